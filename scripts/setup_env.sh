@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Make ./.venv with torchsplice installed, once; later runs reuse it.
+#
+# torch comes first so that pip installs nothing more for it: by default the pinned CPU build
+# (torch==2.13.0). Choose another with TORCHSPLICE_TORCH (a pip requirement) and
+# TORCHSPLICE_TORCH_INDEX (an index URL, e.g. https://download.pytorch.org/whl/cpu).
+# Source it (". scripts/setup_env.sh") to get the environment activated.
+set -euo pipefail
+_root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+_py="${PYTHON:-python3}"
+if [ ! -x "$_root/.venv/bin/python" ]; then
+  echo "setup: creating $_root/.venv" >&2
+  "$_py" -m venv "$_root/.venv"
+fi
+# shellcheck disable=SC1091
+. "$_root/.venv/bin/activate"
+if ! python -c "import torch" >/dev/null 2>&1; then
+  echo "setup: installing ${TORCHSPLICE_TORCH:-torch==2.13.0}" >&2
+  python -m pip install --quiet --disable-pip-version-check "${TORCHSPLICE_TORCH:-torch==2.13.0}" \
+    ${TORCHSPLICE_TORCH_INDEX:+--index-url "$TORCHSPLICE_TORCH_INDEX"}
+fi
+_stamp="$_root/.venv/.torchsplice-installed"
+_want="$(cat "$_root/pyproject.toml" | cksum)"
+if [ ! -f "$_stamp" ] || [ "$(cat "$_stamp")" != "$_want" ]; then
+  echo "setup: installing torchsplice and its dependencies" >&2
+  python -m pip install --quiet --disable-pip-version-check -e "$_root[test]"
+  echo "$_want" > "$_stamp"
+fi

@@ -1,0 +1,45 @@
+"""Shared fixtures: where the real motion capture lives, and helpers to find its clips.
+
+Real clips are read from ``../shared/mocap`` beside the checkout, or from the folder named
+by the ``TORCHSPLICE_MOCAP`` environment variable. Where it is absent, tests that need it are
+skipped with the reason; under CI (``CI=true``) its absence is an error instead, so that CI
+never passes by skipping.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+MOCAP = Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap"))
+
+
+def _require_mocap() -> Path:
+    if MOCAP.is_dir() and any(MOCAP.rglob("*.bvh")):
+        return MOCAP
+    reason = f"real motion capture not found at {MOCAP} (set TORCHSPLICE_MOCAP to its folder)"
+    if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
+        pytest.fail(reason + "; CI must run the real-data tests", pytrace=False)
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="session")
+def mocap_dir() -> Path:
+    """The folder of real BVH files (one subfolder per source)."""
+    return _require_mocap()
+
+
+def real_bvh_files() -> list[Path]:
+    """Every real BVH file, sorted; empty when the data is absent (tests then skip via mocap_dir)."""
+    return sorted(MOCAP.rglob("*.bvh")) if MOCAP.is_dir() else []
+
+
+def bvh_params():
+    """pytest parameters over every real BVH file, with short ids; one skipping placeholder if none."""
+    files = real_bvh_files()
+    if not files:
+        return [pytest.param(None, id="no-real-data")]
+    return [pytest.param(f, id=f"{f.parent.name[:6]}/{f.stem}") for f in files]

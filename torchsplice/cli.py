@@ -1,0 +1,250 @@
+"""The ``torchsplice`` command line.
+
+Every user mistake (a malformed file, an unknown clip, a spec that does not fit) prints one
+line ``torchsplice: error: ...`` and exits non-zero; tracebacks are for bugs only.
+Exit codes: 0 success, 1 finished with problems (e.g. some files skipped), 2 error or bad
+usage, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from . import __version__
+from .core.errors import TorchspliceError
+
+__all__ = ["main", "build_parser"]
+
+
+def _progress(iterable, total: int, desc: str, quiet: bool):
+    """A tqdm progress bar on stderr (hidden with --quiet or when stderr is not a terminal)."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=desc, unit="file", disable=True if quiet else None,
+                file=sys.stderr, dynamic_ncols=True)
+
+
+def _say(args, msg: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(msg)
+
+
+# --------------------------------------------------------------------------------------------
+# sample
+# --------------------------------------------------------------------------------------------
+def cmd_sample(args) -> int:
+    from .io.database import MotionDatabase
+    from .io.sample import sample_motions
+    from .io.spec import load_spec
+
+    spec = load_spec("sample")
+    motions = sample_motions()
+    db = MotionDatabase.create(args.output, overwrite=args.force)
+    with db:
+        for m in motions:
+            db.append(m, spec=spec)
+    frames = sum(m.num_frames for m in motions)
+    roles = {}
+    for m in motions:
+        roles[m.role] = roles.get(m.role, 0) + 1
+    _say(args, f"wrote {args.output}: {len(motions)} synthetic clips ({frames} frames at 30 fps), "
+               + ", ".join(f"{n} {r}" for r, n in sorted(roles.items())))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------
+# import
+# --------------------------------------------------------------------------------------------
+def _collect_bvh(paths: list[str]) -> tuple[list[Path], list[tuple[str, str]]]:
+    files, missing = [], []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() == ".bvh")
+            if not found:
+                missing.append((str(p), "folder holds no .bvh files"))
+            files += found
+        elif p.is_file():
+            files.append(p)
+        else:
+            missing.append((str(p), "no such file or folder"))
+    seen, unique = set(), []
+    for f in files:
+        key = f.resolve()
+        if key not in seen:
+            seen.add(key)
+            unique.append(f)
+    return unique, missing
+
+
+def cmd_import(args) -> int:
+    import torch
+
+    from .io.bvh import read_bvh
+    from .io.database import MotionDatabase
+    from .io.spec import detect_spec, load_spec
+
+    files, skipped = _collect_bvh(args.paths)
+    if not files:
+        for f, why in skipped:
+            print(f"skipped {f}: {why}", file=sys.stderr)
+        raise TorchspliceError("no BVH files to import")
+    fixed_spec = None if args.spec == "auto" else load_spec(args.spec)
+    if args.append:
+        db = MotionDatabase.open(args.output, mode="a")
+    else:
+        db = MotionDatabase.create(args.output, overwrite=args.force,
+                                   dtype="float64" if args.float64 else "float32")
+    dtype = torch.float64 if args.float64 else torch.float32
+    imported, frames, origin = 0, 0, {}
+    with db:
+        for f in _progress(files, len(files), "import", args.quiet):
+            try:
+                m = read_bvh(f, dtype=dtype)
+                m.check_finite()
+                spec = fixed_spec or detect_spec(m.skeleton, f.name)
+                spec.bind(m.skeleton)
+                m.role, m.labels = spec.clip_metadata(m.name)
+                if m.name in origin:
+                    raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
+                db.append(m, spec=spec)
+            except TorchspliceError as exc:
+                skipped.append((str(f), str(exc).removeprefix(f"{f}: ").removeprefix(f"{f}:")))
+                continue
+            origin[m.name] = f
+            imported += 1
+            frames += m.num_frames
+        if imported == 0:
+            db.abort()
+            for f, why in skipped:
+                print(f"skipped {f}: {why}", file=sys.stderr)
+            raise TorchspliceError(f"no clip could be imported; {args.output} was not written")
+        total = len(db)
+    _say(args, f"imported {imported} clips ({frames} frames) into {args.output} ({total} clips in all)")
+    for f, why in skipped:
+        print(f"skipped {f}: {why}", file=sys.stderr)
+    if skipped:
+        print(f"{len(skipped)} input(s) skipped, {imported} imported", file=sys.stderr)
+    return 1 if skipped else 0
+
+
+# --------------------------------------------------------------------------------------------
+# info and export
+# --------------------------------------------------------------------------------------------
+def _labels_text(labels: dict) -> str:
+    return " ".join(f"{k}={v}" for k, v in sorted(labels.items()))
+
+
+def cmd_info(args) -> int:
+    from .io.database import MotionDatabase
+
+    with MotionDatabase.open(args.database) as db:
+        s = db.summary()
+    if args.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    minutes = s["duration_s"] / 60
+    print(f"{s['path']}: {s['num_clips']} clips, {s['num_frames']} frames ({minutes:.1f} min); "
+          f"schema {s['schema_version']}, units {s['units'] or '?'}, up axis {s['up_axis'] or '?'}, "
+          f"quaternions {s['quaternion_order']}")
+    for k in s["skeletons"]:
+        print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}, {k['clips']} clips")
+    print("roles: " + ", ".join(f"{r} {n}" for r, n in sorted(s["roles"].items())))
+    if s["clips"]:
+        w = max(4, max(len(c["name"]) for c in s["clips"]))
+        print(f"{'name':<{w}}  {'frames':>6}  {'fps':>5}  {'sec':>6}  {'role':<10}  labels")
+        for c in s["clips"]:
+            print(f"{c['name']:<{w}}  {c['frames']:>6}  {c['fps']:>5g}  {c['duration_s']:>6.2f}  "
+                  f"{c['role'] or '-':<10}  {_labels_text(c['labels'])}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    import torch
+
+    from .io.bvh import write_bvh
+    from .io.database import MotionDatabase
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    with MotionDatabase.open(args.database) as db:
+        m = db.read(args.clip, dtype=torch.float64)
+    write_bvh(m, out)
+    _say(args, f"wrote {out}: {m.name}, {m.num_frames} frames at {m.fps:g} fps")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------
+# parser and entry point
+# --------------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="torchsplice",
+        description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
+    )
+    p.add_argument("--version", action="version", version=f"torchsplice {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    s = sub.add_parser("sample", help="write the built-in synthetic sample database (no data needed)",
+                       description="Write the built-in sample: procedurally generated locomotions (straight walk, "
+                                   "curve, sharp turn, side-step, jog) and actions performed while walking (carry a "
+                                   "box, carry a cup, wave, punch, arms out) on a standard 22-joint skeleton.")
+    s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=cmd_sample)
+
+    s = sub.add_parser("import", help="import BVH files or folders into a motion database",
+                       description="Import BVH files (folders are searched recursively) into one HDF5 motion "
+                                   "database. A file that cannot be read is skipped with a one-line reason and "
+                                   "the good files still land; the exit code is then 1.")
+    s.add_argument("paths", nargs="+", metavar="PATH", help="BVH files or folders")
+    s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
+    s.add_argument("--spec", default="auto",
+                   help="dataset spec: a shipped name (bandai_namco, cmu, cmu_max, lafan1, sample, generic) or a "
+                        ".toml path; 'auto' (default) picks per file")
+    s.add_argument("--append", action="store_true", help="add to an existing database")
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    s.set_defaults(func=cmd_import)
+
+    s = sub.add_parser("info", help="list a database's clips, skeletons and roles",
+                       description="Describe a motion database. With --json, print an object whose 'clips' list "
+                                   "holds, per clip, name, frames, fps, duration_s, role, labels, skeleton, source.")
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=cmd_info)
+
+    s = sub.add_parser("export", help="write one clip of a database as BVH",
+                       description="Write one clip (by name, as `info` lists it) as a BVH file, with the skeleton's "
+                                   "original channel layout.")
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("clip", help="clip name")
+    s.add_argument("-o", "--output", required=True, help="BVH file to write")
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=cmd_export)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except TorchspliceError as exc:
+        print(f"torchsplice: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("torchsplice: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

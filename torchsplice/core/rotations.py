@@ -1,0 +1,268 @@
+"""Rotation conversions and quaternion algebra on torch tensors.
+
+Conventions, used everywhere in torchsplice:
+
+- **Quaternions are unit quaternions in WXYZ order** (scalar first): ``(..., 4)`` tensors
+  ``[w, x, y, z]``. ``q`` and ``-q`` are the same rotation; functions that return quaternions
+  return the representative with ``w >= 0`` unless they say otherwise.
+- **Rotation matrices act on column vectors**: ``v_parent = R @ v_local``; ``(..., 3, 3)``.
+- **Euler angles follow BVH**: an order such as ``"ZXY"`` lists the axes as the channels
+  appear in a BVH file, and means ``R = R_Z(a0) @ R_X(a1) @ R_Y(a2)`` (intrinsic rotations, the
+  first listed axis outermost). Angles are ``(..., 3)`` tensors in that same order, in degrees
+  unless ``degrees=False``.
+- Any number of leading batch dimensions is accepted; float32 and float64 both work; shapes
+  that do not fit raise ``ValueError``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+__all__ = [
+    "EULER_ORDERS",
+    "quat_identity",
+    "quat_normalize",
+    "quat_canonical",
+    "quat_conj",
+    "quat_mul",
+    "quat_apply",
+    "quat_to_rotmat",
+    "rotmat_to_quat",
+    "axis_angle_to_quat",
+    "quat_to_axis_angle",
+    "quat_angle",
+    "euler_to_quat",
+    "euler_to_rotmat",
+    "rotmat_to_euler",
+    "quat_to_euler",
+    "quat_slerp",
+    "random_quat",
+]
+
+EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _check_last(t: torch.Tensor, n: int, name: str) -> None:
+    if t.shape[-1:] != (n,):
+        raise ValueError(f"{name} must have shape (..., {n}), got {tuple(t.shape)}")
+
+
+def _check_order(order: str) -> str:
+    order = order.upper()
+    if order not in EULER_ORDERS:
+        raise ValueError(f"Euler order must be one of {EULER_ORDERS}, got {order!r}")
+    return order
+
+
+def quat_identity(shape=(), dtype=torch.float32, device=None) -> torch.Tensor:
+    """Identity quaternions of shape ``(*shape, 4)``, WXYZ."""
+    q = torch.zeros(*shape, 4, dtype=dtype, device=device)
+    q[..., 0] = 1.0
+    return q
+
+
+def quat_normalize(q: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
+    """Scale ``(..., 4)`` quaternions to unit norm."""
+    _check_last(q, 4, "q")
+    return q / q.norm(dim=-1, keepdim=True).clamp_min(eps)
+
+
+def quat_canonical(q: torch.Tensor) -> torch.Tensor:
+    """The representative of each ``(..., 4)`` WXYZ quaternion with ``w >= 0``."""
+    _check_last(q, 4, "q")
+    return torch.where(q[..., :1] < 0, -q, q)
+
+
+def quat_conj(q: torch.Tensor) -> torch.Tensor:
+    """Conjugate (the inverse, for unit quaternions) of ``(..., 4)`` WXYZ quaternions."""
+    _check_last(q, 4, "q")
+    return q * q.new_tensor([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_mul(p: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+    """Hamilton product ``p * q`` of broadcastable ``(..., 4)`` WXYZ quaternions.
+
+    As rotations: ``quat_mul(p, q)`` applies ``q`` first, then ``p``.
+    """
+    _check_last(p, 4, "p")
+    _check_last(q, 4, "q")
+    pw, px, py, pz = p.unbind(-1)
+    qw, qx, qy, qz = q.unbind(-1)
+    return torch.stack(
+        (
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ),
+        dim=-1,
+    )
+
+
+def quat_apply(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """Rotate ``(..., 3)`` vectors by broadcastable ``(..., 4)`` unit WXYZ quaternions."""
+    _check_last(q, 4, "q")
+    _check_last(v, 3, "v")
+    batch = torch.broadcast_shapes(q.shape[:-1], v.shape[:-1])
+    q, v = q.expand(batch + (4,)), v.expand(batch + (3,))
+    w, xyz = q[..., :1], q[..., 1:]
+    t = 2.0 * torch.linalg.cross(xyz, v, dim=-1)
+    return v + w * t + torch.linalg.cross(xyz, t, dim=-1)
+
+
+def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
+    """``(..., 4)`` unit WXYZ quaternions to ``(..., 3, 3)`` rotation matrices."""
+    _check_last(q, 4, "q")
+    w, x, y, z = q.unbind(-1)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    m = torch.stack(
+        (
+            1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
+            2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
+            2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
+        ),
+        dim=-1,
+    )
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def rotmat_to_quat(m: torch.Tensor) -> torch.Tensor:
+    """``(..., 3, 3)`` rotation matrices to ``(..., 4)`` unit WXYZ quaternions with ``w >= 0``.
+
+    Shepperd's method: of the four algebraically equal formulas, each element uses the one
+    with the largest (best conditioned) denominator.
+    """
+    if m.shape[-2:] != (3, 3):
+        raise ValueError(f"m must have shape (..., 3, 3), got {tuple(m.shape)}")
+    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
+    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
+    # 4*w^2, 4*x^2, 4*y^2, 4*z^2
+    sq = torch.stack(
+        (1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), dim=-1
+    )
+    # each row: 4*c*(w, x, y, z) for the component c chosen
+    cand = torch.stack(
+        (
+            torch.stack((sq[..., 0], m21 - m12, m02 - m20, m10 - m01), dim=-1),
+            torch.stack((m21 - m12, sq[..., 1], m10 + m01, m02 + m20), dim=-1),
+            torch.stack((m02 - m20, m10 + m01, sq[..., 2], m12 + m21), dim=-1),
+            torch.stack((m10 - m01, m20 + m02, m21 + m12, sq[..., 3]), dim=-1),
+        ),
+        dim=-2,
+    )
+    best = sq.argmax(dim=-1, keepdim=True)
+    q = torch.gather(cand, -2, best[..., None].expand(*best.shape[:-1], 1, 4)).squeeze(-2)
+    return quat_canonical(quat_normalize(q))
+
+
+def axis_angle_to_quat(axis_angle: torch.Tensor) -> torch.Tensor:
+    """``(..., 3)`` rotation vectors (axis times angle, radians) to ``(..., 4)`` WXYZ quaternions."""
+    _check_last(axis_angle, 3, "axis_angle")
+    angle = axis_angle.norm(dim=-1, keepdim=True)
+    half = 0.5 * angle
+    # sin(half)/angle, with its limit 1/2 near zero
+    scale = torch.where(angle > 1e-8, torch.sin(half) / angle.clamp_min(1e-8), 0.5 - angle**2 / 48)
+    return torch.cat((torch.cos(half), axis_angle * scale), dim=-1)
+
+
+def quat_to_axis_angle(q: torch.Tensor) -> torch.Tensor:
+    """``(..., 4)`` unit WXYZ quaternions to ``(..., 3)`` rotation vectors (radians, angle <= pi)."""
+    q = quat_canonical(q)
+    xyz = q[..., 1:]
+    s = xyz.norm(dim=-1, keepdim=True)
+    angle = 2.0 * torch.atan2(s, q[..., :1])
+    scale = torch.where(s > 1e-8, angle / s.clamp_min(1e-8), 2.0 + s**2 / 3)
+    return xyz * scale
+
+
+def quat_angle(p: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+    """Geodesic angle in radians, ``(...)``, between rotations given as ``(..., 4)`` WXYZ quaternions."""
+    _check_last(p, 4, "p")
+    _check_last(q, 4, "q")
+    d = (p * q).sum(-1).abs()
+    s = quat_mul(quat_conj(p), q)[..., 1:].norm(dim=-1)
+    return 2.0 * torch.atan2(s, d)
+
+
+def euler_to_quat(angles: torch.Tensor, order: str, degrees: bool = True) -> torch.Tensor:
+    """``(..., 3)`` Euler angles in BVH ``order`` (e.g. ``"ZXY"``) to ``(..., 4)`` WXYZ quaternions.
+
+    ``q = q_order[0](a0) * q_order[1](a1) * q_order[2](a2)``; not canonicalised, so that
+    continuous angle tracks give continuous quaternions.
+    """
+    _check_last(angles, 3, "angles")
+    order = _check_order(order)
+    half = angles * (0.5 * math.pi / 180.0 if degrees else 0.5)
+    c, s = torch.cos(half), torch.sin(half)
+    elementary = torch.zeros(angles.shape + (4,), dtype=angles.dtype, device=angles.device)  # (..., 3, 4)
+    elementary[..., 0] = c
+    for i, axis in enumerate(order):
+        elementary[..., i, 1 + _AXIS[axis]] = s[..., i]
+    q0, q1, q2 = elementary.unbind(-2)
+    return quat_mul(quat_mul(q0, q1), q2)
+
+
+def euler_to_rotmat(angles: torch.Tensor, order: str, degrees: bool = True) -> torch.Tensor:
+    """``(..., 3)`` Euler angles in BVH ``order`` to ``(..., 3, 3)`` rotation matrices."""
+    return quat_to_rotmat(euler_to_quat(angles, order, degrees))
+
+
+def rotmat_to_euler(m: torch.Tensor, order: str, degrees: bool = True) -> torch.Tensor:
+    """``(..., 3, 3)`` rotation matrices to ``(..., 3)`` Euler angles in BVH ``order``.
+
+    The middle angle lies in ``[-90, 90]`` degrees. At gimbal lock (middle angle +-90) the
+    third angle is set to zero and the first carries the whole remaining rotation.
+    """
+    if m.shape[-2:] != (3, 3):
+        raise ValueError(f"m must have shape (..., 3, 3), got {tuple(m.shape)}")
+    order = _check_order(order)
+    i, j, k = (_AXIS[a] for a in order)
+    s = 1.0 if (j - i) % 3 == 1 else -1.0  # +1 for cyclic orders XYZ, YZX, ZXY
+    sin_b = s * m[..., i, k]
+    cos_b = torch.hypot(m[..., i, i], m[..., i, j])
+    b = torch.atan2(sin_b, cos_b)
+    a = torch.atan2(-s * m[..., j, k], m[..., k, k])
+    c = torch.atan2(-s * m[..., i, j], m[..., i, i])
+    lock = cos_b < (1e-9 if m.dtype == torch.float64 else 1e-5)
+    a = torch.where(lock, torch.atan2(s * m[..., k, j], m[..., j, j]), a)
+    c = torch.where(lock, torch.zeros_like(c), c)
+    out = torch.stack((a, b, c), dim=-1)
+    return out * (180.0 / math.pi) if degrees else out
+
+
+def quat_to_euler(q: torch.Tensor, order: str, degrees: bool = True) -> torch.Tensor:
+    """``(..., 4)`` unit WXYZ quaternions to ``(..., 3)`` Euler angles in BVH ``order``."""
+    return rotmat_to_euler(quat_to_rotmat(q), order, degrees)
+
+
+def quat_slerp(p: torch.Tensor, q: torch.Tensor, t: torch.Tensor | float) -> torch.Tensor:
+    """Spherical linear interpolation along the shorter arc, ``t`` in [0, 1] broadcast over ``(...)``.
+
+    ``p`` and ``q`` are broadcastable ``(..., 4)`` unit WXYZ quaternions; ``t`` is a float or a
+    ``(...)`` tensor. Nearly equal rotations fall back to normalised linear interpolation.
+    """
+    _check_last(p, 4, "p")
+    _check_last(q, 4, "q")
+    t = torch.as_tensor(t, dtype=p.dtype, device=p.device)[..., None]
+    dot = (p * q).sum(-1, keepdim=True)
+    q = torch.where(dot < 0, -q, q)
+    dot = dot.abs().clamp(max=1.0)
+    theta = torch.acos(dot)
+    sin_theta = torch.sin(theta)
+    near = sin_theta < 1e-6
+    safe = torch.where(near, torch.ones_like(sin_theta), sin_theta)
+    wp = torch.where(near, 1.0 - t, torch.sin((1.0 - t) * theta) / safe)
+    wq = torch.where(near, t, torch.sin(t * theta) / safe)
+    return quat_normalize(wp * p + wq * q)
+
+
+def random_quat(shape=(), dtype=torch.float32, device=None, generator=None) -> torch.Tensor:
+    """Uniformly distributed random unit WXYZ quaternions of shape ``(*shape, 4)``."""
+    q = torch.randn(*shape, 4, dtype=dtype, device=device, generator=generator)
+    return quat_normalize(q)

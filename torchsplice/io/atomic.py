@@ -1,0 +1,55 @@
+"""Atomic file output: write beside the target, then rename over it.
+
+A reader never sees a half-written file: until the rename, the target is either absent or
+still holds its previous contents. A full disk or any other OS error becomes a one-line
+:class:`~torchsplice.core.errors.TorchspliceError` naming the file, and the partial file is
+removed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+from pathlib import Path
+
+from ..core.errors import TorchspliceError
+
+__all__ = ["atomic_path", "os_error_message"]
+
+
+def os_error_message(path, exc: OSError) -> str:
+    """One line describing an OS error while writing ``path``."""
+    if exc.errno == errno.ENOSPC:
+        return f"{path}: no space left on the device"
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        return f"{path}: permission denied"
+    return f"{path}: {exc.strerror or exc}"
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix: str = ".partial"):
+    """Yield a temporary path beside ``path``; on success rename it to ``path``.
+
+    The temporary name is ``.NAME<suffix>-PID`` in the same folder (so the rename is atomic
+    on one file system). On any exception the temporary file is removed and the target is
+    left untouched; ``OSError`` is re-raised as :class:`TorchspliceError`.
+    """
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        raise TorchspliceError(f"{path}: folder {path.parent} does not exist")
+    tmp = path.with_name(f".{path.name}{suffix}-{os.getpid()}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        raise TorchspliceError(os_error_message(path, exc)) from exc
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+def _remove(p: Path) -> None:
+    with contextlib.suppress(OSError):
+        p.unlink()

@@ -1,0 +1,551 @@
+"""The HDF5 motion database: any number of clips on one or more skeletons, in one file.
+
+Layout (schema version 1; readable with plain h5py, see ``datasets_spec/README.md`` and the
+project README for a ten-line example)::
+
+    /                       attrs: format="torchsplice.motiondb", schema_version=1,
+                                   quaternion_order="wxyz", units, up_axis, created_by
+    /skeletons/<k>/         one group per skeleton k = 0, 1, ...
+        names               (J,) str      joint names, topological order
+        parents             (J,) int32    parent index, -1 for the root
+        offsets             (J, 3) float64 rest offsets in the parent's frame
+        channels            (J,) str      BVH channel names, space separated
+        end_site_parents    (E,) int32
+        end_site_offsets    (E, 3) float64
+        rotations           (N_k, J, 4)   local rotations of every frame of every clip, WXYZ
+        root_translation    (N_k, 3)      world position of joint 0
+        translations        (N_k, J, 3)   local joint translations (only where the skeleton
+                                          animates non-root translations, e.g. Bandai Namco)
+        attrs: spec (the dataset spec as JSON, or ""), units, up_axis
+    /clips/                 one row per clip, in insertion order
+        name, source, role  (C,) str
+        labels              (C,) str      a JSON object of string labels
+        skeleton            (C,) int32    which /skeletons/<k>
+        start, length       (C,) int64    the clip's frames are rows start:start+length
+        fps                 (C,) float64
+
+Frames of all clips are packed into chunked, compressed datasets (no group per clip), so a
+file holds 100,000 clips and more. Writing is atomic: a new database is written beside its
+target and renamed into place when closed; appending works on a copy that replaces the
+original only when closed cleanly. An interrupted write never leaves a file that looks
+complete at the target path.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import h5py
+import numpy as np
+import torch
+
+from .. import __version__
+from ..core.errors import DatabaseError
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
+from .atomic import os_error_message
+
+__all__ = ["MotionDatabase", "ClipBatch", "SCHEMA_VERSION", "FORMAT"]
+
+FORMAT = "torchsplice.motiondb"
+SCHEMA_VERSION = 1
+_STR = h5py.string_dtype()
+_COLUMNS = {  # name: (dtype, numpy fill for an empty table)
+    "name": _STR, "source": _STR, "role": _STR, "labels": _STR,
+    "skeleton": np.int32, "start": np.int64, "length": np.int64, "fps": np.float64,
+}
+_FLUSH_FRAMES = 1 << 16
+
+
+@dataclass
+class ClipBatch:
+    """Clips of one skeleton, padded to a common length.
+
+    Attributes:
+        rotations: ``(B, T, J, 4)`` local rotations, WXYZ; padding repeats each clip's last frame.
+        root_translation: ``(B, T, 3)``.
+        translations: ``(B, T, J, 3)`` or ``None`` (see :class:`~torchsplice.core.motion.Motion`).
+        lengths: ``(B,)`` int64 number of real frames per clip.
+        mask: ``(B, T)`` bool, True on real frames.
+        fps: ``(B,)`` float64.
+        names: the clips' names; ``indices``: their row numbers in the database.
+        skeleton: the shared :class:`Skeleton`.
+    """
+
+    rotations: torch.Tensor
+    root_translation: torch.Tensor
+    translations: torch.Tensor | None
+    lengths: torch.Tensor
+    mask: torch.Tensor
+    fps: torch.Tensor
+    names: list[str]
+    indices: list[int]
+    skeleton: Skeleton
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def motion(self, b: int) -> Motion:
+        """Clip ``b`` of the batch, without padding."""
+        n = int(self.lengths[b])
+        return Motion(
+            self.skeleton, self.rotations[b, :n], self.root_translation[b, :n], float(self.fps[b]),
+            None if self.translations is None else self.translations[b, :n], name=self.names[b],
+        )
+
+
+def _skeleton_to_group(g: h5py.Group, sk: Skeleton) -> None:
+    g["names"] = np.array(sk.names, dtype=object).astype(_STR)
+    g["parents"] = np.array(sk.parents, dtype=np.int32)
+    g["offsets"] = sk.offsets.numpy()
+    g["channels"] = np.array([" ".join(c) for c in sk.channels], dtype=object).astype(_STR)
+    g["end_site_parents"] = np.array(sk.end_site_parents, dtype=np.int32)
+    g["end_site_offsets"] = sk.end_site_offsets.numpy().reshape(-1, 3)
+
+
+def _skeleton_from_group(g: h5py.Group) -> Skeleton:
+    return Skeleton(
+        names=[s for s in g["names"].asstr()[()]],
+        parents=g["parents"][()].tolist(),
+        offsets=torch.from_numpy(g["offsets"][()]),
+        channels=[c.split() for c in g["channels"].asstr()[()]],
+        end_site_parents=g["end_site_parents"][()].tolist(),
+        end_site_offsets=torch.from_numpy(g["end_site_offsets"][()]),
+    )
+
+
+class MotionDatabase:
+    """A motion database file; make one with :meth:`create`, open one with :meth:`open`.
+
+    Use it as a context manager: leaving the ``with`` block normally commits a write (the
+    file appears at its path); leaving it by an exception discards the write.
+    """
+
+    def __init__(self, path: Path, h5: h5py.File, mode: str, tmp: Path | None, dtype):
+        self.path, self._h5, self.mode, self._tmp, self._dtype = path, h5, mode, tmp, dtype
+        self._skeletons = [_skeleton_from_group(h5["skeletons"][k]) for k in sorted(h5["skeletons"], key=int)]
+        self._names: list[str] | None = None
+        self._name_index: dict[str, int] | None = None
+        self._staged: list[tuple[Motion, int]] = []
+        self._staged_frames = 0
+
+    # -- opening and closing ------------------------------------------------------------------
+    @classmethod
+    def create(cls, path, overwrite: bool = False, dtype=np.float32, chunk_frames: int = 1024,
+               compression: str | None = "gzip") -> "MotionDatabase":
+        """Start a new database that appears at ``path`` when closed.
+
+        Frames are stored as ``dtype`` (float32 by default) in chunks of ``chunk_frames``,
+        compressed with ``compression`` (gzip, readable everywhere; ``None`` for speed).
+        """
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise DatabaseError(f"{path}: already exists (use overwrite, or --force on the command line)")
+        if not path.parent.exists():
+            raise DatabaseError(f"{path}: folder {path.parent} does not exist")
+        tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+        try:
+            h5 = h5py.File(tmp, "w")
+            h5.attrs.update({
+                "format": FORMAT, "schema_version": SCHEMA_VERSION, "quaternion_order": "wxyz",
+                "rotation_convention": "local joint rotation, parent-from-child, column vectors",
+                "units": "", "up_axis": "", "created_by": f"torchsplice {__version__}",
+                "chunk_frames": chunk_frames, "compression": compression or "",
+            })
+            h5.create_group("skeletons")
+            clips = h5.create_group("clips")
+            for name, dt in _COLUMNS.items():
+                clips.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dt, chunks=(4096,))
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise DatabaseError(os_error_message(path, exc)) from None
+        return cls(path, h5, "w", tmp, np.dtype(dtype))
+
+    @classmethod
+    def open(cls, path, mode: str = "r") -> "MotionDatabase":
+        """Open an existing database, ``mode`` ``"r"`` (read) or ``"a"`` (append).
+
+        Appending works on a copy beside the file that replaces it on a clean close.
+        """
+        path = Path(path)
+        if mode not in ("r", "a"):
+            raise ValueError(f"mode must be 'r' or 'a', got {mode!r}")
+        if not path.is_file():
+            raise DatabaseError(f"{path}: no such file")
+        if not h5py.is_hdf5(path):
+            raise DatabaseError(f"{path}: not an HDF5 file")
+        tmp = None
+        try:
+            if mode == "a":
+                tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+                shutil.copyfile(path, tmp)
+            h5 = h5py.File(tmp or path, "r+" if mode == "a" else "r")
+        except OSError as exc:
+            if tmp is not None:
+                tmp.unlink(missing_ok=True)
+            raise DatabaseError(os_error_message(path, exc)) from None
+        try:
+            cls._check_header(path, h5)
+        except DatabaseError:
+            h5.close()
+            if tmp is not None:
+                tmp.unlink(missing_ok=True)
+            raise
+        dtype = h5["skeletons/0/rotations"].dtype if "0" in h5["skeletons"] else np.dtype(np.float32)
+        return cls(path, h5, mode, tmp, dtype)
+
+    @staticmethod
+    def _check_header(path: Path, h5: h5py.File) -> None:
+        if h5.attrs.get("format") != FORMAT:
+            raise DatabaseError(f"{path}: not a torchsplice motion database (no format attribute {FORMAT!r})")
+        version = int(h5.attrs.get("schema_version", -1))
+        if version > SCHEMA_VERSION:
+            raise DatabaseError(f"{path}: schema version {version} is newer than this torchsplice reads ({SCHEMA_VERSION}); upgrade torchsplice")
+        if version < 1 or "skeletons" not in h5 or "clips" not in h5:
+            raise DatabaseError(f"{path}: damaged database (schema version {version}, missing groups)")
+
+    def close(self) -> None:
+        """Commit (for a write) and close. Safe to call twice."""
+        if self._h5 is None:
+            return
+        if self.mode == "r":
+            self._h5.close()
+            self._h5 = None
+            return
+        try:
+            self.flush()
+            self._h5.close()
+            self._h5 = None
+            os.replace(self._tmp, self.path)
+        except OSError as exc:
+            self.abort()
+            raise DatabaseError(os_error_message(self.path, exc)) from None
+        except BaseException:
+            self.abort()
+            raise
+
+    def abort(self) -> None:
+        """Discard a write in progress: the file at ``path`` stays as it was."""
+        if self._h5 is not None:
+            try:
+                self._h5.close()
+            except Exception:
+                pass
+            self._h5 = None
+        if self._tmp is not None:
+            self._tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> "MotionDatabase":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        elif self.mode == "r":
+            self.close()
+        else:
+            self.abort()
+
+    def __del__(self):
+        if getattr(self, "_h5", None) is not None and self.mode != "r":
+            self.abort()
+
+    # -- metadata -----------------------------------------------------------------------------
+    @property
+    def h5(self) -> h5py.File:
+        """The open h5py file (for advanced readers); raises if closed."""
+        if self._h5 is None:
+            raise DatabaseError(f"{self.path}: database is closed")
+        return self._h5
+
+    def __len__(self) -> int:
+        return self.h5["clips/name"].shape[0] + len(self._staged)
+
+    @property
+    def skeletons(self) -> list[Skeleton]:
+        """The skeletons, indexed as ``/skeletons/<k>``."""
+        return list(self._skeletons)
+
+    @property
+    def attrs(self) -> dict:
+        """The file's attributes (format, schema_version, quaternion_order, units, up_axis, ...)."""
+        return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self.h5.attrs.items()}
+
+    def spec_json(self, skeleton: int) -> str:
+        """The dataset spec (JSON) stored with skeleton ``k``, or ``""``."""
+        return str(self.h5[f"skeletons/{skeleton}"].attrs.get("spec", ""))
+
+    @property
+    def names(self) -> list[str]:
+        """Every clip's name, in row order."""
+        if self._names is None:
+            self._names = list(self.h5["clips/name"].asstr()[()])
+        return self._names + [m.name for m, _ in self._staged]
+
+    def index(self, clip: str | int) -> int:
+        """Row number of a clip given by name or row number; a clear error otherwise."""
+        if isinstance(clip, (int, np.integer)):
+            if not 0 <= clip < len(self):
+                raise DatabaseError(f"{self.path}: no clip number {clip} (the database has {len(self)})")
+            return int(clip)
+        index = self._index_map()
+        if clip not in index:
+            close = [n for n in index if clip.lower() in n.lower()][:5]
+            hint = f"; similar: {', '.join(close)}" if close else "; `torchsplice info` lists the clips"
+            raise DatabaseError(f"{self.path}: no clip named {clip!r}{hint}")
+        return self._name_index[clip]
+
+    def _index_map(self) -> dict[str, int]:
+        """Name -> row, built once per open and kept up to date by :meth:`append`."""
+        if self._name_index is None:
+            self._name_index = {n: i for i, n in enumerate(self.names)}
+        return self._name_index
+
+    def clip_info(self, clip: str | int) -> dict:
+        """Metadata of one clip: name, source, role, labels, skeleton, start, length, fps."""
+        i = self.index(clip)
+        self._require_flushed(i)
+        c = self.h5["clips"]
+        info = {k: c[k][i] for k in _COLUMNS}
+        for k in ("name", "source", "role", "labels"):
+            info[k] = info[k].decode() if isinstance(info[k], bytes) else str(info[k])
+        info["labels"] = json.loads(info["labels"] or "{}")
+        for k in ("skeleton", "start", "length"):
+            info[k] = int(info[k])
+        info["fps"] = float(info["fps"])
+        return info
+
+    def table(self) -> dict[str, np.ndarray]:
+        """Every metadata column as an array (labels as JSON strings): one read per column."""
+        self.flush()
+        c = self.h5["clips"]
+        return {k: (c[k].asstr()[()] if c[k].dtype == object else c[k][()]) for k in _COLUMNS}
+
+    def _require_flushed(self, i: int) -> None:
+        if i >= self.h5["clips/name"].shape[0]:
+            self.flush()
+
+    # -- writing ------------------------------------------------------------------------------
+    def _writable(self) -> None:
+        if self.mode == "r":
+            raise DatabaseError(f"{self.path}: opened read-only")
+
+    def add_skeleton(self, skeleton: Skeleton, spec=None) -> int:
+        """Index of a stored skeleton that matches ``skeleton``, storing it if none does.
+
+        ``spec`` (a :class:`~torchsplice.io.spec.DatasetSpec` or ``None``) is stored with a new
+        skeleton; its units and up axis must agree with the database's.
+        """
+        for k, sk in enumerate(self._skeletons):
+            if sk.matches(skeleton):
+                return k
+        self._writable()
+        units = getattr(spec, "units", "") or ""
+        up = getattr(spec, "up_axis", "") or ""
+        for key, value in (("units", units), ("up_axis", up)):
+            have = str(self.h5.attrs.get(key, ""))
+            if value and have and have != value:
+                raise DatabaseError(f"{self.path}: database {key} is {have!r}, the new skeleton's spec says {value!r}")
+            if value and not have:
+                self.h5.attrs[key] = value
+        k = len(self._skeletons)
+        g = self.h5["skeletons"].create_group(str(k))
+        _skeleton_to_group(g, skeleton)
+        g.attrs.update({"spec": spec.to_json() if spec is not None else "", "units": units, "up_axis": up})
+        chunk = int(self.h5.attrs["chunk_frames"])
+        comp = str(self.h5.attrs["compression"]) or None
+        J = skeleton.num_joints
+        shapes = {"rotations": (J, 4), "root_translation": (3,)}
+        if skeleton.has_joint_translations:
+            shapes["translations"] = (J, 3)
+        for name, shape in shapes.items():
+            g.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=self._dtype,
+                             chunks=(chunk,) + shape, compression=comp, shuffle=comp is not None)
+        self._skeletons.append(skeleton)
+        return k
+
+    def append(self, motion: Motion, spec=None) -> int:
+        """Add a clip (buffered; written by :meth:`flush` or on close). Returns its row number.
+
+        The clip name must be new to the database; non-finite values are refused.
+        """
+        self._writable()
+        motion.check_finite()
+        if not motion.name:
+            raise DatabaseError(f"{self.path}: a clip needs a name")
+        index = self._index_map()
+        if motion.name in index:
+            raise DatabaseError(f"{self.path}: a clip named {motion.name!r} is already in the database")
+        k = self.add_skeleton(motion.skeleton, spec)
+        index[motion.name] = len(self)
+        self._staged.append((motion, k))
+        self._staged_frames += motion.num_frames
+        if self._staged_frames >= _FLUSH_FRAMES:
+            self.flush()
+        return len(self) - 1
+
+    def flush(self) -> None:
+        """Write buffered clips to the file."""
+        if not self._staged:
+            return
+        try:
+            self._write_staged()
+        except OSError as exc:
+            raise DatabaseError(os_error_message(self.path, exc)) from None
+        if self._names is not None:
+            self._names += [m.name for m, _ in self._staged]
+        self._staged, self._staged_frames = [], 0
+
+    def _write_staged(self) -> None:
+        h5 = self.h5
+        starts = {}
+        for k in sorted({k for _, k in self._staged}):
+            g = h5[f"skeletons/{k}"]
+            clips = [m for m, kk in self._staged if kk == k]
+            n0 = g["rotations"].shape[0]
+            starts[k] = n0
+            arrays = {
+                "rotations": torch.cat([m.rotations.detach().cpu() for m in clips]),
+                "root_translation": torch.cat([m.root_translation.detach().cpu() for m in clips]),
+            }
+            if "translations" in g:
+                arrays["translations"] = torch.cat([m.local_translations().detach().cpu() for m in clips])
+            for name, t in arrays.items():
+                ds = g[name]
+                ds.resize(n0 + t.shape[0], axis=0)
+                ds[n0:] = t.numpy().astype(self._dtype)
+        rows = {c: [] for c in _COLUMNS}
+        for m, k in self._staged:
+            rows["name"].append(m.name)
+            rows["source"].append(m.source)
+            rows["role"].append(m.role)
+            rows["labels"].append(json.dumps(m.labels, sort_keys=True))
+            rows["skeleton"].append(k)
+            rows["start"].append(starts[k])
+            rows["length"].append(m.num_frames)
+            rows["fps"].append(m.fps)
+            starts[k] += m.num_frames
+        c = h5["clips"]
+        n = c["name"].shape[0]
+        for name, values in rows.items():
+            c[name].resize(n + len(values), axis=0)
+            c[name][n:] = np.array(values, dtype=object if _COLUMNS[name] is _STR else _COLUMNS[name])
+
+    # -- reading ------------------------------------------------------------------------------
+    def read(self, clip: str | int, dtype: torch.dtype = torch.float32, device=None) -> Motion:
+        """One clip as a :class:`Motion` (``dtype`` and ``device`` as asked)."""
+        info = self.clip_info(clip)
+        g = self.h5[f"skeletons/{info['skeleton']}"]
+        s, n = info["start"], info["length"]
+
+        def get(name):
+            return torch.from_numpy(g[name][s:s + n]).to(device=device, dtype=dtype)
+
+        return Motion(
+            skeleton=self._skeletons[info["skeleton"]],
+            rotations=get("rotations"),
+            root_translation=get("root_translation"),
+            translations=get("translations") if "translations" in g else None,
+            fps=info["fps"], name=info["name"], source=info["source"], role=info["role"], labels=info["labels"],
+        )
+
+    def read_batch(self, clips: Sequence[str | int], dtype: torch.dtype = torch.float32, device=None) -> ClipBatch:
+        """Several clips of one skeleton as a padded :class:`ClipBatch`."""
+        if len(clips) == 0:
+            raise DatabaseError(f"{self.path}: an empty batch was asked for")
+        idx = [self.index(c) for c in clips]
+        self._require_flushed(max(idx))
+        col = self.h5["clips"]
+        sk_ids = col["skeleton"][()][idx]
+        if len(set(sk_ids.tolist())) != 1:
+            raise DatabaseError(f"{self.path}: clips of one batch must share a skeleton, got skeletons {sorted(set(sk_ids.tolist()))}")
+        k = int(sk_ids[0])
+        starts = col["start"][()][idx].astype(np.int64)
+        lengths = col["length"][()][idx].astype(np.int64)
+        g = self.h5[f"skeletons/{k}"]
+        lo, hi = int(starts.min()), int((starts + lengths).max())
+        T = int(lengths.max())
+        # one contiguous read when the clips are close together, else one read per clip
+        contiguous = hi - lo <= 2 * int(lengths.sum())
+        rows = starts[:, None] + np.minimum(np.arange(T)[None, :], lengths[:, None] - 1)  # edge padding
+
+        def gather(name):
+            ds = g[name]
+            if contiguous:
+                block = ds[lo:hi]
+                out = block[rows - lo]
+            else:
+                out = np.stack([ds[s:s + n][np.minimum(np.arange(T), n - 1)] for s, n in zip(starts, lengths)])
+            return torch.from_numpy(out).to(device=device, dtype=dtype)
+
+        lengths_t = torch.from_numpy(lengths).to(device)
+        all_names = self.names
+        return ClipBatch(
+            rotations=gather("rotations"),
+            root_translation=gather("root_translation"),
+            translations=gather("translations") if "translations" in g else None,
+            lengths=lengths_t,
+            mask=torch.arange(T, device=device)[None, :] < lengths_t[:, None],
+            fps=torch.from_numpy(col["fps"][()][idx]).to(device),
+            names=[all_names[i] for i in idx],
+            indices=idx,
+            skeleton=self._skeletons[k],
+        )
+
+    def batches(self, clips: Sequence[str | int] | None = None, batch_size: int = 32,
+                dtype: torch.dtype = torch.float32, device=None, sort_by_length: bool = False) -> Iterator[ClipBatch]:
+        """Iterate padded batches of up to ``batch_size`` clips, each batch on one skeleton.
+
+        ``clips`` defaults to every clip in row order; ``sort_by_length`` groups clips of
+        similar length to reduce padding.
+        """
+        self.flush()
+        idx = [self.index(c) for c in clips] if clips is not None else list(range(len(self)))
+        col = self.h5["clips"]
+        sk = col["skeleton"][()]
+        length = col["length"][()]
+        for k in sorted(set(sk[idx].tolist())):
+            group = [i for i in idx if sk[i] == k]
+            if sort_by_length:
+                group.sort(key=lambda i: int(length[i]))
+            for b in range(0, len(group), batch_size):
+                yield self.read_batch(group[b:b + batch_size], dtype=dtype, device=device)
+
+    def summary(self) -> dict:
+        """A JSON-ready description: file attributes, skeletons, roles and every clip."""
+        t = self.table()
+        clips = [
+            {"name": str(t["name"][i]), "frames": int(t["length"][i]), "fps": float(t["fps"][i]),
+             "duration_s": round(float(t["length"][i] / t["fps"][i]), 3), "role": str(t["role"][i]),
+             "labels": json.loads(t["labels"][i] or "{}"), "skeleton": int(t["skeleton"][i]),
+             "source": str(t["source"][i])}
+            for i in range(len(t["name"]))
+        ]
+        roles: dict[str, int] = {}
+        for c in clips:
+            roles[c["role"] or "(none)"] = roles.get(c["role"] or "(none)", 0) + 1
+        skeletons = []
+        for k, sk in enumerate(self._skeletons):
+            spec = json.loads(self.spec_json(k) or "{}")
+            skeletons.append({"id": k, "joints": sk.num_joints, "root": sk.names[0],
+                              "spec": spec.get("name", "") if isinstance(spec, dict) else "",
+                              "clips": sum(c["skeleton"] == k for c in clips), "joint_names": list(sk.names)})
+        attrs = self.attrs
+        return {
+            "path": str(self.path), "format": attrs.get("format"), "schema_version": int(attrs.get("schema_version", 0)),
+            "quaternion_order": attrs.get("quaternion_order"), "units": attrs.get("units"), "up_axis": attrs.get("up_axis"),
+            "created_by": attrs.get("created_by"), "num_clips": len(clips),
+            "num_frames": int(sum(c["frames"] for c in clips)),
+            "duration_s": round(sum(c["duration_s"] for c in clips), 3),
+            "roles": roles, "skeletons": skeletons, "clips": clips,
+        }
+
+    def __repr__(self) -> str:
+        state = "closed" if self._h5 is None else self.mode
+        return f"MotionDatabase({str(self.path)!r}, {state})"
+
