@@ -104,7 +104,7 @@ def cmd_import(args) -> int:
             try:
                 m = read_bvh(f, dtype=dtype)
                 m.check_finite()
-                spec = fixed_spec or detect_spec(m.skeleton, f.name)
+                spec = (fixed_spec or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
                 spec.bind(m.skeleton)
                 m.role, m.labels = spec.clip_metadata(m.name)
                 if m.name in origin:

@@ -156,6 +156,20 @@ class Skeleton:
         ends = self.end_site_offsets + pos[list(self.end_site_parents)] if self.end_site_parents else torch.zeros(0, 3, dtype=torch.float64)
         return pos, ends
 
+    @property
+    def is_depth_first(self) -> bool:
+        """Whether every joint's subtree occupies the indices right after it (BVH's nesting order)."""
+        count, last = [1] * self.num_joints, list(range(self.num_joints))
+        for j in range(self.num_joints - 1, 0, -1):
+            p = self.parents[j]
+            count[p] += count[j]
+            last[p] = max(last[p], last[j])
+        return all(last[j] - j + 1 == count[j] for j in range(self.num_joints))
+
+    @functools.cached_property
+    def _size(self) -> float:
+        return self._compute_size()
+
     def size(self) -> float:
         """A length scale: the longest path between two leaves along the bones (file units).
 
@@ -165,6 +179,9 @@ class Skeleton:
         of an animated joint right under the root is a trajectory, not a bone, and is not
         counted). Used for scale-relative tolerances.
         """
+        return self._size
+
+    def _compute_size(self) -> float:
         J = self.num_joints
         length = self.offsets.norm(dim=1).tolist()
         animated = self.translation_animated
@@ -199,6 +216,8 @@ class Skeleton:
 
     def matches(self, other: "Skeleton", rtol: float = 1e-4) -> bool:
         """Same topology and channel layout, static offsets equal within ``rtol`` of the size."""
+        if other is self:
+            return True
         if not self.same_topology(other) or self.channels != other.channels:
             return False
         return bool(self._static_offset_error(other).max() <= rtol * max(self.size(), 1e-9))

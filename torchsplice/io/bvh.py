@@ -324,14 +324,22 @@ def _fmt(v: float) -> str:
 
 
 def _hierarchy_text(sk: Skeleton) -> str:
-    out = ["HIERARCHY"]
-    kids = [[] for _ in sk.names]
-    for j, p in enumerate(sk.parents):
-        if p >= 0:
-            kids[p].append(j)
-    ends = [[] for _ in sk.names]
+    """The HIERARCHY block; End Sites and child joints keep the order they were read in."""
+    J = len(sk.names)
+    ends = [[] for _ in range(J)]
     for e, p in enumerate(sk.end_site_parents):
         ends[p].append(e)
+    first_end = [min(ends[j], default=len(sk.end_site_parents)) for j in range(J)]  # per subtree
+    for j in range(J - 1, 0, -1):
+        first_end[sk.parents[j]] = min(first_end[sk.parents[j]], first_end[j])
+    items = [[] for _ in range(J)]  # per joint: (sort key, kind, index)
+    for j, p in enumerate(sk.parents):
+        if p >= 0:
+            items[p].append((first_end[j], 1, j))
+    for j in range(J):
+        items[j] += [(e, 0, e) for e in ends[j]]
+        items[j].sort()
+    out = ["HIERARCHY"]
 
     def emit(j, depth):
         ind = "\t" * depth
@@ -340,12 +348,13 @@ def _hierarchy_text(sk: Skeleton) -> str:
         out.append(f"{ind}\tOFFSET " + " ".join(_fmt(v) for v in sk.offsets[j].tolist()))
         if sk.channels[j]:
             out.append(f"{ind}\tCHANNELS {len(sk.channels[j])} " + " ".join(sk.channels[j]))
-        for c in kids[j]:
-            emit(c, depth + 1)
-        for e in ends[j]:
-            out.extend([f"{ind}\tEnd Site", f"{ind}\t{{",
-                    f"{ind}\t\tOFFSET " + " ".join(_fmt(v) for v in sk.end_site_offsets[e].tolist()),
-                    f"{ind}\t}}"])
+        for _, kind, k in items[j]:
+            if kind == 1:
+                emit(k, depth + 1)
+            else:
+                out.extend([f"{ind}\tEnd Site", f"{ind}\t{{",
+                            f"{ind}\t\tOFFSET " + " ".join(_fmt(v) for v in sk.end_site_offsets[k].tolist()),
+                            f"{ind}\t}}"])
         out.append(f"{ind}}}")
 
     emit(0, 0)
@@ -390,7 +399,13 @@ def _frame_columns(motion: Motion) -> np.ndarray:
 
 
 def format_bvh(motion: Motion) -> str:
-    """The clip as BVH text (channel layout and Euler orders from its skeleton)."""
+    """The clip as BVH text (channel layout and Euler orders from its skeleton).
+
+    The skeleton must be in depth-first order (every skeleton read from BVH is), since BVH
+    nesting cannot express any other joint order.
+    """
+    if not motion.skeleton.is_depth_first:
+        raise MotionError(f"clip {motion.name!r}: skeleton joints are not in depth-first order, which BVH cannot keep")
     data = _frame_columns(motion)
     buf = io.StringIO()
     buf.write(_hierarchy_text(motion.skeleton))

@@ -131,6 +131,7 @@ class MotionDatabase:
         self._skeletons = [_skeleton_from_group(h5["skeletons"][k]) for k in sorted(h5["skeletons"], key=int)]
         self._names: list[str] | None = None
         self._name_index: dict[str, int] | None = None
+        self._flushed = h5["clips/name"].shape[0]
         self._staged: list[tuple[Motion, int]] = []
         self._staged_frames = 0
 
@@ -264,7 +265,8 @@ class MotionDatabase:
         return self._h5
 
     def __len__(self) -> int:
-        return self.h5["clips/name"].shape[0] + len(self._staged)
+        self.h5  # raises when closed
+        return self._flushed + len(self._staged)
 
     @property
     def skeletons(self) -> list[Skeleton]:
@@ -327,7 +329,7 @@ class MotionDatabase:
         return {k: (c[k].asstr()[()] if c[k].dtype == object else c[k][()]) for k in _COLUMNS}
 
     def _require_flushed(self, i: int) -> None:
-        if i >= self.h5["clips/name"].shape[0]:
+        if i >= self._flushed:
             self.flush()
 
     # -- writing ------------------------------------------------------------------------------
@@ -399,6 +401,7 @@ class MotionDatabase:
             raise DatabaseError(os_error_message(self.path, exc)) from None
         if self._names is not None:
             self._names += [m.name for m, _ in self._staged]
+        self._flushed += len(self._staged)
         self._staged, self._staged_frames = [], 0
 
     def _write_staged(self) -> None:
