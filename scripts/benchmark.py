@@ -81,8 +81,8 @@ def bench_fk(files: list[Path], device: str) -> None:
     by_skeleton: dict[tuple, list] = {}
     for m in motions:
         by_skeleton.setdefault(m.skeleton.names, []).append(m)
-    group = max(by_skeleton.values(), key=len)[:32]
-    T = min(300, min(m.num_frames for m in group))
+    group = sorted(max(by_skeleton.values(), key=len), key=lambda m: -m.num_frames)[:32]
+    T = min(250, min(m.num_frames for m in group))  # the clips' common length, up to 250 frames
     sk = group[0].skeleton
     for dtype in (torch.float32, torch.float64):
         rot = torch.stack([m.rotations[:T] for m in group]).to(device, dtype)

@@ -554,10 +554,9 @@ def test_detect_spec_file_glob_first(tmp_path):
     """A synthetic LAFAN1-named skeleton: detected as lafan1 by name or by skeleton alone."""
     sk = lafan_like()
     assert detect_spec(sk, "walk1_subject5.bvh").name == "lafan1"
-    # the Bandai Namco glob matches but its spec does not bind: another spec is taken (lafan1, or
-    # a shipped spec whose globs match every name, such as sample.toml's "*")
+    # the Bandai Namco glob matches but its spec does not bind: the first spec that binds is taken
     spec = detect_spec(sk, "dataset-1_walk_normal_001.bvh")
-    assert spec.name != "bandai_namco" and spec.binds(sk)
+    assert spec.name == "lafan1" and spec.binds(sk)
     assert detect_spec(sk).name == "lafan1"
 
 

@@ -73,16 +73,14 @@ class _Header:
         self.end_offsets: list[list[float]] = []
 
 
-def _tokens(lines: list[str], start: int, stop: int):
+def _tokens(lines: list[str], start: int, stop: int) -> list[tuple[str, int]]:
     """(token, 1-based line number) for lines[start:stop]."""
-    for i in range(start, stop):
-        for tok in lines[i].split():
-            yield tok, i + 1
+    return [(tok, i + 1) for i in range(start, stop) for tok in lines[i].split()]
 
 
 def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
     """Parse lines[0:stop] (HIERARCHY ... up to the MOTION line)."""
-    toks = list(_tokens(lines, 0, stop))
+    toks = _tokens(lines, 0, stop)
     h = _Header()
     pos = 0
 
