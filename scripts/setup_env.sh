@@ -6,6 +6,8 @@
 # TORCHSPLICE_TORCH_INDEX (an index URL, e.g. https://download.pytorch.org/whl/cpu).
 # Source it (". scripts/setup_env.sh") to get the environment activated.
 set -euo pipefail
+# pip's notes about unused local package folders on some machines are noise here
+_pip() { python -m pip "$@" --quiet --disable-pip-version-check 2> >(grep -v "is ignored: it is neither" >&2); }
 _root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 _py="${PYTHON:-python3}"
 if [ ! -x "$_root/.venv/bin/python" ]; then
@@ -16,13 +18,13 @@ fi
 . "$_root/.venv/bin/activate"
 if ! python -c "import torch" >/dev/null 2>&1; then
   echo "setup: installing ${TORCHSPLICE_TORCH:-torch==2.13.0}" >&2
-  python -m pip install --quiet --disable-pip-version-check "${TORCHSPLICE_TORCH:-torch==2.13.0}" \
+  _pip install "${TORCHSPLICE_TORCH:-torch==2.13.0}" \
     ${TORCHSPLICE_TORCH_INDEX:+--index-url "$TORCHSPLICE_TORCH_INDEX"}
 fi
 _stamp="$_root/.venv/.torchsplice-installed"
 _want="$(cat "$_root/pyproject.toml" | cksum)"
 if [ ! -f "$_stamp" ] || [ "$(cat "$_stamp")" != "$_want" ]; then
   echo "setup: installing torchsplice and its dependencies" >&2
-  python -m pip install --quiet --disable-pip-version-check -e "$_root[test]"
+  _pip install -e "$_root[test]"
   echo "$_want" > "$_stamp"
 fi
