@@ -245,7 +245,8 @@ def quat_slerp(p: torch.Tensor, q: torch.Tensor, t: torch.Tensor | float) -> tor
     """Spherical linear interpolation along the shorter arc, ``t`` in [0, 1] broadcast over ``(...)``.
 
     ``p`` and ``q`` are broadcastable ``(..., 4)`` unit WXYZ quaternions; ``t`` is a float or a
-    ``(...)`` tensor. Nearly equal rotations fall back to normalised linear interpolation.
+    ``(...)`` tensor. Nearly equal rotations fall back to normalised linear interpolation;
+    ``t = 0`` returns ``p`` exactly.
     """
     _check_last(p, 4, "p")
     _check_last(q, 4, "q")
@@ -259,7 +260,8 @@ def quat_slerp(p: torch.Tensor, q: torch.Tensor, t: torch.Tensor | float) -> tor
     safe = torch.where(near, torch.ones_like(sin_theta), sin_theta)
     wp = torch.where(near, 1.0 - t, torch.sin((1.0 - t) * theta) / safe)
     wq = torch.where(near, t, torch.sin(t * theta) / safe)
-    return quat_normalize(wp * p + wq * q)
+    out = quat_normalize(wp * p + wq * q)
+    return torch.where(t == 0, p.expand_as(out), out)  # exactly p at t = 0
 
 
 def random_quat(shape=(), dtype=torch.float32, device=None, generator=None) -> torch.Tensor:

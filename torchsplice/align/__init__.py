@@ -1,0 +1,1 @@
+"""Alignment: frame distances, dynamic-programming timewarp, alignment curves and Horn rotations."""

@@ -1,0 +1,215 @@
+"""Splice one pair or a batch of (locomotion, action) pairs, with any of the three methods.
+
+    from torchsplice.splice import splice, splice_pairs
+    result = splice(walk, carry_box, spec)                 # the Heck et al. 2006 splice
+    result.motion                                          # the spliced Motion
+    results = splice_pairs([(walk, wave), (turn, wave)], spec, method="naive")
+
+Methods: ``"splice"`` (Heck, Kovar & Gleicher 2006), ``"naive"`` (per-bone replacement of the
+upper body, no timewarp: what per-bone layer masks do) and ``"cpmc"`` (differencing against a
+plain-locomotion ``reference`` of the action's performer, as in Al-Ghreimil & Hahn 2003 and
+engines' additive layers).
+
+Pairs are batched: clips used by several pairs are prepared (resampled to the locomotion's
+frame rate, forward kinematics) once, then every step runs on padded pair tensors. Results
+keep the locomotion's skeleton, frame rate, root and lower body.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+import torch
+
+from ..core.errors import MotionError, TorchspliceError
+from ..core.motion import Motion
+from ..io.spec import DatasetSpec, SkeletonRoles
+from .clips import check_pair, clips_to_tensors, resample_motion
+from .heck import AlignOptions, splice_tensors
+from .locomotion import LocomotionCheck, check_locomotion
+from .methods import cpmc_tensors, naive_tensors
+
+__all__ = ["METHODS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice", "splice_pairs"]
+
+METHODS = ("splice", "naive", "cpmc")
+
+
+class NotLocomotingError(MotionError):
+    """A clip that does not locomote, refused unless ``force`` is set."""
+
+
+@dataclass(frozen=True)
+class SpliceOptions:
+    """Options for every method.
+
+    Attributes:
+        align: time-alignment parameters (:class:`~torchsplice.splice.heck.AlignOptions`).
+        posture: apply posture transfer (``splice`` only).
+        force: splice clips that do not locomote instead of refusing them.
+        min_seconds: shortest clip accepted.
+        dtype, device: where the tensor work runs (float32 on the CPU by default).
+    """
+
+    align: AlignOptions = field(default_factory=AlignOptions)
+    posture: bool = True
+    force: bool = False
+    min_seconds: float = 0.5
+    dtype: torch.dtype = torch.float32
+    device: str | None = None
+
+
+@dataclass
+class SpliceResult:
+    """One spliced pair.
+
+    Attributes:
+        motion: the spliced clip (locomotion's skeleton and frame rate), role ``"spliced"``.
+        method: ``"splice"``, ``"naive"`` or ``"cpmc"``.
+        locomotion, action, reference: source clip names (``reference`` for ``cpmc``).
+        cost: average lower-body frame distance along the alignment path (file units squared);
+            NaN for ``naive``.
+        curve: ``(T,)`` float64, for each result frame the action frame (at the action's own
+            frame rate, from its first frame) whose upper body it carries.
+        crop: action frames skipped at the start (at the action's frame rate).
+        path: ``(P, 2)`` the DP path (locomotion frame, cropped action frame at the
+            locomotion's rate); empty for ``naive``.
+        pelvis_correction: ``(T,)`` per-frame angle of the spatial-alignment rotation, degrees.
+        posture_deg: angle of the posture-transfer rotation ``q_G``, degrees.
+        checks: the locomotion checks of (locomotion, action).
+        notes: warnings, e.g. a clip that was forced although it does not locomote.
+    """
+
+    motion: Motion
+    method: str
+    locomotion: str
+    action: str
+    reference: str | None
+    cost: float
+    curve: torch.Tensor
+    crop: int
+    path: torch.Tensor
+    pelvis_correction: torch.Tensor
+    posture_deg: float
+    checks: tuple[LocomotionCheck, LocomotionCheck] | None = None
+    notes: tuple[str, ...] = ()
+
+
+def splice(locomotion: Motion, action: Motion, spec: DatasetSpec | SkeletonRoles, method: str = "splice",
+           reference: Motion | None = None, options: SpliceOptions | None = None) -> SpliceResult:
+    """Splice the upper body of ``action`` onto the lower body of ``locomotion``."""
+    return splice_pairs([(locomotion, action)], spec, method, None if reference is None else [reference], options)[0]
+
+
+def _unique(motions: Sequence[Motion]) -> tuple[list[Motion], torch.Tensor]:
+    """Distinct clips (by identity) and, per input, its index among them."""
+    seen: dict[int, int] = {}
+    uniq: list[Motion] = []
+    idx = []
+    for m in motions:
+        if id(m) not in seen:
+            seen[id(m)] = len(uniq)
+            uniq.append(m)
+        idx.append(seen[id(m)])
+    return uniq, torch.tensor(idx)
+
+
+def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str = "splice",
+                 references: Sequence[Motion] | None = None, options: SpliceOptions | None = None) -> list[SpliceResult]:
+    """Splice every ``(locomotion, action)`` pair, batched; results in the order of ``pairs``.
+
+    ``references`` (one per pair) are required for ``cpmc``. Pairs must share one skeleton
+    topology. Raises :class:`~torchsplice.core.errors.MotionError` naming the clip for a pair
+    that cannot be spliced, and :class:`NotLocomotingError` for a clip that does not locomote
+    (unless ``options.force``).
+    """
+    options = options or SpliceOptions()
+    if method not in METHODS:
+        raise TorchspliceError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if not pairs:
+        return []
+    if method == "cpmc" and (references is None or len(references) != len(pairs) or any(r is None for r in references)):
+        raise TorchspliceError("method 'cpmc' needs a plain-locomotion reference clip for every action")
+    skeleton = pairs[0][0].skeleton
+    roles = spec.bind(skeleton) if isinstance(spec, DatasetSpec) else spec
+    groups: dict[float, list[int]] = {}
+    for k, (loco, act) in enumerate(pairs):
+        min_frames = max(4, int(options.min_seconds * loco.fps))
+        check_pair(loco, act, min_frames)
+        if references is not None and method == "cpmc":
+            check_pair(loco, references[k], min_frames)
+        if not loco.skeleton.same_topology(skeleton):
+            raise MotionError(f"clip {loco.name!r} has another skeleton than {pairs[0][0].name!r}; splice one skeleton per call")
+        groups.setdefault(loco.fps, []).append(k)
+    results: list[SpliceResult | None] = [None] * len(pairs)
+    for fps, ks in groups.items():
+        refs = [references[k] for k in ks] if method == "cpmc" else None
+        for k, r in zip(ks, _splice_group([pairs[k] for k in ks], refs, roles, method, options, fps)):
+            results[k] = r
+    return results  # type: ignore[return-value]
+
+
+def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float) -> list[SpliceResult]:
+    """Pairs whose locomotions share a frame rate ``fps``."""
+    skeleton = pairs[0][0].skeleton
+    locos, li = _unique([p[0] for p in pairs])
+    acts, ai = _unique([p[1] for p in pairs] + (refs or []))
+    kw = dict(dtype=options.dtype, device=options.device)
+    L = clips_to_tensors(locos, skeleton, **kw)
+    A = clips_to_tensors([resample_motion(a, fps) for a in acts], skeleton, **kw)
+    checks_l = check_locomotion(L, roles, fps)
+    checks_a = check_locomotion(A, roles, fps)
+    dev = L.rotations.device
+    li, ai = li.to(dev), ai.to(dev)
+    B = len(pairs)
+    notes: list[list[str]] = [[] for _ in range(B)]
+    for b in range(B):
+        for clip, check in ((pairs[b][0], checks_l[int(li[b])]), (pairs[b][1], checks_a[int(ai[b])])):
+            if not check.locomoting:
+                if not options.force:
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force to splice anyway)")
+                notes[b].append(f"{clip.name} does not locomote: {check.reason}")
+    loco, act = L.take(li), A.take(ai[:B])
+    empty = torch.zeros(0, 2, dtype=torch.long)
+    if method == "splice":
+        out = splice_tensors(loco, act, roles, skeleton, options.align, fps, posture=options.posture)
+        clips, al = out.clips, out.alignment
+        times = al.curve + al.crop[:, None]
+        corr = torch.rad2deg(out.pelvis_correction).to(torch.float64)
+        posture = torch.rad2deg(2 * torch.atan2(out.posture_rotation[:, 1:].norm(dim=-1), out.posture_rotation[:, 0].abs()))
+        cost, crop, paths = al.cost, al.crop, [al.cells[b, : int(al.path_length[b])] for b in range(B)]
+    elif method == "naive":
+        clips, times = naive_tensors(loco, act, roles, skeleton)
+        corr = torch.zeros(times.shape, dtype=torch.float64)
+        posture = torch.zeros(B)
+        cost, crop, paths = torch.full((B,), float("nan")), torch.zeros(B, dtype=torch.long), [empty] * B
+    else:
+        ref = A.take(ai[B:])
+        clips, al, _ = cpmc_tensors(loco, act, ref, roles, skeleton, options.align, fps)
+        times = al.curve + al.crop[:, None]
+        corr = torch.zeros(times.shape, dtype=torch.float64)
+        posture = torch.zeros(B)
+        cost, crop, paths = al.cost, al.crop, [al.cells[b, : int(al.path_length[b])] for b in range(B)]
+    results = []
+    for b, (lo, ac) in enumerate(pairs):
+        n = int(clips.lengths[b])
+        scale = ac.fps / fps  # action frames at its own rate per frame at the locomotion's rate
+        motion = Motion(
+            skeleton=lo.skeleton,
+            rotations=clips.rotations[b, :n],
+            root_translation=clips.translations[b, :n, 0],
+            translations=clips.translations[b, :n] if lo.skeleton.has_joint_translations else None,
+            fps=fps,
+            name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
+            source=f"splice:{method}",
+            role="spliced",
+            labels={"method": method, "locomotion": lo.name, "action": ac.name},
+        )
+        results.append(SpliceResult(
+            motion=motion, method=method, locomotion=lo.name, action=ac.name,
+            reference=refs[b].name if refs else None, cost=float(cost[b]),
+            curve=(times[b, :n].to(torch.float64) * scale).cpu(), crop=int(round(float(crop[b]) * scale)),
+            path=paths[b].cpu(), pelvis_correction=corr[b, :n].cpu(), posture_deg=float(posture[b]),
+            checks=(checks_l[int(li[b])], checks_a[int(ai[b])]), notes=tuple(notes[b]),
+        ))
+    return results

@@ -1,0 +1,113 @@
+"""Clips as padded tensors for batched splicing: frame-rate resampling, padding and FK.
+
+:class:`ClipTensors` holds ``B`` clips of one skeleton, padded to ``T`` frames by repeating
+each clip's last frame, with their forward kinematics. Shapes: rotations ``(B, T, J, 4)``
+(local, unit WXYZ), root translation ``(B, T, 3)``, local translations ``(B, T, J, 3)`` (every
+joint, offsets where not animated), positions ``(B, T, J, 3)`` and global rotations
+``(B, T, J, 4)`` (world), lengths ``(B,)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import torch
+
+from ..align.curve import interpolate_frames, resample_times, slerp_frames
+from ..core.errors import MotionError
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
+from ..kinematics.fk import forward_kinematics
+
+__all__ = ["ClipTensors", "clips_to_tensors", "resample_motion", "check_pair", "shift_frames", "with_fk"]
+
+
+@dataclass
+class ClipTensors:
+    """A padded batch of clips on one skeleton with their FK (see the module docstring)."""
+
+    rotations: torch.Tensor
+    translations: torch.Tensor
+    lengths: torch.Tensor
+    positions: torch.Tensor
+    global_rotations: torch.Tensor
+
+    @property
+    def root_translation(self) -> torch.Tensor:
+        """``(B, T, 3)`` position of joint 0."""
+        return self.translations[:, :, 0]
+
+    def take(self, index: torch.Tensor) -> "ClipTensors":
+        """Clips ``index`` ``(B',)`` of the batch (a gather, e.g. to form pairs)."""
+        return ClipTensors(*(t.index_select(0, index) for t in
+                             (self.rotations, self.translations, self.lengths, self.positions, self.global_rotations)))
+
+    def shift(self, start: torch.Tensor) -> "ClipTensors":
+        """Each clip ``b`` starting at its frame ``start[b]`` (cropping the frames before)."""
+        return ClipTensors(*(shift_frames(x, start, self.lengths) for x in
+                             (self.rotations, self.translations)), self.lengths - start,
+                           *(shift_frames(x, start, self.lengths) for x in (self.positions, self.global_rotations)))
+
+    def first_frames(self, T: int) -> "ClipTensors":
+        """The first ``T`` frames (lengths capped at ``T``)."""
+        return ClipTensors(self.rotations[:, :T], self.translations[:, :T], self.lengths.clamp(max=T),
+                           self.positions[:, :T], self.global_rotations[:, :T])
+
+    def at_times(self, times: torch.Tensor, lengths: torch.Tensor, skeleton: Skeleton) -> "ClipTensors":
+        """Clips sampled at fractional frame ``times`` ``(B, T')`` (slerp and linear), with new FK."""
+        rot = slerp_frames(self.rotations, times, self.lengths)
+        trans = interpolate_frames(self.translations, times, self.lengths)
+        return with_fk(rot, trans, lengths, skeleton)
+
+
+def shift_frames(x: torch.Tensor, start: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+    """``x[b, t + start[b]]`` for ``x`` ``(B, T, ...)``, repeating each clip's last frame at the end."""
+    T = x.shape[1]
+    idx = torch.minimum(torch.arange(T, device=x.device)[None, :] + start[:, None], (lengths - 1)[:, None])
+    return torch.gather(x, 1, idx.reshape(idx.shape + (1,) * (x.dim() - 2)).expand(idx.shape + x.shape[2:]))
+
+
+def with_fk(rotations: torch.Tensor, translations: torch.Tensor, lengths: torch.Tensor, skeleton: Skeleton) -> ClipTensors:
+    """:class:`ClipTensors` from local rotations and translations, computing the FK."""
+    pos, grot = forward_kinematics(rotations, translations[:, :, 0], skeleton.offsets.to(rotations),
+                                   skeleton.parents, translations)
+    return ClipTensors(rotations, translations, lengths, pos, grot)
+
+
+def resample_motion(motion: Motion, fps: float) -> Motion:
+    """The clip played at ``fps`` (slerp and linear interpolation); itself if already there."""
+    if abs(motion.fps - fps) <= 1e-6 * fps:
+        return motion
+    times = resample_times(motion.num_frames, motion.fps, fps).to(motion.device)[None]
+    lengths = torch.tensor([motion.num_frames], device=motion.device)
+    rot = slerp_frames(motion.rotations[None], times, lengths)[0]
+    root = interpolate_frames(motion.root_translation[None], times, lengths)[0]
+    trans = None if motion.translations is None else interpolate_frames(motion.translations[None], times, lengths)[0]
+    return replace(motion, rotations=rot, root_translation=root, translations=trans, fps=fps, labels=dict(motion.labels))
+
+
+def clips_to_tensors(motions: list[Motion], skeleton: Skeleton, dtype=torch.float32, device=None) -> ClipTensors:
+    """Pad clips (already at a common frame rate) into a :class:`ClipTensors` and run FK once."""
+    if not motions:
+        raise ValueError("no clips")
+    T = max(m.num_frames for m in motions)
+    lengths = torch.tensor([m.num_frames for m in motions], device=device)
+
+    def pad(x: torch.Tensor) -> torch.Tensor:
+        x = x.to(device=device, dtype=dtype)
+        return torch.cat((x, x[-1:].expand((T - x.shape[0],) + x.shape[1:])), 0) if x.shape[0] < T else x
+
+    rot = torch.stack([pad(m.rotations) for m in motions])
+    trans = torch.stack([pad(m.local_translations()) for m in motions])
+    return with_fk(rot, trans, lengths, skeleton)
+
+
+def check_pair(locomotion: Motion, action: Motion, min_frames: int) -> None:
+    """Clear errors for a pair that cannot be spliced: different skeletons, NaN, too short."""
+    for m in (locomotion, action):
+        m.check_finite()
+        if m.num_frames < min_frames:
+            raise MotionError(f"clip {m.name!r} is too short to align: {m.num_frames} frames, at least {min_frames} needed")
+    why = locomotion.skeleton.mismatch(action.skeleton)
+    if why is not None and not locomotion.skeleton.same_topology(action.skeleton):
+        raise MotionError(f"clips {locomotion.name!r} and {action.name!r} have different skeletons: {why}")

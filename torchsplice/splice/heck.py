@@ -1,0 +1,254 @@
+"""The splice of Heck, Kovar & Gleicher 2006 on batches of (locomotion, action) pairs.
+
+Every step works on padded tensors of ``B`` pairs (see :mod:`torchsplice.splice.clips`):
+
+1. frame distances on lower-body point clouds (root and knees by default), heading-restricted
+   so that a pose never matches its mirror half a stride later (:mod:`torchsplice.align.distance`);
+2. phase cropping of the action at the first clear local minimum of its distance to the
+   locomotion's start, compared over half-second windows (single frames are ambiguous);
+3. the slope-limited dynamic-programming timewarp (:mod:`torchsplice.align.timewarp`);
+4. the alignment curve ``lambda(t)``, a strictly increasing B-spline, and the action resampled
+   there (:mod:`torchsplice.align.curve`);
+5. spatial alignment: per frame, Horn's rotation ``q_A`` between the pelvis-frame clouds of
+   pelvis, spine and shoulders; spliced local pelvis rotation ``q_LP * q_A``;
+6. posture transfer: Horn's rotation ``q_G`` between frame-averaged shoulder clouds in heading
+   frames (pelvis at the origin, hips along x), applied about the pelvis **in the heading
+   frame**: the local pelvis rotation becomes ``Q_par^-1 (H q_G H^-1) Q_par q_P``, where
+   ``Q_par`` is the pelvis's parent's global rotation and ``H`` the heading frame. (The
+   paper's ``q_P * q_G`` is the same only when the pelvis's local axes match the heading
+   frame's; on Bandai Namco and LAFAN1 skeletons they do not.)
+7. the result: root and lower body from the locomotion, the pelvis computed, the upper body
+   from the resampled action.
+
+Quaternions are unit WXYZ; the up axis comes from the dataset spec.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from ..align.curve import fit_alignment_curve, interpolate_frames
+from ..align.distance import distance_grid, heading_from_hips
+from ..align.horn import horn_rotation
+from ..align.timewarp import timewarp
+from ..core.rotations import quat_apply, quat_conj, quat_mul
+from ..core.skeleton import Skeleton
+from ..io.spec import SkeletonRoles
+from ..kinematics.heading import heading_frame, to_heading_frame
+from .clips import ClipTensors, shift_frames, with_fk
+
+__all__ = ["AlignOptions", "TimeAlignment", "time_align", "phase_crop", "splice_tensors", "SplicedTensors"]
+
+
+@dataclass(frozen=True)
+class AlignOptions:
+    """Parameters of time alignment (defaults follow the paper where it gives them).
+
+    Attributes:
+        max_run: slope limit ``L``: at most this many consecutive frames of one clip while the
+            other stands still.
+        landmarks: roles whose joints form the lower-body point cloud (``root``, ``hips``,
+            ``knees``, ``feet``, ``toes``); the paper uses root and knees.
+        heading_window_deg: the rotation that aligns two frames must stay within this many
+            degrees of their relative heading (from the hips), which tells left from right;
+            ``None`` gives the paper's unrestricted metric.
+        crop: crop the action's start to bring it in phase with the locomotion.
+        crop_context_s: cropping compares windows of this many seconds, not single frames,
+            so that a frame is not taken for its mirror half a stride later.
+        crop_window_s: the local minimum for cropping must be the smallest within this many
+            seconds on either side (robustness to small noise).
+        knot_spacing_s: seconds of locomotion per span of the alignment B-spline.
+    """
+
+    max_run: int = 3
+    landmarks: tuple[str, ...] = ("root", "knees")
+    heading_window_deg: float | None = 60.0
+    crop: bool = True
+    crop_context_s: float = 0.5
+    crop_window_s: float = 0.2
+    knot_spacing_s: float = 0.25
+
+
+def landmark_indices(roles: SkeletonRoles, landmarks) -> list[int]:
+    """Joint indices of the named roles, pairs expanded (left, right)."""
+    out = []
+    for name in landmarks:
+        v = getattr(roles, name, None)
+        if v is None or name in ("upper_body", "lower_body", "up_axis", "units"):
+            raise ValueError(f"unknown or absent landmark role {name!r}")
+        out += list(v) if isinstance(v, tuple) else [v]
+    return out
+
+
+def _clouds_and_headings(c: ClipTensors, roles: SkeletonRoles, options: AlignOptions):
+    idx = landmark_indices(roles, options.landmarks)
+    cloud = c.positions[:, :, idx]
+    heading = None
+    if options.heading_window_deg is not None:
+        heading = heading_from_hips(c.positions[:, :, roles.hips[0]], c.positions[:, :, roles.hips[1]], roles.up_axis)
+    return cloud, heading
+
+
+def _grid(a: ClipTensors, b: ClipTensors, roles: SkeletonRoles, options: AlignOptions) -> torch.Tensor:
+    ca, ha = _clouds_and_headings(a, roles, options)
+    cb, hb = _clouds_and_headings(b, roles, options)
+    window = math.radians(options.heading_window_deg) if options.heading_window_deg is not None else math.pi
+    return distance_grid(ca, cb, up_axis=roles.up_axis, heading_a=ha, heading_b=hb, max_heading_deviation=window)
+
+
+def phase_crop(grid: torch.Tensor, lengths_a: torch.Tensor, lengths_b: torch.Tensor, context: int, window: int,
+               depth: float = 0.25) -> torch.Tensor:
+    """Frames ``(B,)`` to crop from the start of clip b so that it starts in phase with clip a.
+
+    ``grid`` ``(B, Ta, Tb)`` holds frame distances. Root and knees alone cannot tell a frame
+    from its mirror half a stride later around the moments the knees pass each other, so the
+    crop compares *windows*: ``d(j)`` is the mean distance of a's first ``context`` frames to
+    b's frames ``j .. j + context - 1``. The crop is the first ``j`` that is a local minimum
+    of ``d``, the smallest within ``window`` frames on either side (robust to small noise),
+    and within ``depth`` of the way from the lowest to the highest ``d`` (a real match, not a
+    shallow dip); it leaves at least half of b.
+    """
+    B, Ta, Tb = grid.shape
+    dev = grid.device
+    W = int(max(1, min(context, int(lengths_a.min()), int(lengths_b.min()) // 2)))
+    k = torch.arange(W, device=dev)
+    j = torch.arange(Tb, device=dev)
+    cols = (j[None, :] + k[:, None]).clamp(max=Tb - 1)  # (W, Tb)
+    diag = torch.gather(grid[:, :W], 2, cols[None].expand(B, W, Tb))  # grid[b, k, j + k]
+    d = diag.mean(1)  # (B, Tb)
+    allowed = (j[None, :] + W <= lengths_b[:, None]) & (j[None, :] <= (lengths_b[:, None] - 1) // 2)
+    d = torch.where(allowed, d, torch.full_like(d, float("inf")))
+    nb_min = -torch.nn.functional.max_pool1d(-d[:, None], 2 * window + 1, stride=1, padding=window)[:, 0]
+    lo = d.min(1, keepdim=True).values
+    hi = torch.where(allowed, d, torch.full_like(d, -float("inf"))).max(1, keepdim=True).values
+    deep = d <= lo + depth * (hi - lo)  # a real match, not a shallow dip between strides
+    ok = (d <= nb_min) & allowed & deep
+    return torch.where(ok.any(1), ok.to(torch.int8).argmax(1), torch.zeros(B, dtype=torch.long, device=dev))
+
+
+@dataclass
+class TimeAlignment:
+    """The time alignment of ``B`` pairs.
+
+    Attributes:
+        crop: ``(B,)`` frames cropped from the start of the second clip.
+        cells, path_length: the DP paths (see :class:`~torchsplice.align.timewarp.WarpPath`),
+            in cropped frames.
+        cost: ``(B,)`` average frame distance along each path (file units squared).
+        curve: ``(B, T)`` float64: for each frame ``t`` of the first clip, the matching
+            fractional frame of the cropped second clip (padded with the last value).
+        frames: ``(B,)`` number of frames of the first clip covered (``T`` of the result).
+    """
+
+    crop: torch.Tensor
+    cells: torch.Tensor
+    path_length: torch.Tensor
+    cost: torch.Tensor
+    curve: torch.Tensor
+    frames: torch.Tensor
+
+
+def time_align(base: ClipTensors, other: ClipTensors, roles: SkeletonRoles, options: AlignOptions, fps: float) -> TimeAlignment:
+    """Align ``other`` in time to ``base`` (both at ``fps``): grid, phase crop, DP, curve."""
+    B = base.lengths.shape[0]
+    grid = _grid(base, other, roles, options)
+    crop = torch.zeros(B, dtype=torch.long, device=grid.device)
+    if options.crop:
+        crop = phase_crop(grid, base.lengths, other.lengths, int(round(options.crop_context_s * fps)),
+                          max(1, int(round(options.crop_window_s * fps))))
+    grid = shift_frames(grid.transpose(1, 2), crop, other.lengths).transpose(1, 2)
+    path = timewarp(grid, base.lengths, other.lengths - crop, options.max_run)
+    curve, frames = fit_alignment_curve(path.cells, path.length, knot_spacing=options.knot_spacing_s * fps)
+    return TimeAlignment(crop, path.cells, path.length, path.cost, curve, frames)
+
+
+@dataclass
+class SplicedTensors:
+    """Spliced clips ``(B, T, ...)`` with per-pair diagnostics.
+
+    Attributes:
+        clips: the spliced :class:`ClipTensors` (``lengths`` = frames of each result).
+        alignment: the :class:`TimeAlignment` of action to locomotion.
+        pelvis_correction: ``(B, T)`` angle of ``q_A`` per frame, radians.
+        posture_rotation: ``(B, 4)`` ``q_G`` (identity without posture transfer).
+    """
+
+    clips: ClipTensors
+    alignment: TimeAlignment
+    pelvis_correction: torch.Tensor
+    posture_rotation: torch.Tensor
+
+
+def _assemble(loco: ClipTensors, act: ClipTensors, pelvis_rot: torch.Tensor, roles: SkeletonRoles,
+              lengths: torch.Tensor, skeleton: Skeleton) -> ClipTensors:
+    """Root and lower body from ``loco``, pelvis from ``pelvis_rot`` ``(B, T, 4)``, upper body from ``act``."""
+    T = act.rotations.shape[1]
+    upper = torch.zeros(skeleton.num_joints, dtype=torch.bool, device=loco.rotations.device)
+    upper[list(roles.upper_body)] = True
+    rot = torch.where(upper[:, None], act.rotations, loco.rotations[:, :T])
+    rot[:, :, roles.pelvis] = pelvis_rot
+    trans = torch.where(upper[:, None], act.translations, loco.translations[:, :T])
+    trans[:, :, roles.pelvis] = loco.translations[:, :T, roles.pelvis]
+    return with_fk(rot, trans, lengths, skeleton)
+
+
+def _pelvis_clouds(c: ClipTensors, roles: SkeletonRoles) -> torch.Tensor:
+    """``(B, T, K, 3)`` spine joints and shoulders in the pelvis's own frame."""
+    idx = [j for j in roles.spine if j != roles.pelvis] + list(roles.shoulders)
+    p, q = c.positions[:, :, roles.pelvis], c.global_rotations[:, :, roles.pelvis]
+    return quat_apply(quat_conj(q)[:, :, None], c.positions[:, :, idx] - p[:, :, None])
+
+
+def _posture_clouds(c: ClipTensors, roles: SkeletonRoles, lengths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-frame heading frames ``(B, T, 4)`` and the frame-averaged shoulder cloud ``(B, 2, 3)``."""
+    pos = c.positions
+    H = heading_frame(pos[:, :, roles.hips[0]], pos[:, :, roles.hips[1]], roles.up_axis)
+    local = to_heading_frame(pos[:, :, list(roles.shoulders)], pos[:, :, roles.pelvis], H)  # (B, T, 2, 3)
+    valid = (torch.arange(pos.shape[1], device=pos.device)[None, :] < lengths[:, None]).to(pos.dtype)
+    mean = (local * valid[..., None, None]).sum(1) / valid.sum(1)[:, None, None]
+    return H, mean
+
+
+def splice_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton,
+                   options: AlignOptions, fps: float, posture: bool = True) -> SplicedTensors:
+    """Splice the upper body of each ``act`` clip onto the lower body of each ``loco`` clip.
+
+    ``loco`` and ``act`` are pairs (clip ``b`` with clip ``b``) on ``skeleton``, both at ``fps``.
+    """
+    align = time_align(loco, act, roles, options, fps)
+    frames = align.frames
+    T = int(frames.max())
+    act_c = act.shift(align.crop)
+    times = align.curve.to(act_c.rotations.dtype)
+    act_r = act_c.at_times(times, frames, skeleton)  # the action resampled at lambda(t), (B, T)
+
+    # spatial alignment: q_A per frame, pelvis := q_LP * q_A
+    q_lp = loco.rotations[:, :T, roles.pelvis]
+    first = _assemble(loco, act_r, q_lp, roles, frames, skeleton)
+    q_a = horn_rotation(_pelvis_clouds(first, roles), _pelvis_clouds(loco.first_frames(T), roles))
+    pelvis = quat_mul(q_lp, q_a)
+    spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton)
+    correction = 2 * torch.atan2(q_a[..., 1:].norm(dim=-1), q_a[..., 0].abs())
+
+    B = frames.shape[0]
+    q_g = torch.zeros(B, 4, dtype=pelvis.dtype, device=pelvis.device)
+    q_g[:, 0] = 1
+    if posture:
+        H, mean_s = _posture_clouds(spliced, roles, frames)
+        _, mean_u = _posture_clouds(act_r, roles, frames)
+        q_g = horn_rotation(mean_s, mean_u)
+        parent = skeleton.parents[roles.pelvis]
+        q_par = spliced.global_rotations[:, :, parent]
+        world = quat_mul(quat_mul(H, q_g[:, None].expand_as(H)), quat_conj(H))  # q_G in world coordinates
+        local = quat_mul(quat_mul(quat_conj(q_par), world), q_par)  # ... in the pelvis's parent frame
+        pelvis = quat_mul(local, pelvis)
+        spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton)
+    return SplicedTensors(spliced, align, correction, q_g)
+
+
+def interpolate_positions(c: ClipTensors, times: torch.Tensor) -> torch.Tensor:
+    """Global positions of ``c`` at fractional frame ``times`` ``(B, T')`` (linear)."""
+    return interpolate_frames(c.positions, times.to(c.positions.dtype), c.lengths)

@@ -1,0 +1,48 @@
+"""Is a clip locomoting? The method's stated limit, detected before splicing.
+
+Time alignment matches the lower bodies of two *locomoting* characters; a clip performed
+standing still has no gait cycle to align (Heck et al. 2006, Section 5). A clip counts as
+locomoting when both feet take at least one step (a swing between two ground contacts) and
+the root travels at least one leg length along its floor path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..io.spec import SkeletonRoles
+from ..kinematics.contacts import gait_summary
+from .clips import ClipTensors
+
+__all__ = ["LocomotionCheck", "check_locomotion"]
+
+MIN_TRAVEL_LEGS = 1.0
+
+
+@dataclass(frozen=True)
+class LocomotionCheck:
+    """Verdict for one clip: ``locomoting``, and ``reason`` (empty when locomoting).
+
+    ``swings`` are the (left, right) steps counted, ``travel`` the root's floor path in leg
+    lengths, ``duration`` in seconds.
+    """
+
+    locomoting: bool
+    reason: str
+    swings: tuple[int, int]
+    travel: float
+    duration: float
+
+
+def check_locomotion(clips: ClipTensors, roles: SkeletonRoles, fps: float) -> list[LocomotionCheck]:
+    """One :class:`LocomotionCheck` per clip of the batch (computed batched)."""
+    g = gait_summary(clips.positions, clips.lengths, fps, roles.feet, roles.hips, roles.root, roles.up_axis)
+    out = []
+    for swings, travel, duration in zip(g.swings.tolist(), g.travel.tolist(), g.duration.tolist()):
+        reasons = []
+        if min(swings) < 1:
+            reasons.append(f"no alternating steps (left {swings[0]}, right {swings[1]} in {duration:.1f} s)")
+        if travel < MIN_TRAVEL_LEGS:
+            reasons.append(f"little travel ({travel:.2f} leg lengths)")
+        out.append(LocomotionCheck(not reasons, "; ".join(reasons), tuple(swings), travel, duration))
+    return out
