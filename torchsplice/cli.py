@@ -178,6 +178,71 @@ def cmd_export(args) -> int:
 
 
 # --------------------------------------------------------------------------------------------
+# splice
+# --------------------------------------------------------------------------------------------
+def _db_spec(db, skeleton_id: int, skeleton):
+    """The spec stored with a skeleton of the database, or one detected for it."""
+    from .io.spec import DatasetSpec, detect_spec
+
+    text = db.spec_json(skeleton_id)
+    return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
+
+
+def _splice_options(args):
+    from .splice import AlignOptions, SpliceOptions
+
+    return SpliceOptions(align=AlignOptions(max_run=args.max_run), posture=not args.no_posture,
+                         force=args.force_locomotion, device=args.device)
+
+
+def cmd_splice(args) -> int:
+    import json as _json
+
+    from .io.bvh import write_bvh
+    from .io.database import MotionDatabase
+    from .splice import splice
+    from .splice.references import find_reference
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    with MotionDatabase.open(args.database) as db:
+        loco, act = db.read(args.locomotion), db.read(args.action)
+        spec = _db_spec(db, db.clip_info(args.locomotion)["skeleton"], loco.skeleton)
+        ref = None
+        if args.method == "cpmc":
+            name = args.reference
+            if name is None:
+                t = db.table()
+                cands = [(str(n), str(r), _json.loads(lab or "{}")) for n, r, lab in zip(t["name"], t["role"], t["labels"])]
+                name = find_reference(act.name, act.labels, cands, spec)
+                if name is None:
+                    raise TorchspliceError(f"no plain-locomotion reference found for action {act.name!r}: "
+                                           "name one with --reference (or add a [clips.reference] rule to the spec)")
+            ref = db.read(name)
+        elif args.reference is not None:
+            raise TorchspliceError("--reference is only used by --method cpmc")
+    result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
+    write_bvh(result.motion, out)
+    extra = f", reference {result.reference}" if result.reference else ""
+    _say(args, f"wrote {out}: {args.method} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
+               f"at {result.motion.fps:g} fps; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames, "
+               f"posture rotation {result.posture_deg:.1f} deg")
+    for note in result.notes:
+        print(f"note: {note}", file=sys.stderr)
+    return 0
+
+
+def _add_splice_options(s) -> None:
+    s.add_argument("--max-run", type=int, default=3, metavar="L",
+                   help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
+    s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
+    s.add_argument("--force-locomotion", action="store_true",
+                   help="splice clips that do not locomote (the method's limit) instead of refusing them")
+    s.add_argument("--device", default=None, help="torch device for the tensor work, e.g. cuda (default cpu)")
+
+
+# --------------------------------------------------------------------------------------------
 # parser and entry point
 # --------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
@@ -228,6 +293,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("splice", help="splice one action onto one locomotion and write a BVH file",
+                       description="Splice the upper body of an action clip onto the lower body of a locomotion clip "
+                                   "of the same database (clip names as `info` lists them). Methods: splice (Heck, "
+                                   "Kovar & Gleicher 2006: timewarp, spatial alignment, posture transfer), naive "
+                                   "(per-bone upper-body replacement, no timewarp) and cpmc (differencing against a "
+                                   "plain-locomotion reference of the action's performer, chosen by the spec's "
+                                   "[clips.reference] rule or named with --reference).")
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("--locomotion", required=True, metavar="NAME", help="clip giving root and lower body")
+    s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
+    s.add_argument("-o", "--output", required=True, help="BVH file to write")
+    s.add_argument("--method", default="splice", choices=["splice", "naive", "cpmc"], help="splicing method (default splice)")
+    s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
+    _add_splice_options(s)
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=cmd_splice)
     return p
 
 

@@ -58,7 +58,7 @@ _SECTION_KEYS = {
     "dataset": {"name", "description", "up_axis", "units", "files"},
     "joints": {"root", "pelvis", "spine", "head", "upper_body", "lower_body", "guess",
                *_PAIRS, *_OPTIONAL_PAIRS},
-    "clips": {"pattern", "default_role", "role"},
+    "clips": {"pattern", "default_role", "role", "reference"},
 }
 _PACKAGE = "torchsplice.datasets_spec"
 GENERIC = "generic"
@@ -140,6 +140,9 @@ class DatasetSpec:
         pattern: regex on the clip name whose named groups become labels, or ``None``.
         default_role: role of clips no rule matches.
         rules: :class:`RoleRule` s, first match wins.
+        reference: ``((label, template), ...)``: the labels a plain-locomotion reference of
+            an action carries (for the ``cpmc`` method); ``"{key}"`` in a template is the
+            action's own label ``key``. ``None``: references must be named explicitly.
         guess: joints are guessed at :meth:`bind` time.
         path: the file it was loaded from, or ``None``.
         notes: remarks, e.g. what a guessed spec guessed.
@@ -165,6 +168,7 @@ class DatasetSpec:
     pattern: str | None = None
     default_role: str = "locomotion"
     rules: tuple[RoleRule, ...] = ()
+    reference: tuple[tuple[str, str], ...] | None = None
     guess: bool = False
     path: Path | None = None
     notes: tuple[str, ...] = ()
@@ -218,6 +222,16 @@ class DatasetSpec:
                 labels = {k: v for k, v in m.groupdict().items() if v is not None}
         role = next((r.role for r in self.rules if r.matches(name, labels)), self.default_role)
         return role, labels
+
+    def reference_labels(self, labels: dict[str, str]) -> dict[str, str] | None:
+        """Labels the reference of an action with ``labels`` must carry (``None`` if there is
+        no rule, or the rule names a label the action lacks)."""
+        if self.reference is None:
+            return None
+        try:
+            return {k: v.format_map(labels) for k, v in self.reference}
+        except (KeyError, ValueError, IndexError):
+            return None
 
     def matches_file(self, filename) -> bool:
         """Whether a file name (or its stem) matches one of the ``files`` globs."""
@@ -431,10 +445,16 @@ def _parse_clips(t: _Table) -> dict:
         except re.error as exc:
             raise t.fail("pattern", f"not a valid regular expression ({exc})") from None
     rules = t.get("role", list, default=[])
+    reference = t.get("reference", dict)
+    if reference is not None:
+        bad = [k for k, v in reference.items() if not isinstance(v, str)]
+        if not reference or bad:
+            raise t.fail("reference", "must be a table of label = \"value or {label} template\" strings")
     return {
         "pattern": pattern,
         "default_role": t.choice("default_role", ROLES, default="locomotion"),
         "rules": tuple(_parse_rule(r, i, t.where) for i, r in enumerate(rules)),
+        "reference": None if reference is None else tuple(sorted(reference.items())),
     }
 
 
@@ -482,6 +502,8 @@ def _to_dict(spec: DatasetSpec) -> dict:
     clips = {"default_role": spec.default_role, "role": rules}
     if spec.pattern is not None:
         clips["pattern"] = spec.pattern
+    if spec.reference is not None:
+        clips["reference"] = dict(spec.reference)
     out = {"name": spec.name, "dataset": dataset, "joints": joints, "clips": clips, "notes": list(spec.notes)}
     if spec.path is not None:
         out["path"] = str(spec.path)

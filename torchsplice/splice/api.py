@@ -167,7 +167,7 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
         for clip, check in ((pairs[b][0], checks_l[int(li[b])]), (pairs[b][1], checks_a[int(ai[b])])):
             if not check.locomoting:
                 if not options.force:
-                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force to splice anyway)")
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
                 notes[b].append(f"{clip.name} does not locomote: {check.reason}")
     loco, act = L.take(li), A.take(ai[:B])
     empty = torch.zeros(0, 2, dtype=torch.long)
