@@ -9,6 +9,9 @@ Sections:
   parse  BVH parse speed on every real file: MB/s and frames/s            [>= 30 MB/s]
   fk     batched forward kinematics on real clips: joint-frames/s        [>= 10 million]
   db     HDF5 database: clips written and read per second, file size
+  splice per-stage throughput (grid cells/s, DP cells/s, Horn frames/s) and splices/s for
+         batches of real pairs (Bandai Namco walks, up to 250 frames), beside a per-pair NumPy
+         version of the same method (scripts/numpy_reference.py)   [>= 100x it, >= 200 splices/s]
 
 Without real data (no ../shared/mocap and no TORCHSPLICE_MOCAP), the built-in synthetic
 sample stands in and the figures say so. Timings are the best of several repeats.
@@ -27,6 +30,7 @@ import torch
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
 
 from torchsplice.io.bvh import format_bvh, read_bvh  # noqa: E402
 from torchsplice.io.database import MotionDatabase  # noqa: E402
@@ -125,11 +129,72 @@ def bench_db(files: list[Path]) -> None:
           f"({frames / dt_w:,.0f} frames/s), padded batch read {frames / dt_r:,.0f} frames/s, file {mb:.1f} MB")
 
 
+def bench_splice(files: list[Path], device: str) -> None:
+    import numpy as np
+
+    import numpy_reference as ref
+    from torchsplice.align.distance import distance_grid
+    from torchsplice.align.horn import horn_rotation
+    from torchsplice.align.timewarp import timewarp
+    from torchsplice.core.rotations import quat_angle
+    from torchsplice.io.spec import detect_spec
+    from torchsplice.splice import SpliceOptions, splice_pairs
+
+    walks = [f for f in files if "walk" in f.stem and f.stem.startswith("dataset-2")] or files
+    clips = [read_bvh(f) for f in walks]
+    clips = [m.slice(0, 250) if m.num_frames > 250 else m for m in clips if m.num_frames >= 60]
+    spec = detect_spec(clips[0].skeleton, walks[0].name)
+    roles = spec.bind(clips[0].skeleton)
+    pairs = [(a, b) for a in clips for b in clips][:128]
+    mean_frames = sum(a.num_frames + b.num_frames for a, b in pairs) / (2 * len(pairs))
+    print(f"splice {len(clips)} clips, {len(pairs)} pairs of about {mean_frames:.0f} frames (spec {spec.name}), on {device}")
+    opt = SpliceOptions(force=True, device=device)
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+
+    # per stage, on one batch of 64 pairs
+    B, T = 64, 250
+    g = torch.Generator().manual_seed(0)
+    a = torch.randn(B, T, 3, 3, generator=g).to(device)
+    b = torch.randn(B, T, 3, 3, generator=g).to(device)
+    ha, hb = torch.rand(B, T, generator=g).to(device), torch.rand(B, T, generator=g).to(device)
+    dt = best_of(lambda: (distance_grid(a, b, heading_a=ha, heading_b=hb, max_heading_deviation=1.0), sync()), 3)
+    print(f"splice   distance grid: {B * T * T / dt / 1e6:.1f} million cells/s")
+    grid = distance_grid(a, b, heading_a=ha, heading_b=hb, max_heading_deviation=1.0)
+    dt = best_of(lambda: (timewarp(grid, max_run=3), sync()), 3)
+    print(f"splice   DP timewarp:   {B * T * T / dt / 1e6:.1f} million cells/s")
+    src, tgt = torch.randn(B * T, 5, 3, generator=g).to(device), torch.randn(B * T, 5, 3, generator=g).to(device)
+    dt = best_of(lambda: (horn_rotation(src, tgt), sync()), 3)
+    print(f"splice   Horn by SVD:   {B * T / dt / 1e6:.2f} million frames/s")
+
+    for n in (32, 64, 128):
+        batch = pairs[:n]
+        dt = best_of(lambda: (splice_pairs(batch, spec, options=opt), sync()), 2)
+        print(f"splice   end to end, batch of {n}: {n / dt:,.0f} splices/s  [target >= 200]")
+    batched_per_pair = dt / len(batch)
+
+    # the per-pair NumPy reference, on two pairs; it must agree with the batched code
+    k = 2
+    sample = pairs[1:1 + k]
+    t0 = time.perf_counter()
+    outs = []
+    for lo, ac in sample:
+        def arrays(m):
+            return {"rot": m.rotations.double().numpy(), "trans": m.local_translations().double().numpy()}
+        outs.append(ref.splice_pair(arrays(lo), arrays(ac), roles, lo.skeleton.parents, lo.fps))
+    ref_per_pair = (time.perf_counter() - t0) / k
+    ours = splice_pairs(sample, spec, options=SpliceOptions(force=True, dtype=torch.float64))
+    diff = max(float(quat_angle(r.motion.rotations, torch.from_numpy(o[0])).max()) for r, o in zip(ours, outs))
+    curve = max(float(np.abs(r.curve.numpy() - o[2]).max()) for r, o in zip(ours, outs))
+    print(f"splice   NumPy per-pair reference: {ref_per_pair:.2f} s per pair; batched: {batched_per_pair * 1e3:.1f} ms "
+          f"per pair = {ref_per_pair / batched_per_pair:,.0f}x  [target >= 100x]")
+    print(f"splice   agreement with the reference: rotations within {np.degrees(diff):.2g} deg, curves within {curve:.2g} frames")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,fk,db", help="comma-separated sections: parse, fk, db")
+    p.add_argument("--only", default="parse,fk,db,splice", help="comma-separated sections: parse, fk, db, splice")
     p.add_argument("--device", default="cpu", help="device for tensor work (cpu, cuda)")
     args = p.parse_args()
     sections = set(args.only.split(","))
@@ -147,6 +212,8 @@ def main() -> int:
             bench_fk(files, args.device)
         if "db" in sections:
             bench_db(files)
+        if "splice" in sections:
+            bench_splice(files, args.device)
     return 0
 
 
