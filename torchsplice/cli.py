@@ -188,11 +188,38 @@ def _db_spec(db, skeleton_id: int, skeleton):
     return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
 
 
+def _device(name: str | None):
+    """A torch device name checked up front: one clear line instead of a traceback later."""
+    if name is None:
+        return None
+    import torch
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError):
+        raise TorchspliceError(f"unknown device {name!r} (use cpu, cuda or cuda:N)") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise TorchspliceError(f"device {name!r} asked for, but this torch sees no CUDA device")
+    if dev.type not in ("cpu", "cuda"):
+        raise TorchspliceError(f"device {name!r} is not supported (use cpu or cuda)")
+    return name
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
 def _splice_options(args):
     from .splice import AlignOptions, SpliceOptions
 
     return SpliceOptions(align=AlignOptions(max_run=args.max_run), posture=not args.no_posture,
-                         force=args.force_locomotion, device=args.device)
+                         force=args.force_locomotion, device=_device(args.device))
 
 
 def cmd_splice(args) -> int:
@@ -234,7 +261,7 @@ def cmd_splice(args) -> int:
 
 
 def _add_splice_options(s) -> None:
-    s.add_argument("--max-run", type=int, default=3, metavar="L",
+    s.add_argument("--max-run", type=_positive_int, default=3, metavar="L",
                    help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
     s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
     s.add_argument("--force-locomotion", action="store_true",

@@ -133,12 +133,6 @@ def _valid_mask(la, lb, Ta, Tb) -> torch.Tensor:
 # ----------------------------------------------------------------------------- forward pass
 
 
-def _shift_right(x: torch.Tensor, fill) -> torch.Tensor:
-    """``x[..., j - 1]`` at column ``j`` along the last dim, ``fill`` at column 0."""
-    pad = torch.full_like(x[..., :1], fill)
-    return torch.cat([pad, x[..., :-1]], dim=-1)
-
-
 def _forward(grid, la, lb, L, keep_min=False):
     """Row-by-row DP over states ``[D, H1..HL, V1..VL]`` (index ``0``, ``1..L``, ``L+1..2L``).
 
@@ -177,30 +171,32 @@ def _forward(grid, la, lb, L, keep_min=False):
         # D from any state at (i-1, j-1); first minimum wins (D, then H, then V).
         m, a = prev_sum.min(dim=1)                            # (B, Tb)
         c = prev_cnt.gather(1, a[:, None])[:, 0]
-        cur_sum[:, 0] = g + _shift_right(m, inf)
-        cur_cnt[:, 0] = _shift_right(c, 0) + 1
-        bp[0, :, i] = _shift_right(a, 0).to(bp_dtype)
+        cur_sum[:, 0, 0] = inf
+        torch.add(g[:, 1:], m[:, :-1], out=cur_sum[:, 0, 1:])
+        cur_cnt[:, 0, 0] = 1
+        torch.add(c[:, :-1], 1, out=cur_cnt[:, 0, 1:])
+        bp[0, :, i, 1:] = a[:, :-1]
         if i == 0:                                            # the start cell counts as D
             cur_sum[:, 0, 0] = g[:, 0]
-            cur_cnt[:, 0, 0] = 1
         # V1 from D or any H state at (i-1, j); V_c from V_{c-1} at (i-1, j).
         m, a = prev_sum[:, : L + 1].min(dim=1)
-        cur_sum[:, L + 1] = g + m
-        cur_cnt[:, L + 1] = prev_cnt.gather(1, a[:, None])[:, 0] + 1
-        bp[2, :, i] = a.to(bp_dtype)
+        torch.add(g, m, out=cur_sum[:, L + 1])
+        torch.add(prev_cnt.gather(1, a[:, None])[:, 0], 1, out=cur_cnt[:, L + 1])
+        bp[2, :, i] = a
         if L > 1:
-            cur_sum[:, L + 2:] = g[:, None] + prev_sum[:, L + 1: S - 1]
-            cur_cnt[:, L + 2:] = prev_cnt[:, L + 1: S - 1] + 1
+            torch.add(g[:, None], prev_sum[:, L + 1: S - 1], out=cur_sum[:, L + 2:])
+            torch.add(prev_cnt[:, L + 1: S - 1], 1, out=cur_cnt[:, L + 2:])
         # H1 from D or any V state at (i, j-1); H_c from H_{c-1} at (i, j-1): L shifts.
-        sub = cur_sum[:, h1_from]
-        m, a = sub.min(dim=1)
+        m, a = cur_sum[:, h1_from].min(dim=1)
         c = cur_cnt[:, h1_from].gather(1, a[:, None])[:, 0]
-        cur_sum[:, 1] = g + _shift_right(m, inf)
-        cur_cnt[:, 1] = _shift_right(c, 0) + 1
-        bp[1, :, i] = _shift_right(h1_from[a], 0).to(bp_dtype)
+        cur_sum[:, 1:L + 1, 0] = inf
+        cur_cnt[:, 1:L + 1, 0] = 1
+        torch.add(g[:, 1:], m[:, :-1], out=cur_sum[:, 1, 1:])
+        torch.add(c[:, :-1], 1, out=cur_cnt[:, 1, 1:])
+        bp[1, :, i, 1:] = h1_from[a[:, :-1]]
         for k in range(2, L + 1):
-            cur_sum[:, k] = g + _shift_right(cur_sum[:, k - 1], inf)
-            cur_cnt[:, k] = _shift_right(cur_cnt[:, k - 1], 0) + 1
+            torch.add(g[:, 1:], cur_sum[:, k - 1, :-1], out=cur_sum[:, k, 1:])
+            torch.add(cur_cnt[:, k - 1, :-1], 1, out=cur_cnt[:, k, 1:])
         # What the end-cell choice needs: each pair's top row and right column.
         if i in top_rows:
             at_top = (la - 1 == i)[:, None, None]

@@ -23,6 +23,11 @@ project README for a ten-line example)::
         skeleton            (C,) int32    which /skeletons/<k>
         start, length       (C,) int64    the clip's frames are rows start:start+length
         fps                 (C,) float64
+        <extra>             (C,) str, float64 or int64: optional columns a writer declares,
+                            listed in the root attribute ``extra_columns`` (JSON), e.g. the
+                            source clips, method and alignment cost of spliced clips
+    /skeletons/<k>/<extra>  (N_k,) float32: optional per-frame columns (same rows as the
+                            frames), e.g. the action frame each spliced frame came from
 
 Frames of all clips are packed into chunked, compressed datasets (no group per clip), so a
 file holds 100,000 clips and more. Writing is atomic: a new database is written beside its
@@ -60,6 +65,7 @@ _COLUMNS = {  # name: (dtype, numpy fill for an empty table)
     "skeleton": np.int32, "start": np.int64, "length": np.int64, "fps": np.float64,
 }
 _FLUSH_FRAMES = 1 << 16
+_KINDS = {"str": (_STR, ""), "float": (np.float64, np.nan), "int": (np.int64, -1)}
 
 
 @dataclass
@@ -119,6 +125,24 @@ def _skeleton_from_group(g: h5py.Group) -> Skeleton:
     )
 
 
+def _json_value(v):
+    """A numpy scalar as a JSON-ready Python value (NaN as None)."""
+    if isinstance(v, (str, bytes)):
+        return v.decode() if isinstance(v, bytes) else v
+    v = v.item() if hasattr(v, "item") else v
+    return None if isinstance(v, float) and v != v else v
+
+
+def _frame_values(values, T: int, column: str, clip: str) -> np.ndarray:
+    """A per-frame column's ``(T,)`` float32 values for one clip (NaN when not given)."""
+    if values is None:
+        return np.full(T, np.nan, dtype=np.float32)
+    a = (values.detach().cpu().numpy() if isinstance(values, torch.Tensor) else np.asarray(values)).astype(np.float32)
+    if a.shape != (T,):
+        raise DatabaseError(f"clip {clip!r}: column {column!r} needs {T} values, got shape {a.shape}")
+    return a
+
+
 class MotionDatabase:
     """A motion database file; make one with :meth:`create`, open one with :meth:`open`.
 
@@ -132,18 +156,29 @@ class MotionDatabase:
         self._names: list[str] | None = None
         self._name_index: dict[str, int] | None = None
         self._flushed = h5["clips/name"].shape[0]
-        self._staged: list[tuple[Motion, int]] = []
+        extra = json.loads(str(h5.attrs.get("extra_columns", "")) or "{}")
+        self.columns: dict[str, str] = dict(extra.get("clip", {}))
+        self.frame_columns: tuple[str, ...] = tuple(extra.get("frame", ()))
+        self._staged: list[tuple] = []
         self._staged_frames = 0
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod
     def create(cls, path, overwrite: bool = False, dtype=np.float32, chunk_frames: int = 1024,
-               compression: str | None = "gzip") -> "MotionDatabase":
+               compression: str | None = "gzip", columns: dict[str, str] | None = None,
+               frame_columns: tuple[str, ...] = (), attrs: dict | None = None) -> "MotionDatabase":
         """Start a new database that appears at ``path`` when closed.
 
         Frames are stored as ``dtype`` (float32 by default) in chunks of ``chunk_frames``,
         compressed with ``compression`` (gzip, readable everywhere; ``None`` for speed).
+        ``columns`` declares extra per-clip columns (name -> ``"str"``, ``"float"`` or ``"int"``),
+        ``frame_columns`` extra per-frame float32 columns; ``attrs`` are extra root attributes.
         """
+        columns = dict(columns or {})
+        bad = [c for c in list(columns) + list(frame_columns)
+               if c in _COLUMNS or c in ("rotations", "root_translation", "translations") or not c.isidentifier()]
+        if bad or any(k not in _KINDS for k in columns.values()):
+            raise ValueError(f"bad extra columns {bad or columns}")
         path = Path(path)
         if path.exists() and not overwrite:
             raise DatabaseError(f"{path}: already exists (use overwrite, or --force on the command line)")
@@ -157,10 +192,12 @@ class MotionDatabase:
                 "rotation_convention": "local joint rotation, parent-from-child, column vectors",
                 "units": "", "up_axis": "", "created_by": f"torchsplice {__version__}",
                 "chunk_frames": chunk_frames, "compression": compression or "",
+                "extra_columns": json.dumps({"clip": columns, "frame": list(frame_columns)}),
+                **(attrs or {}),
             })
             h5.create_group("skeletons")
             clips = h5.create_group("clips")
-            for name, dt in _COLUMNS.items():
+            for name, dt in list(_COLUMNS.items()) + [(n, _KINDS[k][0]) for n, k in columns.items()]:
                 clips.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dt, chunks=(4096,))
         except OSError as exc:
             tmp.unlink(missing_ok=True)
@@ -287,7 +324,7 @@ class MotionDatabase:
         """Every clip's name, in row order."""
         if self._names is None:
             self._names = list(self.h5["clips/name"].asstr()[()])
-        return self._names + [m.name for m, _ in self._staged]
+        return self._names + [m.name for m, *_ in self._staged]
 
     def index(self, clip: str | int) -> int:
         """Row number of a clip given by name or row number; a clear error otherwise."""
@@ -313,9 +350,11 @@ class MotionDatabase:
         i = self.index(clip)
         self._require_flushed(i)
         c = self.h5["clips"]
-        info = {k: c[k][i] for k in _COLUMNS}
-        for k in ("name", "source", "role", "labels"):
+        info = {k: c[k][i] for k in [*_COLUMNS, *self.columns]}
+        for k in ("name", "source", "role", "labels", *[n for n, kind in self.columns.items() if kind == "str"]):
             info[k] = info[k].decode() if isinstance(info[k], bytes) else str(info[k])
+        for n, kind in self.columns.items():
+            info[n] = float(info[n]) if kind == "float" else int(info[n]) if kind == "int" else info[n]
         info["labels"] = json.loads(info["labels"] or "{}")
         for k in ("skeleton", "start", "length"):
             info[k] = int(info[k])
@@ -323,10 +362,17 @@ class MotionDatabase:
         return info
 
     def table(self) -> dict[str, np.ndarray]:
-        """Every metadata column as an array (labels as JSON strings): one read per column."""
+        """Every metadata column, extra ones too, as an array (labels as JSON strings)."""
         self.flush()
         c = self.h5["clips"]
-        return {k: (c[k].asstr()[()] if c[k].dtype == object else c[k][()]) for k in _COLUMNS}
+        return {k: (c[k].asstr()[()] if c[k].dtype == object else c[k][()]) for k in [*_COLUMNS, *self.columns]}
+
+    def read_frame_column(self, clip: str | int, name: str) -> np.ndarray:
+        """A clip's values ``(T,)`` of the per-frame column ``name``."""
+        if name not in self.frame_columns:
+            raise DatabaseError(f"{self.path}: no per-frame column {name!r} (has: {', '.join(self.frame_columns) or 'none'})")
+        info = self.clip_info(clip)
+        return self.h5[f"skeletons/{info['skeleton']}/{name}"][info["start"]:info["start"] + info["length"]]
 
     def _require_flushed(self, i: int) -> None:
         if i >= self._flushed:
@@ -368,14 +414,23 @@ class MotionDatabase:
         for name, shape in shapes.items():
             g.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=self._dtype,
                              chunks=(chunk,) + shape, compression=comp, shuffle=comp is not None)
+        for name in self.frame_columns:
+            g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float32, chunks=(chunk,),
+                             compression=comp, shuffle=comp is not None)
         self._skeletons.append(skeleton)
         return k
 
-    def append(self, motion: Motion, spec=None) -> int:
+    def append(self, motion: Motion, spec=None, extra: dict | None = None, frame_extra: dict | None = None) -> int:
         """Add a clip (buffered; written by :meth:`flush` or on close). Returns its row number.
 
-        The clip name must be new to the database; non-finite values are refused.
+        The clip name must be new to the database; non-finite values are refused. ``extra``
+        gives values of the declared extra columns (missing ones: ``""``, NaN or -1) and
+        ``frame_extra`` per-frame arrays ``(T,)`` of the declared frame columns (missing: NaN).
         """
+        extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
+        unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
+        if unknown:
+            raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         self._writable()
         motion.check_finite()
         if not motion.name:
@@ -385,7 +440,7 @@ class MotionDatabase:
             raise DatabaseError(f"{self.path}: a clip named {motion.name!r} is already in the database")
         k = self.add_skeleton(motion.skeleton, spec)
         index[motion.name] = len(self)
-        self._staged.append((motion, k))
+        self._staged.append((motion, k, extra, frame_extra))
         self._staged_frames += motion.num_frames
         if self._staged_frames >= _FLUSH_FRAMES:
             self.flush()
@@ -400,30 +455,32 @@ class MotionDatabase:
         except OSError as exc:
             raise DatabaseError(os_error_message(self.path, exc)) from None
         if self._names is not None:
-            self._names += [m.name for m, _ in self._staged]
+            self._names += [m.name for m, *_ in self._staged]
         self._flushed += len(self._staged)
         self._staged, self._staged_frames = [], 0
 
     def _write_staged(self) -> None:
         h5 = self.h5
         starts = {}
-        for k in sorted({k for _, k in self._staged}):
+        for k in sorted({k for _, k, *_ in self._staged}):
             g = h5[f"skeletons/{k}"]
-            clips = [m for m, kk in self._staged if kk == k]
+            staged = [(m, fx) for m, kk, _, fx in self._staged if kk == k]
             n0 = g["rotations"].shape[0]
             starts[k] = n0
             arrays = {
-                "rotations": torch.cat([m.rotations.detach().cpu() for m in clips]),
-                "root_translation": torch.cat([m.root_translation.detach().cpu() for m in clips]),
+                "rotations": torch.cat([m.rotations.detach().cpu() for m, _ in staged]).numpy(),
+                "root_translation": torch.cat([m.root_translation.detach().cpu() for m, _ in staged]).numpy(),
             }
             if "translations" in g:
-                arrays["translations"] = torch.cat([m.local_translations().detach().cpu() for m in clips])
-            for name, t in arrays.items():
+                arrays["translations"] = torch.cat([m.local_translations().detach().cpu() for m, _ in staged]).numpy()
+            for name in self.frame_columns:
+                arrays[name] = np.concatenate([_frame_values(fx.get(name), m.num_frames, name, m.name) for m, fx in staged])
+            for name, a in arrays.items():
                 ds = g[name]
-                ds.resize(n0 + t.shape[0], axis=0)
-                ds[n0:] = t.numpy().astype(self._dtype)
-        rows = {c: [] for c in _COLUMNS}
-        for m, k in self._staged:
+                ds.resize(n0 + a.shape[0], axis=0)
+                ds[n0:] = a.astype(ds.dtype)
+        rows = {c: [] for c in [*_COLUMNS, *self.columns]}
+        for m, k, extra, _ in self._staged:
             rows["name"].append(m.name)
             rows["source"].append(m.source)
             rows["role"].append(m.role)
@@ -432,12 +489,15 @@ class MotionDatabase:
             rows["start"].append(starts[k])
             rows["length"].append(m.num_frames)
             rows["fps"].append(m.fps)
+            for n, kind in self.columns.items():
+                rows[n].append(extra.get(n, _KINDS[kind][1]))
             starts[k] += m.num_frames
         c = h5["clips"]
         n = c["name"].shape[0]
         for name, values in rows.items():
+            dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
             c[name].resize(n + len(values), axis=0)
-            c[name][n:] = np.array(values, dtype=object if _COLUMNS[name] is _STR else _COLUMNS[name])
+            c[name][n:] = np.array(values, dtype=object if dt is _STR else dt)
 
     # -- reading ------------------------------------------------------------------------------
     def read(self, clip: str | int, dtype: torch.dtype = torch.float32, device=None) -> Motion:
@@ -526,7 +586,8 @@ class MotionDatabase:
             {"name": str(t["name"][i]), "frames": int(t["length"][i]), "fps": float(t["fps"][i]),
              "duration_s": round(float(t["length"][i] / t["fps"][i]), 3), "role": str(t["role"][i]),
              "labels": json.loads(t["labels"][i] or "{}"), "skeleton": int(t["skeleton"][i]),
-             "source": str(t["source"][i])}
+             "source": str(t["source"][i]),
+             **{n: _json_value(t[n][i]) for n in self.columns}}
             for i in range(len(t["name"]))
         ]
         roles: dict[str, int] = {}

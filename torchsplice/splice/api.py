@@ -25,7 +25,7 @@ import torch
 from ..core.errors import MotionError, TorchspliceError
 from ..core.motion import Motion
 from ..io.spec import DatasetSpec, SkeletonRoles
-from .clips import check_pair, clips_to_tensors, resample_motion
+from .clips import check_clip, check_pair, clips_to_tensors, resample_motion
 from .heck import AlignOptions, splice_tensors
 from .locomotion import LocomotionCheck, check_locomotion
 from .methods import cpmc_tensors, naive_tensors
@@ -133,11 +133,13 @@ def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | Ske
     skeleton = pairs[0][0].skeleton
     roles = spec.bind(skeleton) if isinstance(spec, DatasetSpec) else spec
     groups: dict[float, list[int]] = {}
+    clips = _unique([m for p in pairs for m in p] + list(references if method == "cpmc" else []))[0]
+    for m in clips:
+        check_clip(m, max(4, int(options.min_seconds * m.fps)))
     for k, (loco, act) in enumerate(pairs):
-        min_frames = max(4, int(options.min_seconds * loco.fps))
-        check_pair(loco, act, min_frames)
-        if references is not None and method == "cpmc":
-            check_pair(loco, references[k], min_frames)
+        for other in (act, references[k] if method == "cpmc" else None):
+            if other is not None and other.skeleton is not loco.skeleton:
+                check_pair(loco, other)
         if not loco.skeleton.same_topology(skeleton):
             raise MotionError(f"clip {loco.name!r} has another skeleton than {pairs[0][0].name!r}; splice one skeleton per call")
         groups.setdefault(loco.fps, []).append(k)

@@ -19,7 +19,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..kinematics.fk import forward_kinematics
 
-__all__ = ["ClipTensors", "clips_to_tensors", "resample_motion", "check_pair", "shift_frames", "with_fk"]
+__all__ = ["ClipTensors", "clips_to_tensors", "resample_motion", "check_pair", "check_clip", "shift_frames", "with_fk"]
 
 
 @dataclass
@@ -102,12 +102,15 @@ def clips_to_tensors(motions: list[Motion], skeleton: Skeleton, dtype=torch.floa
     return with_fk(rot, trans, lengths, skeleton)
 
 
-def check_pair(locomotion: Motion, action: Motion, min_frames: int) -> None:
-    """Clear errors for a pair that cannot be spliced: different skeletons, NaN, too short."""
-    for m in (locomotion, action):
-        m.check_finite()
-        if m.num_frames < min_frames:
-            raise MotionError(f"clip {m.name!r} is too short to align: {m.num_frames} frames, at least {min_frames} needed")
+def check_clip(m: Motion, min_frames: int) -> None:
+    """Clear errors for a clip that cannot be spliced: NaN, too short."""
+    m.check_finite()
+    if m.num_frames < min_frames:
+        raise MotionError(f"clip {m.name!r} is too short to align: {m.num_frames} frames, at least {min_frames} needed")
+
+
+def check_pair(locomotion: Motion, action: Motion) -> None:
+    """A clear error for a pair whose skeletons differ."""
     why = locomotion.skeleton.mismatch(action.skeleton)
     if why is not None and not locomotion.skeleton.same_topology(action.skeleton):
         raise MotionError(f"clips {locomotion.name!r} and {action.name!r} have different skeletons: {why}")

@@ -113,13 +113,15 @@ def phase_crop(grid: torch.Tensor, lengths_a: torch.Tensor, lengths_b: torch.Ten
     """
     B, Ta, Tb = grid.shape
     dev = grid.device
-    W = int(max(1, min(context, int(lengths_a.min()), int(lengths_b.min()) // 2)))
+    Wb = torch.minimum(torch.minimum(lengths_a, lengths_b // 2), torch.full_like(lengths_a, context)).clamp_min(1)  # per pair
+    W = int(Wb.max())
     k = torch.arange(W, device=dev)
     j = torch.arange(Tb, device=dev)
     cols = (j[None, :] + k[:, None]).clamp(max=Tb - 1)  # (W, Tb)
     diag = torch.gather(grid[:, :W], 2, cols[None].expand(B, W, Tb))  # grid[b, k, j + k]
-    d = diag.mean(1)  # (B, Tb)
-    allowed = (j[None, :] + W <= lengths_b[:, None]) & (j[None, :] <= (lengths_b[:, None] - 1) // 2)
+    inside = (k[None, :] < Wb[:, None]).to(grid.dtype)  # (B, W)
+    d = (diag * inside[:, :, None]).sum(1) / Wb[:, None].to(grid.dtype)  # (B, Tb)
+    allowed = (j[None, :] + Wb[:, None] <= lengths_b[:, None]) & (j[None, :] <= (lengths_b[:, None] - 1) // 2)
     d = torch.where(allowed, d, torch.full_like(d, float("inf")))
     nb_min = -torch.nn.functional.max_pool1d(-d[:, None], 2 * window + 1, stride=1, padding=window)[:, 0]
     lo = d.min(1, keepdim=True).values

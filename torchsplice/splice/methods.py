@@ -6,7 +6,9 @@ mapping used (for each result frame, the action frame it took its upper body fro
 **Rotation difference (CPMC).** For each upper-body joint (the pelvis and everything above)
 the difference between the action ``q_act`` and its time-aligned plain-locomotion reference
 ``q_ref`` is taken in the joint's own frame, ``d = q_ref^-1 * q_act``, and added onto the new
-base the same way, ``q = q_base * d``. With ``q_base = q_ref`` this returns the action exactly.
+base the same way, ``q = q_base * d``. Frame by frame, ``q_base = q_ref`` gives back the action;
+over a clip, the two time alignments may pair a base frame with a reference frame one gait
+cycle later, so the result then carries the walk's cycle-to-cycle variation.
 This is how game engines apply local-space additive layers.
 """
 
