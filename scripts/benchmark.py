@@ -140,9 +140,10 @@ def bench_splice(files: list[Path], device: str) -> None:
     from torchsplice.io.spec import detect_spec
     from torchsplice.splice import SpliceOptions, splice_pairs
 
-    walks = [f for f in files if "walk" in f.stem and f.stem.startswith("dataset-2")] or files
+    walks = [f for f in files if "walk" in f.stem and f.stem.startswith("dataset-")] or files
     clips = [read_bvh(f) for f in walks]
-    clips = [m.slice(0, 250) if m.num_frames > 250 else m for m in clips if m.num_frames >= 60]
+    long = [m.slice(0, 250) for m in clips if m.num_frames >= 200]  # pairs of ~250-frame clips
+    clips = long if len(long) >= 8 else [m.slice(0, 250) if m.num_frames > 250 else m for m in clips if m.num_frames >= 60]
     spec = detect_spec(clips[0].skeleton, walks[0].name)
     roles = spec.bind(clips[0].skeleton)
     pairs = [(a, b) for a in clips for b in clips][:128]

@@ -282,7 +282,7 @@ def splice_pair(loco, act, roles, parents, fps, L=3, window_deg=60.0, crop_conte
         rot[t, roles.pelvis] = qmul(loco["rot"][t, roles.pelvis], horn(src, tgt))
     ps, gs = fk(rot, trans, parents)
     # posture: the action resampled along the curve, and the spliced-so-far motion
-    act_r = act["rot"].copy()
+    act_r = np.zeros((T,) + act["rot"].shape[1:])
     for t, lam in enumerate(curve):
         i0 = min(int(math.floor(lam)), n_act - 1)
         i1 = min(i0 + 1, n_act - 1)
@@ -291,7 +291,7 @@ def splice_pair(loco, act, roles, parents, fps, L=3, window_deg=60.0, crop_conte
     act_t = np.array([act["trans"][crop + min(int(math.floor(lam)), n_act - 1)] +
                       (lam - math.floor(lam)) * (act["trans"][crop + min(int(math.floor(lam)) + 1, n_act - 1)] -
                                                  act["trans"][crop + min(int(math.floor(lam)), n_act - 1)]) for lam in curve])
-    pr, _ = fk(act_r[:T], act_t, parents)
+    pr, _ = fk(act_r, act_t, parents)
     sh = list(roles.shoulders)
 
     def posture(p):
