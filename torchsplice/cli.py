@@ -270,6 +270,39 @@ def _add_splice_options(s) -> None:
 
 
 # --------------------------------------------------------------------------------------------
+# splice-all
+# --------------------------------------------------------------------------------------------
+def cmd_splice_all(args) -> int:
+    import logging
+
+    from .job import JobConfig, SpliceJob
+    from .job.splice_all import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS
+
+    logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="torchsplice: %(message)s", stream=sys.stderr)
+    methods = tuple(m.strip() for m in args.method.split(",") if m.strip())
+    config = JobConfig(
+        database=Path(args.database), output=Path(args.output),
+        actions_db=Path(args.actions_db) if args.actions_db else None,
+        locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
+        methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
+        force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
+        posture=not args.no_posture, device=_device(args.device),
+    )
+    if not Path(args.output).parent.exists():
+        raise TorchspliceError(f"{args.output}: folder {Path(args.output).parent} does not exist")
+    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force)
+    try:
+        summary = job.run()
+    except KeyboardInterrupt:
+        print(f"torchsplice: interrupted; finished batches are kept in {job.work}; "
+              "run the same command again to resume", file=sys.stderr)
+        return 130
+    if not args.quiet:
+        print("\n".join(summary.lines()))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------
 # parser and entry point
 # --------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
@@ -338,6 +371,34 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=cmd_splice)
+
+    s = sub.add_parser("splice-all", help="splice every selected locomotion x action pair into a new database",
+                       description="The main job: splice the upper body of every selected action onto the lower body "
+                                   "of every selected locomotion and write all results as a new motion database "
+                                   "(same schema, plus provenance, alignment curve and quality figures per clip). "
+                                   "SELECT: comma-separated alternatives, each a glob on clip names ('*walk*'), "
+                                   "role:NAME or label:KEY=VALUE; a repeated flag must match too. Killed or "
+                                   "interrupted, the same command resumes where it stopped.")
+    s.add_argument("database", help="motion database with the locomotions (and actions)")
+    s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
+    s.add_argument("--locomotions", action="append", metavar="SELECT",
+                   help="clips giving the lower body (default: role:locomotion,role:both)")
+    s.add_argument("--actions", action="append", metavar="SELECT",
+                   help="clips giving the upper body (default: role:action,role:both)")
+    s.add_argument("--actions-db", metavar="DB", help="take the actions from this database (same skeleton)")
+    s.add_argument("--method", default="splice", metavar="M[,M...]",
+                   help="splice, naive, cpmc, or several comma-separated (default splice)")
+    s.add_argument("--memory-budget", type=_positive_int, default=1024, metavar="MB",
+                   help="memory for one batch of pairs (default 1024 MB); sets the batch size")
+    s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
+    s.add_argument("--copy-sources", action="store_true", help="copy the source clips into the output too")
+    _add_splice_options(s)
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing output file")
+    s.add_argument("--restart", action="store_true", help="discard an unfinished earlier run instead of resuming it")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    s.add_argument("--log-level", default="warning", choices=["debug", "info", "warning", "error"],
+                   help="detail of log messages on stderr (default warning)")
+    s.set_defaults(func=cmd_splice_all)
     return p
 
 

@@ -560,6 +560,30 @@ class MotionDatabase:
             skeleton=self._skeletons[k],
         )
 
+    def read_all(self, dtype: torch.dtype = torch.float32) -> Iterator[tuple[Motion, dict, dict]]:
+        """Every clip in row order as ``(motion, extra columns, per-frame columns)``.
+
+        Reads each dataset of the file once, whole: meant for small databases (the splice
+        job's parts); use :meth:`read` or :meth:`batches` on large ones.
+        """
+        t = self.table()
+        frames: dict[int, dict[str, np.ndarray]] = {}
+        for i in range(len(t["name"])):
+            k = int(t["skeleton"][i])
+            if k not in frames:
+                g = self.h5[f"skeletons/{k}"]
+                frames[k] = {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
+            f, s, n = frames[k], int(t["start"][i]), int(t["length"][i])
+
+            def get(name):
+                return torch.from_numpy(f[name][s:s + n]).to(dtype)
+
+            motion = Motion(self._skeletons[k], get("rotations"), get("root_translation"), float(t["fps"][i]),
+                            get("translations") if "translations" in f else None, name=str(t["name"][i]),
+                            source=str(t["source"][i]), role=str(t["role"][i]), labels=json.loads(t["labels"][i] or "{}"))
+            extra = {c: _json_value(t[c][i]) for c in self.columns}
+            yield motion, extra, {c: f[c][s:s + n] for c in self.frame_columns}
+
     def batches(self, clips: Sequence[str | int] | None = None, batch_size: int = 32,
                 dtype: torch.dtype = torch.float32, device=None, sort_by_length: bool = False) -> Iterator[ClipBatch]:
         """Iterate padded batches of up to ``batch_size`` clips, each batch on one skeleton.

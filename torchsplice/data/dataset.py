@@ -1,0 +1,546 @@
+"""Training data from a motion database: a ``torch.utils.data.Dataset`` and its collate function.
+
+:class:`MotionDataset` serves the clips of any torchsplice motion database (an input database
+or one written by the splice job), whole or cut into fixed-length windows, as dicts of
+tensors; :func:`collate_motion` pads such items into a batch. A training-data loop::
+
+    from torch.utils.data import DataLoader
+    from torchsplice.data import MotionDataset, collate_motion
+
+    ds = MotionDataset("spliced.h5", where={"role": "spliced"}, window=60,
+                       features=("rotations", "positions"))
+    loader = DataLoader(ds, batch_size=32, shuffle=True, collate_fn=collate_motion, num_workers=2)
+    for batch in loader:
+        x = batch["rotations"]            # (B, 60, J, 4) local WXYZ quaternions
+        p = batch["positions"]            # (B, 60, J, 3) world positions, file units
+        loss = model_loss(x, p, batch["mask"])   # mask (B, 60): True on real frames
+
+Conventions, as everywhere in torchsplice: quaternions are unit quaternions in **WXYZ** order;
+rotations are local (joint frame to parent frame) unless the feature's name says
+``global``; positions and translations are in the database's file units (its ``units``
+attribute) with the database's up axis (Y for every shipped dataset). ``T`` is the number of
+frames of an item (the window length, or the clip's length), ``J`` the skeleton's joints.
+
+Features (``features=``):
+
+=====================  ===============  ===================================================
+name                   shape            meaning
+=====================  ===============  ===================================================
+``rotations``          ``(T, J, 4)``    local joint rotations, WXYZ, as stored
+``root_translation``   ``(T, 3)``       world position of joint 0, as stored
+``translations``       ``(T, J, 3)``    local joint translations in the parent's frame:
+                                        the animated ones where the skeleton animates
+                                        them, the rest offsets elsewhere; row 0 is the
+                                        root translation (as ``Motion.local_translations``)
+``positions``          ``(T, J, 3)``    world joint positions, by batched forward kinematics
+``global_rotations``   ``(T, J, 4)``    world joint rotations (joint frame to world), WXYZ
+``velocities``         ``(T, J, 3)``    ``(positions[t] - positions[t-1]) * fps``; a clip's
+                                        first frame copies its second (zero for a one-frame
+                                        clip). A window that does not start a clip uses
+                                        the frame before it, so a window's velocities are
+                                        exactly the slice of its clip's velocities.
+any per-frame column   ``(T,)``         e.g. ``action_frame`` of a spliced database
+                                        (stored as float32, NaN where not given)
+=====================  ===============  ===================================================
+
+Every feature comes as ``dtype`` (float32 by default).
+
+Workers: the dataset holds no open HDF5 file when it is made or pickled; each process opens
+the file itself on its first read (and a process forked from one that had it open opens its
+own), so it works with ``DataLoader(num_workers=N)`` under fork, spawn and forkserver.
+Clip metadata is kept in numpy arrays, so forked workers do not copy it page by page.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import operator
+import os
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from ..core.errors import DatabaseError
+from ..core.skeleton import Skeleton
+from ..io.database import MotionDatabase
+from ..kinematics.fk import forward_kinematics
+
+__all__ = ["MotionDataset", "collate_motion", "DatasetError", "BUILTIN_FEATURES", "ITEM_KEYS"]
+
+BUILTIN_FEATURES = ("rotations", "root_translation", "translations", "positions", "global_rotations", "velocities")
+"""The features every database offers (its per-frame columns come on top)."""
+
+ITEM_KEYS = ("name", "length", "fps", "index", "start", "skeleton")
+"""The metadata keys of every item, besides its features."""
+
+_BASE_COLUMNS = ("name", "source", "role", "labels", "skeleton", "start", "length", "fps")
+_NEEDS_FK = {"positions", "global_rotations", "velocities"}
+
+
+class DatasetError(DatabaseError, ValueError):
+    """A dataset asked for something the database does not have (a column, a clip, a feature).
+
+    Both a :class:`~torchsplice.core.errors.DatabaseError` and a ``ValueError``.
+    """
+
+
+# --------------------------------------------------------------------------------------------
+# selection
+# --------------------------------------------------------------------------------------------
+def _is_glob(s: str) -> bool:
+    return any(ch in s for ch in "*?[")
+
+
+def _select_clips(clips: Iterable[str | int], names: np.ndarray, path: Path) -> np.ndarray:
+    """Boolean mask ``(C,)`` of the rows named by ``clips`` (names, shell globs or row numbers)."""
+    C = len(names)
+    keep = np.zeros(C, dtype=bool)
+    index = None
+    for c in ([clips] if isinstance(clips, str) else clips):
+        if isinstance(c, (int, np.integer)):
+            if not -C <= int(c) < C:
+                raise DatasetError(f"{path}: no clip number {int(c)} (the database has {C})")
+            keep[int(c)] = True
+        elif isinstance(c, str) and _is_glob(c):
+            hit = np.fromiter((fnmatch.fnmatchcase(n, c) for n in names), dtype=bool, count=C)
+            if not hit.any():
+                raise DatasetError(f"{path}: no clip name matches the pattern {c!r}")
+            keep |= hit
+        elif isinstance(c, str):
+            if index is None:
+                index = {n: i for i, n in enumerate(names)}
+            if c not in index:
+                close = [n for n in names if c.lower() in n.lower()][:5]
+                hint = f"; similar: {', '.join(close)}" if close else ""
+                raise DatasetError(f"{path}: no clip named {c!r}{hint}")
+            keep[index[c]] = True
+        else:
+            raise TypeError(f"clips must hold clip names, shell patterns or row numbers, got {c!r}")
+    return keep
+
+
+def _matcher(key: str, want) -> Callable[[Any], bool]:
+    """A predicate on one clip's value from a ``where`` entry (a callable, a collection or a value)."""
+    if callable(want):
+        return lambda v: bool(want(v))
+    if isinstance(want, (list, tuple, set, frozenset, np.ndarray)):
+        accepted = list(want)
+        return lambda v: any(v == a for a in accepted)
+    return lambda v: v == want
+
+
+def _where_mask(where: Mapping[str, Any], table: dict[str, np.ndarray], columns: dict[str, str],
+                frame_columns: Sequence[str], path: Path) -> np.ndarray:
+    """Boolean mask ``(C,)`` of the rows whose metadata satisfy every entry of ``where``."""
+    C = len(table["name"])
+    keep = np.ones(C, dtype=bool)
+    labels_cache: dict[str, dict] = {}
+
+    def labels(s: str) -> dict:
+        if s not in labels_cache:
+            labels_cache[s] = json.loads(s or "{}")
+        return labels_cache[s]
+
+    known = [*_BASE_COLUMNS, *columns]
+    for key, want in where.items():
+        if not isinstance(key, str):
+            raise TypeError(f"where keys must be column names, got {key!r}")
+        if key.startswith("labels."):
+            label = key[len("labels."):]
+            values = [labels(s).get(label) for s in table["labels"]]
+        elif key == "labels":
+            values = [labels(s) for s in table["labels"]]
+        elif key in known:
+            values = table[key].tolist()
+        else:
+            extra = f"; {key!r} is a per-frame column (a feature, not a filter)" if key in frame_columns else ""
+            raise DatasetError(
+                f"{path}: no column {key!r} to filter on{extra}; columns: {', '.join(known)}, "
+                f"and labels.KEY for any label")
+        match = _matcher(key, want)
+        keep &= np.fromiter((match(v) for v in values), dtype=bool, count=C)
+    return keep
+
+
+# --------------------------------------------------------------------------------------------
+# features from raw frames
+# --------------------------------------------------------------------------------------------
+def _velocities(pos: torch.Tensor, fps: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
+    """``(N, J, 3)`` finite-difference velocities of frames ``pos`` (N, J, 3) of one or more clips.
+
+    ``fps`` ``(N,)`` per frame; ``first`` ``(N,)`` bool marks each clip's first frame, which
+    copies the clip's second frame (zero for a one-frame clip). Frames not marked use the
+    frame before them.
+    """
+    vel = torch.zeros_like(pos)
+    if pos.shape[0] > 1:
+        vel[1:] = (pos[1:] - pos[:-1]) * fps[1:, None, None]
+    f = first.nonzero().flatten()
+    if f.numel():
+        nxt = f + 1
+        ok = nxt < pos.shape[0]
+        inside = ok.nonzero().flatten()
+        ok[inside] = ~first[nxt[inside]]  # a one-frame clip's next frame starts another clip
+        vel[f[ok]] = vel[nxt[ok]]
+        vel[f[~ok]] = 0
+    return vel
+
+
+def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Skeleton,
+            fps: torch.Tensor, first: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The asked ``features`` of ``N`` frames from the raw stored arrays ``raw`` (see the module table).
+
+    ``raw`` holds ``rotations`` (N, J, 4), ``root_translation`` (N, 3) and, where stored,
+    ``translations`` (N, J, 3) and per-frame columns (N,); ``fps`` and ``first`` are as in
+    :func:`_velocities`.
+    """
+    out: dict[str, torch.Tensor] = {}
+    fk = None
+    if _NEEDS_FK & set(features):
+        offsets = skeleton.offsets.to(raw["rotations"])
+        fk = forward_kinematics(raw["rotations"], raw["root_translation"], offsets, skeleton.parents,
+                                raw.get("translations"))
+    for f in features:
+        if f in ("rotations", "root_translation"):
+            out[f] = raw[f]
+        elif f == "translations":
+            if "translations" in raw:
+                t = raw["translations"].clone()
+            else:
+                rot = raw["rotations"]
+                t = skeleton.offsets.to(rot).expand(rot.shape[0], -1, -1).clone()
+            t[:, 0] = raw["root_translation"]
+            out[f] = t
+        elif f == "positions":
+            out[f] = fk[0]
+        elif f == "global_rotations":
+            out[f] = fk[1]
+        elif f == "velocities":
+            out[f] = _velocities(fk[0], fps, first)
+        else:  # a per-frame column
+            out[f] = raw[f]
+    return out
+
+
+def _gather_rows(ds, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Rows ``start:start+length`` of an h5py dataset for several clips, concatenated.
+
+    One read of the covering span when the clips lie close together, else one read per clip.
+    """
+    if len(starts) == 0:
+        return ds[0:0]
+    lo, hi = int(starts.min()), int((starts + lengths).max())
+    total = int(lengths.sum())
+    if hi - lo <= 2 * total:
+        block = ds[lo:hi]
+        rel = np.repeat(starts - lo - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
+        return block[rel]
+    return np.concatenate([ds[int(s):int(s + n)] for s, n in zip(starts, lengths)])
+
+
+# --------------------------------------------------------------------------------------------
+# the dataset
+# --------------------------------------------------------------------------------------------
+class MotionDataset(Dataset):
+    """Clips (or fixed-length windows of clips) of a motion database as dicts of tensors.
+
+    Args:
+        path: the database file (any torchsplice motion database).
+        clips: clips to use: names, shell patterns (``"walk_*"``) or row numbers; ``None`` for
+            every clip. A name that is not in the database, or a pattern that matches nothing,
+            is an error.
+        where: metadata filters, all of which a clip must pass, e.g.
+            ``{"role": "spliced", "labels.style": ["elderly", "proud"], "cost": lambda c: c < 5}``.
+            Keys: the base columns (``name``, ``source``, ``role``, ``skeleton``, ``start``,
+            ``length``, ``fps``, ``labels`` — the labels as a dict), ``labels.KEY`` (the label's
+            string, ``None`` where a clip lacks it) and the database's extra per-clip columns
+            (``str``, ``float`` — NaN where unset — or ``int``). Values: a value to equal, a
+            list/tuple/set of accepted values, or a callable on the value returning truth.
+            An unknown key raises :class:`DatasetError`.
+        window: ``None`` for one item per clip (variable length); ``W`` for items of exactly
+            ``W`` frames, windows ``start = 0, S, 2S, ...`` with ``start + W <= T`` over every
+            clip (``floor((T - W) / S) + 1`` per clip); clips shorter than ``W`` give none and
+            are counted in :attr:`num_too_short`.
+        stride: ``S``, frames between window starts; defaults to ``window``. Only with ``window``.
+        features: names of the per-frame tensors of each item, see the module docstring
+            (``rotations``, ``root_translation``, ``translations``, ``positions``,
+            ``global_rotations``, ``velocities`` or any per-frame column of the database).
+        dtype: floating dtype of every feature tensor.
+        preload: read every selected clip and compute its features once, here; items are then
+            slices of memory (fast for datasets that fit in RAM; no file access afterwards).
+
+    Items (``ds[i]``): a dict with each feature as a ``(T, ...)`` tensor and ``name`` (str),
+    ``length`` (int, ``T``), ``fps`` (float), ``index`` (the clip's row in the database),
+    ``start`` (the window's first frame within the clip, 0 for whole clips) and ``skeleton``
+    (int, the database skeleton the clip is on). Clips of several skeletons may be mixed;
+    filter with ``where={"skeleton": k}`` to batch J-dependent features.
+
+    Attributes:
+        path, features, window, stride, dtype, preload: as given (features as a tuple).
+        indices: ``(C,)`` int64 database rows of the selected clips, in row order.
+        names: the selected clips' names, in the same order.
+        table: the selected clips' metadata, column -> ``(C,)`` numpy array (as
+            :meth:`MotionDatabase.table`, labels as JSON strings).
+        skeletons: every skeleton of the database (``item["skeleton"]`` indexes it).
+        num_clips: number of selected clips; num_too_short: how many of them are shorter than
+            ``window`` (and so give no item); too_short: their names.
+    """
+
+    def __init__(self, path, clips: Iterable[str | int] | None = None, where: Mapping[str, Any] | None = None,
+                 window: int | None = None, stride: int | None = None,
+                 features: Sequence[str] = ("rotations", "root_translation"),
+                 dtype: torch.dtype = torch.float32, preload: bool = False):
+        self.path = Path(path)
+        if isinstance(features, str):
+            features = (features,)
+        self.features = tuple(dict.fromkeys(features))
+        self.dtype = dtype
+        self.preload = bool(preload)
+        if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+            raise ValueError(f"dtype must be a floating torch dtype, got {dtype!r}")
+        if window is None:
+            if stride is not None:
+                raise ValueError("stride needs a window")
+        else:
+            window = operator.index(window)
+            stride = window if stride is None else operator.index(stride)
+            if window < 1 or stride < 1:
+                raise ValueError(f"window and stride must be at least 1, got window={window}, stride={stride}")
+        self.window, self.stride = window, stride
+
+        self._db: MotionDatabase | None = None
+        self._db_pid: int | None = None
+        self._datasets: dict = {}
+        with MotionDatabase.open(self.path) as db:
+            table = db.table()
+            self.skeletons: list[Skeleton] = db.skeletons
+            self.frame_columns: tuple[str, ...] = tuple(db.frame_columns)
+            self.columns: dict[str, str] = dict(db.columns)
+            stored = {k: set(db.h5[f"skeletons/{k}"].keys()) for k in range(len(self.skeletons))}
+            self._check_features()
+            keep = np.ones(len(table["name"]), dtype=bool)
+            if clips is not None:
+                keep &= _select_clips(clips, table["name"], self.path)
+            if where:
+                keep &= _where_mask(where, table, self.columns, self.frame_columns, self.path)
+            if not keep.any():
+                raise DatasetError(
+                    f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}")
+            sel = np.flatnonzero(keep)
+            self.indices = sel.astype(np.int64)
+            self.table = {k: v[sel] for k, v in table.items()}
+            self.names = [str(n) for n in self.table["name"]]
+            self._skel = self.table["skeleton"].astype(np.int64)
+            self._row0 = self.table["start"].astype(np.int64)
+            self._len = self.table["length"].astype(np.int64)
+            self._fps = self.table["fps"].astype(np.float64)
+            self._names_arr = np.array(self.names, dtype=str) if self.names else np.zeros(0, dtype="<U1")
+            # stored arrays each skeleton needs to make the features
+            self._raw: dict[int, tuple[str, ...]] = {}
+            for k in sorted(set(self._skel.tolist())):
+                need = []
+                if set(self.features) & ({"rotations", "translations"} | _NEEDS_FK):
+                    need.append("rotations")
+                if set(self.features) & ({"root_translation", "translations"} | _NEEDS_FK):
+                    need.append("root_translation")
+                if "translations" in stored[k] and set(self.features) & ({"translations"} | _NEEDS_FK):
+                    need.append("translations")
+                need += [f for f in self.features if f in self.frame_columns]
+                self._raw[k] = tuple(need)
+            if self.preload:
+                self._load_all(db)
+
+        self.num_clips = len(self.indices)
+        if window is None:
+            self._win_clip = self._win_start = None
+            self.num_too_short, self.too_short = 0, ()
+        else:
+            counts = np.where(self._len >= window, (self._len - window) // stride + 1, 0)
+            self._win_clip = np.repeat(np.arange(self.num_clips, dtype=np.int64), counts)
+            first = np.cumsum(counts) - counts
+            self._win_start = (np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(first, counts)) * stride
+            short = np.flatnonzero(counts == 0)
+            self.num_too_short = int(len(short))
+            self.too_short = tuple(self.names[i] for i in short)
+
+    # -- checks and files -------------------------------------------------------------------------
+    def _check_features(self) -> None:
+        available = (*BUILTIN_FEATURES, *self.frame_columns)
+        bad = [f for f in self.features if f not in available]
+        if bad:
+            raise ValueError(f"unknown feature {bad[0]!r}; this database offers: {', '.join(available)}")
+        clash = [f for f in self.features if f in ITEM_KEYS or f in ("mask", "lengths")]
+        if clash:
+            raise ValueError(f"per-frame column {clash[0]!r} has the name of an item key; it cannot be a feature")
+
+    def _database(self) -> MotionDatabase:
+        """This process's open database, opened on first use (and anew in a forked child)."""
+        pid = os.getpid()
+        if self._db is not None and self._db_pid != pid:
+            # inherited across fork: never read through the parent's handle
+            try:
+                self._db.close()
+            except Exception:
+                pass
+            self._db, self._datasets = None, {}
+        if self._db is None:
+            self._db = MotionDatabase.open(self.path)
+            self._db_pid = pid
+        return self._db
+
+    def _dataset(self, k: int, name: str):
+        key = (k, name)
+        if key not in self._datasets:
+            self._datasets[key] = self._database().h5[f"skeletons/{k}/{name}"]
+        return self._datasets[key]
+
+    def close(self) -> None:
+        """Close this process's HDF5 file, if open (it reopens on the next read)."""
+        if self._db is not None and self._db_pid == os.getpid():
+            self._db.close()
+        self._db, self._db_pid, self._datasets = None, None, {}
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.update(_db=None, _db_pid=None, _datasets={})  # h5py handles never travel
+        return state
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # -- preloading -----------------------------------------------------------------------------
+    def _load_all(self, db: MotionDatabase) -> None:
+        """Read the selected clips and compute their features, per skeleton, once."""
+        self._pre: dict[int, dict[str, torch.Tensor]] = {}
+        self._pre_offset = np.zeros(len(self.indices), dtype=np.int64)
+        for k, need in self._raw.items():
+            clips = np.flatnonzero(self._skel == k)
+            starts, lengths = self._row0[clips], self._len[clips]
+            g = db.h5[f"skeletons/{k}"]
+            raw = {n: torch.from_numpy(_gather_rows(g[n], starts, lengths)).to(self.dtype) for n in need}
+            offs = np.cumsum(lengths) - lengths
+            self._pre_offset[clips] = offs
+            N = int(lengths.sum())
+            fps = torch.from_numpy(np.repeat(self._fps[clips], lengths)).to(self.dtype)
+            first = torch.zeros(N, dtype=torch.bool)
+            first[torch.from_numpy(offs[lengths > 0])] = True
+            self._pre[k] = _derive(raw, self.features, self.skeletons[k], fps, first)
+
+    # -- items ------------------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return self.num_clips if self.window is None else len(self._win_clip)
+
+    def _locate(self, i: int) -> tuple[int, int, int]:
+        """(selected clip, start frame, number of frames) of item ``i``."""
+        n = len(self)
+        i = operator.index(i)
+        if i < 0:
+            i += n
+        if not 0 <= i < n:
+            raise IndexError(f"item {i} out of range for a dataset of {n}")
+        if self.window is None:
+            return i, 0, int(self._len[i])
+        return int(self._win_clip[i]), int(self._win_start[i]), self.window
+
+    def frames(self, c: int, start: int, n: int) -> dict[str, torch.Tensor]:
+        """The features of frames ``start:start+n`` of selected clip ``c`` (``0 <= c < num_clips``)."""
+        k = int(self._skel[c])
+        if self.preload:
+            s = int(self._pre_offset[c]) + start
+            return {f: t[s:s + n].clone() for f, t in self._pre[k].items()}
+        ctx = 1 if ("velocities" in self.features and start > 0) else 0  # the frame before, for velocities
+        lo = int(self._row0[c]) + start - ctx
+        raw = {name: torch.from_numpy(self._dataset(k, name)[lo:lo + n + ctx]).to(self.dtype)
+               for name in self._raw[k]}
+        fps = torch.full((n + ctx,), float(self._fps[c]), dtype=self.dtype)
+        first = torch.zeros(n + ctx, dtype=torch.bool)
+        first[0] = start == 0
+        out = _derive(raw, self.features, self.skeletons[k], fps, first)
+        return {f: t[ctx:] for f, t in out.items()} if ctx else out
+
+    def __getitem__(self, i: int) -> dict:
+        c, start, n = self._locate(i)
+        item: dict[str, Any] = self.frames(c, start, n)
+        item.update(name=str(self._names_arr[c]), length=n, fps=float(self._fps[c]), index=int(self.indices[c]),
+                    start=start, skeleton=int(self._skel[c]))
+        return item
+
+    @property
+    def skeleton(self) -> Skeleton:
+        """The one skeleton every selected clip is on (an error if they are on several)."""
+        ks = sorted(set(self._skel.tolist()))
+        if len(ks) != 1:
+            raise DatasetError(f"{self.path}: the selected clips are on skeletons {ks}; filter with where={{'skeleton': k}}")
+        return self.skeletons[ks[0]]
+
+    def __repr__(self) -> str:
+        what = "clips" if self.window is None else f"windows of {self.window} (stride {self.stride})"
+        return (f"MotionDataset({str(self.path)!r}, {len(self)} {what} from {self.num_clips} clips, "
+                f"features={list(self.features)})")
+
+
+# --------------------------------------------------------------------------------------------
+# batching
+# --------------------------------------------------------------------------------------------
+def collate_motion(items: Sequence[dict]) -> dict:
+    """Pad items of :class:`MotionDataset` to the longest and stack them into a batch.
+
+    Per-frame tensors (those whose first dimension is the item's ``length``: every feature)
+    become ``(B, T, ...)`` with ``T`` the longest length; shorter items are padded by
+    repeating their last frame. Other tensors are stacked as ``(B, ...)``.
+
+    Returns a dict with the stacked features and:
+
+    - ``lengths``: ``(B,)`` int64 real frames per item; ``mask``: ``(B, T)`` bool, True on real frames;
+    - ``fps``: ``(B,)`` float64;
+    - ``name``, ``index``, ``start``, ``skeleton``: lists (and any other non-tensor key as a list).
+
+    Raises ``ValueError`` when a feature's per-frame shape differs between items (e.g. clips
+    on skeletons with different numbers of joints).
+    """
+    items = list(items)
+    if not items:
+        raise ValueError("collate_motion needs at least one item")
+    lengths = torch.tensor([int(it["length"]) for it in items], dtype=torch.int64)
+    T = int(lengths.max())
+    B = len(items)
+    out: dict[str, Any] = {}
+    for key in items[0]:
+        if key in ("length", "lengths", "mask"):
+            continue
+        values = [it[key] for it in items]
+        if key == "fps":
+            out[key] = torch.tensor([float(v) for v in values], dtype=torch.float64)
+        elif not isinstance(values[0], torch.Tensor):
+            out[key] = values
+        elif values[0].dim() >= 1 and values[0].shape[0] == int(lengths[0]):
+            shape = values[0].shape[1:]
+            for it, v in zip(items, values):
+                if v.shape != (int(it["length"]), *shape):
+                    raise ValueError(
+                        f"cannot batch {key!r}: item {it.get('name', '?')!r} has shape {tuple(v.shape)}, "
+                        f"the first has (T, {', '.join(map(str, shape))}) (clips on different skeletons?)")
+            x = torch.empty((B, T, *shape), dtype=values[0].dtype)
+            for b, v in enumerate(values):
+                n = v.shape[0]
+                x[b, :n] = v
+                if 0 < n < T:
+                    x[b, n:] = v[n - 1]
+                elif n == 0:
+                    x[b].zero_()
+            out[key] = x
+        else:
+            try:
+                out[key] = torch.stack(values)
+            except RuntimeError as exc:
+                raise ValueError(f"cannot batch {key!r}: {exc}") from None
+    out["lengths"] = lengths
+    out["mask"] = torch.arange(T)[None, :] < lengths[:, None]
+    return out

@@ -1,0 +1,74 @@
+"""Choosing clips of a database by name, role or label.
+
+A selector is a comma-separated list of alternatives, any of which selects a clip:
+
+- ``role:NAME``: the clip's role (``locomotion``, ``action``, ``both``, ``spliced``);
+- ``label:KEY=VALUE``: the clip's label ``KEY``, ``VALUE`` being a shell-style glob;
+- anything else: a shell-style glob on the clip name (``'*walk*'``), case-sensitive.
+
+Several selectors (a repeated command-line flag) must all select a clip:
+``--locomotions role:locomotion --locomotions 'label:style=normal'`` takes the normal-style
+locomotions, ``--locomotions '*walk*,*run*'`` takes walks and runs.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+from typing import Sequence
+
+from ..core.errors import TorchspliceError
+
+__all__ = ["select_clips", "parse_selector"]
+
+
+def parse_selector(text: str) -> list[tuple[str, str, str]]:
+    """The alternatives of one selector as ``(kind, key, pattern)``: kind ``role``, ``label`` or ``name``."""
+    alts = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            raise TorchspliceError(f"empty alternative in selector {text!r}")
+        if part.startswith("role:"):
+            alts.append(("role", "", part[5:]))
+        elif part.startswith("label:"):
+            key, eq, value = part[6:].partition("=")
+            if not eq or not key:
+                raise TorchspliceError(f"selector {part!r} must read label:KEY=VALUE")
+            alts.append(("label", key, value))
+        else:
+            alts.append(("name", "", part))
+    return alts
+
+
+def _matches(alts, name: str, role: str, labels: dict) -> bool:
+    for kind, key, pattern in alts:
+        if kind == "role" and role == pattern:
+            return True
+        if kind == "label" and key in labels and fnmatch.fnmatchcase(str(labels[key]), pattern):
+            return True
+        if kind == "name" and fnmatch.fnmatchcase(name, pattern):
+            return True
+    return False
+
+
+def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) -> list[int]:
+    """Rows of a database ``table`` (:meth:`MotionDatabase.table`) that every selector selects.
+
+    ``what`` (e.g. ``"--locomotions"``) and ``source`` (the database path) only serve error
+    messages: a selector that selects nothing is an error naming it.
+    """
+    names = [str(n) for n in table["name"]]
+    roles = [str(r) for r in table["role"]]
+    labels = [json.loads(lab or "{}") for lab in table["labels"]]
+    rows = list(range(len(names)))
+    for text in selectors:
+        alts = parse_selector(text)
+        hit = [i for i in range(len(names)) if _matches(alts, names[i], roles[i], labels[i])]
+        if not hit:
+            sample = ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
+            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} (its clips: {sample or 'none'})")
+        keep = set(hit)
+        rows = [i for i in rows if i in keep]
+    if not rows:
+        raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}")
+    return rows
