@@ -12,6 +12,7 @@ Sections:
   splice per-stage throughput (grid cells/s, DP cells/s, Horn frames/s) and splices/s for
          batches of real pairs (Bandai Namco walks, up to 250 frames), beside a per-pair NumPy
          version of the same method (scripts/numpy_reference.py)   [>= 100x it, >= 200 splices/s]
+  job    the n x m database job end to end on real clips: splices/s and peak memory
 
 Without real data (no ../shared/mocap and no TORCHSPLICE_MOCAP), the built-in synthetic
 sample stands in and the figures say so. Timings are the best of several repeats.
@@ -191,11 +192,44 @@ def bench_splice(files: list[Path], device: str) -> None:
     print(f"splice   agreement with the reference: rotations within {np.degrees(diff):.2g} deg, curves within {curve:.2g} frames")
 
 
+def _job_child(files: list[str], tmp: str, queue) -> None:
+    """Run one splice-all job in a fresh process; report time, pairs and peak RSS."""
+    import resource
+
+    from torchsplice.cli import main as cli
+
+    db, out = Path(tmp) / "in.h5", Path(tmp) / "out.h5"
+    cli(["import", *files, "-o", str(db), "-q"])
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    from torchsplice.job import JobConfig, SpliceJob
+
+    summary = SpliceJob(JobConfig(database=db, output=out, locomotions=("*",), actions=("*",)), progress=False).run()
+    queue.put((time.perf_counter() - t0, summary.spliced, summary.compute_seconds, base,
+               resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, out.stat().st_size))
+
+
+def bench_job(files: list[Path]) -> None:
+    import multiprocessing as mp
+
+    walks = [str(f) for f in files if "walk" in f.stem and f.stem.startswith("dataset-2")][:16] or [str(f) for f in files[:16]]
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    with tempfile.TemporaryDirectory() as tmp:
+        p = ctx.Process(target=_job_child, args=(walks, tmp, queue))
+        p.start()
+        seconds, spliced, compute, base, peak, size = queue.get()
+        p.join()
+    print(f"job    {len(walks)} x {len(walks)} real clips (self-pairs skipped): {spliced} splices in {seconds:.1f} s "
+          f"= {spliced / seconds:,.0f} splices/s end to end ({spliced / compute:,.0f}/s in splicing); "
+          f"peak memory {peak / 1024:.0f} MB ({(peak - base) / 1024:+.0f} MB over the loaded interpreter); output {size / 1e6:.1f} MB")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,fk,db,splice", help="comma-separated sections: parse, fk, db, splice")
+    p.add_argument("--only", default="parse,fk,db,splice,job", help="comma-separated sections: parse, fk, db, splice, job")
     p.add_argument("--device", default="cpu", help="device for tensor work (cpu, cuda)")
     args = p.parse_args()
     sections = set(args.only.split(","))
@@ -215,6 +249,8 @@ def main() -> int:
             bench_db(files)
         if "splice" in sections:
             bench_splice(files, args.device)
+        if "job" in sections:
+            bench_job(files)
     return 0
 
 

@@ -48,7 +48,13 @@ Every feature comes as ``dtype`` (float32 by default).
 Workers: the dataset holds no open HDF5 file when it is made or pickled; each process opens
 the file itself on its first read (and a process forked from one that had it open opens its
 own), so it works with ``DataLoader(num_workers=N)`` under fork, spawn and forkserver.
-Clip metadata is kept in numpy arrays, so forked workers do not copy it page by page.
+Items take their clip metadata from numpy arrays, so forked workers do not copy it page by page.
+
+Speed: an item reads just its frames (one slice per stored array). ``DataLoader`` fetches a
+batch through :meth:`MotionDataset.__getitems__`, which runs forward kinematics once for the
+whole batch. Random windows cost mostly the decompression of the HDF5 chunks they touch
+(1024 gzip-compressed frames by default); a database written with smaller chunks or without
+compression, or ``preload=True``, is several times faster to sample at random.
 """
 
 from __future__ import annotations
@@ -169,34 +175,37 @@ def _where_mask(where: Mapping[str, Any], table: dict[str, np.ndarray], columns:
 # --------------------------------------------------------------------------------------------
 # features from raw frames
 # --------------------------------------------------------------------------------------------
-def _velocities(pos: torch.Tensor, fps: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
-    """``(N, J, 3)`` finite-difference velocities of frames ``pos`` (N, J, 3) of one or more clips.
+def _velocities(pos: torch.Tensor, fps: torch.Tensor, clip_first: torch.Tensor, seg_first: torch.Tensor) -> torch.Tensor:
+    """``(N, J, 3)`` finite-difference velocities of ``pos`` ``(N, J, 3)``: segments of frames, concatenated.
 
-    ``fps`` ``(N,)`` per frame; ``first`` ``(N,)`` bool marks each clip's first frame, which
-    copies the clip's second frame (zero for a one-frame clip). Frames not marked use the
-    frame before them.
+    ``fps`` ``(N,)`` per frame. ``seg_first`` ``(N,)`` bool marks the first row of each segment
+    (an item, or a preloaded clip); ``clip_first`` marks rows that are a clip's first frame:
+    those copy the next row of their segment (zero when the segment has no next row). Any
+    other row uses the row before it; a segment's first row that is not a clip's first frame
+    is a context frame whose own value is meaningless (the caller drops it).
     """
     vel = torch.zeros_like(pos)
     if pos.shape[0] > 1:
         vel[1:] = (pos[1:] - pos[:-1]) * fps[1:, None, None]
-    f = first.nonzero().flatten()
+    f = clip_first.nonzero().flatten()
     if f.numel():
         nxt = f + 1
         ok = nxt < pos.shape[0]
         inside = ok.nonzero().flatten()
-        ok[inside] = ~first[nxt[inside]]  # a one-frame clip's next frame starts another clip
+        ok[inside] = ~seg_first[nxt[inside]]  # a one-frame segment's next row belongs to another
         vel[f[ok]] = vel[nxt[ok]]
         vel[f[~ok]] = 0
     return vel
 
 
 def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Skeleton,
-            fps: torch.Tensor, first: torch.Tensor) -> dict[str, torch.Tensor]:
+            fps: torch.Tensor, clip_first: torch.Tensor, seg_first: torch.Tensor) -> dict[str, torch.Tensor]:
     """The asked ``features`` of ``N`` frames from the raw stored arrays ``raw`` (see the module table).
 
     ``raw`` holds ``rotations`` (N, J, 4), ``root_translation`` (N, 3) and, where stored,
-    ``translations`` (N, J, 3) and per-frame columns (N,); ``fps`` and ``first`` are as in
-    :func:`_velocities`.
+    ``translations`` (N, J, 3) and per-frame columns (N,); ``fps``, ``clip_first`` and
+    ``seg_first`` are as in :func:`_velocities`. Every feature is computed frame by frame
+    (velocities from the row before), so rows of several items can go through in one call.
     """
     out: dict[str, torch.Tensor] = {}
     fk = None
@@ -220,7 +229,7 @@ def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Ske
         elif f == "global_rotations":
             out[f] = fk[1]
         elif f == "velocities":
-            out[f] = _velocities(fk[0], fps, first)
+            out[f] = _velocities(fk[0], fps, clip_first, seg_first)
         else:  # a per-frame column
             out[f] = raw[f]
     return out
@@ -431,7 +440,7 @@ class MotionDataset(Dataset):
             fps = torch.from_numpy(np.repeat(self._fps[clips], lengths)).to(self.dtype)
             first = torch.zeros(N, dtype=torch.bool)
             first[torch.from_numpy(offs[lengths > 0])] = True
-            self._pre[k] = _derive(raw, self.features, self.skeletons[k], fps, first)
+            self._pre[k] = _derive(raw, self.features, self.skeletons[k], fps, first, first)
 
     # -- items ------------------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -451,26 +460,70 @@ class MotionDataset(Dataset):
 
     def frames(self, c: int, start: int, n: int) -> dict[str, torch.Tensor]:
         """The features of frames ``start:start+n`` of selected clip ``c`` (``0 <= c < num_clips``)."""
-        k = int(self._skel[c])
-        if self.preload:
-            s = int(self._pre_offset[c]) + start
-            return {f: t[s:s + n].clone() for f, t in self._pre[k].items()}
-        ctx = 1 if ("velocities" in self.features and start > 0) else 0  # the frame before, for velocities
-        lo = int(self._row0[c]) + start - ctx
-        raw = {name: torch.from_numpy(self._dataset(k, name)[lo:lo + n + ctx]).to(self.dtype)
-               for name in self._raw[k]}
-        fps = torch.full((n + ctx,), float(self._fps[c]), dtype=self.dtype)
-        first = torch.zeros(n + ctx, dtype=torch.bool)
-        first[0] = start == 0
-        out = _derive(raw, self.features, self.skeletons[k], fps, first)
-        return {f: t[ctx:] for f, t in out.items()} if ctx else out
+        return self._fetch([(c, start, n)])[0]
 
-    def __getitem__(self, i: int) -> dict:
-        c, start, n = self._locate(i)
-        item: dict[str, Any] = self.frames(c, start, n)
+    def _fetch(self, parts: Sequence[tuple[int, int, int]]) -> list[dict[str, torch.Tensor]]:
+        """Features of several ``(clip, start, n)`` frame ranges; one feature computation per skeleton.
+
+        Each range reads just its rows from the file (and the row before it when velocities
+        are asked and it does not start its clip); the rows of all ranges on one skeleton are
+        then concatenated so that forward kinematics runs once over all of them.
+        """
+        if self.preload:
+            out = []
+            for c, start, n in parts:
+                s = int(self._pre_offset[c]) + start
+                out.append({f: t[s:s + n].clone() for f, t in self._pre[int(self._skel[c])].items()})
+            return out
+        results: list[dict[str, torch.Tensor] | None] = [None] * len(parts)
+        by_skeleton: dict[int, list[int]] = {}
+        for p, (c, _, _) in enumerate(parts):
+            by_skeleton.setdefault(int(self._skel[c]), []).append(p)
+        vel = "velocities" in self.features
+        for k, members in by_skeleton.items():
+            raw: dict[str, list[torch.Tensor]] = {name: [] for name in self._raw[k]}
+            ctxs, sizes, fps, clip_first = [], [], [], []
+            for p in members:
+                c, start, n = parts[p]
+                ctx = 1 if (vel and start > 0) else 0  # the frame before, for velocities
+                lo = int(self._row0[c]) + start - ctx
+                for name in raw:
+                    raw[name].append(torch.from_numpy(self._dataset(k, name)[lo:lo + n + ctx]))
+                ctxs.append(ctx)
+                sizes.append(n + ctx)
+                fps.append(float(self._fps[c]))
+                clip_first.append(start == 0)
+            sizes_t = torch.tensor(sizes, dtype=torch.int64)
+            seg_first = torch.zeros(int(sizes_t.sum()), dtype=torch.bool)
+            offsets = torch.cumsum(sizes_t, 0) - sizes_t
+            seg_first[offsets[sizes_t > 0]] = True
+            clip_first_rows = seg_first.clone()
+            clip_first_rows[offsets[(sizes_t > 0) & ~torch.tensor(clip_first)]] = False
+            frames = {name: (torch.cat(v) if len(v) > 1 else v[0]).to(self.dtype) for name, v in raw.items()}
+            fps_rows = torch.repeat_interleave(torch.tensor(fps, dtype=self.dtype), sizes_t)
+            derived = _derive(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first)
+            for p, o, size, ctx in zip(members, offsets.tolist(), sizes, ctxs):
+                results[p] = {f: t[o + ctx:o + size] for f, t in derived.items()}
+        return results
+
+    def _item(self, c: int, start: int, n: int, frames: dict[str, torch.Tensor]) -> dict:
+        item: dict[str, Any] = frames
         item.update(name=str(self._names_arr[c]), length=n, fps=float(self._fps[c]), index=int(self.indices[c]),
                     start=start, skeleton=int(self._skel[c]))
         return item
+
+    def __getitem__(self, i: int) -> dict:
+        c, start, n = self._locate(i)
+        return self._item(c, start, n, self._fetch([(c, start, n)])[0])
+
+    def __getitems__(self, indices: Sequence[int]) -> list[dict]:
+        """Items ``[self[i] for i in indices]``, their features computed in one batch.
+
+        ``DataLoader`` calls this with each batch's indices (torch 2.x), so forward kinematics
+        runs once per batch instead of once per item; the items equal ``self[i]`` exactly.
+        """
+        where = [self._locate(i) for i in indices]
+        return [self._item(c, start, n, f) for (c, start, n), f in zip(where, self._fetch(where))]
 
     @property
     def skeleton(self) -> Skeleton:

@@ -437,7 +437,8 @@ class SpliceJob:
                "pairs_spliced": len(pairs)}
         flagged: dict[str, int] = {}
         n = copied = 0
-        with MotionDatabase.create(c.output, overwrite=self.overwrite, columns=OUTPUT_COLUMNS,
+        # 256-frame chunks: random training windows decompress little (see torchsplice.data)
+        with MotionDatabase.create(c.output, overwrite=self.overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
                                    frame_columns=FRAME_COLUMNS, attrs={"run": json.dumps(run)}) as out:
             for k in range(len(batches)):
                 with MotionDatabase.open(self._part(k)) as part:
