@@ -1,0 +1,112 @@
+"""The clip selector grammar of ``splice-all`` (:mod:`torchsplice.job.select`) on a hand-made table."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from torchsplice.core.errors import TorchspliceError
+from torchsplice.job import parse_selector, select_clips
+
+ROWS = [  # name, role, labels
+    ("walk_normal", "locomotion", {"content": "walk", "style": "normal", "dataset": "2"}),
+    ("walk-turn-left_normal", "locomotion", {"content": "walk-turn-left", "style": "normal", "dataset": "2"}),
+    ("walk-turn-right_proud", "both", {"content": "walk-turn-right", "style": "proud", "dataset": "1"}),
+    ("run_Proud", "both", {"content": "run", "style": "proud", "dataset": "1"}),
+    ("wave_normal", "action", {"content": "wave-left-hand", "style": "normal", "dataset": "2"}),
+    ("carry_box", "action", {}),
+    ("mystery", "", {}),
+]
+
+
+@pytest.fixture
+def table():
+    return {
+        "name": [r[0] for r in ROWS],
+        "role": [r[1] for r in ROWS],
+        # as MotionDatabase.table() gives them: JSON strings; an empty string means no labels
+        "labels": [json.dumps(r[2]) if r[2] else "" for r in ROWS],
+    }
+
+
+def names(table, *selectors):
+    return [table["name"][i] for i in select_clips(table, list(selectors), "--locomotions", "db.h5")]
+
+
+def test_name_globs_are_case_sensitive_and_whole_name(table):
+    assert names(table, "walk*") == ["walk_normal", "walk-turn-left_normal", "walk-turn-right_proud"]
+    assert names(table, "*_proud") == ["walk-turn-right_proud"]  # run_Proud differs in case
+    assert names(table, "*_[Pp]roud") == ["walk-turn-right_proud", "run_Proud"]
+    assert names(table, "carry_box") == ["carry_box"]
+    assert names(table, "wave?normal") == ["wave_normal"]
+    with pytest.raises(TorchspliceError):
+        names(table, "walk")  # a glob matches the whole name, not a part of it
+
+
+def test_role_selects_exact_role(table):
+    assert names(table, "role:locomotion") == ["walk_normal", "walk-turn-left_normal"]
+    assert names(table, "role:both") == ["walk-turn-right_proud", "run_Proud"]
+    assert names(table, "role:action") == ["wave_normal", "carry_box"]
+
+
+def test_label_key_value_with_globs(table):
+    assert names(table, "label:style=proud") == ["walk-turn-right_proud", "run_Proud"]
+    assert names(table, "label:content=walk-turn-*") == ["walk-turn-left_normal", "walk-turn-right_proud"]
+    assert names(table, "label:content=wave-*-hand") == ["wave_normal"]
+    assert names(table, "label:dataset=[12]") == [r[0] for r in ROWS if r[2]]
+    assert names(table, "label:content=*") == [r[0] for r in ROWS if r[2]]  # clips without the key never match
+    # the value is everything after the first '='
+    assert parse_selector("label:note=a=b") == [("label", "note", "a=b")]
+
+
+def test_comma_alternatives_are_or(table):
+    assert names(table, "role:locomotion,role:both") == [
+        "walk_normal", "walk-turn-left_normal", "walk-turn-right_proud", "run_Proud"]
+    # kinds mix, order of the result is the table's row order, duplicates collapse
+    assert names(table, "carry_box, label:style=proud ,walk_normal,run_*") == [
+        "walk_normal", "walk-turn-right_proud", "run_Proud", "carry_box"]
+    # an alternative that matches nothing is fine while another one matches
+    assert names(table, "nothing_like_this,role:action") == ["wave_normal", "carry_box"]
+    assert parse_selector("a*, role:x ,label:k=v") == [("name", "", "a*"), ("role", "", "x"), ("label", "k", "v")]
+
+
+def test_repeated_selectors_are_and(table):
+    assert names(table, "label:style=normal", "label:content=walk-turn-*") == ["walk-turn-left_normal"]
+    assert names(table, "role:locomotion,role:both", "label:dataset=1") == ["walk-turn-right_proud", "run_Proud"]
+    assert names(table, "label:content=walk-turn-*", "role:both") == ["walk-turn-right_proud"]
+    # the order of the selectors does not matter
+    assert names(table, "label:dataset=1", "role:locomotion,role:both") == ["walk-turn-right_proud", "run_Proud"]
+
+
+def test_selector_matching_nothing_names_it_and_the_database(table):
+    with pytest.raises(TorchspliceError) as e:
+        select_clips(table, ["role:locomotion", "label:style=angry"], "--actions", "/data/db.h5")
+    msg = str(e.value)
+    assert "'label:style=angry'" in msg and "--actions" in msg and "/data/db.h5" in msg
+    assert "\n" not in msg
+    with pytest.raises(TorchspliceError) as e:
+        select_clips(table, ["ROLE:action"], "--locomotions", "db.h5")  # a name glob, matching no clip
+    assert "'ROLE:action'" in str(e.value)
+
+
+def test_selectors_each_matching_but_not_together(table):
+    with pytest.raises(TorchspliceError) as e:
+        select_clips(table, ["role:action", "label:style=proud"], "--locomotions", "db.h5")
+    msg = str(e.value)
+    assert "'role:action'" in msg and "'label:style=proud'" in msg and "together" in msg and "db.h5" in msg
+
+
+@pytest.mark.parametrize("bad", ["label:style", "label:=normal", "walk*,label:content"])
+def test_malformed_label_selector_names_it(table, bad):
+    with pytest.raises(TorchspliceError) as e:
+        select_clips(table, [bad], "--locomotions", "db.h5")
+    part = [p for p in bad.split(",") if p.startswith("label:")][0]
+    assert repr(part) in str(e.value) and "label:KEY=VALUE" in str(e.value)
+
+
+@pytest.mark.parametrize("bad", ["", "walk*,", ",walk*", "walk*,,run*", " , "])
+def test_empty_alternative_is_an_error(table, bad):
+    with pytest.raises(TorchspliceError) as e:
+        select_clips(table, [bad], "--locomotions", "db.h5")
+    assert repr(bad) in str(e.value) and "empty" in str(e.value)
