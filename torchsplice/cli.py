@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -290,7 +291,8 @@ def cmd_splice_all(args) -> int:
     )
     if not Path(args.output).parent.exists():
         raise TorchspliceError(f"{args.output}: folder {Path(args.output).parent} does not exist")
-    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force)
+    command = "torchsplice " + shlex.join(args.argv)
+    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command)
     try:
         summary = job.run()
     except KeyboardInterrupt:
@@ -404,7 +406,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv
     try:
         return args.func(args)
     except TorchspliceError as exc:

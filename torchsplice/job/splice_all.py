@@ -63,6 +63,8 @@ FRAME_COLUMNS = ("action_frame",)
 DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
 DEFAULT_ACTIONS = ("role:action,role:both",)
 POOR_ALIGNMENT = 0.15  # flag a pair whose mean landmark distance exceeds this many leg lengths
+MIN_SECONDS = SpliceOptions().min_seconds
+FLAG_SEPARATOR = " | "
 
 
 @dataclass(frozen=True)
@@ -110,7 +112,8 @@ class Pair:
 
 @dataclass
 class JobSummary:
-    """What a run did. ``skipped`` maps a reason to the number of pairs it skipped."""
+    """What a run did. ``skipped`` maps a reason to the number of pairs it skipped, ``flagged``
+    a kind of flag to the number of clips carrying it (``flagged_clips`` clips in all)."""
 
     output: Path
     pairs: int = 0
@@ -118,6 +121,7 @@ class JobSummary:
     resumed: int = 0
     skipped: dict[str, int] = field(default_factory=dict)
     flagged: dict[str, int] = field(default_factory=dict)
+    flagged_clips: int = 0
     copied: int = 0
     seconds: float = 0.0
     compute_seconds: float = 0.0
@@ -133,7 +137,7 @@ class JobSummary:
             out.append(f"skipped {sum(self.skipped.values())} pairs:")
             out += [f"  {n} x {why}" for why, n in sorted(self.skipped.items(), key=lambda kv: -kv[1])]
         if self.flagged:
-            out.append(f"flagged {sum(self.flagged.values())} clips (see the 'flags' column):")
+            out.append(f"flagged {self.flagged_clips} clips (see the 'flags' column):")
             out += [f"  {n} x {why}" for why, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
         return out
 
@@ -176,8 +180,11 @@ class _ClipCache:
 class SpliceJob:
     """Plan and run one splice job (see the module docstring)."""
 
-    def __init__(self, config: JobConfig, progress: bool = True, restart: bool = False, overwrite: bool = False):
+    def __init__(self, config: JobConfig, progress: bool = True, restart: bool = False, overwrite: bool = False,
+                 command: str | None = None):
         self.config, self.progress, self.restart, self.overwrite = config, progress, restart, overwrite
+        self.command = command or "torchsplice.job.SpliceJob (Python API)"
+        self._checks: dict = {}
         bad = [m for m in config.methods if m not in METHODS]
         if bad or not config.methods:
             raise TorchspliceError(f"unknown method {bad[0] if bad else '(none)'!r}; choose from {', '.join(METHODS)}")
@@ -197,7 +204,7 @@ class SpliceJob:
             raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
                                    f"have no skeleton in common: {a.mismatch(b)}")
         context = self._skeleton_context(loco_db, tl, locos)
-        checks = {} if c.force_locomotion else self._locomotion_checks(loco_db, act_db, tl, ta, locos, acts, context)
+        checks = self._checks = self._locomotion_checks(loco_db, act_db, tl, ta, locos, acts, context)
         refs = self._references(act_db, ta, acts, context) if "cpmc" in c.methods else {}
         pairs, skipped = [], {}
 
@@ -223,10 +230,15 @@ class SpliceJob:
             return "a clip is not spliced onto itself"
         if not sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]):
             return "skeletons differ"
-        for key, name in ((("L", i), str(tl["name"][i])), (("A", j), str(ta["name"][j]))):
-            check = checks.get(key)
-            if check is not None and not check.locomoting:
-                return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
+        for table, row in ((tl, i), (ta, j)):
+            need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
+            if int(table["length"][row]) < need:
+                return f"{table['name'][row]} is too short to splice ({int(table['length'][row])} frames, at least {need})"
+        if not self.config.force_locomotion:
+            for key, name in ((("L", i), str(tl["name"][i])), (("A", j), str(ta["name"][j]))):
+                check = checks.get(key)
+                if check is not None and not check.locomoting:
+                    return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
         if method == "cpmc" and refs.get(j) is None:
             return f"no plain-locomotion reference for {ta['name'][j]} (cpmc)"
         return None
@@ -322,8 +334,10 @@ class SpliceJob:
         """Plan, splice every batch (resuming finished ones), merge; returns the summary."""
         c = self.config
         t0 = time.perf_counter()
+        self._started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         if c.output.exists() and not self.overwrite:
             raise TorchspliceError(f"{c.output}: already exists (use --force to overwrite)")
+        _remove_stale_outputs(c.output)
         if c.actions_db is not None and c.actions_db.resolve() == c.database.resolve():
             c = self.config = JobConfig(**{**asdict(c), "actions_db": None})
         with MotionDatabase.open(c.database) as loco_db:
@@ -374,7 +388,7 @@ class SpliceJob:
                 pending.result()
         bar.close()
         summary.compute_seconds = compute
-        summary.spliced, summary.flagged, summary.copied = self._merge(batches, loco_db, act_db, tl, ta, pairs, signature, t0)
+        summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = self._merge(batches, loco_db, act_db, tl, ta, pairs, signature, t0)
         shutil.rmtree(self.work, ignore_errors=True)
         return summary
 
@@ -400,7 +414,7 @@ class SpliceJob:
         lc, ac = caches[0], caches[1] or caches[0]
         ctx = context[int(tl["skeleton"][chunk[0].loco])]
         opts = SpliceOptions(align=AlignOptions(max_run=c.max_run), posture=c.posture,
-                             force=c.force_locomotion, device=c.device)
+                             force=True, check_locomotion=False, device=c.device)  # the plan checked the clips
         pairs = [(lc.get(p.loco), ac.get(p.action)) for p in chunk]
         refs = [ac.get(p.reference) for p in chunk] if chunk[0].method == "cpmc" else None
         results = splice_pairs(pairs, ctx["spec"], method=chunk[0].method, references=refs, options=opts)
@@ -409,13 +423,14 @@ class SpliceJob:
         leg = ctx["leg"]
         records = []
         for p, r in zip(chunk, results):
-            flags = [n for n in r.notes]
+            flags = [f"{name} does not locomote ({chk.reason})" for key, name in ((("L", p.loco), r.locomotion), (("A", p.action), r.action))
+                     if (chk := self._checks.get(key)) is not None and not chk.locomoting]
             if math.isfinite(r.cost) and math.sqrt(max(r.cost, 0.0)) > POOR_ALIGNMENT * leg:
                 flags.append(f"poor alignment (mean landmark distance {math.sqrt(r.cost) / leg:.2f} leg lengths)")
             loco_frames = int(tl["length"][p.loco])
             extra = {
                 "locomotion": r.locomotion, "action": r.action, "reference": r.reference or "", "method": r.method,
-                "params": params, "flags": "; ".join(flags), "locomotion_id": p.loco, "action_id": p.action,
+                "params": params, "flags": FLAG_SEPARATOR.join(flags), "locomotion_id": p.loco, "action_id": p.action,
                 "crop": r.crop, "cost": r.cost, "posture_deg": r.posture_deg,
                 "pelvis_correction_deg": float(r.pelvis_correction.mean()) if r.pelvis_correction.numel() else 0.0,
                 "coverage": r.motion.num_frames / loco_frames,
@@ -433,10 +448,10 @@ class SpliceJob:
 
     def _merge(self, batches, loco_db, act_db, tl, ta, pairs, signature, t0) -> tuple[int, dict, int]:
         c = self.config
-        run = {**signature, "command": " ".join(sys.argv), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        run = {**signature, "command": self.command, "started": self._started,
                "pairs_spliced": len(pairs)}
         flagged: dict[str, int] = {}
-        n = copied = 0
+        n = copied = flagged_clips = 0
         # 256-frame chunks: random training windows decompress little (see torchsplice.data)
         with MotionDatabase.create(c.output, overwrite=self.overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
                                    frame_columns=FRAME_COLUMNS, attrs={"run": json.dumps(run)}) as out:
@@ -444,13 +459,15 @@ class SpliceJob:
                 with MotionDatabase.open(self._part(k)) as part:
                     spec = DatasetSpec.from_json(part.spec_json(0)) if part.spec_json(0) else None
                     for motion, extra, frames in part.read_all():
-                        for f in filter(None, (s.split(" (")[0] for s in (extra["flags"] or "").split("; "))):
+                        kinds = {_flag_kind(f) for f in (extra["flags"] or "").split(FLAG_SEPARATOR) if f}
+                        for f in kinds:
                             flagged[f] = flagged.get(f, 0) + 1
+                        flagged_clips += bool(kinds)
                         out.append(motion, spec=spec, extra=extra, frame_extra=frames)
                         n += 1
             if c.copy_sources:
                 copied = self._copy_sources(out, loco_db, act_db, pairs)
-        return n, flagged, copied
+        return n, flagged, flagged_clips, copied
 
     def _copy_sources(self, out: MotionDatabase, loco_db, act_db, pairs) -> int:
         count = 0
@@ -463,6 +480,22 @@ class SpliceJob:
                 out.append(m, spec=DatasetSpec.from_json(spec_text) if spec_text else None)
                 count += 1
         return count
+
+
+def _flag_kind(flag: str) -> str:
+    """The kind of a flag, without the clip-specific details in parentheses."""
+    return flag.split(" (")[0].split(": ")[0] if " does not locomote" not in flag else "clip does not locomote"
+
+
+def _remove_stale_outputs(output: Path) -> None:
+    """Delete ``.OUT.h5.partial-PID`` files of merges whose process is gone (killed mid-merge)."""
+    for f in output.parent.glob(f".{output.name}.partial-*"):
+        try:
+            os.kill(int(f.name.rsplit("-", 1)[1]), 0)
+        except ProcessLookupError:
+            f.unlink(missing_ok=True)
+        except (ValueError, PermissionError, OSError):
+            pass
 
 
 def _progress(total: int, initial: int, show: bool):

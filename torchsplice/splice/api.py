@@ -47,6 +47,8 @@ class SpliceOptions:
         align: time-alignment parameters (:class:`~torchsplice.splice.heck.AlignOptions`).
         posture: apply posture transfer (``splice`` only).
         force: splice clips that do not locomote instead of refusing them.
+        check_locomotion: run the locomotion check at all (a caller that has checked its
+            clips already, such as the n x m job, turns it off).
         min_seconds: shortest clip accepted.
         dtype, device: where the tensor work runs (float32 on the CPU by default).
     """
@@ -54,6 +56,7 @@ class SpliceOptions:
     align: AlignOptions = field(default_factory=AlignOptions)
     posture: bool = True
     force: bool = False
+    check_locomotion: bool = True
     min_seconds: float = 0.5
     dtype: torch.dtype = torch.float32
     device: str | None = None
@@ -159,8 +162,9 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
     kw = dict(dtype=options.dtype, device=options.device)
     L = clips_to_tensors(locos, skeleton, **kw)
     A = clips_to_tensors([resample_motion(a, fps) for a in acts], skeleton, **kw)
-    checks_l = check_locomotion(L, roles, fps)
-    checks_a = check_locomotion(A, roles, fps)
+    ok = LocomotionCheck(True, "", (0, 0), float("nan"), float("nan"))  # not checked
+    checks_l = check_locomotion(L, roles, fps) if options.check_locomotion else [ok] * len(locos)
+    checks_a = check_locomotion(A, roles, fps) if options.check_locomotion else [ok] * len(acts)
     dev = L.rotations.device
     li, ai = li.to(dev), ai.to(dev)
     B = len(pairs)
@@ -212,6 +216,7 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
             reference=refs[b].name if refs else None, cost=float(cost[b]),
             curve=(times[b, :n].to(torch.float64) * scale).cpu(), crop=int(round(float(crop[b]) * scale)),
             path=paths[b].cpu(), pelvis_correction=corr[b, :n].cpu(), posture_deg=float(posture[b]),
-            checks=(checks_l[int(li[b])], checks_a[int(ai[b])]), notes=tuple(notes[b]),
+            checks=(checks_l[int(li[b])], checks_a[int(ai[b])]) if options.check_locomotion else None,
+            notes=tuple(notes[b]),
         ))
     return results

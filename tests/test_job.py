@@ -1,0 +1,606 @@
+"""``torchsplice splice-all``: the n x m database job (:mod:`torchsplice.job.splice_all`).
+
+Counts and provenance on the built-in sample and on real Bandai Namco clips, several methods,
+resuming after SIGKILL and after an interrupt (bit-identical to an uninterrupted run), refusing
+to mix runs with other arguments, determinism, bounded memory and bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from torchsplice import __version__
+from torchsplice.cli import main
+from torchsplice.io.database import MotionDatabase
+from torchsplice.io.sample import sample_motions
+from torchsplice.io.spec import load_spec
+from torchsplice.job import JobConfig, SpliceJob
+
+REPO = Path(__file__).resolve().parents[1]
+BANDAI = "bandai_namco_research_motiondataset"
+BANDAI_CLIPS = [
+    "dataset-2_walk-turn-left_normal_025",  # locomotion
+    "dataset-2_walk-turn-right_normal_031",  # locomotion
+    "dataset-2_walk_normal_008",  # locomotion
+    "dataset-2_walk_active_032",  # both
+    "dataset-2_walk-turn-left_elderly_003",  # both
+    "dataset-2_wave-left-hand_normal_001",  # action, standing in place
+]
+WAVE = "dataset-2_wave-left-hand_normal_001"
+SAMPLE_LOCOS = ["walk_straight", "walk_curve", "turn_sharp", "sidestep", "jog"]
+SAMPLE_ACTIONS = ["carry_box", "carry_cup", "wave", "punch", "arms_out"]
+VOLATILE_RUN_KEYS = ("started", "command")  # the only parts of the run record that may differ between runs
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def env():
+    e = dict(os.environ)
+    e.setdefault("OMP_NUM_THREADS", "1")
+    return e
+
+
+def work_folder(out: Path) -> Path:
+    return out.with_name(f".{out.name}.parts")
+
+
+def table(path) -> dict:
+    with MotionDatabase.open(path) as db:
+        t = db.table()
+    return {k: [v.item() if hasattr(v, "item") else v for v in col] for k, col in t.items()}
+
+
+def clips(path) -> list[dict]:
+    with MotionDatabase.open(path) as db:
+        return db.summary()["clips"]
+
+
+def run_record(path) -> dict:
+    with h5py.File(path, "r") as f:
+        return json.loads(f.attrs["run"])
+
+
+def h5_dump(path) -> dict:
+    """Every group and dataset of a file: dtype, shape, raw values and attributes (run record less its volatile keys)."""
+    out = {}
+
+    def attrs(obj):
+        a = {}
+        for k, v in obj.attrs.items():
+            v = v.decode() if isinstance(v, bytes) else v.tolist() if hasattr(v, "tolist") else v
+            if k == "run":
+                v = {kk: vv for kk, vv in json.loads(v).items() if kk not in VOLATILE_RUN_KEYS}
+            a[k] = v
+        return a
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset):
+            values = obj[()]
+            raw = values.tolist() if values.dtype == object else values.tobytes()
+            out[name] = (str(obj.dtype), values.shape, raw, attrs(obj))
+        else:
+            out[name] = ("group", attrs(obj))
+
+    with h5py.File(path, "r") as f:
+        visit("/", f)
+        f.visititems(visit)
+    return out
+
+
+def assert_same_file(a, b):
+    da, db = h5_dump(a), h5_dump(b)
+    assert sorted(da) == sorted(db)
+    for name in da:
+        assert da[name] == db[name], f"{name} differs between {a} and {b}"
+
+
+def write_db(path, motions, spec_name="sample"):
+    spec = load_spec(spec_name)
+    with MotionDatabase.create(path) as db:
+        for m in motions:
+            db.append(m, spec=spec)
+    return path
+
+
+def sample_copies(copies: int, frames: int | None = None):
+    """The sample clips, ``copies`` times under new names (``walk_straight_3``), optionally cut to ``frames``."""
+    out = []
+    for c in range(copies):
+        for m in sample_motions():
+            m = m.slice(0, frames or m.num_frames)
+            m.name = f"{m.name}_{c}"
+            out.append(m)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# fixtures
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def sample_db(tmp_path_factory):
+    db = tmp_path_factory.mktemp("sample") / "sample.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    return db
+
+
+@pytest.fixture(scope="module")
+def default_out(sample_db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("default") / "out.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "-q"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def multi_out(sample_db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("multi") / "out.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "--method", "splice,naive,cpmc", "--copy-sources", "-q"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def batch2_out(sample_db, tmp_path_factory):
+    """An uninterrupted run with ``--batch-size 2`` (13 batches), the reference for resumed runs."""
+    out = tmp_path_factory.mktemp("batch2") / "out.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "--batch-size", "2", "-q"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def bandai_db(mocap_dir, tmp_path_factory):
+    db = tmp_path_factory.mktemp("bandai") / "bandai.h5"
+    files = [str(mocap_dir / BANDAI / f"{n}.bvh") for n in BANDAI_CLIPS]
+    assert main(["import", *files, "-o", str(db), "--spec", "bandai_namco", "-q"]) == 0
+    return db
+
+
+# --------------------------------------------------------------------------------------------
+# 1. the sample job: counts, provenance, per-frame column, quality figures, run record
+# --------------------------------------------------------------------------------------------
+def test_sample_job_counts_and_provenance(sample_db, default_out, capsys):
+    src = table(sample_db)
+    assert sorted(n for n, r in zip(src["name"], src["role"]) if r == "locomotion") == sorted(SAMPLE_LOCOS)
+    assert sorted(n for n, r in zip(src["name"], src["role"]) if r == "action") == sorted(SAMPLE_ACTIONS)
+    code, out, _ = run(capsys, "info", default_out, "--json")
+    assert code == 0
+    info = json.loads(out)
+    cs = info["clips"]
+    assert info["num_clips"] == len(cs) == 25
+    assert {c["role"] for c in cs} == {"spliced"}
+    assert len({c["name"] for c in cs}) == 25
+    assert {(c["locomotion"], c["action"]) for c in cs} == {(l, a) for l in SAMPLE_LOCOS for a in SAMPLE_ACTIONS}
+    for c in cs:
+        assert c["name"] == f"{c['locomotion']}+{c['action']}"
+        assert src["name"][c["locomotion_id"]] == c["locomotion"] and src["role"][c["locomotion_id"]] == "locomotion"
+        assert src["name"][c["action_id"]] == c["action"] and src["role"][c["action_id"]] == "action"
+        assert c["method"] == "splice" and c["reference"] == "" and c["flags"] == ""
+        assert c["labels"] == {"method": "splice", "locomotion": c["locomotion"], "action": c["action"]}
+        assert c["fps"] == 30.0 and c["skeleton"] == 0
+        params = json.loads(c["params"])
+        assert params["max_run"] == 3 and params["posture"] is True and params["force_locomotion"] is False
+        loco_frames, act_frames = src["length"][c["locomotion_id"]], src["length"][c["action_id"]]
+        # quality figures
+        assert np.isfinite(c["cost"]) and c["cost"] >= 0
+        assert 0 <= c["crop"] < act_frames
+        assert 0 < c["coverage"] <= 1 and c["coverage"] == pytest.approx(c["frames"] / loco_frames)
+        assert 0 <= c["posture_deg"] < 90 and 0 <= c["pelvis_correction_deg"] < 90
+    with MotionDatabase.open(default_out) as db:
+        assert db.frame_columns == ("action_frame",)
+        for c in cs:
+            f = db.read_frame_column(c["name"], "action_frame")
+            act_frames = src["length"][c["action_id"]]
+            assert f.shape == (c["frames"],) and np.isfinite(f).all()
+            assert (np.diff(f) > 0).all(), c["name"]  # strictly increasing
+            assert f[0] >= c["crop"] - 1e-3 and f[-1] <= act_frames - 1 + 1e-3
+            assert db.read(c["name"]).num_frames == c["frames"]
+    rec = run_record(default_out)
+    assert rec["tool"] == f"torchsplice {__version__}"
+    assert rec["database"]["path"] == str(sample_db.resolve()) and rec["actions_db"] is None
+    assert rec["locomotions"] == ["role:locomotion,role:both"] and rec["actions"] == ["role:action,role:both"]
+    assert rec["methods"] == ["splice"] and rec["max_run"] == 3 and rec["posture"] is True
+    assert rec["force_locomotion"] is False and rec["copy_sources"] is False
+    assert rec["pairs"] == rec["pairs_spliced"] == 25
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d{4}", rec["started"])
+
+
+def test_run_record_command_is_the_command_that_ran(sample_db, tmp_path):
+    """Called as ``main([...])`` (e.g. from a notebook), the record holds those arguments, not the host's argv."""
+    out = tmp_path / "rec.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "--locomotions", "jog", "-q"]) == 0
+    command = run_record(out)["command"]
+    assert "splice-all" in command and str(out) in command and "jog" in command, command
+
+
+# --------------------------------------------------------------------------------------------
+# 2. several methods, copied sources
+# --------------------------------------------------------------------------------------------
+def test_several_methods_and_copied_sources(sample_db, multi_out):
+    src = table(sample_db)
+    cs = clips(multi_out)
+    spliced = [c for c in cs if c["role"] == "spliced"]
+    assert len(spliced) == 75 and len(cs) == 85
+    assert len({c["name"] for c in cs}) == 85
+    for method, suffix in (("splice", ""), ("naive", ".naive"), ("cpmc", ".cpmc")):
+        rows = [c for c in spliced if c["method"] == method]
+        assert {(c["locomotion"], c["action"]) for c in rows} == {(l, a) for l in SAMPLE_LOCOS for a in SAMPLE_ACTIONS}
+        for c in rows:
+            assert c["name"] == f"{c['locomotion']}+{c['action']}{suffix}"
+            assert c["labels"]["method"] == method and c["source"] == f"splice:{method}"
+            assert src["name"][c["locomotion_id"]] == c["locomotion"] and src["name"][c["action_id"]] == c["action"]
+            # the sample spec's reference rule: content={gait} (walk), path=straight
+            assert c["reference"] == ("walk_straight" if method == "cpmc" else "")
+            if method == "naive":
+                assert c["cost"] is None and c["crop"] == 0
+            else:
+                assert np.isfinite(c["cost"]) and c["cost"] >= 0
+    # the ten selected source clips, with their own roles, labels and frames
+    copied = [c for c in cs if c["role"] != "spliced"]
+    assert sorted(c["name"] for c in copied) == sorted(src["name"])
+    with MotionDatabase.open(sample_db) as a, MotionDatabase.open(multi_out) as b:
+        for c in copied:
+            i = src["name"].index(c["name"])
+            assert c["role"] == src["role"][i] and c["labels"] == json.loads(src["labels"][i])
+            assert c["method"] == "" and c["locomotion_id"] == -1 and c["cost"] is None
+            m, n = a.read(c["name"]), b.read(c["name"])
+            assert np.array_equal(m.rotations.numpy(), n.rotations.numpy())
+            assert np.array_equal(m.root_translation.numpy(), n.root_translation.numpy())
+            assert np.isnan(b.read_frame_column(c["name"], "action_frame")).all()
+
+
+def test_splice_rows_do_not_depend_on_the_other_methods(default_out, multi_out):
+    """The ``splice`` rows of the three-method run are those of the splice-only run."""
+    with MotionDatabase.open(default_out) as a, MotionDatabase.open(multi_out) as b:
+        assert a.names == b.names[:25]
+        for name in a.names:
+            x, y = a.read(name), b.read(name)
+            assert x.num_frames == y.num_frames, name
+            assert np.allclose(x.rotations.numpy(), y.rotations.numpy(), atol=1e-5), name
+            assert np.allclose(a.read_frame_column(name, "action_frame"), b.read_frame_column(name, "action_frame"),
+                               atol=1e-4), name
+
+
+# --------------------------------------------------------------------------------------------
+# 3. real data
+# --------------------------------------------------------------------------------------------
+def test_real_clips_selected_by_labels(bandai_db, tmp_path, capsys):
+    out = tmp_path / "real.h5"
+    code, text, err = run(capsys, "splice-all", bandai_db, "-o", out,
+                          "--locomotions", "label:style=normal", "--locomotions", "label:content=walk-turn-*",
+                          "--actions", "label:dataset=2", "--actions", "label:content=walk*")
+    assert code == 0, err
+    src = table(bandai_db)
+    locos = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031"]
+    acts = [n for n in BANDAI_CLIPS if n != WAVE]  # every walk* clip, whatever its role
+    # n x m minus the two locomotions paired with themselves
+    want = {(l, a) for l in locos for a in acts if l != a}
+    assert len(want) == 2 * 5 - 2
+    cs = clips(out)
+    assert len(cs) == len(want) and {(c["locomotion"], c["action"]) for c in cs} == want
+    for c in cs:
+        assert c["name"] == f"{c['locomotion']}+{c['action']}" and c["role"] == "spliced"
+        assert src["name"][c["locomotion_id"]] == c["locomotion"] and src["name"][c["action_id"]] == c["action"]
+        assert np.isfinite(c["cost"]) and 0 < c["coverage"] <= 1 and c["fps"] == 30.0
+    assert "wrote" in text and f"{len(want)} spliced clips" in text
+    assert "skipped 2 pairs:" in text and "2 x a clip is not spliced onto itself" in text
+    rec = run_record(out)
+    assert rec["locomotions"] == ["label:style=normal", "label:content=walk-turn-*"]
+    assert rec["actions"] == ["label:dataset=2", "label:content=walk*"]
+    with MotionDatabase.open(out) as db:
+        assert len(db.skeletons) == 1 and json.loads(db.spec_json(0))["name"] == "bandai_namco"
+        m = db.read(cs[0]["name"])
+        assert m.translations is not None  # Bandai Namco animates joint translations; they are kept
+
+
+def test_in_place_action_is_skipped_with_its_reason(bandai_db, tmp_path, capsys):
+    out = tmp_path / "wave.h5"
+    code, text, err = run(capsys, "splice-all", bandai_db, "-o", out, "--locomotions", "role:locomotion")
+    assert code == 0, err
+    cs = clips(out)
+    # 3 locomotions x (2 'both' clips + the wave) - the 3 wave pairs
+    assert len(cs) == 6 and WAVE not in {c["action"] for c in cs}
+    assert "skipped 3 pairs:" in text
+    line = [l for l in text.splitlines() if WAVE in l]
+    assert len(line) == 1 and line[0].strip().startswith("3 x") and "does not locomote" in line[0]
+    assert "--force-locomotion" in line[0]
+
+
+def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_path, capsys):
+    out = tmp_path / "forced.h5"
+    code, text, err = run(capsys, "splice-all", bandai_db, "-o", out, "--locomotions", "role:locomotion",
+                          "--force-locomotion")
+    assert code == 0, err
+    cs = clips(out)
+    assert len(cs) == 9
+    waves = [c for c in cs if c["action"] == WAVE]
+    assert len(waves) == 3
+    for c in cs:
+        assert (f"{WAVE} does not locomote" in c["flags"]) == (c["action"] == WAVE), c["name"]
+        assert json.loads(c["params"])["force_locomotion"] is True
+    assert "skipped" not in text
+    # the summary counts flagged clips: one line "flagged N clips", N = clips with a non-empty flags column
+    flagged = sum(1 for c in cs if c["flags"])
+    m = re.search(r"flagged (\d+) clips", text)
+    assert m and int(m.group(1)) == flagged, text
+
+
+# --------------------------------------------------------------------------------------------
+# 4. resume after SIGKILL
+# --------------------------------------------------------------------------------------------
+def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
+    out = tmp_path / "killed" / "out.h5"
+    out.parent.mkdir()
+    work = work_folder(out)
+    cmd = [sys.executable, "scripts/splice_all.py", str(sample_db), "-o", str(out), "--batch-size", "2"]
+    proc = subprocess.Popen(cmd, cwd=REPO, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:
+            if len(list(work.glob("part-*.h5"))) >= 2:
+                break
+            time.sleep(0.005)
+        assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read().decode()[-2000:]
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stderr.close()
+    assert proc.returncode == -signal.SIGKILL
+    assert not out.exists()  # the output appears only once complete
+    kept = sorted(work.glob("part-*.h5"))
+    assert 2 <= len(kept) < 13 and (work / "job.json").is_file()
+
+    done = subprocess.run(cmd, cwd=REPO, env=env(), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    m = re.search(r"25 spliced clips \((\d+) from an earlier run\)", done.stdout)
+    assert m, done.stdout
+    assert 2 * len(kept) <= int(m.group(1)) < 25 and int(m.group(1)) % 2 == 0
+    assert not work.exists()
+    assert sorted(p.name for p in out.parent.iterdir()) == ["out.h5"]  # nothing else left behind
+    names = [c["name"] for c in clips(out)]
+    assert len(names) == len(set(names)) == 25
+    assert_same_file(out, batch2_out)
+
+
+# --------------------------------------------------------------------------------------------
+# 5. interrupted in-process, resumed by a new SpliceJob
+# --------------------------------------------------------------------------------------------
+def test_interrupt_then_resume_in_process(sample_db, batch2_out, tmp_path, monkeypatch):
+    out = tmp_path / "out.h5"
+    config = JobConfig(database=sample_db, output=out, batch_pairs=2)
+    real = SpliceJob._splice_batch
+    calls = []
+
+    def interrupted(self, chunk, *args):
+        calls.append(len(chunk))
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(self, chunk, *args)
+
+    monkeypatch.setattr(SpliceJob, "_splice_batch", interrupted)
+    job = SpliceJob(config, progress=False)
+    with pytest.raises(KeyboardInterrupt):
+        job.run()
+    work = work_folder(out)
+    assert job.work == work and not out.exists()
+    assert sorted(p.name for p in work.glob("part-*.h5")) == ["part-000000.h5", "part-000001.h5"]
+    assert not list(work.glob(".part-*"))
+
+    calls.clear()
+    monkeypatch.setattr(SpliceJob, "_splice_batch", lambda self, chunk, *a: calls.append(len(chunk)) or real(self, chunk, *a))
+    summary = SpliceJob(config, progress=False).run()
+    assert summary.resumed == 4 and summary.spliced == 25 and summary.pairs == 25
+    assert len(calls) == 11 and sum(calls) == 21  # only the unfinished batches are spliced
+    assert "(4 from an earlier run)" in summary.lines()[0]
+    assert not work.exists()
+    assert_same_file(out, batch2_out)
+
+
+# --------------------------------------------------------------------------------------------
+# 6. other arguments while an unfinished work folder exists
+# --------------------------------------------------------------------------------------------
+def test_other_arguments_refuse_to_mix_until_restart(sample_db, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "out.h5"
+    work = work_folder(out)
+    real = SpliceJob._splice_batch
+    calls = []
+
+    def interrupted(self, chunk, *args):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(self, chunk, *args)
+
+    monkeypatch.setattr(SpliceJob, "_splice_batch", interrupted)
+    base = ["splice-all", sample_db, "-o", out, "--batch-size", "2", "-q"]
+    code, _, err = run(capsys, *base)
+    assert code == 130 and str(work) in err and "resume" in err
+    monkeypatch.setattr(SpliceJob, "_splice_batch", real)
+    parts = sorted(p.name for p in work.glob("part-*.h5"))
+    signature = (work / "job.json").read_text()
+    assert len(parts) == 2
+
+    for other in (["--method", "naive"], ["--actions", "carry_box"], ["--batch-size", "3"], ["--no-posture"]):
+        code, text, err = run(capsys, *base, *other)
+        assert code == 2, other
+        assert err.count("\n") == 1 and str(work) in err and "--restart" in err and "Traceback" not in err, err
+        assert not out.exists()
+        assert sorted(p.name for p in work.glob("part-*.h5")) == parts and (work / "job.json").read_text() == signature
+
+    code, _, err = run(capsys, *base, "--method", "naive", "--restart")
+    assert code == 0, err
+    cs = clips(out)
+    assert len(cs) == 25 and {c["method"] for c in cs} == {"naive"}
+    assert not work.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# 7. determinism
+# --------------------------------------------------------------------------------------------
+def test_two_separate_runs_are_bit_identical(sample_db, default_out, tmp_path):
+    out = tmp_path / "again.h5"
+    done = subprocess.run([sys.executable, "-m", "torchsplice", "splice-all", str(sample_db), "-o", str(out), "-q"],
+                          cwd=tmp_path, env=env(), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert_same_file(out, default_out)
+
+
+# --------------------------------------------------------------------------------------------
+# 8. bounded memory
+# --------------------------------------------------------------------------------------------
+DRIVER = """
+import json, resource, sys
+import torch, torchsplice.job
+from torchsplice.cli import main
+
+
+def peak_kb():
+    # the peak RSS of this process image: ru_maxrss would also count the parent's pages from
+    # before execve (Linux keeps the high-water mark across exec), VmHWM does not
+    try:
+        with open("/proc/self/status") as f:
+            return int(next(l for l in f if l.startswith("VmHWM:")).split()[1])
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+
+before = peak_kb()
+code = main(["splice-all", sys.argv[1], "-o", sys.argv[2], "--method", "naive", "--batch-size", "64",
+             "--memory-budget", "64", "-q"])
+print(json.dumps({"code": code, "before_kb": before, "after_kb": peak_kb()}))
+"""
+
+
+def test_peak_memory_does_not_grow_with_the_number_of_pairs(tmp_path):
+    """5 x 5 pairs against 40 x 40 (64 times as many), same skeleton, 60-frame clips, same batch size.
+
+    Measured: what the job adds to the peak RSS of a process that has already imported
+    everything (about 26 MB small, 115 MB big here). The fixed margin covers the database
+    writer's buffer (it flushes every 65,536 frames, which only the big job reaches); a job that
+    kept every spliced result in memory adds about 190 MB on the big input and fails.
+    """
+    small = write_db(tmp_path / "small.h5", sample_copies(1, 60))
+    big = write_db(tmp_path / "big.h5", sample_copies(8, 60))
+    script = tmp_path / "driver.py"
+    script.write_text(DRIVER)
+    procs = [subprocess.Popen([sys.executable, str(script), str(db), str(tmp_path / f"out_{db.stem}.h5")],
+                              env=env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for db in (small, big)]
+    res = []
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        res.append(json.loads(out.strip().splitlines()[-1]))
+    assert [r["code"] for r in res] == [0, 0]
+    assert len(clips(tmp_path / "out_small.h5")) == 25 and len(clips(tmp_path / "out_big.h5")) == 1600
+    grow_small, grow_big = ((r["after_kb"] - r["before_kb"]) / 1024 for r in res)
+    assert grow_big < 1.5 * grow_small + 112, (grow_small, grow_big)
+
+
+# --------------------------------------------------------------------------------------------
+# 9. bad input
+# --------------------------------------------------------------------------------------------
+def assert_left_nothing(folder: Path, *keep: str):
+    assert sorted(p.name for p in folder.iterdir()) == sorted(keep)
+
+
+def test_selector_matching_nothing(sample_db, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "role:locomotion",
+                          "--locomotions", "label:path=zigzag")
+    assert code == 2 and err.count("\n") == 1 and err.startswith("torchsplice: error:")
+    assert "'label:path=zigzag'" in err and "--locomotions" in err and str(sample_db) in err
+    assert text == ""
+    assert_left_nothing(tmp_path)
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--actions", "no_such_clip*")
+    assert code == 2 and "'no_such_clip*'" in err and "--actions" in err
+    assert_left_nothing(tmp_path)
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--actions", "label:content")
+    assert code == 2 and err.count("\n") == 1 and "'label:content'" in err and "label:KEY=VALUE" in err
+    assert_left_nothing(tmp_path)
+
+
+def test_actions_db_with_another_skeleton(bandai_db, mocap_dir, tmp_path, capsys):
+    lafan = tmp_path / "lafan.h5"
+    assert run(capsys, "import", mocap_dir / "lafan1_via_pypi_bvhtools" / "test2.bvh", "-o", lafan, "-q")[0] == 0
+    out_dir = tmp_path / "o"
+    out_dir.mkdir()
+    code, _, err = run(capsys, "splice-all", bandai_db, "--actions-db", lafan, "--actions", "*", "-o", out_dir / "x.h5")
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert str(bandai_db) in err and str(lafan) in err and "skeleton" in err
+    assert_left_nothing(out_dir)
+
+
+def test_unknown_method(sample_db, tmp_path, capsys):
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "o.h5", "--method", "splice,bogus")
+    assert code == 2 and err.count("\n") == 1 and "'bogus'" in err and "cpmc" in err
+    assert_left_nothing(tmp_path)
+
+
+def test_existing_output_needs_force(sample_db, tmp_path, capsys):
+    out = tmp_path / "o.h5"
+    out.write_bytes(b"precious")
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "jog", "-q")
+    assert code == 2 and err.count("\n") == 1 and "already exists" in err and "--force" in err
+    assert out.read_bytes() == b"precious"
+    assert_left_nothing(tmp_path, "o.h5")
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "jog", "-q", "--force")
+    assert code == 0, err
+    assert len(clips(out)) == 5
+    assert_left_nothing(tmp_path, "o.h5")
+
+
+def test_missing_output_folder(sample_db, tmp_path, capsys):
+    out = tmp_path / "no" / "such" / "o.h5"
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out)
+    assert code == 2 and err.count("\n") == 1 and str(out.parent) in err
+    assert not (tmp_path / "no").exists()
+
+
+def test_missing_database(tmp_path, capsys):
+    code, _, err = run(capsys, "splice-all", tmp_path / "nothing.h5", "-o", tmp_path / "o.h5")
+    assert code == 2 and err.count("\n") == 1 and "nothing.h5" in err
+    assert_left_nothing(tmp_path)
+
+
+def test_too_short_clip_is_skipped_not_fatal(tmp_path, capsys):
+    """A clip too short to align (10 frames at 30 fps; 15 needed) costs its pairs, not the whole job, forced or not."""
+    motions = sample_motions()
+    short = motions[5].slice(0, 10)
+    short.name = "carry_box_short"
+    db = write_db(tmp_path / "db.h5", motions + [short])
+    for force in ([], ["--force-locomotion"]):
+        out = tmp_path / f"out{len(force)}.h5"
+        code, text, err = run(capsys, "splice-all", db, "-o", out, *force)
+        assert code == 0, err
+        cs = clips(out)
+        assert len(cs) == 25 and "carry_box_short" not in {c["action"] for c in cs}
+        assert "skipped 5 pairs:" in text and "carry_box_short" in text
+        assert not work_folder(out).exists()
+
+
+# --------------------------------------------------------------------------------------------
+# 10. the script
+# --------------------------------------------------------------------------------------------
+def test_script_help():
+    done = subprocess.run([sys.executable, "scripts/splice_all.py", "--help"], cwd=REPO, env=env(),
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "usage:" in done.stdout and "splice-all" in done.stdout
+    for option in ("--locomotions", "--actions", "--method", "--batch-size", "--restart", "--copy-sources"):
+        assert option in done.stdout
