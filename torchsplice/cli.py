@@ -270,6 +270,21 @@ def _add_splice_options(s) -> None:
     s.add_argument("--device", default=None, help="torch device for the tensor work, e.g. cuda (default cpu)")
 
 
+def cmd_plot_alignment(args) -> int:
+    from .io.database import MotionDatabase
+    from .viz.alignment import plot_alignment
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    with MotionDatabase.open(args.database) as db:
+        loco, act = db.read(args.locomotion), db.read(args.action)
+        spec = _db_spec(db, db.clip_info(args.locomotion)["skeleton"], loco.skeleton)
+    plot_alignment(loco, act, spec, out, options=_splice_options(args))
+    _say(args, f"wrote {out}: alignment of {act.name} to {loco.name}")
+    return 0
+
+
 # --------------------------------------------------------------------------------------------
 # splice-all
 # --------------------------------------------------------------------------------------------
@@ -373,6 +388,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=cmd_splice)
+
+    s = sub.add_parser("plot-alignment", help="picture of one pair's time alignment (distance grid, DP path, curve)",
+                       description="Draw the lower-body distance grid of a locomotion and an action as a heat map with "
+                                   "the optimal DP path and the fitted alignment curve over it (Heck et al. 2006, "
+                                   "Figure 3), and the per-frame pelvis correction angle below. PNG, PDF or SVG.")
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("--locomotion", required=True, metavar="NAME", help="clip giving root and lower body")
+    s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
+    s.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
+    _add_splice_options(s)
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=cmd_plot_alignment, force_locomotion=True)
 
     s = sub.add_parser("splice-all", help="splice every selected locomotion x action pair into a new database",
                        description="The main job: splice the upper body of every selected action onto the lower body "

@@ -58,7 +58,7 @@ _SECTION_KEYS = {
     "dataset": {"name", "description", "up_axis", "units", "files"},
     "joints": {"root", "pelvis", "spine", "head", "upper_body", "lower_body", "guess",
                *_PAIRS, *_OPTIONAL_PAIRS},
-    "clips": {"pattern", "default_role", "role", "reference"},
+    "clips": {"pattern", "default_role", "role", "reference", "ground_truth"},
 }
 _PACKAGE = "torchsplice.datasets_spec"
 GENERIC = "generic"
@@ -143,6 +143,9 @@ class DatasetSpec:
         reference: ``((label, template), ...)``: the labels a plain-locomotion reference of
             an action carries (for the ``cpmc`` method); ``"{key}"`` in a template is the
             action's own label ``key``. ``None``: references must be named explicitly.
+        ground_truth: ``(action conditions, locomotion conditions, capture templates)``: which
+            captured clip shows an action's upper body during a locomotion (for evaluation);
+            ``"{action.KEY}"`` / ``"{locomotion.KEY}"`` in a template are the sources' labels.
         guess: joints are guessed at :meth:`bind` time.
         path: the file it was loaded from, or ``None``.
         notes: remarks, e.g. what a guessed spec guessed.
@@ -169,6 +172,7 @@ class DatasetSpec:
     default_role: str = "locomotion"
     rules: tuple[RoleRule, ...] = ()
     reference: tuple[tuple[str, str], ...] | None = None
+    ground_truth: tuple | None = None
     guess: bool = False
     path: Path | None = None
     notes: tuple[str, ...] = ()
@@ -232,6 +236,28 @@ class DatasetSpec:
             return {k: v.format_map(labels) for k, v in self.reference}
         except (KeyError, ValueError, IndexError):
             return None
+
+    def ground_truth_labels(self, locomotion: dict[str, str], action: dict[str, str]) -> dict[str, str] | None:
+        """Labels of the captured clip that shows ``action``'s upper body during ``locomotion``
+        (given both clips' labels), or ``None`` when the spec declares none for this pair."""
+        if self.ground_truth is None:
+            return None
+        act_cond, loco_cond, capture = self.ground_truth
+        if any(action.get(k) != v for k, v in act_cond) or any(locomotion.get(k) != v for k, v in loco_cond):
+            return None
+        sides = {"action": action, "locomotion": locomotion}
+        out = {}
+        for key, template in capture:
+            def sub(m):
+                value = sides[m.group(1)].get(m.group(2))
+                if value is None:
+                    raise KeyError(m.group(0))
+                return value
+            try:
+                out[key] = re.sub(r"\{(action|locomotion)\.([^{}]+)\}", sub, template)
+            except KeyError:
+                return None
+        return out
 
     def matches_file(self, filename) -> bool:
         """Whether a file name (or its stem) matches one of the ``files`` globs."""
@@ -450,12 +476,33 @@ def _parse_clips(t: _Table) -> dict:
         bad = [k for k, v in reference.items() if not isinstance(v, str)]
         if not reference or bad:
             raise t.fail("reference", "must be a table of label = \"value or {label} template\" strings")
+    ground_truth = t.get("ground_truth", dict)
+    if ground_truth is not None:
+        ground_truth = _parse_ground_truth(ground_truth, t)
     return {
         "pattern": pattern,
         "default_role": t.choice("default_role", ROLES, default="locomotion"),
         "rules": tuple(_parse_rule(r, i, t.where) for i, r in enumerate(rules)),
         "reference": None if reference is None else tuple(sorted(reference.items())),
+        "ground_truth": ground_truth,
     }
+
+
+def _parse_ground_truth(table: dict, t) -> tuple:
+    """``[clips.ground_truth]``: ``((("action", k, v), ...), (("locomotion", k, v), ...), ((k, template), ...))``."""
+    extra = set(table) - {"action", "locomotion", "capture"}
+    capture = table.get("capture")
+    if extra or not isinstance(capture, dict) or not capture:
+        raise t.fail("ground_truth", "must hold a non-empty 'capture' table and optional 'action' and 'locomotion' tables")
+    conds = []
+    for side in ("action", "locomotion"):
+        cond = table.get(side, {})
+        if not isinstance(cond, dict) or not all(isinstance(v, str) for v in cond.values()):
+            raise t.fail("ground_truth", f"'{side}' must be a table of label = \"value\" strings")
+        conds.append(tuple(sorted(cond.items())))
+    if not all(isinstance(v, str) for v in capture.values()):
+        raise t.fail("ground_truth", "'capture' must be a table of label = \"value or {side.label} template\" strings")
+    return conds[0], conds[1], tuple(sorted(capture.items()))
 
 
 def _parse_rule(rule, i: int, where: str) -> RoleRule:
@@ -504,6 +551,9 @@ def _to_dict(spec: DatasetSpec) -> dict:
         clips["pattern"] = spec.pattern
     if spec.reference is not None:
         clips["reference"] = dict(spec.reference)
+    if spec.ground_truth is not None:
+        act, loco, cap = spec.ground_truth
+        clips["ground_truth"] = {"action": dict(act), "locomotion": dict(loco), "capture": dict(cap)}
     out = {"name": spec.name, "dataset": dataset, "joints": joints, "clips": clips, "notes": list(spec.notes)}
     if spec.path is not None:
         out["path"] = str(spec.path)

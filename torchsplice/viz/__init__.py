@@ -1,0 +1,1 @@
+"""Pictures: stick-figure previews and alignment plots (matplotlib, no display needed)."""
