@@ -285,6 +285,39 @@ def cmd_plot_alignment(args) -> int:
     return 0
 
 
+def cmd_render(args) -> int:
+    from .io.database import MotionDatabase
+    from .viz.render import render
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    with MotionDatabase.open(args.database) as db:
+        clips = [db.read(name) for name in args.clips]
+        k = db.clip_info(args.clips[0])["skeleton"]
+        spec = _db_spec(db, k, clips[0].skeleton)
+    render(clips, out, titles=[c.name for c in clips], up_axis="xyz".index(spec.up_axis), frames=args.frames,
+           max_seconds=args.max_seconds)
+    _say(args, f"wrote {out}: {len(clips)} clips")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from .evaluation.report import evaluate_database
+
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
+                            max_rows=args.max_rows)
+    if not args.quiet:
+        for method, a in agg.items():
+            gt = f", ground-truth error {a['gt_error']:.2f} over {a['gt_pairs']} pairs" if a["gt_error"] is not None else ""
+            print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f}/s, posture kept {a['posture']:.2f}{gt}")
+        print(f"wrote {out}")
+    return 0
+
+
 # --------------------------------------------------------------------------------------------
 # splice-all
 # --------------------------------------------------------------------------------------------
@@ -401,6 +434,32 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=cmd_plot_alignment, force_locomotion=True)
+
+    s = sub.add_parser("render", help="stick-figure preview of clips side by side (GIF, MP4 or PNG filmstrip)",
+                       description="Draw clips as stick figures side by side (e.g. locomotion, action, naive, spliced) "
+                                   "from a fixed camera that follows each root, with clip names as titles and a "
+                                   "ground grid. .gif and .mp4 (needs ffmpeg) animate; .png is a filmstrip.")
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("clips", nargs="+", metavar="CLIP", help="clip names")
+    s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
+    s.add_argument("--frames", type=_positive_int, default=8, help="frames per clip in a PNG filmstrip (default 8)")
+    s.add_argument("--max-seconds", type=float, default=None, help="show at most this many seconds")
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("evaluate", help="Markdown report judging a spliced database, per clip and per method",
+                       description="Judge a database written by splice-all: foot skate, arm-leg phase coherence, "
+                                   "posture kept, and error against captured ground truth where the spec declares "
+                                   "it; per clip and per method, with pictures.")
+    s.add_argument("database", help="database written by splice-all")
+    s.add_argument("-o", "--output", required=True, help="report to write (.md); pictures go to <stem>_files/")
+    s.add_argument("--sources", nargs="+", metavar="DB", help="databases holding the source clips (default: as recorded)")
+    s.add_argument("--no-pictures", action="store_true", help="tables only")
+    s.add_argument("--max-rows", type=_positive_int, default=60, help="per-clip rows per method (default 60)")
+    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing report")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("splice-all", help="splice every selected locomotion x action pair into a new database",
                        description="The main job: splice the upper body of every selected action onto the lower body "

@@ -1,0 +1,138 @@
+"""Alignment pictures, the spec's ground-truth rule, and the evaluation report."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from torchsplice.cli import main
+from torchsplice.core.errors import SpecError, TorchspliceError
+from torchsplice.io.sample import sample_motions
+from torchsplice.io.spec import DatasetSpec, load_spec
+from torchsplice.viz.alignment import alignment_data, plot_alignment
+
+BANDAI = "bandai_namco_research_motiondataset"
+
+
+@pytest.fixture(scope="module")
+def sample():
+    return {m.name: m for m in sample_motions()}
+
+
+# -- the ground-truth rule --------------------------------------------------------------------
+def test_ground_truth_labels_follow_the_rule():
+    spec = load_spec("bandai_namco")
+    loco = {"dataset": "2", "content": "walk-turn-left", "style": "normal", "take": "025"}
+    act = {"dataset": "2", "content": "walk", "style": "elderly", "take": "006"}
+    assert spec.ground_truth_labels(loco, act) == {"dataset": "2", "content": "walk-turn-left", "style": "elderly"}
+    assert spec.ground_truth_labels({**loco, "style": "proud"}, act) is None  # locomotion must be normal style
+    assert spec.ground_truth_labels(loco, {**act, "content": "wave-left-hand"}) is None  # action must be a walk
+    assert spec.ground_truth_labels(loco, {"content": "walk"}) is None  # a label the template needs is missing
+    assert DatasetSpec.from_json(spec.to_json()).ground_truth == spec.ground_truth
+    assert load_spec("sample").ground_truth_labels({}, {}) is None
+
+
+def test_malformed_ground_truth_rule_is_a_spec_error(tmp_path):
+    base = (load_spec("sample").path).read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(base.replace('name = "sample"', 'name = "bad"') + '\n[clips.ground_truth]\naction = { content = "walk" }\n')
+    with pytest.raises(SpecError, match="ground_truth"):
+        load_spec(bad)
+
+
+# -- the alignment picture --------------------------------------------------------------------
+def test_alignment_data_is_consistent(sample):
+    loco, act = sample["walk_curve"], sample["carry_box"]
+    d = alignment_data(loco, act, load_spec("sample"))
+    assert d["grid"].shape == (loco.num_frames, act.num_frames)
+    path = d["path"]
+    assert tuple(path[0].tolist()) == (0, d["crop"])
+    assert bool((path[1:] >= path[:-1]).all())
+    curve = d["curve"]
+    assert bool((curve[1:] > curve[:-1]).all()) and abs(float(curve[0]) - d["crop"]) < 1e-6
+    # the path runs along low distances: its mean cost is the result's cost
+    i, j = path[:, 0], path[:, 1]
+    assert float(d["grid"][i, j].mean()) == pytest.approx(d["cost"], rel=1e-3)
+    assert float(d["grid"][i, j].mean()) < 0.5 * float(d["grid"].mean())
+
+
+def test_plot_alignment_writes_a_picture(sample, tmp_path):
+    import matplotlib.image as mpimg
+    import matplotlib.pyplot as plt
+
+    out = plot_alignment(sample["walk_straight"], sample["wave"], load_spec("sample"), tmp_path / "a.png")
+    img = mpimg.imread(out)
+    assert img.shape[0] > 300 and img.shape[1] > 300 and float(np.std(img)) > 0.05
+    assert plt.get_fignums() == []
+    with pytest.raises(TorchspliceError, match="unsupported picture type"):
+        plot_alignment(sample["walk_straight"], sample["wave"], load_spec("sample"), tmp_path / "a.bmpx")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]
+
+
+def test_plot_alignment_command(tmp_path, capsys):
+    db = tmp_path / "s.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    out = tmp_path / "a.png"
+    assert main(["plot-alignment", str(db), "--locomotion", "walk_curve", "--action", "carry_box", "-o", str(out), "-q"]) == 0
+    assert out.stat().st_size > 10_000
+    assert main(["plot-alignment", str(db), "--locomotion", "walk_curve", "--action", "nope", "-o", str(out), "-f"]) == 2
+    assert "nope" in capsys.readouterr().err
+
+
+# -- the report -------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def sample_job(tmp_path_factory):
+    d = tmp_path_factory.mktemp("job")
+    db, out = d / "s.h5", d / "spliced.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    assert main(["splice-all", str(db), "-o", str(out), "--method", "splice,naive", "-q"]) == 0
+    return out
+
+
+def test_report_on_the_sample_ranks_splice_above_naive(sample_job, tmp_path, capsys):
+    report = tmp_path / "report.md"
+    assert main(["evaluate", str(sample_job), "-o", str(report), "--no-pictures"]) == 0
+    out = capsys.readouterr().out
+    assert "splice: 25 clips" in out and "naive: 25 clips" in out
+    from torchsplice.evaluation.report import evaluate_database
+
+    agg = evaluate_database(sample_job, tmp_path / "r2.md", pictures=False)
+    assert agg["splice"]["clips"] == agg["naive"]["clips"] == 25
+    # the splice keeps the action's posture and the arm-leg coordination; naive copying does not
+    assert agg["splice"]["posture"] < 0.5 * agg["naive"]["posture"]
+    assert agg["splice"]["phase_in_range"] > agg["naive"]["phase_in_range"]
+    assert agg["splice"]["phase"] < agg["naive"]["phase"]
+    # the lower body comes from the locomotion either way: foot skate is about the same
+    assert agg["splice"]["foot_skate"] == pytest.approx(agg["naive"]["foot_skate"], rel=0.2)
+    text = report.read_text()
+    assert "| splice | 25 |" in text and "| naive | 25 |" in text and "walk_curve+carry_box" in text
+
+
+def test_report_needs_a_spliced_database(tmp_path):
+    db = tmp_path / "s.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    assert main(["evaluate", str(db), "-o", str(tmp_path / "r.md")]) == 2
+    assert not (tmp_path / "r.md").exists()
+
+
+def test_report_with_ground_truth_on_real_clips(mocap_dir, tmp_path):
+    names = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031",
+             "dataset-2_walk_elderly_006", "dataset-2_walk_feminine_025",
+             "dataset-2_walk-turn-left_elderly_003", "dataset-2_walk-turn-right_elderly_020",
+             "dataset-2_walk-turn-left_feminine_025", "dataset-2_walk-turn-right_feminine_003"]
+    src = tmp_path / "in"
+    src.mkdir()
+    for n in names:
+        shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", src)
+    db, out, report = tmp_path / "b.h5", tmp_path / "o.h5", tmp_path / "r.md"
+    assert main(["import", str(src), "--spec", "bandai_namco", "-o", str(db), "-q"]) == 0
+    assert main(["splice-all", str(db), "-o", str(out), "-q", "--method", "splice,naive",
+                 "--locomotions", "label:style=normal", "--actions", "label:content=walk"]) == 0
+    from torchsplice.evaluation.report import evaluate_database
+
+    agg = evaluate_database(out, report, pictures=False)
+    assert agg["splice"]["gt_pairs"] == agg["naive"]["gt_pairs"] == 4  # 2 turns x 2 styles
+    assert agg["splice"]["gt_error"] < agg["naive"]["gt_error"]
+    assert "dataset-2_walk-turn-left_elderly_003" in report.read_text()

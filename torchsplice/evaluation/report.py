@@ -1,0 +1,262 @@
+"""``torchsplice evaluate``: judge a database written by the splice job, per clip and per method.
+
+For every spliced clip (and, in aggregate, every method) the report gives:
+
+- **foot skate**: horizontal foot speed while the foot is in ground contact (file units/s);
+- **arm-leg phase**: the lag between each arm's swing and the opposite leg's swing, as a
+  fraction of the gait cycle, and whether it lies in the range seen in the captured source clips;
+- **posture kept**: distance between the result's and the action's mean shoulder offset from
+  the pelvis in the heading frame (small: the action's posture, e.g. a lean, survived);
+- **ground-truth error**: mean upper-body joint error against the real capture of the same
+  combination, where the spec declares ground truth (``[clips.ground_truth]``).
+
+The source clips come from the databases recorded in the output's ``run`` attribute, from
+``sources`` given explicitly, or from the output itself when the job copied them in.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import torch
+
+from ..core.errors import TorchspliceError
+from ..core.motion import Motion
+from ..io.atomic import atomic_path
+from ..io.database import MotionDatabase
+from ..io.spec import DatasetSpec, detect_spec
+from ..splice.clips import clips_to_tensors, resample_motion
+from .ground_truth import upper_body_error
+from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
+
+__all__ = ["evaluate_database"]
+
+
+def _source_dbs(out_db: MotionDatabase, sources) -> list[MotionDatabase]:
+    paths = [Path(p) for p in sources] if sources else []
+    if not paths:
+        run = json.loads(str(out_db.attrs.get("run", "")) or "{}")
+        for key in ("database", "actions_db"):
+            rec = run.get(key)
+            if rec and Path(rec["path"]).is_file():
+                paths.append(Path(rec["path"]))
+    return [MotionDatabase.open(p) for p in paths]
+
+
+class _Sources:
+    """Find source clips by name in the source databases (or the output itself)."""
+
+    def __init__(self, dbs: list[MotionDatabase], out_db: MotionDatabase):
+        self.dbs = dbs + [out_db]
+        self.cache: dict[str, Motion] = {}
+
+    def has(self, name: str) -> bool:
+        return any(name in db._index_map() for db in self.dbs)
+
+    def get(self, name: str) -> Motion:
+        if name not in self.cache:
+            db = next((d for d in self.dbs if name in d._index_map()), None)
+            if db is None:
+                raise TorchspliceError(f"source clip {name!r} is in no source database; pass them with --sources")
+            self.cache[name] = db.read(name)
+        return self.cache[name]
+
+    def captures(self) -> list[tuple[str, str, dict]]:
+        out = []
+        for db in self.dbs[:-1] or self.dbs:
+            t = db.table()
+            out += [(str(n), str(r), json.loads(lab or "{}")) for n, r, lab in zip(t["name"], t["role"], t["labels"])]
+        return out
+
+
+def _find_capture(spec: DatasetSpec, loco: Motion, act: Motion, candidates) -> str | None:
+    want = spec.ground_truth_labels(loco.labels, act.labels)
+    if want is None:
+        return None
+    hits = sorted(n for n, role, lab in candidates if role != "spliced" and all(lab.get(k) == v for k, v in want.items()))
+    hits = [h for h in hits if h not in (loco.name, act.name)]
+    return hits[0] if hits else None
+
+
+def _metrics(results: list[Motion], locos: list[Motion], acts: list[Motion], roles, fps: float) -> dict:
+    sk = results[0].skeleton
+    R = clips_to_tensors(results, sk)
+    A = clips_to_tensors([resample_motion(a, fps) for a in acts], sk)
+    return {
+        "foot_skate": foot_skate(R, roles, fps),
+        "phase": arm_leg_phase(R, roles, fps),
+        "posture": posture_kept(R, A, roles),
+    }
+
+
+def _fmt(v, digits=2) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v:.{digits}f}"
+
+
+def evaluate_database(path, output, sources=None, pictures: bool = True, max_rows: int = 60, examples: int = 3) -> dict:
+    """Write the Markdown report for the splice job's output ``path`` to ``output``.
+
+    Returns the aggregate figures per method (also in the report). Pictures (filmstrips and
+    alignment plots of a few example pairs) go to ``<output stem>_files/`` beside the report.
+    """
+    path, output = Path(path), Path(output)
+    with MotionDatabase.open(path) as db:
+        if "method" not in db.columns or "locomotion" not in db.columns:
+            raise TorchspliceError(f"{path}: not written by the splice job (no locomotion/method columns)")
+        t = db.table()
+        rows = [i for i, r in enumerate(t["role"]) if r == "spliced"]
+        if not rows:
+            raise TorchspliceError(f"{path}: holds no spliced clip")
+        srcs = _source_dbs(db, sources)
+        try:
+            return _evaluate(db, t, rows, _Sources(srcs, db), path, output, pictures, max_rows, examples)
+        finally:
+            for s in srcs:
+                s.close()
+
+
+def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, examples) -> dict:
+    k = int(t["skeleton"][rows[0]])
+    sk = db.skeletons[k]
+    spec = DatasetSpec.from_json(db.spec_json(k)) if db.spec_json(k) else detect_spec(sk)
+    roles = spec.bind(sk)
+    units = spec.units if spec.units != "unknown" else "units"
+    candidates = sources.captures()
+    methods = sorted({str(t["method"][i]) for i in rows}, key=lambda m: ("splice", "naive", "cpmc").index(m) if m in ("splice", "naive", "cpmc") else 9)
+    per_clip: list[dict] = []
+    captured_names = set()
+    for method in methods:
+        mrows = [i for i in rows if t["method"][i] == method]
+        for b in range(0, len(mrows), 64):
+            chunk = mrows[b:b + 64]
+            results = [db.read(i) for i in chunk]
+            locos = [sources.get(str(t["locomotion"][i])) for i in chunk]
+            acts = [sources.get(str(t["action"][i])) for i in chunk]
+            captured_names.update(m.name for m in locos + acts)
+            fps = results[0].fps
+            m = _metrics(results, locos, acts, roles, fps)
+            caps = [_find_capture(spec, lo, ac, candidates) for lo, ac in zip(locos, acts)]
+            gt = [None] * len(chunk)
+            have = [n for n, c in enumerate(caps) if c is not None]
+            if have:
+                err = upper_body_error([results[n] for n in have], [sources.get(caps[n]) for n in have], roles)
+                for n, e in zip(have, err.tolist()):
+                    gt[n] = e
+            for n, i in enumerate(chunk):
+                per_clip.append({
+                    "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
+                    "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
+                    "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
+                    "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
+                })
+    captured = [sources.get(n) for n in sorted(captured_names)]
+    lo, hi = _captured_phase_band(captured, roles)
+    for c in per_clip:
+        c["phase_ok"] = lo <= c["phase"] <= hi
+        c["abs_phase"] = abs(c["phase"])
+    aggregates = _aggregate(per_clip, methods)
+    figures = _pictures(db, sources, spec, per_clip, output, examples) if pictures else []
+    text = _markdown(path, spec, units, methods, aggregates, per_clip, (lo, hi), figures, max_rows, len(captured))
+    with atomic_path(output) as tmp:
+        Path(tmp).write_text(text)
+    return aggregates
+
+
+def _captured_phase_band(captured: list[Motion], roles) -> tuple[float, float]:
+    """Range of arm-leg lags over the captured clips whose arms clearly swing with the legs
+    (correlation above 0.8 on both sides; a side-step or a held object says nothing)."""
+    fps = captured[0].fps
+    C = clips_to_tensors([resample_motion(c, fps) for c in captured], captured[0].skeleton)
+    st = arm_leg_phase_stats(C, roles, fps)
+    keep = torch.isfinite(st.lag) & (st.correlation.min(dim=1).values > 0.8)
+    if not bool(keep.any()):
+        return float("nan"), float("nan")
+    lags = st.lag[keep]
+    return float(lags.min()), float(lags.max())
+
+
+def _aggregate(per_clip: list[dict], methods: list[str]) -> dict:
+    out = {}
+    for method in methods:
+        cs = [c for c in per_clip if c["method"] == method]
+
+        def mean(key):
+            vals = [c[key] for c in cs if c[key] is not None and math.isfinite(c[key])]
+            return sum(vals) / len(vals) if vals else None
+
+        gt = [c["gt_error"] for c in cs if c["gt_error"] is not None]
+        out[method] = {
+            "clips": len(cs), "foot_skate": mean("foot_skate"), "phase": mean("abs_phase"),
+            "phase_in_range": sum(c["phase_ok"] for c in cs) / len(cs), "posture": mean("posture"),
+            "gt_error": sum(gt) / len(gt) if gt else None, "gt_pairs": len(gt), "cost": mean("cost"),
+        }
+    return out
+
+
+def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[tuple[str, str]]:
+    """A filmstrip (locomotion, action, each method) and an alignment plot for a few pairs."""
+    from ..viz.alignment import plot_alignment
+    from ..viz.render import render
+
+    folder = output.with_name(output.stem + "_files")
+    folder.mkdir(exist_ok=True)
+    first = [c for c in per_clip if c["method"] == per_clip[0]["method"]]
+    chosen = sorted(first, key=lambda c: (c["capture"] is None, c["name"]))[:examples]
+    figures = []
+    for c in chosen:
+        loco, act = sources.get(c["locomotion"]), sources.get(c["action"])
+        same = [d for d in per_clip if d["locomotion"] == c["locomotion"] and d["action"] == c["action"]]
+        clips = [loco, act] + [db.read(d["name"]) for d in same]
+        titles = [f"locomotion: {loco.name}", f"action: {act.name}"] + [d["method"] for d in same]
+        if c["capture"]:
+            clips.append(sources.get(c["capture"]))
+            titles.append(f"captured: {c['capture']}")
+        stem = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in c["name"])
+        strip = folder / f"{stem}_filmstrip.png"
+        render(clips, strip, titles=titles, frames=6)
+        align = folder / f"{stem}_alignment.png"
+        plot_alignment(loco, act, spec, align)
+        figures.append((c["name"], str(strip.relative_to(output.parent))))
+        figures.append((f"{c['name']}: time alignment", str(align.relative_to(output.parent))))
+    return figures
+
+
+def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, max_rows, n_captured) -> str:
+    lines = [f"# torchsplice evaluation: `{path.name}`", "",
+             f"{len(per_clip)} spliced clips, methods: {', '.join(methods)}; spec `{spec.name}`, lengths in {units}.", "",
+             "## Per method", "",
+             f"| method | clips | foot skate ({units}/s) | arm-leg lag, mean abs. (cycles) | lag within captured range | "
+             f"posture kept ({units}) | ground-truth error ({units}) | ground-truth pairs | alignment cost |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for m in methods:
+        a = agg[m]
+        lines.append(f"| {m} | {a['clips']} | {_fmt(a['foot_skate'])} | {_fmt(a['phase'], 3)} | "
+                     f"{100 * a['phase_in_range']:.0f}% | {_fmt(a['posture'])} | {_fmt(a['gt_error'])} | "
+                     f"{a['gt_pairs']} | {_fmt(a['cost'])} |")
+    lines += ["", "Foot skate: mean horizontal foot speed while in ground contact. Arm-leg lag: lag between each "
+              "arm's swing and the opposite leg's swing, as a fraction of the gait cycle (0: the arm swings forward "
+              "with the opposite leg); the captured source clips whose arms swing with their legs "
+              f"(of {n_captured}) span {phase_band[0]:.3f} to {phase_band[1]:.3f}. Posture kept: distance between the "
+              "result's and the action's mean shoulder offset from the pelvis in the heading frame. Ground-truth "
+              "error: mean upper-body joint distance to the real capture of the same combination, each in its root "
+              "heading frame after time alignment. Lower is better everywhere.", ""]
+    if figures:
+        lines += ["## Pictures", ""]
+        lines += [f"**{title}**\n\n![{title}]({file})\n" for title, file in figures]
+    lines += ["## Per clip", ""]
+    for m in methods:
+        cs = [c for c in per_clip if c["method"] == m]
+        lines += [f"### {m}", "", f"| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
+                  "|---|---|---|---|---|---|---|"]
+        for c in cs[:max_rows]:
+            lines.append(f"| {c['name']} | {c['frames']} | {_fmt(c['foot_skate'])} | {_fmt(c['phase'], 3)}"
+                         f"{'' if c['phase_ok'] else ' (out of range)'} | {_fmt(c['posture'])} | "
+                         f"{c['capture'] or '-'} | {_fmt(c['gt_error'])} |")
+        if len(cs) > max_rows:
+            lines.append(f"| ... {len(cs) - max_rows} more | | | | | | |")
+        lines.append("")
+    return "\n".join(lines)

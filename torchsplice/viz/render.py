@@ -1,0 +1,617 @@
+"""Stick-figure previews of clips: an animated GIF or MP4, or a PNG filmstrip.
+
+Each clip gets a panel: its bones as line segments from parent to child (end sites included:
+head top, hands, toes), left limbs blue and right limbs red (by joint name), a head circle, a
+ground grid on the floor plane and a short trail of the root's recent path on the floor.
+
+Camera and projection (:func:`view_rotation`, :func:`project`):
+
+- The up axis comes from the dataset spec (``up_axis``: 0, 1 or 2 for X, Y or Z; 1 for every
+  shipped dataset). Positions are taken in a right-handed frame ``(e1, e2, up)`` with
+  ``e1 = (up+1) % 3`` and ``e2 = (up+2) % 3`` (for Y up: ``e1 = Z``, ``e2 = X``), so the
+  picture is never mirrored.
+- One fixed orthographic view for every panel and frame: the camera sits at ``azimuth``
+  degrees about the up axis from ``e1`` (towards ``e2``) and ``elevation`` degrees above the
+  floor, looking down at the character (the default: an elevated three-quarter view; the
+  sample's characters face ``+Z`` at frame 0, so they start facing the camera, turned to its
+  left). Up maps to screen up, so heights read as heights.
+- The camera follows each clip's root in the floor plane (its position smoothed over about
+  half a second, so the gait's side-to-side sway stays visible) and looks at the floor below
+  it; the floor height is the lowest point a clip reaches. The scale is fixed: one data range
+  for every panel and frame, equal aspect, so speed and size compare across panels and time.
+  The grid is fixed in the world, so it slides under a walking figure.
+
+Forward kinematics runs once per clip, vectorised over frames; drawing a frame only sets the
+data of a few ``Line2D`` artists. Clips of different lengths play to the longest, each holding
+its last frame. Figures are made with :class:`matplotlib.figure.Figure` on the Agg canvas
+directly (no pyplot, no display, no global backend switch) and are released when done. Every
+output is written atomically (:func:`~torchsplice.io.atomic.atomic_path`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from matplotlib.animation import FFMpegWriter, PillowWriter
+
+from ..core.errors import TorchspliceError
+from ..core.motion import Motion
+from ..io.atomic import atomic_path
+from ..kinematics.fk import end_site_positions, forward_kinematics
+
+__all__ = ["render", "project", "view_rotation", "SUPPORTED_SUFFIXES"]
+
+SUPPORTED_SUFFIXES = (".gif", ".mp4", ".png")
+"""Output types :func:`render` writes, chosen by the output's suffix."""
+
+DEFAULT_AZIMUTH = -55.0
+DEFAULT_ELEVATION = 22.0
+
+_CENTER, _LEFT, _RIGHT = 0, 1, 2
+_COLORS = {_CENTER: "#2b2b2b", _LEFT: "#1f6fb4", _RIGHT: "#d0342c"}
+_GRID_COLOR = "#cfd3d8"
+_TRAIL_COLOR = "#8fb9d9"
+_FOLLOW_SECONDS = 0.5  # smoothing window of the follow camera
+_TRAIL_SECONDS = 2.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Projection
+# ---------------------------------------------------------------------------------------------
+
+
+def _check_up_axis(up_axis) -> int:
+    if up_axis not in (0, 1, 2) or isinstance(up_axis, bool):
+        raise TorchspliceError(f"up_axis must be 0, 1 or 2 (X, Y or Z), got {up_axis!r}")
+    return int(up_axis)
+
+
+def _canonical_axes(up_axis: int) -> list[int]:
+    """Indices ``[e1, e2, up]`` of a right-handed frame with ``up`` last."""
+    return [(up_axis + 1) % 3, (up_axis + 2) % 3, up_axis]
+
+
+def view_rotation(up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation: float = DEFAULT_ELEVATION) -> np.ndarray:
+    """The fixed view as a ``(3, 3)`` float64 rotation whose rows are world directions.
+
+    Row 0 is the screen's right, row 1 the screen's up, row 2 points from the scene towards
+    the camera (right-handed: ``row0 x row1 = row2``), all in the file's world coordinates.
+    The camera direction (row 2) is ``(cos el cos az, cos el sin az, sin el)`` in the frame
+    ``(e1, e2, up)`` of the module docstring; with ``elevation = 0`` the up axis is exactly the
+    screen's up, and for ``0 < elevation < 90`` it still projects straight up the screen.
+    """
+    up = _check_up_axis(up_axis)
+    az, el = math.radians(azimuth), math.radians(elevation)
+    ca, sa, ce, se = math.cos(az), math.sin(az), math.cos(el), math.sin(el)
+    canon = np.array([
+        [-sa, ca, 0.0],             # right
+        [-se * ca, -se * sa, ce],   # up
+        [ce * ca, ce * sa, se],     # towards the camera
+    ])
+    rot = np.zeros((3, 3))
+    rot[:, _canonical_axes(up)] = canon  # columns back in the file's axis order
+    return rot
+
+
+def project(points, up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation: float = DEFAULT_ELEVATION) -> np.ndarray:
+    """Orthographic screen coordinates ``(..., 2)`` (x right, y up; file units) of ``(..., 3)`` points.
+
+    ``points`` may be a numpy array or a torch tensor in the file's axes and units; the result
+    is float64 numpy. The projection is linear, so translating the points translates the
+    screen positions (the follow camera subtracts the projected camera centre).
+    """
+    if isinstance(points, torch.Tensor):
+        points = points.detach().cpu().double().numpy()
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[-1:] != (3,):
+        raise ValueError(f"points must be (..., 3), got {p.shape}")
+    return p @ view_rotation(up_axis, azimuth, elevation)[:2].T
+
+
+# ---------------------------------------------------------------------------------------------
+# Per-clip geometry (computed once, vectorised over frames)
+# ---------------------------------------------------------------------------------------------
+
+
+def _side(name: str) -> int:
+    """Left, right or centre from a joint name (``LeftArm``, ``l_hip``, ``RHand``, ``hand_r`` ...)."""
+    low = name.lower()
+    if "left" in low:
+        return _LEFT
+    if "right" in low:
+        return _RIGHT
+    m = re.search(r"(?:^|[_:.\s])([LlRr])(?:[A-Z0-9_.:\s]|$)", name)
+    if m:
+        return _LEFT if m.group(1) in "Ll" else _RIGHT
+    return _CENTER
+
+
+def _nice(x: float) -> float:
+    """The largest of 1, 2, 5 times a power of ten not above ``x`` (``x > 0``)."""
+    e = 10.0 ** math.floor(math.log10(x))
+    return max(m * e for m in (1.0, 2.0, 5.0) if m * e <= x * (1 + 1e-9))
+
+
+def _moving_average(x: np.ndarray, width: int) -> np.ndarray:
+    """Centred moving average along axis 0 of ``(T, ...)``, edges padded with the end values."""
+    if width <= 1 or x.shape[0] < 2:
+        return x.copy()
+    h = width // 2
+    pad = np.concatenate([np.repeat(x[:1], h, 0), x, np.repeat(x[-1:], h, 0)])
+    c = np.cumsum(np.concatenate([np.zeros_like(x[:1]), pad]), axis=0)
+    return (c[2 * h + 1:] - c[:-2 * h - 1]) / (2 * h + 1)
+
+
+@dataclass
+class _Clip:
+    """One clip, ready to draw. Screen coordinates are relative to the follow camera.
+
+    ``screen``: ``(T, P + 1, 2)`` joints then end sites, the last row NaN (a line break);
+    ``lines``: per side, an index array into ``P + 1`` (``a, b, NaN, a, b, NaN, ...``);
+    ``head``: ``(T, 2)`` head circle centre or ``None``; ``head_size``: its diameter (units);
+    ``root``: ``(T, 2)`` projected floor point under the followed joint (screen, absolute);
+    ``center``: ``(T, 2)`` projected camera centre (absolute); ``floor_center``: ``(T, 2)``
+    the camera centre in the floor plane ``(e1, e2)``; ``height``: figure height (units).
+    """
+
+    name: str
+    fps: float
+    screen: np.ndarray
+    lines: dict[int, np.ndarray]
+    head: np.ndarray | None
+    head_size: float
+    root: np.ndarray
+    center: np.ndarray
+    floor_center: np.ndarray
+    floor: float
+    height: float
+
+    @property
+    def num_frames(self) -> int:
+        return self.screen.shape[0]
+
+
+def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
+    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy."""
+    sk = motion.skeleton
+    rot = motion.rotations.detach().to("cpu", torch.float64)
+    root_t = motion.root_translation.detach().to("cpu", torch.float64)
+    trans = None if motion.translations is None else motion.translations.detach().to("cpu", torch.float64)
+    pos, grot = forward_kinematics(rot, root_t, sk.offsets, sk.parents, trans)
+    if sk.end_site_parents:
+        ends = end_site_positions(pos, grot, sk.end_site_parents, sk.end_site_offsets)
+        pts = torch.cat([pos, ends], dim=1).numpy()
+    else:
+        pts = pos.numpy()
+    T, P = pts.shape[:2]
+    J = sk.num_joints
+    axes = _canonical_axes(up)
+    height_all = pts[..., up]
+    finite = np.isfinite(height_all)
+    floor = float(np.min(height_all[finite])) if finite.any() else 0.0
+    top = float(np.max(height_all[finite])) if finite.any() else 1.0
+
+    # the followed joint: the root, or a root child whose translation is animated (Bandai
+    # Namco's Hips under joint_Root), whose path is the character's
+    follow = 0
+    animated = sk.translation_animated
+    for c in sk.children(0):
+        if animated[c]:
+            follow = c
+            break
+    skip_bone = {c for c in sk.children(0) if animated[c]}  # a trajectory, not a bone
+
+    floor_xy = pts[:, follow][:, axes[:2]]  # (T, 2) in (e1, e2)
+    floor_xy = np.where(np.isfinite(floor_xy), floor_xy, 0.0)
+    smooth = _moving_average(floor_xy, max(1, int(round(_FOLLOW_SECONDS * motion.fps)) | 1))
+    cam3 = np.zeros((T, 3))
+    cam3[:, axes[0]], cam3[:, axes[1]], cam3[:, up] = smooth[:, 0], smooth[:, 1], floor
+    root3 = cam3.copy()
+    root3[:, axes[0]], root3[:, axes[1]] = floor_xy[:, 0], floor_xy[:, 1]
+
+    scr = (pts - cam3[:, None]) @ view[:2].T  # (T, P, 2), relative to the camera centre
+    screen = np.concatenate([scr, np.full((T, 1, 2), np.nan)], axis=1)
+
+    # bones per side: parent -> joint, joint -> end site
+    segs: dict[int, list[int]] = {_CENTER: [], _LEFT: [], _RIGHT: []}
+    for j in range(1, J):
+        if j in skip_bone:
+            continue
+        segs[_side(sk.names[j])] += [sk.parents[j], j, P]
+    for e, p in enumerate(sk.end_site_parents):
+        segs[_side(sk.names[p])] += [p, J + e, P]
+    lines = {k: np.asarray(v, dtype=np.int64) for k, v in segs.items() if v}
+
+    # the head: the end site highest in the rest pose, drawn as a circle on its bone
+    head, head_size = None, 0.0
+    if sk.end_site_parents:
+        _, rest_ends = sk.rest_positions()
+        e = int(torch.argmax(rest_ends[:, up]))
+        hj = sk.end_site_parents[e]
+        if _side(sk.names[hj]) == _CENTER:
+            head_size = float(sk.end_site_offsets[e].norm())
+            head = 0.5 * (scr[:, hj] + scr[:, J + e])
+    return _Clip(
+        name=motion.name, fps=motion.fps, screen=screen, lines=lines, head=head, head_size=head_size,
+        root=root3 @ view[:2].T, center=cam3 @ view[:2].T, floor_center=smooth, floor=floor,
+        height=max(top - floor, 1e-6),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Drawing
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Scene:
+    """What every panel shares: view, fixed data limits and grid layout."""
+
+    view: np.ndarray
+    up: int
+    xlim: tuple[float, float]
+    ylim: tuple[float, float]
+    spacing: float  # grid spacing (units)
+    reach: float  # grid half-width around the camera centre (units)
+    panel_w: float  # inches
+    panel_h: float
+
+
+def _scene(clips: list[_Clip], up: int, view: np.ndarray, size: float) -> _Scene:
+    """Shared limits: every clip's every frame fits, equal aspect, a margin of floor in front."""
+    H = max(c.height for c in clips)
+    xs = np.concatenate([c.screen[..., 0][np.isfinite(c.screen[..., 0])] for c in clips] + [np.zeros(1)])
+    ys = np.concatenate([c.screen[..., 1][np.isfinite(c.screen[..., 1])] for c in clips] + [np.zeros(1)])
+    half_w = max(float(np.abs(xs).max()) + 0.08 * H, 0.45 * H)
+    y0 = min(float(ys.min()), 0.0) - 0.22 * H
+    y1 = max(float(ys.max()), 0.0) + 0.06 * H
+    # panel shape follows the data, within reason; then widen the short side to match
+    ratio = min(max((y1 - y0) / (2 * half_w), 0.75), 1.6)
+    panel_w, panel_h = size, size * ratio
+    if (y1 - y0) / (2 * half_w) > ratio:
+        half_w = (y1 - y0) / ratio / 2
+    else:
+        extra = 2 * half_w * ratio - (y1 - y0)
+        y0, y1 = y0 - 0.5 * extra, y1 + 0.5 * extra
+    reach = 2.5 * max(half_w, y1 - y0)
+    return _Scene(view=view, up=up, xlim=(-half_w, half_w), ylim=(y0, y1), spacing=_nice(H / 1.75),
+                  reach=reach, panel_w=panel_w, panel_h=panel_h)
+
+
+def _grid_lines(scene: _Scene, clip: _Clip, f: int) -> tuple[np.ndarray, np.ndarray]:
+    """World-fixed floor grid lines near the camera centre at frame ``f``, screen coordinates
+    relative to the camera, NaN-separated (two arrays ``x``, ``y``)."""
+    s, R = scene.spacing, scene.reach
+    c = clip.floor_center[f]
+    out = []
+    for a in (0, 1):  # lines of constant e_a, running along the other axis
+        k = np.arange(math.ceil((c[a] - R) / s), math.floor((c[a] + R) / s) + 1)
+        n = len(k)
+        seg = np.zeros((n, 3, 3))  # (line, start/end/NaN, (e1, e2, up))
+        seg[:, :2, a] = (k * s - c[a])[:, None]
+        seg[:, 0, 1 - a], seg[:, 1, 1 - a] = -R, R
+        seg[:, 2] = np.nan
+        out.append(seg.reshape(-1, 3))
+    canon = np.concatenate(out)
+    world = np.zeros_like(canon)
+    world[:, _canonical_axes(scene.up)] = canon
+    xy = world @ scene.view[:2].T
+    return xy[:, 0], xy[:, 1]
+
+
+class _Panel:
+    """One axes showing one clip; :meth:`show` puts frame ``f`` on it by setting line data.
+
+    With ``animated=True`` the moving artists are left out of a full draw: the animation
+    draws the static background once and blits them over it each frame (:meth:`blit`).
+    """
+
+    def __init__(self, fig, rect, scene: _Scene, clip: _Clip, title: str | None, animated: bool):
+        from matplotlib.lines import Line2D
+        from matplotlib.patches import Rectangle
+
+        self.scene, self.clip = scene, clip
+        ax = fig.add_axes(rect)
+        ax.set_xlim(*scene.xlim)
+        ax.set_ylim(*scene.ylim)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_axis_off()
+        ax.add_patch(Rectangle((0, 0), 1, 1, transform=ax.transAxes, facecolor="#fafafa", edgecolor="#b5b5b5",
+                               lw=0.8, zorder=0))
+        self.ax = ax
+        self.grid = ax.add_line(Line2D([], [], color=_GRID_COLOR, lw=0.7, zorder=1))
+        self.trail = ax.add_line(Line2D([], [], color=_TRAIL_COLOR, lw=1.8, zorder=2, solid_capstyle="round"))
+        lw = max(1.2, min(2.6, 0.9 * scene.panel_w))
+        self.bones = []
+        for side, idx in clip.lines.items():
+            ln = Line2D([], [], color=_COLORS[side], lw=lw, zorder=4 if side == _CENTER else 3, marker="o",
+                        markersize=lw * 1.3, markeredgewidth=0, solid_capstyle="round", solid_joinstyle="round")
+            self.bones.append((ax.add_line(ln), idx))
+        self.head = None
+        if clip.head is not None:
+            ppu = 72.0 * scene.panel_h / (scene.ylim[1] - scene.ylim[0])  # points per data unit
+            self.head = ax.add_line(Line2D([], [], ls="none", marker="o", markersize=max(3.0, clip.head_size * 0.95 * ppu),
+                                           markerfacecolor="white", markeredgecolor=_COLORS[_CENTER],
+                                           markeredgewidth=0.8 * lw, zorder=6))
+        x0, y0, w, h = rect
+        if title is not None:
+            fig.text(x0 + w / 2, y0 + h + 0.02 * h, title, ha="center", va="bottom", fontsize=10)
+        self.label = fig.text(x0 + w / 2, y0 - 0.015 * h, "", ha="center", va="top", fontsize=8, color="#444444")
+        self.moving = [self.grid, self.trail] + [ln for ln, _ in self.bones] + ([self.head] if self.head else []) + [self.label]
+        for a in self.moving:
+            a.set_animated(animated)
+        self._trail_frames = max(1, int(round(_TRAIL_SECONDS * clip.fps)))
+
+    def show(self, f: int, held: bool = False) -> None:
+        """Set every moving artist to frame ``f`` (``held``: past the clip's end, for the label)."""
+        c = self.clip
+        gx, gy = _grid_lines(self.scene, c, f)
+        self.grid.set_data(gx, gy)
+        tr = c.root[max(0, f - self._trail_frames):f + 1] - c.center[f]
+        self.trail.set_data(tr[:, 0], tr[:, 1])
+        pts = c.screen[f]
+        for ln, idx in self.bones:
+            xy = pts[idx]
+            ln.set_data(xy[:, 0], xy[:, 1])
+        if self.head is not None:
+            self.head.set_data(c.head[f, :1], c.head[f, 1:])
+        end = "  (end)" if held else ""
+        self.label.set_text(f"{f / c.fps:.2f} s  frame {f}{end}")
+
+    def blit(self) -> None:
+        """Draw the moving artists onto the canvas (after the background was restored)."""
+        fig = self.ax.figure
+        for a in self.moving:
+            (self.ax if a is not self.label else fig).draw_artist(a)
+
+
+def _new_figure(width_in: float, height_in: float, dpi: int):
+    """An Agg figure sized to whole, even pixel counts (video encoders need even sizes)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    w_px = 2 * max(1, math.ceil(width_in * dpi / 2))
+    h_px = 2 * max(1, math.ceil(height_in * dpi / 2))
+    fig = Figure(figsize=(w_px / dpi, h_px / dpi), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+# Layout, inches
+_TITLE_H = 0.32
+_LABEL_H = 0.24
+_MARGIN = 0.08
+
+
+def _animation_figure(scene: _Scene, clips: list[_Clip], titles: list[str], dpi: int):
+    """One row of panels, a title above and a time label under each."""
+    n = len(clips)
+    gap = 0.1
+    W = n * scene.panel_w + (n + 1) * gap
+    Hh = scene.panel_h + _TITLE_H + _LABEL_H + _MARGIN
+    fig = _new_figure(W, Hh, dpi)
+    W, Hh = fig.get_size_inches()
+    panels = []
+    for i, (clip, title) in enumerate(zip(clips, titles)):
+        rect = ((gap + i * (scene.panel_w + gap)) / W, (_LABEL_H + _MARGIN / 2) / Hh, scene.panel_w / W, scene.panel_h / Hh)
+        panels.append(_Panel(fig, rect, scene, clip, title, animated=True))
+    return fig, panels
+
+
+def _filmstrip_figure(scene: _Scene, clips: list[_Clip], titles: list[str], frames: int, dpi: int):
+    """One row per clip (its name above the row), one column per time, a time label under each."""
+    n = len(clips)
+    gap = 0.06
+    row_h = _TITLE_H + scene.panel_h + _LABEL_H
+    W = frames * scene.panel_w + (frames + 1) * gap
+    Hh = n * row_h + _MARGIN
+    fig = _new_figure(W, Hh, dpi)
+    W, Hh = fig.get_size_inches()
+    cells = []
+    for r, (clip, title) in enumerate(zip(clips, titles)):
+        top = Hh - _MARGIN / 2 - r * row_h
+        fig.text(gap / W, (top - 0.04) / Hh, title, ha="left", va="top", fontsize=11, fontweight="bold")
+        row = []
+        for k in range(frames):
+            rect = ((gap + k * (scene.panel_w + gap)) / W, (top - _TITLE_H - scene.panel_h) / Hh,
+                    scene.panel_w / W, scene.panel_h / Hh)
+            row.append(_Panel(fig, rect, scene, clip, None, animated=False))
+        cells.append(row)
+    return fig, cells
+
+
+# ---------------------------------------------------------------------------------------------
+# Writers: both take the frame the canvas already holds (blitted), not a fresh full draw
+# ---------------------------------------------------------------------------------------------
+
+
+class _GifWriter(PillowWriter):
+    """PillowWriter that grabs the blitted canvas and writes one shared palette.
+
+    Quantising every frame on its own (Pillow's default) costs ~40 ms a frame; one palette
+    from a few frames, mapped without dithering, costs ~1 ms and suits flat line drawings.
+    The format is named, so the temporary file's name does not matter. GIF stores frame
+    durations in hundredths of a second, so 30 fps plays at 1000 / 30 ms rounded to 10 ms.
+    """
+
+    def grab_frame(self, **savefig_kwargs):
+        from PIL import Image
+
+        w, h = self.fig.canvas.get_width_height()
+        self._frames.append(Image.frombuffer("RGBA", (w, h), bytes(self.fig.canvas.buffer_rgba()), "raw", "RGBA", 0, 1)
+                            .convert("RGB"))
+
+    def finish(self):
+        from PIL import Image
+
+        frames = self._frames
+        pick = sorted({round(i) for i in np.linspace(0, len(frames) - 1, min(len(frames), 6))})
+        w, h = frames[0].size
+        sheet = Image.new("RGB", (w, h * len(pick)))
+        for k, i in enumerate(pick):
+            sheet.paste(frames[i], (0, k * h))
+        palette = sheet.quantize(64, method=Image.Quantize.FASTOCTREE)
+        p = [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
+        p[0].save(self.outfile, format="GIF", save_all=True, append_images=p[1:],
+                  duration=int(round(1000 / self.fps)), loop=0)
+
+
+class _MP4Writer(FFMpegWriter):
+    """FFMpegWriter (H.264, yuv420p, MP4 named, so the temporary file's name does not matter)
+    that pipes the blitted canvas instead of redrawing the figure."""
+
+    def __init__(self, fps):
+        super().__init__(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p", "-f", "mp4"])
+        self.frame_format = "rgba"
+
+    def grab_frame(self, **savefig_kwargs):
+        self._proc.stdin.write(bytes(self.fig.canvas.buffer_rgba()))
+
+
+def _ffmpeg_available() -> bool:
+    return FFMpegWriter.isAvailable()
+
+
+def _make_writer(suffix: str, fps: float):
+    """The movie writer for ``suffix`` (``.gif`` or ``.mp4``) at ``fps`` frames per second."""
+    return _GifWriter(fps=fps) if suffix == ".gif" else _MP4Writer(fps)
+
+
+# ---------------------------------------------------------------------------------------------
+# The entry point
+# ---------------------------------------------------------------------------------------------
+
+
+def _truncate(m: Motion, max_seconds: float | None) -> Motion:
+    if max_seconds is None:
+        return m
+    n = max(1, int(math.floor(max_seconds * m.fps + 1e-9)))
+    return m.slice(0, n) if n < m.num_frames else m
+
+
+def render(
+    motions: Sequence[Motion],
+    output,
+    titles: Sequence[str] | None = None,
+    up_axis: int = 1,
+    fps: float | None = None,
+    frames: int = 8,
+    size: float = 3.0,
+    dpi: int = 100,
+    max_seconds: float | None = None,
+    *,
+    azimuth: float = DEFAULT_AZIMUTH,
+    elevation: float = DEFAULT_ELEVATION,
+) -> Path:
+    """Draw clips as stick figures side by side and write ``output``; returns its path.
+
+    Args:
+        motions: the clips, one panel each (any skeletons, lengths and frame rates). Each is
+            drawn from its own ``rotations`` ``(T, J, 4)`` (WXYZ), ``root_translation``
+            ``(T, 3)`` and ``translations``, in file units.
+        output: the file to write; its suffix picks the type (see :data:`SUPPORTED_SUFFIXES`):
+            ``.gif`` an animation (matplotlib's PillowWriter), ``.mp4`` an animation (matplotlib's
+            FFMpegWriter, H.264; needs ``ffmpeg`` on ``PATH``), ``.png`` a filmstrip: one row per
+            clip, ``frames`` columns at evenly spaced times over the longest clip (the same
+            times in every row), the time and frame number under each figure.
+        titles: one title per clip; the clips' names by default.
+        up_axis: the vertical axis of the data (0, 1, 2 for X, Y, Z); the dataset spec's.
+        fps: the animation's frame rate; the clips' (the highest, if they differ) by default.
+            Each output frame shows, per clip, the frame nearest its time.
+        frames: number of columns of the PNG filmstrip.
+        size: width of one panel in inches (its height follows the figures' proportions).
+        dpi: pixels per inch.
+        max_seconds: keep only the first ``max_seconds`` of each clip.
+        azimuth, elevation: the fixed camera, degrees (see :func:`view_rotation`).
+
+    The animation has as many frames as the longest clip needs at ``fps``; shorter clips hold
+    their last frame (their label says ``(end)``). The output appears complete or not at all:
+    it is written to a temporary file beside it and renamed.
+
+    Raises:
+        TorchspliceError: an unsupported suffix (naming the supported ones), ``.mp4`` without
+            ffmpeg, no clips, titles that do not match the clips, bad numbers, or an OS error
+            while writing (one line naming the file).
+    """
+    output = Path(output)
+    suffix = output.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise TorchspliceError(
+            f"{output}: cannot render to {output.suffix or 'a file without a suffix'!r}; "
+            f"write one of {', '.join(SUPPORTED_SUFFIXES)}"
+        )
+    if suffix == ".mp4" and not _ffmpeg_available():
+        raise TorchspliceError(".mp4 needs ffmpeg on PATH; write .gif or .png instead")
+    motions = list(motions)
+    if not motions:
+        raise TorchspliceError("render needs at least one clip")
+    titles = [m.name for m in motions] if titles is None else [str(t) for t in titles]
+    if len(titles) != len(motions):
+        raise TorchspliceError(f"{len(titles)} titles for {len(motions)} clips; give one title per clip")
+    up = _check_up_axis(up_axis)
+    if fps is not None and not fps > 0:
+        raise TorchspliceError(f"fps must be positive, got {fps}")
+    if int(frames) < 1:
+        raise TorchspliceError(f"frames must be at least 1, got {frames}")
+    if not size > 0 or not dpi > 0:
+        raise TorchspliceError(f"size and dpi must be positive, got size={size}, dpi={dpi}")
+    if max_seconds is not None and not max_seconds > 0:
+        raise TorchspliceError(f"max_seconds must be positive, got {max_seconds}")
+
+    view = view_rotation(up, azimuth, elevation)
+    clips = [_prepare(_truncate(m, max_seconds), up, view) for m in motions]
+    scene = _scene(clips, up, view, float(size))
+    rate = float(fps) if fps is not None else max(c.fps for c in clips)
+    last = max((c.num_frames - 1) / c.fps for c in clips)  # time of the last frame of the longest clip
+
+    def frame_of(c: _Clip, t: float) -> tuple[int, bool]:
+        f = int(round(t * c.fps))
+        return min(f, c.num_frames - 1), f > c.num_frames - 1
+
+    with atomic_path(output) as tmp:
+        if suffix == ".png":
+            n_cols = int(frames)
+            times = np.linspace(0.0, last, n_cols) if n_cols > 1 else np.zeros(1)
+            fig, cells = _filmstrip_figure(scene, clips, titles, n_cols, int(dpi))
+            try:
+                for row, c in zip(cells, clips):
+                    for panel, t in zip(row, times):
+                        panel.show(*frame_of(c, float(t)))
+                fig.savefig(tmp, format="png", dpi=int(dpi))
+            finally:
+                _release(fig)
+        else:
+            n_out = int(math.floor(last * rate + 1e-6)) + 1
+            fig, panels = _animation_figure(scene, clips, titles, int(dpi))
+            try:
+                canvas = fig.canvas
+                canvas.draw()  # the static background, once
+                background = canvas.copy_from_bbox(fig.bbox)
+                writer = _make_writer(suffix, rate)
+                with writer.saving(fig, str(tmp), int(dpi)):
+                    for k in range(n_out):
+                        t = k / rate
+                        canvas.restore_region(background)
+                        for p in panels:
+                            p.show(*frame_of(p.clip, t))
+                            p.blit()
+                        writer.grab_frame()
+            except subprocess.CalledProcessError as exc:
+                err = (exc.stderr or "").strip().splitlines()
+                raise TorchspliceError(f"{output}: ffmpeg failed: {err[-1] if err else exc}") from None
+            finally:
+                _release(fig)
+    return output
+
+
+def _release(fig) -> None:
+    """Drop a figure's artists so its memory goes at once (it was never registered with pyplot)."""
+    fig.clear()
