@@ -30,6 +30,7 @@ def test_ground_truth_labels_follow_the_rule():
     assert spec.ground_truth_labels({**loco, "style": "proud"}, act) is None  # locomotion must be normal style
     assert spec.ground_truth_labels(loco, {**act, "content": "wave-left-hand"}) is None  # action must be a walk
     assert spec.ground_truth_labels(loco, {"content": "walk"}) is None  # a label the template needs is missing
+    assert spec.ground_truth_labels({**loco, "dataset": "1"}, act) is None  # sources from different datasets
     assert DatasetSpec.from_json(spec.to_json()).ground_truth == spec.ground_truth
     assert load_spec("sample").ground_truth_labels({}, {}) is None
 

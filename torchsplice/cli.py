@@ -296,7 +296,7 @@ def cmd_render(args) -> int:
         clips = [db.read(name) for name in args.clips]
         k = db.clip_info(args.clips[0])["skeleton"]
         spec = _db_spec(db, k, clips[0].skeleton)
-    render(clips, out, titles=[c.name for c in clips], up_axis="xyz".index(spec.up_axis), frames=args.frames,
+    render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=args.frames,
            max_seconds=args.max_seconds)
     _say(args, f"wrote {out}: {len(clips)} clips")
     return 0

@@ -205,7 +205,11 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
     folder = output.with_name(output.stem + "_files")
     folder.mkdir(exist_ok=True)
     first = [c for c in per_clip if c["method"] == per_clip[0]["method"]]
-    chosen = sorted(first, key=lambda c: (c["capture"] is None, c["name"]))[:examples]
+    chosen, seen = [], set()  # long pairs with a capture first, one per locomotion
+    for c in sorted(first, key=lambda c: (c["capture"] is None, -c["frames"], c["name"])):
+        if c["locomotion"] not in seen and len(chosen) < examples:
+            chosen.append(c)
+            seen.add(c["locomotion"])
     figures = []
     for c in chosen:
         loco, act = sources.get(c["locomotion"]), sources.get(c["action"])
@@ -217,7 +221,7 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
             titles.append(f"captured: {c['capture']}")
         stem = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in c["name"])
         strip = folder / f"{stem}_filmstrip.png"
-        render(clips, strip, titles=titles, frames=6)
+        render(clips, strip, titles=titles, frames=6, up_axis=spec.up_axis)
         align = folder / f"{stem}_alignment.png"
         plot_alignment(loco, act, spec, align)
         figures.append((c["name"], str(strip.relative_to(output.parent))))

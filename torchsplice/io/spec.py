@@ -143,7 +143,8 @@ class DatasetSpec:
         reference: ``((label, template), ...)``: the labels a plain-locomotion reference of
             an action carries (for the ``cpmc`` method); ``"{key}"`` in a template is the
             action's own label ``key``. ``None``: references must be named explicitly.
-        ground_truth: ``(action conditions, locomotion conditions, capture templates)``: which
+        ground_truth: ``(action conditions, locomotion conditions, capture templates, labels both
+            must share)``: which
             captured clip shows an action's upper body during a locomotion (for evaluation);
             ``"{action.KEY}"`` / ``"{locomotion.KEY}"`` in a template are the sources' labels.
         guess: joints are guessed at :meth:`bind` time.
@@ -242,8 +243,10 @@ class DatasetSpec:
         (given both clips' labels), or ``None`` when the spec declares none for this pair."""
         if self.ground_truth is None:
             return None
-        act_cond, loco_cond, capture = self.ground_truth
+        act_cond, loco_cond, capture, same = self.ground_truth
         if any(action.get(k) != v for k, v in act_cond) or any(locomotion.get(k) != v for k, v in loco_cond):
+            return None
+        if any(action.get(k) is None or action.get(k) != locomotion.get(k) for k in same):
             return None
         sides = {"action": action, "locomotion": locomotion}
         out = {}
@@ -490,10 +493,13 @@ def _parse_clips(t: _Table) -> dict:
 
 def _parse_ground_truth(table: dict, t) -> tuple:
     """``[clips.ground_truth]``: ``((("action", k, v), ...), (("locomotion", k, v), ...), ((k, template), ...))``."""
-    extra = set(table) - {"action", "locomotion", "capture"}
+    extra = set(table) - {"action", "locomotion", "capture", "same"}
     capture = table.get("capture")
     if extra or not isinstance(capture, dict) or not capture:
-        raise t.fail("ground_truth", "must hold a non-empty 'capture' table and optional 'action' and 'locomotion' tables")
+        raise t.fail("ground_truth", "must hold a non-empty 'capture' table and optional 'action', 'locomotion' and 'same'")
+    same = table.get("same", [])
+    if not isinstance(same, list) or not all(isinstance(k, str) for k in same):
+        raise t.fail("ground_truth", "'same' must be a list of label names")
     conds = []
     for side in ("action", "locomotion"):
         cond = table.get(side, {})
@@ -502,7 +508,7 @@ def _parse_ground_truth(table: dict, t) -> tuple:
         conds.append(tuple(sorted(cond.items())))
     if not all(isinstance(v, str) for v in capture.values()):
         raise t.fail("ground_truth", "'capture' must be a table of label = \"value or {side.label} template\" strings")
-    return conds[0], conds[1], tuple(sorted(capture.items()))
+    return conds[0], conds[1], tuple(sorted(capture.items())), tuple(sorted(same))
 
 
 def _parse_rule(rule, i: int, where: str) -> RoleRule:
@@ -552,8 +558,8 @@ def _to_dict(spec: DatasetSpec) -> dict:
     if spec.reference is not None:
         clips["reference"] = dict(spec.reference)
     if spec.ground_truth is not None:
-        act, loco, cap = spec.ground_truth
-        clips["ground_truth"] = {"action": dict(act), "locomotion": dict(loco), "capture": dict(cap)}
+        act, loco, cap, same = spec.ground_truth
+        clips["ground_truth"] = {"action": dict(act), "locomotion": dict(loco), "capture": dict(cap), "same": list(same)}
     out = {"name": spec.name, "dataset": dataset, "joints": joints, "clips": clips, "notes": list(spec.notes)}
     if spec.path is not None:
         out["path"] = str(spec.path)

@@ -12,14 +12,18 @@ Camera and projection (:func:`view_rotation`, :func:`project`):
   picture is never mirrored.
 - One fixed orthographic view for every panel and frame: the camera sits at ``azimuth``
   degrees about the up axis from ``e1`` (towards ``e2``) and ``elevation`` degrees above the
-  floor, looking down at the character (the default: an elevated three-quarter view; the
-  sample's characters face ``+Z`` at frame 0, so they start facing the camera, turned to its
-  left). Up maps to screen up, so heights read as heights.
-- The camera follows each clip's root in the floor plane (its position smoothed over about
-  half a second, so the gait's side-to-side sway stays visible) and looks at the floor below
-  it; the floor height is the lowest point a clip reaches. The scale is fixed: one data range
-  for every panel and frame, equal aspect, so speed and size compare across panels and time.
-  The grid is fixed in the world, so it slides under a walking figure.
+  floor, looking down at the character. The default (-55, 22) is an elevated three-quarter
+  view: for Y up, from ``+Z`` and ``-X``, so the sample's characters, which face ``+Z`` with
+  their left at ``+X``, are first seen from the front right. Up maps to screen up.
+- The camera follows each clip's root in the floor plane (smoothed over half a second, so
+  the gait's side-to-side sway stays visible; for a skeleton whose root stays on the ground
+  and whose child is animated, like Bandai Namco's ``joint_Root`` and ``Hips``, it follows
+  the child) and looks at the floor below it; the floor height is the lowest point a clip
+  reaches. The grid is fixed in the world, so it slides under a walking figure, and a trail
+  shows the last two seconds of the root's path on the floor.
+- The scale is fixed over time and equal in x and y. Panels share one scale, so sizes and
+  speeds compare, unless the skeletons differ in size by more than a factor of 1.5 (other
+  units); then each panel is scaled to its own skeleton.
 
 Forward kinematics runs once per clip, vectorised over frames; drawing a frame only sets the
 data of a few ``Line2D`` artists. Clips of different lengths play to the longest, each holding
@@ -69,8 +73,11 @@ _TRAIL_SECONDS = 2.0
 
 
 def _check_up_axis(up_axis) -> int:
-    if up_axis not in (0, 1, 2) or isinstance(up_axis, bool):
-        raise TorchspliceError(f"up_axis must be 0, 1 or 2 (X, Y or Z), got {up_axis!r}")
+    """0, 1 or 2 from an index or a name (``"x"``, ``"y"``, ``"z"``, as dataset specs spell it)."""
+    if isinstance(up_axis, str) and up_axis.lower() in ("x", "y", "z"):
+        return "xyz".index(up_axis.lower())
+    if isinstance(up_axis, bool) or up_axis not in (0, 1, 2):
+        raise TorchspliceError(f"up_axis must be 0, 1 or 2 (or 'x', 'y', 'z'), got {up_axis!r}")
     return int(up_axis)
 
 
@@ -159,7 +166,10 @@ class _Clip:
     ``head``: ``(T, 2)`` head circle centre or ``None``; ``head_size``: its diameter (units);
     ``root``: ``(T, 2)`` projected floor point under the followed joint (screen, absolute);
     ``center``: ``(T, 2)`` projected camera centre (absolute); ``floor_center``: ``(T, 2)``
-    the camera centre in the floor plane ``(e1, e2)``; ``height``: figure height (units).
+    the camera centre in the floor plane ``(e1, e2)``; ``floor``: the floor's height;
+    ``height``: the figure's greatest height above the floor (at least a quarter of the
+    skeleton's size, for a figure lying flat); ``size``: the skeleton's size
+    (units); ``drawn``: indices of the points that some bone uses.
     """
 
     name: str
@@ -173,10 +183,44 @@ class _Clip:
     floor_center: np.ndarray
     floor: float
     height: float
+    size: float
+    drawn: np.ndarray
 
     @property
     def num_frames(self) -> int:
         return self.screen.shape[0]
+
+
+def _head(sk, pts: np.ndarray, up: int) -> tuple[np.ndarray | None, float]:
+    """The head circle: centres ``(T, 3)`` (world) and diameter, or ``(None, 0)``.
+
+    The head is the first centre joint named like ``head`` (else the joint under the end
+    site highest in the rest pose). With an end site of some length (the sample's head top)
+    the circle sits on that bone, as wide as it is long; with none or a zero-length one (Bandai
+    Namco, LAFAN1) it sits on top of the joint, continuing the neck, 0.09 skeleton sizes wide.
+    """
+    J = sk.num_joints
+    names = [n.lower() for n in sk.names]
+    cand = [j for j in range(1, J) if "head" in names[j] and "end" not in names[j] and _side(sk.names[j]) == _CENTER]
+    if cand:
+        h = cand[0]
+    elif sk.end_site_parents:
+        _, rest_ends = sk.rest_positions()
+        h = sk.end_site_parents[int(torch.argmax(rest_ends[:, up]))]
+        if _side(sk.names[h]) != _CENTER or h == 0:
+            return None, 0.0
+    else:
+        return None, 0.0
+    ends = [e for e, p in enumerate(sk.end_site_parents) if p == h]
+    lengths = [float(sk.end_site_offsets[e].norm()) for e in ends]
+    if lengths and max(lengths) > 0.03 * sk.size():
+        e = ends[int(np.argmax(lengths))]
+        return 0.5 * (pts[:, h] + pts[:, J + e]), 0.95 * max(lengths)
+    d = 0.09 * sk.size()
+    along = pts[:, h] - pts[:, sk.parents[h]]
+    norm = np.linalg.norm(along, axis=-1, keepdims=True)
+    unit = np.where(norm > 1e-9, along / np.where(norm > 1e-9, norm, 1.0), 0.0)
+    return pts[:, h] + 0.5 * d * unit, d
 
 
 def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
@@ -194,24 +238,31 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
     T, P = pts.shape[:2]
     J = sk.num_joints
     axes = _canonical_axes(up)
-    height_all = pts[..., up]
-    finite = np.isfinite(height_all)
-    floor = float(np.min(height_all[finite])) if finite.any() else 0.0
-    top = float(np.max(height_all[finite])) if finite.any() else 1.0
 
     # the followed joint: the root, or a root child whose translation is animated (Bandai
-    # Namco's Hips under joint_Root), whose path is the character's
-    follow = 0
+    # Namco's Hips under joint_Root, which stays on the ground), whose path is the character's
     animated = sk.translation_animated
-    for c in sk.children(0):
-        if animated[c]:
-            follow = c
-            break
-    skip_bone = {c for c in sk.children(0) if animated[c]}  # a trajectory, not a bone
+    skip_bone = [c for c in sk.children(0) if animated[c]]  # a trajectory, not a bone
+    follow = skip_bone[0] if skip_bone else 0
+
+    # bones per side: parent -> joint, joint -> end site; NaN (index P) between segments
+    segs: dict[int, list[int]] = {_CENTER: [], _LEFT: [], _RIGHT: []}
+    for j in range(1, J):
+        if j not in skip_bone:
+            segs[_side(sk.names[j])] += [sk.parents[j], j, P]
+    for e, p in enumerate(sk.end_site_parents):
+        segs[_side(sk.names[p])] += [p, J + e, P]
+    lines = {k: np.asarray(v, dtype=np.int64) for k, v in segs.items() if v}
+    drawn = np.unique(np.concatenate(list(lines.values())))[:-1] if lines else np.array([follow])
+
+    height = pts[:, drawn, up]
+    finite = np.isfinite(height)
+    floor = float(np.min(height[finite])) if finite.any() else 0.0
+    top = float(np.max(height[finite])) if finite.any() else floor + 1.0
 
     floor_xy = pts[:, follow][:, axes[:2]]  # (T, 2) in (e1, e2)
     floor_xy = np.where(np.isfinite(floor_xy), floor_xy, 0.0)
-    smooth = _moving_average(floor_xy, max(1, int(round(_FOLLOW_SECONDS * motion.fps)) | 1))
+    smooth = _moving_average(floor_xy, max(1, int(round(_FOLLOW_SECONDS * motion.fps))) | 1)
     cam3 = np.zeros((T, 3))
     cam3[:, axes[0]], cam3[:, axes[1]], cam3[:, up] = smooth[:, 0], smooth[:, 1], floor
     root3 = cam3.copy()
@@ -220,29 +271,13 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
     scr = (pts - cam3[:, None]) @ view[:2].T  # (T, P, 2), relative to the camera centre
     screen = np.concatenate([scr, np.full((T, 1, 2), np.nan)], axis=1)
 
-    # bones per side: parent -> joint, joint -> end site
-    segs: dict[int, list[int]] = {_CENTER: [], _LEFT: [], _RIGHT: []}
-    for j in range(1, J):
-        if j in skip_bone:
-            continue
-        segs[_side(sk.names[j])] += [sk.parents[j], j, P]
-    for e, p in enumerate(sk.end_site_parents):
-        segs[_side(sk.names[p])] += [p, J + e, P]
-    lines = {k: np.asarray(v, dtype=np.int64) for k, v in segs.items() if v}
-
-    # the head: the end site highest in the rest pose, drawn as a circle on its bone
-    head, head_size = None, 0.0
-    if sk.end_site_parents:
-        _, rest_ends = sk.rest_positions()
-        e = int(torch.argmax(rest_ends[:, up]))
-        hj = sk.end_site_parents[e]
-        if _side(sk.names[hj]) == _CENTER:
-            head_size = float(sk.end_site_offsets[e].norm())
-            head = 0.5 * (scr[:, hj] + scr[:, J + e])
+    head, head_size = _head(sk, pts, up)
+    if head is not None:
+        head = (head - cam3) @ view[:2].T
     return _Clip(
         name=motion.name, fps=motion.fps, screen=screen, lines=lines, head=head, head_size=head_size,
         root=root3 @ view[:2].T, center=cam3 @ view[:2].T, floor_center=smooth, floor=floor,
-        height=max(top - floor, 1e-6),
+        height=max(top - floor, 0.25 * sk.size(), 1e-9), size=max(sk.size(), 1e-9), drawn=drawn,
     )
 
 
@@ -253,25 +288,45 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
 
 @dataclass
 class _Scene:
-    """What every panel shares: view, fixed data limits and grid layout."""
+    """What the panels share: view, fixed limits, grid layout, panel size.
+
+    Limits and grid sizes are in *reference units*: panel ``i`` shows them times
+    ``scale[i]`` in its clip's own units. ``scale`` is all ones (one scale for every panel,
+    so sizes and speeds compare) unless the skeletons differ in size by more than a factor
+    of 1.5 (other units, e.g. CMU's against centimetres); then each panel is scaled by its
+    own skeleton's :meth:`~torchsplice.core.skeleton.Skeleton.size`.
+    """
 
     view: np.ndarray
     up: int
     xlim: tuple[float, float]
     ylim: tuple[float, float]
-    spacing: float  # grid spacing (units)
-    reach: float  # grid half-width around the camera centre (units)
+    height: float  # the tallest figure (reference units): sets the grid spacing
+    reach: float  # grid half-width around the camera centre (reference units)
     panel_w: float  # inches
     panel_h: float
+    scale: list[float]
 
 
 def _scene(clips: list[_Clip], up: int, view: np.ndarray, size: float) -> _Scene:
     """Shared limits: every clip's every frame fits, equal aspect, a margin of floor in front."""
-    H = max(c.height for c in clips)
-    xs = np.concatenate([c.screen[..., 0][np.isfinite(c.screen[..., 0])] for c in clips] + [np.zeros(1)])
-    ys = np.concatenate([c.screen[..., 1][np.isfinite(c.screen[..., 1])] for c in clips] + [np.zeros(1)])
+    sizes = [c.size for c in clips]
+    scale = [1.0] * len(clips) if max(sizes) <= 1.5 * min(sizes) else sizes
+    H = max(c.height / k for c, k in zip(clips, scale))
+    xs, ys = [np.zeros(1)], [np.zeros(1)]
+    for c, k in zip(clips, scale):
+        pts = c.screen[:, c.drawn] / k
+        ok = np.isfinite(pts).all(-1)
+        xs.append(pts[..., 0][ok])
+        ys.append(pts[..., 1][ok])
+        if c.head is not None:  # the head circle's outline
+            r = 0.5 * c.head_size / k
+            hd = c.head[np.isfinite(c.head).all(-1)] / k
+            xs += [hd[:, 0] - r, hd[:, 0] + r]
+            ys += [hd[:, 1] - r, hd[:, 1] + r]
+    xs, ys = np.concatenate(xs), np.concatenate(ys)
     half_w = max(float(np.abs(xs).max()) + 0.08 * H, 0.45 * H)
-    y0 = min(float(ys.min()), 0.0) - 0.22 * H
+    y0 = min(float(ys.min()), 0.0) - 0.15 * H
     y1 = max(float(ys.max()), 0.0) + 0.06 * H
     # panel shape follows the data, within reason; then widen the short side to match
     ratio = min(max((y1 - y0) / (2 * half_w), 0.75), 1.6)
@@ -282,21 +337,26 @@ def _scene(clips: list[_Clip], up: int, view: np.ndarray, size: float) -> _Scene
         extra = 2 * half_w * ratio - (y1 - y0)
         y0, y1 = y0 - 0.5 * extra, y1 + 0.5 * extra
     reach = 2.5 * max(half_w, y1 - y0)
-    return _Scene(view=view, up=up, xlim=(-half_w, half_w), ylim=(y0, y1), spacing=_nice(H / 1.75),
-                  reach=reach, panel_w=panel_w, panel_h=panel_h)
+    return _Scene(view=view, up=up, xlim=(-half_w, half_w), ylim=(y0, y1), height=H, reach=reach,
+                  panel_w=panel_w, panel_h=panel_h, scale=[float(k) for k in scale])
 
 
-def _grid_lines(scene: _Scene, clip: _Clip, f: int) -> tuple[np.ndarray, np.ndarray]:
+def _grid_lines(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """World-fixed floor grid lines near the camera centre at frame ``f``, screen coordinates
-    relative to the camera, NaN-separated (two arrays ``x``, ``y``)."""
-    s, R = scene.spacing, scene.reach
+    relative to the camera, NaN-separated (two arrays ``x``, ``y``); ``k``: the panel's scale.
+
+    The spacing is a round number near half the tallest figure's height (1 m for people in
+    centimetres); the lines are fixed in the world, so they slide as the camera follows.
+    """
+    R = k * scene.reach
+    s = max(_nice(k * scene.height / 1.75), _nice(R / 30))  # at most ~60 lines each way
     c = clip.floor_center[f]
     out = []
     for a in (0, 1):  # lines of constant e_a, running along the other axis
-        k = np.arange(math.ceil((c[a] - R) / s), math.floor((c[a] + R) / s) + 1)
-        n = len(k)
-        seg = np.zeros((n, 3, 3))  # (line, start/end/NaN, (e1, e2, up))
-        seg[:, :2, a] = (k * s - c[a])[:, None]
+        n_lo, n_hi = math.ceil((c[a] - R) / s), math.floor((c[a] + R) / s)
+        k_lines = np.arange(n_lo, n_hi + 1)
+        seg = np.zeros((len(k_lines), 3, 3))  # (line, start/end/NaN, (e1, e2, up))
+        seg[:, :2, a] = (k_lines * s - c[a])[:, None]
         seg[:, 0, 1 - a], seg[:, 1, 1 - a] = -R, R
         seg[:, 2] = np.nan
         out.append(seg.reshape(-1, 3))
@@ -314,18 +374,18 @@ class _Panel:
     draws the static background once and blits them over it each frame (:meth:`blit`).
     """
 
-    def __init__(self, fig, rect, scene: _Scene, clip: _Clip, title: str | None, animated: bool):
+    def __init__(self, fig, rect, scene: _Scene, clip: _Clip, k: float, title: str | None, animated: bool):
         from matplotlib.lines import Line2D
         from matplotlib.patches import Rectangle
 
-        self.scene, self.clip = scene, clip
+        self.scene, self.clip, self.k = scene, clip, k
         ax = fig.add_axes(rect)
-        ax.set_xlim(*scene.xlim)
-        ax.set_ylim(*scene.ylim)
+        ax.set_xlim(k * scene.xlim[0], k * scene.xlim[1])
+        ax.set_ylim(k * scene.ylim[0], k * scene.ylim[1])
         ax.set_aspect("equal", adjustable="box")
         ax.set_axis_off()
-        ax.add_patch(Rectangle((0, 0), 1, 1, transform=ax.transAxes, facecolor="#fafafa", edgecolor="#b5b5b5",
-                               lw=0.8, zorder=0))
+        ax.add_patch(Rectangle((0, 0), 1, 1, transform=ax.transAxes, facecolor="white", edgecolor="#b5b5b5",
+                               lw=0.8, zorder=0, clip_on=False))
         self.ax = ax
         self.grid = ax.add_line(Line2D([], [], color=_GRID_COLOR, lw=0.7, zorder=1))
         self.trail = ax.add_line(Line2D([], [], color=_TRAIL_COLOR, lw=1.8, zorder=2, solid_capstyle="round"))
@@ -337,23 +397,28 @@ class _Panel:
             self.bones.append((ax.add_line(ln), idx))
         self.head = None
         if clip.head is not None:
-            ppu = 72.0 * scene.panel_h / (scene.ylim[1] - scene.ylim[0])  # points per data unit
+            ppu = 72.0 * scene.panel_h / (k * (scene.ylim[1] - scene.ylim[0]))  # points per data unit
             self.head = ax.add_line(Line2D([], [], ls="none", marker="o", markersize=max(3.0, clip.head_size * 0.95 * ppu),
                                            markerfacecolor="white", markeredgecolor=_COLORS[_CENTER],
                                            markeredgewidth=0.8 * lw, zorder=6))
         x0, y0, w, h = rect
         if title is not None:
             fig.text(x0 + w / 2, y0 + h + 0.02 * h, title, ha="center", va="bottom", fontsize=10)
-        self.label = fig.text(x0 + w / 2, y0 - 0.015 * h, "", ha="center", va="top", fontsize=8, color="#444444")
-        self.moving = [self.grid, self.trail] + [ln for ln, _ in self.bones] + ([self.head] if self.head else []) + [self.label]
-        for a in self.moving:
+        # the filmstrip labels every cell with its time; the animation draws one time label for
+        # the whole figure (text is the costliest artist to draw) and "(end)" under a held clip
+        self.label = fig.text(x0 + w / 2, y0 - 0.015 * h, "" if not animated else "(end)", ha="center", va="top",
+                              fontsize=8, color="#444444")
+        self.animated = animated
+        self.moving = [self.grid, self.trail] + [ln for ln, _ in self.bones] + ([self.head] if self.head else [])
+        for a in self.moving + [self.label]:
             a.set_animated(animated)
+        self.held = False
         self._trail_frames = max(1, int(round(_TRAIL_SECONDS * clip.fps)))
 
     def show(self, f: int, held: bool = False) -> None:
         """Set every moving artist to frame ``f`` (``held``: past the clip's end, for the label)."""
         c = self.clip
-        gx, gy = _grid_lines(self.scene, c, f)
+        gx, gy = _grid_lines(self.scene, c, f, self.k)
         self.grid.set_data(gx, gy)
         tr = c.root[max(0, f - self._trail_frames):f + 1] - c.center[f]
         self.trail.set_data(tr[:, 0], tr[:, 1])
@@ -363,14 +428,17 @@ class _Panel:
             ln.set_data(xy[:, 0], xy[:, 1])
         if self.head is not None:
             self.head.set_data(c.head[f, :1], c.head[f, 1:])
-        end = "  (end)" if held else ""
-        self.label.set_text(f"{f / c.fps:.2f} s  frame {f}{end}")
+        self.held = held
+        if not self.animated:
+            end = "  (end)" if held else ""
+            self.label.set_text(f"{f / c.fps:.2f} s  frame {f}{end}")
 
     def blit(self) -> None:
         """Draw the moving artists onto the canvas (after the background was restored)."""
-        fig = self.ax.figure
         for a in self.moving:
-            (self.ax if a is not self.label else fig).draw_artist(a)
+            self.ax.draw_artist(a)
+        if self.held:
+            self.ax.figure.draw_artist(self.label)
 
 
 def _new_figure(width_in: float, height_in: float, dpi: int):
@@ -396,14 +464,15 @@ def _animation_figure(scene: _Scene, clips: list[_Clip], titles: list[str], dpi:
     n = len(clips)
     gap = 0.1
     W = n * scene.panel_w + (n + 1) * gap
-    Hh = scene.panel_h + _TITLE_H + _LABEL_H + _MARGIN
+    Hh = scene.panel_h + _TITLE_H + 2 * _LABEL_H + _MARGIN
     fig = _new_figure(W, Hh, dpi)
     W, Hh = fig.get_size_inches()
     panels = []
     for i, (clip, title) in enumerate(zip(clips, titles)):
-        rect = ((gap + i * (scene.panel_w + gap)) / W, (_LABEL_H + _MARGIN / 2) / Hh, scene.panel_w / W, scene.panel_h / Hh)
-        panels.append(_Panel(fig, rect, scene, clip, title, animated=True))
-    return fig, panels
+        rect = ((gap + i * (scene.panel_w + gap)) / W, (2 * _LABEL_H + _MARGIN / 2) / Hh, scene.panel_w / W, scene.panel_h / Hh)
+        panels.append(_Panel(fig, rect, scene, clip, scene.scale[i], title, animated=True))
+    clock = fig.text(0.5, 0.04 / Hh, "", ha="center", va="bottom", fontsize=9, color="#333333", animated=True)
+    return fig, panels, clock
 
 
 def _filmstrip_figure(scene: _Scene, clips: list[_Clip], titles: list[str], frames: int, dpi: int):
@@ -423,7 +492,7 @@ def _filmstrip_figure(scene: _Scene, clips: list[_Clip], titles: list[str], fram
         for k in range(frames):
             rect = ((gap + k * (scene.panel_w + gap)) / W, (top - _TITLE_H - scene.panel_h) / Hh,
                     scene.panel_w / W, scene.panel_h / Hh)
-            row.append(_Panel(fig, rect, scene, clip, None, animated=False))
+            row.append(_Panel(fig, rect, scene, clip, scene.scale[r], None, animated=False))
         cells.append(row)
     return fig, cells
 
@@ -433,35 +502,69 @@ def _filmstrip_figure(scene: _Scene, clips: list[_Clip], titles: list[str], fram
 # ---------------------------------------------------------------------------------------------
 
 
-class _GifWriter(PillowWriter):
-    """PillowWriter that grabs the blitted canvas and writes one shared palette.
+_GIF_MAX_FPS = 50.0
+"""GIF frame delays are whole hundredths of a second and browsers slow down delays under two,
+so a GIF plays at most 50 frames per second; faster clips (CMU's 120) are sampled down."""
 
-    Quantising every frame on its own (Pillow's default) costs ~40 ms a frame; one palette
-    from a few frames, mapped without dithering, costs ~1 ms and suits flat line drawings.
-    The format is named, so the temporary file's name does not matter. GIF stores frame
-    durations in hundredths of a second, so 30 fps plays at 1000 / 30 ms rounded to 10 ms.
+_GIF_MAX_PIXELS = 1.2e9
+"""A GIF is assembled in memory (one byte a pixel, twice over while Pillow encodes it): more
+pixels over all frames than this is refused with a hint (``max_seconds``, smaller, ``.mp4``)."""
+
+_TEXT_COLORS = ("#000000", "#333333", "#444444", "#b5b5b5")
+
+
+def _palette():
+    """A fixed GIF palette: every colour drawn, blended with white and with the grid colour
+    in eighths (antialiased edges), so frames map to it without per-frame quantising.
+
+    Returns the palette image to map against and the ``768`` palette values to write.
     """
+    from matplotlib.colors import to_rgb
+    from PIL import Image
+
+    white, grid = np.ones(3), np.array(to_rgb(_GRID_COLOR))
+    inks = [np.array(to_rgb(c)) for c in (*_COLORS.values(), _GRID_COLOR, _TRAIL_COLOR, *_TEXT_COLORS)]
+    entries = {(255, 255, 255)}
+    for ink in inks:
+        for a in np.linspace(0.125, 1.0, 8):
+            for under in (white, grid):
+                entries.add(tuple(int(round(255 * v)) for v in a * ink + (1 - a) * under))
+    flat = [v for rgb in sorted(entries) for v in rgb][:768]
+    flat += flat[:3] * (256 - len(flat) // 3)
+    # Pillow maps a pixel to the entry nearest the lower corner of its 4x4x4 colour cell, so
+    # pure white would go to a light grey; mapping against entries floored to their cells'
+    # corners and then writing the true colours back keeps every drawn colour exact
+    lookup = Image.new("P", (1, 1))
+    lookup.putpalette([v & ~3 for v in flat])
+    return lookup, flat
+
+
+class _GifWriter(PillowWriter):
+    """PillowWriter that grabs the blitted canvas and maps it onto one fixed palette.
+
+    Pillow's default quantises every frame on its own (~40 ms a frame); mapping onto the
+    fixed palette of :func:`_palette` without dithering costs ~1 ms, suits flat line
+    drawings, and keeps one byte a pixel in memory. The format is named, so the temporary
+    file's name does not matter. GIF stores frame durations in hundredths of a second: 30 fps
+    is written as 30 ms a frame (33.3 rounded to GIF's resolution).
+    """
+
+    def setup(self, fig, outfile, dpi=None):
+        super().setup(fig, outfile, dpi=dpi)
+        self._lookup, self._palette = _palette()
 
     def grab_frame(self, **savefig_kwargs):
         from PIL import Image
 
         w, h = self.fig.canvas.get_width_height()
-        self._frames.append(Image.frombuffer("RGBA", (w, h), bytes(self.fig.canvas.buffer_rgba()), "raw", "RGBA", 0, 1)
-                            .convert("RGB"))
+        rgb = Image.frombuffer("RGBA", (w, h), bytes(self.fig.canvas.buffer_rgba()), "raw", "RGBA", 0, 1).convert("RGB")
+        frame = rgb.quantize(palette=self._lookup, dither=Image.Dither.NONE)
+        frame.putpalette(self._palette)
+        self._frames.append(frame)
 
     def finish(self):
-        from PIL import Image
-
-        frames = self._frames
-        pick = sorted({round(i) for i in np.linspace(0, len(frames) - 1, min(len(frames), 6))})
-        w, h = frames[0].size
-        sheet = Image.new("RGB", (w, h * len(pick)))
-        for k, i in enumerate(pick):
-            sheet.paste(frames[i], (0, k * h))
-        palette = sheet.quantize(64, method=Image.Quantize.FASTOCTREE)
-        p = [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
-        p[0].save(self.outfile, format="GIF", save_all=True, append_images=p[1:],
-                  duration=int(round(1000 / self.fps)), loop=0)
+        self._frames[0].save(self.outfile, format="GIF", save_all=True, append_images=self._frames[1:],
+                             duration=int(round(1000 / self.fps)), loop=0)
 
 
 class _MP4Writer(FFMpegWriter):
@@ -523,9 +626,11 @@ def render(
             clip, ``frames`` columns at evenly spaced times over the longest clip (the same
             times in every row), the time and frame number under each figure.
         titles: one title per clip; the clips' names by default.
-        up_axis: the vertical axis of the data (0, 1, 2 for X, Y, Z); the dataset spec's.
-        fps: the animation's frame rate; the clips' (the highest, if they differ) by default.
-            Each output frame shows, per clip, the frame nearest its time.
+        up_axis: the vertical axis of the data (0, 1, 2 or ``"x"``, ``"y"``, ``"z"``); the
+            dataset spec's.
+        fps: the animation's frame rate; the clips' (the highest, if they differ) by default,
+            at most 50 for a GIF (see :data:`_GIF_MAX_FPS`). Each output frame shows, per clip,
+            the frame nearest its time.
         frames: number of columns of the PNG filmstrip.
         size: width of one panel in inches (its height follows the figures' proportions).
         dpi: pixels per inch.
@@ -533,8 +638,10 @@ def render(
         azimuth, elevation: the fixed camera, degrees (see :func:`view_rotation`).
 
     The animation has as many frames as the longest clip needs at ``fps``; shorter clips hold
-    their last frame (their label says ``(end)``). The output appears complete or not at all:
-    it is written to a temporary file beside it and renamed.
+    their last frame (their label says ``(end)``). A GIF is assembled in memory and refused
+    beyond about a gigapixel over all frames (a minute of four panels at the defaults); MP4
+    streams to ffmpeg. The output appears complete or not at all: it is written to a
+    temporary file beside it and renamed.
 
     Raises:
         TorchspliceError: an unsupported suffix (naming the supported ones), ``.mp4`` without
@@ -570,6 +677,8 @@ def render(
     clips = [_prepare(_truncate(m, max_seconds), up, view) for m in motions]
     scene = _scene(clips, up, view, float(size))
     rate = float(fps) if fps is not None else max(c.fps for c in clips)
+    if suffix == ".gif":
+        rate = min(rate, _GIF_MAX_FPS)
     last = max((c.num_frames - 1) / c.fps for c in clips)  # time of the last frame of the longest clip
 
     def frame_of(c: _Clip, t: float) -> tuple[int, bool]:
@@ -590,26 +699,67 @@ def render(
                 _release(fig)
         else:
             n_out = int(math.floor(last * rate + 1e-6)) + 1
-            fig, panels = _animation_figure(scene, clips, titles, int(dpi))
+            fig, panels, clock = _animation_figure(scene, clips, titles, int(dpi))
+            same_rate = all(c.fps == rate for c in clips)
             try:
                 canvas = fig.canvas
+                w, h = canvas.get_width_height()
+                if suffix == ".gif" and n_out * w * h > _GIF_MAX_PIXELS:
+                    raise TorchspliceError(
+                        f"{output}: a GIF of {n_out} frames of {w}x{h} pixels is too large to assemble in memory; "
+                        f"shorten it (max_seconds), make it smaller (size, dpi) or write .mp4")
                 canvas.draw()  # the static background, once
                 background = canvas.copy_from_bbox(fig.bbox)
                 writer = _make_writer(suffix, rate)
-                with writer.saving(fig, str(tmp), int(dpi)):
+                writer.setup(fig, str(tmp), int(dpi))
+                done = False
+                try:
                     for k in range(n_out):
                         t = k / rate
                         canvas.restore_region(background)
                         for p in panels:
                             p.show(*frame_of(p.clip, t))
                             p.blit()
+                        clock.set_text(f"{t:.2f} s   frame {k}" if same_rate else f"{t:.2f} s")
+                        fig.draw_artist(clock)
                         writer.grab_frame()
-            except subprocess.CalledProcessError as exc:
-                err = (exc.stderr or "").strip().splitlines()
+                    done = True
+                except BrokenPipeError:  # ffmpeg stopped reading: say why
+                    raise TorchspliceError(f"{output}: ffmpeg failed: {_ffmpeg_complaint(writer)}") from None
+                finally:
+                    if done:
+                        writer.finish()
+                    else:
+                        _abandon(writer)
+            except subprocess.CalledProcessError as exc:  # ffmpeg failed at the end
+                err = (exc.stderr if isinstance(exc.stderr, str) else "").strip().splitlines()
                 raise TorchspliceError(f"{output}: ffmpeg failed: {err[-1] if err else exc}") from None
             finally:
                 _release(fig)
     return output
+
+
+def _ffmpeg_complaint(writer) -> str:
+    """The last line ffmpeg wrote to its error stream, once it has exited."""
+    proc = getattr(writer, "_proc", None)
+    if proc is None:
+        return "it stopped reading frames"
+    try:
+        _, err = proc.communicate(timeout=10)
+    except Exception:  # noqa: BLE001 - a best effort for the message only
+        return "it stopped reading frames"
+    lines = (err or b"").decode("utf-8", "replace").strip().splitlines()
+    return lines[-1] if lines else f"exit status {proc.returncode}"
+
+
+def _abandon(writer) -> None:
+    """Stop a writer that failed part-way without finishing the file (the caller removes it)."""
+    proc = getattr(writer, "_proc", None)  # ffmpeg, fed through a pipe
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.communicate()
+    if hasattr(writer, "_frames"):
+        writer._frames = []
 
 
 def _release(fig) -> None:

@@ -1,0 +1,305 @@
+"""Stick-figure rendering: real files read back, a projection that can be checked by hand,
+images that must (and must not) change, one-line errors and atomic output."""
+
+import math
+import shutil
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+
+import matplotlib.pyplot as plt
+
+import torchsplice.viz.render as render_mod
+from torchsplice.core.errors import TorchspliceError
+from torchsplice.core.motion import Motion
+from torchsplice.core.skeleton import Skeleton
+from torchsplice.io.sample import sample_motion
+from torchsplice.viz.render import project, render, view_rotation
+
+SMALL = dict(size=1.6, dpi=50)  # small pictures keep the file fast
+
+
+@pytest.fixture(scope="module")
+def clips():
+    """Short sample clips (30 fps): two walks and an action, 45, 45 and 30 frames."""
+    return {
+        "walk": sample_motion("walk_straight", dtype=torch.float64).slice(0, 45),
+        "curve": sample_motion("walk_curve", dtype=torch.float64).slice(0, 45),
+        "box": sample_motion("carry_box", dtype=torch.float64).slice(0, 30),
+    }
+
+
+def pixels(path) -> np.ndarray:
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB"), dtype=np.int16)
+
+
+def shifted(m: Motion, by) -> Motion:
+    """The same clip moved by ``by`` in the world."""
+    return Motion(m.skeleton, m.rotations, m.root_translation + torch.tensor(by, dtype=m.dtype), m.fps, name=m.name)
+
+
+def axes_cycled(m: Motion) -> Motion:
+    """The same clip with its axes renamed (x, y, z) -> (y, z, x): Y-up data becomes Z-up.
+
+    A cyclic permutation is a proper rotation, so quaternions permute their vector part the
+    same way and the picture must not change when the up axis follows.
+    """
+    perm = [2, 0, 1]  # new (x, y, z) = old (z, x, y)
+    sk = m.skeleton
+    sk2 = Skeleton(sk.names, sk.parents, sk.offsets[:, perm], sk.channels, sk.end_site_parents, sk.end_site_offsets[:, perm])
+    q = m.rotations
+    q2 = torch.cat([q[..., :1], q[..., 1:][..., perm]], dim=-1)
+    return Motion(sk2, q2, m.root_translation[:, perm], m.fps, name=m.name)
+
+
+def pole(position=(0.0, 0.0, 0.0), along=(0.0, 100.0, 0.0), frames=2) -> Motion:
+    """A hand-made two-joint 'skeleton': a root and one joint ``along`` from it (a pole), plus
+    a short end site sideways (+X) at the top, standing still at ``position``."""
+    sk = Skeleton(["base", "tip"], [-1, 0], torch.tensor([[0.0, 0, 0], list(along)], dtype=torch.float64),
+                  [["Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"], ["Zrotation", "Xrotation", "Yrotation"]],
+                  end_site_parents=[1], end_site_offsets=torch.tensor([[30.0, 0, 0]], dtype=torch.float64))
+    rot = torch.zeros(frames, 2, 4, dtype=torch.float64)
+    rot[..., 0] = 1.0
+    root = torch.tensor(position, dtype=torch.float64).expand(frames, 3).clone()
+    return Motion(sk, rot, root, 30.0, name="pole")
+
+
+# -- the projection -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("up", [0, 1, 2])
+def test_view_is_a_rotation_and_up_is_screen_up(up):
+    V = view_rotation(up, azimuth=-55.0, elevation=22.0)
+    assert np.allclose(V @ V.T, np.eye(3), atol=1e-12) and np.isclose(np.linalg.det(V), 1.0)
+    h = np.zeros(3)
+    h[up] = 100.0
+    x, y = project(h, up, azimuth=-55.0, elevation=22.0)
+    assert abs(x) < 1e-9 and y == pytest.approx(100.0 * math.cos(math.radians(22.0)))
+    # level view: heights keep their length; looking down: the floor point nearest the camera
+    # is lower on the screen than the one opposite it
+    assert project(h, up, elevation=0.0)[1] == pytest.approx(100.0)
+    towards = np.zeros(3)
+    towards[[(up + 1) % 3, (up + 2) % 3]] = V[2, [(up + 1) % 3, (up + 2) % 3]]
+    assert project(100 * towards, up)[1] < 0 < project(-100 * towards, up)[1]
+
+
+def test_projection_known_answers_y_up():
+    # azimuth 0 = camera on +Z (in front of the sample's characters), elevation 0: screen
+    # right is +X (the character's left, as seen face to face), screen up is Y
+    p = project(torch.tensor([[10.0, 20.0, 30.0], [0.0, 0.0, 0.0]]), up_axis=1, azimuth=0.0, elevation=0.0)
+    assert np.allclose(p, [[10.0, 20.0], [0.0, 0.0]])
+    # azimuth 90 puts the camera on +X, looking at the character's left side: forward (+Z)
+    # points to the screen's left
+    assert np.allclose(project([0.0, 0.0, 30.0], 1, azimuth=90.0, elevation=0.0), [-30.0, 0.0])
+    # the projection is linear: a translation moves every point alike
+    pts = np.random.default_rng(0).normal(size=(5, 3))
+    assert np.allclose(project(pts + [7.0, -3.0, 2.0], 1) - project(pts, 1), project([7.0, -3.0, 2.0], 1))
+    # up axes by name, as dataset specs spell them
+    assert np.allclose(view_rotation("z"), view_rotation(2))
+
+
+def test_pole_lands_where_expected_in_the_picture(tmp_path):
+    """A pole standing far from the origin: drawn upright at the panel's centre (the camera
+    follows it), its sideways end site at the top; laid along the floor it is drawn flat."""
+    def dark_pixels(m, name):
+        out = render([m], tmp_path / name, titles=[""], frames=1, size=2.0, dpi=60, elevation=10.0)
+        rgb = pixels(out)
+        ink = rgb.max(axis=-1) < 90  # the bone colour; the grid and trail are light
+        ink[-int(0.3 * 60):] = False  # the time label under the panel
+        rows, cols = np.nonzero(ink)
+        return rgb.shape, rows, cols
+
+    shape, rows, cols = dark_pixels(pole(position=(500.0, 0.0, -300.0)), "standing.png")
+    height, width = rows.max() - rows.min(), cols.max() - cols.min()
+    assert height > 4 * width  # upright
+    assert abs(np.median(cols) - shape[1] / 2) < 0.05 * shape[1]  # followed: at the centre
+    top, bottom = rows < np.percentile(rows, 15), rows > np.percentile(rows, 85)
+    assert np.ptp(cols[top]) > 3 * max(np.ptp(cols[bottom]), 1)  # the stub is at the top: up is up
+
+    _, rows, cols = dark_pixels(pole(position=(500.0, 0.0, -300.0), along=(0.0, 0.0, 100.0)), "lying.png")
+    assert rows.max() - rows.min() < cols.max() - cols.min()  # on the floor, seen from 10 degrees up
+
+
+# -- PNG filmstrip ------------------------------------------------------------------------------
+
+
+def test_png_filmstrip_reads_back(tmp_path, clips):
+    out = render([clips["walk"], clips["box"], clips["curve"]], tmp_path / "strip.png", frames=4, **SMALL)
+    assert out == tmp_path / "strip.png" and out.is_file()
+    with Image.open(out) as im:
+        assert im.format == "PNG"
+        w, h = im.size
+    # 4 columns of 1.6-inch panels at 50 dpi, plus small gaps; 3 rows, each a panel plus
+    # its title and labels
+    assert 4 * 1.6 * 50 <= w <= 4 * 1.6 * 50 * 1.1
+    assert 3 * (0.75 * 1.6 * 50) < h < 3 * (1.6 * 1.6 + 0.7) * 50
+    rgb = pixels(out)
+    assert rgb.std() > 10  # not blank
+    blue = (rgb[..., 2] > 150) & (rgb[..., 0] < 90)
+    red = (rgb[..., 0] > 170) & (rgb[..., 2] < 90)
+    assert blue.mean() > 0.002 and red.mean() > 0.002  # left and right limbs are drawn
+    assert plt.get_fignums() == []
+
+
+def test_png_changes_with_the_clip_and_only_then(tmp_path, clips):
+    a = pixels(render([clips["walk"]], tmp_path / "a.png", frames=3, **SMALL))
+    again = pixels(render([clips["walk"]], tmp_path / "again.png", frames=3, **SMALL))
+    b = pixels(render([clips["box"]], tmp_path / "b.png", frames=3, **SMALL))
+    assert np.array_equal(a, again)  # deterministic
+    if a.shape == b.shape:
+        assert np.abs(a - b).mean() > 0.5  # another pose, another picture
+    # and in the same clip, later frames differ from the first
+    w = a.shape[1] // 3
+    assert np.abs(a[:, :w] - a[:, w:2 * w]).mean() > 0.5
+
+
+def test_camera_follows_the_root(tmp_path, clips):
+    """A clip moved far away (by whole grid cells: the grid is 1 m here) looks the same; moved
+    by part of a cell, the figure is the same but the world-fixed grid slides under it."""
+    walk = clips["walk"]
+    a = pixels(render([walk], tmp_path / "here.png", frames=3, **SMALL))
+    far = pixels(render([shifted(walk, (3.0e4, 0.0, -5.0e4))], tmp_path / "far.png", frames=3, **SMALL))
+    assert a.shape == far.shape and np.abs(a - far).max() <= 2
+    part = pixels(render([shifted(walk, (37.0, 0.0, 0.0))], tmp_path / "part.png", frames=3, **SMALL))
+    assert (np.abs(a - part).max(axis=-1) > 8).mean() > 0.03  # grid lines moved across the panels
+
+
+def test_up_axis_is_followed(tmp_path, clips):
+    walk = clips["walk"]
+    y_up = pixels(render([walk], tmp_path / "y.png", frames=2, up_axis=1, **SMALL))
+    z_up = pixels(render([axes_cycled(walk)], tmp_path / "z.png", frames=2, up_axis=2, **SMALL))
+    assert y_up.shape == z_up.shape and np.abs(y_up - z_up).max() <= 2
+    wrong = pixels(render([axes_cycled(walk)], tmp_path / "wrong.png", frames=2, up_axis=1, **SMALL))
+    assert wrong.shape != y_up.shape or np.abs(wrong - y_up).mean() > 1
+
+
+# -- GIF ----------------------------------------------------------------------------------------
+
+
+def gif_info(path):
+    with Image.open(path) as im:
+        assert im.format == "GIF" and im.is_animated
+        n = im.n_frames
+        durations = []
+        first = np.asarray(im.convert("RGB"), dtype=np.int16)
+        for k in range(n):
+            im.seek(k)
+            durations.append(im.info["duration"])
+        last = np.asarray(im.convert("RGB"), dtype=np.int16)
+    return n, durations, first, last
+
+
+def test_gif_plays_to_the_longest_clip(tmp_path, clips):
+    out = render([clips["walk"], clips["box"]], tmp_path / "anim.gif", **SMALL)  # 45 and 30 frames
+    n, durations, first, last = gif_info(out)
+    assert n == 45
+    assert all(abs(d - 1000 / 30) <= 10 for d in durations)  # GIF keeps hundredths of a second
+    assert np.abs(first - last).mean() > 0.5  # it moves
+    assert plt.get_fignums() == []
+
+
+def test_gif_max_seconds_and_fps(tmp_path, clips):
+    n, _, _, _ = gif_info(render([clips["walk"], clips["box"]], tmp_path / "cut.gif", max_seconds=0.5, **SMALL))
+    assert n == 15  # 0.5 s at 30 fps
+    n, durations, _, _ = gif_info(render([clips["walk"]], tmp_path / "slow.gif", fps=10, **SMALL))
+    assert n == 15  # 44 frames at 30 fps last 1.47 s: frames at 0, 0.1, ..., 1.4 s
+    assert all(d == 100 for d in durations)
+
+
+def test_gif_of_fast_clips_plays_at_50_fps(tmp_path, clips):
+    """GIF delays are whole hundredths and browsers slow down shorter ones: a 120 fps clip
+    (CMU's rate) beside a 30 fps one is sampled at 50 fps, in real time."""
+    walk = clips["walk"]
+    fast = Motion(walk.skeleton, walk.rotations, walk.root_translation, 120.0, name="fast")  # 44/120 s
+    n, durations, _, _ = gif_info(render([walk, fast], tmp_path / "fast.gif", **SMALL))
+    assert n == math.floor(44 / 30 * 50) + 1
+    assert all(d == 20 for d in durations)
+
+
+# -- errors and atomic output ---------------------------------------------------------------------
+
+
+def test_mp4_without_ffmpeg_is_one_line(tmp_path, clips, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))  # no ffmpeg anywhere on PATH
+    if render_mod.FFMpegWriter.isAvailable():
+        pytest.skip("ffmpeg is configured by absolute path here (animation.ffmpeg_path)")
+    with pytest.raises(TorchspliceError) as err:
+        render([clips["walk"]], tmp_path / "movie.mp4")
+    assert str(err.value) == ".mp4 needs ffmpeg on PATH; write .gif or .png instead"
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg is not on PATH")
+def test_mp4_with_ffmpeg(tmp_path, clips):
+    out = render([clips["walk"], clips["box"]], tmp_path / "movie.mp4", **SMALL)
+    data = out.read_bytes()
+    assert data[4:8] == b"ftyp" and len(data) > 1000
+    assert [p.name for p in tmp_path.iterdir()] == ["movie.mp4"]
+
+
+@pytest.mark.parametrize("name", ["out.jpg", "out", "out.GIFF"])
+def test_unknown_suffix(tmp_path, clips, name):
+    with pytest.raises(TorchspliceError, match=r"\.gif, \.mp4, \.png") as err:
+        render([clips["walk"]], tmp_path / name)
+    assert "\n" not in str(err.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_arguments(tmp_path, clips):
+    with pytest.raises(TorchspliceError, match="at least one clip"):
+        render([], tmp_path / "x.png")
+    with pytest.raises(TorchspliceError, match="one title per clip"):
+        render([clips["walk"]], tmp_path / "x.png", titles=["a", "b"])
+    with pytest.raises(TorchspliceError, match="up_axis"):
+        render([clips["walk"]], tmp_path / "x.png", up_axis=3)
+    with pytest.raises(TorchspliceError, match="does not exist"):
+        render([clips["walk"]], tmp_path / "missing" / "x.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".png"])
+def test_failure_mid_render_leaves_nothing(tmp_path, clips, monkeypatch, suffix):
+    """The writer has written part of the file when it fails: neither that nor the output remains,
+    and an older output of the same name is left as it was."""
+    def half_written(path):
+        with open(path, "wb") as f:
+            f.write(b"GIF89a-partial" if suffix == ".gif" else b"\x89PNG-partial")
+        raise RuntimeError("disk on fire")
+
+    if suffix == ".gif":
+        monkeypatch.setattr(render_mod._GifWriter, "finish", lambda self: half_written(self.outfile))
+    else:
+        import matplotlib.figure
+        monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda self, path, **kw: half_written(path))
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        render([clips["walk"]], tmp_path / f"fresh{suffix}", **SMALL)
+    assert list(tmp_path.iterdir()) == []
+
+    old = tmp_path / f"old{suffix}"
+    old.write_bytes(b"previous contents")
+    with pytest.raises(RuntimeError):
+        render([clips["walk"]], old, **SMALL)
+    assert old.read_bytes() == b"previous contents"
+    assert [p.name for p in tmp_path.iterdir()] == [old.name]
+    assert plt.get_fignums() == []
+
+
+def test_failure_at_the_first_frame_is_reported_as_it_is(tmp_path, clips, monkeypatch):
+    def broken(self, **kwargs):
+        raise RuntimeError("no frame for you")
+
+    monkeypatch.setattr(render_mod._GifWriter, "grab_frame", broken)
+    with pytest.raises(RuntimeError, match="no frame for you"):
+        render([clips["walk"]], tmp_path / "x.gif", **SMALL)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_oversized_gif_is_refused_before_drawing(tmp_path, clips, monkeypatch):
+    monkeypatch.setattr(render_mod, "_GIF_MAX_PIXELS", 1000.0)
+    with pytest.raises(TorchspliceError, match="max_seconds") as err:
+        render([clips["walk"]], tmp_path / "x.gif", **SMALL)
+    assert "\n" not in str(err.value)
+    assert list(tmp_path.iterdir()) == []
