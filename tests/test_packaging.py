@@ -1,7 +1,6 @@
 """The package as installed: every subpackage listed in pyproject.toml, the shipped specs found."""
 
 import sys
-from pathlib import Path
 
 from conftest import REPO
 

@@ -1,11 +1,9 @@
 """Alignment pictures, the spec's ground-truth rule, and the evaluation report."""
 
-import json
 import shutil
 
 import numpy as np
 import pytest
-import torch
 
 from torchsplice.cli import main
 from torchsplice.core.errors import SpecError, TorchspliceError

@@ -28,6 +28,20 @@ def _progress(iterable, total: int, desc: str, quiet: bool):
                 file=sys.stderr, dynamic_ncols=True)
 
 
+def _new_output(args) -> Path:
+    """``args.output`` as a path, refusing to overwrite an existing file without ``--force``."""
+    out = Path(args.output)
+    if out.exists() and not args.force:
+        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    return out
+
+
+def _read_pair(db, args):
+    """The ``--locomotion`` and ``--action`` clips of an open database, and the spec that fits them."""
+    loco, act = db.read(args.locomotion), db.read(args.action)
+    return loco, act, _db_spec(db, db.clip_info(args.locomotion)["skeleton"], loco.skeleton)
+
+
 def _say(args, msg: str) -> None:
     if not getattr(args, "quiet", False):
         print(msg)
@@ -168,9 +182,7 @@ def cmd_export(args) -> int:
     from .io.bvh import write_bvh
     from .io.database import MotionDatabase
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    out = _new_output(args)
     with MotionDatabase.open(args.database) as db:
         m = db.read(args.clip, dtype=torch.float64)
     write_bvh(m, out)
@@ -231,12 +243,9 @@ def cmd_splice(args) -> int:
     from .splice import splice
     from .splice.references import find_reference
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    out = _new_output(args)
     with MotionDatabase.open(args.database) as db:
-        loco, act = db.read(args.locomotion), db.read(args.action)
-        spec = _db_spec(db, db.clip_info(args.locomotion)["skeleton"], loco.skeleton)
+        loco, act, spec = _read_pair(db, args)
         ref = None
         if args.method == "cpmc":
             name = args.reference
@@ -274,12 +283,9 @@ def cmd_plot_alignment(args) -> int:
     from .io.database import MotionDatabase
     from .viz.alignment import plot_alignment
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    out = _new_output(args)
     with MotionDatabase.open(args.database) as db:
-        loco, act = db.read(args.locomotion), db.read(args.action)
-        spec = _db_spec(db, db.clip_info(args.locomotion)["skeleton"], loco.skeleton)
+        loco, act, spec = _read_pair(db, args)
     plot_alignment(loco, act, spec, out, options=_splice_options(args))
     _say(args, f"wrote {out}: alignment of {act.name} to {loco.name}")
     return 0
@@ -289,9 +295,7 @@ def cmd_render(args) -> int:
     from .io.database import MotionDatabase
     from .viz.render import render
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    out = _new_output(args)
     with MotionDatabase.open(args.database) as db:
         clips = [db.read(name) for name in args.clips]
         k = db.clip_info(args.clips[0])["skeleton"]
@@ -305,9 +309,7 @@ def cmd_render(args) -> int:
 def cmd_evaluate(args) -> int:
     from .evaluation.report import evaluate_database
 
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+    out = _new_output(args)
     agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
                             max_rows=args.max_rows)
     if not args.quiet:

@@ -254,7 +254,7 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
     lines += ["## Per clip", ""]
     for m in methods:
         cs = [c for c in per_clip if c["method"] == m]
-        lines += [f"### {m}", "", f"| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
+        lines += [f"### {m}", "", "| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
                   "|---|---|---|---|---|---|---|"]
         for c in cs[:max_rows]:
             lines.append(f"| {c['name']} | {c['frames']} | {_fmt(c['foot_skate'])} | {_fmt(c['phase'], 3)}"

@@ -17,7 +17,7 @@ keep the locomotion's skeleton, frame rate, root and lower body.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import torch

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..align.curve import fit_alignment_curve, interpolate_frames
+from ..align.curve import fit_alignment_curve
 from ..align.distance import distance_grid, heading_from_hips
 from ..align.horn import horn_rotation
 from ..align.timewarp import timewarp
@@ -249,8 +249,3 @@ def splice_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, sk
         pelvis = quat_mul(local, pelvis)
         spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton)
     return SplicedTensors(spliced, align, correction, q_g)
-
-
-def interpolate_positions(c: ClipTensors, times: torch.Tensor) -> torch.Tensor:
-    """Global positions of ``c`` at fractional frame ``times`` ``(B, T')`` (linear)."""
-    return interpolate_frames(c.positions, times.to(c.positions.dtype), c.lengths)
