@@ -270,6 +270,11 @@ def cmd_splice(args) -> int:
     return 0
 
 
+def _add_output_flags(s, force_help: str = "overwrite an existing file", quiet_help: str = "print nothing on success") -> None:
+    s.add_argument("-f", "--force", action="store_true", help=force_help)
+    s.add_argument("-q", "--quiet", action="store_true", help=quiet_help)
+
+
 def _add_splice_options(s) -> None:
     s.add_argument("--max-run", type=_positive_int, default=3, metavar="L",
                    help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
@@ -370,8 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "curve, sharp turn, side-step, jog) and actions performed while walking (carry a "
                                    "box, carry a cup, wave, punch, arms out) on a standard 22-joint skeleton.")
     s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
-    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    _add_output_flags(s)
     s.set_defaults(func=cmd_sample)
 
     s = sub.add_parser("import", help="import BVH files or folders into a motion database",
@@ -402,8 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("database", help="motion database (.h5)")
     s.add_argument("clip", help="clip name")
     s.add_argument("-o", "--output", required=True, help="BVH file to write")
-    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    _add_output_flags(s)
     s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("splice", help="splice one action onto one locomotion and write a BVH file",
@@ -420,8 +423,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", default="splice", choices=["splice", "naive", "cpmc"], help="splicing method (default splice)")
     s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
     _add_splice_options(s)
-    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    _add_output_flags(s)
     s.set_defaults(func=cmd_splice)
 
     s = sub.add_parser("plot-alignment", help="picture of one pair's time alignment (distance grid, DP path, curve)",
@@ -433,8 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
     s.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
     _add_splice_options(s)
-    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    _add_output_flags(s)
     s.set_defaults(func=cmd_plot_alignment, force_locomotion=True)
 
     s = sub.add_parser("render", help="stick-figure preview of clips side by side (GIF, MP4 or PNG filmstrip)",
@@ -446,8 +447,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
     s.add_argument("--frames", type=_positive_int, default=8, help="frames per clip in a PNG filmstrip (default 8)")
     s.add_argument("--max-seconds", type=float, default=None, help="show at most this many seconds")
-    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    _add_output_flags(s)
     s.set_defaults(func=cmd_render)
 
     s = sub.add_parser("evaluate", help="Markdown report judging a spliced database, per clip and per method",
