@@ -123,3 +123,21 @@ def test_sample_command_and_export_of_a_sample_clip(tmp_path, capsys):
     # an existing output is not overwritten without --force
     code, _, err = run(capsys, "sample", "-o", db)
     assert code == 2 and "already exists" in err
+
+
+def test_bvh_writers_refuse_other_file_names_and_misspelt_clips_get_a_hint(tmp_path, capsys):
+    db = tmp_path / "s.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    code, _, err = run(capsys, "splice", db, "--locomotion", "walk_curve", "--action", "carry_box", "-o", tmp_path / "x.h5")
+    assert code == 2 and "must end in .bvh" in err and not (tmp_path / "x.h5").exists()
+    code, _, err = run(capsys, "export", db, "walk_curve", "-o", tmp_path / "w.txt")
+    assert code == 2 and "must end in .bvh" in err and not (tmp_path / "w.txt").exists()
+    code, _, err = run(capsys, "splice", db, "--locomotion", "walk_curve", "--action", "carry_bx", "-o", tmp_path / "y.bvh")
+    assert code == 2 and "similar: carry_box" in err
+
+
+def test_unknown_selector_prefix_is_refused(tmp_path, capsys):
+    db = tmp_path / "s.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    code, _, err = run(capsys, "splice-all", db, "-o", tmp_path / "o.h5", "--locomotions", "rol:locomotion")
+    assert code == 2 and "unknown prefix 'rol'" in err and not (tmp_path / "o.h5").exists()

@@ -36,6 +36,14 @@ def _new_output(args) -> Path:
     return out
 
 
+def _bvh_output(args) -> Path:
+    """``args.output`` for a BVH writer: it must end in ``.bvh``."""
+    out = _new_output(args)
+    if out.suffix.lower() != ".bvh":
+        raise TorchspliceError(f"{out}: writes BVH, so the file name must end in .bvh")
+    return out
+
+
 def _read_pair(db, args):
     """The ``--locomotion`` and ``--action`` clips of an open database, and the spec that fits them."""
     loco, act = db.read(args.locomotion), db.read(args.action)
@@ -182,7 +190,7 @@ def cmd_export(args) -> int:
     from .io.bvh import write_bvh
     from .io.database import MotionDatabase
 
-    out = _new_output(args)
+    out = _bvh_output(args)
     with MotionDatabase.open(args.database) as db:
         m = db.read(args.clip, dtype=torch.float64)
     write_bvh(m, out)
@@ -243,7 +251,7 @@ def cmd_splice(args) -> int:
     from .splice import splice
     from .splice.references import find_reference
 
-    out = _new_output(args)
+    out = _bvh_output(args)
     with MotionDatabase.open(args.database) as db:
         loco, act, spec = _read_pair(db, args)
         ref = None
@@ -262,9 +270,11 @@ def cmd_splice(args) -> int:
     result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
     write_bvh(result.motion, out)
     extra = f", reference {result.reference}" if result.reference else ""
+    detail = "" if args.method == "naive" else (
+        f"; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames"
+        + (f", posture rotation {result.posture_deg:.1f} deg" if args.method == "splice" else ""))
     _say(args, f"wrote {out}: {args.method} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
-               f"at {result.motion.fps:g} fps; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames, "
-               f"posture rotation {result.posture_deg:.1f} deg")
+               f"at {result.motion.fps:g} fps{detail}")
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
     return 0
@@ -307,7 +317,7 @@ def cmd_render(args) -> int:
         spec = _db_spec(db, k, clips[0].skeleton)
     render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=args.frames,
            max_seconds=args.max_seconds)
-    _say(args, f"wrote {out}: {len(clips)} clips")
+    _say(args, f"wrote {out}: {len(clips)} clip{'s' if len(clips) != 1 else ''}")
     return 0
 
 
@@ -318,9 +328,14 @@ def cmd_evaluate(args) -> int:
     agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
                             max_rows=args.max_rows)
     if not args.quiet:
+        from .io.database import MotionDatabase
+
+        with MotionDatabase.open(args.database) as db:
+            u = db.attrs.get("units") or "units"
         for method, a in agg.items():
-            gt = f", ground-truth error {a['gt_error']:.2f} over {a['gt_pairs']} pairs" if a["gt_error"] is not None else ""
-            print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f}/s, posture kept {a['posture']:.2f}{gt}")
+            gt = f", ground-truth error {a['gt_error']:.2f} {u} over {a['gt_pairs']} pairs" if a["gt_error"] is not None else ""
+            print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f} {u}/s, "
+                  f"posture kept {a['posture']:.2f} {u}{gt}")
         print(f"wrote {out}")
     return 0
 

@@ -38,6 +38,7 @@ complete at the target path.
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import shutil
@@ -181,7 +182,7 @@ class MotionDatabase:
             raise ValueError(f"bad extra columns {bad or columns}")
         path = Path(path)
         if path.exists() and not overwrite:
-            raise DatabaseError(f"{path}: already exists (use overwrite, or --force on the command line)")
+            raise DatabaseError(f"{path}: already exists (use --force to overwrite)")
         if not path.parent.exists():
             raise DatabaseError(f"{path}: folder {path.parent} does not exist")
         tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
@@ -334,7 +335,7 @@ class MotionDatabase:
             return int(clip)
         index = self._index_map()
         if clip not in index:
-            close = [n for n in index if clip.lower() in n.lower()][:5]
+            close = [n for n in index if clip.lower() in n.lower()][:5] or difflib.get_close_matches(clip, list(index), n=5)
             hint = f"; similar: {', '.join(close)}" if close else "; `torchsplice info` lists the clips"
             raise DatabaseError(f"{self.path}: no clip named {clip!r}{hint}")
         return self._name_index[clip]

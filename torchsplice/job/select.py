@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import fnmatch
 import json
+import re
 from typing import Sequence
 
 from ..core.errors import TorchspliceError
@@ -35,6 +36,9 @@ def parse_selector(text: str) -> list[tuple[str, str, str]]:
             if not eq or not key:
                 raise TorchspliceError(f"selector {part!r} must read label:KEY=VALUE")
             alts.append(("label", key, value))
+        elif re.match(r"^[A-Za-z]+:", part):
+            raise TorchspliceError(f"selector {part!r}: unknown prefix {part.split(':')[0]!r} (use role:NAME, "
+                                   "label:KEY=VALUE, or a glob on clip names)")
         else:
             alts.append(("name", "", part))
     return alts
