@@ -280,6 +280,12 @@ def cmd_splice(args) -> int:
     return 0
 
 
+def _add_pair_args(s) -> None:
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("--locomotion", required=True, metavar="NAME", help="clip giving root and lower body")
+    s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
+
+
 def _add_output_flags(s, force_help: str = "overwrite an existing file", quiet_help: str = "print nothing on success") -> None:
     s.add_argument("-f", "--force", action="store_true", help=force_help)
     s.add_argument("-q", "--quiet", action="store_true", help=quiet_help)
@@ -431,9 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(per-bone upper-body replacement, no timewarp) and cpmc (differencing against a "
                                    "plain-locomotion reference of the action's performer, chosen by the spec's "
                                    "[clips.reference] rule or named with --reference).")
-    s.add_argument("database", help="motion database (.h5)")
-    s.add_argument("--locomotion", required=True, metavar="NAME", help="clip giving root and lower body")
-    s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
+    _add_pair_args(s)
     s.add_argument("-o", "--output", required=True, help="BVH file to write")
     s.add_argument("--method", default="splice", choices=["splice", "naive", "cpmc"], help="splicing method (default splice)")
     s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
@@ -445,9 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Draw the lower-body distance grid of a locomotion and an action as a heat map with "
                                    "the optimal DP path and the fitted alignment curve over it (Heck et al. 2006, "
                                    "Figure 3), and the per-frame pelvis correction angle below. PNG, PDF or SVG.")
-    s.add_argument("database", help="motion database (.h5)")
-    s.add_argument("--locomotion", required=True, metavar="NAME", help="clip giving root and lower body")
-    s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
+    _add_pair_args(s)
     s.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
     _add_splice_options(s)
     _add_output_flags(s)
@@ -474,8 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sources", nargs="+", metavar="DB", help="databases holding the source clips (default: as recorded)")
     s.add_argument("--no-pictures", action="store_true", help="tables only")
     s.add_argument("--max-rows", type=_positive_int, default=60, help="per-clip rows per method (default 60)")
-    s.add_argument("-f", "--force", action="store_true", help="overwrite an existing report")
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    _add_output_flags(s, force_help="overwrite an existing report")
     s.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("splice-all", help="splice every selected locomotion x action pair into a new database",

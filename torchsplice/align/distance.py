@@ -157,6 +157,14 @@ def _best_rotation(C, S, delta, max_dev: float):
     return r * torch.cos(e - ec), wrap_angle(delta + ec)
 
 
+def _check_inputs(a, b, weights, up_axis, heading_a, heading_b, max_dev, min_dim: int, shape: str) -> torch.Tensor:
+    """Validate the arguments shared by :func:`distance_grid` and :func:`align_frames`; the weights."""
+    K = _check_clouds(a, b, min_dim, shape)
+    floor_axes(up_axis)
+    _check_headings(heading_a, heading_b, max_dev)
+    return _weights(weights, K, a)
+
+
 def distance_grid(
     a: torch.Tensor,
     b: torch.Tensor,
@@ -183,10 +191,7 @@ def distance_grid(
     up and floor translations, via a few batched matrix products; tiny negative round-off is
     clamped to 0.
     """
-    K = _check_clouds(a, b, 3, "(..., T, K, 3)")
-    floor_axes(up_axis)
-    _check_headings(heading_a, heading_b, max_heading_deviation)
-    w = _weights(weights, K, a)[..., None, :]  # (..., 1, K): same for every frame
+    w = _check_inputs(a, b, weights, up_axis, heading_a, heading_b, max_heading_deviation, 3, "(..., T, K, 3)")[..., None, :]  # (..., 1, K): same for every frame
     ref = a[..., up_axis].mean(dim=(-2, -1), keepdim=True)  # common height origin (round-off)
     ha, ya, _ = _centred(a, w, up_axis, ref)
     hb, yb, _ = _centred(b, w, up_axis, ref)
@@ -236,10 +241,7 @@ def align_frames(
     ``rotate_about_up(b, theta[..., None], up_axis) + translation[..., None, :]`` is the best fit of ``b`` onto
     ``a`` and ``distance = sum_k w_k |a_k - that_k|^2`` (evaluated directly).
     """
-    K = _check_clouds(a, b, 2, "(..., K, 3)")
-    floor_axes(up_axis)
-    _check_headings(heading_a, heading_b, max_heading_deviation)
-    w = _weights(weights, K, a)
+    w = _check_inputs(a, b, weights, up_axis, heading_a, heading_b, max_heading_deviation, 2, "(..., K, 3)")
     zero = a.new_zeros(())
     ha, _, ca = _centred(a, w, up_axis, zero)
     hb, _, cb = _centred(b, w, up_axis, zero)

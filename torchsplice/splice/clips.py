@@ -19,39 +19,50 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..kinematics.fk import forward_kinematics
 
-__all__ = ["ClipTensors", "clips_to_tensors", "resample_motion", "check_pair", "check_clip", "shift_frames", "with_fk"]
+__all__ = ["ClipTensors", "clips_to_tensors", "resample_motion", "check_pair", "check_clip", "shift_frames", "with_fk", "without_fk"]
 
 
 @dataclass
 class ClipTensors:
-    """A padded batch of clips on one skeleton with their FK (see the module docstring)."""
+    """A padded batch of clips on one skeleton with their FK (see the module docstring).
+
+    ``positions`` and ``global_rotations`` are ``None`` for results whose FK nobody reads
+    (the final spliced clips: callers keep local rotations and translations).
+    """
 
     rotations: torch.Tensor
     translations: torch.Tensor
     lengths: torch.Tensor
-    positions: torch.Tensor
-    global_rotations: torch.Tensor
+    positions: torch.Tensor | None
+    global_rotations: torch.Tensor | None
 
     @property
     def root_translation(self) -> torch.Tensor:
         """``(B, T, 3)`` position of joint 0."""
         return self.translations[:, :, 0]
 
+    def _map(self, fn) -> "ClipTensors":
+        """Apply ``fn`` to every per-frame tensor (skipping absent FK), keeping ``lengths``."""
+        return ClipTensors(fn(self.rotations), fn(self.translations), self.lengths,
+                           *(None if t is None else fn(t) for t in (self.positions, self.global_rotations)))
+
     def take(self, index: torch.Tensor) -> "ClipTensors":
         """Clips ``index`` ``(B',)`` of the batch (a gather, e.g. to form pairs)."""
-        return ClipTensors(*(t.index_select(0, index) for t in
-                             (self.rotations, self.translations, self.lengths, self.positions, self.global_rotations)))
+        out = self._map(lambda t: t.index_select(0, index))
+        out.lengths = self.lengths.index_select(0, index)
+        return out
 
     def shift(self, start: torch.Tensor) -> "ClipTensors":
         """Each clip ``b`` starting at its frame ``start[b]`` (cropping the frames before)."""
-        return ClipTensors(*(shift_frames(x, start, self.lengths) for x in
-                             (self.rotations, self.translations)), self.lengths - start,
-                           *(shift_frames(x, start, self.lengths) for x in (self.positions, self.global_rotations)))
+        out = self._map(lambda t: shift_frames(t, start, self.lengths))
+        out.lengths = self.lengths - start
+        return out
 
     def first_frames(self, T: int) -> "ClipTensors":
         """The first ``T`` frames (lengths capped at ``T``)."""
-        return ClipTensors(self.rotations[:, :T], self.translations[:, :T], self.lengths.clamp(max=T),
-                           self.positions[:, :T], self.global_rotations[:, :T])
+        out = self._map(lambda t: t[:, :T])
+        out.lengths = self.lengths.clamp(max=T)
+        return out
 
     def at_times(self, times: torch.Tensor, lengths: torch.Tensor, skeleton: Skeleton) -> "ClipTensors":
         """Clips sampled at fractional frame ``times`` ``(B, T')`` (slerp and linear), with new FK."""
@@ -65,6 +76,11 @@ def shift_frames(x: torch.Tensor, start: torch.Tensor, lengths: torch.Tensor) ->
     T = x.shape[1]
     idx = torch.minimum(torch.arange(T, device=x.device)[None, :] + start[:, None], (lengths - 1)[:, None])
     return torch.gather(x, 1, idx.reshape(idx.shape + (1,) * (x.dim() - 2)).expand(idx.shape + x.shape[2:]))
+
+
+def without_fk(rotations: torch.Tensor, translations: torch.Tensor, lengths: torch.Tensor) -> ClipTensors:
+    """:class:`ClipTensors` of local rotations and translations only (no FK computed)."""
+    return ClipTensors(rotations, translations, lengths, None, None)
 
 
 def with_fk(rotations: torch.Tensor, translations: torch.Tensor, lengths: torch.Tensor, skeleton: Skeleton) -> ClipTensors:

@@ -38,7 +38,7 @@ from ..core.rotations import quat_apply, quat_conj, quat_mul
 from ..core.skeleton import Skeleton
 from ..io.spec import SkeletonRoles
 from ..kinematics.heading import heading_frame, to_heading_frame
-from .clips import ClipTensors, shift_frames, with_fk
+from .clips import ClipTensors, shift_frames, with_fk, without_fk
 
 __all__ = ["AlignOptions", "TimeAlignment", "time_align", "phase_crop", "splice_tensors", "SplicedTensors"]
 
@@ -172,7 +172,8 @@ class SplicedTensors:
     """Spliced clips ``(B, T, ...)`` with per-pair diagnostics.
 
     Attributes:
-        clips: the spliced :class:`ClipTensors` (``lengths`` = frames of each result).
+        clips: the spliced :class:`ClipTensors` (``lengths`` = frames of each result; local
+            rotations and translations only, no FK).
         alignment: the :class:`TimeAlignment` of action to locomotion.
         pelvis_correction: ``(B, T)`` angle of ``q_A`` per frame, radians.
         posture_rotation: ``(B, 4)`` ``q_G`` (identity without posture transfer).
@@ -185,8 +186,9 @@ class SplicedTensors:
 
 
 def _assemble(loco: ClipTensors, act: ClipTensors, pelvis_rot: torch.Tensor, roles: SkeletonRoles,
-              lengths: torch.Tensor, skeleton: Skeleton) -> ClipTensors:
-    """Root and lower body from ``loco``, pelvis from ``pelvis_rot`` ``(B, T, 4)``, upper body from ``act``."""
+              lengths: torch.Tensor, skeleton: Skeleton, fk: bool = True) -> ClipTensors:
+    """Root and lower body from ``loco``, pelvis from ``pelvis_rot`` ``(B, T, 4)``, upper body from
+    ``act``; with its FK when ``fk`` (needed for the alignment clouds, not for the final result)."""
     T = act.rotations.shape[1]
     upper = torch.zeros(skeleton.num_joints, dtype=torch.bool, device=loco.rotations.device)
     upper[list(roles.upper_body)] = True
@@ -194,7 +196,7 @@ def _assemble(loco: ClipTensors, act: ClipTensors, pelvis_rot: torch.Tensor, rol
     rot[:, :, roles.pelvis] = pelvis_rot
     trans = torch.where(upper[:, None], act.translations, loco.translations[:, :T])
     trans[:, :, roles.pelvis] = loco.translations[:, :T, roles.pelvis]
-    return with_fk(rot, trans, lengths, skeleton)
+    return with_fk(rot, trans, lengths, skeleton) if fk else without_fk(rot, trans, lengths)
 
 
 def _pelvis_clouds(c: ClipTensors, roles: SkeletonRoles) -> torch.Tensor:
@@ -232,13 +234,13 @@ def splice_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, sk
     first = _assemble(loco, act_r, q_lp, roles, frames, skeleton)
     q_a = horn_rotation(_pelvis_clouds(first, roles), _pelvis_clouds(loco.first_frames(T), roles))
     pelvis = quat_mul(q_lp, q_a)
-    spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton)
     correction = 2 * torch.atan2(q_a[..., 1:].norm(dim=-1), q_a[..., 0].abs())
 
     B = frames.shape[0]
     q_g = torch.zeros(B, 4, dtype=pelvis.dtype, device=pelvis.device)
     q_g[:, 0] = 1
     if posture:
+        spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton)
         H, mean_s = _posture_clouds(spliced, roles, frames)
         _, mean_u = _posture_clouds(act_r, roles, frames)
         q_g = horn_rotation(mean_s, mean_u)
@@ -247,5 +249,5 @@ def splice_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, sk
         world = quat_mul(quat_mul(H, q_g[:, None].expand_as(H)), quat_conj(H))  # q_G in world coordinates
         local = quat_mul(quat_mul(quat_conj(q_par), world), q_par)  # ... in the pelvis's parent frame
         pelvis = quat_mul(local, pelvis)
-        spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton)
+    spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton, fk=False)
     return SplicedTensors(spliced, align, correction, q_g)

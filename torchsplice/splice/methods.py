@@ -1,7 +1,7 @@
 """The two baselines on padded pair tensors: naive DOF replacement and CPMC differencing.
 
-Both return :class:`~torchsplice.splice.clips.ClipTensors` of spliced clips plus the time
-mapping used (for each result frame, the action frame it took its upper body from).
+Both return :class:`~torchsplice.splice.clips.ClipTensors` of spliced clips (local rotations
+and translations; no FK) plus the time mapping used (for each result frame, the action frame it took its upper body from).
 
 **Rotation difference (CPMC).** For each upper-body joint (the pelvis and everything above)
 the difference between the action ``q_act`` and its time-aligned plain-locomotion reference
@@ -20,7 +20,7 @@ from ..core.rotations import quat_conj, quat_mul
 from ..core.skeleton import Skeleton
 from ..io.spec import SkeletonRoles
 from ..align.curve import slerp_frames
-from .clips import ClipTensors, shift_frames, with_fk
+from .clips import ClipTensors, shift_frames, without_fk
 from .heck import AlignOptions, TimeAlignment, time_align
 
 __all__ = ["naive_tensors", "cpmc_tensors", "upper_mask"]
@@ -46,7 +46,7 @@ def naive_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, ske
     trans = torch.where(upper[:, None], act.translations[:, :T], loco.translations[:, :T])
     trans[:, :, roles.pelvis] = loco.translations[:, :T, roles.pelvis]
     times = torch.arange(T, dtype=torch.float64, device=lengths.device)[None].expand(lengths.shape[0], T)
-    return with_fk(rot, trans, lengths, skeleton), torch.minimum(times, (lengths - 1)[:, None].to(times.dtype))
+    return without_fk(rot, trans, lengths), torch.minimum(times, (lengths - 1)[:, None].to(times.dtype))
 
 
 def cpmc_tensors(loco: ClipTensors, act: ClipTensors, ref: ClipTensors, roles: SkeletonRoles,
@@ -78,4 +78,4 @@ def cpmc_tensors(loco: ClipTensors, act: ClipTensors, ref: ClipTensors, roles: S
     d = slerp_frames(diff, act_to_base.curve.to(diff.dtype), n_act - act_to_base.crop)
     base = loco.rotations[:, :T]
     rot = torch.where(upper[:, None], quat_mul(base, d), base)
-    return with_fk(rot, loco.translations[:, :T], frames, skeleton), act_to_base, ref_to_act
+    return without_fk(rot, loco.translations[:, :T], frames), act_to_base, ref_to_act
