@@ -162,6 +162,7 @@ class MotionDatabase:
         self.frame_columns: tuple[str, ...] = tuple(extra.get("frame", ()))
         self._staged: list[tuple] = []
         self._staged_frames = 0
+        self._skeleton_ids: dict[int, tuple[Skeleton, int]] = {}  # id -> (object kept alive, row)
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod
@@ -390,8 +391,12 @@ class MotionDatabase:
         ``spec`` (a :class:`~torchsplice.io.spec.DatasetSpec` or ``None``) is stored with a new
         skeleton; its units and up axis must agree with the database's.
         """
+        known = self._skeleton_ids.get(id(skeleton))
+        if known is not None and known[0] is skeleton:
+            return known[1]  # matched once per skeleton object, not per appended clip
         for k, sk in enumerate(self._skeletons):
             if sk.matches(skeleton):
+                self._skeleton_ids[id(skeleton)] = (skeleton, k)
                 return k
         self._writable()
         units = getattr(spec, "units", "") or ""
@@ -419,6 +424,7 @@ class MotionDatabase:
             g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float32, chunks=(chunk,),
                              compression=comp, shuffle=comp is not None)
         self._skeletons.append(skeleton)
+        self._skeleton_ids[id(skeleton)] = (skeleton, k)
         return k
 
     def append(self, motion: Motion, spec=None, extra: dict | None = None, frame_extra: dict | None = None) -> int:
@@ -446,6 +452,102 @@ class MotionDatabase:
         if self._staged_frames >= _FLUSH_FRAMES:
             self.flush()
         return len(self) - 1
+
+    def append_packed(self, skeleton: Skeleton, rotations, root_translation, translations, lengths, names, fps,
+                      spec=None, sources="", roles="", labels=None, extra: dict | None = None,
+                      frame_extra: dict | None = None) -> None:
+        """Add many clips of one skeleton at once, from arrays packed along frames.
+
+        Args:
+            skeleton: the clips' :class:`Skeleton` (matched against the stored ones once).
+            rotations: ``(N, J, 4)`` local rotations (WXYZ) of every frame of every clip, clip
+                after clip; root_translation: ``(N, 3)``; translations: ``(N, J, 3)`` local
+                translations (row 0 is ignored) or ``None`` (the skeleton's offsets).
+            lengths: ``(C,)`` frames per clip, summing to ``N``; names: ``C`` new clip names.
+            fps: one rate for all clips or ``(C,)``; sources, roles: one string or ``C``;
+                labels: ``C`` dicts or JSON strings (``None``: no labels).
+            extra: declared per-clip columns, ``C`` values each; frame_extra: declared
+                per-frame columns, ``(N,)`` values each (missing ones: ``""``, NaN or -1).
+
+        Numpy arrays or tensors. The clips are written at once, after any clips appended
+        before, so row order is call order. Non-finite values are refused.
+        """
+        self._writable()
+        self.flush()
+        arr = lambda x: x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)  # noqa: E731
+        rot, root = arr(rotations), arr(root_translation)
+        lengths = arr(lengths).astype(np.int64).reshape(-1)
+        names = [str(n) for n in names]
+        C, N, J = len(names), int(lengths.sum()), skeleton.num_joints
+        if lengths.shape != (C,) or rot.shape != (N, J, 4) or root.shape != (N, 3) or (lengths < 1).any():
+            raise DatabaseError(f"{self.path}: packed clips do not fit: {C} names, lengths summing to {N}, "
+                                f"rotations {rot.shape}, root translation {root.shape} for {J} joints")
+        trans = None if translations is None else arr(translations)
+        if trans is not None and trans.shape != (N, J, 3):
+            raise DatabaseError(f"{self.path}: translations must be {(N, J, 3)}, got {trans.shape}")
+        index = self._index_map()
+        clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
+        if clash:
+            raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        for name, a in (("rotations", rot), ("root translation", root), ("translations", trans)):
+            if a is not None and not np.isfinite(a).all():
+                row = int(np.nonzero(~np.isfinite(a.reshape(N, -1)).all(1))[0][0])
+                c = int(np.searchsorted(starts, row, side="right") - 1)
+                raise DatabaseError(f"{self.path}: clip {names[c]!r} has non-finite {name} at frame {row - starts[c]}")
+        extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
+        unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
+        if unknown:
+            raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
+        k = self.add_skeleton(skeleton, spec)
+        g = self.h5[f"skeletons/{k}"]
+        arrays = {"rotations": rot, "root_translation": root}
+        if "translations" in g:
+            t = trans.copy() if trans is not None else np.broadcast_to(skeleton.offsets.numpy(), (N, J, 3)).copy()
+            t[:, 0] = root
+            arrays["translations"] = t
+        for name in self.frame_columns:
+            v = frame_extra.get(name)
+            arrays[name] = np.full(N, np.nan, np.float32) if v is None else arr(v).astype(np.float32).reshape(-1)
+            if arrays[name].shape != (N,):
+                raise DatabaseError(f"{self.path}: column {name!r} needs {N} values, got {arrays[name].shape}")
+        each = lambda v: [v] * C if isinstance(v, (str, int, float)) else list(v)  # noqa: E731
+        if labels is None:
+            labels = ["{}"] * C
+        rows = {
+            "name": names, "source": each(sources), "role": each(roles),
+            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in labels],
+            "skeleton": [k] * C, "length": lengths, "fps": each(float(fps)) if np.ndim(fps) == 0 else arr(fps),
+        }
+        for n, kind in self.columns.items():
+            rows[n] = list(extra[n]) if n in extra else [_KINDS[kind][1]] * C
+        try:
+            n0 = g["rotations"].shape[0]
+            for name, a in arrays.items():
+                ds = g[name]
+                ds.resize(n0 + N, axis=0)
+                ds[n0:] = a.astype(ds.dtype, copy=False)
+            rows["start"] = n0 + starts
+            c = self.h5["clips"]
+            m0 = c["name"].shape[0]
+            for name, values in rows.items():
+                dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
+                c[name].resize(m0 + C, axis=0)
+                c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
+        except OSError as exc:
+            raise DatabaseError(os_error_message(self.path, exc)) from None
+        for n in names:
+            index[n] = len(index)
+        if self._names is not None:
+            self._names += names
+        self._flushed += C
+
+    def packed(self, skeleton: int = 0) -> dict[str, np.ndarray]:
+        """Every frame of skeleton ``k`` as whole arrays: ``rotations``, ``root_translation``,
+        ``translations`` (when stored) and the per-frame columns, rows as in the file (read at
+        once: meant for a splice job's parts and other small files)."""
+        g = self.h5[f"skeletons/{skeleton}"]
+        return {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
 
     def flush(self) -> None:
         """Write buffered clips to the file."""

@@ -11,28 +11,35 @@ plain-locomotion ``reference`` of the action's performer, as in Al-Ghreimil & Ha
 engines' additive layers).
 
 Pairs are batched: clips used by several pairs are prepared (resampled to the locomotion's
-frame rate, forward kinematics) once, then every step runs on padded pair tensors. Results
+frame rate, forward kinematics) once. On the CPU the pairs then run through the compiled
+splicer (:mod:`torchsplice.cpu`: one pair per thread, in parallel over pairs); on CUDA, or
+with ``SpliceOptions(backend="torch")``, every step runs on padded pair tensors
+(:mod:`torchsplice.splice.heck`). Both give the same clips (to float32 rounding). Results
 keep the locomotion's skeleton, frame rate, root and lower body.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Sequence
 
+import numpy as np
 import torch
 
 from ..core.errors import MotionError, TorchspliceError
 from ..core.motion import Motion
 from ..io.spec import DatasetSpec, SkeletonRoles
-from .clips import check_clip, check_pair, clips_to_tensors, resample_motion
+from .clips import ClipTensors, check_clip, check_pair, clips_to_tensors, resample_motion
 from .heck import AlignOptions, splice_tensors
 from .locomotion import LocomotionCheck, check_locomotion
 from .methods import cpmc_tensors, naive_tensors
 
-__all__ = ["METHODS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice", "splice_pairs"]
+__all__ = ["METHODS", "BACKENDS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice", "splice_pairs",
+           "resolve_backend"]
 
 METHODS = ("splice", "naive", "cpmc")
+BACKENDS = ("auto", "compiled", "torch")
 
 
 class NotLocomotingError(MotionError):
@@ -50,7 +57,10 @@ class SpliceOptions:
         check_locomotion: run the locomotion check at all (a caller that has checked its
             clips already, such as the n x m job, turns it off).
         min_seconds: shortest clip accepted.
-        dtype, device: where the tensor work runs (float32 on the CPU by default).
+        dtype, device: where the tensor work runs (float32 on the CPU by default); the
+            compiled backend computes in float64 and returns ``dtype``.
+        backend: ``"auto"`` (the compiled splicer on the CPU, torch on other devices),
+            ``"compiled"`` or ``"torch"``.
     """
 
     align: AlignOptions = field(default_factory=AlignOptions)
@@ -60,6 +70,21 @@ class SpliceOptions:
     min_seconds: float = 0.5
     dtype: torch.dtype = torch.float32
     device: str | None = None
+    backend: str = "auto"
+
+
+def resolve_backend(options: SpliceOptions) -> str:
+    """``"compiled"`` or ``"torch"``: what ``options.backend`` means for ``options.device``."""
+    if options.backend not in BACKENDS:
+        raise TorchspliceError(f"unknown backend {options.backend!r}; choose one of {', '.join(BACKENDS)}")
+    on_cpu = options.device is None or torch.device(options.device).type == "cpu"
+    if options.backend == "compiled" and not on_cpu:
+        raise TorchspliceError(f"the compiled backend runs on the CPU; device {options.device!r} needs backend 'torch' or 'auto'")
+    if options.backend == "auto":
+        from ..cpu import available
+
+        return "compiled" if on_cpu and available() else "torch"
+    return options.backend
 
 
 @dataclass
@@ -156,6 +181,8 @@ def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | Ske
 
 def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float) -> list[SpliceResult]:
     """Pairs whose locomotions share a frame rate ``fps``."""
+    if resolve_backend(options) == "compiled":
+        return _splice_group_compiled(pairs, refs, roles, method, options, fps)
     skeleton = pairs[0][0].skeleton
     locos, li = _unique([p[0] for p in pairs])
     acts, ai = _unique([p[1] for p in pairs] + (refs or []))
@@ -220,3 +247,72 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
             notes=tuple(notes[b]),
         ))
     return results
+
+
+def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str]]:
+    """Per pair, the notes on clips that do not locomote; raises unless ``options.force``."""
+    notes: list[list[str]] = [[] for _ in pairs]
+    for b, (lo, ac) in enumerate(pairs):
+        for clip, check in ((lo, checks_l[li[b]]), (ac, checks_a[ai[b]])):
+            if not check.locomoting:
+                if not options.force:
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                notes[b].append(f"{clip.name} does not locomote: {check.reason}")
+    return notes
+
+
+def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float) -> list[SpliceResult]:
+    """:func:`_splice_group` through the compiled splicer (:mod:`torchsplice.cpu`)."""
+    from ..cpu.bank import ClipBank, CompiledSpliceError, splice_bank
+
+    skeleton = pairs[0][0].skeleton
+    locos, li = _unique([p[0] for p in pairs])
+    acts, ai = _unique([p[1] for p in pairs] + (refs or []))
+    bank = ClipBank.from_motions(locos + [resample_motion(a, fps) for a in acts], skeleton, roles, options.align.landmarks)
+    ok = LocomotionCheck(True, "", (0, 0), float("nan"), float("nan"))  # not checked
+    checks = [ok] * len(bank)
+    if options.check_locomotion:
+        positions, lengths = bank.padded_positions()
+        checks = check_locomotion(ClipTensors(None, None, lengths, positions, None), roles, fps)
+    B = len(pairs)
+    li, ai = li.tolist(), ai.tolist()
+    notes = _notes_or_raise(pairs, li, ai, checks[:len(locos)], checks[len(locos):], options)
+    act_idx = [len(locos) + a for a in ai]
+    try:
+        out = splice_bank(bank, li, act_idx[:B], method, ref=act_idx[B:] if method == "cpmc" else None,
+                          posture=options.posture, dtype=np.float64 if options.dtype == torch.float64 else np.float32,
+                          **align_kwargs(options.align, fps))
+    except CompiledSpliceError as exc:
+        lo, ac = pairs[exc.pair]
+        raise MotionError(f"clips {lo.name!r} and {ac.name!r} cannot be aligned: {exc.reason}") from None
+    results = []
+    deg = 180.0 / math.pi
+    for b, (lo, ac) in enumerate(pairs):
+        s, n = int(out.start[b]), int(out.frames[b])
+        scale = ac.fps / fps
+        rot = torch.from_numpy(out.rotations[s:s + n]).to(options.dtype)
+        trans = torch.from_numpy(out.translations[s:s + n]).to(options.dtype)
+        motion = Motion(
+            skeleton=lo.skeleton, rotations=rot, root_translation=trans[:, 0].clone(),
+            translations=trans if lo.skeleton.has_joint_translations else None, fps=fps,
+            name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
+            source=f"splice:{method}", role="spliced",
+            labels={"method": method, "locomotion": lo.name, "action": ac.name},
+        )
+        results.append(SpliceResult(
+            motion=motion, method=method, locomotion=lo.name, action=ac.name,
+            reference=refs[b].name if refs else None, cost=float(out.cost[b]),
+            curve=torch.from_numpy(out.curve[s:s + n] * scale), crop=int(round(float(out.crop[b]) * scale)),
+            path=torch.from_numpy(out.cells[b, : int(out.path_length[b])].copy()),
+            pelvis_correction=torch.from_numpy(out.correction[s:s + n] * deg), posture_deg=float(out.posture[b]) * deg,
+            checks=(checks[li[b]], checks[act_idx[b]]) if options.check_locomotion else None,
+            notes=tuple(notes[b]),
+        ))
+    return results
+
+
+def align_kwargs(align: AlignOptions, fps: float) -> dict:
+    """The compiled splicer's alignment arguments (frame counts at ``fps``) for ``align``."""
+    return dict(max_run=align.max_run, heading_window_deg=align.heading_window_deg, crop=align.crop,
+                crop_context=int(round(align.crop_context_s * fps)), crop_window=max(1, int(round(align.crop_window_s * fps))),
+                knot_spacing=align.knot_spacing_s * fps)

@@ -1,0 +1,64 @@
+"""Compiled CPU kernels (numba): the fast path of every per-pair stage of splicing.
+
+Why compiled kernels: the slope-limited DP is sequential along each pair's rows, and the
+other stages (distance grids, per-frame Horn rotations, curve fits, resampling, FK) are many
+small elementwise passes per pair. As torch code they become thousands of tiny ops, each a
+parallel region over all threads; on a busy machine every region waits for a descheduled
+thread. Here each pair runs start to end in one thread, pairs are spread over threads
+(coarse-grained: one pair per task), and inner loops over frames are vectorised by LLVM.
+
+Why numba rather than a C++ extension: it installs from a wheel on every platform torch
+supports, needs no compiler on the user's machine, and its compiled code is cached next to
+the sources (``__pycache__``) after the first run, so later runs start at once.
+
+The torch implementations (:mod:`torchsplice.align`, :mod:`torchsplice.splice.heck`) stay:
+they run on CUDA and are the reference the kernels are tested against (the DP gives the same
+bits on the same grid; the whole splice agrees to float32 rounding).
+
+Modules: :mod:`.quat` (quaternion algebra on tuples), :mod:`.fk`, :mod:`.grid` (distance
+grids, phase crop), :mod:`.timewarp` (the DP), :mod:`.curve` (B-spline fit, resampling),
+:mod:`.horn`, :mod:`.splice` (whole pairs, in parallel), :mod:`.bank` (the Python side).
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["available", "set_threads", "get_threads"]
+
+_AVAILABLE: bool | None = None
+
+
+def available() -> bool:
+    """Whether numba can be imported (the compiled backend is then used on the CPU)."""
+    global _AVAILABLE
+    if _AVAILABLE is None:
+        if os.environ.get("TORCHSPLICE_BACKEND", "") == "torch":
+            _AVAILABLE = False
+        else:
+            try:
+                import numba  # noqa: F401
+
+                _AVAILABLE = True
+            except Exception:  # pragma: no cover - depends on the install
+                _AVAILABLE = False
+    return _AVAILABLE
+
+
+def set_threads(n: int | None) -> int:
+    """Use ``n`` threads for the compiled kernels (``None``: every core); returns the number set.
+
+    Results do not depend on it: each pair is computed by one thread, alone.
+    """
+    import numba
+
+    n = numba.config.NUMBA_NUM_THREADS if n is None else max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(n)
+    return n
+
+
+def get_threads() -> int:
+    """Threads the compiled kernels use now."""
+    import numba
+
+    return numba.get_num_threads()

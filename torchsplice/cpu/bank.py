@@ -1,0 +1,189 @@
+"""Python side of the compiled splicer: clips packed into a bank, joint tables, the batch call.
+
+:class:`ClipBank` holds clips of one skeleton at one frame rate, packed along frames, with
+their forward kinematics and grid features computed once per clip (not per pair).
+:func:`splice_bank` splices pairs of bank clips with :func:`torchsplice.cpu.splice.splice_batch`
+and returns packed results (:class:`PackedSplices`). Shapes: ``N`` packed frames, ``J`` joints,
+quaternions WXYZ, lengths in the skeleton's units, the up axis from the spec.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from numba import njit, prange
+
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
+from ..io.spec import SkeletonRoles
+from .fk import fk_clips, joint_closure
+from .grid import clip_features
+from .splice import METHOD_CODES, STATUS, splice_batch
+
+__all__ = ["ClipBank", "PackedSplices", "joint_config", "splice_bank", "landmark_joints"]
+
+
+def landmark_joints(roles: SkeletonRoles, landmarks) -> list[int]:
+    """Joint indices of the named landmark roles, pairs expanded (left, right)."""
+    out = []
+    for name in landmarks:
+        v = getattr(roles, name, None)
+        if v is None or name in ("upper_body", "lower_body", "up_axis", "units"):
+            raise ValueError(f"unknown or absent landmark role {name!r}")
+        out += list(v) if isinstance(v, tuple) else [v]
+    return out
+
+
+def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> tuple:
+    """The joint tables the kernels take (see :mod:`torchsplice.cpu.splice`)."""
+    parents = np.array(skeleton.parents, dtype=np.int64)
+    J = skeleton.num_joints
+    upper = np.zeros(J, dtype=np.bool_)
+    upper[list(roles.upper_body)] = True
+    pcloud = [j for j in roles.spine if j != roles.pelvis] + list(roles.shoulders)
+    fk_joints = joint_closure(parents, [roles.pelvis, *pcloud, *roles.hips, *roles.shoulders])
+    act_joints = np.array(sorted(set(fk_joints.tolist()) | set(np.nonzero(upper)[0].tolist())), dtype=np.int64)
+    return (parents, upper, fk_joints, act_joints, np.array(landmark_joints(roles, landmarks), dtype=np.int64),
+            np.array(roles.hips, dtype=np.int64), np.array(roles.shoulders, dtype=np.int64), np.array(pcloud, dtype=np.int64),
+            int(roles.pelvis), int(parents[roles.pelvis]), int(roles.up_axis))
+
+
+@njit(cache=True, parallel=True)
+def _features(pos, starts, lengths, landmarks, hips, up, floor, height, norm, hcos, hsin):
+    for c in prange(starts.shape[0]):
+        s, n = starts[c], lengths[c]
+        clip_features(pos[s:s + n], landmarks, hips, up, n, floor[:, :, s:s + n], height[:, s:s + n], norm[s:s + n],
+                      hcos[s:s + n], hsin[s:s + n])
+
+
+@dataclass
+class ClipBank:
+    """Clips of one skeleton packed along frames, with FK and grid features (float64).
+
+    Attributes:
+        rot ``(N, J, 4)``, trans ``(N, J, 3)`` (row 0: root position), pos ``(N, J, 3)``,
+        grot ``(N, J, 4)``; starts, lengths ``(C,)`` int64; feat: the five arrays of
+        :func:`torchsplice.cpu.grid.clip_features`; joints: :func:`joint_config`.
+    """
+
+    rot: np.ndarray
+    trans: np.ndarray
+    pos: np.ndarray
+    grot: np.ndarray
+    starts: np.ndarray
+    lengths: np.ndarray
+    feat: tuple
+    joints: tuple
+
+    @classmethod
+    def from_arrays(cls, rotations: list, translations: list, skeleton: Skeleton, roles: SkeletonRoles,
+                    landmarks=("root", "knees")) -> "ClipBank":
+        """A bank from per-clip ``(T, J, 4)`` rotations and ``(T, J, 3)`` local translations."""
+        lengths = np.array([len(r) for r in rotations], dtype=np.int64)
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        rot = np.ascontiguousarray(np.concatenate(rotations), dtype=np.float64)
+        trans = np.ascontiguousarray(np.concatenate(translations), dtype=np.float64)
+        joints = joint_config(roles, skeleton, landmarks)
+        pos = np.zeros(trans.shape)
+        grot = np.zeros(rot.shape)
+        fk_clips(rot, trans, joints[0], starts, lengths, pos, grot)
+        K, N = joints[4].shape[0], rot.shape[0]
+        feat = (np.empty((K, 2, N)), np.empty((K, N)), np.empty(N), np.empty(N), np.empty(N))
+        _features(pos, starts, lengths, joints[4], joints[5], joints[10], *feat)
+        return cls(rot, trans, pos, grot, starts, lengths, feat, joints)
+
+    @classmethod
+    def from_motions(cls, motions: list[Motion], skeleton: Skeleton, roles: SkeletonRoles,
+                     landmarks=("root", "knees")) -> "ClipBank":
+        """A bank of clips (already at a common frame rate)."""
+        return cls.from_arrays([m.rotations.detach().cpu().double().numpy() for m in motions],
+                               [m.local_translations().detach().cpu().double().numpy() for m in motions],
+                               skeleton, roles, landmarks)
+
+    def __len__(self) -> int:
+        return len(self.lengths)
+
+    def padded_positions(self, clips=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """FK positions ``(C, T, J, 3)`` of ``clips`` (default: all), padded by repeating each
+        clip's last frame, and their lengths ``(C,)``, as float32 torch tensors."""
+        clips = np.arange(len(self)) if clips is None else np.asarray(clips, dtype=np.int64)
+        lengths = self.lengths[clips]
+        T = int(lengths.max())
+        rows = self.starts[clips, None] + np.minimum(np.arange(T)[None, :], lengths[:, None] - 1)
+        return torch.from_numpy(self.pos[rows].astype(np.float32)), torch.from_numpy(lengths)
+
+
+@dataclass
+class PackedSplices:
+    """Results of :func:`splice_bank`, packed: pair ``b``'s frames are rows
+    ``start[b] : start[b] + frames[b]`` of ``rotations (M, J, 4)``, ``translations (M, J, 3)``
+    (``dtype``), ``curve (M,)`` (action frame at the locomotion's rate, crop included, float64) and
+    ``correction (M,)`` (pelvis correction, radians). Per pair: ``frames``, ``crop``, ``cost``
+    (mean path cost, NaN for naive), ``posture`` (radians), ``cells (B, P, 2)`` and
+    ``path_length`` (the DP path in cropped frames)."""
+
+    start: np.ndarray
+    frames: np.ndarray
+    rotations: np.ndarray
+    translations: np.ndarray
+    curve: np.ndarray
+    correction: np.ndarray
+    crop: np.ndarray
+    cost: np.ndarray
+    posture: np.ndarray
+    cells: np.ndarray
+    path_length: np.ndarray
+
+
+class CompiledSpliceError(ValueError):
+    """A pair the compiled splicer could not align: ``pair`` (its index in the call) and ``reason``."""
+
+    def __init__(self, pair: int, reason: str):
+        super().__init__(f"pair {pair}: {reason}")
+        self.pair, self.reason = pair, reason
+
+
+def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, max_run: int = 3,
+                heading_window_deg: float | None = 60.0, crop: bool = True, crop_context: int = 15,
+                crop_window: int = 6, crop_depth: float = 0.25, knot_spacing: float = 7.5,
+                smoothing: float = 1e-2, posture: bool = True, compact: bool = True,
+                dtype=np.float32) -> PackedSplices:
+    """Splice pairs of bank clips: ``loco``, ``act`` (and ``ref`` for cpmc) ``(B,)`` clip indices.
+
+    Frame counts (``crop_context``, ``crop_window``, ``knot_spacing``) are at the bank's frame
+    rate. With ``compact`` the outputs are packed without gaps; otherwise each pair keeps room
+    for its locomotion's length. Rotations and translations come out as ``dtype`` (float32 or
+    float64; the computation is float64 either way).
+    """
+    loco = np.ascontiguousarray(loco, dtype=np.int64)
+    act = np.ascontiguousarray(act, dtype=np.int64)
+    ref = np.ascontiguousarray(ref if ref is not None else np.zeros_like(loco), dtype=np.int64)
+    B = len(loco)
+    room = bank.lengths[loco]
+    out_start = np.concatenate(([0], np.cumsum(room)[:-1])).astype(np.int64)
+    M, J = int(room.sum()), bank.rot.shape[1]
+    P = int((bank.lengths[loco] + bank.lengths[act]).max()) if B else 1
+    orot, otrans = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype)
+    ocurve, ocorr = np.empty(M), np.empty(M)
+    cells = np.empty((B, P, 2), np.int64)
+    status, ocrop, plen, frames = (np.empty(B, np.int64) for _ in range(4))
+    cost, angle = np.empty(B), np.empty(B)
+    max_dev = math.radians(heading_window_deg) if heading_window_deg is not None else math.pi
+    opts = (float(max_run), float(max_dev), float(crop), float(crop_context), float(crop_window), float(crop_depth),
+            float(knot_spacing), float(smoothing))
+    if B:
+        splice_batch((bank.rot, bank.trans, bank.pos, bank.grot), bank.feat, bank.starts, bank.lengths, METHOD_CODES[method],
+                     loco, act, ref, bank.joints, opts, bool(posture), out_start, orot, otrans, ocurve, ocorr, cells,
+                     status, ocrop, plen, cost, frames, angle)
+    bad = np.nonzero(status != 0)[0]
+    if len(bad):
+        b = int(bad[0])
+        raise CompiledSpliceError(b, STATUS[int(status[b])])
+    if compact and B:
+        keep = np.concatenate([np.arange(s, s + f) for s, f in zip(out_start, frames)])
+        orot, otrans, ocurve, ocorr = orot[keep], otrans[keep], ocurve[keep], ocorr[keep]
+        out_start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    return PackedSplices(out_start, frames, orot, otrans, ocurve, ocorr, ocrop, cost, angle, cells, plen)

@@ -1,0 +1,316 @@
+"""Compiled splicing of many pairs: one pair per thread, the whole method in one pass.
+
+The same steps and results as the torch implementation (:mod:`torchsplice.splice.heck` and
+:mod:`torchsplice.splice.methods`), computed per pair in float64 and written as float32:
+
+- ``splice`` (Heck et al. 2006): distance grid, phase crop, DP timewarp, B-spline curve, the
+  action resampled on it, per-frame Horn rotation of the pelvis clouds, posture transfer in
+  the heading frame, assembly (root and lower body from the locomotion);
+- ``naive``: upper-body local rotations and translations copied frame by frame;
+- ``cpmc``: the reference aligned to the action, per-joint differences ``q_ref^-1 q_act``,
+  the action aligned to the locomotion, the differences resampled and added to it.
+
+Inputs are a *bank* of prepared clips, packed along frames (clip ``c`` is rows
+``starts[c] : starts[c] + lengths[c]``): local rotations ``rot (N, J, 4)`` (WXYZ), local
+translations ``trans (N, J, 3)`` (row 0: root position), their FK ``pos (N, J, 3)`` and
+``grot (N, J, 4)``, and the grid features of :func:`torchsplice.cpu.grid.clip_features`.
+Pairs index the bank. Each pair writes its result into rows ``out_start[b] :`` of the outputs
+(room for its locomotion's length) and its scalars into per-pair arrays; nothing a pair
+computes depends on the other pairs of the call, so results do not depend on batching.
+
+``joints`` (see :func:`joint_config` in :mod:`torchsplice.cpu.bank`) is a tuple of int64
+arrays: parents, upper-body mask, FK joints, resampled action joints, landmarks, hips,
+shoulders, pelvis-cloud joints, and scalars pelvis, pelvis parent, up axis.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .curve import fit_curve, resample_clip
+from .fk import fk_clip
+from .grid import distance_row_block, phase_crop_pair
+from .horn import horn_from_h
+from .quat import qconj, qload, qmul, qnormalize, qrot, qslerp, qstore, rotmat_to_q
+from .timewarp import dp_pair
+
+__all__ = ["METHOD_CODES", "STATUS", "splice_batch"]
+
+METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
+STATUS = {0: "ok", 1: "no path: +inf costs block every alignment", 2: "the alignment does not advance in both clips"}
+
+
+@njit(cache=True, nogil=True)
+def _time_align(feat, starts, a, na, b, nb, opts, cells, curve):
+    """Align clip ``b`` (its first ``nb`` frames) to clip ``a`` (first ``na``): grid, crop, DP, curve.
+
+    Returns ``(status, crop, path_length, cost, frames)``; the path goes to ``cells`` (in cropped
+    frames of b) and the curve (cropped frames of b per frame of a) to ``curve``.
+    """
+    floor, height, norm, hcos, hsin = feat
+    max_run, max_dev, do_crop, context, window, depth, knot_spacing, smoothing = opts
+    sa, sb = starts[a], starts[b]
+    grid = np.empty((na, nb))
+    distance_row_block(floor[:, :, sa:sa + na], height[:, sa:sa + na], norm[sa:sa + na], hcos[sa:sa + na], hsin[sa:sa + na], na,
+                       floor[:, :, sb:sb + nb], height[:, sb:sb + nb], norm[sb:sb + nb], hcos[sb:sb + nb], hsin[sb:sb + nb], nb,
+                       max_dev, grid)
+    crop = phase_crop_pair(grid, na, nb, int(context), int(window), depth) if do_crop > 0 else 0
+    length, total = dp_pair(grid, crop, na, nb - crop, int(max_run), cells)
+    if length < 0:
+        return 1, crop, 0, np.nan, 0
+    frames = fit_curve(cells, length, knot_spacing, smoothing, curve)
+    if frames < 0:
+        return 2, crop, length, total / length, 0
+    return 0, crop, length, total / length, frames
+
+
+@njit(cache=True, nogil=True)
+def _heading_q(pos, t, lh, rh, up):
+    """Heading frame (WXYZ, heading-frame to world) at frame ``t`` from the hips, as
+    :func:`torchsplice.kinematics.heading.heading_frame`."""
+    lat = 1 if up == 0 else 0
+    third = 3 - lat - up
+    v = (pos[t, lh, 0] - pos[t, rh, 0], pos[t, lh, 1] - pos[t, rh, 1], pos[t, lh, 2] - pos[t, rh, 2])
+    u = [0.0, 0.0, 0.0]
+    u[up] = 1.0
+    lv = [v[0], v[1], v[2]]
+    lv[up] = 0.0
+    nn = max(math.sqrt(lv[0] * lv[0] + lv[1] * lv[1] + lv[2] * lv[2]), 1e-12)
+    lx, ly, lz = lv[0] / nn, lv[1] / nn, lv[2] / nn
+    sgn = 1.0 if (up - lat) % 3 == 1 else -1.0
+    ox, oy, oz = sgn * (ly * u[2] - lz * u[1]), sgn * (lz * u[0] - lx * u[2]), sgn * (lx * u[1] - ly * u[0])
+    m = np.empty((3, 3))
+    m[0, lat], m[1, lat], m[2, lat] = lx, ly, lz
+    m[0, up], m[1, up], m[2, up] = u[0], u[1], u[2]
+    m[0, third], m[1, third], m[2, third] = ox, oy, oz
+    return rotmat_to_q(m[0, 0], m[0, 1], m[0, 2], m[1, 0], m[1, 1], m[1, 2], m[2, 0], m[2, 1], m[2, 2])
+
+
+@njit(cache=True, nogil=True)
+def _mean_shoulders(pos, T, hips, shoulders, pelvis, up, out, H):
+    """Frame-averaged shoulders ``out (2, 3)`` in heading frames around the pelvis; the heading
+    frames go to ``H (T, 4)`` when it is not empty."""
+    out[:, :] = 0.0
+    for t in range(T):
+        h = _heading_q(pos, t, hips[0], hips[1], up)
+        if H.shape[0] > 0:
+            H[t, 0], H[t, 1], H[t, 2], H[t, 3] = h
+        hc = qconj(h)
+        for k in range(2):
+            s = shoulders[k]
+            v = qrot(hc, (pos[t, s, 0] - pos[t, pelvis, 0], pos[t, s, 1] - pos[t, pelvis, 1], pos[t, s, 2] - pos[t, pelvis, 2]))
+            out[k, 0] += v[0]
+            out[k, 1] += v[1]
+            out[k, 2] += v[2]
+    out /= T
+
+
+@njit(cache=True, nogil=True)
+def _horn_pair_cloud(src, tgt):
+    """Horn rotation between two ``(K, 3)`` clouds with uniform weights."""
+    K = src.shape[0]
+    w = 1.0 / K
+    h = np.zeros(9)
+    for k in range(K):
+        for a in range(3):
+            for b in range(3):
+                h[3 * a + b] += w * src[k, a] * tgt[k, b]
+    return horn_from_h(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8])
+
+
+@njit(cache=True, nogil=True)
+def _assemble(lrot, ltrans, ls, arot, atrans, T, joints_list, upper, pelvis, prot, rot, trans):
+    """Rows ``t < T`` for ``joints_list``: upper body from the resampled action, the rest from the
+    locomotion (rows from ``ls``), the pelvis's rotation ``prot (T, 4)`` and its translation
+    from the locomotion."""
+    for t in range(T):
+        for j in joints_list:
+            if j == pelvis:
+                rot[t, j, 0], rot[t, j, 1], rot[t, j, 2], rot[t, j, 3] = prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3]
+                for c in range(3):
+                    trans[t, j, c] = ltrans[ls + t, j, c]
+            elif upper[j]:
+                for c in range(4):
+                    rot[t, j, c] = arot[t, j, c]
+                for c in range(3):
+                    trans[t, j, c] = atrans[t, j, c]
+            else:
+                for c in range(4):
+                    rot[t, j, c] = lrot[ls + t, j, c]
+                for c in range(3):
+                    trans[t, j, c] = ltrans[ls + t, j, c]
+
+
+@njit(cache=True, nogil=True)
+def _pelvis_cloud(pos, grot, t, pelvis, cloud, out):
+    """Joints ``cloud`` at frame ``t`` in the pelvis's own frame, into ``out (K, 3)``."""
+    qc = qconj(qload(grot, t, pelvis))
+    for k in range(cloud.shape[0]):
+        j = cloud[k]
+        v = qrot(qc, (pos[t, j, 0] - pos[t, pelvis, 0], pos[t, j, 1] - pos[t, pelvis, 1], pos[t, j, 2] - pos[t, pelvis, 2]))
+        out[k, 0], out[k, 1], out[k, 2] = v
+
+
+@njit(cache=True, nogil=True)
+def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, cells, curve, orot, otrans, ocorr):
+    """The Heck et al. splice of one pair; returns ``(status, crop, path_length, cost, frames, posture_angle)``."""
+    rot, trans, pos, grot = bank
+    parents, upper, fk_joints, act_joints, landmarks, hips, shoulders, pcloud, pelvis, pelvis_parent, up = joints
+    J = rot.shape[1]
+    ls, as_ = starts[loco], starts[act]
+    status, crop, plen, cost, T = _time_align(feat, starts, loco, lengths[loco], act, lengths[act], opts, cells, curve)
+    if status != 0:
+        return status, crop, plen, cost, 0, 0.0
+    n_c = lengths[act] - crop
+    arot = np.zeros((T, J, 4))
+    atrans = np.zeros((T, J, 3))
+    resample_clip(rot, trans, as_ + crop, n_c, curve, T, act_joints, arot, atrans)
+    # spatial alignment: q_A per frame between the pelvis clouds of (action on loco) and loco
+    frot = np.zeros((T, J, 4))
+    ftrans = np.zeros((T, J, 3))
+    fpos = np.zeros((T, J, 3))
+    fgrot = np.zeros((T, J, 4))
+    q_lp = np.empty((T, 4))
+    for t in range(T):
+        for c in range(4):
+            q_lp[t, c] = rot[ls + t, pelvis, c]
+    _assemble(rot, trans, ls, arot, atrans, T, fk_joints, upper, pelvis, q_lp, frot, ftrans)
+    fk_clip(frot, ftrans, parents, fk_joints, T, fpos, fgrot)
+    K = pcloud.shape[0]
+    src = np.empty((K, 3))
+    tgt = np.empty((K, 3))
+    prot = np.empty((T, 4))
+    lpos, lgrot = pos[ls:ls + T], grot[ls:ls + T]
+    for t in range(T):
+        _pelvis_cloud(fpos, fgrot, t, pelvis, pcloud, src)
+        _pelvis_cloud(lpos, lgrot, t, pelvis, pcloud, tgt)
+        qa = _horn_pair_cloud(src, tgt)
+        ocorr[t] = 2.0 * math.atan2(math.sqrt(qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]), abs(qa[0]))
+        p = qmul((q_lp[t, 0], q_lp[t, 1], q_lp[t, 2], q_lp[t, 3]), qa)
+        prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3] = p
+    angle = 0.0
+    if posture:
+        _assemble(rot, trans, ls, arot, atrans, T, fk_joints, upper, pelvis, prot, frot, ftrans)
+        fk_clip(frot, ftrans, parents, fk_joints, T, fpos, fgrot)
+        H = np.empty((T, 4))
+        mean_s = np.empty((2, 3))
+        mean_u = np.empty((2, 3))
+        _mean_shoulders(fpos, T, hips, shoulders, pelvis, up, mean_s, H)
+        upos = np.zeros((T, J, 3))
+        ugrot = np.zeros((T, J, 4))
+        fk_clip(arot, atrans, parents, fk_joints, T, upos, ugrot)
+        _mean_shoulders(upos, T, hips, shoulders, pelvis, up, mean_u, np.empty((0, 4)))
+        qg = _horn_pair_cloud(mean_s, mean_u)
+        angle = 2.0 * math.atan2(math.sqrt(qg[1] * qg[1] + qg[2] * qg[2] + qg[3] * qg[3]), abs(qg[0]))
+        for t in range(T):
+            h = (H[t, 0], H[t, 1], H[t, 2], H[t, 3])
+            world = qmul(qmul(h, qg), qconj(h))
+            qpar = qload(fgrot, t, pelvis_parent) if pelvis_parent >= 0 else (1.0, 0.0, 0.0, 0.0)
+            local = qmul(qmul(qconj(qpar), world), qpar)
+            p = qmul(local, (prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3]))
+            prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3] = p
+    all_joints = np.arange(J)
+    _assemble(rot, trans, ls, arot, atrans, T, all_joints, upper, pelvis, prot, orot, otrans)
+    return 0, crop, plen, cost, T, angle
+
+
+@njit(cache=True, nogil=True)
+def _naive_one(bank, starts, lengths, loco, act, joints, curve, orot, otrans):
+    """Naive DOF replacement of one pair; returns the number of frames."""
+    rot, trans, pos, grot = bank
+    upper, pelvis = joints[1], joints[8]
+    J = rot.shape[1]
+    ls, as_ = starts[loco], starts[act]
+    T = min(lengths[loco], lengths[act])
+    for t in range(T):
+        curve[t] = t
+        for j in range(J):
+            src = as_ + t if upper[j] and j != pelvis else ls + t
+            for c in range(4):
+                orot[t, j, c] = rot[as_ + t if upper[j] else ls + t, j, c]
+            for c in range(3):
+                otrans[t, j, c] = trans[src, j, c]
+    return T
+
+
+@njit(cache=True, nogil=True)
+def _cpmc_one(bank, feat, starts, lengths, loco, act, ref, joints, opts, cells, curve, orot, otrans):
+    """CPMC differencing of one pair against its reference; returns ``(status, crop, path_length, cost, frames)``."""
+    rot, trans, pos, grot = bank
+    upper = joints[1]
+    J = rot.shape[1]
+    ls, as_, rs = starts[loco], starts[act], starts[ref]
+    upper_joints = np.nonzero(upper)[0]
+    # the reference aligned to the action (rows: action frames)
+    c1 = np.full((lengths[act] + lengths[ref], 2), -1, dtype=np.int64)
+    curve1 = np.empty(lengths[act])
+    status, crop1, _, _, n_act = _time_align(feat, starts, act, lengths[act], ref, lengths[ref], opts, c1, curve1)
+    if status != 0:
+        return status, crop1, 0, np.nan, 0
+    rrot = np.zeros((n_act, J, 4))
+    rtrans = np.zeros((n_act, J, 3))
+    resample_clip(rot, trans, rs + crop1, lengths[ref] - crop1, curve1, n_act, upper_joints, rrot, rtrans)
+    diff = np.zeros((n_act, J, 4))
+    for t in range(n_act):
+        for j in upper_joints:
+            qstore(diff, t, j, qmul(qconj(qload(rrot, t, j)), qload(rot, as_ + t, j)))
+    # the action (its frames with a reference) aligned to the locomotion
+    status, crop, plen, cost, T = _time_align(feat, starts, loco, lengths[loco], act, n_act, opts, cells, curve)
+    if status != 0:
+        return status, crop, plen, cost, 0
+    n_d = n_act - crop
+    top = n_d - 1
+    for t in range(T):
+        x = min(max(curve[t], 0.0), float(top))
+        i0 = int(math.floor(x))
+        i1 = min(i0 + 1, top)
+        w = x - i0
+        for j in range(J):
+            base = qload(rot, ls + t, j)
+            if upper[j]:
+                d = qslerp(qload(diff, crop + i0, j), qload(diff, crop + i1, j), w)
+                qstore(orot, t, j, qmul(base, d))
+            else:
+                qstore(orot, t, j, base)
+            for c in range(3):
+                otrans[t, j, c] = trans[ls + t, j, c]
+    return 0, crop, plen, cost, T
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, opts, posture, out_start,
+                 orot, otrans, ocurve, ocorr, cells, status, crop, plen, cost, frames, angle):
+    """Splice every pair ``b`` (bank clips ``loco[b]``, ``act[b]``, ``ref[b]`` for cpmc) in parallel.
+
+    Per pair: ``status`` (0 ok, else a :data:`STATUS` code), ``crop`` (action frames skipped),
+    ``plen`` and ``cells[b]`` (the DP path, -1 padded), ``cost`` (mean path cost), ``frames``,
+    ``angle`` (posture rotation, radians); per result frame from row ``out_start[b]``:
+    ``orot``/``otrans`` (float32 local rotations and translations), ``ocurve`` (action frame,
+    after the crop) and ``ocorr`` (pelvis correction, radians).
+    """
+    for b in prange(loco.shape[0]):
+        o = out_start[b]
+        n = lengths[loco[b]]
+        r, tr, cu, co = orot[o:o + n], otrans[o:o + n], ocurve[o:o + n], ocorr[o:o + n]
+        for t in range(n):
+            co[t] = 0.0
+        if method == 1:
+            frames[b] = _naive_one(bank, starts, lengths, loco[b], act[b], joints, cu, r, tr)
+            status[b], crop[b], plen[b], cost[b], angle[b] = 0, 0, 0, np.nan, 0.0
+            continue
+        cb = np.empty((cells.shape[1], 2), dtype=np.int64)
+        if method == 0:
+            st, c, pl, cs, T, ang = _splice_one(bank, feat, starts, lengths, loco[b], act[b], joints, opts, posture,
+                                                cb, cu, r, tr, co)
+        else:
+            st, c, pl, cs, T = _cpmc_one(bank, feat, starts, lengths, loco[b], act[b], ref[b], joints, opts, cb, cu, r, tr)
+            ang = 0.0
+        status[b], crop[b], plen[b], cost[b], frames[b], angle[b] = st, c, pl, cs, T, ang
+        for p in range(cells.shape[1]):
+            cells[b, p, 0] = cb[p, 0] if p < pl else -1
+            cells[b, p, 1] = cb[p, 1] if p < pl else -1
+        for t in range(T):
+            cu[t] += c
