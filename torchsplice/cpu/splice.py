@@ -34,7 +34,7 @@ from .curve import fit_curve, resample_clip
 from .fk import fk_clip
 from .grid import distance_row_block, phase_crop_pair
 from .horn import horn_from_h
-from .quat import qconj, qload, qmul, qnormalize, qrot, qslerp, qstore, rotmat_to_q
+from .quat import qconj, qload, qmul, qrot, qslerp, qstore, rotmat_to_q
 from .timewarp import dp_pair
 
 __all__ = ["METHOD_CODES", "STATUS", "splice_batch"]

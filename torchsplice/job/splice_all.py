@@ -7,17 +7,25 @@ How it runs:
 1. **Plan.** Select locomotions and actions (see :mod:`torchsplice.job.select`), check that
    their skeletons match, check once per clip that it locomotes, find ``cpmc`` references,
    and list the pairs, each with a reason when it is skipped.
-2. **Batches.** Pairs are cut into batches whose size follows a memory budget (the distance
-   grids and DP tables grow with the clips' lengths), so peak memory stays bounded whatever
-   n x m is. Each batch is spliced as tensor operations (:func:`torchsplice.splice.splice_pairs`)
-   and written by a background thread while the next batch computes.
-3. **Resumable.** Each finished batch becomes a small database ``part-NNNNNN.h5`` in the work
+2. **Sources.** Every selected clip is read once and prepared once per locomotion skeleton
+   and frame rate (resampled, forward kinematics, grid features: a
+   :class:`~torchsplice.cpu.bank.ClipBank`), so no per-pair work repeats per clip. The
+   locomotion checks run on the same kinematics.
+3. **Batches.** Pairs are cut into batches whose size follows a memory budget, so peak memory
+   stays bounded whatever n x m is. On the CPU each batch runs through the compiled splicer
+   (:func:`torchsplice.cpu.bank.splice_bank`: one pair per thread, in parallel over pairs); on
+   CUDA through :func:`torchsplice.splice.splice_pairs`. A batch's results stay packed in
+   whole arrays, its output columns are computed at once, and a background thread writes it
+   while the next batch computes. Each pair's result depends on that pair alone, so the
+   output does not depend on the batch size, the thread count or the load.
+4. **Resumable.** Each finished batch becomes a small database ``part-NNNNNN.h5`` in the work
    folder ``.OUT.h5.parts/``, written atomically, so a kill at any moment loses at most the
    batches in flight. A rerun with the same arguments skips finished batches; with other
    arguments it refuses to mix and says so. Batches are cut the same way every time, so a
    resumed run writes the same bits as an uninterrupted one.
-4. **Merge.** The parts are merged in order into ``OUT.h5`` (created beside it and renamed into
-   place, so the file exists only once complete), with a run record; the work folder is removed.
+5. **Merge.** The parts are merged in order, whole datasets at a time, into ``OUT.h5`` (created
+   beside it and renamed into place, so the file exists only once complete), with a run
+   record; the work folder is removed.
 
 The output has the input's schema plus per-clip columns (source names and rows, method and
 parameters, alignment cost and quality figures) and a per-frame ``action_frame`` column (the
@@ -29,15 +37,17 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import math
 import os
 import shutil
 import sys
 import time
-from collections import OrderedDict
+from contextlib import contextmanager
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+import numpy as np
+import torch
 
 from .. import __version__
 from ..core.errors import TorchspliceError
@@ -45,7 +55,8 @@ from ..core.motion import Motion
 from ..io.database import MotionDatabase
 from ..io.spec import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import METHODS, AlignOptions, SpliceOptions, splice_pairs
-from ..splice.clips import clips_to_tensors
+from ..splice.api import align_kwargs, resolve_backend
+from ..splice.clips import ClipTensors, clips_to_tensors, resample_motion
 from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
 from .select import select_clips
@@ -82,7 +93,10 @@ class JobConfig:
         force_locomotion: splice clips that do not locomote instead of skipping their pairs.
         copy_sources: copy the selected source clips into the output too.
         max_run, posture: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
-        device: torch device for the tensor work.
+        device: torch device for the tensor work (``None``/``"cpu"``: the compiled CPU splicer).
+        threads: threads of the compiled splicer (``None``: every core); results do not depend on it.
+        compression: the output's compression, ``"gzip"`` (readable everywhere), ``"lzf"``
+            (several times faster to write, read by h5py) or ``None``.
     """
 
     database: Path
@@ -98,6 +112,11 @@ class JobConfig:
     max_run: int = 3
     posture: bool = True
     device: str | None = None
+    threads: int | None = None
+    compression: str | None = "gzip"
+
+
+COMPRESSIONS = ("gzip", "lzf", None)
 
 
 @dataclass
@@ -156,25 +175,56 @@ def _leg_length(skeleton, roles: SkeletonRoles) -> float:
     return total
 
 
-class _ClipCache:
-    """Clips read from a database, least recently used dropped past a byte budget."""
+@dataclass
+class _Part:
+    """One batch's results, packed along frames (see :meth:`MotionDatabase.append_packed`)."""
 
-    def __init__(self, db: MotionDatabase, budget: int):
-        self.db, self.budget, self.used = db, budget, 0
-        self.items: OrderedDict[int, Motion] = OrderedDict()
+    skeleton: object
+    names: list
+    lengths: np.ndarray
+    fps: np.ndarray
+    rotations: np.ndarray
+    translations: np.ndarray
+    labels: list
+    extra: dict
+    action_frame: np.ndarray
+    flags: list
 
-    def get(self, row: int) -> Motion:
-        if row in self.items:
-            self.items.move_to_end(row)
-            return self.items[row]
-        m = self.db.read(row)
-        size = m.rotations.numel() * 4 * (2 if m.translations is not None else 1)
-        self.items[row] = m
-        self.used += size
-        while self.used > self.budget and len(self.items) > 1:
-            _, old = self.items.popitem(last=False)
-            self.used -= old.rotations.numel() * 4 * (2 if old.translations is not None else 1)
-        return m
+
+class _Sources:
+    """The selected clips, each read once, and one :class:`ClipBank` per locomotion group.
+
+    Clips are keyed ``("L", row)`` in the locomotion database and ``("A", row)`` in the action
+    database (``"L"`` for both when they are one file). A group is a locomotion skeleton and
+    frame rate; its bank holds the group's locomotions and every action or reference of the
+    same topology, resampled to the group's rate, with kinematics computed once per clip.
+    """
+
+    def __init__(self, loco_db: MotionDatabase, act_db: MotionDatabase):
+        self.dbs = {"L": loco_db, "A": act_db}
+        self.same = act_db is loco_db
+        self.motions: dict[tuple[str, int], Motion] = {}
+        self.banks: dict[tuple[int, float], tuple] = {}
+
+    def key(self, tag: str, row: int) -> tuple[str, int]:
+        return ("L" if self.same else tag, int(row))
+
+    def motion(self, key: tuple[str, int]) -> Motion:
+        if key not in self.motions:
+            self.motions[key] = self.dbs[key[0]].read(key[1])
+        return self.motions[key]
+
+    def bank(self, group: tuple[int, float], keys: list, roles: SkeletonRoles, landmarks) -> tuple:
+        """``(bank, index)`` of a group (built on first use): ``index`` maps a clip key to its bank row."""
+        if group not in self.banks:
+            motions = [self.motion(k) for k in keys]
+            fps = group[1]
+            skeleton = motions[0].skeleton
+            from ..cpu.bank import ClipBank
+
+            bank = ClipBank.from_motions([resample_motion(m, fps) for m in motions], skeleton, roles, landmarks)
+            self.banks[group] = (bank, {k: i for i, k in enumerate(keys)})
+        return self.banks[group]
 
 
 class SpliceJob:
@@ -185,6 +235,8 @@ class SpliceJob:
         self.config, self.progress, self.restart, self.overwrite = config, progress, restart, overwrite
         self.command = command or "torchsplice.job.SpliceJob (Python API)"
         self._checks: dict = {}
+        if config.compression not in COMPRESSIONS:
+            raise TorchspliceError(f"unknown compression {config.compression!r}; choose gzip, lzf or none")
         bad = [m for m in config.methods if m not in METHODS]
         if bad or not config.methods:
             raise TorchspliceError(f"unknown method {bad[0] if bad else '(none)'!r}; choose from {', '.join(METHODS)}")
@@ -204,8 +256,10 @@ class SpliceJob:
             raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
                                    f"have no skeleton in common: {a.mismatch(b)}")
         context = self._skeleton_context(loco_db, tl, locos)
-        checks = self._checks = self._locomotion_checks(loco_db, act_db, tl, ta, locos, acts, context)
         refs = self._references(act_db, ta, acts, context) if "cpmc" in c.methods else {}
+        self._sources = _Sources(loco_db, act_db)
+        self._groups = self._group_clips(tl, ta, locos, acts, refs, sk_l, sk_a)
+        checks = self._checks = self._locomotion_checks(tl, ta, context)
         pairs, skipped = [], {}
 
         def skip(why: str) -> None:
@@ -225,6 +279,50 @@ class SpliceJob:
             raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
         return pairs, skipped, context
 
+    def _group_clips(self, tl, ta, locos, acts, refs, sk_l, sk_a) -> dict:
+        """Locomotion groups ``(skeleton id, fps) -> clip keys``: the group's locomotions, then every
+        selected action and reference of the same topology."""
+        src = self._sources
+        others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
+        groups: dict = {}
+        for i in locos:
+            groups.setdefault((int(tl["skeleton"][i]), float(tl["fps"][i])), []).append(src.key("L", i))
+        for (k, _), keys in groups.items():
+            for j in others:
+                key = src.key("A", j)
+                if key not in keys and sk_l[k].same_topology(sk_a[int(ta["skeleton"][j])]):
+                    keys.append(key)
+        return groups
+
+    def _locomotion_checks(self, tl, ta, context) -> dict:
+        """``("L" | "A", row) -> LocomotionCheck`` for every clip of every group, at the clip's own
+        frame rate (from the group's bank where the rates agree, else by torch FK)."""
+        src = self._sources
+        out: dict = {}
+        tables = {"L": tl, "A": ta}
+        for (k, fps), keys in self._groups.items():
+            roles = context[k]["roles"]
+            native = [key for key in keys if float(tables[key[0]]["fps"][key[1]]) == fps]
+            if _compiled(self.config):
+                bank, index = src.bank((k, fps), keys, roles, AlignOptions().landmarks)
+                for b in range(0, len(native), 256):
+                    chunk = native[b:b + 256]
+                    pos, lengths = bank.padded_positions([index[key] for key in chunk])
+                    for key, chk in zip(chunk, check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, fps)):
+                        out[key] = chk
+            rest = [key for key in keys if key not in out]
+            by_rate: dict = {}
+            for key in rest:
+                by_rate.setdefault(float(tables[key[0]]["fps"][key[1]]), []).append(key)
+            for rate, ks in by_rate.items():
+                for b in range(0, len(ks), 64):
+                    chunk = ks[b:b + 64]
+                    motions = [src.motion(key) for key in chunk]
+                    clips = clips_to_tensors(motions, motions[0].skeleton)
+                    for key, chk in zip(chunk, check_locomotion(clips, roles, rate)):
+                        out[key] = chk
+        return out
+
     def _skip_reason(self, method, i, j, same_db, tl, ta, sk_l, sk_a, checks, refs) -> str | None:
         if same_db and i == j:
             return "a clip is not spliced onto itself"
@@ -235,7 +333,7 @@ class SpliceJob:
             if int(table["length"][row]) < need:
                 return f"{table['name'][row]} is too short to splice ({int(table['length'][row])} frames, at least {need})"
         if not self.config.force_locomotion:
-            for key, name in ((("L", i), str(tl["name"][i])), (("A", j), str(ta["name"][j]))):
+            for key, name in ((self._sources.key("L", i), str(tl["name"][i])), (self._sources.key("A", j), str(ta["name"][j]))):
                 check = checks.get(key)
                 if check is not None and not check.locomoting:
                     return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
@@ -254,32 +352,12 @@ class SpliceJob:
             out[k] = {"spec": spec, "roles": roles, "leg": _leg_length(sk, roles)}
         return out
 
-    def _locomotion_checks(self, loco_db, act_db, tl, ta, locos, acts, context) -> dict:
-        """``("L" | "A", row) -> LocomotionCheck`` for every selected clip, batched by skeleton and rate."""
-        spec = next(iter(context.values()))["spec"]
-        out: dict = {}
-        for tag, db, table, rows in (("L", loco_db, tl, locos), ("A", act_db, ta, acts)):
-            groups: dict = {}
-            for r in rows:
-                groups.setdefault((int(table["skeleton"][r]), float(table["fps"][r])), []).append(r)
-            for (k, fps), rs in groups.items():
-                sk = db.skeletons[k]
-                if not spec.binds(sk):
-                    continue  # another skeleton: its pairs are skipped as "skeletons differ"
-                roles = spec.bind(sk)
-                for b in range(0, len(rs), 64):
-                    chunk = rs[b:b + 64]
-                    clips = clips_to_tensors([db.read(r) for r in chunk], sk)
-                    for r, chk in zip(chunk, check_locomotion(clips, roles, fps)):
-                        out[(tag, r)] = chk
-        return out
-
     def _references(self, act_db: MotionDatabase, ta, acts, context) -> dict[int, int | None]:
         """Action row -> reference row (in the action database) for ``cpmc``."""
         names = [str(n) for n in ta["name"]]
         cands = [(names[i], str(ta["role"][i]), json.loads(ta["labels"][i] or "{}")) for i in range(len(names))]
         index = {n: i for i, n in enumerate(names)}
-        spec = next(iter(context.values()))["spec"]
+        spec = next(iter(context.values()))["spec"]  # actions are named by the locomotions' dataset rules
         out = {}
         for j in acts:
             ref = find_reference(names[j], json.loads(ta["labels"][j] or "{}"), cands, spec)
@@ -292,6 +370,10 @@ class SpliceJob:
             return max(1, int(c.batch_pairs))
         t_l = int(max(tl["length"][i] for i in locos))
         t_a = max(int(ta["length"][j] * float(tl["fps"][locos[0]]) / float(ta["fps"][j])) + 1 for j in acts)
+        J = max(sk.num_joints for sk in self._sources.dbs["L"].skeletons)
+        if _compiled(c):  # per pair: its result (rotations, translations, curves) twice, its path
+            per_pair = 2 * t_l * (J * 28 + 16) + 16 * (t_l + t_a)
+            return int(min(512, max(1, c.memory_budget_mb * 2**20 // per_pair)))
         per_pair = 40 * t_l * t_a + 2000 * 32 * (t_l + t_a)  # grid, DP tables, clip tensors
         return int(min(256, max(1, c.memory_budget_mb * 2**20 // per_pair)))
 
@@ -306,7 +388,7 @@ class SpliceJob:
             "locomotions": list(c.locomotions), "actions": list(c.actions), "methods": list(c.methods),
             "force_locomotion": c.force_locomotion, "max_run": c.max_run, "posture": c.posture,
             "batch_pairs": batch, "pairs": len(pairs), "pair_list_sha256": hashlib.sha256(body).hexdigest(),
-            "copy_sources": c.copy_sources, "device": c.device or "cpu",
+            "copy_sources": c.copy_sources, "device": c.device or "cpu", "compression": c.compression,
         }
 
     def _prepare_work(self, signature: dict) -> None:
@@ -340,7 +422,7 @@ class SpliceJob:
         _remove_stale_outputs(c.output)
         if c.actions_db is not None and c.actions_db.resolve() == c.database.resolve():
             c = self.config = JobConfig(**{**asdict(c), "actions_db": None})
-        with MotionDatabase.open(c.database) as loco_db:
+        with MotionDatabase.open(c.database) as loco_db, _compute_threads(c):
             act_db = MotionDatabase.open(c.actions_db) if c.actions_db else loco_db
             try:
                 summary = self._run(loco_db, act_db, t0)
@@ -362,8 +444,6 @@ class SpliceJob:
         done = {k for k in range(len(batches)) if self._part(k).exists()}
         summary.resumed = sum(len(batches[k]) for k in done)
         log.info("%d pairs in %d batches of up to %d (%d already done)", len(pairs), len(batches), batch, summary.resumed)
-        budget = c.memory_budget_mb * 2**20 // 4
-        caches = (_ClipCache(loco_db, budget), _ClipCache(act_db, budget) if act_db is not loco_db else None)
         bar = _progress(len(pairs), summary.resumed, self.progress)
         pending: Future | None = None
         compute = 0.0
@@ -373,7 +453,7 @@ class SpliceJob:
                     if k in done:
                         continue
                     t1 = time.perf_counter()
-                    records = self._splice_batch(chunk, caches, tl, ta, context)
+                    records = self._splice_batch(chunk, tl, ta, context)
                     compute += time.perf_counter() - t1
                     if pending is not None:
                         pending.result()
@@ -393,10 +473,10 @@ class SpliceJob:
         return summary
 
     def _batches(self, pairs: list[Pair], tl, size: int) -> list[list[Pair]]:
-        """Consecutive chunks of at most ``size`` pairs sharing method and locomotion skeleton."""
+        """Consecutive chunks of at most ``size`` pairs sharing method, locomotion skeleton and frame rate."""
         out, cur, key = [], [], None
         for p in pairs:
-            k = (p.method, int(tl["skeleton"][p.loco]))
+            k = (p.method, int(tl["skeleton"][p.loco]), float(tl["fps"][p.loco]))
             if cur and (k != key or len(cur) >= size):
                 out.append(cur)
                 cur = []
@@ -409,42 +489,92 @@ class SpliceJob:
     def _part(self, k: int) -> Path:
         return self.work / f"part-{k:06d}.h5"
 
-    def _splice_batch(self, chunk: list[Pair], caches, tl, ta, context) -> list[tuple]:
+    def _splice_batch(self, chunk: list[Pair], tl, ta, context) -> _Part:
+        """Splice one batch (one method, locomotion skeleton and rate); its results packed."""
         c = self.config
-        lc, ac = caches[0], caches[1] or caches[0]
-        ctx = context[int(tl["skeleton"][chunk[0].loco])]
-        opts = SpliceOptions(align=AlignOptions(max_run=c.max_run), posture=c.posture,
-                             force=True, check_locomotion=False, device=c.device)  # the plan checked the clips
-        pairs = [(lc.get(p.loco), ac.get(p.action)) for p in chunk]
-        refs = [ac.get(p.reference) for p in chunk] if chunk[0].method == "cpmc" else None
-        results = splice_pairs(pairs, ctx["spec"], method=chunk[0].method, references=refs, options=opts)
-        params = json.dumps({"max_run": c.max_run, "posture": c.posture, "heading_window_deg": opts.align.heading_window_deg,
+        src = self._sources
+        method, k, fps = chunk[0].method, int(tl["skeleton"][chunk[0].loco]), float(tl["fps"][chunk[0].loco])
+        ctx = context[k]
+        align = AlignOptions(max_run=c.max_run)
+        lkeys = [src.key("L", p.loco) for p in chunk]
+        akeys = [src.key("A", p.action) for p in chunk]
+        rkeys = [src.key("A", p.reference) for p in chunk] if method == "cpmc" else None
+        if _compiled(c):
+            from ..cpu.bank import splice_bank
+
+            bank, index = src.bank((k, fps), self._groups[(k, fps)], ctx["roles"], align.landmarks)
+            out = splice_bank(bank, [index[x] for x in lkeys], [index[x] for x in akeys], method,
+                              ref=[index[x] for x in rkeys] if rkeys else None, posture=c.posture, **align_kwargs(align, fps))
+            frames, rot, trans = out.frames, out.rotations, out.translations
+            curve, corr, crop, cost, posture = out.curve, out.correction, out.crop.astype(np.float64), out.cost, out.posture
+        else:
+            opts = SpliceOptions(align=align, posture=c.posture, force=True, check_locomotion=False, device=c.device)
+            results = splice_pairs([(src.motion(a), src.motion(b)) for a, b in zip(lkeys, akeys)], ctx["spec"],
+                                   method=method, references=[src.motion(r) for r in rkeys] if rkeys else None, options=opts)
+            scale_back = np.array([fps / src.motion(a).fps for a in akeys])
+            frames = np.array([r.motion.num_frames for r in results], dtype=np.int64)
+            rot = torch.cat([r.motion.rotations for r in results]).float().cpu().numpy()
+            trans = torch.cat([r.motion.local_translations() for r in results]).float().cpu().numpy()
+            curve = np.concatenate([r.curve.numpy() for r in results]) * np.repeat(scale_back, frames)
+            corr = np.radians(np.concatenate([r.pelvis_correction.numpy() for r in results]))
+            crop = np.array([r.crop for r in results], dtype=np.float64) * scale_back
+            cost = np.array([r.cost for r in results])
+            posture = np.radians([r.posture_deg for r in results])
+        return self._pack(chunk, method, fps, frames, rot, trans, curve, corr, crop, cost, posture, tl, ta, ctx, align)
+
+    def _pack(self, chunk, method, fps, frames, rot, trans, curve, corr, crop, cost, posture, tl, ta, ctx, align) -> _Part:
+        """A batch's output columns, computed at once (``curve``, ``crop`` at the locomotion's rate)."""
+        c = self.config
+        src = self._sources
+        lnames = [str(tl["name"][p.loco]) for p in chunk]
+        anames = [str(ta["name"][p.action]) for p in chunk]
+        scale = np.array([float(ta["fps"][p.action]) / fps for p in chunk])  # to the action's own frames
+        starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+        corr_deg = np.degrees(corr)
+        mean_corr = np.add.reduceat(corr_deg, starts) / frames if len(corr_deg) else np.zeros(len(chunk))
+        loco_frames = np.array([int(tl["length"][p.loco]) for p in chunk])
+        params = json.dumps({"max_run": c.max_run, "posture": c.posture, "heading_window_deg": align.heading_window_deg,
                              "force_locomotion": c.force_locomotion})
         leg = ctx["leg"]
-        records = []
-        for p, r in zip(chunk, results):
-            flags = [f"{name} does not locomote ({chk.reason})" for key, name in ((("L", p.loco), r.locomotion), (("A", p.action), r.action))
-                     if (chk := self._checks.get(key)) is not None and not chk.locomoting]
-            if math.isfinite(r.cost) and math.sqrt(max(r.cost, 0.0)) > POOR_ALIGNMENT * leg:
-                flags.append(f"poor alignment (mean landmark distance {math.sqrt(r.cost) / leg:.2f} leg lengths)")
-            loco_frames = int(tl["length"][p.loco])
-            extra = {
-                "locomotion": r.locomotion, "action": r.action, "reference": r.reference or "", "method": r.method,
-                "params": params, "flags": FLAG_SEPARATOR.join(flags), "locomotion_id": p.loco, "action_id": p.action,
-                "crop": r.crop, "cost": r.cost, "posture_deg": r.posture_deg,
-                "pelvis_correction_deg": float(r.pelvis_correction.mean()) if r.pelvis_correction.numel() else 0.0,
-                "coverage": r.motion.num_frames / loco_frames,
-            }
-            records.append((r.motion.to("cpu"), extra, {"action_frame": r.curve}, flags))
-        return records
+        dist = np.sqrt(np.maximum(cost, 0.0)) / leg
+        poor = np.isfinite(cost) & (dist > POOR_ALIGNMENT)
+        flags = []
+        for b, p in enumerate(chunk):
+            f = [f"{name} does not locomote ({chk.reason})"
+                 for key, name in ((src.key("L", p.loco), lnames[b]), (src.key("A", p.action), anames[b]))
+                 if (chk := self._checks.get(key)) is not None and not chk.locomoting]
+            if poor[b]:
+                f.append(f"poor alignment (mean landmark distance {dist[b]:.2f} leg lengths)")
+            flags.append(f)
+        suffix = "" if method == "splice" else f".{method}"
+        names = [f"{lo}+{ac}{suffix}" for lo, ac in zip(lnames, anames)]
+        labels = [json.dumps({"method": method, "locomotion": lo, "action": ac}, sort_keys=True) for lo, ac in zip(lnames, anames)]
+        refs = [str(ta["name"][p.reference]) if method == "cpmc" else "" for p in chunk]
+        extra = {
+            "locomotion": lnames, "action": anames, "reference": refs, "method": [method] * len(chunk),
+            "params": [params] * len(chunk), "flags": [FLAG_SEPARATOR.join(f) for f in flags],
+            "locomotion_id": [p.loco for p in chunk], "action_id": [p.action for p in chunk],
+            "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": np.degrees(posture),
+            "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
+        }
+        skeleton = src.motion(src.key("L", chunk[0].loco)).skeleton
+        return _Part(skeleton, names, frames, np.full(len(chunk), fps), rot, trans, labels, extra,
+                     (curve * np.repeat(scale, frames)).astype(np.float32), flags)
 
-    def _write_part(self, k: int, records, context) -> None:
-        spec = next(iter(context.values()))["spec"]
-        part = self._part(k)
-        with MotionDatabase.create(part, overwrite=True, columns=OUTPUT_COLUMNS, frame_columns=FRAME_COLUMNS,
+    def _write_part(self, k: int, part: _Part, context) -> None:
+        spec = self._spec_of(part.skeleton, context)
+        with MotionDatabase.create(self._part(k), overwrite=True, columns=OUTPUT_COLUMNS, frame_columns=FRAME_COLUMNS,
                                    compression=None) as db:
-            for motion, extra, frames, _ in records:
-                db.append(motion, spec=spec, extra=extra, frame_extra=frames)
+            db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations, part.lengths,
+                             part.names, part.fps, spec=spec, sources=[f"splice:{m}" for m in part.extra["method"]],
+                             roles="spliced", labels=part.labels, extra=part.extra,
+                             frame_extra={"action_frame": part.action_frame})
+
+    def _spec_of(self, skeleton, context):
+        for ctx in context.values():
+            if ctx["spec"].binds(skeleton):
+                return ctx["spec"]
+        return None
 
     def _merge(self, batches, loco_db, act_db, tl, ta, pairs, signature, t0) -> tuple[int, dict, int]:
         c = self.config
@@ -454,17 +584,24 @@ class SpliceJob:
         n = copied = flagged_clips = 0
         # 256-frame chunks: random training windows decompress little (see torchsplice.data)
         with MotionDatabase.create(c.output, overwrite=self.overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
-                                   frame_columns=FRAME_COLUMNS, attrs={"run": json.dumps(run)}) as out:
+                                   compression=c.compression, frame_columns=FRAME_COLUMNS,
+                                   attrs={"run": json.dumps(run)}) as out:
             for k in range(len(batches)):
                 with MotionDatabase.open(self._part(k)) as part:
                     spec = DatasetSpec.from_json(part.spec_json(0)) if part.spec_json(0) else None
-                    for motion, extra, frames in part.read_all():
-                        kinds = {_flag_kind(f) for f in (extra["flags"] or "").split(FLAG_SEPARATOR) if f}
-                        for f in kinds:
-                            flagged[f] = flagged.get(f, 0) + 1
+                    t = part.table()
+                    frames = part.packed(0)
+                    for f in t["flags"]:
+                        kinds = {_flag_kind(x) for x in str(f).split(FLAG_SEPARATOR) if x}
+                        for kind in kinds:
+                            flagged[kind] = flagged.get(kind, 0) + 1
                         flagged_clips += bool(kinds)
-                        out.append(motion, spec=spec, extra=extra, frame_extra=frames)
-                        n += 1
+                    out.append_packed(part.skeletons[0], frames["rotations"], frames["root_translation"],
+                                      frames.get("translations"), t["length"], t["name"], t["fps"], spec=spec,
+                                      sources=t["source"], roles=t["role"], labels=t["labels"],
+                                      extra={col: t[col] for col in OUTPUT_COLUMNS},
+                                      frame_extra={name: frames[name] for name in FRAME_COLUMNS})
+                    n += len(t["name"])
             if c.copy_sources:
                 copied = self._copy_sources(out, loco_db, act_db, pairs)
         return n, flagged, flagged_clips, copied
@@ -480,6 +617,33 @@ class SpliceJob:
                 out.append(m, spec=DatasetSpec.from_json(spec_text) if spec_text else None)
                 count += 1
         return count
+
+
+@contextmanager
+def _compute_threads(config: JobConfig):
+    """The job's parallelism is over pairs: torch's intra-op threads are set to one while it runs
+    (no fine-grained parallel regions), the compiled splicer's to ``config.threads``."""
+    old_torch = torch.get_num_threads()
+    torch.set_num_threads(1)
+    old = None
+    if _compiled(config):
+        from ..cpu import get_threads, set_threads
+
+        old = get_threads()
+        set_threads(config.threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old_torch)
+        if old is not None:
+            from ..cpu import set_threads
+
+            set_threads(old)
+
+
+def _compiled(config: JobConfig) -> bool:
+    """Whether the job runs the compiled CPU splicer (else torch, e.g. on CUDA)."""
+    return resolve_backend(SpliceOptions(device=config.device)) == "compiled"
 
 
 def _flag_kind(flag: str) -> str:
