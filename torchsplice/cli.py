@@ -297,7 +297,8 @@ def _add_splice_options(s) -> None:
     s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
     s.add_argument("--force-locomotion", action="store_true",
                    help="splice clips that do not locomote (the method's limit) instead of refusing them")
-    s.add_argument("--device", default=None, help="torch device for the tensor work, e.g. cuda (default cpu)")
+    s.add_argument("--device", default=None,
+                   help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
 
 
 def cmd_plot_alignment(args) -> int:
@@ -363,7 +364,8 @@ def cmd_splice_all(args) -> int:
         locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
         methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
         force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
-        posture=not args.no_posture, device=_device(args.device),
+        posture=not args.no_posture, device=_device(args.device), threads=args.threads,
+        compression=None if args.compression == "none" else args.compression,
     )
     if not Path(args.output).parent.exists():
         raise TorchspliceError(f"{args.output}: folder {Path(args.output).parent} does not exist")
@@ -499,6 +501,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
     s.add_argument("--copy-sources", action="store_true", help="copy the source clips into the output too")
+    s.add_argument("--threads", type=_positive_int, default=None, metavar="N",
+                   help="threads splicing pairs in parallel on the CPU (default: every core); results do not depend on it")
+    s.add_argument("--compression", default="auto", choices=["auto", "lzf", "gzip", "none"],
+                   help="compression of the output: auto (default: LZF on translations and per-frame columns, "
+                        "rotations raw; fast, read by h5py), lzf (everything), gzip (smallest, read by every "
+                        "HDF5 tool, several times slower to write) or none")
     _add_splice_options(s)
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing output file")
     s.add_argument("--restart", action="store_true", help="discard an unfinished earlier run instead of resuming it")

@@ -34,7 +34,11 @@ of reach; those are never chosen. The all-diagonal path from ``(0, 0)`` always r
 or right edge, so with finite costs some end cell is always reachable, whatever the lengths
 and ``L``; a pair only fails (``ValueError`` naming it) when ``+inf`` cells block every path.
 
-Cost of the search: the Python loop runs over the ``Ta`` rows, each step vectorised over the
+Two implementations give the same bits: this module's torch code (any device; it is what runs
+on CUDA) and the compiled one of :mod:`torchsplice.cpu.timewarp` (CPU tensors, by default),
+which runs each pair in one thread and pairs in parallel.
+
+Cost of the torch search: the Python loop runs over the ``Ta`` rows, each step vectorised over the
 batch and the columns (plus ``L`` shifts along the row); memory is the grid, three ``int8``
 back-pointer arrays ``(B, Ta, Tb)`` and a few ``(B, 2L+1, max(Ta, Tb))`` state arrays.
 Backtracking steps every pair back at once, one path step per loop iteration.
@@ -44,6 +48,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 __all__ = ["WarpPath", "timewarp", "cumulative_cost", "reachable_mask"]
@@ -298,7 +303,42 @@ def _backtrack(bp, end_i, end_j, state, length, L):
 # ----------------------------------------------------------------------------- public API
 
 
-def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3) -> WarpPath:
+def _backend(backend: str, grid: torch.Tensor) -> str:
+    """``"compiled"`` or ``"torch"`` for ``backend`` (``"auto"``: compiled for CPU tensors)."""
+    if backend not in ("auto", "compiled", "torch"):
+        raise ValueError(f"backend must be 'auto', 'compiled' or 'torch', got {backend!r}")
+    if backend == "compiled" and grid.device.type != "cpu":
+        raise ValueError(f"the compiled backend runs on CPU tensors, got a grid on {grid.device}")
+    if backend == "auto":
+        from ..cpu import available
+
+        return "compiled" if grid.device.type == "cpu" and available() else "torch"
+    return backend
+
+
+def _timewarp_compiled(grid, la, lb, L, unbatched) -> WarpPath:
+    from ..cpu.timewarp import timewarp_batch
+
+    B, Ta, Tb = grid.shape
+    g = grid.detach().contiguous().numpy()
+    cells = np.full((B, Ta + Tb - 1, 2), -1, dtype=np.int64)
+    length = np.zeros(B, dtype=np.int64)
+    total = np.zeros(B, dtype=g.dtype)
+    timewarp_batch(g, la.numpy(), lb.numpy(), L, cells, length, total)
+    if (length < 0).any():
+        b = int(np.nonzero(length < 0)[0][0])
+        raise ValueError(
+            f"pair {b}: no cell on the top or right edge of its {int(la[b])}x{int(lb[b])} grid can be "
+            f"reached from (0, 0) with slope limit {L} without crossing an infinite cost"
+        )
+    cells_t, length_t, total_t = torch.from_numpy(cells[:, : int(length.max())]), torch.from_numpy(length), torch.from_numpy(total)
+    cost = total_t / length_t.to(total_t.dtype)
+    if unbatched:
+        return WarpPath(cells=cells_t[0], length=length_t[0], cost=cost[0], total=total_t[0])
+    return WarpPath(cells=cells_t, length=length_t, cost=cost, total=total_t)
+
+
+def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: str = "auto") -> WarpPath:
     """Optimal slope-limited time alignment of each pair (Heck et al. 2006, §3.1).
 
     Args:
@@ -310,6 +350,9 @@ def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3) -> WarpPath
         lengths_b: ``(B,)`` integers in ``[1, Tb]``, the valid columns; None means ``Tb``.
         max_run: the slope limit ``L >= 1``: at most ``L`` consecutive horizontal steps and at
             most ``L`` consecutive vertical steps.
+        backend: ``"auto"`` (the compiled DP of :mod:`torchsplice.cpu.timewarp` for CPU
+            tensors, this module's torch code otherwise), ``"compiled"`` or ``"torch"``. Both
+            give the same paths, lengths and totals, bit for bit.
 
     Returns:
         A :class:`WarpPath`; for an unbatched grid its fields drop the batch dimension
@@ -320,6 +363,8 @@ def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3) -> WarpPath
             valid cell, or a pair whose every path to its top or right edge crosses ``+inf``.
     """
     grid, la, lb, L, unbatched = _check_inputs(grid, lengths_a, lengths_b, max_run)
+    if _backend(backend, grid) == "compiled":
+        return _timewarp_compiled(grid, la, lb, L, unbatched)
     L = _effective_run(L, grid.shape[1], grid.shape[2])
     fw = _forward(grid, la, lb, L)
     end_i, end_j, state, total, length = _choose_end(fw, la, lb, max_run)
@@ -330,7 +375,7 @@ def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3) -> WarpPath
     return out
 
 
-def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3) -> torch.Tensor:
+def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: str = "auto") -> torch.Tensor:
     """Minimal summed cost of a slope-limited path from ``(0, 0)`` to every cell.
 
     Args and conventions as :func:`timewarp`. Returns ``(B, Ta, Tb)`` (``(Ta, Tb)`` for an
@@ -338,6 +383,13 @@ def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3) -> t
     unreachable under the slope limit, blocked by ``+inf`` costs, or padding.
     """
     grid, la, lb, L, unbatched = _check_inputs(grid, lengths_a, lengths_b, max_run)
+    if _backend(backend, grid) == "compiled":
+        from ..cpu.timewarp import cumulative_cost_batch
+
+        out = np.full(tuple(grid.shape), np.inf, dtype=grid.detach().numpy().dtype)
+        cumulative_cost_batch(grid.detach().contiguous().numpy(), la.numpy(), lb.numpy(), L, out)
+        out = torch.from_numpy(out)
+        return out[0] if unbatched else out
     L = _effective_run(L, grid.shape[1], grid.shape[2])
     out = _forward(grid, la, lb, L, keep_min=True)["min"]
     return out[0] if unbatched else out

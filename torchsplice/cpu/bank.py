@@ -21,9 +21,9 @@ from ..core.skeleton import Skeleton
 from ..io.spec import SkeletonRoles
 from .fk import fk_clips, joint_closure
 from .grid import clip_features
-from .splice import METHOD_CODES, STATUS, splice_batch
+from .splice import METHOD_CODES, STATUS, compact, splice_batch
 
-__all__ = ["ClipBank", "PackedSplices", "joint_config", "splice_bank", "landmark_joints"]
+__all__ = ["ClipBank", "PackedSplices", "Buffers", "joint_config", "splice_bank", "landmark_joints"]
 
 
 def landmark_joints(roles: SkeletonRoles, landmarks) -> list[int]:
@@ -146,17 +146,36 @@ class CompiledSpliceError(ValueError):
         self.pair, self.reason = pair, reason
 
 
+class Buffers:
+    """Output arrays reused from batch to batch (first-touch page faults cost as much as the
+    copies): the per-pair room the kernel writes into, and the packed result. Results returned
+    with a :class:`Buffers` are views, valid until the next call with the same buffers."""
+
+    def __init__(self):
+        self.room: dict = {}
+        self.packed: dict = {}
+
+    @staticmethod
+    def _get(store: dict, rows: int, J: int, dtype) -> tuple:
+        have = store.get("arrays")
+        if have is None or have[0].shape[0] < rows or have[0].shape[1] != J or have[0].dtype != dtype:
+            rows = max(rows, int(1.25 * (have[0].shape[0] if have is not None else 0)))
+            have = (np.empty((rows, J, 4), dtype), np.empty((rows, J, 3), dtype), np.empty(rows), np.empty(rows))
+            store["arrays"] = have
+        return have
+
+
 def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, max_run: int = 3,
                 heading_window_deg: float | None = 60.0, crop: bool = True, crop_context: int = 15,
                 crop_window: int = 6, crop_depth: float = 0.25, knot_spacing: float = 7.5,
-                smoothing: float = 1e-2, posture: bool = True, compact: bool = True,
-                dtype=np.float32) -> PackedSplices:
+                smoothing: float = 1e-2, posture: bool = True, dtype=np.float32,
+                buffers: Buffers | None = None) -> PackedSplices:
     """Splice pairs of bank clips: ``loco``, ``act`` (and ``ref`` for cpmc) ``(B,)`` clip indices.
 
     Frame counts (``crop_context``, ``crop_window``, ``knot_spacing``) are at the bank's frame
-    rate. With ``compact`` the outputs are packed without gaps; otherwise each pair keeps room
-    for its locomotion's length. Rotations and translations come out as ``dtype`` (float32 or
-    float64; the computation is float64 either way).
+    rate. Rotations and translations come out as ``dtype`` (float32 or float64; the
+    computation is float64 either way). With ``buffers`` the output arrays are reused from
+    call to call (see :class:`Buffers`).
     """
     loco = np.ascontiguousarray(loco, dtype=np.int64)
     act = np.ascontiguousarray(act, dtype=np.int64)
@@ -166,8 +185,10 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
     out_start = np.concatenate(([0], np.cumsum(room)[:-1])).astype(np.int64)
     M, J = int(room.sum()), bank.rot.shape[1]
     P = int((bank.lengths[loco] + bank.lengths[act]).max()) if B else 1
-    orot, otrans = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype)
-    ocurve, ocorr = np.empty(M), np.empty(M)
+    if buffers is not None:
+        orot, otrans, ocurve, ocorr = Buffers._get(buffers.room, M, J, dtype)
+    else:
+        orot, otrans, ocurve, ocorr = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M), np.empty(M)
     cells = np.empty((B, P, 2), np.int64)
     status, ocrop, plen, frames = (np.empty(B, np.int64) for _ in range(4))
     cost, angle = np.empty(B), np.empty(B)
@@ -182,8 +203,15 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
     if len(bad):
         b = int(bad[0])
         raise CompiledSpliceError(b, STATUS[int(status[b])])
-    if compact and B:
-        keep = np.concatenate([np.arange(s, s + f) for s, f in zip(out_start, frames)])
-        orot, otrans, ocurve, ocorr = orot[keep], otrans[keep], ocurve[keep], ocorr[keep]
-        out_start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    if B:
+        new_start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+        n = int(frames.sum())
+        if buffers is not None:
+            crot, ctrans, ccurve, ccorr = Buffers._get(buffers.packed, n, J, dtype)
+        else:
+            crot, ctrans, ccurve, ccorr = np.empty((n, J, 4), dtype), np.empty((n, J, 3), dtype), np.empty(n), np.empty(n)
+        compact(orot, otrans, ocurve, ocorr, out_start, frames, new_start, crot, ctrans, ccurve, ccorr)
+        orot, otrans, ocurve, ocorr, out_start = crot[:n], ctrans[:n], ccurve[:n], ccorr[:n], new_start
+    else:
+        orot, otrans, ocurve, ocorr = orot[:0], otrans[:0], ocurve[:0], ocorr[:0]
     return PackedSplices(out_start, frames, orot, otrans, ocurve, ocorr, ocrop, cost, angle, cells, plen)

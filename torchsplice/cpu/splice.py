@@ -37,7 +37,7 @@ from .horn import horn_from_h
 from .quat import qconj, qload, qmul, qrot, qslerp, qstore, rotmat_to_q
 from .timewarp import dp_pair
 
-__all__ = ["METHOD_CODES", "STATUS", "splice_batch"]
+__all__ = ["METHOD_CODES", "STATUS", "splice_batch", "compact"]
 
 METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
 STATUS = {0: "ok", 1: "no path: +inf costs block every alignment", 2: "the alignment does not advance in both clips"}
@@ -67,26 +67,29 @@ def _time_align(feat, starts, a, na, b, nb, opts, cells, curve):
     return 0, crop, length, total / length, frames
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _pick(c, lat, up, l, u, o):
+    """Component of column ``c`` of the heading matrix: the lateral, up or third axis."""
+    return l if c == lat else (u if c == up else o)
+
+
 @njit(cache=True, nogil=True)
 def _heading_q(pos, t, lh, rh, up):
     """Heading frame (WXYZ, heading-frame to world) at frame ``t`` from the hips, as
-    :func:`torchsplice.kinematics.heading.heading_frame`."""
+    :func:`torchsplice.kinematics.heading.heading_frame`: columns lateral (the floor projection
+    of left hip minus right hip), up, and their cross product (sign keeping it right-handed)."""
     lat = 1 if up == 0 else 0
-    third = 3 - lat - up
-    v = (pos[t, lh, 0] - pos[t, rh, 0], pos[t, lh, 1] - pos[t, rh, 1], pos[t, lh, 2] - pos[t, rh, 2])
-    u = [0.0, 0.0, 0.0]
-    u[up] = 1.0
-    lv = [v[0], v[1], v[2]]
-    lv[up] = 0.0
-    nn = max(math.sqrt(lv[0] * lv[0] + lv[1] * lv[1] + lv[2] * lv[2]), 1e-12)
-    lx, ly, lz = lv[0] / nn, lv[1] / nn, lv[2] / nn
+    ux, uy, uz = (1.0 if up == 0 else 0.0), (1.0 if up == 1 else 0.0), (1.0 if up == 2 else 0.0)
+    vx, vy, vz = pos[t, lh, 0] - pos[t, rh, 0], pos[t, lh, 1] - pos[t, rh, 1], pos[t, lh, 2] - pos[t, rh, 2]
+    d = vx * ux + vy * uy + vz * uz
+    vx, vy, vz = vx - d * ux, vy - d * uy, vz - d * uz
+    nn = max(math.sqrt(vx * vx + vy * vy + vz * vz), 1e-12)
+    lx, ly, lz = vx / nn, vy / nn, vz / nn
     sgn = 1.0 if (up - lat) % 3 == 1 else -1.0
-    ox, oy, oz = sgn * (ly * u[2] - lz * u[1]), sgn * (lz * u[0] - lx * u[2]), sgn * (lx * u[1] - ly * u[0])
-    m = np.empty((3, 3))
-    m[0, lat], m[1, lat], m[2, lat] = lx, ly, lz
-    m[0, up], m[1, up], m[2, up] = u[0], u[1], u[2]
-    m[0, third], m[1, third], m[2, third] = ox, oy, oz
-    return rotmat_to_q(m[0, 0], m[0, 1], m[0, 2], m[1, 0], m[1, 1], m[1, 2], m[2, 0], m[2, 1], m[2, 2])
+    ox, oy, oz = sgn * (ly * uz - lz * uy), sgn * (lz * ux - lx * uz), sgn * (lx * uy - ly * ux)
+    return rotmat_to_q(_pick(0, lat, up, lx, ux, ox), _pick(1, lat, up, lx, ux, ox), _pick(2, lat, up, lx, ux, ox),
+                       _pick(0, lat, up, ly, uy, oy), _pick(1, lat, up, ly, uy, oy), _pick(2, lat, up, ly, uy, oy),
+                       _pick(0, lat, up, lz, uz, oz), _pick(1, lat, up, lz, uz, oz), _pick(2, lat, up, lz, uz, oz))
 
 
 @njit(cache=True, nogil=True)
@@ -113,12 +116,20 @@ def _horn_pair_cloud(src, tgt):
     """Horn rotation between two ``(K, 3)`` clouds with uniform weights."""
     K = src.shape[0]
     w = 1.0 / K
-    h = np.zeros(9)
+    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
     for k in range(K):
-        for a in range(3):
-            for b in range(3):
-                h[3 * a + b] += w * src[k, a] * tgt[k, b]
-    return horn_from_h(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8])
+        sx, sy, sz = w * src[k, 0], w * src[k, 1], w * src[k, 2]
+        tx, ty, tz = tgt[k, 0], tgt[k, 1], tgt[k, 2]
+        h00 += sx * tx
+        h01 += sx * ty
+        h02 += sx * tz
+        h10 += sy * tx
+        h11 += sy * ty
+        h12 += sy * tz
+        h20 += sz * tx
+        h21 += sz * ty
+        h22 += sz * tz
+    return horn_from_h(h00, h01, h02, h10, h11, h12, h20, h21, h22)
 
 
 @njit(cache=True, nogil=True)
@@ -165,14 +176,15 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, c
     if status != 0:
         return status, crop, plen, cost, 0, 0.0
     n_c = lengths[act] - crop
-    arot = np.zeros((T, J, 4))
-    atrans = np.zeros((T, J, 3))
+    # every array below is read only on the joints it is written on (act_joints, fk_joints)
+    arot = np.empty((T, J, 4))
+    atrans = np.empty((T, J, 3))
     resample_clip(rot, trans, as_ + crop, n_c, curve, T, act_joints, arot, atrans)
     # spatial alignment: q_A per frame between the pelvis clouds of (action on loco) and loco
-    frot = np.zeros((T, J, 4))
-    ftrans = np.zeros((T, J, 3))
-    fpos = np.zeros((T, J, 3))
-    fgrot = np.zeros((T, J, 4))
+    frot = np.empty((T, J, 4))
+    ftrans = np.empty((T, J, 3))
+    fpos = np.empty((T, J, 3))
+    fgrot = np.empty((T, J, 4))
     q_lp = np.empty((T, 4))
     for t in range(T):
         for c in range(4):
@@ -199,8 +211,8 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, c
         mean_s = np.empty((2, 3))
         mean_u = np.empty((2, 3))
         _mean_shoulders(fpos, T, hips, shoulders, pelvis, up, mean_s, H)
-        upos = np.zeros((T, J, 3))
-        ugrot = np.zeros((T, J, 4))
+        upos = np.empty((T, J, 3))
+        ugrot = np.empty((T, J, 4))
         fk_clip(arot, atrans, parents, fk_joints, T, upos, ugrot)
         _mean_shoulders(upos, T, hips, shoulders, pelvis, up, mean_u, np.empty((0, 4)))
         qg = _horn_pair_cloud(mean_s, mean_u)
@@ -250,10 +262,10 @@ def _cpmc_one(bank, feat, starts, lengths, loco, act, ref, joints, opts, cells, 
     status, crop1, _, _, n_act = _time_align(feat, starts, act, lengths[act], ref, lengths[ref], opts, c1, curve1)
     if status != 0:
         return status, crop1, 0, np.nan, 0
-    rrot = np.zeros((n_act, J, 4))
-    rtrans = np.zeros((n_act, J, 3))
+    rrot = np.empty((n_act, J, 4))
+    rtrans = np.empty((n_act, J, 3))
     resample_clip(rot, trans, rs + crop1, lengths[ref] - crop1, curve1, n_act, upper_joints, rrot, rtrans)
-    diff = np.zeros((n_act, J, 4))
+    diff = np.empty((n_act, J, 4))  # upper-body joints only
     for t in range(n_act):
         for j in upper_joints:
             qstore(diff, t, j, qmul(qconj(qload(rrot, t, j)), qload(rot, as_ + t, j)))
@@ -314,3 +326,15 @@ def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, op
             cells[b, p, 1] = cb[p, 1] if p < pl else -1
         for t in range(T):
             cu[t] += c
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def compact(rot, trans, curve, corr, start, frames, new_start, crot, ctrans, ccurve, ccorr):
+    """Copy pair ``b``'s ``frames[b]`` rows from ``start[b]`` to ``new_start[b]`` (packing the
+    results of :func:`splice_batch` without gaps), in parallel over pairs."""
+    for b in prange(start.shape[0]):
+        s, d, n = start[b], new_start[b], frames[b]
+        crot[d:d + n] = rot[s:s + n]
+        ctrans[d:d + n] = trans[s:s + n]
+        ccurve[d:d + n] = curve[s:s + n]
+        ccorr[d:d + n] = corr[s:s + n]

@@ -52,7 +52,7 @@ import torch
 from .. import __version__
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
-from ..io.database import MotionDatabase
+from ..io.database import COMPRESSIONS, MotionDatabase
 from ..io.spec import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import METHODS, AlignOptions, SpliceOptions, splice_pairs
 from ..splice.api import align_kwargs, resolve_backend
@@ -95,8 +95,9 @@ class JobConfig:
         max_run, posture: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         device: torch device for the tensor work (``None``/``"cpu"``: the compiled CPU splicer).
         threads: threads of the compiled splicer (``None``: every core); results do not depend on it.
-        compression: the output's compression, ``"gzip"`` (readable everywhere), ``"lzf"``
-            (several times faster to write, read by h5py) or ``None``.
+        compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
+            (LZF on everything but rotations: fast, read by h5py), ``"lzf"``, ``"gzip"`` (read by
+            every HDF5 tool, several times slower to write) or ``None``.
     """
 
     database: Path
@@ -113,10 +114,8 @@ class JobConfig:
     posture: bool = True
     device: str | None = None
     threads: int | None = None
-    compression: str | None = "gzip"
+    compression: str | None = "auto"
 
-
-COMPRESSIONS = ("gzip", "lzf", None)
 
 
 @dataclass
@@ -191,6 +190,27 @@ class _Part:
     flags: list
 
 
+class _Output:
+    """The output database being written, with what the closing summary counts."""
+
+    def __init__(self, db: MotionDatabase):
+        self.db = db
+        self.clips = self.flagged_clips = self.copied = 0
+        self.flagged: dict[str, int] = {}
+
+    def append(self, skeleton, spec, rotations, root, translations, lengths, names, fps, sources, roles, labels,
+               extra, action_frame) -> None:
+        for f in extra["flags"]:
+            kinds = {_flag_kind(x) for x in str(f).split(FLAG_SEPARATOR) if x}
+            for kind in kinds:
+                self.flagged[kind] = self.flagged.get(kind, 0) + 1
+            self.flagged_clips += bool(kinds)
+        self.db.append_packed(skeleton, rotations, root, translations, lengths, names, fps, spec=spec, sources=sources,
+                              roles=roles, labels=labels, extra=extra, frame_extra={"action_frame": action_frame},
+                              check=False)
+        self.clips += len(names)
+
+
 class _Sources:
     """The selected clips, each read once, and one :class:`ClipBank` per locomotion group.
 
@@ -236,7 +256,7 @@ class SpliceJob:
         self.command = command or "torchsplice.job.SpliceJob (Python API)"
         self._checks: dict = {}
         if config.compression not in COMPRESSIONS:
-            raise TorchspliceError(f"unknown compression {config.compression!r}; choose gzip, lzf or none")
+            raise TorchspliceError(f"unknown compression {config.compression!r}; choose auto, lzf, gzip or none")
         bad = [m for m in config.methods if m not in METHODS]
         if bad or not config.methods:
             raise TorchspliceError(f"unknown method {bad[0] if bad else '(none)'!r}; choose from {', '.join(METHODS)}")
@@ -445,30 +465,42 @@ class SpliceJob:
         summary.resumed = sum(len(batches[k]) for k in done)
         log.info("%d pairs in %d batches of up to %d (%d already done)", len(pairs), len(batches), batch, summary.resumed)
         bar = _progress(len(pairs), summary.resumed, self.progress)
+        out = self._open_output(signature, len(pairs))
         pending: Future | None = None
         compute = 0.0
+        # One writer thread, fed in batch order: it writes each new part (for resuming) and
+        # appends every part, new or resumed, to the output, while the next batch computes.
         with ThreadPoolExecutor(max_workers=1) as writer:
             try:
                 for k, chunk in enumerate(batches):
                     if k in done:
-                        continue
-                    t1 = time.perf_counter()
-                    records = self._splice_batch(chunk, tl, ta, context)
-                    compute += time.perf_counter() - t1
+                        part = None
+                    else:
+                        t1 = time.perf_counter()
+                        part = self._splice_batch(chunk, tl, ta, context)
+                        compute += time.perf_counter() - t1
                     if pending is not None:
                         pending.result()
-                    pending = writer.submit(self._write_part, k, records, context)
-                    bar.update(len(chunk))
+                    pending = writer.submit(self._write_and_append, k, part, context, out)
+                    if part is not None:
+                        bar.update(len(chunk))
+                if pending is not None:
+                    pending.result()
+                if c.copy_sources:
+                    out.copied = self._copy_sources(out.db, loco_db, act_db, pairs)
+                out.db.close()
             except BaseException:
                 if pending is not None and not pending.done():
-                    pending.result()  # keep the batch that was being written
+                    try:
+                        pending.result()  # keep the batch that was being written
+                    except BaseException:
+                        pass
+                out.db.abort()
                 bar.close()
                 raise
-            if pending is not None:
-                pending.result()
         bar.close()
         summary.compute_seconds = compute
-        summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = self._merge(batches, loco_db, act_db, tl, ta, pairs, signature, t0)
+        summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = out.clips, out.flagged, out.flagged_clips, out.copied
         shutil.rmtree(self.work, ignore_errors=True)
         return summary
 
@@ -500,11 +532,15 @@ class SpliceJob:
         akeys = [src.key("A", p.action) for p in chunk]
         rkeys = [src.key("A", p.reference) for p in chunk] if method == "cpmc" else None
         if _compiled(c):
-            from ..cpu.bank import splice_bank
+            from ..cpu.bank import Buffers, splice_bank
 
             bank, index = src.bank((k, fps), self._groups[(k, fps)], ctx["roles"], align.landmarks)
+            # two sets of output buffers, alternating: the writer reads one while the next batch fills the other
+            self._buffers = getattr(self, "_buffers", None) or (Buffers(), Buffers())
+            self._parity = 1 - getattr(self, "_parity", 1)
             out = splice_bank(bank, [index[x] for x in lkeys], [index[x] for x in akeys], method,
-                              ref=[index[x] for x in rkeys] if rkeys else None, posture=c.posture, **align_kwargs(align, fps))
+                              ref=[index[x] for x in rkeys] if rkeys else None, posture=c.posture,
+                              buffers=self._buffers[self._parity], **align_kwargs(align, fps))
             frames, rot, trans = out.frames, out.rotations, out.translations
             curve, corr, crop, cost, posture = out.curve, out.correction, out.crop.astype(np.float64), out.cost, out.posture
         else:
@@ -576,35 +612,30 @@ class SpliceJob:
                 return ctx["spec"]
         return None
 
-    def _merge(self, batches, loco_db, act_db, tl, ta, pairs, signature, t0) -> tuple[int, dict, int]:
+    def _open_output(self, signature: dict, pairs: int) -> "_Output":
+        """The output database, written beside its path and renamed into place when complete."""
         c = self.config
-        run = {**signature, "command": self.command, "started": self._started,
-               "pairs_spliced": len(pairs)}
-        flagged: dict[str, int] = {}
-        n = copied = flagged_clips = 0
+        run = {**signature, "command": self.command, "started": self._started, "pairs_spliced": pairs}
         # 256-frame chunks: random training windows decompress little (see torchsplice.data)
-        with MotionDatabase.create(c.output, overwrite=self.overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
-                                   compression=c.compression, frame_columns=FRAME_COLUMNS,
-                                   attrs={"run": json.dumps(run)}) as out:
-            for k in range(len(batches)):
-                with MotionDatabase.open(self._part(k)) as part:
-                    spec = DatasetSpec.from_json(part.spec_json(0)) if part.spec_json(0) else None
-                    t = part.table()
-                    frames = part.packed(0)
-                    for f in t["flags"]:
-                        kinds = {_flag_kind(x) for x in str(f).split(FLAG_SEPARATOR) if x}
-                        for kind in kinds:
-                            flagged[kind] = flagged.get(kind, 0) + 1
-                        flagged_clips += bool(kinds)
-                    out.append_packed(part.skeletons[0], frames["rotations"], frames["root_translation"],
-                                      frames.get("translations"), t["length"], t["name"], t["fps"], spec=spec,
-                                      sources=t["source"], roles=t["role"], labels=t["labels"],
-                                      extra={col: t[col] for col in OUTPUT_COLUMNS},
-                                      frame_extra={name: frames[name] for name in FRAME_COLUMNS})
-                    n += len(t["name"])
-            if c.copy_sources:
-                copied = self._copy_sources(out, loco_db, act_db, pairs)
-        return n, flagged, flagged_clips, copied
+        db = MotionDatabase.create(c.output, overwrite=self.overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
+                                   compression=c.compression, frame_columns=FRAME_COLUMNS, attrs={"run": json.dumps(run)})
+        return _Output(db)
+
+    def _write_and_append(self, k: int, part: "_Part | None", context, out: "_Output") -> None:
+        """Write batch ``k``'s part (a new batch), then append it to the output (from memory, or
+        from its part file when an earlier run wrote it)."""
+        if part is not None:
+            self._write_part(k, part, context)
+            out.append(part.skeleton, self._spec_of(part.skeleton, context), part.rotations, part.translations[:, 0],
+                       part.translations, part.lengths, part.names, part.fps, [f"splice:{m}" for m in part.extra["method"]],
+                       "spliced", part.labels, part.extra, part.action_frame)
+            return
+        with MotionDatabase.open(self._part(k)) as db:
+            spec = DatasetSpec.from_json(db.spec_json(0)) if db.spec_json(0) else None
+            t, frames = db.table(), db.packed(0)
+            out.append(db.skeletons[0], spec, frames["rotations"], frames["root_translation"], frames.get("translations"),
+                       t["length"], t["name"], t["fps"], t["source"], t["role"], t["labels"],
+                       {col: t[col] for col in OUTPUT_COLUMNS}, frames["action_frame"])
 
     def _copy_sources(self, out: MotionDatabase, loco_db, act_db, pairs) -> int:
         count = 0
