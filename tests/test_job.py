@@ -19,12 +19,14 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import torch
 
 from torchsplice import __version__
 from torchsplice.cli import main
 from torchsplice.io.database import MotionDatabase
 from torchsplice.io.sample import sample_motions
 from torchsplice.io.spec import load_spec
+from torchsplice.core.rotations import quat_angle
 from torchsplice.job import JobConfig, SpliceJob
 
 REPO = Path(__file__).resolve().parents[1]
@@ -458,6 +460,56 @@ def test_two_separate_runs_are_bit_identical(sample_db, default_out, tmp_path):
                           cwd=tmp_path, env=env(), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert_same_file(out, default_out)
+
+
+def datasets(path) -> dict:
+    """Every dataset of a file (clip data and columns), raw; the run record is left out."""
+    return {k: v for k, v in h5_dump(path).items() if v[0] != "group"}
+
+
+def test_output_does_not_depend_on_batch_size_or_threads(sample_db, default_out, tmp_path):
+    """Each pair is computed alone by one thread: other batch sizes and thread counts give the
+    same bits, clip data and columns alike."""
+    for batch, threads in (("3", "1"), ("7", "2")):
+        out = tmp_path / f"b{batch}_t{threads}.h5"
+        assert main(["splice-all", str(sample_db), "-o", str(out), "--batch-size", batch, "--threads", threads, "-q"]) == 0
+        assert datasets(out) == datasets(default_out), (batch, threads)
+        assert run_record(out)["batch_pairs"] == int(batch)
+
+
+def test_compression_choices_hold_the_same_clips(sample_db, default_out, tmp_path):
+    want = datasets(default_out)
+    for comp in ("none", "lzf", "gzip"):
+        out = tmp_path / f"{comp}.h5"
+        assert main(["splice-all", str(sample_db), "-o", str(out), "--compression", comp, "-q"]) == 0
+        assert datasets(out) == want
+        with h5py.File(out, "r") as f:
+            ds = f["skeletons/0/rotations"]
+            assert ds.compression == (None if comp == "none" else comp)
+            assert f.attrs["compression"] == ("" if comp == "none" else comp)
+    with h5py.File(default_out, "r") as f:  # auto: LZF everywhere but the rotations
+        assert f["skeletons/0/rotations"].compression is None
+        assert f["skeletons/0/root_translation"].compression == "lzf"
+        assert f["skeletons/0/action_frame"].compression == "lzf"
+
+
+def test_torch_path_writes_the_same_clips(sample_db, default_out, tmp_path, monkeypatch):
+    """Without the compiled splicer (as on CUDA) the job runs the torch splicer: the same clips
+    to float32 rounding, the same alignment choices."""
+    import torchsplice.cpu
+
+    monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
+    out = tmp_path / "torch.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "-q"]) == 0
+    a, b = table(out), table(default_out)
+    for col in ("name", "length", "crop", "locomotion", "action", "flags"):
+        assert a[col] == b[col], col
+    assert np.allclose(a["cost"], b["cost"], rtol=1e-4)
+    assert np.allclose(a["pelvis_correction_deg"], b["pelvis_correction_deg"], atol=1e-3)
+    with h5py.File(out, "r") as fa, h5py.File(default_out, "r") as fb:
+        qa, qb = (torch.from_numpy(f["skeletons/0/rotations"][()]).double() for f in (fa, fb))
+        assert float(torch.rad2deg(quat_angle(qa, qb)).max()) < 1e-3
+        assert np.allclose(fa["skeletons/0/action_frame"][()], fb["skeletons/0/action_frame"][()], atol=1e-3)
 
 
 # --------------------------------------------------------------------------------------------

@@ -8,8 +8,10 @@ thread. Here each pair runs start to end in one thread, pairs are spread over th
 (coarse-grained: one pair per task), and inner loops over frames are vectorised by LLVM.
 
 Why numba rather than a C++ extension: it installs from a wheel on every platform torch
-supports, needs no compiler on the user's machine, and its compiled code is cached next to
-the sources (``__pycache__``) after the first run, so later runs start at once.
+supports, needs no compiler on the user's machine, and its compiled code is cached after the
+first run (in ``__pycache__/numba/<hash of the kernel sources>`` beside them, or the user's
+cache folder when that is read-only), so later runs start at once and a changed kernel is
+never served from a stale cache.
 
 The torch implementations (:mod:`torchsplice.align`, :mod:`torchsplice.splice.heck`) stay:
 they run on CUDA and are the reference the kernels are tested against (the DP gives the same
@@ -22,9 +24,59 @@ grids, phase crop), :mod:`.timewarp` (the DP), :mod:`.curve` (B-spline fit, resa
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
+from pathlib import Path
 
-__all__ = ["available", "set_threads", "get_threads"]
+__all__ = ["available", "set_threads", "get_threads", "cache_dir"]
+
+
+def _kernel_hash() -> str:
+    """A hash of every kernel source here: numba re-validates a cached function against its
+    own file only, so a change in a function it calls from another file would go unseen."""
+    h = hashlib.sha256()
+    for f in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(f.name.encode() + f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _cache_root() -> Path:
+    """Where compiled kernels are cached: beside the sources when writable, else the user's cache."""
+    here = Path(__file__).parent / "__pycache__" / "numba"
+    try:
+        here.mkdir(parents=True, exist_ok=True)
+        if os.access(here, os.W_OK):
+            return here
+    except OSError:
+        pass
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "torchsplice" / "numba"
+
+
+def _set_cache_dir() -> Path:
+    """Point numba's cache at a folder named by the kernels' hash (old folders are removed)."""
+    root = Path(os.environ["NUMBA_CACHE_DIR"]) if os.environ.get("NUMBA_CACHE_DIR") else _cache_root()
+    path = root / _kernel_hash()
+    try:
+        import numba
+
+        path.mkdir(parents=True, exist_ok=True)
+        numba.config.CACHE_DIR = str(path)
+        if not os.environ.get("NUMBA_CACHE_DIR"):
+            for old in root.iterdir():
+                if old.is_dir() and old.name != path.name:
+                    shutil.rmtree(old, ignore_errors=True)
+    except Exception:  # no numba, or a read-only disk: numba then compiles without caching
+        pass
+    return path
+
+
+def cache_dir() -> Path:
+    """The folder holding this version's compiled kernels."""
+    return _CACHE
+
+
+_CACHE = _set_cache_dir()
 
 _AVAILABLE: bool | None = None
 

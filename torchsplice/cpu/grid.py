@@ -65,42 +65,74 @@ def clip_features(pos, landmarks, hips, up, n, floor, height, norm, hcos, hsin):
             hcos[t], hsin[t] = 1.0, 0.0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _aligned(c, s, cd, sd, cos_dev, sin_dev):
+    """The best aligned term ``M`` from ``C``, ``S`` and the relative heading's cosine and sine."""
+    r = math.sqrt(c * c + s * s)
+    c2 = c * cd + s * sd
+    s2 = s * cd - c * sd
+    return r if c2 >= r * cos_dev else c2 * cos_dev + abs(s2) * sin_dev
+
+
 @njit(cache=True, nogil=True)
-def distance_row_block(fa, ya, na, ca, sa, la, fb, yb, nb, cb, sb, lb, max_dev, out):
-    """``out[i, j]`` for ``i < la``, ``j < lb``: distance of frame ``i`` of clip a to frame
-    ``j`` of clip b, from both clips' features (``max_dev >= pi``: unrestricted)."""
-    K = fa.shape[0]
+def distance_row_block(feat, sa, la, sb, lb, max_dev, out):
+    """``out[i, j]`` for ``i < la``, ``j < lb``: distance of frame ``sa + i`` to frame ``sb + j`` of
+    the packed features ``feat`` (see :func:`clip_features`; ``max_dev >= pi``: unrestricted).
+
+    The features stay whole arrays indexed by offset, so that the compiler sees unit strides
+    and vectorises the pass over ``j``; three landmarks (root and knees, the default) take a
+    fused single pass.
+    """
+    floor, height, norm, hcos, hsin = feat
+    K = floor.shape[0]
     w = 1.0 / K
     cos_dev = math.cos(max_dev) if max_dev < math.pi else -2.0
     sin_dev = math.sin(max_dev)
+    if K == 3:
+        # 1-D rows of b's features from its first frame (unit stride, no aliasing with out)
+        b00, b01, b10, b11 = floor[0, 0, sb:sb + lb], floor[0, 1, sb:sb + lb], floor[1, 0, sb:sb + lb], floor[1, 1, sb:sb + lb]
+        b20, b21 = floor[2, 0, sb:sb + lb], floor[2, 1, sb:sb + lb]
+        y0, y1, y2 = height[0, sb:sb + lb], height[1, sb:sb + lb], height[2, sb:sb + lb]
+        nb, cb, sbh = norm[sb:sb + lb], hcos[sb:sb + lb], hsin[sb:sb + lb]
+        for i in range(la):
+            ia = sa + i
+            u0, v0, u1, v1 = w * floor[0, 0, ia], w * floor[0, 1, ia], w * floor[1, 0, ia], w * floor[1, 1, ia]
+            u2, v2 = w * floor[2, 0, ia], w * floor[2, 1, ia]
+            a0, a1, a2 = height[0, ia], height[1, ia], height[2, ia]
+            ci, si, ni = hcos[ia], hsin[ia], norm[ia]
+            row = out[i]
+            for j in range(lb):
+                c = u0 * b00[j] + v0 * b01[j] + u1 * b10[j] + v1 * b11[j] + u2 * b20[j] + v2 * b21[j]
+                s = v0 * b00[j] - u0 * b01[j] + v1 * b10[j] - u1 * b11[j] + v2 * b20[j] - u2 * b21[j]
+                d0, d1, d2 = a0 - y0[j], a1 - y1[j], a2 - y2[j]
+                hh = w * (d0 * d0 + d1 * d1 + d2 * d2)
+                m = _aligned(c, s, ci * cb[j] + si * sbh[j], si * cb[j] - ci * sbh[j], cos_dev, sin_dev)
+                d = ni + nb[j] + hh - 2.0 * m
+                row[j] = d if d > 0.0 else 0.0
+        return
     C = np.empty(lb)
     S = np.empty(lb)
     Hh = np.empty(lb)
     for i in range(la):
+        ia = sa + i
         for j in range(lb):
             C[j] = 0.0
             S[j] = 0.0
             Hh[j] = 0.0
         for k in range(K):
-            u, v, y = w * fa[k, 0, i], w * fa[k, 1, i], ya[k, i]
-            fbu, fbv, ybk = fb[k, 0], fb[k, 1], yb[k]
+            u, v, y = w * floor[k, 0, ia], w * floor[k, 1, ia], height[k, ia]
             for j in range(lb):
-                C[j] += u * fbu[j] + v * fbv[j]
-                S[j] += v * fbu[j] - u * fbv[j]
-                d = y - ybk[j]
+                fu, fv = floor[k, 0, sb + j], floor[k, 1, sb + j]
+                C[j] += u * fu + v * fv
+                S[j] += v * fu - u * fv
+                d = y - height[k, sb + j]
                 Hh[j] += w * d * d
-        ci, si, ni = ca[i], sa[i], na[i]
-        row = out[i]
+        ci, si, ni = hcos[ia], hsin[ia], norm[ia]
         for j in range(lb):
-            cd = ci * cb[j] + si * sb[j]  # cos(heading_a - heading_b)
-            sd = si * cb[j] - ci * sb[j]
-            c, s = C[j], S[j]
-            r = math.sqrt(c * c + s * s)
-            c2 = c * cd + s * sd
-            s2 = s * cd - c * sd
-            m = r if c2 >= r * cos_dev else c2 * cos_dev + abs(s2) * sin_dev
-            d = ni + nb[j] + Hh[j] - 2.0 * m
-            row[j] = d if d > 0.0 else 0.0
+            jb = sb + j
+            m = _aligned(C[j], S[j], ci * hcos[jb] + si * hsin[jb], si * hcos[jb] - ci * hsin[jb], cos_dev, sin_dev)
+            d = ni + norm[jb] + Hh[j] - 2.0 * m
+            out[i, j] = d if d > 0.0 else 0.0
 
 
 @njit(cache=True, nogil=True)

@@ -14,7 +14,8 @@ right of its largest root and the iteration descends monotonically onto it (the 
 Theobald 2005). The eigenvector is a column of the adjugate of ``N - l I`` (the one with the
 largest diagonal cofactor). Degenerate inputs follow the SVD form's rules: ``H ~ 0`` gives the
 identity; a rank-1 ``H`` (collinear clouds, one point) gives the smallest rotation taking the
-source line onto the target line.
+source line onto the target line. ``H`` is scaled to unit norm first, so clouds of any size
+(micrometres or kilometres) give unit quaternions.
 """
 
 from __future__ import annotations
@@ -78,10 +79,19 @@ def _rank1_rotation(sxx, sxy, sxz, syx, syy, syz, szx, szy, szz):
 @njit(cache=True)
 def horn_from_h(sxx, sxy, sxz, syx, syy, syz, szx, szy, szz):
     """The rotation (WXYZ tuple, ``w >= 0``) from the cross-covariance entries ``S_ab = H[a, b]``."""
-    fro2 = sxx * sxx + sxy * sxy + sxz * sxz + syx * syx + syy * syy + syz * syz + szx * szx + szy * szy + szz * szz
-    fro = math.sqrt(fro2)
-    if fro <= _TINY_SQRT:
+    # the rotation does not depend on H's scale: work on H / |H|_F (no overflow, and the
+    # adjugate below stays of order one, so the quaternion normalises cleanly)
+    big = max(abs(sxx), abs(sxy), abs(sxz), abs(syx), abs(syy), abs(syz), abs(szx), abs(szy), abs(szz))
+    if not big > 0.0 or not math.isfinite(big):
         return (1.0, 0.0, 0.0, 0.0)
+    sxx, sxy, sxz, syx, syy, syz, szx, szy, szz = (sxx / big, sxy / big, sxz / big, syx / big, syy / big, syz / big,
+                                                  szx / big, szy / big, szz / big)
+    f = math.sqrt(sxx * sxx + sxy * sxy + sxz * sxz + syx * syx + syy * syy + syz * syz + szx * szx + szy * szy + szz * szz)
+    if big * f <= _TINY_SQRT:
+        return (1.0, 0.0, 0.0, 0.0)
+    sxx, sxy, sxz, syx, syy, syz, szx, szy, szz = (sxx / f, sxy / f, sxz / f, syx / f, syy / f, syz / f,
+                                                  szx / f, szy / f, szz / f)
+    fro = fro2 = 1.0
     # cofactor norm ~ s1 s2: rank 1 when s2 <= 1e3 eps s1 (the torch form's test)
     c00, c01, c02 = syy * szz - syz * szy, syz * szx - syx * szz, syx * szy - syy * szx
     c10, c11, c12 = sxz * szy - sxy * szz, sxx * szz - sxz * szx, sxy * szx - sxx * szy

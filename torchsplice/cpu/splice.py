@@ -50,13 +50,9 @@ def _time_align(feat, starts, a, na, b, nb, opts, cells, curve):
     Returns ``(status, crop, path_length, cost, frames)``; the path goes to ``cells`` (in cropped
     frames of b) and the curve (cropped frames of b per frame of a) to ``curve``.
     """
-    floor, height, norm, hcos, hsin = feat
     max_run, max_dev, do_crop, context, window, depth, knot_spacing, smoothing = opts
-    sa, sb = starts[a], starts[b]
     grid = np.empty((na, nb))
-    distance_row_block(floor[:, :, sa:sa + na], height[:, sa:sa + na], norm[sa:sa + na], hcos[sa:sa + na], hsin[sa:sa + na], na,
-                       floor[:, :, sb:sb + nb], height[:, sb:sb + nb], norm[sb:sb + nb], hcos[sb:sb + nb], hsin[sb:sb + nb], nb,
-                       max_dev, grid)
+    distance_row_block(feat, starts[a], na, starts[b], nb, max_dev, grid)
     crop = phase_crop_pair(grid, na, nb, int(context), int(window), depth) if do_crop > 0 else 0
     length, total = dp_pair(grid, crop, na, nb - crop, int(max_run), cells)
     if length < 0:
@@ -312,6 +308,7 @@ def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, op
         if method == 1:
             frames[b] = _naive_one(bank, starts, lengths, loco[b], act[b], joints, cu, r, tr)
             status[b], crop[b], plen[b], cost[b], angle[b] = 0, 0, 0, np.nan, 0.0
+            cells[b, :, :] = -1
             continue
         cb = np.empty((cells.shape[1], 2), dtype=np.int64)
         if method == 0:

@@ -37,7 +37,7 @@ def _argmin_into(m, c, a, sums, cnts, s, off, n):
 def dp_forward(g, col0, la, lb, L, bp, right_sum, right_cnt, top_sum, top_cnt, cmin):
     """Forward pass over one pair: rows ``0..la-1`` and columns ``col0..col0+lb-1`` of ``g``.
 
-    Writes back-pointers ``bp`` ``(3, >=la, >=lb)`` int8 (predecessor state of D, H1, V1 at
+    Writes back-pointers ``bp`` ``(3, >=la, >=lb)`` int8, or int16 for ``2L + 1 > 127`` states (predecessor state of D, H1, V1 at
     each cell), the states of the right column ``right_sum/right_cnt`` ``(S, la)`` and of the top
     row ``top_sum/top_cnt`` ``(S, lb)``, and when ``cmin`` is not empty ``(la, lb)`` the minimal
     total over states of every cell. State rows are stored with a guard column 0 (``j = -1``)
@@ -53,7 +53,7 @@ def dp_forward(g, col0, la, lb, L, bp, right_sum, right_cnt, top_sum, top_cnt, c
     cur_sum[:, 0] = inf
     m = np.empty(lb, dtype=g.dtype)
     c = np.empty(lb, dtype=np.int32)
-    a = np.empty(lb, dtype=np.int8)
+    a = np.empty(lb, dtype=bp.dtype)
     keep_min = cmin.shape[0] > 0
     for i in range(la):
         gi = g[i]
@@ -183,8 +183,14 @@ def dp_pair(g, col0, la, lb, max_run, cells):
     into ``cells`` ``(>= la + lb - 1, 2)`` (column indices relative to ``col0``); returns
     ``(length, total)``, or ``(-1, nan)`` when ``+inf`` costs block every path."""
     L = max(1, min(max_run, max(la, lb) - 1))
+    if 2 * L + 1 > 127:  # state indices no longer fit int8 back-pointers
+        return _dp_pair_with(np.empty((3, la, lb), dtype=np.int16), g, col0, la, lb, L, cells)
+    return _dp_pair_with(np.empty((3, la, lb), dtype=np.int8), g, col0, la, lb, L, cells)
+
+
+@njit(cache=True, nogil=True)
+def _dp_pair_with(bp, g, col0, la, lb, L, cells):
     S = 2 * L + 1
-    bp = np.empty((3, la, lb), dtype=np.int8)
     right_sum = np.empty((S, la), dtype=g.dtype)
     right_cnt = np.empty((S, la), dtype=np.int32)
     top_sum = np.empty((S, lb), dtype=g.dtype)
@@ -218,7 +224,7 @@ def cumulative_cost_batch(grid, la, lb, max_run, out):
         L = max(1, min(max_run, max(na, nb) - 1))
         S = 2 * L + 1
         cmin = np.empty((na, nb), dtype=grid.dtype)
-        dp_forward(grid[b], 0, na, nb, L, np.empty((3, na, nb), dtype=np.int8), np.empty((S, na), dtype=grid.dtype),
+        dp_forward(grid[b], 0, na, nb, L, np.empty((3, na, nb), dtype=np.int16), np.empty((S, na), dtype=grid.dtype),
                    np.empty((S, na), dtype=np.int32), np.empty((S, nb), dtype=grid.dtype), np.empty((S, nb), dtype=np.int32),
                    cmin)
         out[b, :na, :nb] = cmin
