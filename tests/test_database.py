@@ -169,6 +169,66 @@ def test_round_trip_two_skeletons(db_path, two_skeleton_clips):
         assert "translations" not in db.h5["skeletons/0"]
 
 
+def assert_same_motion(a: Motion, b: Motion) -> None:
+    assert (a.name, a.source, a.role, a.labels, a.fps) == (b.name, b.source, b.role, b.labels, b.fps)
+    assert a.skeleton is b.skeleton
+    assert torch.equal(a.rotations, b.rotations) and torch.equal(a.root_translation, b.root_translation)
+    assert (a.translations is None) == (b.translations is None)
+    if a.translations is not None:
+        assert torch.equal(a.translations, b.translations)
+
+
+def test_read_many_equals_read_per_clip(db_path, two_skeleton_clips):
+    with MotionDatabase.open(db_path) as db:
+        order = ["a_long", 1, "a_walk", 5, "b_run", 2, "a_long"]  # both skeletons, names and rows, a repeat
+        for got, clip in zip(db.read_many(order), order):
+            assert_same_motion(got, db.read(clip))
+        assert db.read_many([]) == []
+        with pytest.raises(DatabaseError, match="no clip named 'nope'"):
+            db.read_many(["a_walk", "nope"])
+
+
+def test_append_packed_equals_appending_clip_by_clip(tmp_path, two_skeleton_clips):
+    """Packed clips of one skeleton land exactly as appended one by one, with extra columns."""
+    clips = [m for m in two_skeleton_clips if m.skeleton is two_skeleton_clips[0].skeleton]
+    cols, frames = {"cost": "float", "note": "str", "n": "int"}, ("score",)
+    extra = {"cost": [0.5, 1.5, 2.5, 3.5], "note": ["x", "", "ü", "y"], "n": [1, 2, 3, 4]}
+    score = [np.arange(m.num_frames, dtype=np.float32) for m in clips]
+    with MotionDatabase.create(tmp_path / "one.h5", columns=cols, frame_columns=frames) as db:
+        for k, m in enumerate(clips):
+            db.append(m, extra={c: v[k] for c, v in extra.items()}, frame_extra={"score": score[k]})
+    with MotionDatabase.create(tmp_path / "packed.h5", columns=cols, frame_columns=frames) as db:
+        db.append_packed(clips[0].skeleton, torch.cat([m.rotations for m in clips]),
+                         torch.cat([m.root_translation for m in clips]), None, [m.num_frames for m in clips],
+                         [m.name for m in clips], [m.fps for m in clips], sources=[m.source for m in clips],
+                         roles=[m.role for m in clips], labels=[m.labels for m in clips], extra=extra,
+                         frame_extra={"score": np.concatenate(score)})
+    with MotionDatabase.open(tmp_path / "one.h5") as a, MotionDatabase.open(tmp_path / "packed.h5") as b:
+        ta, tb = a.table(), b.table()
+        assert ta.keys() == tb.keys()
+        for c in ta:
+            assert np.array_equal(ta[c], tb[c]) or (ta[c].dtype.kind == "f" and np.array_equal(ta[c], tb[c], equal_nan=True)), c
+        for m in clips:
+            assert torch.equal(a.read(m.name).rotations, b.read(m.name).rotations)
+            assert np.array_equal(a.read_frame_column(m.name, "score"), b.read_frame_column(m.name, "score"))
+
+
+def test_append_packed_refuses_bad_input(tmp_path, two_skeleton_clips):
+    m = two_skeleton_clips[0]
+    with MotionDatabase.create(tmp_path / "x.h5") as db:
+        db.append(m)
+        args = (m.skeleton, m.rotations, m.root_translation, None, [m.num_frames])
+        with pytest.raises(DatabaseError, match="already in the database"):
+            db.append_packed(*args, [m.name], m.fps)
+        with pytest.raises(DatabaseError, match="do not fit"):
+            db.append_packed(m.skeleton, m.rotations, m.root_translation, None, [m.num_frames + 1], ["new"], m.fps)
+        bad = m.rotations.clone()
+        bad[3, 1, 2] = float("nan")
+        with pytest.raises(DatabaseError, match="clip 'new' has non-finite rotations at frame 3"):
+            db.append_packed(m.skeleton, bad, m.root_translation, None, [m.num_frames], ["new"], m.fps)
+        assert len(db) == 1
+
+
 def test_same_names_different_offsets_get_their_own_skeleton(tmp_path):
     short, tall = chain_skeleton(3, bone=1.0), chain_skeleton(3, bone=2.0)
     clips = [random_clip(short, 5, "short", 1), random_clip(tall, 6, "tall", 2), random_clip(short, 2, "short2", 3)]

@@ -231,12 +231,20 @@ class _Sources:
 
     def motion(self, key: tuple[str, int]) -> Motion:
         if key not in self.motions:
-            self.motions[key] = self.dbs[key[0]].read(key[1])
+            self.load([key])
         return self.motions[key]
+
+    def load(self, keys) -> None:
+        """Read the clips not read yet, a database at a time."""
+        for tag in ("L", "A"):
+            rows = sorted({k[1] for k in keys if k[0] == tag and k not in self.motions})
+            for row, m in zip(rows, self.dbs[tag].read_many(rows)):
+                self.motions[(tag, row)] = m
 
     def bank(self, group: tuple[int, float], keys: list, roles: SkeletonRoles, landmarks) -> tuple:
         """``(bank, index)`` of a group (built on first use): ``index`` maps a clip key to its bank row."""
         if group not in self.banks:
+            self.load(keys)
             motions = [self.motion(k) for k in keys]
             fps = group[1]
             skeleton = motions[0].skeleton
@@ -393,7 +401,7 @@ class SpliceJob:
         J = max(sk.num_joints for sk in self._sources.dbs["L"].skeletons)
         if _compiled(c):  # per pair: its result (rotations, translations, curves) twice, its path
             per_pair = 2 * t_l * (J * 28 + 16) + 16 * (t_l + t_a)
-            return int(min(512, max(1, c.memory_budget_mb * 2**20 // per_pair)))
+            return int(min(256, max(1, c.memory_budget_mb * 2**20 // per_pair)))
         per_pair = 40 * t_l * t_a + 2000 * 32 * (t_l + t_a)  # grid, DP tables, clip tensors
         return int(min(256, max(1, c.memory_budget_mb * 2**20 // per_pair)))
 
