@@ -26,7 +26,6 @@ is shared, so compare ratios measured in one run rather than figures from differ
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
 import subprocess

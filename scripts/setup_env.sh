@@ -28,3 +28,9 @@ if [ ! -f "$_stamp" ] || [ "$(cat "$_stamp")" != "$_want" ]; then
   _pip install -e "$_root[test]"
   echo "$_want" > "$_stamp"
 fi
+# compile the CPU splicer's kernels once per version of their sources (numba caches them)
+_kernels="$(cat "$_root"/torchsplice/cpu/*.py | cksum)"
+if [ ! -f "$_root/.venv/.torchsplice-kernels" ] || [ "$(cat "$_root/.venv/.torchsplice-kernels")" != "$_kernels" ]; then
+  python -m torchsplice.cpu.warmup
+  echo "$_kernels" > "$_root/.venv/.torchsplice-kernels"
+fi

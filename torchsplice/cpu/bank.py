@@ -138,6 +138,22 @@ class PackedSplices:
     path_length: np.ndarray
 
 
+_NOTED = False
+
+
+def _note_first_compile() -> None:
+    """Say so on a terminal when the kernels are about to be compiled (once per version)."""
+    global _NOTED
+    if not _NOTED:
+        _NOTED = True
+        import sys
+
+        from .warmup import warm
+
+        if not warm() and sys.stderr.isatty():
+            print("torchsplice: compiling the CPU splicer for this machine (once; about a minute)", file=sys.stderr, flush=True)
+
+
 class CompiledSpliceError(ValueError):
     """A pair the compiled splicer could not align: ``pair`` (its index in the call) and ``reason``."""
 
@@ -177,6 +193,7 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
     computation is float64 either way). With ``buffers`` the output arrays are reused from
     call to call (see :class:`Buffers`).
     """
+    _note_first_compile()
     loco = np.ascontiguousarray(loco, dtype=np.int64)
     act = np.ascontiguousarray(act, dtype=np.int64)
     ref = np.ascontiguousarray(ref if ref is not None else np.zeros_like(loco), dtype=np.int64)
