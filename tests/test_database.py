@@ -227,6 +227,15 @@ def test_append_packed_refuses_bad_input(tmp_path, two_skeleton_clips):
         with pytest.raises(DatabaseError, match="clip 'new' has non-finite rotations at frame 3"):
             db.append_packed(m.skeleton, bad, m.root_translation, None, [m.num_frames], ["new"], m.fps)
         assert len(db) == 1
+        with pytest.raises(DatabaseError, match="source needs 1 values, got 2"):
+            db.append_packed(*args, ["new"], m.fps, sources=["a", "b"])
+        db.append_packed(m.skeleton, m.rotations[:0], m.root_translation[:0], None, [], [], m.fps)  # nothing to add
+        db.append_packed(*args, ["new"], m.fps, sources="one source for all")
+        assert len(db) == 2 and db.clip_info("new")["source"] == "one source for all"
+    with MotionDatabase.open(tmp_path / "x.h5") as db:  # nothing half-written by the refused calls
+        t = db.table()
+        assert list(t["name"]) == [m.name, "new"] and all(len(col) == 2 for col in t.values())
+        assert db.h5["skeletons/0/rotations"].shape[0] == 2 * m.num_frames
 
 
 def test_same_names_different_offsets_get_their_own_skeleton(tmp_path):

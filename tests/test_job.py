@@ -23,6 +23,7 @@ import torch
 
 from torchsplice import __version__
 from torchsplice.cli import main
+from torchsplice.core.motion import Motion
 from torchsplice.io.database import MotionDatabase
 from torchsplice.io.sample import sample_motions
 from torchsplice.io.spec import load_spec
@@ -510,6 +511,30 @@ def test_torch_path_writes_the_same_clips(sample_db, default_out, tmp_path, monk
         qa, qb = (torch.from_numpy(f["skeletons/0/rotations"][()]).double() for f in (fa, fb))
         assert float(torch.rad2deg(quat_angle(qa, qb)).max()) < 1e-3
         assert np.allclose(fa["skeletons/0/action_frame"][()], fb["skeletons/0/action_frame"][()], atol=1e-3)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_pair_that_cannot_be_aligned_is_skipped_and_the_rest_land(tmp_path, capsys, monkeypatch, compiled):
+    """An action that is its locomotion's first pose held still, with runs as long as the action:
+    the cheapest path stays on the locomotion's first frame, so the alignment does not advance.
+    That pair is skipped with its reason; the other pair of the batch still lands."""
+    import torchsplice.cpu
+
+    if not compiled:
+        monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
+    walk = {m.name: m for m in sample_motions()}["walk_straight"]
+    pose = walk.slice(0, 1)
+    pose = Motion(walk.skeleton, pose.rotations.expand(16, -1, -1).clone(), pose.root_translation.expand(16, -1).clone(),
+                  walk.fps, None if pose.translations is None else pose.translations.expand(16, -1, -1).clone(),
+                  name="held_pose", role="action")
+    box = {m.name: m for m in sample_motions()}["carry_box"]
+    walk.role = "locomotion"
+    db = write_db(tmp_path / "in.h5", [walk, pose, box])
+    out = tmp_path / "out.h5"
+    code, stdout, err = run(capsys, "splice-all", db, "-o", out, "--force-locomotion", "--max-run", "15")
+    assert code == 0, err
+    assert "1 x the alignment failed (the alignment does not advance in both clips)" in stdout.replace("pair 0: ", "")
+    assert [c["name"] for c in clips(out)] == ["walk_straight+carry_box"]
 
 
 # --------------------------------------------------------------------------------------------

@@ -126,7 +126,7 @@ def fit_alignment_curve(
     i_last, j_last = end[:, 0].to(torch.float64), end[:, 1].to(torch.float64)
     j_first = cells[:, 0, 1].to(torch.float64)
     if bool((i_last <= 0).any()) or bool((j_last <= j_first).any()):
-        raise ValueError("a path must advance in both clips")
+        raise ValueError("the alignment does not advance in both clips")
     n_ctrl = (torch.round(i_last / knot_spacing) + _DEGREE).clamp_min(_DEGREE + 1).to(torch.long)
     n = int(n_ctrl.max())
     u = torch.where(valid, cells[..., 0].to(torch.float64) / i_last[:, None], torch.zeros(()))

@@ -62,7 +62,8 @@ def _set_cache_dir() -> Path:
 
         path.mkdir(parents=True, exist_ok=True)
         numba.config.CACHE_DIR = str(path)
-        if not os.environ.get("NUMBA_CACHE_DIR"):
+        if not os.environ.get("NUMBA_CACHE_DIR") and root == Path(__file__).parent / "__pycache__" / "numba":
+            # beside the sources: other versions' folders are stale (a shared user cache is left alone)
             for old in root.iterdir():
                 if old.is_dir() and old.name != path.name:
                     shutil.rmtree(old, ignore_errors=True)

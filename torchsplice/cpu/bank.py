@@ -123,7 +123,7 @@ class PackedSplices:
     (``dtype``), ``curve (M,)`` (action frame at the locomotion's rate, crop included, float64) and
     ``correction (M,)`` (pelvis correction, radians). Per pair: ``frames``, ``crop``, ``cost``
     (mean path cost, NaN for naive), ``posture`` (radians), ``cells (B, P, 2)`` and
-    ``path_length`` (the DP path in cropped frames)."""
+    ``path_length`` (the DP path in cropped frames); ``status`` (0, or why the pair failed)."""
 
     start: np.ndarray
     frames: np.ndarray
@@ -136,6 +136,7 @@ class PackedSplices:
     posture: np.ndarray
     cells: np.ndarray
     path_length: np.ndarray
+    status: np.ndarray
 
 
 _NOTED = False
@@ -185,13 +186,15 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
                 heading_window_deg: float | None = 60.0, crop: bool = True, crop_context: int = 15,
                 crop_window: int = 6, crop_depth: float = 0.25, knot_spacing: float = 7.5,
                 smoothing: float = 1e-2, posture: bool = True, dtype=np.float32,
-                buffers: Buffers | None = None) -> PackedSplices:
+                buffers: Buffers | None = None, on_error: str = "raise") -> PackedSplices:
     """Splice pairs of bank clips: ``loco``, ``act`` (and ``ref`` for cpmc) ``(B,)`` clip indices.
 
     Frame counts (``crop_context``, ``crop_window``, ``knot_spacing``) are at the bank's frame
     rate. Rotations and translations come out as ``dtype`` (float32 or float64; the
     computation is float64 either way). With ``buffers`` the output arrays are reused from
-    call to call (see :class:`Buffers`).
+    call to call (see :class:`Buffers`). A pair that cannot be aligned raises
+    :class:`CompiledSpliceError`, or with ``on_error="keep"`` gets no frames and its
+    :data:`~torchsplice.cpu.splice.STATUS` code in ``status`` (the other pairs are unaffected).
     """
     _note_first_compile()
     loco = np.ascontiguousarray(loco, dtype=np.int64)
@@ -217,7 +220,7 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
                      loco, act, ref, bank.joints, opts, bool(posture), out_start, orot, otrans, ocurve, ocorr, cells,
                      status, ocrop, plen, cost, frames, angle)
     bad = np.nonzero(status != 0)[0]
-    if len(bad):
+    if len(bad) and on_error == "raise":
         b = int(bad[0])
         raise CompiledSpliceError(b, STATUS[int(status[b])])
     if B:
@@ -231,4 +234,4 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
         orot, otrans, ocurve, ocorr, out_start = crot[:n], ctrans[:n], ccurve[:n], ccorr[:n], new_start
     else:
         orot, otrans, ocurve, ocorr = orot[:0], otrans[:0], ocurve[:0], ocorr[:0]
-    return PackedSplices(out_start, frames, orot, otrans, ocurve, ocorr, ocrop, cost, angle, cells, plen)
+    return PackedSplices(out_start, frames, orot, otrans, ocurve, ocorr, ocrop, cost, angle, cells, plen, status)

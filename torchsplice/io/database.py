@@ -516,9 +516,32 @@ class MotionDatabase:
         unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
+        if C == 0:
+            return
+        frames = {}
+        for name in self.frame_columns:
+            v = frame_extra.get(name)
+            frames[name] = np.full(N, np.nan, np.float32) if v is None else arr(v).astype(np.float32).reshape(-1)
+            if frames[name].shape != (N,):
+                raise DatabaseError(f"{self.path}: column {name!r} needs {N} values, got {frames[name].shape}")
+
+        def each(v, what):
+            """One value for every clip, or ``C`` values."""
+            out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(arr(v) if isinstance(v, torch.Tensor) else v)
+            if len(out) != C:
+                raise DatabaseError(f"{self.path}: {what} needs {C} values, got {len(out)}")
+            return out
+
+        rows = {
+            "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
+            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
+            "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
+        }
+        for n, kind in self.columns.items():
+            rows[n] = each(extra[n], f"column {n!r}") if n in extra else [_KINDS[kind][1]] * C
         k = self.add_skeleton(skeleton, spec)
         g = self.h5[f"skeletons/{k}"]
-        arrays = {"rotations": rot, "root_translation": root}
+        arrays = {"rotations": rot, "root_translation": root, **frames}
         if "translations" in g:
             if trans is not None and np.array_equal(trans[:, 0], root):
                 arrays["translations"] = trans  # row 0 already holds the root
@@ -526,36 +549,31 @@ class MotionDatabase:
                 t = trans.copy() if trans is not None else np.broadcast_to(skeleton.offsets.numpy(), (N, J, 3)).copy()
                 t[:, 0] = root
                 arrays["translations"] = t
-        for name in self.frame_columns:
-            v = frame_extra.get(name)
-            arrays[name] = np.full(N, np.nan, np.float32) if v is None else arr(v).astype(np.float32).reshape(-1)
-            if arrays[name].shape != (N,):
-                raise DatabaseError(f"{self.path}: column {name!r} needs {N} values, got {arrays[name].shape}")
-        each = lambda v: [v] * C if isinstance(v, (str, int, float)) else list(v)  # noqa: E731
-        if labels is None:
-            labels = ["{}"] * C
-        rows = {
-            "name": names, "source": each(sources), "role": each(roles),
-            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in labels],
-            "skeleton": [k] * C, "length": lengths, "fps": each(float(fps)) if np.ndim(fps) == 0 else arr(fps),
-        }
-        for n, kind in self.columns.items():
-            rows[n] = list(extra[n]) if n in extra else [_KINDS[kind][1]] * C
+        c = self.h5["clips"]
+        n0, m0 = g["rotations"].shape[0], c["name"].shape[0]
+        rows["skeleton"], rows["start"] = [k] * C, n0 + starts
         try:
-            n0 = g["rotations"].shape[0]
             for name, a in arrays.items():
                 ds = g[name]
                 ds.resize(n0 + N, axis=0)
                 ds[n0:] = a.astype(ds.dtype, copy=False)
-            rows["start"] = n0 + starts
-            c = self.h5["clips"]
-            m0 = c["name"].shape[0]
             for name, values in rows.items():
                 dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
                 c[name].resize(m0 + C, axis=0)
                 c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
-        except OSError as exc:
-            raise DatabaseError(os_error_message(self.path, exc)) from None
+        except BaseException as exc:
+            try:  # leave the file as it was before the call: no half-written rows
+                for name in arrays:
+                    g[name].resize(n0, axis=0)
+                for name in rows:
+                    c[name].resize(m0, axis=0)
+            except Exception:
+                pass
+            if isinstance(exc, OSError):
+                raise DatabaseError(os_error_message(self.path, exc)) from None
+            if isinstance(exc, (TypeError, ValueError)):
+                raise DatabaseError(f"{self.path}: cannot store these clips: {exc}") from None
+            raise
         for n in names:
             index[n] = len(index)
         if self._names is not None:

@@ -16,16 +16,19 @@ How it runs:
    (:func:`torchsplice.cpu.bank.splice_bank`: one pair per thread, in parallel over pairs); on
    CUDA through :func:`torchsplice.splice.splice_pairs`. A batch's results stay packed in
    whole arrays, its output columns are computed at once, and a background thread writes it
-   while the next batch computes. Each pair's result depends on that pair alone, so the
-   output does not depend on the batch size, the thread count or the load.
+   while the next batch computes. On the CPU each pair's result depends on that pair alone, so
+   the output does not depend on the batch size, the thread count or the load. Memory grows
+   with the selected clips (n + m, prepared once) and the batch, not with n x m.
 4. **Resumable.** Each finished batch becomes a small database ``part-NNNNNN.h5`` in the work
    folder ``.OUT.h5.parts/``, written atomically, so a kill at any moment loses at most the
    batches in flight. A rerun with the same arguments skips finished batches; with other
    arguments it refuses to mix and says so. Batches are cut the same way every time, so a
    resumed run writes the same bits as an uninterrupted one.
-5. **Merge.** The parts are merged in order, whole datasets at a time, into ``OUT.h5`` (created
-   beside it and renamed into place, so the file exists only once complete), with a run
-   record; the work folder is removed.
+5. **Output.** The writer appends each batch, whole arrays at a time, to ``OUT.h5`` in batch
+   order (parts an earlier run finished are appended from their files). The output is written
+   beside its path and renamed into place, so it exists only once complete, with a run record;
+   the work folder is then removed. A pair that cannot be aligned is skipped, with its reason
+   in the summary, and the others still land.
 
 The output has the input's schema plus per-clip columns (source names and rows, method and
 parameters, alignment cost and quality figures) and a per-frame ``action_frame`` column (the
@@ -43,7 +46,7 @@ import sys
 import time
 from contextlib import contextmanager
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -188,6 +191,7 @@ class _Part:
     extra: dict
     action_frame: np.ndarray
     flags: list
+    skipped: dict = field(default_factory=dict)  # pairs that could not be aligned, by reason
 
 
 class _Output:
@@ -197,6 +201,11 @@ class _Output:
         self.db = db
         self.clips = self.flagged_clips = self.copied = 0
         self.flagged: dict[str, int] = {}
+        self.skipped: dict[str, int] = {}
+
+    def add_skipped(self, skipped: dict) -> None:
+        for why, n in skipped.items():
+            self.skipped[why] = self.skipped.get(why, 0) + int(n)
 
     def append(self, skeleton, spec, rotations, root, translations, lengths, names, fps, sources, roles, labels,
                extra, action_frame) -> None:
@@ -234,6 +243,9 @@ class _Sources:
             self.load([key])
         return self.motions[key]
 
+    def skeleton_of(self, key: tuple[str, int]):
+        return self.motion(key).skeleton
+
     def load(self, keys) -> None:
         """Read the clips not read yet, a database at a time."""
         for tag in ("L", "A"):
@@ -263,6 +275,8 @@ class SpliceJob:
         self.config, self.progress, self.restart, self.overwrite = config, progress, restart, overwrite
         self.command = command or "torchsplice.job.SpliceJob (Python API)"
         self._checks: dict = {}
+        if config.compression == "none":
+            config = self.config = replace(config, compression=None)
         if config.compression not in COMPRESSIONS:
             raise TorchspliceError(f"unknown compression {config.compression!r}; choose auto, lzf, gzip or none")
         bad = [m for m in config.methods if m not in METHODS]
@@ -283,6 +297,12 @@ class SpliceJob:
             a, b = sk_l[int(tl["skeleton"][locos[0]])], sk_a[int(ta["skeleton"][acts[0]])]
             raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
                                    f"have no skeleton in common: {a.mismatch(b)}")
+        if act_db is not loco_db:
+            for key in ("units", "up_axis"):
+                a, b = str(loco_db.attrs.get(key) or ""), str(act_db.attrs.get(key) or "")
+                if a and b and a != b:
+                    raise TorchspliceError(f"{c.actions_db}: {key} {b!r} differs from {c.database}'s {a!r}; "
+                                           "splice clips of one unit and up axis")
         context = self._skeleton_context(loco_db, tl, locos)
         refs = self._references(act_db, ta, acts, context) if "cpmc" in c.methods else {}
         self._sources = _Sources(loco_db, act_db)
@@ -399,9 +419,18 @@ class SpliceJob:
         t_l = int(max(tl["length"][i] for i in locos))
         t_a = max(int(ta["length"][j] * float(tl["fps"][locos[0]]) / float(ta["fps"][j])) + 1 for j in acts)
         J = max(sk.num_joints for sk in self._sources.dbs["L"].skeletons)
-        if _compiled(c):  # per pair: its result (rotations, translations, curves) twice, its path
-            per_pair = 2 * t_l * (J * 28 + 16) + 16 * (t_l + t_a)
-            return int(min(256, max(1, c.memory_budget_mb * 2**20 // per_pair)))
+        if _compiled(c):
+            # each thread holds one pair's grid (float64) and back-pointers: 11 bytes a cell
+            from ..cpu import get_threads
+
+            threads = c.threads or get_threads()
+            scratch = threads * 11 * t_l * t_a
+            left = c.memory_budget_mb * 2**20 - scratch
+            if left <= 0:
+                log.warning("the longest pair's alignment tables (%d x %d frames) take %.0f MB on %d threads, over "
+                            "--memory-budget %d MB", t_l, t_a, scratch / 2**20, threads, c.memory_budget_mb)
+            per_pair = 2 * t_l * (J * 28 + 16) + 16 * (t_l + t_a)  # its result twice (double buffers), its path
+            return int(min(256, max(1, left // per_pair)))
         per_pair = 40 * t_l * t_a + 2000 * 32 * (t_l + t_a)  # grid, DP tables, clip tensors
         return int(min(256, max(1, c.memory_budget_mb * 2**20 // per_pair)))
 
@@ -417,6 +446,7 @@ class SpliceJob:
             "force_locomotion": c.force_locomotion, "max_run": c.max_run, "posture": c.posture,
             "batch_pairs": batch, "pairs": len(pairs), "pair_list_sha256": hashlib.sha256(body).hexdigest(),
             "copy_sources": c.copy_sources, "device": c.device or "cpu", "compression": c.compression,
+            "backend": "compiled" if _compiled(c) else "torch",
         }
 
     def _prepare_work(self, signature: dict) -> None:
@@ -498,17 +528,21 @@ class SpliceJob:
                     out.copied = self._copy_sources(out.db, loco_db, act_db, pairs)
                 out.db.close()
             except BaseException:
-                if pending is not None and not pending.done():
+                while pending is not None and not pending.done():
                     try:
-                        pending.result()  # keep the batch that was being written
+                        pending.result()  # keep the batch that was being written (a second Ctrl-C waits on)
+                    except KeyboardInterrupt:
+                        continue
                     except BaseException:
-                        pass
+                        break
                 out.db.abort()
                 bar.close()
                 raise
         bar.close()
         summary.compute_seconds = compute
         summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = out.clips, out.flagged, out.flagged_clips, out.copied
+        for why, n in out.skipped.items():
+            summary.skipped[why] = summary.skipped.get(why, 0) + n
         shutil.rmtree(self.work, ignore_errors=True)
         return summary
 
@@ -548,13 +582,29 @@ class SpliceJob:
             self._parity = 1 - getattr(self, "_parity", 1)
             out = splice_bank(bank, [index[x] for x in lkeys], [index[x] for x in akeys], method,
                               ref=[index[x] for x in rkeys] if rkeys else None, posture=c.posture,
-                              buffers=self._buffers[self._parity], **align_kwargs(align, fps))
-            frames, rot, trans = out.frames, out.rotations, out.translations
-            curve, corr, crop, cost, posture = out.curve, out.correction, out.crop.astype(np.float64), out.cost, out.posture
+                              buffers=self._buffers[self._parity], on_error="keep", **align_kwargs(align, fps))
+            from ..cpu.splice import STATUS
+
+            failed = {b: STATUS[int(st)] for b, st in enumerate(out.status) if st != 0}
+            ok = out.status == 0
+            frames, rot, trans = out.frames[ok], out.rotations, out.translations
+            curve, corr, crop, cost, posture = out.curve, out.correction, out.crop[ok].astype(np.float64), out.cost[ok], out.posture[ok]
         else:
             opts = SpliceOptions(align=align, posture=c.posture, force=True, check_locomotion=False, device=c.device)
-            results = splice_pairs([(src.motion(a), src.motion(b)) for a, b in zip(lkeys, akeys)], ctx["spec"],
-                                   method=method, references=[src.motion(r) for r in rkeys] if rkeys else None, options=opts)
+            pairs = [(src.motion(a), src.motion(b)) for a, b in zip(lkeys, akeys)]
+            refs = [src.motion(r) for r in rkeys] if rkeys else None
+            failed = {}
+            try:
+                results = splice_pairs(pairs, ctx["spec"], method=method, references=refs, options=opts)
+            except (ValueError, TorchspliceError):  # one pair cannot be aligned: the others still are
+                results = []
+                for b in range(len(pairs)):
+                    try:
+                        results += splice_pairs(pairs[b:b + 1], ctx["spec"], method=method,
+                                                references=refs[b:b + 1] if refs else None, options=opts)
+                    except (ValueError, TorchspliceError) as exc:
+                        failed[b] = str(exc)
+            akeys = [a for b, a in enumerate(akeys) if b not in failed]
             scale_back = np.array([fps / src.motion(a).fps for a in akeys])
             frames = np.array([r.motion.num_frames for r in results], dtype=np.int64)
             rot = torch.cat([r.motion.rotations for r in results]).float().cpu().numpy()
@@ -564,7 +614,15 @@ class SpliceJob:
             crop = np.array([r.crop for r in results], dtype=np.float64) * scale_back
             cost = np.array([r.cost for r in results])
             posture = np.radians([r.posture_deg for r in results])
-        return self._pack(chunk, method, fps, frames, rot, trans, curve, corr, crop, cost, posture, tl, ta, ctx, align)
+        skipped: dict[str, int] = {}
+        for b in failed:
+            why = f"the alignment failed ({failed[b]})"
+            skipped[why] = skipped.get(why, 0) + 1
+            log.warning("%s + %s: %s", tl["name"][chunk[b].loco], ta["name"][chunk[b].action], why)
+        chunk = [p for b, p in enumerate(chunk) if b not in failed]
+        part = self._pack(chunk, method, fps, frames, rot, trans, curve, corr, crop, cost, posture, tl, ta, ctx, align)
+        part.skipped = skipped
+        return part
 
     def _pack(self, chunk, method, fps, frames, rot, trans, curve, corr, crop, cost, posture, tl, ta, ctx, align) -> _Part:
         """A batch's output columns, computed at once (``curve``, ``crop`` at the locomotion's rate)."""
@@ -601,14 +659,16 @@ class SpliceJob:
             "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": np.degrees(posture),
             "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
         }
-        skeleton = src.motion(src.key("L", chunk[0].loco)).skeleton
+        skeleton = self._sources.skeleton_of(self._sources.key("L", chunk[0].loco)) if chunk else None
         return _Part(skeleton, names, frames, np.full(len(chunk), fps), rot, trans, labels, extra,
                      (curve * np.repeat(scale, frames)).astype(np.float32), flags)
 
     def _write_part(self, k: int, part: _Part, context) -> None:
         spec = self._spec_of(part.skeleton, context)
         with MotionDatabase.create(self._part(k), overwrite=True, columns=OUTPUT_COLUMNS, frame_columns=FRAME_COLUMNS,
-                                   compression=None) as db:
+                                   compression=None, attrs={"skipped": json.dumps(part.skipped)}) as db:
+            if not part.names:
+                return
             db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations, part.lengths,
                              part.names, part.fps, spec=spec, sources=[f"splice:{m}" for m in part.extra["method"]],
                              roles="spliced", labels=part.labels, extra=part.extra,
@@ -634,11 +694,17 @@ class SpliceJob:
         from its part file when an earlier run wrote it)."""
         if part is not None:
             self._write_part(k, part, context)
+            out.add_skipped(part.skipped)
+            if not part.names:
+                return
             out.append(part.skeleton, self._spec_of(part.skeleton, context), part.rotations, part.translations[:, 0],
                        part.translations, part.lengths, part.names, part.fps, [f"splice:{m}" for m in part.extra["method"]],
                        "spliced", part.labels, part.extra, part.action_frame)
             return
         with MotionDatabase.open(self._part(k)) as db:
+            out.add_skipped(json.loads(str(db.attrs.get("skipped", "")) or "{}"))
+            if len(db) == 0:
+                return
             spec = DatasetSpec.from_json(db.spec_json(0)) if db.spec_json(0) else None
             t, frames = db.table(), db.packed(0)
             out.append(db.skeletons[0], spec, frames["rotations"], frames["root_translation"], frames.get("translations"),
@@ -660,12 +726,13 @@ class SpliceJob:
 
 @contextmanager
 def _compute_threads(config: JobConfig):
-    """The job's parallelism is over pairs: torch's intra-op threads are set to one while it runs
-    (no fine-grained parallel regions), the compiled splicer's to ``config.threads``."""
+    """On the compiled path the job's parallelism is over pairs: the compiled splicer's threads are
+    set to ``config.threads`` and torch's intra-op threads to one while it runs (no fine-grained
+    parallel regions). The torch path keeps torch's threads."""
     old_torch = torch.get_num_threads()
-    torch.set_num_threads(1)
     old = None
     if _compiled(config):
+        torch.set_num_threads(1)
         from ..cpu import get_threads, set_threads
 
         old = get_threads()

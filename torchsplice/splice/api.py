@@ -21,7 +21,7 @@ keep the locomotion's skeleton, frame rate, root and lower body.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
@@ -183,6 +183,8 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
     """Pairs whose locomotions share a frame rate ``fps``."""
     if resolve_backend(options) == "compiled":
         return _splice_group_compiled(pairs, refs, roles, method, options, fps)
+    if options.backend == "torch":  # every step in torch, the DP too
+        options = replace(options, align=replace(options.align, dp_backend="torch"))
     skeleton = pairs[0][0].skeleton
     locos, li = _unique([p[0] for p in pairs])
     acts, ai = _unique([p[1] for p in pairs] + (refs or []))

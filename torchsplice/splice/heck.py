@@ -61,6 +61,8 @@ class AlignOptions:
         crop_window_s: the local minimum for cropping must be the smallest within this many
             seconds on either side (robustness to small noise).
         knot_spacing_s: seconds of locomotion per span of the alignment B-spline.
+        dp_backend: the DP's implementation in :func:`time_align` (see
+            :func:`~torchsplice.align.timewarp.timewarp`; both give the same bits).
     """
 
     max_run: int = 3
@@ -70,6 +72,7 @@ class AlignOptions:
     crop_context_s: float = 0.5
     crop_window_s: float = 0.2
     knot_spacing_s: float = 0.25
+    dp_backend: str = "auto"
 
 
 def landmark_indices(roles: SkeletonRoles, landmarks) -> list[int]:
@@ -162,7 +165,7 @@ def time_align(base: ClipTensors, other: ClipTensors, roles: SkeletonRoles, opti
         crop = phase_crop(grid, base.lengths, other.lengths, int(round(options.crop_context_s * fps)),
                           max(1, int(round(options.crop_window_s * fps))))
     grid = shift_frames(grid.transpose(1, 2), crop, other.lengths).transpose(1, 2)
-    path = timewarp(grid, base.lengths, other.lengths - crop, options.max_run)
+    path = timewarp(grid, base.lengths, other.lengths - crop, options.max_run, backend=options.dp_backend)
     curve, frames = fit_alignment_curve(path.cells, path.length, knot_spacing=options.knot_spacing_s * fps)
     return TimeAlignment(crop, path.cells, path.length, path.cost, curve, frames)
 
