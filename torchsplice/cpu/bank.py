@@ -19,22 +19,12 @@ from numba import njit, prange
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..io.spec import SkeletonRoles
+from ..splice.heck import landmark_indices
 from .fk import fk_clips, joint_closure
 from .grid import clip_features
 from .splice import METHOD_CODES, STATUS, compact, splice_batch
 
-__all__ = ["ClipBank", "PackedSplices", "Buffers", "joint_config", "splice_bank", "landmark_joints"]
-
-
-def landmark_joints(roles: SkeletonRoles, landmarks) -> list[int]:
-    """Joint indices of the named landmark roles, pairs expanded (left, right)."""
-    out = []
-    for name in landmarks:
-        v = getattr(roles, name, None)
-        if v is None or name in ("upper_body", "lower_body", "up_axis", "units"):
-            raise ValueError(f"unknown or absent landmark role {name!r}")
-        out += list(v) if isinstance(v, tuple) else [v]
-    return out
+__all__ = ["ClipBank", "PackedSplices", "Buffers", "joint_config", "splice_bank"]
 
 
 def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> tuple:
@@ -46,7 +36,7 @@ def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> tuple:
     pcloud = [j for j in roles.spine if j != roles.pelvis] + list(roles.shoulders)
     fk_joints = joint_closure(parents, [roles.pelvis, *pcloud, *roles.hips, *roles.shoulders])
     act_joints = np.array(sorted(set(fk_joints.tolist()) | set(np.nonzero(upper)[0].tolist())), dtype=np.int64)
-    return (parents, upper, fk_joints, act_joints, np.array(landmark_joints(roles, landmarks), dtype=np.int64),
+    return (parents, upper, fk_joints, act_joints, np.array(landmark_indices(roles, landmarks), dtype=np.int64),
             np.array(roles.hips, dtype=np.int64), np.array(roles.shoulders, dtype=np.int64), np.array(pcloud, dtype=np.int64),
             int(roles.pelvis), int(parents[roles.pelvis]), int(roles.up_axis))
 

@@ -21,7 +21,7 @@ from numba import njit
 
 from .quat import qload, qslerp, qstore
 
-__all__ = ["knots", "basis4", "fit_curve", "resample_clip"]
+__all__ = ["knots", "basis4", "fit_curve", "split_time", "resample_clip"]
 
 
 @njit(cache=True, nogil=True)
@@ -165,16 +165,22 @@ def fit_curve(cells, length, knot_spacing, smoothing, curve):
 
 
 @njit(cache=True, nogil=True)
+def split_time(x, n):
+    """Frames ``i0``, ``i1`` and weight ``w`` to sample a clip of ``n`` frames at fractional frame
+    ``x`` (clamped to ``[0, n - 1]``), as :func:`torchsplice.align.curve.slerp_frames` does."""
+    top = n - 1
+    x = min(max(x, 0.0), float(top))
+    i0 = int(math.floor(x))
+    return i0, min(i0 + 1, top), x - i0
+
+
+@njit(cache=True, nogil=True)
 def resample_clip(rot, trans, start, n, times, T, joints, out_rot, out_trans):
     """Frames ``start .. start + n - 1`` of a clip sampled at ``times[:T]`` (fractional, relative
     to ``start``, clamped to ``[0, n - 1]``) for ``joints``: slerp of ``rot`` ``(., J, 4)`` and
     linear ``trans`` ``(., J, 3)`` into ``out_rot``/``out_trans`` ``(T, J, .)``."""
-    top = n - 1
     for t in range(T):
-        x = min(max(times[t], 0.0), float(top))
-        i0 = int(math.floor(x))
-        i1 = min(i0 + 1, top)
-        w = x - i0
+        i0, i1, w = split_time(times[t], n)
         for j in joints:
             qstore(out_rot, t, j, qslerp(qload(rot, start + i0, j), qload(rot, start + i1, j), w))
             for c in range(3):

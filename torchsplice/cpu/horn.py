@@ -140,10 +140,13 @@ def horn_from_h(sxx, sxy, sxz, syx, syy, syz, szx, szy, szz):
 
 @njit(cache=True)
 def horn_cloud(source, target, weights):
-    """Rotation of one cloud: ``source, target (K, 3)``, ``weights (K,)``; a WXYZ tuple."""
+    """Rotation of one cloud: ``source, target (K, 3)``, ``weights (K,)`` (an empty array:
+    uniform ``1 / K``); a WXYZ tuple."""
     h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
-    for k in range(source.shape[0]):
-        w = weights[k]
+    K = source.shape[0]
+    uniform = weights.shape[0] == 0
+    for k in range(K):
+        w = 1.0 / K if uniform else weights[k]
         sx, sy, sz = w * source[k, 0], w * source[k, 1], w * source[k, 2]
         tx, ty, tz = target[k, 0], target[k, 1], target[k, 2]
         h00 += sx * tx

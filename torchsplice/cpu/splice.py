@@ -30,16 +30,17 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .curve import fit_curve, resample_clip
+from .curve import fit_curve, resample_clip, split_time
 from .fk import fk_clip
 from .grid import distance_row_block, phase_crop_pair
-from .horn import horn_from_h
+from .horn import horn_cloud
 from .quat import qconj, qload, qmul, qrot, qslerp, qstore, rotmat_to_q
 from .timewarp import dp_pair
 
 __all__ = ["METHOD_CODES", "STATUS", "splice_batch", "compact"]
 
 METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
+_UNIFORM = np.empty(0)  # horn_cloud's uniform weights
 STATUS = {0: "ok", 1: "no path: +inf costs block every alignment", 2: "the alignment does not advance in both clips"}
 
 
@@ -105,27 +106,6 @@ def _mean_shoulders(pos, T, hips, shoulders, pelvis, up, out, H):
             out[k, 1] += v[1]
             out[k, 2] += v[2]
     out /= T
-
-
-@njit(cache=True, nogil=True)
-def _horn_pair_cloud(src, tgt):
-    """Horn rotation between two ``(K, 3)`` clouds with uniform weights."""
-    K = src.shape[0]
-    w = 1.0 / K
-    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
-    for k in range(K):
-        sx, sy, sz = w * src[k, 0], w * src[k, 1], w * src[k, 2]
-        tx, ty, tz = tgt[k, 0], tgt[k, 1], tgt[k, 2]
-        h00 += sx * tx
-        h01 += sx * ty
-        h02 += sx * tz
-        h10 += sy * tx
-        h11 += sy * ty
-        h12 += sy * tz
-        h20 += sz * tx
-        h21 += sz * ty
-        h22 += sz * tz
-    return horn_from_h(h00, h01, h02, h10, h11, h12, h20, h21, h22)
 
 
 @njit(cache=True, nogil=True)
@@ -195,7 +175,7 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, c
     for t in range(T):
         _pelvis_cloud(fpos, fgrot, t, pelvis, pcloud, src)
         _pelvis_cloud(lpos, lgrot, t, pelvis, pcloud, tgt)
-        qa = _horn_pair_cloud(src, tgt)
+        qa = horn_cloud(src, tgt, _UNIFORM)
         ocorr[t] = 2.0 * math.atan2(math.sqrt(qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]), abs(qa[0]))
         p = qmul((q_lp[t, 0], q_lp[t, 1], q_lp[t, 2], q_lp[t, 3]), qa)
         prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3] = p
@@ -211,7 +191,7 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, c
         ugrot = np.empty((T, J, 4))
         fk_clip(arot, atrans, parents, fk_joints, T, upos, ugrot)
         _mean_shoulders(upos, T, hips, shoulders, pelvis, up, mean_u, np.empty((0, 4)))
-        qg = _horn_pair_cloud(mean_s, mean_u)
+        qg = horn_cloud(mean_s, mean_u, _UNIFORM)
         angle = 2.0 * math.atan2(math.sqrt(qg[1] * qg[1] + qg[2] * qg[2] + qg[3] * qg[3]), abs(qg[0]))
         for t in range(T):
             h = (H[t, 0], H[t, 1], H[t, 2], H[t, 3])
@@ -269,13 +249,8 @@ def _cpmc_one(bank, feat, starts, lengths, loco, act, ref, joints, opts, cells, 
     status, crop, plen, cost, T = _time_align(feat, starts, loco, lengths[loco], act, n_act, opts, cells, curve)
     if status != 0:
         return status, crop, plen, cost, 0
-    n_d = n_act - crop
-    top = n_d - 1
     for t in range(T):
-        x = min(max(curve[t], 0.0), float(top))
-        i0 = int(math.floor(x))
-        i1 = min(i0 + 1, top)
-        w = x - i0
+        i0, i1, w = split_time(curve[t], n_act - crop)
         for j in range(J):
             base = qload(rot, ls + t, j)
             if upper[j]:
