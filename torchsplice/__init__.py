@@ -4,14 +4,28 @@ Conventions (stated once here and in every docstring that uses them): quaternion
 quaternions in WXYZ order (scalar first); rotation matrices act on column vectors; Euler
 angles follow BVH channel order; lengths are in the source file's units; the up axis is the
 one the dataset spec names (Y for every shipped dataset).
+
+The names below are imported on first use, so that ``import torchsplice`` (and the command
+line) starts without loading torch until it is needed.
 """
 
 __version__ = "0.1.0"
-
-from .core import BVHError, DatabaseError, Motion, MotionError, Skeleton, SpecError, TorchspliceError
-from .kinematics import forward_kinematics
 
 __all__ = [
     "__version__", "Motion", "Skeleton", "forward_kinematics",
     "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError",
 ]
+
+_LAZY = {
+    "Motion": "core.motion", "Skeleton": "core.skeleton", "forward_kinematics": "kinematics.fk",
+    "TorchspliceError": "core.errors", "BVHError": "core.errors", "DatabaseError": "core.errors",
+    "SpecError": "core.errors", "MotionError": "core.errors",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -354,7 +354,7 @@ def cmd_splice_all(args) -> int:
     import logging
 
     from .job import JobConfig, SpliceJob
-    from .job.splice_all import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS
+    from .job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, parse_shard
 
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="torchsplice: %(message)s", stream=sys.stderr)
     methods = tuple(m.strip() for m in args.method.split(",") if m.strip())
@@ -364,19 +364,47 @@ def cmd_splice_all(args) -> int:
         locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
         methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
         force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
-        posture=not args.no_posture, device=_device(args.device), threads=args.threads,
-        compression=None if args.compression == "none" else args.compression,
+        posture=not args.no_posture, device=_device(args.device), compression=args.compression, layout=args.layout,
+        engine=args.engine, workers=args.workers, ray_address=args.ray_address,
     )
-    if not Path(args.output).parent.exists():
-        raise TorchspliceError(f"{args.output}: folder {Path(args.output).parent} does not exist")
+    if args.ray_address and args.engine != "ray":
+        raise TorchspliceError("--ray-address needs --engine ray")
     command = "torchsplice " + shlex.join(args.argv)
-    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command)
+    shard = parse_shard(args.shard) if args.shard else None
+    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command, shard=shard)
     try:
         summary = job.run()
     except KeyboardInterrupt:
-        print(f"torchsplice: interrupted; finished batches are kept in {job.work}; "
+        print(f"torchsplice: interrupted; finished tasks are kept in {job.work}; "
               "run the same command again to resume", file=sys.stderr)
         return 130
+    if not args.quiet:
+        print("\n".join(summary.lines()))
+    return 0
+
+
+def _prestart_workers(args) -> None:
+    """Start the local engine's fork server before this process imports torch: it loads torch and
+    the kernels for the workers while this process plans."""
+    import os
+
+    workers = args.workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    if args.engine == "local" and workers > 1 and (args.device or "cpu") == "cpu" and sys.platform != "win32":
+        import multiprocessing as mp
+        from multiprocessing import forkserver
+
+        mp.get_context("forkserver").set_forkserver_preload(["torchsplice.job.worker"])
+        try:
+            forkserver.ensure_running()
+        except Exception:  # the engine starts it later, or reports why it cannot
+            pass
+
+
+def cmd_merge(args) -> int:
+    from .job import merge_job
+
+    summary = merge_job(Path(args.output), overwrite=args.force, progress=not args.quiet,
+                        command="torchsplice " + shlex.join(args.argv))
     if not args.quiet:
         print("\n".join(summary.lines()))
     return 0
@@ -501,8 +529,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
     s.add_argument("--copy-sources", action="store_true", help="copy the source clips into the output too")
-    s.add_argument("--threads", type=_positive_int, default=None, metavar="N",
-                   help="threads splicing pairs in parallel on the CPU (default: every core); results do not depend on it")
+    s.add_argument("--engine", default="local", choices=["local", "ray"],
+                   help="local: worker processes on this machine (default); ray: Ray tasks on a cluster")
+    s.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+                   help="local worker processes, one compute thread each (default: one per core); results do not depend on it")
+    s.add_argument("--ray-address", default=None, metavar="HOST:PORT",
+                   help="the Ray cluster to run on (with --engine ray; default: start a local Ray instance)")
+    s.add_argument("--shard", default=None, metavar="K/N",
+                   help="run only the K-th of N slices of the job's tasks into its work folder, and write no output "
+                        "(for Slurm arrays, CI matrices); then run 'torchsplice merge OUT'")
+    s.add_argument("--layout", default="copy", choices=["copy", "virtual"],
+                   help="copy: one self-contained output file (default); virtual: the output's frames are HDF5 virtual "
+                        "datasets over the task shards, kept in OUT.shards/ beside it (no copy, for outputs too large to copy)")
     s.add_argument("--compression", default="auto", choices=["auto", "lzf", "gzip", "none"],
                    help="compression of the output: auto (default: LZF on translations and per-frame columns, "
                         "rotations raw; fast, read by h5py), lzf (everything), gzip (smallest, read by every "
@@ -514,6 +552,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--log-level", default="warning", choices=["debug", "info", "warning", "error"],
                    help="detail of log messages on stderr (default warning)")
     s.set_defaults(func=cmd_splice_all)
+
+    s = sub.add_parser("merge", help="write a splice-all output from its finished shards (after --shard runs)",
+                       description="Join the shards of a splice-all job, in plan order, into its output; says which "
+                                   "slices are missing if some are.")
+    s.add_argument("output", help="the output the job was run with (-o of splice-all)")
+    _add_output_flags(s, force_help="overwrite an existing output")
+    s.set_defaults(func=cmd_merge)
     return p
 
 
@@ -522,6 +567,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
+    if args.func is cmd_splice_all:
+        _prestart_workers(args)
     try:
         return args.func(args)
     except TorchspliceError as exc:

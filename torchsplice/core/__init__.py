@@ -1,7 +1,20 @@
-"""Core types: rotations (WXYZ quaternions), skeletons, motion clips and user-facing errors."""
+"""Core types: rotations (WXYZ quaternions), skeletons, motion clips and user-facing errors.
+
+The errors import at once; the torch-based types on first use.
+"""
 
 from .errors import BVHError, DatabaseError, MotionError, SpecError, TorchspliceError
-from .motion import Motion
-from .skeleton import Skeleton
 
 __all__ = ["Motion", "Skeleton", "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError"]
+
+
+def __getattr__(name):
+    if name == "Motion":
+        from .motion import Motion
+
+        return Motion
+    if name == "Skeleton":
+        from .skeleton import Skeleton
+
+        return Skeleton
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -11,7 +11,9 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["warm", "warm_up"]
+import numpy as np
+
+__all__ = ["warm", "warm_up", "preload"]
 
 
 def warm() -> bool:
@@ -28,8 +30,6 @@ def warm_up(quiet: bool = False) -> float:
     t0 = time.perf_counter()
     if not quiet:
         print("setup: compiling the CPU splicer for this machine (once; about a minute)", file=sys.stderr, flush=True)
-    import numpy as np
-
     from ..io.sample import sample_motions
     from ..io.spec import load_spec
     from .bank import ClipBank, splice_bank
@@ -51,3 +51,29 @@ if __name__ == "__main__":
     seconds = warm_up()
     if seconds:
         print(f"setup: compiled in {seconds:.0f} s", file=sys.stderr)
+
+
+def preload(dtype=np.float32) -> None:
+    """Load the kernels a job's task runs from numba's cache, by type signature, running none of
+    them: a process forked after this starts splicing at once, and no parallel region (whose
+    threads would not survive a fork) has run."""
+    from numba import typeof
+
+    from . import bank as bank_mod
+    from . import splice as splice_mod
+    from .fk import fk_clips
+
+    f8, i8 = np.zeros((1, 1, 1)), np.zeros(1, np.int64)
+    v8, m8 = np.zeros(1), np.zeros((1, 1))
+    out = np.zeros((1, 1, 1), dtype)
+    joints = (i8, np.zeros(1, np.bool_), i8, i8, i8, i8, i8, i8, 0, 0, 0)
+    opts = (0.0,) * 8
+    kernels = {
+        splice_mod.splice_batch: ((f8, f8, f8, f8), (f8, m8, v8, v8, v8), i8, i8, 0, i8, i8, i8, joints, opts, True, i8,
+                                  out, out, v8, v8, np.zeros((1, 1, 2), np.int64), i8, i8, i8, v8, i8, v8),
+        splice_mod.compact: (out, out, v8, v8, i8, i8, i8, out, out, v8, v8),
+        fk_clips: (f8, f8, i8, i8, i8, f8, f8),
+        bank_mod._features: (f8, i8, i8, i8, i8, 0, f8, m8, v8, v8, v8),
+    }
+    for kernel, args in kernels.items():
+        kernel.compile(tuple(typeof(a) for a in args))

@@ -55,6 +55,7 @@ from ..core.errors import DatabaseError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
+from .lock import host_pid
 
 __all__ = ["MotionDatabase", "ClipBatch", "SCHEMA_VERSION", "FORMAT", "COMPRESSIONS"]
 
@@ -171,6 +172,7 @@ class MotionDatabase:
         self._staged: list[tuple] = []
         self._staged_frames = 0
         self._skeleton_ids: dict[int, tuple[Skeleton, int]] = {}  # id -> (object kept alive, row)
+        self._virtual: dict[int, list[tuple[str, int]]] = {}  # skeleton -> (source file, frames) in order
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod
@@ -200,7 +202,7 @@ class MotionDatabase:
             raise DatabaseError(f"{path}: already exists (use --force to overwrite)")
         if not path.parent.exists():
             raise DatabaseError(f"{path}: folder {path.parent} does not exist")
-        tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+        tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
         try:
             h5 = h5py.File(tmp, "w")
             h5.attrs.update({
@@ -236,7 +238,7 @@ class MotionDatabase:
         tmp = None
         try:
             if mode == "a":
-                tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+                tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
                 shutil.copyfile(path, tmp)
             h5 = h5py.File(tmp or path, "r+" if mode == "a" else "r")
         except OSError as exc:
@@ -273,6 +275,7 @@ class MotionDatabase:
             return
         try:
             self.flush()
+            self._build_virtual()
             self._h5.close()
             self._h5 = None
             os.replace(self._tmp, self.path)
@@ -579,6 +582,91 @@ class MotionDatabase:
         if self._names is not None:
             self._names += names
         self._flushed += C
+
+    def append_virtual(self, source: Path, skeleton: Skeleton, lengths, names, fps, spec=None, sources="", roles="",
+                       labels=None, extra: dict | None = None) -> None:
+        """Add the clips of skeleton 0 of the database file ``source`` without copying their frames.
+
+        The clips' rows go into this file's table; their frames stay in ``source``. When this
+        file is closed, each frame dataset of the skeleton becomes an HDF5 *virtual dataset*
+        over the sources, in call order, which plain h5py reads like any dataset. The sources
+        are referred to by their path relative to this file's folder, so the two must stay
+        side by side. Arguments as :meth:`append_packed` (without the frames). A skeleton
+        holds either virtual or real frames, not both.
+        """
+        self._writable()
+        self.flush()
+        lengths = np.asarray(lengths, dtype=np.int64).reshape(-1)
+        names = [str(n) for n in names]
+        C, N = len(names), int(lengths.sum())
+        if C == 0:
+            return
+        k = self.add_skeleton(skeleton, spec)
+        if self.h5[f"skeletons/{k}/rotations"].shape[0]:
+            raise DatabaseError(f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones")
+        parts = self._virtual.setdefault(k, [])
+        n0 = sum(n for _, n in parts)
+        rel = os.path.relpath(Path(source).resolve(), self._tmp.resolve().parent)
+        self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
+        parts.append((rel, N))
+
+    def _append_rows(self, k: int, n0: int, lengths, names, fps, sources, roles, labels, extra: dict) -> None:
+        """Table rows of ``C`` clips of skeleton ``k`` whose frames start at row ``n0``."""
+        C = len(names)
+        index = self._index_map()
+        clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
+        if clash:
+            raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
+
+        def each(v, what):
+            out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(v)
+            if len(out) != C:
+                raise DatabaseError(f"{self.path}: {what} needs {C} values, got {len(out)}")
+            return out
+
+        rows = {
+            "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
+            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
+            "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
+            "skeleton": [k] * C, "start": n0 + np.concatenate(([0], np.cumsum(lengths)[:-1])),
+        }
+        for n, kind in self.columns.items():
+            rows[n] = each(extra[n], f"column {n!r}") if n in extra else [_KINDS[kind][1]] * C
+        c = self.h5["clips"]
+        m0 = c["name"].shape[0]
+        try:
+            for name, values in rows.items():
+                dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
+                c[name].resize(m0 + C, axis=0)
+                c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
+        except BaseException as exc:
+            for name in rows:
+                c[name].resize(m0, axis=0)
+            if isinstance(exc, OSError):
+                raise DatabaseError(os_error_message(self.path, exc)) from None
+            raise
+        for n in names:
+            index[n] = len(index)
+        if self._names is not None:
+            self._names += names
+        self._flushed += C
+
+    def _build_virtual(self) -> None:
+        """Replace the empty frame datasets of virtual skeletons by virtual datasets over their sources."""
+        for k, parts in self._virtual.items():
+            g = self.h5[f"skeletons/{k}"]
+            total = sum(n for _, n in parts)
+            for name in [n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g]:
+                ds = g[name]
+                shape, dtype = (total,) + ds.shape[1:], ds.dtype
+                layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
+                at = 0
+                for rel, n in parts:
+                    layout[at:at + n] = h5py.VirtualSource(rel, f"skeletons/0/{name}", shape=(n,) + ds.shape[1:])
+                    at += n
+                del g[name]
+                g.create_virtual_dataset(name, layout, fillvalue=np.nan)
+        self._virtual = {}
 
     def packed(self, skeleton: int = 0) -> dict[str, np.ndarray]:
         """Every frame of skeleton ``k`` as whole arrays: ``rotations``, ``root_translation``,

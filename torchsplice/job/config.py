@@ -1,0 +1,153 @@
+"""The job's configuration: one object that every part of the job reads.
+
+:class:`JobConfig` holds what to splice (inputs, selections, methods, splice options, output
+layout) and how to run it (engine, workers, device). Only the first half defines the job:
+:meth:`JobConfig.plan_key` is what a resumed run must share with the run it resumes, so a
+resume may use another engine or worker count. The splice options are derived here, once
+(:meth:`JobConfig.align_options`, :meth:`JobConfig.splice_options`, :meth:`JobConfig.params`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ..core.errors import TorchspliceError
+from ..io.database import COMPRESSIONS
+from ..splice import METHODS, AlignOptions, SpliceOptions
+
+__all__ = ["JobConfig", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
+
+DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
+DEFAULT_ACTIONS = ("role:action,role:both",)
+ENGINES = ("local", "ray")
+LAYOUTS = ("copy", "virtual")
+
+
+@dataclass(frozen=True)
+class JobConfig:
+    """Everything that defines a job and how it runs.
+
+    What to splice (the plan):
+        database: the motion database holding the locomotions (and the actions, by default).
+        output: the database to write.
+        actions_db: another database holding the actions (same skeleton, units and up axis).
+        locomotions, actions: selectors, all of which must select a clip.
+        methods: one or several of ``splice``, ``naive``, ``cpmc``.
+        force_locomotion: splice clips that do not locomote instead of skipping their pairs.
+        copy_sources: copy the selected source clips into the output too.
+        max_run, posture: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
+        compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
+            (LZF on everything but rotations: fast, read by h5py), ``"lzf"``, ``"gzip"`` (read by
+            every HDF5 tool, several times slower to write) or ``None``.
+        layout: ``"copy"`` (one self-contained file) or ``"virtual"`` (the output's frames are
+            HDF5 virtual datasets over the shards, kept in ``OUT.shards/`` beside it: no copy).
+        memory_budget_mb: bound on the memory of one task, which sets the pairs per task.
+        batch_pairs: pairs per task; ``None`` derives it from the budget.
+
+    How to run it (free to change between a run and its resume):
+        engine: ``"local"`` (worker processes on this machine) or ``"ray"`` (Ray tasks).
+        workers: local worker processes (``None``: one per core); each computes with one thread.
+        ray_address: the Ray cluster to use (``None``: start a local Ray instance).
+        device: ``None``/``"cpu"`` for the compiled CPU splicer, or a torch device such as
+            ``"cuda"`` (then the torch splicer runs in this process).
+    """
+
+    database: Path
+    output: Path
+    actions_db: Path | None = None
+    locomotions: tuple[str, ...] = DEFAULT_LOCOMOTIONS
+    actions: tuple[str, ...] = DEFAULT_ACTIONS
+    methods: tuple[str, ...] = ("splice",)
+    force_locomotion: bool = False
+    copy_sources: bool = False
+    max_run: int = 3
+    posture: bool = True
+    compression: str | None = "auto"
+    layout: str = "copy"
+    memory_budget_mb: int = 1024
+    batch_pairs: int | None = None
+    engine: str = "local"
+    workers: int | None = None
+    ray_address: str | None = None
+    device: str | None = None
+
+    def checked(self) -> "JobConfig":
+        """The configuration with paths and names normalised; a clear error for a bad value."""
+        c = self
+        if c.compression == "none":
+            c = replace(c, compression=None)
+        if c.compression not in COMPRESSIONS:
+            raise TorchspliceError(f"unknown compression {c.compression!r}; choose auto, lzf, gzip or none")
+        bad = [m for m in c.methods if m not in METHODS]
+        if bad or not c.methods:
+            raise TorchspliceError(f"unknown method {bad[0] if bad else '(none)'!r}; choose from {', '.join(METHODS)}")
+        if c.engine not in ENGINES:
+            raise TorchspliceError(f"unknown engine {c.engine!r}; choose {' or '.join(ENGINES)}")
+        if c.layout not in LAYOUTS:
+            raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
+        if c.workers is not None and c.workers < 1:
+            raise TorchspliceError(f"--workers must be at least 1, got {c.workers}")
+        c = replace(c, database=Path(c.database), output=Path(c.output),
+                    actions_db=Path(c.actions_db) if c.actions_db is not None else None)
+        if c.actions_db is not None and c.actions_db.resolve() == c.database.resolve():
+            c = replace(c, actions_db=None)
+        return c
+
+    @property
+    def work(self) -> Path:
+        """The job's work folder beside the output: its plan, shards and locks."""
+        return self.output.with_name(f".{self.output.name}.parts")
+
+    @property
+    def shards_folder(self) -> Path:
+        """Where a ``virtual`` output keeps its shards (they are part of the output)."""
+        return self.output.with_name(f"{self.output.name}.shards")
+
+    def worker_count(self) -> int:
+        """Local worker processes: ``workers``, or one per core."""
+        if self.workers:
+            return self.workers
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+    def align_options(self) -> AlignOptions:
+        return AlignOptions(max_run=self.max_run)
+
+    def splice_options(self) -> SpliceOptions:
+        """Options for :func:`~torchsplice.splice.splice_pairs` (the plan has checked every clip)."""
+        return SpliceOptions(align=self.align_options(), posture=self.posture, force=True, check_locomotion=False,
+                             device=self.device)
+
+    def params(self) -> str:
+        """The ``params`` column of every spliced clip (JSON)."""
+        return json.dumps({"max_run": self.max_run, "posture": self.posture,
+                           "heading_window_deg": self.align_options().heading_window_deg,
+                           "force_locomotion": self.force_locomotion})
+
+    def backend(self) -> str:
+        """``"compiled"`` (the CPU splicer) or ``"torch"`` (CUDA, or no numba)."""
+        from ..splice.api import resolve_backend
+
+        return resolve_backend(SpliceOptions(device=self.device))
+
+    def plan_key(self) -> dict:
+        """The settings a resumed run must share with the run it resumes (the backend too: the
+        compiled splicer computes in float64, torch in float32)."""
+        return {"backend": self.backend(),
+            "locomotions": list(self.locomotions), "actions": list(self.actions), "methods": list(self.methods),
+            "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
+            "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
+        }
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"K/N"`` as ``(K, N)`` with ``1 <= K <= N``; a clear error otherwise."""
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise TorchspliceError(f"--shard must look like K/N (e.g. 2/8), got {text!r}") from None
+    if not 1 <= k <= n:
+        raise TorchspliceError(f"--shard {text}: K must be between 1 and N")
+    return k, n

@@ -1,0 +1,342 @@
+"""Engines that run the job's tasks: in this process, on local worker processes, or on Ray.
+
+Every engine runs the same function on the same task (:func:`~torchsplice.job.task.run_task`)
+and the result goes through the same :class:`~torchsplice.job.sink.Sink`, so the shards, and
+the output merged from them, are the same bits whatever the engine and the worker count.
+
+- :class:`InlineEngine`: this process (one worker, or a CUDA device). A background thread
+  writes each task's shard while the next one computes.
+- :class:`LocalEngine`: worker processes on this machine (``--workers N``, default one per
+  core), each computing with one thread and writing its own shards. When a worker dies
+  (killed, out of memory) the pool is restarted and the unfinished tasks run again, up to
+  :data:`MAX_ATTEMPTS` times in all.
+- :class:`RayEngine`: Ray tasks on a cluster (``--ray-address``), or on a Ray instance started
+  here. The driver puts each locomotion group's source clips in Ray's object store once; tasks
+  return their results to the driver, which writes the shards. So a cluster needs no shared
+  file system: only torchsplice installed on every node. Ray retries a task whose worker or
+  node dies; the driver keeps at most two tasks in flight per CPU of the cluster, which bounds
+  its memory and the object store's.
+
+An engine calls ``done(task, part)`` for each finished task, in the driver's thread, with the
+task's :class:`~torchsplice.job.task.Part` when it is still in memory (else ``None``: the
+shard is on disk).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import sys
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+
+from ..core.errors import TorchspliceError
+from .config import JobConfig
+from .plan import Plan, Task
+from .sink import Sink
+from .sources import Sources
+from .task import run_task
+
+__all__ = ["InlineEngine", "LocalEngine", "RayEngine", "make_engine", "MAX_ATTEMPTS"]
+
+MAX_ATTEMPTS = 3
+
+
+def _shard_compression(config: JobConfig):
+    """Shards of a virtual output are the output's frames: compressed like it; otherwise raw."""
+    return config.compression if config.layout == "virtual" else None
+
+
+class InlineEngine:
+    """Tasks in this process, one after another (see the module docstring)."""
+
+    name = "inline"
+
+    def __init__(self, config: JobConfig, plan: Plan, sources: Sources, sink: Sink, shard_dir: Path):
+        self.config, self.plan, self.sources, self.sink, self.shard_dir = config, plan, sources, sink, shard_dir
+
+    def describe(self) -> str:
+        from ..cpu import get_threads
+
+        device = self.config.device or "cpu"
+        return f"in this process on {device}" + (f", {get_threads()} threads" if self.config.backend() == "compiled" else "")
+
+    def alive(self) -> int:
+        return 1
+
+    def run(self, tasks: list[Task], done) -> None:
+        buffers = None
+        if self.config.backend() == "compiled":
+            from ..cpu.bank import Buffers
+
+            buffers = (Buffers(), Buffers())  # the writer reads one while the next task fills the other
+        comp = _shard_compression(self.config)
+        pending: Future | None = None
+
+        def write(task, part):
+            self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
+            done(task, part)
+
+        with ThreadPoolExecutor(max_workers=1) as writer:
+            try:
+                for n, task in enumerate(tasks):
+                    part = run_task(self.plan, task, self.sources, self.config, buffers[n % 2] if buffers else None)
+                    if pending is not None:
+                        pending.result()
+                    pending = writer.submit(write, task, part)
+                if pending is not None:
+                    pending.result()
+            except BaseException:
+                while pending is not None and not pending.done():
+                    try:
+                        pending.result()  # keep the task being written (a second Ctrl-C waits on)
+                    except KeyboardInterrupt:
+                        continue
+                    except BaseException:
+                        break
+                raise
+
+    def close(self) -> None:
+        pass
+
+
+# --------------------------------------------------------------------------------------------- local processes
+_WORKER: dict = {}
+
+
+def _worker_init(config: JobConfig, plan_path: str, shard_dir: str) -> None:
+    """A worker process: one compute thread, Ctrl-C left to the driver, the plan read once; it
+    dies with the fork server, which dies with the driver (a killed job leaves no worker behind)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with_parent()
+    import torch
+
+    torch.set_num_threads(1)
+    if config.backend() == "compiled":
+        from ..cpu import set_threads
+
+        set_threads(1)
+    from .sink import HDF5Sink
+
+    _WORKER.update(config=config, plan=Plan.load(Path(plan_path)), sources=Sources(config.database, config.actions_db),
+                   sink=HDF5Sink(), shard_dir=Path(shard_dir))
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent dies; elsewhere, watch the parent."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(1, signal.SIGKILL, 0, 0, 0) == 0:  # PR_SET_PDEATHSIG
+            return
+    except (OSError, AttributeError):
+        pass
+    import threading
+    import time
+
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def _worker_task(index: int) -> tuple[str, int]:
+    w = _WORKER
+    task = w["plan"].tasks[index]
+    part = run_task(w["plan"], task, w["sources"], w["config"])
+    w["sink"].write_shard(part, w["shard_dir"] / w["sink"].shard_name(task.id), _shard_compression(w["config"]))
+    return task.id, os.getpid()
+
+
+def _main_reimports() -> bool:
+    """Whether worker processes re-import the driver's main script (which then must be guarded)."""
+    main = sys.modules.get("__main__")
+    return getattr(main, "__file__", None) is not None and getattr(main, "__spec__", None) is None
+
+
+class LocalEngine:
+    """Worker processes on this machine (see the module docstring)."""
+
+    name = "local"
+
+    def __init__(self, config: JobConfig, plan: Plan, plan_path: Path, shard_dir: Path, workers: int):
+        self.config, self.plan, self.plan_path, self.shard_dir, self.workers = config, plan, plan_path, shard_dir, workers
+        self.pool: ProcessPoolExecutor | None = None
+
+    def describe(self) -> str:
+        return f"{self.workers} local worker process{'es' if self.workers > 1 else ''}, one thread each"
+
+    def _start(self) -> None:
+        ctx = mp.get_context("forkserver" if sys.platform != "win32" else "spawn")
+        if hasattr(ctx, "set_forkserver_preload"):
+            ctx.set_forkserver_preload(["torchsplice.job.worker"])  # workers fork with torch and the kernels loaded
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_worker_init,
+                                        initargs=(self.config, str(self.plan_path), str(self.shard_dir)))
+
+    def alive(self) -> int:
+        procs = getattr(self.pool, "_processes", None) or {}
+        return sum(p.is_alive() for p in list(procs.values()))
+
+    def run(self, tasks: list[Task], done) -> None:
+        index = {t.id: n for n, t in enumerate(self.plan.tasks)}
+        todo = {t.id: t for t in tasks}
+        rounds = 0
+        while todo:
+            self._start()
+            futures = {self.pool.submit(_worker_task, index[tid]): tid for tid in todo}
+            rounds += 1
+            broken = False
+            try:
+                remaining = set(futures)
+                while remaining:
+                    finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+                    for f in finished:
+                        tid = futures[f]
+                        try:
+                            f.result()
+                        except BrokenProcessPool:
+                            broken = True
+                            continue
+                        done(todo.pop(tid), None)
+                    if broken:
+                        break
+            except BaseException:
+                self.close(kill=True)
+                raise
+            if broken:
+                self.close(kill=True)
+                if rounds == 1 and len(todo) == len(tasks) and _main_reimports():
+                    raise TorchspliceError(
+                        "local worker processes could not start: a script that runs the job through the Python API "
+                        "must guard its entry point with `if __name__ == \"__main__\":` (workers re-import it), or "
+                        "use workers=1")
+                if rounds >= MAX_ATTEMPTS:
+                    raise TorchspliceError(f"worker processes died {rounds} times ({len(todo)} tasks unfinished; out of "
+                                           "memory, or killed); finished tasks are kept: rerun to resume")
+            else:
+                self.close()
+
+    def close(self, kill: bool = False) -> None:
+        if self.pool is None:
+            return
+        if kill:
+            for p in list((getattr(self.pool, "_processes", None) or {}).values()):
+                if p.is_alive():
+                    p.kill()
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        self.pool = None
+
+
+# --------------------------------------------------------------------------------------------- Ray
+_RAY_CACHE: dict = {}
+
+
+def _ray_run(config: JobConfig, plan_json: str, index: int, group_motions: dict):
+    """A Ray task: the plan and each group's sources are kept per worker process."""
+    from .plan import Plan as _Plan
+
+    key = hash(plan_json)
+    if _RAY_CACHE.get("key") != key:
+        import torch
+
+        torch.set_num_threads(1)
+        if config.backend() == "compiled":
+            from ..cpu import set_threads
+
+            set_threads(1)
+        _RAY_CACHE.clear()
+        _RAY_CACHE.update(key=key, plan=_Plan.from_json(plan_json), sources=Sources.from_motions({}))
+    plan, sources = _RAY_CACHE["plan"], _RAY_CACHE["sources"]
+    for k, m in group_motions.items():
+        sources.motions.setdefault(k, m)
+    return run_task(plan, plan.tasks[index], sources, config)
+
+
+class RayEngine:
+    """Ray tasks on a cluster (see the module docstring)."""
+
+    name = "ray"
+
+    def __init__(self, config: JobConfig, plan: Plan, sources: Sources, sink: Sink, shard_dir: Path):
+        self.config, self.plan, self.sources, self.sink, self.shard_dir = config, plan, sources, sink, shard_dir
+        try:
+            import ray
+        except ImportError:
+            raise TorchspliceError("--engine ray needs Ray: pip install 'torchsplice[ray]'") from None
+        self.ray = ray
+        self.started = not ray.is_initialized()
+        if self.started:
+            try:
+                ray.init(address=config.ray_address, include_dashboard=False, log_to_driver=False,
+                         logging_level="ERROR", configure_logging=True)
+            except (ConnectionError, ValueError, RuntimeError) as exc:
+                raise TorchspliceError(f"cannot reach the Ray cluster at {config.ray_address or '(a new local one)'}: {exc}") from None
+
+    def describe(self) -> str:
+        res = self.ray.cluster_resources()
+        nodes = sum(n.get("Alive", False) for n in self.ray.nodes())
+        return f"Ray, {nodes} node{'s' if nodes != 1 else ''}, {int(res.get('CPU', 0))} CPUs"
+
+    def alive(self) -> int:
+        return int(self.ray.cluster_resources().get("CPU", 0))
+
+    def run(self, tasks: list[Task], done) -> None:
+        ray = self.ray
+        remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS)(_ray_run)
+        plan_ref = ray.put(self.plan.to_json())
+        config_ref = ray.put(self.config)
+        group_refs: dict[int, object] = {}
+        index = {t.id: n for n, t in enumerate(self.plan.tasks)}
+        queue = list(tasks)
+        inflight: dict = {}
+        limit = max(2, 2 * self.alive())
+        comp = _shard_compression(self.config)
+        try:
+            while queue or inflight:
+                while queue and len(inflight) < limit:
+                    task = queue.pop(0)
+                    if task.group not in group_refs:
+                        keys = self.plan.groups[task.group].clips
+                        group_refs[task.group] = ray.put(self.sources.group_motions(keys))
+                    inflight[remote.remote(config_ref, plan_ref, index[task.id], group_refs[task.group])] = task
+                ready, _ = ray.wait(list(inflight), num_returns=1)
+                for ref in ready:
+                    task = inflight.pop(ref)
+                    try:
+                        part = ray.get(ref)
+                    except ray.exceptions.RayTaskError as exc:
+                        cause = exc.as_instanceof_cause()
+                        if isinstance(cause, TorchspliceError):
+                            raise TorchspliceError(str(cause)) from None
+                        raise TorchspliceError(f"task {task.id} failed on the Ray cluster: {exc}") from None
+                    except (ray.exceptions.WorkerCrashedError, ray.exceptions.NodeDiedError,
+                            ray.exceptions.ObjectLostError) as exc:
+                        raise TorchspliceError(f"task {task.id} was lost {MAX_ATTEMPTS} times on the Ray cluster "
+                                               f"({type(exc).__name__}); finished tasks are kept: rerun to resume") from None
+                    self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
+                    done(task, None)
+        except BaseException:
+            for ref in inflight:
+                ray.cancel(ref, force=True)
+            raise
+
+    def close(self) -> None:
+        if self.started and self.ray.is_initialized():
+            self.ray.shutdown()
+
+
+def make_engine(config: JobConfig, plan: Plan, plan_path: Path, sources: Sources, sink: Sink, shard_dir: Path):
+    """The engine ``config`` asks for (a CUDA device, or one worker, runs in this process)."""
+    if config.engine == "ray":
+        return RayEngine(config, plan, sources, sink, shard_dir)
+    workers = config.worker_count()
+    if workers == 1 or config.backend() != "compiled":
+        return InlineEngine(config, plan, sources, sink, shard_dir)
+    return LocalEngine(config, plan, plan_path, shard_dir, workers)

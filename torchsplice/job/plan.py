@@ -1,0 +1,309 @@
+"""The job's plan: which pairs to splice, grouped into tasks, and which are skipped and why.
+
+:func:`make_plan` turns a :class:`~torchsplice.job.config.JobConfig` and its databases into a
+:class:`Plan`, deterministically: the same inputs and settings give the same plan, on any
+machine. It selects the clips, checks once per clip that it locomotes, finds ``cpmc``
+references, lists the pairs (method by method, each locomotion against each action) with a
+reason for every skipped one, and cuts the pairs into tasks: consecutive blocks of one method
+and one locomotion group (skeleton and frame rate), each with a stable id. The plan is saved
+as JSON in the job's work folder, so every worker, a resume and ``torchsplice merge`` see
+exactly the same plan.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from .. import __version__
+from ..core.errors import TorchspliceError
+from ..io.spec import DatasetSpec, SkeletonRoles, detect_spec
+from ..splice import SpliceOptions
+from ..splice.clips import ClipTensors, clips_to_tensors
+from ..splice.locomotion import check_locomotion
+from ..splice.references import find_reference
+from .config import JobConfig
+from .select import select_clips
+from .sources import Sources, clip_key
+
+__all__ = ["Pair", "Task", "Group", "Plan", "make_plan", "PLAN_VERSION", "MIN_SECONDS"]
+
+PLAN_VERSION = 1
+MIN_SECONDS = SpliceOptions().min_seconds
+
+
+@dataclass
+class Pair:
+    """One planned pair: rows in the locomotion and action databases, method, reference row."""
+
+    method: str
+    loco: int
+    action: int
+    reference: int | None = None
+
+
+@dataclass
+class Task:
+    """Pairs ``start:stop`` of the plan, all of one method and locomotion group."""
+
+    id: str
+    method: str
+    group: int
+    start: int
+    stop: int
+
+    @property
+    def size(self) -> int:
+        return self.stop - self.start
+
+
+@dataclass
+class Group:
+    """A locomotion skeleton (its row in the locomotion database) and frame rate, with its clips
+    (keys, locomotions first), dataset spec (JSON) and leg length (file units)."""
+
+    skeleton: int
+    fps: float
+    clips: list[str]
+    spec: str
+    leg: float
+
+    def roles(self, skeleton) -> SkeletonRoles:
+        return DatasetSpec.from_json(self.spec).bind(skeleton)
+
+
+@dataclass
+class Plan:
+    """What a job does (see the module docstring). ``clips`` maps a clip key to its name,
+    frames and fps; ``flags`` a key to why the clip does not locomote (for forced clips)."""
+
+    key: dict
+    pairs: list[Pair]
+    tasks: list[Task]
+    groups: list[Group]
+    skipped: dict[str, int]
+    clips: dict[str, dict]
+    flags: dict[str, str] = field(default_factory=dict)
+    version: int = PLAN_VERSION
+
+    def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
+        return (clip_key("L", p.loco, same_db), clip_key("A", p.action, same_db),
+                clip_key("A", p.reference, same_db) if p.reference is not None and p.method == "cpmc" else None)
+
+    @property
+    def same_db(self) -> bool:
+        return self.key["actions_db"] is None
+
+    def digest(self) -> str:
+        """A hash of the whole plan: two runs with the same digest write the same output."""
+        return hashlib.sha256(self.to_json().encode()).hexdigest()
+
+    def to_json(self) -> str:
+        return json.dumps({"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
+                           "groups": [asdict(g) for g in self.groups], "clips": self.clips,
+                           "tasks": [asdict(t) for t in self.tasks],
+                           "pairs": [[p.method, p.loco, p.action, p.reference] for p in self.pairs]},
+                          sort_keys=True, separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> "Plan":
+        d = json.loads(text)
+        if d.get("version") != PLAN_VERSION:
+            raise TorchspliceError(f"the job's plan has version {d.get('version')}, this torchsplice writes {PLAN_VERSION}")
+        return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
+                   groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"], clips=d["clips"], flags=d["flags"],
+                   version=d["version"])
+
+    def save(self, path: Path) -> None:
+        """Write the plan atomically (a plan written at the same moment by another process of the
+        same job holds the same text)."""
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(self.to_json())
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: Path) -> "Plan":
+        try:
+            return cls.from_json(Path(path).read_text())
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise TorchspliceError(f"{path}: not a readable job plan ({exc})") from None
+
+
+def _fingerprint(path: Path) -> dict:
+    st = path.stat()
+    return {"path": str(path.resolve()), "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def plan_key(config: JobConfig) -> dict:
+    """What defines a job: the settings of :meth:`JobConfig.plan_key`, the inputs and the tool."""
+    return {"tool": f"torchsplice {__version__}", "database": _fingerprint(config.database),
+            "actions_db": _fingerprint(config.actions_db) if config.actions_db else None, **config.plan_key()}
+
+
+def leg_length(skeleton, roles: SkeletonRoles) -> float:
+    """Hip-to-ankle bone length of the left leg (offset norms), in file units."""
+    j, total = roles.feet[0], 0.0
+    while j not in (roles.hips[0], -1):
+        total += float(skeleton.offsets[j].norm())
+        j = skeleton.parents[j]
+    return total
+
+
+def make_plan(config: JobConfig, sources: Sources) -> Plan:
+    """The plan of ``config`` (see the module docstring); ``sources`` reads (and keeps) the clips."""
+    c = config
+    loco_db, act_db = sources.db("L"), sources.db("A")
+    same = act_db is loco_db or c.actions_db is None
+    tl = loco_db.table()
+    ta = tl if same else act_db.table()
+    locos = select_clips(tl, c.locomotions, "--locomotions", str(c.database))
+    acts = select_clips(ta, c.actions, "--actions", str(c.actions_db or c.database))
+    sk_l, sk_a = loco_db.skeletons, act_db.skeletons
+    if not any(sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]) for i in locos for j in acts):
+        a, b = sk_l[int(tl["skeleton"][locos[0]])], sk_a[int(ta["skeleton"][acts[0]])]
+        raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
+                               f"have no skeleton in common: {a.mismatch(b)}")
+    if not same:
+        for k in ("units", "up_axis"):
+            a, b = str(loco_db.attrs.get(k) or ""), str(act_db.attrs.get(k) or "")
+            if a and b and a != b:
+                raise TorchspliceError(f"{c.actions_db}: {k} {b!r} differs from {c.database}'s {a!r}; "
+                                       "splice clips of one unit and up axis")
+    specs = {}
+    for k in sorted({int(tl["skeleton"][i]) for i in locos}):
+        text = loco_db.spec_json(k)
+        specs[k] = DatasetSpec.from_json(text) if text else detect_spec(sk_l[k])
+    refs = _references(ta, acts, next(iter(specs.values()))) if "cpmc" in c.methods else {}
+
+    # groups: a locomotion skeleton and rate, its locomotions, then every action and reference of its topology
+    others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
+    by_group: dict[tuple[int, float], list[str]] = {}
+    for i in locos:
+        by_group.setdefault((int(tl["skeleton"][i]), float(tl["fps"][i])), []).append(clip_key("L", i, same))
+    groups: list[Group] = []
+    for (k, fps), keys in by_group.items():
+        for j in others:
+            key = clip_key("A", j, same)
+            if key not in keys and sk_l[k].same_topology(sk_a[int(ta["skeleton"][j])]):
+                keys.append(key)
+        roles = specs[k].bind(sk_l[k])
+        groups.append(Group(k, fps, keys, specs[k].to_json(), leg_length(sk_l[k], roles)))
+    group_of = {(g.skeleton, g.fps): n for n, g in enumerate(groups)}
+    tables = {"L": tl, "A": ta}
+    clips = {}
+    for g in groups:
+        for key in g.clips:
+            tag, row = key.split(":")
+            t = tables[tag]
+            clips[key] = {"name": str(t["name"][int(row)]), "frames": int(t["length"][int(row)]), "fps": float(t["fps"][int(row)])}
+    checks = _locomotion_checks(c, sources, groups, clips, sk_l)
+
+    pairs: list[Pair] = []
+    skipped: dict[str, int] = {}
+    for method in c.methods:
+        for i in locos:
+            for j in acts:
+                why = _skip_reason(c, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs)
+                if why:
+                    skipped[why] = skipped.get(why, 0) + 1
+                else:
+                    pairs.append(Pair(method, int(i), int(j), refs.get(j)))
+    if not pairs:
+        reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
+        raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
+    size = _task_size(c, pairs, clips, groups, same, tl, ta)
+    tasks: list[Task] = []
+    start = 0
+    for n in range(1, len(pairs) + 1):
+        p0 = pairs[start]
+        g0 = group_of[(int(tl["skeleton"][p0.loco]), float(tl["fps"][p0.loco]))]
+        end = n == len(pairs)
+        if not end:
+            p = pairs[n]
+            g = group_of[(int(tl["skeleton"][p.loco]), float(tl["fps"][p.loco]))]
+        if end or n - start >= size or p.method != p0.method or g != g0:
+            tasks.append(Task(f"{len(tasks):06d}", p0.method, g0, start, n))
+            start = n
+    flags = {k: chk.reason for k, chk in checks.items() if not chk.locomoting}
+    key = plan_key(c)
+    key["task_pairs"] = size
+    return Plan(key=key, pairs=pairs, tasks=tasks, groups=groups, skipped=skipped, clips=clips, flags=flags)
+
+
+def _references(ta, acts, spec: DatasetSpec) -> dict[int, int | None]:
+    """Action row -> reference row (in the action database) for ``cpmc``."""
+    names = [str(n) for n in ta["name"]]
+    cands = [(names[i], str(ta["role"][i]), json.loads(ta["labels"][i] or "{}")) for i in range(len(names))]
+    index = {n: i for i, n in enumerate(names)}
+    out = {}
+    for j in acts:
+        ref = find_reference(names[j], json.loads(ta["labels"][j] or "{}"), cands, spec)
+        out[int(j)] = index[ref] if ref is not None else None
+    return out
+
+
+def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l) -> dict:
+    """Clip key -> :class:`LocomotionCheck`, each clip at its own frame rate (from its group's bank
+    when the rates agree and the compiled splicer runs, else by torch FK)."""
+    out: dict = {}
+    landmarks = config.align_options().landmarks
+    for n, g in enumerate(groups):
+        roles = g.roles(sk_l[g.skeleton])
+        native = [k for k in g.clips if clips[k]["fps"] == g.fps]
+        if config.backend() == "compiled":
+            bank, index = sources.bank(n, g.clips, g.fps, roles, landmarks)
+            for b in range(0, len(native), 256):
+                chunk = native[b:b + 256]
+                pos, lengths = bank.padded_positions([index[k] for k in chunk])
+                for k, chk in zip(chunk, check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, g.fps)):
+                    out[k] = chk
+        rest: dict[float, list[str]] = {}
+        for k in g.clips:
+            if k not in out:
+                rest.setdefault(clips[k]["fps"], []).append(k)
+        for rate, keys in rest.items():
+            for b in range(0, len(keys), 64):
+                chunk = keys[b:b + 64]
+                motions = [sources.motion(k) for k in chunk]
+                for k, chk in zip(chunk, check_locomotion(clips_to_tensors(motions, motions[0].skeleton), roles, rate)):
+                    out[k] = chk
+    return out
+
+
+def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs) -> str | None:
+    if same and i == j:
+        return "a clip is not spliced onto itself"
+    if not sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]):
+        return "skeletons differ"
+    for table, row in ((tl, i), (ta, j)):
+        need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
+        if int(table["length"][row]) < need:
+            return f"{table['name'][row]} is too short to splice ({int(table['length'][row])} frames, at least {need})"
+    if not c.force_locomotion:
+        for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
+            check = checks.get(key)
+            if check is not None and not check.locomoting:
+                return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
+    if method == "cpmc" and refs.get(j) is None:
+        return f"no plain-locomotion reference for {ta['name'][j]} (cpmc)"
+    return None
+
+
+def _task_size(c: JobConfig, pairs, clips, groups, same, tl, ta) -> int:
+    """Pairs per task: ``batch_pairs``, or what fits the memory budget (one worker's alignment
+    tables for the longest pair, and a task's results)."""
+    if c.batch_pairs is not None:
+        return max(1, int(c.batch_pairs))
+    t_l = max(int(tl["length"][p.loco]) for p in pairs)
+    fps = max(g.fps for g in groups)
+    t_a = max(int(ta["length"][p.action] * fps / float(ta["fps"][p.action])) + 1 for p in pairs)
+    J = 64  # a generous joint count: the budget is a bound, not an estimate
+    if c.backend() == "compiled":
+        left = c.memory_budget_mb * 2**20 - 11 * t_l * t_a
+        per_pair = 2 * t_l * (J * 28 + 16) + 16 * (t_l + t_a)
+        return int(min(256, max(1, left // per_pair)))
+    per_pair = 40 * t_l * t_a + 2000 * 32 * (t_l + t_a)  # torch: grid, DP tables, clip tensors
+    return int(min(256, max(1, c.memory_budget_mb * 2**20 // per_pair)))

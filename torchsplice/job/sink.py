@@ -1,0 +1,134 @@
+"""Where task results go, and how they become the output: the job's ``Sink`` seam.
+
+A sink writes each task's :class:`~torchsplice.job.task.Part` as a *shard* (one file per task,
+named by the task's id, written under a temporary name and renamed into place) and joins the
+shards, in plan order, into the output. The plan, the engines and the merge only call the
+methods of :class:`Sink`, so another output format plugs in here without touching them.
+
+:class:`HDF5Sink` writes torchsplice motion databases. Shards are written without compression
+(they are read once, by the merge) unless the output is *virtual*: then they are compressed
+like the output and stay beside it in ``OUT.shards/``, and the output's frame datasets are
+HDF5 virtual datasets over them, so nothing is copied.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..io.database import MotionDatabase
+from ..io.spec import DatasetSpec
+from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
+
+__all__ = ["Sink", "HDF5Sink", "OutputWriter"]
+
+
+class Sink:
+    """The interface a sink implements (see the module docstring)."""
+
+    def shard_name(self, task_id: str) -> str:
+        raise NotImplementedError
+
+    def write_shard(self, part: Part, path: Path, compression) -> None:
+        raise NotImplementedError
+
+    def shard_skipped(self, path: Path) -> dict:
+        raise NotImplementedError
+
+    def open_output(self, path: Path, compression, run: dict, overwrite: bool) -> "OutputWriter":
+        raise NotImplementedError
+
+
+class OutputWriter:
+    """The output being joined; counts what the closing summary reports."""
+
+    def __init__(self, db: MotionDatabase):
+        self.db = db
+        self.clips = self.flagged_clips = self.copied = 0
+        self.flagged: dict[str, int] = {}
+        self.skipped: dict[str, int] = {}
+
+    def _count(self, flags, skipped: dict) -> None:
+        for f in flags:
+            kinds = {flag_kind(x) for x in str(f).split(FLAG_SEPARATOR) if x}
+            for kind in kinds:
+                self.flagged[kind] = self.flagged.get(kind, 0) + 1
+            self.flagged_clips += bool(kinds)
+        for why, n in skipped.items():
+            self.skipped[why] = self.skipped.get(why, 0) + int(n)
+
+    def append_shard(self, path: Path, part: Part | None = None, virtual: bool = False) -> None:
+        """Append a shard's clips: from ``part`` when it is still in memory, else from the file;
+        with ``virtual``, only the shard's table (its frames stay in the shard)."""
+        if part is not None and not virtual:
+            self._count(part.extra["flags"], part.skipped)
+            if part.names:
+                self.db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations,
+                                      part.lengths, part.names, part.fps, spec=DatasetSpec.from_json(part.spec),
+                                      sources=part.sources, roles="spliced", labels=part.labels, extra=part.extra,
+                                      frame_extra={"action_frame": part.action_frame}, check=False)
+                self.clips += len(part.names)
+            return
+        with MotionDatabase.open(path) as shard:
+            skipped = json.loads(str(shard.attrs.get("skipped", "")) or "{}")
+            if len(shard) == 0:
+                self._count([], skipped)
+                return
+            spec = DatasetSpec.from_json(shard.spec_json(0)) if shard.spec_json(0) else None
+            t = shard.table()
+            self._count(t["flags"], skipped)
+            extra = {col: t[col] for col in OUTPUT_COLUMNS}
+            if virtual:
+                self.db.append_virtual(path, shard.skeletons[0], t["length"], t["name"], t["fps"], spec=spec,
+                                       sources=t["source"], roles=t["role"], labels=t["labels"], extra=extra)
+            else:
+                f = shard.packed(0)
+                self.db.append_packed(shard.skeletons[0], f["rotations"], f["root_translation"], f.get("translations"),
+                                      t["length"], t["name"], t["fps"], spec=spec, sources=t["source"], roles=t["role"],
+                                      labels=t["labels"], extra=extra, frame_extra={n: f[n] for n in FRAME_COLUMNS},
+                                      check=False)
+            self.clips += len(t["name"])
+
+    def copy_sources(self, dbs: list[tuple[MotionDatabase, list[int]]]) -> None:
+        """Copy source clips (database, rows) into the output, each name once."""
+        for db, rows in dbs:
+            for r in rows:
+                m = db.read(r)
+                if m.name in self.db._index_map():
+                    continue
+                spec_text = db.spec_json(db.clip_info(r)["skeleton"])
+                self.db.append(m, spec=DatasetSpec.from_json(spec_text) if spec_text else None)
+                self.copied += 1
+
+    def close(self) -> None:
+        self.db.close()
+
+    def abort(self) -> None:
+        self.db.abort()
+
+
+class HDF5Sink(Sink):
+    """Shards and output as torchsplice motion databases (see the module docstring)."""
+
+    def shard_name(self, task_id: str) -> str:
+        return f"part-{task_id}.h5"
+
+    def write_shard(self, part: Part, path: Path, compression) -> None:
+        with MotionDatabase.create(path, overwrite=True, columns=OUTPUT_COLUMNS, frame_columns=FRAME_COLUMNS,
+                                   compression=compression, chunk_frames=256 if compression else 1024,
+                                   attrs={"skipped": json.dumps(part.skipped, sort_keys=True), "task": part.task}) as db:
+            if part.names:
+                db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations, part.lengths,
+                                 part.names, part.fps, spec=DatasetSpec.from_json(part.spec), sources=part.sources,
+                                 roles="spliced", labels=part.labels, extra=part.extra,
+                                 frame_extra={"action_frame": part.action_frame}, check=False)
+
+    def shard_skipped(self, path: Path) -> dict:
+        with MotionDatabase.open(path) as db:
+            return json.loads(str(db.attrs.get("skipped", "")) or "{}")
+
+    def open_output(self, path: Path, compression, run: dict, overwrite: bool) -> OutputWriter:
+        # 256-frame chunks: random training windows decompress little (see torchsplice.data)
+        return OutputWriter(MotionDatabase.create(path, overwrite=overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
+                                                  compression=compression, frame_columns=FRAME_COLUMNS,
+                                                  attrs={"run": json.dumps(run)}))

@@ -1,0 +1,166 @@
+"""One task of the job: splice its pairs, and give back their results packed, with their columns.
+
+:func:`run_task` is all a worker does, whatever the engine: it takes the plan, one task and the
+job's :class:`~torchsplice.job.sources.Sources`, splices the task's pairs (the compiled CPU
+splicer, or torch on CUDA), and returns a :class:`Part`: every result's frames packed in whole
+arrays and every output column computed at once. A task's result depends on its pairs alone,
+not on the other tasks, the worker or the engine. A pair that cannot be aligned is left out
+with its reason in ``Part.skipped``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from ..core.errors import TorchspliceError
+from ..splice import splice_pairs
+from ..splice.api import align_kwargs
+from .config import JobConfig
+from .plan import Plan, Task
+from .sources import Sources
+
+__all__ = ["Part", "run_task", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT", "FLAG_SEPARATOR", "flag_kind"]
+
+log = logging.getLogger("torchsplice.job")
+
+OUTPUT_COLUMNS = {
+    "locomotion": "str", "action": "str", "reference": "str", "method": "str", "params": "str", "flags": "str",
+    "locomotion_id": "int", "action_id": "int", "crop": "int",
+    "cost": "float", "posture_deg": "float", "pelvis_correction_deg": "float", "coverage": "float",
+}
+FRAME_COLUMNS = ("action_frame",)
+POOR_ALIGNMENT = 0.15  # flag a pair whose mean landmark distance exceeds this many leg lengths
+FLAG_SEPARATOR = " | "
+
+
+def flag_kind(flag: str) -> str:
+    """The kind of a flag, without the clip-specific details in parentheses."""
+    return flag.split(" (")[0].split(": ")[0] if " does not locomote" not in flag else "clip does not locomote"
+
+
+@dataclass
+class Part:
+    """One task's results, packed along frames (see :meth:`MotionDatabase.append_packed`):
+    ``rotations (N, J, 4)`` and ``translations (N, J, 3)`` float32 (row 0 the root),
+    ``lengths``, ``names``, ``fps``, ``labels`` (JSON), the output ``extra`` columns and the
+    per-frame ``action_frame``; ``skipped`` counts the pairs left out, by reason."""
+
+    task: str
+    skeleton: object
+    spec: str
+    names: list
+    lengths: np.ndarray
+    fps: np.ndarray
+    rotations: np.ndarray
+    translations: np.ndarray
+    labels: list
+    extra: dict
+    action_frame: np.ndarray
+    skipped: dict = field(default_factory=dict)
+
+    @property
+    def sources(self) -> list[str]:
+        return [f"splice:{m}" for m in self.extra["method"]]
+
+
+def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
+    """Splice the pairs of ``task`` (see the module docstring)."""
+    group = plan.groups[task.group]
+    pairs = plan.pairs[task.start:task.stop]
+    keys = [plan.pair_keys(p, plan.same_db) for p in pairs]
+    skeleton = sources.motion(group.clips[0]).skeleton
+    roles = group.roles(skeleton)
+    align = config.align_options()
+    fps = group.fps
+    method = task.method
+    failed: dict[int, str] = {}
+    if config.backend() == "compiled":
+        from ..cpu.bank import splice_bank
+        from ..cpu.splice import STATUS
+
+        bank, index = sources.bank(task.group, group.clips, fps, roles, align.landmarks)
+        out = splice_bank(bank, [index[k[0]] for k in keys], [index[k[1]] for k in keys], method,
+                          ref=[index[k[2]] for k in keys] if method == "cpmc" else None, posture=config.posture,
+                          buffers=buffers, on_error="keep", **align_kwargs(align, fps))
+        failed = {b: STATUS[int(s)] for b, s in enumerate(out.status) if s != 0}
+        ok = out.status == 0
+        frames, rot, trans = out.frames[ok], out.rotations, out.translations
+        curve, corr, crop = out.curve, out.correction, out.crop[ok].astype(np.float64)
+        cost, posture = out.cost[ok], out.posture[ok]
+    else:
+        motions = [(sources.motion(k[0]), sources.motion(k[1])) for k in keys]
+        refs = [sources.motion(k[2]) for k in keys] if method == "cpmc" else None
+        opts = config.splice_options()
+        results = []
+        try:
+            results = splice_pairs(motions, roles, method=method, references=refs, options=opts)
+        except (ValueError, TorchspliceError):  # one pair cannot be aligned: the others still are
+            for b in range(len(motions)):
+                try:
+                    results += splice_pairs(motions[b:b + 1], roles, method=method,
+                                            references=refs[b:b + 1] if refs else None, options=opts)
+                except (ValueError, TorchspliceError) as exc:
+                    failed[b] = str(exc)
+        kept = [b for b in range(len(pairs)) if b not in failed]
+        back = np.array([fps / motions[b][1].fps for b in kept])
+        frames = np.array([r.motion.num_frames for r in results], dtype=np.int64)
+        rot = torch.cat([r.motion.rotations for r in results]).float().cpu().numpy() if results else np.zeros((0, skeleton.num_joints, 4), np.float32)
+        trans = torch.cat([r.motion.local_translations() for r in results]).float().cpu().numpy() if results else np.zeros((0, skeleton.num_joints, 3), np.float32)
+        curve = np.concatenate([r.curve.numpy() for r in results] or [np.zeros(0)]) * np.repeat(back, frames)
+        corr = np.radians(np.concatenate([r.pelvis_correction.numpy() for r in results] or [np.zeros(0)]))
+        crop = np.array([r.crop for r in results], dtype=np.float64) * back
+        cost = np.array([r.cost for r in results], dtype=np.float64)
+        posture = np.radians(np.array([r.posture_deg for r in results], dtype=np.float64))
+    skipped: dict[str, int] = {}
+    for b, reason in failed.items():
+        why = f"the alignment failed ({reason})"
+        skipped[why] = skipped.get(why, 0) + 1
+        log.warning("%s + %s: %s", plan.clips[keys[b][0]]["name"], plan.clips[keys[b][1]]["name"], why)
+    kept = [b for b in range(len(pairs)) if b not in failed]
+    part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
+                 frames, rot, trans, curve, corr, crop, cost, posture)
+    part.skipped = skipped
+    return part
+
+
+def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleton, frames, rot, trans, curve, corr,
+          crop, cost, posture) -> Part:
+    """A task's output columns, computed at once (``curve`` and ``crop`` at the locomotion's rate)."""
+    method, fps = task.method, group.fps
+    lnames = [plan.clips[k[0]]["name"] for k in keys]
+    anames = [plan.clips[k[1]]["name"] for k in keys]
+    scale = np.array([plan.clips[k[1]]["fps"] / fps for k in keys])  # to the action's own frames
+    starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    corr_deg = np.degrees(corr)
+    mean_corr = np.add.reduceat(corr_deg, starts) / frames if len(corr_deg) else np.zeros(len(keys))
+    loco_frames = np.array([plan.clips[k[0]]["frames"] for k in keys])
+    dist = np.sqrt(np.maximum(cost, 0.0)) / group.leg
+    poor = np.isfinite(cost) & (dist > POOR_ALIGNMENT)
+    flags = []
+    for b, k in enumerate(keys):
+        f = [f"{name} does not locomote ({plan.flags[key]})"
+             for key, name in ((k[0], lnames[b]), (k[1], anames[b])) if key in plan.flags]
+        if poor[b]:
+            f.append(f"poor alignment (mean landmark distance {dist[b]:.2f} leg lengths)")
+        flags.append(FLAG_SEPARATOR.join(f))
+    suffix = "" if method == "splice" else f".{method}"
+    extra = {
+        "locomotion": lnames, "action": anames,
+        "reference": [plan.clips[k[2]]["name"] if k[2] else "" for k in keys], "method": [method] * len(keys),
+        "params": [config.params()] * len(keys), "flags": flags,
+        "locomotion_id": [p.loco for p in pairs], "action_id": [p.action for p in pairs],
+        "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": np.degrees(posture),
+        "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
+    }
+    return Part(
+        task=task.id, skeleton=skeleton, spec=group.spec,
+        names=[f"{lo}+{ac}{suffix}" for lo, ac in zip(lnames, anames)], lengths=frames, fps=np.full(len(keys), fps),
+        rotations=rot, translations=trans,
+        labels=[json.dumps({"method": method, "locomotion": lo, "action": ac}, sort_keys=True) for lo, ac in zip(lnames, anames)],
+        extra=extra, action_frame=(curve * np.repeat(scale, frames)).astype(np.float32),
+    )

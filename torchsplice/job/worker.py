@@ -1,0 +1,23 @@
+"""What a local worker process starts with: the job's modules and the compiled kernels, loaded
+once in the fork server (:class:`~torchsplice.job.executors.LocalEngine`), so that every worker
+forked from it starts splicing at once.
+
+Workers compute with one thread each; their kernels use numba's ``workqueue`` threading layer,
+which survives a fork (GNU OpenMP, numba's usual layer, does not).
+"""
+
+import numba
+
+numba.config.THREADING_LAYER = "workqueue"
+
+from .task import run_task  # noqa: E402,F401  (imports torch, numba's kernels and the splicer)
+
+try:
+    from ..cpu import available
+
+    if available():
+        from ..cpu.warmup import preload
+
+        preload()
+except Exception:  # a worker then loads the kernels itself, on first use
+    pass
