@@ -106,11 +106,11 @@ class InlineEngine:
 _WORKER: dict = {}
 
 
-def _worker_init(config: JobConfig, plan_path: str, shard_dir: str) -> None:
+def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int) -> None:
     """A worker process: one compute thread, Ctrl-C left to the driver, the plan read once; it
-    dies with the fork server, which dies with the driver (a killed job leaves no worker behind)."""
+    exits when the driver is gone (a killed job leaves no worker behind)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _die_with_parent()
+    _exit_with(driver)
     import torch
 
     torch.set_num_threads(1)
@@ -124,27 +124,23 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str) -> None:
                    sink=HDF5Sink(), shard_dir=Path(shard_dir))
 
 
-def _die_with_parent() -> None:
-    """Ask Linux to kill this process when its parent dies; elsewhere, watch the parent."""
-    try:
-        import ctypes
+def _exit_with(driver: int) -> None:
+    """Exit as soon as the driver process is gone (checked twice a second, in a daemon thread).
 
-        libc = ctypes.CDLL(None, use_errno=True)
-        if libc.prctl(1, signal.SIGKILL, 0, 0, 0) == 0:  # PR_SET_PDEATHSIG
-            return
-    except (OSError, AttributeError):
-        pass
+    Workers are children of the fork server, and they hold the pipes that would tell it (and
+    them) that the driver died, so neither would notice a killed driver by itself.
+    """
     import threading
     import time
 
-    parent = os.getppid()
+    from ..io.lock import pid_alive
 
     def watch():
-        while os.getppid() == parent:
-            time.sleep(1.0)
+        while pid_alive(driver):
+            time.sleep(0.5)
         os._exit(1)
 
-    threading.Thread(target=watch, daemon=True).start()
+    threading.Thread(target=watch, name="torchsplice-driver-watch", daemon=True).start()
 
 
 def _worker_task(index: int) -> tuple[str, int]:
@@ -178,7 +174,7 @@ class LocalEngine:
         if hasattr(ctx, "set_forkserver_preload"):
             ctx.set_forkserver_preload(["torchsplice.job.worker"])  # workers fork with torch and the kernels loaded
         self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_worker_init,
-                                        initargs=(self.config, str(self.plan_path), str(self.shard_dir)))
+                                        initargs=(self.config, str(self.plan_path), str(self.shard_dir), os.getpid()))
 
     def alive(self) -> int:
         procs = getattr(self.pool, "_processes", None) or {}

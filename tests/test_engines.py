@@ -1,0 +1,273 @@
+"""The job at scale: engines, shards and merge, locks (:mod:`torchsplice.job`).
+
+Worker processes killed mid-job (retried, or a clean failure, never a hang), ``--shard K/N``
+slices merged into the one-shot output, the virtual layout, locks refusing a second writer and
+taking over a dead one's, and temporary files of dead processes cleaned up.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from torchsplice.cli import main
+from torchsplice.io.database import MotionDatabase
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def frames_and_table(path) -> dict:
+    """Every clip's data and columns, as plain arrays (the run record and layout left out)."""
+    with MotionDatabase.open(path) as db:
+        t = db.table()
+        out = {k: (list(v) if v.dtype == object else v.tobytes()) for k, v in t.items()}  # NaN-safe, bit for bit
+        for k in range(len(db.skeletons)):
+            for name, a in db.packed(k).items():
+                out[f"{k}/{name}"] = a.tobytes()
+    return out
+
+
+@pytest.fixture(scope="module")
+def sample_db(tmp_path_factory):
+    db = tmp_path_factory.mktemp("sample") / "sample.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    return db
+
+
+@pytest.fixture(scope="module")
+def reference(sample_db, tmp_path_factory):
+    """The one-shot run in this process, three methods: what every other way must reproduce."""
+    out = tmp_path_factory.mktemp("ref") / "out.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "--method", "splice,naive,cpmc", "--workers", "1",
+                 "--batch-size", "4", "--copy-sources", "-q"]) == 0
+    return out
+
+
+JOB = ["--method", "splice,naive,cpmc", "--batch-size", "4", "--copy-sources", "-q"]
+
+
+def children(pid: int) -> list[int]:
+    out = []
+    for p in Path("/proc").iterdir():
+        if p.name.isdigit():
+            try:
+                if int((p / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(p.name))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
+
+
+def workers_of(driver: int) -> list[int]:
+    """The local engine's worker processes: children of the driver's fork server."""
+    return [w for server in children(driver) for w in children(server)]
+
+
+def start_job(db, out, *extra):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), *JOB, *extra],
+                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+# --------------------------------------------------------------------------------------------
+# local worker processes
+# --------------------------------------------------------------------------------------------
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
+def test_a_killed_worker_is_replaced_and_the_output_is_unchanged(sample_db, reference, tmp_path):
+    out = tmp_path / "out.h5"
+    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    killed = None
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline and killed is None:
+            if list(tmp_path.glob(".out.h5.parts/part-*.h5")):
+                ws = workers_of(proc.pid)
+                if ws:
+                    os.kill(ws[0], signal.SIGKILL)
+                    killed = ws[0]
+            time.sleep(0.01)
+        stdout, stderr = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert killed is not None, "no worker was found to kill"
+    assert proc.returncode == 0, stderr
+    assert frames_and_table(out) == frames_and_table(reference)
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
+def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path):
+    out = tmp_path / "out.h5"
+    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:
+            for w in workers_of(proc.pid):
+                try:
+                    os.kill(w, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            time.sleep(0.02)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 2, stderr
+    assert stderr.strip().count("\n") == 0 and "worker processes died 3 times" in stderr and "Traceback" not in stderr
+    assert not out.exists() and (tmp_path / ".out.h5.parts" / "plan.json").is_file()  # kept, to resume
+
+
+def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
+    out = tmp_path / "out.h5"
+    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    ws = []
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline and not ws:
+        ws = workers_of(proc.pid)
+        time.sleep(0.01)
+    proc.kill()
+    proc.wait()
+    assert ws, "no worker process was seen"
+    deadline = time.monotonic() + 20
+    while any(Path(f"/proc/{w}").exists() and "Z" not in Path(f"/proc/{w}/stat").read_text().split(")")[-1][:3]
+              for w in ws) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    alive = [w for w in ws if Path(f"/proc/{w}").exists()]
+    for w in alive:
+        os.kill(w, signal.SIGKILL)  # do not leave them to the next test
+    assert not alive, f"workers {alive} outlived their driver"
+
+
+def test_an_unguarded_script_gets_a_clear_error(sample_db, tmp_path):
+    script = tmp_path / "unguarded.py"
+    out = tmp_path / "out.h5"
+    script.write_text("from torchsplice.job import JobConfig, SpliceJob\n"
+                      f"SpliceJob(JobConfig(database={str(sample_db)!r}, output={str(out)!r}, workers=2), progress=False).run()\n")
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode != 0 and 'if __name__ == "__main__":' in done.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# slices and merge
+# --------------------------------------------------------------------------------------------
+def test_slices_then_merge_equal_the_one_shot_run(sample_db, reference, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB[:-1], "--shard", "2/3")
+    assert code == 0, err
+    assert "slice 2/3" in text and "torchsplice merge" in text and not out.exists()
+    code, _, err = run(capsys, "merge", out)
+    assert code == 2 and err.count("\n") == 1
+    assert "slices done: 2/3; missing: 1/3, 3/3" in err, err
+    for k in ("1/3", "3/3"):
+        assert run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--shard", k, "--workers", "2")[0] == 0
+    code, text, err = run(capsys, "merge", out)
+    assert code == 0, err
+    assert frames_and_table(out) == frames_and_table(reference)
+    assert not (tmp_path / ".out.h5.parts").exists()
+    with h5py.File(out, "r") as f:
+        assert json.loads(f.attrs["run"])["plan_sha256"]
+
+
+def test_a_slice_resumes_into_a_full_run(sample_db, reference, tmp_path, capsys):
+    """Slices done by hand count as finished tasks for an ordinary run of the same job."""
+    out = tmp_path / "out.h5"
+    assert run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--shard", "1/2")[0] == 0
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB[:-1])
+    assert code == 0, err
+    assert "from an earlier run" in text
+    assert frames_and_table(out) == frames_and_table(reference)
+
+
+def test_merge_without_a_job(tmp_path, capsys):
+    code, _, err = run(capsys, "merge", tmp_path / "nothing.h5")
+    assert code == 2 and "no unfinished splice-all job" in err
+
+
+# --------------------------------------------------------------------------------------------
+# the virtual layout
+# --------------------------------------------------------------------------------------------
+def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--layout", "virtual")
+    assert code == 0, err
+    shards = tmp_path / "out.h5.shards"
+    assert shards.is_dir() and len(list(shards.glob("part-*.h5"))) > 1
+    with h5py.File(out, "r") as f:
+        assert f["skeletons/0/rotations"].is_virtual and not f["skeletons/0/rotations"][()].size == 0
+    want = frames_and_table(reference)
+    got = frames_and_table(out)
+    spliced = [n for n in want["name"] if "+" in n]
+    assert got["name"][:len(spliced)] == want["name"][:len(spliced)]
+    cwd = os.getcwd()
+    try:  # the shards are found relative to the output, wherever one reads it from
+        os.chdir("/")
+        with MotionDatabase.open(out) as a, MotionDatabase.open(reference) as b:
+            for name in spliced:
+                assert np.array_equal(a.read(name).rotations.numpy(), b.read(name).rotations.numpy())
+                assert np.array_equal(a.read_frame_column(name, "action_frame"), b.read_frame_column(name, "action_frame"))
+    finally:
+        os.chdir(cwd)
+
+
+# --------------------------------------------------------------------------------------------
+# locks and temporary files
+# --------------------------------------------------------------------------------------------
+def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(sample_db, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    lock = tmp_path / ".out.h5.lock"
+    lock.write_text(json.dumps({"host": socket.gethostname(), "pid": os.getpid(), "started": "then"}))
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
+    assert code == 2 and err.count("\n") == 1
+    assert f"being written by process {os.getpid()} on {socket.gethostname()}" in err and str(lock) in err
+    assert not out.exists() and lock.exists()
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    lock.write_text(json.dumps({"host": socket.gethostname(), "pid": dead.pid, "started": "then"}))
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
+    assert code == 0, err
+    assert out.exists() and not lock.exists()
+
+
+def test_a_lock_from_another_host_is_not_broken(sample_db, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    (tmp_path / ".out.h5.lock").write_text(json.dumps({"host": "elsewhere.example", "pid": 1, "started": "then"}))
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
+    assert code == 2 and "on elsewhere.example" in err
+
+
+def test_temporary_files_of_dead_processes_on_this_host_are_removed(sample_db, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    living = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        me = socket.gethostname()
+        stale = tmp_path / f".out.h5.partial-{me}-{dead.pid}"
+        alive = tmp_path / f".out.h5.partial-{me}-{living.pid}"
+        remote = tmp_path / ".out.h5.partial-elsewhere.example-12345"
+        for f in (stale, alive, remote):
+            f.write_bytes(b"half")
+        assert run(capsys, "splice-all", sample_db, "-o", out, "-q")[0] == 0
+        assert not stale.exists() and alive.exists() and remote.exists()
+    finally:
+        living.kill()
+        living.wait()
