@@ -21,11 +21,13 @@ if ! python -c "import torch" >/dev/null 2>&1; then
   _pip install "${TORCHSPLICE_TORCH:-torch==2.13.0}" \
     ${TORCHSPLICE_TORCH_INDEX:+--index-url "$TORCHSPLICE_TORCH_INDEX"}
 fi
+# extras: the tests also install Ray (TORCHSPLICE_EXTRAS=test,ray, set by scripts/test.sh)
+_extras="${TORCHSPLICE_EXTRAS:-test}"
 _stamp="$_root/.venv/.torchsplice-installed"
-_want="$(cat "$_root/pyproject.toml" | cksum)"
+_want="$(cat "$_root/pyproject.toml" | cksum) $_extras"
 if [ ! -f "$_stamp" ] || [ "$(cat "$_stamp")" != "$_want" ]; then
   echo "setup: installing torchsplice and its dependencies" >&2
-  _pip install -e "$_root[test]"
+  _pip install -e "$_root[$_extras]"
   echo "$_want" > "$_stamp"
 fi
 # compile the CPU splicer's kernels once per version of their sources (numba caches them)

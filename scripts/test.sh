@@ -3,5 +3,5 @@
 # Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-. scripts/setup_env.sh
+TORCHSPLICE_EXTRAS="test,ray" . scripts/setup_env.sh
 exec python -m pytest "$@"
