@@ -26,10 +26,13 @@ is shared, so compare ratios measured in one run rather than figures from differ
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import re
+import shlex
 import subprocess
 import sys
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -250,21 +253,46 @@ def bench_splice(files: list[Path], device: str) -> None:
     globals()["_PEER_RATE"] = peer_all
 
 
-def _run_job(db: Path, out: Path, clips: list[str], device: str) -> tuple[float, int, float]:
-    """One ``torchsplice splice-all`` in a fresh process: (wall seconds, splices, peak RSS MB)."""
-    # peak RSS from VmHWM: ru_maxrss would also count the benchmark's own pages (kept across exec)
-    code = ("import sys; from torchsplice.cli import main; c = main(sys.argv[1:]); "
-            "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM:')]; "
-            "print('PEAK', hwm[0].split()[1] if hwm else 0, file=sys.stderr); sys.exit(c)")
+def _tree_rss_mb(root: int) -> float:
+    """Resident memory of a process and all its descendants, MB (from /proc)."""
+    kids: dict[int, list[int]] = {}
+    rss: dict[int, int] = {}
+    for p in Path("/proc").iterdir():
+        if p.name.isdigit():
+            try:
+                stat = (p / "stat").read_text().rsplit(")", 1)[1].split()
+                kids.setdefault(int(stat[1]), []).append(int(p.name))
+                rss[int(p.name)] = int(stat[21]) * os.sysconf("SC_PAGE_SIZE")
+            except (OSError, IndexError, ValueError):
+                pass
+    total, todo = 0, [root]
+    while todo:
+        pid = todo.pop()
+        total += rss.get(pid, 0)
+        todo += kids.get(pid, [])
+    return total / 2**20
+
+
+def _run_job(db: Path, out: Path, clips: list[str], device: str, extra=(), cores=None, prefix=()) -> tuple[float, int, float]:
+    """One ``torchsplice splice-all`` in a fresh process: (wall seconds, splices, peak MB of the
+    process and its workers, sampled every 20 ms). ``cores`` pins it (and its workers) to those
+    cores; ``prefix`` runs it under another command (``unshare --net ...``)."""
     sel = ",".join(clips)
-    cmd = [sys.executable, "-c", code, "splice-all", str(db), "-o", str(out), "--locomotions", sel, "--actions", sel,
-           "--force", "--restart", "-q"] + (["--device", device] if device != "cpu" else [])
+    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions", sel,
+           "--actions", sel, "--force", "--restart", "-q", *extra] + (["--device", device] if device != "cpu" else [])
+    if prefix:
+        cmd = [*prefix, " ".join(map(shlex.quote, cmd))]
     t0 = time.perf_counter()
-    p = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+                         preexec_fn=(lambda: os.sched_setaffinity(0, cores)) if cores else None)
+    peak = 0.0
+    while p.poll() is None:
+        peak = max(peak, _tree_rss_mb(p.pid))
+        time.sleep(0.02)
     dt = time.perf_counter() - t0
+    _, err = p.communicate()
     if p.returncode != 0:
-        raise SystemExit(f"job failed: {p.stderr[-2000:]}")
-    peak = int(re.search(r"PEAK (\d+)", p.stderr).group(1)) / 1024
+        raise SystemExit(f"job failed: {err[-2000:]}")
     import h5py
 
     with h5py.File(out, "r") as f:
@@ -311,11 +339,70 @@ def bench_job(files: list[Path], device: str) -> None:
               f"{100 * ratio:.0f}% of quiet  [>= 40%]")
 
 
+def bench_engines(files: list[Path]) -> None:
+    """Local workers on one core and on every core, and Ray, each on a 20 x 20 and a 60 x 60 job:
+    marginal seconds per extra splice, so that start-up costs cancel out."""
+    from torchsplice.cli import main as cli
+
+    chosen = walks_and_turns(files, 60)
+    names = [f.stem for f in chosen]
+    small = names[:: max(1, len(names) // 20)][:20]
+    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else list(range(os.cpu_count() or 1))
+    n = len(cores)
+    ray_ok = importlib.util.find_spec("ray") is not None and shutil.which("unshare") is not None and os.geteuid() == 0
+    with tempfile.TemporaryDirectory() as tmp:
+        db, out = Path(tmp) / "in.h5", Path(tmp) / "out.h5"
+        cli(["import", *map(str, chosen), "-o", str(db), "-q"])
+
+        def marginal(**kw):
+            runs = {}
+            for label, sel in (("small", small), ("big", names)):
+                runs[label] = min((_run_job(db, out, sel, "cpu", **kw) for _ in range(2)), key=lambda r: r[0])
+            (ts, ns, _), (tb, nb, peak) = runs["small"], runs["big"]
+            return (nb - ns) / max(tb - ts, 1e-9), nb / tb, peak
+
+        one = marginal(extra=["--workers", "1"], cores={cores[0]})
+        print(f"engines local, 1 worker on 1 core: {one[0]:,.0f} splices/s marginal, {one[1]:,.0f} whole process")
+        many = marginal(extra=["--workers", str(n)])
+        print(f"engines local, {n} workers on {n} cores: {many[0]:,.0f} splices/s marginal, {many[1]:,.0f} whole process, "
+              f"peak memory {many[2]:.0f} MB with its workers = {many[0] / one[0]:.2f}x one worker  [>= 1.8x on 2 cores]")
+        if ray_ok:
+            ray = _ray_marginal(db, out, small, names)
+            print(f"engines Ray, a local instance ({n} CPUs, in a private network namespace): {ray[0]:,.0f} splices/s "
+                  f"marginal, {ray[1]:,.0f} whole process (its start included) = {100 * (many[0] / ray[0] - 1):+.0f}% "
+                  "time against the local engine  [overhead < 10%]")
+        else:
+            print("engines Ray: skipped (needs ray, unshare and root for a private network namespace)")
+
+
+def _ray_marginal(db: Path, out: Path, small: list[str], names: list[str]) -> tuple[float, float]:
+    runs = {}
+    for label, sel in (("small", small), ("big", names)):
+        s = ",".join(sel)
+        cmd = (f"ip link set lo up && RAY_USAGE_STATS_ENABLED=0 {shlex.quote(sys.executable)} -m torchsplice splice-all "
+               f"{db} -o {out} --locomotions {shlex.quote(s)} --actions {shlex.quote(s)} --force --restart -q --engine ray")
+        best = None
+        for _ in range(2):
+            t0 = time.perf_counter()
+            p = subprocess.run(["unshare", "--net", "bash", "-c", cmd], capture_output=True, text=True, cwd=REPO)
+            dt = time.perf_counter() - t0
+            if p.returncode != 0:
+                raise SystemExit(f"Ray job failed: {p.stderr[-2000:]}")
+            best = dt if best is None else min(best, dt)
+        import h5py
+
+        with h5py.File(out, "r") as f:
+            runs[label] = (best, f["clips/name"].shape[0])
+    (ts, ns), (tb, nb) = runs["small"], runs["big"]
+    return (nb - ns) / max(tb - ts, 1e-9), nb / tb
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,stages,splice,job", help="comma-separated sections: parse, stages, splice, job")
+    p.add_argument("--only", default="parse,stages,splice,job,engines",
+                   help="comma-separated sections: parse, stages, splice, job, engines")
     p.add_argument("--device", default="cpu", help="cpu (the compiled splicer) or a torch device such as cuda")
     args = p.parse_args()
     sections = set(args.only.split(","))
@@ -337,6 +424,8 @@ def main() -> int:
             bench_splice(files, args.device)
         if "job" in sections:
             bench_job(files, args.device)
+        if "engines" in sections and args.device == "cpu":
+            bench_engines(files)
     return 0
 
 

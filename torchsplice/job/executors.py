@@ -19,7 +19,7 @@ the output merged from them, are the same bits whatever the engine and the worke
 
 An engine calls ``done(task, part)`` for each finished task, in the driver's thread, with the
 task's :class:`~torchsplice.job.task.Part` when it is still in memory (else ``None``: the
-shard is on disk).
+shard is on disk, and the merge reads it from there).
 """
 
 from __future__ import annotations
@@ -317,7 +317,7 @@ class RayEngine:
                         raise TorchspliceError(f"task {task.id} was lost {MAX_ATTEMPTS} times on the Ray cluster "
                                                f"({type(exc).__name__}); finished tasks are kept: rerun to resume") from None
                     self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
-                    done(task, None)
+                    done(task, part)  # the driver may append it from memory, saving a read of the shard
         except BaseException:
             for ref in inflight:
                 ray.cancel(ref, force=True)

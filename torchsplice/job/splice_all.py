@@ -187,7 +187,9 @@ class SpliceJob:
         def done(task, part) -> None:
             state["done"] += 1
             if out is not None:
-                ready[order[task.id]] = part
+                # parts that finish ahead of their turn wait on disk, except a few in memory
+                held = sum(p is not None for p in ready.values())
+                ready[order[task.id]] = part if (order[task.id] == state["next"] or held < 4) else None
                 merge_ready()
             bar.update(task.size)
             bar.set_postfix_str(f"workers {engine.alive()}", refresh=False)
