@@ -146,11 +146,16 @@ def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
     proc.kill()
     proc.wait()
     assert ws, "no worker process was seen"
+    def running(pid: int) -> bool:  # a zombie waiting for its parent to reap it has exited
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+
     deadline = time.monotonic() + 20
-    while any(Path(f"/proc/{w}").exists() and "Z" not in Path(f"/proc/{w}/stat").read_text().split(")")[-1][:3]
-              for w in ws) and time.monotonic() < deadline:
+    while any(running(w) for w in ws) and time.monotonic() < deadline:
         time.sleep(0.1)
-    alive = [w for w in ws if Path(f"/proc/{w}").exists()]
+    alive = [w for w in ws if running(w)]
     for w in alive:
         os.kill(w, signal.SIGKILL)  # do not leave them to the next test
     assert not alive, f"workers {alive} outlived their driver"
