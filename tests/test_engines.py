@@ -131,7 +131,7 @@ def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path)
             proc.kill()
             proc.wait()
     assert proc.returncode == 2, stderr
-    assert stderr.strip().count("\n") == 0 and "worker processes died 3 times" in stderr and "Traceback" not in stderr
+    assert stderr.strip().count("\n") == 0 and "worker processes died 3 times in a row" in stderr and "Traceback" not in stderr
     assert not out.exists() and (tmp_path / ".out.h5.parts" / "plan.json").is_file()  # kept, to resume
 
 
@@ -212,6 +212,9 @@ def test_merge_without_a_job(tmp_path, capsys):
 def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, capsys):
     out = tmp_path / "out.h5"
     code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--layout", "virtual")
+    assert code == 2 and "--copy-sources needs --layout copy" in err  # a virtual output holds spliced clips only
+    job = [a for a in JOB if a != "--copy-sources"]
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *job, "--layout", "virtual")
     assert code == 0, err
     shards = tmp_path / "out.h5.shards"
     assert shards.is_dir() and len(list(shards.glob("part-*.h5"))) > 1
@@ -230,6 +233,13 @@ def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, caps
                 assert np.array_equal(a.read_frame_column(name, "action_frame"), b.read_frame_column(name, "action_frame"))
     finally:
         os.chdir(cwd)
+    # another job over the same output replaces the shards; none of the old ones is reused
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--method", "naive", "--layout", "virtual", "--force", "-q")
+    assert code == 0, err
+    with MotionDatabase.open(out) as db:
+        assert set(db.table()["method"]) == {"naive"} and len(db) == 25
+        assert np.isfinite(db.read(len(db) - 1).rotations.numpy()).all()
+    assert not list(tmp_path.glob(".out.h5.shards.*"))
 
 
 # --------------------------------------------------------------------------------------------
@@ -238,11 +248,16 @@ def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, caps
 def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(sample_db, tmp_path, capsys):
     out = tmp_path / "out.h5"
     lock = tmp_path / ".out.h5.lock"
-    lock.write_text(json.dumps({"host": socket.gethostname(), "pid": os.getpid(), "started": "then"}))
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
-    assert code == 2 and err.count("\n") == 1
-    assert f"being written by process {os.getpid()} on {socket.gethostname()}" in err and str(lock) in err
-    assert not out.exists() and lock.exists()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock.write_text(json.dumps({"host": socket.gethostname(), "pid": holder.pid, "started": "then"}))
+        code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
+        assert code == 2 and err.count("\n") == 1
+        assert f"being written by process {holder.pid} on {socket.gethostname()}" in err and str(lock) in err
+        assert not out.exists() and lock.exists()
+    finally:
+        holder.kill()
+        holder.wait()
 
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()

@@ -371,7 +371,7 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
 
     done = subprocess.run(cmd, cwd=REPO, env=env(), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
-    m = re.search(r"25 spliced clips \((\d+) from an earlier run\)", done.stdout)
+    m = re.search(r"25 spliced clips \((\d+) pairs from an earlier run\)", done.stdout)
     assert m, done.stdout
     assert kept_pairs <= int(m.group(1)) < 25
     assert not work.exists()
@@ -413,7 +413,7 @@ def test_interrupt_then_resume_in_process(sample_db, batch2_out, tmp_path, monke
     summary = SpliceJob(config, progress=False).run()
     assert summary.resumed == 4 and summary.spliced == 25 and summary.pairs == 25
     assert len(calls) == 11 and sum(calls) == 21  # only the unfinished tasks are spliced
-    assert "(4 from an earlier run)" in summary.lines()[0]
+    assert "(4 pairs from an earlier run)" in summary.lines()[0]
     assert not work.exists()
     assert_same_file(out, batch2_out)
 

@@ -543,6 +543,7 @@ class MotionDatabase:
         for n, kind in self.columns.items():
             rows[n] = each(extra[n], f"column {n!r}") if n in extra else [_KINDS[kind][1]] * C
         k = self.add_skeleton(skeleton, spec)
+        self._no_virtual(k)
         g = self.h5[f"skeletons/{k}"]
         arrays = {"rotations": rot, "root_translation": root, **frames}
         if "translations" in g:
@@ -584,14 +585,15 @@ class MotionDatabase:
         self._flushed += C
 
     def append_virtual(self, source: Path, skeleton: Skeleton, lengths, names, fps, spec=None, sources="", roles="",
-                       labels=None, extra: dict | None = None) -> None:
+                       labels=None, extra: dict | None = None, refer_as: Path | None = None) -> None:
         """Add the clips of skeleton 0 of the database file ``source`` without copying their frames.
 
         The clips' rows go into this file's table; their frames stay in ``source``. When this
         file is closed, each frame dataset of the skeleton becomes an HDF5 *virtual dataset*
         over the sources, in call order, which plain h5py reads like any dataset. The sources
         are referred to by their path relative to this file's folder, so the two must stay
-        side by side. Arguments as :meth:`append_packed` (without the frames). A skeleton
+        side by side; ``refer_as`` names where the source will be when this file is read, if it
+        is elsewhere now. Arguments as :meth:`append_packed` (without the frames). A skeleton
         holds either virtual or real frames, not both.
         """
         self._writable()
@@ -606,7 +608,7 @@ class MotionDatabase:
             raise DatabaseError(f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones")
         parts = self._virtual.setdefault(k, [])
         n0 = sum(n for _, n in parts)
-        rel = os.path.relpath(Path(source).resolve(), self._tmp.resolve().parent)
+        rel = os.path.relpath(Path(refer_as or source).resolve(), self._tmp.resolve().parent)
         self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
         parts.append((rel, N))
 
@@ -688,10 +690,15 @@ class MotionDatabase:
         self._flushed += len(self._staged)
         self._staged, self._staged_frames = [], 0
 
+    def _no_virtual(self, k: int) -> None:
+        if k in self._virtual:
+            raise DatabaseError(f"{self.path}: skeleton {k} holds virtual frames; real frames cannot be added to it")
+
     def _write_staged(self) -> None:
         h5 = self.h5
         starts = {}
         for k in sorted({k for _, k, *_ in self._staged}):
+            self._no_virtual(k)
             g = h5[f"skeletons/{k}"]
             staged = [(m, fx) for m, kk, _, fx in self._staged if kk == k]
             n0 = g["rotations"].shape[0]

@@ -1,13 +1,16 @@
 """Exclusive locks on outputs: one writer at a time, stale locks taken over.
 
-A lock is a small JSON file (``host``, ``pid``, ``started``, ``command``) created with
-``O_EXCL`` beside what it guards. A second writer is refused at once with one line naming the
-holder. A lock whose process is gone (same host, PID not alive) is stale and taken over; a
-lock held from another host is never broken (its process cannot be checked from here).
+A lock is a small file beside what it guards, holding JSON (``host``, ``pid``, ``started``,
+``command``) and held with ``flock`` for as long as the process lives: the kernel lets go of
+it when the process dies, however it dies, so two processes can never both hold it on one
+host. A second writer is refused at once with one line naming the holder. A lock file whose
+process is gone is taken over. A lock file written from another host is never broken (its
+process cannot be checked from here), even where ``flock`` does not reach across hosts.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import socket
@@ -44,49 +47,69 @@ class FileLock:
 
     def __init__(self, path: Path, what: str, command: str = ""):
         self.path, self.what, self.command = Path(path), what, command
-        self.held = False
+        self.fd: int | None = None
 
-    def acquire(self) -> "FileLock":
-        me = {"host": socket.gethostname(), "pid": os.getpid(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-              "command": self.command}
-        for _ in range(3):
-            try:
-                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                holder = self._holder()
-                if holder is not None and self._stale(holder):
-                    self.path.unlink(missing_ok=True)  # its process is gone: take it over
-                    continue
-                if holder is None:  # being written this instant, or unreadable: look again
-                    time.sleep(0.05)
-                    continue
-                raise LockedError(f"{self.what} is being written by process {holder.get('pid')} on "
-                                  f"{holder.get('host')} since {holder.get('started')} (lock {self.path}); "
-                                  "wait for it to finish, or stop it") from None
-            except OSError as exc:
-                raise TorchspliceError(f"{self.path}: cannot take the lock: {exc.strerror or exc}") from None
-            with os.fdopen(fd, "w") as f:
-                json.dump(me, f)
-            self.held = True
-            return self
-        raise LockedError(f"{self.what}: the lock {self.path} is unreadable; remove it if no job is running")
+    @property
+    def held(self) -> bool:
+        return self.fd is not None
 
-    def _holder(self) -> dict | None:
+    def holder(self) -> dict | None:
+        """What the lock file says of its holder (``None``: no readable lock)."""
         try:
             return json.loads(self.path.read_text() or "null")
         except (OSError, ValueError):
             return None
 
     @staticmethod
-    def _stale(holder: dict) -> bool:
+    def stale(holder: dict) -> bool:
+        """Whether ``holder`` is a dead process of this host."""
         return holder.get("host") == socket.gethostname() and not pid_alive(int(holder.get("pid", -1)))
 
+    def _refuse(self, holder: dict | None) -> None:
+        h = holder or {}
+        raise LockedError(f"{self.what} is being written by process {h.get('pid', '?')} on {h.get('host', '?')} "
+                          f"since {h.get('started', '?')} (lock {self.path}); wait for it to finish, or stop it")
+
+    def acquire(self) -> "FileLock":
+        for _ in range(20):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
+            except OSError as exc:
+                raise TorchspliceError(f"{self.path}: cannot take the lock: {exc.strerror or exc}") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(fd)
+                self._refuse(self.holder())
+            try:
+                if os.fstat(fd).st_ino != os.stat(self.path).st_ino:  # removed and made anew meanwhile: again
+                    os.close(fd)
+                    continue
+            except FileNotFoundError:
+                os.close(fd)
+                continue
+            holder = self.holder()
+            if holder and holder.get("host") != socket.gethostname():
+                os.close(fd)
+                self._refuse(holder)  # flock may not reach across hosts: trust the other host's word
+            if holder and not self.stale(holder) and holder.get("pid") != os.getpid():
+                os.close(fd)
+                self._refuse(holder)  # a live holder that took no flock (an older torchsplice)
+            me = {"host": socket.gethostname(), "pid": os.getpid(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                  "command": self.command}
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(me).encode(), 0)
+            self.fd = fd
+            return self
+        raise LockedError(f"{self.what}: the lock {self.path} keeps changing; is another job starting?")
+
     def release(self) -> None:
-        if self.held:
-            holder = self._holder()
-            if holder is not None and holder.get("pid") == os.getpid() and holder.get("host") == socket.gethostname():
-                self.path.unlink(missing_ok=True)
-            self.held = False
+        if self.fd is not None:
+            try:
+                self.path.unlink(missing_ok=True)  # while still held: a waiter then finds a new file
+            finally:
+                os.close(self.fd)
+                self.fd = None
 
     def __enter__(self) -> "FileLock":
         return self.acquire()

@@ -88,6 +88,8 @@ class JobConfig:
             raise TorchspliceError(f"unknown engine {c.engine!r}; choose {' or '.join(ENGINES)}")
         if c.layout not in LAYOUTS:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
+        if c.layout == "virtual" and c.copy_sources:
+            raise TorchspliceError("--copy-sources needs --layout copy: a virtual output holds only the spliced clips")
         if c.workers is not None and c.workers < 1:
             raise TorchspliceError(f"--workers must be at least 1, got {c.workers}")
         c = replace(c, database=Path(c.database), output=Path(c.output),

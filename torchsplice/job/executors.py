@@ -8,8 +8,8 @@ the output merged from them, are the same bits whatever the engine and the worke
   writes each task's shard while the next one computes.
 - :class:`LocalEngine`: worker processes on this machine (``--workers N``, default one per
   core), each computing with one thread and writing its own shards. When a worker dies
-  (killed, out of memory) the pool is restarted and the unfinished tasks run again, up to
-  :data:`MAX_ATTEMPTS` times in all.
+  (killed, out of memory) the pool is restarted and the unfinished tasks run again; the job
+  gives up after :data:`MAX_ATTEMPTS` breaks in a row without a task finishing.
 - :class:`RayEngine`: Ray tasks on a cluster (``--ray-address``), or on a Ray instance started
   here. The driver puts each locomotion group's source clips in Ray's object store once; tasks
   return their results to the driver, which writes the shards. So a cluster needs no shared
@@ -17,7 +17,8 @@ the output merged from them, are the same bits whatever the engine and the worke
   node dies; the driver keeps at most two tasks in flight per CPU of the cluster, which bounds
   its memory and the object store's.
 
-An engine calls ``done(task, part)`` for each finished task, in the driver's thread, with the
+An engine calls ``done(task, part)`` for each finished task, one call at a time, in order of
+completion (the inline engine from its writer thread, the others from the driver's), with the
 task's :class:`~torchsplice.job.task.Part` when it is still in memory (else ``None``: the
 shard is on disk, and the merge reads it from there).
 """
@@ -28,6 +29,7 @@ import multiprocessing as mp
 import os
 import signal
 import sys
+import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -60,8 +62,10 @@ class InlineEngine:
     def describe(self) -> str:
         from ..cpu import get_threads
 
-        device = self.config.device or "cpu"
-        return f"in this process on {device}" + (f", {get_threads()} threads" if self.config.backend() == "compiled" else "")
+        if self.config.backend() == "compiled":
+            n = get_threads()
+            return f"this process ({n} compute thread{'s' if n != 1 else ''})"
+        return f"this process (torch on {self.config.device or 'cpu'})"
 
     def alive(self) -> int:
         return 1
@@ -183,10 +187,11 @@ class LocalEngine:
     def run(self, tasks: list[Task], done) -> None:
         index = {t.id: n for n, t in enumerate(self.plan.tasks)}
         todo = {t.id: t for t in tasks}
-        rounds = 0
+        rounds = 0  # pool breaks in a row without a task finished
         while todo:
             self._start()
             futures = {self.pool.submit(_worker_task, index[tid]): tid for tid in todo}
+            before = len(todo)
             rounds += 1
             broken = False
             try:
@@ -208,14 +213,16 @@ class LocalEngine:
                 raise
             if broken:
                 self.close(kill=True)
+                if len(todo) < before:
+                    rounds = 0  # it made progress: only breaks in a row count
                 if rounds == 1 and len(todo) == len(tasks) and _main_reimports():
                     raise TorchspliceError(
                         "local worker processes could not start: a script that runs the job through the Python API "
                         "must guard its entry point with `if __name__ == \"__main__\":` (workers re-import it), or "
                         "use workers=1")
                 if rounds >= MAX_ATTEMPTS:
-                    raise TorchspliceError(f"worker processes died {rounds} times ({len(todo)} tasks unfinished; out of "
-                                           "memory, or killed); finished tasks are kept: rerun to resume")
+                    raise TorchspliceError(f"worker processes died {rounds} times in a row ({len(todo)} tasks unfinished; "
+                                           "out of memory, or killed); finished tasks are kept: rerun to resume")
             else:
                 self.close()
 
@@ -234,12 +241,12 @@ class LocalEngine:
 _RAY_CACHE: dict = {}
 
 
-def _ray_run(config: JobConfig, plan_json: str, index: int, group_motions: dict):
-    """A Ray task: the plan and each group's sources are kept per worker process."""
-    from .plan import Plan as _Plan
+def _ray_run(config: JobConfig, digest: str, plan_box: list, index: int, group_box: list):
+    """A Ray task. The plan and each group's clips come boxed in a list, so that Ray passes their
+    references untouched: a worker process fetches each only once and keeps it."""
+    import ray
 
-    key = hash(plan_json)
-    if _RAY_CACHE.get("key") != key:
+    if _RAY_CACHE.get("plan") != digest:
         import torch
 
         torch.set_num_threads(1)
@@ -248,10 +255,13 @@ def _ray_run(config: JobConfig, plan_json: str, index: int, group_motions: dict)
 
             set_threads(1)
         _RAY_CACHE.clear()
-        _RAY_CACHE.update(key=key, plan=_Plan.from_json(plan_json), sources=Sources.from_motions({}))
-    plan, sources = _RAY_CACHE["plan"], _RAY_CACHE["sources"]
-    for k, m in group_motions.items():
-        sources.motions.setdefault(k, m)
+        _RAY_CACHE.update(plan=digest, obj=Plan.from_json(ray.get(plan_box[0])), sources=Sources.from_motions({}), groups=set())
+    plan, sources = _RAY_CACHE["obj"], _RAY_CACHE["sources"]
+    ref = group_box[0]
+    if ref.hex() not in _RAY_CACHE["groups"]:
+        for k, m in ray.get(ref).items():
+            sources.motions.setdefault(k, m)
+        _RAY_CACHE["groups"].add(ref.hex())
     return run_task(plan, plan.tasks[index], sources, config)
 
 
@@ -288,34 +298,45 @@ class RayEngine:
         remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS)(_ray_run)
         plan_ref = ray.put(self.plan.to_json())
         config_ref = ray.put(self.config)
+        digest = self.plan.digest()
         group_refs: dict[int, object] = {}
         index = {t.id: n for n, t in enumerate(self.plan.tasks)}
         queue = list(tasks)
         inflight: dict = {}
-        limit = max(2, 2 * self.alive())
         comp = _shard_compression(self.config)
+        waited = 0.0
         try:
             while queue or inflight:
-                while queue and len(inflight) < limit:
+                limit = 2 * self.alive()  # two tasks in flight per CPU, as CPUs come and go
+                if limit == 0 and not inflight:
+                    if waited > 120:
+                        raise TorchspliceError("the Ray cluster has had no CPU for two minutes: add a node with CPUs")
+                    time.sleep(1.0)
+                    waited += 1.0
+                    continue
+                waited = 0.0
+                while queue and len(inflight) < max(limit, 1):
                     task = queue.pop(0)
                     if task.group not in group_refs:
                         keys = self.plan.groups[task.group].clips
                         group_refs[task.group] = ray.put(self.sources.group_motions(keys))
-                    inflight[remote.remote(config_ref, plan_ref, index[task.id], group_refs[task.group])] = task
-                ready, _ = ray.wait(list(inflight), num_returns=1)
+                    inflight[remote.remote(config_ref, digest, [plan_ref], index[task.id], [group_refs[task.group]])] = task
+                ready, _ = ray.wait(list(inflight), num_returns=1, timeout=10.0)
                 for ref in ready:
                     task = inflight.pop(ref)
                     try:
                         part = ray.get(ref)
                     except ray.exceptions.RayTaskError as exc:
-                        cause = exc.as_instanceof_cause()
-                        if isinstance(cause, TorchspliceError):
-                            raise TorchspliceError(str(cause)) from None
-                        raise TorchspliceError(f"task {task.id} failed on the Ray cluster: {exc}") from None
+                        cause = getattr(exc, "cause", None)
+                        why = str(cause) if cause is not None else str(exc).strip().splitlines()[-1]
+                        raise TorchspliceError(f"task {task.id} failed on the Ray cluster: {why}") from None
                     except (ray.exceptions.WorkerCrashedError, ray.exceptions.NodeDiedError,
                             ray.exceptions.ObjectLostError) as exc:
                         raise TorchspliceError(f"task {task.id} was lost {MAX_ATTEMPTS} times on the Ray cluster "
                                                f"({type(exc).__name__}); finished tasks are kept: rerun to resume") from None
+                    except ray.exceptions.RayError as exc:
+                        raise TorchspliceError(f"task {task.id} failed on the Ray cluster ({type(exc).__name__}); "
+                                               "finished tasks are kept: rerun to resume") from None
                     self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
                     done(task, part)  # the driver may append it from memory, saving a read of the shard
         except BaseException:

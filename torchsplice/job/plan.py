@@ -2,7 +2,7 @@
 
 :func:`make_plan` turns a :class:`~torchsplice.job.config.JobConfig` and its databases into a
 :class:`Plan`, deterministically: the same inputs and settings give the same plan, on any
-machine. It selects the clips, checks once per clip that it locomotes, finds ``cpmc``
+machine with the inputs at the same paths. It selects the clips, checks once per clip that it locomotes, finds ``cpmc``
 references, lists the pairs (method by method, each locomotion against each action) with a
 reason for every skipped one, and cuts the pairs into tasks: consecutive blocks of one method
 and one locomotion group (skeleton and frame rate), each with a stable id. The plan is saved
@@ -20,6 +20,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..core.errors import TorchspliceError
+from ..io.lock import host_pid
 from ..io.spec import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import SpliceOptions
 from ..splice.clips import ClipTensors, clips_to_tensors
@@ -98,8 +99,10 @@ class Plan:
         return self.key["actions_db"] is None
 
     def digest(self) -> str:
-        """A hash of the whole plan: two runs with the same digest write the same output."""
-        return hashlib.sha256(self.to_json().encode()).hexdigest()
+        """A hash of the whole plan: two runs with the same digest write the same output (computed once)."""
+        if getattr(self, "_digest", None) is None:
+            self._digest = hashlib.sha256(self.to_json().encode()).hexdigest()
+        return self._digest
 
     def to_json(self) -> str:
         return json.dumps({"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
@@ -120,7 +123,7 @@ class Plan:
     def save(self, path: Path) -> None:
         """Write the plan atomically (a plan written at the same moment by another process of the
         same job holds the same text)."""
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
         tmp.write_text(self.to_json())
         os.replace(tmp, path)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ..core.errors import DatabaseError
 from ..io.database import MotionDatabase
 from ..io.spec import DatasetSpec
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
@@ -47,6 +48,14 @@ class OutputWriter:
         self.clips = self.flagged_clips = self.copied = 0
         self.flagged: dict[str, int] = {}
         self.skipped: dict[str, int] = {}
+        self.expect_plan: str | None = None  # the plan digest every shard must carry
+
+    def set_spliced(self, n: int) -> None:
+        """Record the clips actually spliced in the run record (pairs can fail to align)."""
+        run = json.loads(str(self.db.h5.attrs.get("run", "")) or "{}")
+        if run:
+            run["pairs_spliced"] = int(n)
+            self.db.h5.attrs["run"] = json.dumps(run)
 
     def _count(self, flags, skipped: dict) -> None:
         for f in flags:
@@ -57,9 +66,10 @@ class OutputWriter:
         for why, n in skipped.items():
             self.skipped[why] = self.skipped.get(why, 0) + int(n)
 
-    def append_shard(self, path: Path, part: Part | None = None, virtual: bool = False) -> None:
+    def append_shard(self, path: Path, part: Part | None = None, virtual: bool = False, refer_as: Path | None = None) -> None:
         """Append a shard's clips: from ``part`` when it is still in memory, else from the file;
-        with ``virtual``, only the shard's table (its frames stay in the shard)."""
+        with ``virtual``, only the shard's table (its frames stay in the shard, which the output
+        refers to as ``refer_as``, where it will be once the output is complete)."""
         if part is not None and not virtual:
             self._count(part.extra["flags"], part.skipped)
             if part.names:
@@ -70,6 +80,9 @@ class OutputWriter:
                 self.clips += len(part.names)
             return
         with MotionDatabase.open(path) as shard:
+            made_for = str(shard.attrs.get("plan", ""))
+            if self.expect_plan is not None and made_for != self.expect_plan:
+                raise DatabaseError(f"{path}: this shard belongs to another plan of the job; rerun with --restart")
             skipped = json.loads(str(shard.attrs.get("skipped", "")) or "{}")
             if len(shard) == 0:
                 self._count([], skipped)
@@ -79,7 +92,7 @@ class OutputWriter:
             self._count(t["flags"], skipped)
             extra = {col: t[col] for col in OUTPUT_COLUMNS}
             if virtual:
-                self.db.append_virtual(path, shard.skeletons[0], t["length"], t["name"], t["fps"], spec=spec,
+                self.db.append_virtual(path, shard.skeletons[0], t["length"], t["name"], t["fps"], spec=spec, refer_as=refer_as,
                                        sources=t["source"], roles=t["role"], labels=t["labels"], extra=extra)
             else:
                 f = shard.packed(0)
@@ -116,7 +129,8 @@ class HDF5Sink(Sink):
     def write_shard(self, part: Part, path: Path, compression) -> None:
         with MotionDatabase.create(path, overwrite=True, columns=OUTPUT_COLUMNS, frame_columns=FRAME_COLUMNS,
                                    compression=compression, chunk_frames=256 if compression else 1024,
-                                   attrs={"skipped": json.dumps(part.skipped, sort_keys=True), "task": part.task}) as db:
+                                   attrs={"skipped": json.dumps(part.skipped, sort_keys=True), "task": part.task,
+                                          "plan": part.plan}) as db:
             if part.names:
                 db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations, part.lengths,
                                  part.names, part.fps, spec=DatasetSpec.from_json(part.spec), sources=part.sources,

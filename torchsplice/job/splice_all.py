@@ -32,6 +32,7 @@ parameters, alignment cost and quality figures) and a per-frame ``action_frame``
 from __future__ import annotations
 
 import logging
+import os
 import re
 import shutil
 import socket
@@ -76,21 +77,23 @@ class JobSummary:
     shard: tuple[int, int] | None = None
     tasks: int = 0
     tasks_done: int = 0
+    merge: bool = False
 
     def lines(self) -> list[str]:
         """The closing summary, as printed by the command line."""
         rate = (self.spliced - self.resumed) / self.compute_seconds if self.compute_seconds > 0 else float("nan")
-        where = f" on {self.engine}" if self.engine else ""
+        where = f" with {self.engine}" if self.engine else ""
         if self.shard is not None:
             k, n = self.shard
             out = [f"slice {k}/{n}: {self.tasks_done} of {self.tasks} tasks done"
                    + (f" ({self.resumed} pairs from an earlier run)" if self.resumed else "")
                    + f" in {self.seconds:.1f} s{where}; when every slice is done: torchsplice merge {self.output}"]
         else:
+            done = f" merged from the shards in {self.seconds:.1f} s" if self.merge else \
+                f" in {self.seconds:.1f} s ({rate:,.0f} splices/s){where}"
             out = [f"wrote {self.output}: {self.spliced} spliced clips"
-                   + (f" ({self.resumed} from an earlier run)" if self.resumed else "")
-                   + (f" + {self.copied} source clips" if self.copied else "")
-                   + f" in {self.seconds:.1f} s ({rate:,.0f} splices/s){where}"]
+                   + (f" ({self.resumed} pairs from an earlier run)" if self.resumed else "")
+                   + (f" + {self.copied} source clips" if self.copied else "") + done]
         if self.skipped:
             out.append(f"skipped {sum(self.skipped.values())} pairs:")
             out += [f"  {n} x {why}" for why, n in sorted(self.skipped.items(), key=lambda kv: -kv[1])]
@@ -122,23 +125,27 @@ class SpliceJob:
         if self.shard is None and c.output.exists() and not self.overwrite:
             raise TorchspliceError(f"{c.output}: already exists (use --force to overwrite)")
         _prestart_workers(c)
+        if self.shard is not None and self.restart:
+            raise TorchspliceError("--restart discards the whole job, every slice's work too: run it once without --shard")
         if self.shard is None:
             lock = FileLock(_output_lock(c.output), str(c.output), self.command)
         else:
             self.work.mkdir(exist_ok=True)
             lock = FileLock(self.work / f"lock-{self.shard[0]}-of-{self.shard[1]}", f"slice {self.shard[0]}/{self.shard[1]} of {c.output}", self.command)
         with lock, _compute_threads(c):
+            if self.shard is None:
+                _refuse_live_slices(self.work)
             if self.restart and self.work.exists():
                 _clear_work(self.work, keep=lock.path)
-            for folder in (self.work, c.output.parent, c.shards_folder):
+            for folder in (self.work, c.output.parent):
                 _remove_stale_files(folder)
             sources = Sources(c.database, c.actions_db)
             try:
                 summary = self._run(sources, t0)
             finally:
                 sources.close()
-        if self.shard is None:
-            shutil.rmtree(self.work, ignore_errors=True)
+            if self.shard is None:
+                shutil.rmtree(self.work, ignore_errors=True)
         summary.seconds = time.perf_counter() - t0
         return summary
 
@@ -155,8 +162,7 @@ class SpliceJob:
                     "arguments to finish it, or pass --restart to discard it")
         else:
             plan.save(plan_path)
-        shard_dir = c.shards_folder if c.layout == "virtual" else self.work
-        shard_dir.mkdir(exist_ok=True)
+        shard_dir = self.work
         tasks = plan.tasks if self.shard is None else _slice(plan.tasks, *self.shard)
         have = {t.id for t in tasks if (shard_dir / self.sink.shard_name(t.id)).exists()}
         pending = [t for t in tasks if t.id not in have]
@@ -173,6 +179,7 @@ class SpliceJob:
                    "command": self.command, "started": self._started, "engine": summary.engine,
                    "pairs_spliced": len(plan.pairs)}
             out = self.sink.open_output(c.output, c.compression, run, self.overwrite)
+            out.expect_plan = plan.digest()
         order = {t.id: n for n, t in enumerate(tasks)}
         ready: dict[int, object] = {order[tid]: None for tid in have}
         state = {"next": 0, "done": len(have)}
@@ -181,7 +188,8 @@ class SpliceJob:
             while state["next"] in ready:
                 n = state["next"]
                 part = ready.pop(n)
-                out.append_shard(shard_dir / self.sink.shard_name(tasks[n].id), part, virtual=c.layout == "virtual")
+                name = self.sink.shard_name(tasks[n].id)
+                out.append_shard(shard_dir / name, part, virtual=c.layout == "virtual", refer_as=c.shards_folder / name)
                 state["next"] += 1
 
         def done(task, part) -> None:
@@ -203,8 +211,13 @@ class SpliceJob:
             summary.tasks_done = state["done"]
             if out is not None:
                 merge_ready()
+                if state["next"] != len(tasks):
+                    raise TorchspliceError(f"{c.output}: task {tasks[state['next']].id} has no shard; rerun to finish the job")
                 if c.copy_sources:
                     self._copy_sources(out, plan, sources)
+                out.set_spliced(out.clips)
+                if c.layout == "virtual":
+                    _install_shards(shard_dir, c.shards_folder, [self.sink.shard_name(t.id) for t in tasks])
                 out.close()
                 summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = (
                     out.clips, out.flagged, out.flagged_clips, out.copied)
@@ -244,9 +257,16 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
     config = JobConfig(database=Path(key["database"]["path"]), output=output,
                        actions_db=Path(key["actions_db"]["path"]) if key["actions_db"] else None,
                        copy_sources=key["copy_sources"], compression=key["compression"], layout=key["layout"]).checked()
+    if config.copy_sources and Path(key["database"]["path"]).exists():
+        from .plan import plan_key as _key
+
+        now = _key(config)
+        if now["database"] != key["database"] or now["actions_db"] != key["actions_db"]:
+            raise TorchspliceError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
+                                   "source clips (run splice-all again with --restart)")
     t0 = time.perf_counter()
     sink = HDF5Sink()
-    shard_dir = config.shards_folder if config.layout == "virtual" else work
+    shard_dir = work
     missing = [t for t in plan.tasks if not (shard_dir / sink.shard_name(t.id)).exists()]
     if missing:
         done = sorted((int(m.group(1)), int(m.group(2))) for f in work.glob("slice-*-of-*.done")
@@ -259,19 +279,25 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         raise TorchspliceError(f"{output}: {len(missing)} of {len(plan.tasks)} tasks have no shard yet (first: task "
                                f"{missing[0].id}){hint}")
     with FileLock(_output_lock(output), str(output), command or ""):
-        summary = JobSummary(output=output, pairs=len(plan.pairs), skipped=dict(plan.skipped), engine="the shards")
+        _refuse_live_slices(work)
+        summary = JobSummary(output=output, pairs=len(plan.pairs), skipped=dict(plan.skipped), engine="merge", merge=True)
         run = {**key, "pairs": len(plan.pairs), "batch_pairs": key["task_pairs"], "plan_sha256": plan.digest(),
                "command": command or "torchsplice.job.merge_job (Python API)",
                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "engine": "merge", "pairs_spliced": len(plan.pairs)}
         out = sink.open_output(output, config.compression, run, overwrite)
+        out.expect_plan = plan.digest()
         bar = _progress(len(plan.pairs), 0, progress)
         sources = Sources(config.database, config.actions_db)
         try:
             for t in plan.tasks:
-                out.append_shard(shard_dir / sink.shard_name(t.id), virtual=config.layout == "virtual")
+                name = sink.shard_name(t.id)
+                out.append_shard(shard_dir / name, virtual=config.layout == "virtual", refer_as=config.shards_folder / name)
                 bar.update(t.size)
             if config.copy_sources:
                 SpliceJob._copy_sources(out, plan, sources)
+            out.set_spliced(out.clips)
+            if config.layout == "virtual":
+                _install_shards(shard_dir, config.shards_folder, [sink.shard_name(t.id) for t in plan.tasks])
             out.close()
         except BaseException:
             out.abort()
@@ -279,10 +305,10 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         finally:
             bar.close()
             sources.close()
+        shutil.rmtree(work, ignore_errors=True)
     summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = out.clips, out.flagged, out.flagged_clips, out.copied
     for why, n in out.skipped.items():
         summary.skipped[why] = summary.skipped.get(why, 0) + n
-    shutil.rmtree(work, ignore_errors=True)
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0
     return summary
 
@@ -291,6 +317,30 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
 def _slice(tasks: list, k: int, n: int) -> list:
     """The K-th of N contiguous slices of the tasks (1-based)."""
     return tasks[(k - 1) * len(tasks) // n: k * len(tasks) // n]
+
+
+def _refuse_live_slices(work: Path) -> None:
+    """A whole run or a merge must not touch the work folder while a slice writes into it."""
+    if not work.is_dir():
+        return
+    for lock in sorted(work.glob("lock-*-of-*")):
+        holder = FileLock(lock, "").holder()
+        if holder is not None and not FileLock.stale(holder):
+            raise TorchspliceError(f"{work}: slice {lock.name[5:].replace('-of-', '/')} is still running (process "
+                                   f"{holder.get('pid')} on {holder.get('host')}); wait for it to finish")
+
+
+def _install_shards(work: Path, folder: Path, names: list[str]) -> None:
+    """Move a virtual output's shards into ``folder`` (an older folder is set aside, then removed)."""
+    fresh = folder.with_name(f".{folder.name}.new-{socket.gethostname()}-{os.getpid()}")
+    fresh.mkdir()
+    for name in names:
+        os.replace(work / name, fresh / name)
+    old = folder.with_name(f".{folder.name}.old-{socket.gethostname()}-{os.getpid()}")
+    if folder.exists():
+        os.replace(folder, old)
+    os.replace(fresh, folder)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def _output_lock(output: Path) -> Path:

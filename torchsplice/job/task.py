@@ -62,6 +62,7 @@ class Part:
     extra: dict
     action_frame: np.ndarray
     skipped: dict = field(default_factory=dict)
+    plan: str = ""  # the digest of the plan it was made for
 
     @property
     def sources(self) -> list[str]:
@@ -70,6 +71,12 @@ class Part:
 
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
     """Splice the pairs of ``task`` (see the module docstring)."""
+    from .. import __version__
+
+    if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != config.backend():
+        raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {config.backend()} splicer, but the job "
+                               f"was planned by {plan.key['tool']} with the {plan.key['backend']} splicer: install the same "
+                               "version (and numba) everywhere")
     group = plan.groups[task.group]
     pairs = plan.pairs[task.start:task.stop]
     keys = [plan.pair_keys(p, plan.same_db) for p in pairs]
@@ -125,6 +132,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture)
     part.skipped = skipped
+    part.plan = plan.digest()
     return part
 
 

@@ -10,7 +10,7 @@ import numba
 
 numba.config.THREADING_LAYER = "workqueue"
 
-from .task import run_task  # noqa: E402,F401  (imports torch, numba's kernels and the splicer)
+from .task import run_task  # noqa: E402,F401 (imports torch, numba's kernels and the splicer)
 
 try:
     from ..cpu import available
