@@ -7,8 +7,10 @@ cover the dialects and every kind of malformed input.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +21,7 @@ from conftest import bvh_params
 from torchsplice.core.errors import BVHError, MotionError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.bvh import format_bvh, parse_bvh, read_bvh, write_bvh
+from torchsplice.io.bvh import BVHWarning, format_bvh, parse_bvh, read_bvh, write_bvh
 
 # --------------------------------------------------------------------------------------------
 # helpers
@@ -782,3 +784,333 @@ def test_written_hierarchy_of_a_breadth_first_skeleton(tmp_path):
     with pytest.raises(MotionError, match="depth-first"):
         write_bvh(m, out)
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# issue 10: nothing lost, no traceback
+# --------------------------------------------------------------------------------------------
+def _read_same_as_base(path: Path, **kw) -> Motion:
+    ref = parse_bvh(BASE, dtype=torch.float64)
+    m = read_bvh(path, dtype=torch.float64, **kw)
+    _assert_same_motion(ref, m)
+    return m
+
+
+def test_utf8_byte_order_mark_is_read(tmp_path):
+    p = tmp_path / "bom.bvh"
+    p.write_bytes(b"\xef\xbb\xbf" + BASE.encode())
+    _read_same_as_base(p)
+    p.write_bytes(b"\xef\xbb\xbf" + BASE.replace("\n", "\r\n").encode())
+    _read_same_as_base(p)
+    _assert_same_motion(parse_bvh(BASE, dtype=torch.float64), parse_bvh("\ufeff" + BASE, dtype=torch.float64))
+
+
+def test_utf16_with_byte_order_mark_is_read(tmp_path):
+    p = tmp_path / "utf16.bvh"
+    p.write_bytes(("\ufeff" + BASE).encode("utf-16-le"))
+    _read_same_as_base(p)
+
+
+@pytest.mark.parametrize("line", ["Frame\tTime: 0.0333333", "Frame  Time: 0.0333333", "Frame Time:\t0.0333333",
+                                  "  frame \t time :0.0333333", "FRAME TIME:   0.0333333"])
+def test_frame_time_line_tolerates_whitespace(tmp_path, line):
+    _read_same_as_base(write(tmp_path, base_with({LINE["frame_time"]: line})))
+
+
+@pytest.mark.parametrize("line", ["Frames:\t3", "Frames:  3", "Frames:3", "\tFrames : 3 ", "FRAMES: 03"])
+def test_frames_line_tolerates_whitespace(tmp_path, line):
+    _read_same_as_base(write(tmp_path, base_with({LINE["frames"]: line})))
+
+
+def test_bvh_warning_is_exported():
+    import torchsplice.io.bvh as bvh
+
+    assert "BVHWarning" in bvh.__all__ and issubclass(BVHWarning, UserWarning)
+    assert "BVHWarning" in (bvh.__doc__ or "")
+    w = BVHWarning("a.bvh", "something", 7)
+    assert str(w) == "a.bvh:7: something" and (w.path, w.line, w.problem) == ("a.bvh", 7, "something")
+
+
+def test_lines_after_the_declared_frames_are_ignored_with_one_warning(tmp_path):
+    # QAvimator / Second Life: keyframe indices after the frames
+    p = write(tmp_path, BASE + "1 2\n0\n\n", "qavimator.bvh")
+    with pytest.warns(BVHWarning) as rec:
+        _read_same_as_base(p)
+    assert len(rec) == 1
+    msg = str(rec[0].message)
+    assert msg == f"{p}:22: 2 lines after the declared 3 frames ignored", msg
+    # the header declares fewer frames than the file holds: the declared ones are read
+    p = write(tmp_path, base_with({LINE["frames"]: "Frames: 2"}), "fewer.bvh")
+    with pytest.warns(BVHWarning, match=r"fewer\.bvh:21: 1 line after the declared 2 frames ignored") as rec:
+        m = read_bvh(p, dtype=torch.float64)
+    assert len(rec) == 1 and m.num_frames == 2
+    ref = parse_bvh(BASE, dtype=torch.float64)
+    torch.testing.assert_close(m.rotations, ref.rotations[:2], rtol=0, atol=0)
+    # no warning for a clean file, nor for blank lines at its end
+    with warnings_as_errors():
+        read_bvh(write(tmp_path, BASE + "\n \n\t\n", "blank_tail.bvh"))
+
+
+@contextlib.contextmanager
+def warnings_as_errors():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        yield
+
+
+def test_a_refused_file_does_not_also_warn(tmp_path):
+    with warnings_as_errors():
+        err = _bvh_error(tmp_path, base_with({LINE["f1"]: "1 2 3 10 20 30 5 6 x"}) + "1 2 3\n")
+    _check(err, LINE["f1"], "non-numeric", "'x'")
+
+
+def test_error_frame_time_that_overflows(tmp_path):
+    err = _bvh_error(tmp_path, base_with({LINE["frame_time"]: "Frame Time: 5e-324"}))
+    _check(err, LINE["frame_time"], "frame time", "5e-324", "1 to 1,000 fps")
+
+
+@pytest.mark.parametrize("frame_time", ["0.0009", "1.5", "2", "1e9", "0", "-0.0333333", "nan", "inf", "1e-300"])
+def test_error_frame_rate_outside_1_to_1000_fps(tmp_path, frame_time):
+    err = _bvh_error(tmp_path, base_with({LINE["frame_time"]: f"Frame Time: {frame_time}"}))
+    _check(err, LINE["frame_time"], "frame time")
+
+
+@pytest.mark.parametrize("frame_time, fps", [("0.001", 1000.0), ("1", 1.0), ("0.5", 2.0)])
+def test_frame_rate_edges_are_read(frame_time, fps):
+    assert parse_bvh(base_with({LINE["frame_time"]: f"Frame Time: {frame_time}"})).fps == fps
+
+
+@pytest.mark.parametrize("count", ["\u00b3", "\u0663", "\uff13", "\u2083", "3.0", "+3", "-3"])
+def test_error_channel_count_not_ascii_digits(tmp_path, count):
+    line = f"    CHANNELS {count} Zrotation Xrotation Yrotation"
+    err = _bvh_error(tmp_path, base_with({LINE["spine_channels"]: line}))
+    _check(err, LINE["spine_channels"], "channel count")
+
+
+@pytest.mark.parametrize("count", ["\u00b3", "\u0663", "\u0663\u0660", "\uff13", "+3", "-3", "3.0", "3 frames", ""])
+def test_error_frame_count_not_ascii_digits(tmp_path, count):
+    err = _bvh_error(tmp_path, base_with({LINE["frames"]: f"Frames: {count}"}))
+    _check(err, LINE["frames"], "frame count")
+
+
+def test_error_channel_count_beyond_the_possible(tmp_path):
+    err = _bvh_error(tmp_path, base_with({LINE["spine_channels"]: "    CHANNELS 99999999999999999999999 Zrotation"}))
+    _check(err, LINE["spine_channels"], "Spine", "at most 9")
+
+
+@pytest.mark.parametrize("char", ["\x00", "\x01", "\x1b", "\x7f", "\x9f"])
+def test_error_control_character_in_joint_name(tmp_path, char):
+    err = _bvh_error(tmp_path, BASE.replace("JOINT Spine", f"JOINT Sp{char}ine"))
+    _check(err, 6, "control character", f"U+{ord(char):04X}")
+
+
+def _chain_text(n: int) -> tuple[str, np.ndarray]:
+    """A chain of ``n`` joints J0 <- J1 <- ... (not indented: the text stays linear in ``n``)."""
+    rng = np.random.default_rng(n)
+    angles = rng.uniform(-20, 20, size=(2, n, 3))
+    lines = ["HIERARCHY"]
+    for j in range(n):
+        ch = "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation" if j == 0 else \
+            "CHANNELS 3 Zrotation Xrotation Yrotation"
+        lines += [f"{'ROOT' if j == 0 else 'JOINT'} J{j}", "{", "OFFSET 0 1 0", ch]
+    lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * n + ["MOTION", "Frames: 2", "Frame Time: 0.0333333"]
+    lines += ["1 2 3 " + " ".join(f"{v:.6f}" for v in angles[t].reshape(-1)) for t in range(2)]
+    return "\n".join(lines) + "\n", angles
+
+
+def test_deep_chain_is_read_and_written(tmp_path):
+    n = 1500  # past Python's default recursion limit (1,000)
+    text, angles = _chain_text(n)
+    m = parse_bvh(text, dtype=torch.float64)
+    assert m.skeleton.names == tuple(f"J{j}" for j in range(n))
+    assert m.skeleton.parents == (-1,) + tuple(range(n - 1))
+    assert m.skeleton.end_site_parents == (n - 1,)
+    assert m.num_frames == 2
+    np.testing.assert_allclose(quat_matrix(m.rotations[1, n - 1]), euler_matrix("ZXY", angles[1, n - 1]), atol=1e-12)
+    out = tmp_path / "deep.bvh"
+    write_bvh(m, out)  # the writer walks the hierarchy without recursion too
+    m2 = read_bvh(out, dtype=torch.float64)
+    same_skeleton(m.skeleton, m2.skeleton)
+    torch.testing.assert_close(m2.rotations.abs(), m.rotations.abs(), rtol=0, atol=1e-6)
+
+
+def test_error_more_than_10000_joints(tmp_path):
+    from torchsplice.io.bvh import MAX_JOINTS
+
+    assert MAX_JOINTS == 10_000
+    text, _ = _chain_text(MAX_JOINTS + 1)
+    err = _bvh_error(tmp_path, text, "huge.bvh")
+    _check(err, None, "more than 10,000 joints")
+
+
+@pytest.mark.parametrize("token", ["nan", "-nan", "inf", "-Infinity", "1e999"])
+@pytest.mark.parametrize("where", ["spine_offset", "end_site"])
+def test_error_non_finite_offset(tmp_path, token, where):
+    line = {"spine_offset": LINE["spine_offset"], "end_site": LINE["end_site_close"] - 1}[where]
+    err = _bvh_error(tmp_path, base_with({line: f"    OFFSET 0 {token} 0"}))
+    _check(err, line, "OFFSET", token)
+
+
+@pytest.mark.parametrize("token", ["1e300", "-1e13", "1e999", "-1e999"])
+def test_error_absurd_or_overflowing_frame_value(tmp_path, token):
+    err = _bvh_error(tmp_path, base_with({LINE["f2"]: f"2 4 6 20 40 60 10 12 {token}"}))
+    _check(err, LINE["f2"], token, "frame 2", "Spine Yrotation")
+
+
+def test_error_absurd_offset(tmp_path):
+    err = _bvh_error(tmp_path, base_with({LINE["spine_offset"]: "    OFFSET 0 1e14 0"}))
+    _check(err, LINE["spine_offset"], "absurd OFFSET", "1e14")
+
+
+@pytest.mark.parametrize("token", ["\u0661", "\u00b2", "1_000", "0x10", "\x00", "1,5"])
+def test_error_non_ascii_or_odd_numbers_in_frames(tmp_path, token):
+    err = _bvh_error(tmp_path, base_with({LINE["f1"]: f"1 2 3 10 {token} 30 5 6 7"}))
+    _check(err, LINE["f1"], "non-numeric")
+
+
+def test_error_huge_frame_count_without_allocating(tmp_path):
+    import time
+    import tracemalloc
+
+    for frames, phrase in (("99999999999", "truncated"), ("9" * 5000, "absurd frame count")):
+        p = write(tmp_path, base_with({LINE["frames"]: f"Frames: {frames}"}))
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        try:
+            with pytest.raises(BVHError) as ei:
+                read_bvh(p)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert time.perf_counter() - t0 < 5 and peak < 20e6, peak
+        _check(ei.value, None, phrase)
+        assert len(str(ei.value)) < 300
+
+
+_MB = "Q" * 1_000_000
+
+
+@pytest.mark.parametrize("where", ["offset", "channel", "frame", "frames", "frame_time", "keyword", "hierarchy",
+                                   "name_nul", "name_dup", "end_site", "after_root"])
+def test_error_messages_stay_short_with_a_1mb_token(tmp_path, where):
+    text = {
+        "offset": base_with({LINE["spine_offset"]: f"OFFSET 0 {_MB} 0"}),
+        "channel": base_with({LINE["spine_channels"]: f"CHANNELS 3 Zrotation {_MB} Yrotation"}),
+        "frame": base_with({LINE["f1"]: f"1 2 3 10 {_MB} 30 5 6 7"}),
+        "frames": base_with({LINE["frames"]: f"Frames: {_MB}"}),
+        "frame_time": base_with({LINE["frame_time"]: f"Frame Time: {_MB}"}),
+        "keyword": base_with({1: _MB}),
+        "hierarchy": base_with({LINE["spine_channels"] + 1: _MB}),
+        "name_nul": BASE.replace("JOINT Spine", f"JOINT {_MB}\x00"),
+        "name_dup": BASE.replace("JOINT Spine", f"JOINT {_MB}").replace("ROOT Hips", f"ROOT {_MB}"),
+        "end_site": base_with({LINE["end_site_close"] - 3: f"End {_MB}"}),
+        "after_root": BASE.replace("MOTION", f"{_MB}\nMOTION"),
+    }[where]
+    err = _bvh_error(tmp_path, text)
+    assert len(str(err)) < 300, len(str(err))
+    assert "..." in str(err)
+
+
+def test_error_message_of_a_wide_root_stays_short(tmp_path):
+    lines = ["HIERARCHY", "ROOT Root", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    for j in range(4999):
+        lines += [f"JOINT Child{j % 4998}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation", "}"]
+    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.0333333", " ".join(["0"] * (6 + 3 * 4999))]
+    err = _bvh_error(tmp_path, "\n".join(lines) + "\n")
+    _check(err, None, "'Child0' appears twice")
+    assert len(str(err)) < 300
+    # the same without the duplicate reads
+    ok = "\n".join(lines).replace("JOINT Child0\n{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n}\n", "", 1)
+    ok = ok.replace(" ".join(["0"] * (6 + 3 * 4999)), " ".join(["0"] * (6 + 3 * 4998)))
+    assert parse_bvh(ok).skeleton.num_joints == 4999
+
+
+def _finite_motion(T=4) -> Motion:
+    frames = [[t, 0, 0, 10 * t, 0, 0, 5, 0, 0] for t in range(T)]
+    return parse_bvh(_chain_bvh(["ZXY", "ZXY"], [(0, 0, 0), (0, 1, 0)], frames), dtype=torch.float64, name="walk")
+
+
+@pytest.mark.parametrize("what", ["rotations", "root_translation", "translations", "offsets", "end_site_offsets"])
+@pytest.mark.parametrize("value", [math.nan, math.inf])
+def test_writer_refuses_non_finite_values_and_writes_nothing(tmp_path, what, value):
+    m = _finite_motion()
+    if what in ("rotations", "root_translation"):
+        getattr(m, what)[2, 0] = value
+        where = "frame 2"
+    elif what == "translations":
+        m.translations = m.local_translations()
+        m.translations[3, 1, 0] = value
+        where = "frame 3"
+    else:
+        getattr(m.skeleton, what)[0, 1] = value
+        where = "OFFSET"
+    with pytest.raises(MotionError) as ei:
+        format_bvh(m)
+    msg = str(ei.value)
+    assert "'walk'" in msg and where in msg and "\n" not in msg and len(msg) < 300
+    out = tmp_path / "walk.bvh"
+    with pytest.raises(MotionError):
+        write_bvh(m, out)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("fps", [0.5, 1500.0, math.inf])
+def test_writer_refuses_frame_rates_the_reader_refuses(tmp_path, fps):
+    m = _finite_motion()
+    m.fps = fps
+    with pytest.raises(MotionError, match="fps"):
+        write_bvh(m, tmp_path / "x.bvh")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_writer_refuses_joint_names_that_would_not_read_back(tmp_path):
+    m = _finite_motion()
+    for bad in ("Sp\nine", "Sp\x00ine", " Spine", "a { b", ""):
+        sk = m.skeleton
+        names = (sk.names[0], bad)
+        m.skeleton = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_site_parents, sk.end_site_offsets)
+        with pytest.raises(MotionError, match="would not read back"):
+            write_bvh(m, tmp_path / "x.bvh")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_bvh_checks_its_argument_types(tmp_path):
+    m = _finite_motion()
+    out = tmp_path / "x.bvh"
+    with pytest.raises(TypeError, match="swapped"):
+        write_bvh(out, m)
+    with pytest.raises(TypeError, match="swapped"):
+        write_bvh(str(out), m)
+    with pytest.raises(TypeError, match="must be a Motion"):
+        write_bvh(m.rotations, out)
+    with pytest.raises(TypeError, match="path must be"):
+        write_bvh(m, 3)
+    with pytest.raises(TypeError, match="must be a Motion"):
+        format_bvh("walk.bvh")
+    assert list(tmp_path.iterdir()) == []
+    write_bvh(m, str(out))
+    assert read_bvh(out).num_frames == 4
+
+
+def test_non_utf8_bytes_are_read_as_latin1_or_refused_cleanly(tmp_path):
+    p = tmp_path / "latin1.bvh"
+    p.write_bytes(BASE.replace("Spine", "R\u00fccken").encode("latin-1"))
+    assert read_bvh(p).skeleton.names == ("Hips", "R\u00fccken")
+    for i, junk in enumerate([b"\xff", b"\x80\x81", b"\xc3\x28", b"\xfe\xff\x00"]):
+        p = tmp_path / f"junk{i}.bvh"
+        p.write_bytes(BASE.replace("1 2 3 10", "1 2 3 1").encode().replace(b"3 1", b"3 1" + junk, 1))
+        with pytest.raises(BVHError, match=f"junk{i}.bvh:{LINE['f1']}: non-numeric"):
+            read_bvh(p)
+    p = tmp_path / "random.bvh"
+    p.write_bytes(bytes(np.random.default_rng(0).integers(0, 256, 5000, dtype=np.uint8)))
+    with pytest.raises(BVHError, match="random.bvh"):
+        read_bvh(p)
+
+
+def test_line_numbers_count_only_cr_and_lf(tmp_path):
+    # a form feed or a vertical tab is whitespace inside a line, not a line break
+    text = base_with({LINE["spine_offset"]: "    OFFSET 0\x0c10\x0b0"})
+    _read_same_as_base(write(tmp_path, text, "ff.bvh"))
+    err = _bvh_error(tmp_path, text.replace("2 4 6 20 40 60", "2 4 6 20 40 x"))
+    _check(err, LINE["f2"], "non-numeric")

@@ -9,7 +9,16 @@ The names below are imported on first use, so that ``import torchsplice`` (and t
 line) starts without loading torch until it is needed.
 """
 
+import os as _os
+
 __version__ = "0.1.0"
+
+# Bit-identical results whatever the machine is doing: MKL (torch's BLAS on x86) may pick
+# another code path for the same matrix product depending on how its inputs happen to be
+# aligned in memory, which changes the last bits of distance grids; its conditional numerical
+# reproducibility mode fixes the path. It must be set before torch loads MKL, so it is set
+# here, on first import of the package (the command line imports torch only later).
+_os.environ.setdefault("MKL_CBWR", "AUTO")
 
 __all__ = [
     "__version__", "Motion", "Skeleton", "forward_kinematics",

@@ -9,13 +9,15 @@ usage, 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shlex
 import sys
+import warnings
 from pathlib import Path
 
 from . import __version__
-from .core.errors import TorchspliceError
+from .core.errors import DatabaseError, TorchspliceError
 
 __all__ = ["main", "build_parser"]
 
@@ -28,20 +30,33 @@ def _progress(iterable, total: int, desc: str, quiet: bool):
                 file=sys.stderr, dynamic_ncols=True)
 
 
-def _new_output(args) -> Path:
-    """``args.output`` as a path, refusing to overwrite an existing file without ``--force``."""
-    out = Path(args.output)
-    if out.exists() and not args.force:
-        raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
-    return out
+_OUTPUTS = {  # kind of output: (suffixes, what it is)
+    "database": ((".h5", ".hdf5"), "a database"),
+    "bvh": ((".bvh",), "BVH"),
+    "report": ((".md",), "a Markdown report"),
+    "plot": ((".png", ".pdf", ".svg"), "a picture"),
+    "render": ((".gif", ".mp4", ".png"), "a GIF, MP4 or PNG filmstrip"),
+}
 
 
-def _bvh_output(args) -> Path:
-    """``args.output`` for a BVH writer: it must end in ``.bvh``."""
-    out = _new_output(args)
-    if out.suffix.lower() != ".bvh":
-        raise TorchspliceError(f"{out}: writes BVH, so the file name must end in .bvh")
-    return out
+def _output(args, kind: str, inputs=()) -> Path:
+    """``args.output`` checked before any work: the right suffix for ``kind``, not a folder,
+    not one of ``inputs``, and not an existing file unless ``--force``."""
+    from .io.atomic import check_output
+
+    suffixes, what = _OUTPUTS[kind]
+    return check_output(args.output, suffixes, what, inputs=inputs, overwrite=getattr(args, "force", False))
+
+
+@contextlib.contextmanager
+def _locked(out: Path, args):
+    """Hold the output's lock while the command writes it: a second writer is refused at once."""
+    from .io.lock import output_lock
+
+    with output_lock(out, "torchsplice " + shlex.join(getattr(args, "argv", []))):
+        if out.exists() and not getattr(args, "force", False):  # written meanwhile by another process
+            raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+        yield out
 
 
 def _read_pair(db, args):
@@ -63,9 +78,10 @@ def cmd_sample(args) -> int:
     from .io.sample import sample_motions
     from .io.spec import load_spec
 
+    out = _output(args, "database")
     spec = load_spec("sample")
     motions = sample_motions()
-    db = MotionDatabase.create(args.output, overwrite=args.force)
+    db = MotionDatabase.create(out, overwrite=args.force)
     with db:
         for m in motions:
             db.append(m, spec=spec)
@@ -110,31 +126,53 @@ def cmd_import(args) -> int:
     from .io.spec import detect_spec, load_spec
 
     files, skipped = _collect_bvh(args.paths)
+    if args.append:
+        out = Path(args.output)
+        if out.suffix.lower() not in _OUTPUTS["database"][0]:
+            raise TorchspliceError(f"{out}: --append adds to a database, so its name must end in .h5 or .hdf5")
+        if not out.is_file():
+            raise TorchspliceError(f"{out}: no such database to append to (leave out --append to make a new one)")
+    else:
+        out = _output(args, "database", inputs=files)
     if not files:
         for f, why in skipped:
-            print(f"skipped {f}: {why}", file=sys.stderr)
+            print(f"skipped {_at(f, why)}", file=sys.stderr)
         raise TorchspliceError("no BVH files to import")
     fixed_spec = None if args.spec == "auto" else load_spec(args.spec)
     if args.append:
-        db = MotionDatabase.open(args.output, mode="a")
+        db = MotionDatabase.open(out, mode="a")
     else:
-        db = MotionDatabase.create(args.output, overwrite=args.force,
-                                   dtype="float64" if args.float64 else "float32")
+        db = MotionDatabase.create(out, overwrite=args.force, dtype="float64" if args.float64 else "float32")
     dtype = torch.float64 if args.float64 else torch.float32
-    imported, frames, origin = 0, 0, {}
+    imported, frames, origin, warned = 0, 0, {}, []
     with db:
         for f in _progress(files, len(files), "import", args.quiet):
             try:
-                m = read_bvh(f, dtype=dtype)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    m = read_bvh(f, dtype=dtype)
+                warned += [(str(f), _one_line(w.message, f)) for w in caught]
                 m.check_finite()
                 spec = (fixed_spec or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
                 spec.bind(m.skeleton)
                 m.role, m.labels = spec.clip_metadata(m.name)
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
+                known = len(db.skeletons)
                 db.append(m, spec=spec)
+                if len(db.skeletons) > known and spec.is_guessed:
+                    _say(args, f"skeleton {known} (first seen in {f}): joint roles guessed by the {spec.name!r} spec "
+                               "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in spec.guess_summary()))
+            except DatabaseError:
+                raise  # the output itself failed (a full disk): nothing more can be written
             except TorchspliceError as exc:
-                skipped.append((str(f), str(exc).removeprefix(f"{f}: ").removeprefix(f"{f}:")))
+                skipped.append((str(f), _one_line(exc, f)))
+                continue
+            except (KeyboardInterrupt, MemoryError):
+                raise
+            except Exception as exc:  # a bug met on this file: skip it, keep the others, say what to report
+                skipped.append((str(f), f"unexpected error ({type(exc).__name__}: {_one_line(exc, f)}); "
+                                        "please report it with the file"))
                 continue
             origin[m.name] = f
             imported += 1
@@ -142,15 +180,31 @@ def cmd_import(args) -> int:
         if imported == 0:
             db.abort()
             for f, why in skipped:
-                print(f"skipped {f}: {why}", file=sys.stderr)
+                print(f"skipped {_at(f, why)}", file=sys.stderr)
             raise TorchspliceError(f"no clip could be imported; {args.output} was not written")
         total = len(db)
     _say(args, f"imported {imported} clips ({frames} frames) into {args.output} ({total} clips in all)")
+    for f, why in warned:
+        print(f"warning: {_at(f, why)}", file=sys.stderr)
     for f, why in skipped:
-        print(f"skipped {f}: {why}", file=sys.stderr)
+        print(f"skipped {_at(f, why)}", file=sys.stderr)
     if skipped:
         print(f"{len(skipped)} input(s) skipped, {imported} imported", file=sys.stderr)
     return 1 if skipped else 0
+
+
+def _at(path, why: str) -> str:
+    """``PATH: why``, or ``PATH:LINE: rest`` when ``why`` starts with a line number."""
+    head, sep, _ = why.partition(":")
+    return f"{path}:{why}" if sep and head.isdigit() else f"{path}: {why}"
+
+
+def _one_line(message, path=None, limit: int = 300) -> str:
+    """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
+    text = " ".join(str(message).split())
+    if path is not None:
+        text = text.removeprefix(f"{path}: ").removeprefix(f"{path}:").lstrip()
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 # --------------------------------------------------------------------------------------------
@@ -173,7 +227,9 @@ def cmd_info(args) -> int:
           f"schema {s['schema_version']}, units {s['units'] or '?'}, up axis {s['up_axis'] or '?'}, "
           f"quaternions {s['quaternion_order']}")
     for k in s["skeletons"]:
-        print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}, {k['clips']} clips")
+        print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}"
+              f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "
+              f"up axis {k['up_axis'] or '?'}, {k['clips']} clips")
     print("roles: " + ", ".join(f"{r} {n}" for r, n in sorted(s["roles"].items())))
     if s["clips"]:
         w = max(4, max(len(c["name"]) for c in s["clips"]))
@@ -190,10 +246,11 @@ def cmd_export(args) -> int:
     from .io.bvh import write_bvh
     from .io.database import MotionDatabase
 
-    out = _bvh_output(args)
+    out = _output(args, "bvh", inputs=[args.database])
     with MotionDatabase.open(args.database) as db:
         m = db.read(args.clip, dtype=torch.float64)
-    write_bvh(m, out)
+    with _locked(out, args):
+        write_bvh(m, out)
     _say(args, f"wrote {out}: {m.name}, {m.num_frames} frames at {m.fps:g} fps")
     return 0
 
@@ -236,6 +293,29 @@ def _positive_int(text: str) -> int:
     return value
 
 
+_MAX_FILMSTRIP = 64  # columns of a PNG filmstrip: more would not fit a screen (and took minutes and GBs)
+
+
+def _bounded_int(lo: int, hi: int):
+    """An argparse type: a whole number from ``lo`` to ``hi``."""
+    def parse(text: str) -> int:
+        value = _positive_int(text) if lo >= 1 else int(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be from {lo} to {hi}, got {value}")
+        return value
+    return parse
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
 def _splice_options(args):
     from .splice import AlignOptions, SpliceOptions
 
@@ -251,7 +331,7 @@ def cmd_splice(args) -> int:
     from .splice import splice
     from .splice.references import find_reference
 
-    out = _bvh_output(args)
+    out = _output(args, "bvh", inputs=[args.database])
     with MotionDatabase.open(args.database) as db:
         loco, act, spec = _read_pair(db, args)
         ref = None
@@ -268,7 +348,8 @@ def cmd_splice(args) -> int:
         elif args.reference is not None:
             raise TorchspliceError("--reference is only used by --method cpmc")
     result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
-    write_bvh(result.motion, out)
+    with _locked(out, args):
+        write_bvh(result.motion, out)
     extra = f", reference {result.reference}" if result.reference else ""
     detail = "" if args.method == "naive" else (
         f"; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames"
@@ -305,10 +386,11 @@ def cmd_plot_alignment(args) -> int:
     from .io.database import MotionDatabase
     from .viz.alignment import plot_alignment
 
-    out = _new_output(args)
+    out = _output(args, "plot", inputs=[args.database])
     with MotionDatabase.open(args.database) as db:
         loco, act, spec = _read_pair(db, args)
-    plot_alignment(loco, act, spec, out, options=_splice_options(args))
+    with _locked(out, args):
+        plot_alignment(loco, act, spec, out, options=_splice_options(args))
     _say(args, f"wrote {out}: alignment of {act.name} to {loco.name}")
     return 0
 
@@ -317,13 +399,20 @@ def cmd_render(args) -> int:
     from .io.database import MotionDatabase
     from .viz.render import render
 
-    out = _new_output(args)
+    out = _output(args, "render", inputs=[args.database])
     with MotionDatabase.open(args.database) as db:
         clips = [db.read(name) for name in args.clips]
         k = db.clip_info(args.clips[0])["skeleton"]
         spec = _db_spec(db, k, clips[0].skeleton)
-    render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=args.frames,
-           max_seconds=args.max_seconds)
+    longest = max(c.num_frames for c in clips)
+    frames = args.frames
+    if out.suffix.lower() == ".png" and frames > longest:
+        print(f"note: --frames {frames} is more than the {longest} frames of the longest clip; drawing {longest}",
+              file=sys.stderr)
+        frames = longest
+    with _locked(out, args):
+        render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=frames,
+               max_seconds=args.max_seconds)
     _say(args, f"wrote {out}: {len(clips)} clip{'s' if len(clips) != 1 else ''}")
     return 0
 
@@ -331,14 +420,16 @@ def cmd_render(args) -> int:
 def cmd_evaluate(args) -> int:
     from .evaluation.report import evaluate_database
 
-    out = _new_output(args)
-    agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
-                            max_rows=args.max_rows)
+    out = _output(args, "report", inputs=[args.database] + ([args.sources] if args.sources else []))
+    with _locked(out, args):
+        agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
+                                max_rows=args.max_rows)
     if not args.quiet:
         from .io.database import MotionDatabase
 
         with MotionDatabase.open(args.database) as db:
             u = db.attrs.get("units") or "units"
+        u = "units" if u in ("mixed", "unknown") else u
         for method, a in agg.items():
             gt = f", ground-truth error {a['gt_error']:.2f} {u} over {a['gt_pairs']} pairs" if a["gt_error"] is not None else ""
             print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f} {u}/s, "
@@ -374,10 +465,10 @@ def cmd_splice_all(args) -> int:
     job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command, shard=shard)
     try:
         summary = job.run()
-    except KeyboardInterrupt:
-        print(f"torchsplice: interrupted; finished tasks are kept in {job.work}; "
+    except KeyboardInterrupt as exc:
+        print(f"torchsplice: {_stopped(exc)}; finished tasks are kept in {job.work}; "
               "run the same command again to resume", file=sys.stderr)
-        return 130
+        return _stop_code(exc)
     if not args.quiet:
         print("\n".join(summary.lines()))
     return 0
@@ -492,8 +583,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("database", help="motion database (.h5)")
     s.add_argument("clips", nargs="+", metavar="CLIP", help="clip names")
     s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
-    s.add_argument("--frames", type=_positive_int, default=8, help="frames per clip in a PNG filmstrip (default 8)")
-    s.add_argument("--max-seconds", type=float, default=None, help="show at most this many seconds")
+    s.add_argument("--frames", type=_bounded_int(1, _MAX_FILMSTRIP), default=8,
+                   help=f"frames per clip in a PNG filmstrip (default 8, at most {_MAX_FILMSTRIP})")
+    s.add_argument("--max-seconds", type=_positive_float, default=None, help="show at most this many seconds")
     _add_output_flags(s)
     s.set_defaults(func=cmd_render)
 
@@ -562,23 +654,48 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a scheduler or ``kill`` stopping the process): handled like Ctrl-C."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _stopped(exc: BaseException) -> str:
+    return "terminated" if isinstance(exc, Terminated) else "interrupted"
+
+
+def _stop_code(exc: BaseException) -> int:
+    return 143 if isinstance(exc, Terminated) else 130
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    import signal
+    import threading
+
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
     if args.func is cmd_splice_all:
         _prestart_workers(args)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)  # stop as Ctrl-C does: outputs discarded, work kept
     try:
         return args.func(args)
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {exc}", file=sys.stderr)
+        print(f"torchsplice: error: {_one_line(exc, limit=1000)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("torchsplice: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"torchsplice: {_stopped(exc)}", file=sys.stderr)
+        return _stop_code(exc)
     except BrokenPipeError:
         return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -81,6 +81,10 @@ class Skeleton:
             )
         if self.parents[0] != -1 or any(p < 0 for p in self.parents[1:]):
             raise ValueError("joint 0 must be the only root (parent -1)")
+        far = [j for j, p in enumerate(self.parents) if p >= J]
+        if far:
+            raise ValueError(f"joint {self.names[far[0]]!r} has parent {self.parents[far[0]]}, "
+                             f"but the skeleton has joints 0..{J - 1}")
         hierarchy_levels(self.parents)  # validates the order
         for name, ch in zip(self.names, self.channels):
             bad = [c for c in ch if c not in ROTATION_CHANNELS + POSITION_CHANNELS]
@@ -91,6 +95,9 @@ class Skeleton:
                 raise ValueError(f"joint {name!r} must have 0 or 3 rotation channels, has {rot}")
         if len(self.end_site_parents) != ends.shape[0]:
             raise ValueError("end_site_parents and end_site_offsets must have the same length")
+        bad_end = [p for p in self.end_site_parents if not 0 <= p < J]
+        if bad_end:
+            raise ValueError(f"an End Site hangs from joint {bad_end[0]}, but the skeleton has joints 0..{J - 1}")
 
     # -- lookups ---------------------------------------------------------------------------
     @property
@@ -214,13 +221,24 @@ class Skeleton:
         animated = torch.tensor(self.translation_animated) | torch.tensor(other.translation_animated)
         return torch.where(animated, torch.zeros_like(d), d)
 
+    def _end_site_error(self, other: "Skeleton") -> torch.Tensor:
+        """Per End Site ``(E,)``: offset difference (the End Sites hang from the same joints)."""
+        return (self.end_site_offsets - other.end_site_offsets).abs().max(dim=1).values
+
     def matches(self, other: "Skeleton", rtol: float = 1e-4) -> bool:
-        """Same topology and channel layout, static offsets equal within ``rtol`` of the size."""
+        """Same topology and channel layout, static offsets and End Sites equal within ``rtol`` of
+        the size: End Sites are part of a clip (its leaf tails: head, hands, toes), so two
+        skeletons whose End Sites differ are two skeletons."""
         if other is self:
             return True
         if not self.same_topology(other) or self.channels != other.channels:
             return False
-        return bool(self._static_offset_error(other).max() <= rtol * max(self.size(), 1e-9))
+        if self.end_site_parents != other.end_site_parents:
+            return False
+        tol = rtol * max(self.size(), 1e-9)
+        if self.end_site_parents and bool(self._end_site_error(other).max() > tol):
+            return False
+        return bool(self._static_offset_error(other).max() <= tol)
 
     def mismatch(self, other: "Skeleton") -> str | None:
         """A short description of how ``other`` differs, or ``None`` when they match."""
@@ -239,7 +257,18 @@ class Skeleton:
         if not self.matches(other):
             d = self._static_offset_error(other)
             j = int(d.argmax())
-            return f"bone offsets differ (joint {self.names[j]!r} by {float(d[j]):.4g})"
+            if float(d[j]) > 1e-4 * max(self.size(), 1e-9):
+                return f"bone offsets differ (joint {self.names[j]!r} by {float(d[j]):.4g})"
+            if self.end_site_parents != other.end_site_parents:
+                mine, theirs = len(self.end_site_parents), len(other.end_site_parents)
+                if mine != theirs:
+                    return f"End Sites differ ({mine} against {theirs})"
+                e = next(i for i, (a, b) in enumerate(zip(self.end_site_parents, other.end_site_parents)) if a != b)
+                return f"End Sites differ (End Site {e} hangs from joint {self.names[self.end_site_parents[e]]!r} " \
+                       f"against {other.names[other.end_site_parents[e]]!r})"
+            d = self._end_site_error(other)
+            e = int(d.argmax())
+            return f"End Site offsets differ (the End Site of joint {self.names[self.end_site_parents[e]]!r} by {float(d[e]):.4g})"
         return None
 
     def with_offsets(self, offsets: torch.Tensor) -> "Skeleton":

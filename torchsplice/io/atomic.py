@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..core.errors import TorchspliceError
 
-__all__ = ["atomic_path", "os_error_message"]
+__all__ = ["atomic_path", "os_error_message", "same_file", "check_output"]
 
 
 def os_error_message(path, exc: OSError) -> str:
@@ -25,6 +25,40 @@ def os_error_message(path, exc: OSError) -> str:
     if exc.errno in (errno.EACCES, errno.EPERM):
         return f"{path}: permission denied"
     return f"{path}: {exc.strerror or exc}"
+
+
+def same_file(a, b) -> bool:
+    """Whether paths ``a`` and ``b`` name one file (the same path, or links to one file)."""
+    a, b = Path(a), Path(b)
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_output(path, suffixes: tuple[str, ...], what: str, inputs=(), overwrite: bool = False) -> Path:
+    """``path`` checked as the output of a command, before any work; one-line errors.
+
+    Its suffix must be one of ``suffixes`` (``what`` names the kind of file, e.g. "a report"),
+    it must not be a folder or one of the command's ``inputs`` (whatever ``overwrite`` says:
+    writing it would destroy the input), its folder must exist, and an existing file is
+    refused unless ``overwrite``.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise TorchspliceError(f"{path}: the output is {what}, so its name must end in {' or '.join(suffixes)}")
+    if path.is_dir():
+        raise TorchspliceError(f"{path}: is a folder; give the output a file name ending in {suffixes[0]}")
+    for source in inputs:
+        if same_file(path, source):
+            raise TorchspliceError(f"{path}: is also an input of this command; write the output to another file")
+    if not path.parent.is_dir():
+        raise TorchspliceError(f"{path}: folder {path.parent} does not exist")
+    if path.exists() and not overwrite:
+        raise TorchspliceError(f"{path}: already exists (use --force to overwrite)")
+    return path
 
 
 @contextlib.contextmanager

@@ -3,8 +3,15 @@
 Dialects read: any of the six Euler orders per joint (mixed within one file), position
 channels on any joint in any axis order (Bandai Namco animates every joint's translation;
 they are kept, not dropped), unit scale channels (``Xscale``...; dropped, anything but 1 is
-refused), End Sites, any frame time, CRLF or LF line ends, tabs or spaces, joint names with
-spaces.
+refused), End Sites, frame times from 0.001 s to 1 s (1 to 1,000 fps), CRLF, LF or CR line
+ends, tabs or any number of spaces between tokens (also inside ``Frame Time:``), a UTF-8 byte
+order mark, joint names with spaces, and text that is not UTF-8 (read as Latin-1). Numbers
+are ASCII only (``12``, ``-1.5e3``); counts are ASCII digits only.
+
+Lines after the declared frames (QAvimator and Second Life animations keep keyframe indices
+there) are not frames: the declared frames are read and one :class:`BVHWarning` is issued
+through :func:`warnings.warn`, ``"FILE:LINE: N lines after the declared F frames ignored"``,
+which a caller can catch (``warnings.catch_warnings``) and print as one line.
 
 Conventions of the result (a :class:`~torchsplice.core.motion.Motion`):
 
@@ -16,13 +23,22 @@ Conventions of the result (a :class:`~torchsplice.core.motion.Motion`):
   1e-4 of one (``0.0333333`` reads as 30 fps).
 
 The motion block is parsed in one vectorised call (``numpy.loadtxt``); errors name the file,
-the line and the problem, as :class:`~torchsplice.core.errors.BVHError`.
+the line and the problem, as :class:`~torchsplice.core.errors.BVHError`, on one line of at
+most about 300 characters (long tokens and long lists of names are cut short). Refused: joint
+names with control characters (e.g. NUL), more than 10,000 joints, non-finite or absurd
+(beyond 1e12) OFFSET and channel values, and frame times outside [0.001, 1] s.
+
+:func:`write_bvh` and :func:`format_bvh` refuse non-finite values (naming the clip and the
+first bad frame) and anything the reader would refuse, and write nothing then.
 """
 
 from __future__ import annotations
 
 import io
 import math
+import os
+import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -34,10 +50,89 @@ from ..core.rotations import euler_to_quat, quat_to_rotmat, rotmat_to_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .atomic import atomic_path
 
-__all__ = ["read_bvh", "parse_bvh", "write_bvh", "format_bvh"]
+__all__ = ["read_bvh", "parse_bvh", "write_bvh", "format_bvh", "BVHWarning"]
 
 _SCALE_CHANNELS = ("Xscale", "Yscale", "Zscale")
 _CHANNEL_NAMES = {c.lower(): c for c in ROTATION_CHANNELS + POSITION_CHANNELS + _SCALE_CHANNELS}
+
+MAX_JOINTS = 10_000  # more joints than any real skeleton: a file past it is refused
+MIN_FRAME_TIME, MAX_FRAME_TIME = 0.001, 1.0  # seconds: 1,000 fps to 1 fps
+MAX_ABS_VALUE = 1e12  # an OFFSET or channel value beyond this is refused as absurd
+_MAX_PROBLEM = 200  # characters of a message after "FILE:LINE: "
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
+_NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)\Z", re.IGNORECASE)
+_COUNT = re.compile(r"\d+\Z", re.ASCII)
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\ud800-\udfff]")
+
+
+class BVHWarning(UserWarning):
+    """Something in a BVH file that was read past, not refused: ``"FILE:LINE: what"``.
+
+    Issued with :func:`warnings.warn` (e.g. lines after the declared frames, which are
+    ignored); a caller that wants one line per file catches this category.
+    """
+
+    def __init__(self, path, problem: str, line: int | None = None):
+        where = f"{path}:{line}" if line is not None else f"{path}"
+        super().__init__(f"{where}: {problem}")
+        self.path, self.line, self.problem = path, line, problem
+
+
+def _q(text: str, limit: int = 60) -> str:
+    """``repr(text)``, cut to about ``limit`` characters with an ellipsis."""
+    r = repr(text)
+    return r if len(r) <= limit else r[: limit - 4] + "..." + r[-1]
+
+
+def _name_list(names, shown: int = 4) -> str:
+    """At most ``shown`` quoted names, then ``and N more``."""
+    names = list(names)
+    text = ", ".join(_q(n, 40) for n in names[:shown])
+    return text if len(names) <= shown else f"{text} and {len(names) - shown} more"
+
+
+def _error(path, problem: str, line: int | None = None) -> BVHError:
+    """A :class:`BVHError` whose problem is one line of bounded length."""
+    problem = " ".join(str(problem).splitlines())
+    if len(problem) > _MAX_PROBLEM:
+        problem = problem[: _MAX_PROBLEM - 3] + "..."
+    return BVHError(path, problem, line)
+
+
+def _number(tok: str, what: str, path, line: int) -> float:
+    """One ASCII number, finite and not absurd; a :class:`BVHError` otherwise."""
+    if _NUMBER.match(tok):
+        v = float(tok)
+        if not math.isfinite(v):
+            raise _error(path, f"{what} value {_q(tok)} is too large (not finite)", line)
+        if abs(v) > MAX_ABS_VALUE:
+            raise _error(path, f"absurd {what} value {_q(tok)} (beyond {MAX_ABS_VALUE:g})", line)
+        return v
+    if _NON_FINITE.match(tok):
+        raise _error(path, f"non-finite {what} value {_q(tok)}", line)
+    raise _error(path, f"non-numeric {what} value {_q(tok)}", line)
+
+
+def _decode(raw: bytes) -> str:
+    """Text of a file: UTF-8 (with or without a byte order mark), UTF-16 with a byte order
+    mark, anything else as Latin-1 (which never fails)."""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError:
+            pass
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _split_lines(text: str) -> list[str]:
+    """Lines split at CRLF, LF or CR only (so line numbers are those an editor shows)."""
+    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return lines
 
 
 # --------------------------------------------------------------------------------------------
@@ -47,18 +142,19 @@ def read_bvh(path, dtype: torch.dtype = torch.float32, name: str | None = None) 
     """Read a BVH file into a :class:`Motion` (float32 by default, float64 on request).
 
     The clip is named after the file's stem unless ``name`` is given; ``source`` is the path.
-    Raises :class:`BVHError` (``"FILE:LINE: problem"``) for a malformed file.
+    Raises :class:`BVHError` (``"FILE:LINE: problem"``, one line) for a malformed file; warns
+    with :class:`BVHWarning` when lines after the declared frames are ignored.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"read_bvh: path must be a str or os.PathLike, got {type(path).__name__}")
     path = Path(path)
     try:
         raw = path.read_bytes()
     except OSError as exc:
-        raise BVHError(path, f"cannot read file ({exc.strerror or exc})") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    return parse_bvh(text, path=path, dtype=dtype, name=name if name is not None else path.stem)
+        raise _error(path, f"cannot read file ({exc.strerror or exc})") from None
+    except ValueError as exc:  # e.g. a NUL byte in the path
+        raise _error(path, f"cannot read file ({exc})") from None
+    return parse_bvh(_decode(raw), path=path, dtype=dtype, name=name if name is not None else path.stem)
 
 
 class _Header:
@@ -79,13 +175,18 @@ def _tokens(lines: list[str], start: int, stop: int) -> list[tuple[str, int]]:
 
 
 def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
-    """Parse lines[0:stop] (HIERARCHY ... up to the MOTION line)."""
+    """Parse lines[0:stop] (HIERARCHY ... up to the MOTION line).
+
+    Iterative (an explicit stack of open joints), so a chain of thousands of joints reads
+    like any other; more than :data:`MAX_JOINTS` joints are refused.
+    """
     toks = _tokens(lines, 0, stop)
     h = _Header()
+    seen: set[str] = set()
     pos = 0
 
     def err(msg, line=None):
-        return BVHError(path, msg, line if line is not None else (toks[pos][1] if pos < len(toks) else stop))
+        return _error(path, msg, line if line is not None else (toks[pos][1] if pos < len(toks) else stop))
 
     def take(expected=None):
         nonlocal pos
@@ -93,37 +194,30 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
             raise err(f"unexpected end of hierarchy{f', expected {expected!r}' if expected else ''}")
         tok, line = toks[pos]
         if expected is not None and tok.upper() != expected.upper():
-            raise err(f"expected {expected!r}, found {tok!r}", line)
+            raise err(f"expected {expected!r}, found {_q(tok)}", line)
         pos += 1
         return tok, line
 
     def floats(n, what):
-        vals = []
-        for _ in range(n):
-            tok, line = take()
-            try:
-                v = float(tok)
-            except ValueError:
-                raise err(f"non-numeric {what} value {tok!r}", line) from None
-            if not math.isfinite(v):
-                raise err(f"non-finite {what} value {tok!r}", line)
-            vals.append(v)
-        return vals
+        return [_number(tok, what, path, line) for tok, line in (take() for _ in range(n))]
 
-    def name_until_brace():
+    def open_joint(parent: int, kw_line: int) -> int:
+        """Read a joint's name (the rest of its ROOT/JOINT line), OFFSET and CHANNELS."""
         parts = []
-        while pos < len(toks) and toks[pos][0] != "{":
+        while pos < len(toks) and toks[pos][1] == kw_line and toks[pos][0] != "{":
             parts.append(take()[0])
         if not parts:
-            raise err("joint without a name")
-        return " ".join(parts)
-
-    def joint(parent: int):
-        jname = name_until_brace()
-        line = toks[pos][1] if pos < len(toks) else stop
-        if jname in h.names:
-            raise err(f"joint name {jname!r} appears twice", line)
+            raise err("joint without a name", kw_line)
+        jname = " ".join(parts)
+        bad = _CONTROL.search(jname)
+        if bad:
+            raise err(f"joint name {_q(jname)} contains control character U+{ord(bad.group()):04X}", kw_line)
+        if jname in seen:
+            raise err(f"joint name {_q(jname)} appears twice", kw_line)
+        if len(h.names) >= MAX_JOINTS:
+            raise err(f"more than {MAX_JOINTS:,} joints; this is not a skeleton torchsplice can use", kw_line)
         idx = len(h.names)
+        seen.add(jname)
         h.names.append(jname)
         h.parents.append(parent)
         take("{")
@@ -133,46 +227,53 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
         if pos < len(toks) and toks[pos][0].upper() == "CHANNELS":
             take()
             tok, cline = take()
-            if not tok.isdigit():
-                raise err(f"channel count must be an integer, found {tok!r}", cline)
-            for _ in range(int(tok)):
+            if not _COUNT.match(tok):
+                raise err(f"channel count must be a whole number (ASCII digits), found {_q(tok)}", cline)
+            count = int(tok) if len(tok) <= 6 else 10**6
+            if count > len(_CHANNEL_NAMES):
+                raise err(f"joint {_q(jname)} declares {_q(tok)} channels; at most {len(_CHANNEL_NAMES)} exist", cline)
+            for _ in range(count):
                 ctok, cl = take()
                 c = _CHANNEL_NAMES.get(ctok.lower())
                 if c is None:
-                    raise err(f"bad channel name {ctok!r} for joint {jname!r}", cl)
+                    hint = " (CHANNELS count too large?)" if ctok.upper() in ("JOINT", "END", "}") else ""
+                    raise err(f"bad channel name {_q(ctok)} for joint {_q(jname)}{hint}", cl)
                 if c in h.channels[idx]:
-                    raise err(f"channel {c} repeated for joint {jname!r}", cl)
+                    raise err(f"channel {c} repeated for joint {_q(jname)}", cl)
                 h.channels[idx].append(c)
             rot = [c for c in h.channels[idx] if c in ROTATION_CHANNELS]
             if len(rot) not in (0, 3):
-                raise err(f"joint {jname!r} has {len(rot)} rotation channels; 0 or 3 are supported", cline)
-        while True:
-            tok, tline = take()
-            up = tok.upper()
-            if up == "}":
-                return
-            if up == "JOINT":
-                joint(idx)
-            elif up == "END":
-                take("Site")
-                take("{")
-                take("OFFSET")
-                h.end_parents.append(idx)
-                h.end_offsets.append(floats(3, "End Site OFFSET"))
-                take("}")
-            else:
-                raise err(f"unexpected {tok!r} in joint {jname!r}", tline)
+                raise err(f"joint {_q(jname)} has {len(rot)} rotation channels; 0 or 3 are supported", cline)
+        return idx
 
     if not toks or toks[0][0].upper() != "HIERARCHY":
-        raise BVHError(path, "missing HIERARCHY at the start of the file", toks[0][1] if toks else 1)
+        found = f", found {_q(toks[0][0])}" if toks else ""
+        raise _error(path, f"missing HIERARCHY at the start of the file{found}", toks[0][1] if toks else 1)
     take("HIERARCHY")
-    take("ROOT")
-    joint(-1)
+    _, root_line = take("ROOT")
+    stack = [open_joint(-1, root_line)]  # the joints whose '}' is still to come
+    while stack:
+        tok, tline = take()
+        up = tok.upper()
+        if up == "}":
+            stack.pop()
+        elif up == "JOINT":
+            stack.append(open_joint(stack[-1], tline))
+        elif up == "END":
+            take("Site")
+            take("{")
+            take("OFFSET")
+            h.end_parents.append(stack[-1])
+            h.end_offsets.append(floats(3, "End Site OFFSET"))
+            take("}")
+        else:
+            hint = " (CHANNELS count too small?)" if tok.lower() in _CHANNEL_NAMES else ""
+            raise err(f"unexpected {_q(tok)} in joint {_q(h.names[stack[-1]])}{hint}", tline)
     if pos < len(toks):
         tok, line = toks[pos]
         if tok.upper() == "ROOT":
             raise err("more than one ROOT; only single-root skeletons are supported", line)
-        raise err(f"unexpected {tok!r} after the hierarchy", line)
+        raise err(f"unexpected {_q(tok)} after the hierarchy (one '}}' too many?)", line)
     return h
 
 
@@ -180,75 +281,97 @@ def _find_motion(lines: list[str], path) -> tuple[int, int, float, int]:
     """Locate MOTION; return (motion line index, frame count, frame time, first data line index)."""
     motion = next((i for i, l in enumerate(lines) if l.strip().upper() == "MOTION"), None)
     if motion is None:
-        raise BVHError(path, "missing MOTION section (truncated file?)", len(lines))
+        if not any(l.strip() for l in lines):
+            raise _error(path, "empty file")
+        raise _error(path, "missing MOTION section (truncated file?)", len(lines))
     i = motion + 1
 
     def field(i, key):
         while i < len(lines) and not lines[i].strip():
             i += 1
         if i >= len(lines):
-            raise BVHError(path, f"missing '{key}:' line after MOTION (truncated file?)", i)
+            raise _error(path, f"missing '{key}:' line after MOTION (truncated file?)", i)
         text = lines[i].strip()
         k, sep, v = text.partition(":")
-        if not sep or k.strip().lower() != key.lower():
-            raise BVHError(path, f"expected '{key}:', found {text[:40]!r}", i + 1)
+        if not sep or " ".join(k.split()).lower() != key.lower():
+            raise _error(path, f"expected '{key}:', found {_q(text, 50)}", i + 1)
         return i, v.strip()
 
     i, frames = field(i, "Frames")
-    try:
-        n = int(frames)
-    except ValueError:
-        raise BVHError(path, f"frame count is not an integer: {frames!r}", i + 1) from None
+    if not _COUNT.match(frames):
+        raise _error(path, f"frame count must be a whole number (ASCII digits), found {_q(frames)}", i + 1)
+    if len(frames.lstrip("0")) > 12:
+        raise _error(path, f"absurd frame count {_q(frames)}", i + 1)
+    n = int(frames)
     if n <= 0:
-        raise BVHError(path, f"zero frames (Frames: {n})", i + 1)
+        raise _error(path, f"zero frames (Frames: {n})", i + 1)
     i, ft = field(i + 1, "Frame Time")
-    try:
-        dt = float(ft)
-    except ValueError:
-        raise BVHError(path, f"frame time is not a number: {ft!r}", i + 1) from None
-    if not (math.isfinite(dt) and dt > 0):
-        raise BVHError(path, f"frame time must be positive, found {ft!r}", i + 1)
+    if not _NUMBER.match(ft):
+        raise _error(path, f"frame time is not a number: {_q(ft)}", i + 1)
+    dt = float(ft)
+    if not MIN_FRAME_TIME <= dt <= MAX_FRAME_TIME:
+        raise _error(path, f"frame time {_q(ft)} s is outside [{MIN_FRAME_TIME:g}, {MAX_FRAME_TIME:g}] s "
+                           "(1 to 1,000 fps)", i + 1)
     return motion, n, dt, i + 1
 
 
-def _locate_bad_line(lines: list[str], first: int, n_channels: int, path) -> BVHError:
-    """Slow path after a failed vectorised parse: the first offending data line."""
-    for i in range(first, len(lines)):
+def _parse_rows_slowly(lines: list[str], rows: list[int], n_channels: int, path) -> np.ndarray:
+    """Token by token, after a failed vectorised parse: the values, or the first offending line."""
+    data = np.empty((len(rows), n_channels))
+    last_row = rows[-1] if rows else -1
+    for r, i in enumerate(rows):
         parts = lines[i].split()
-        if not parts:
-            continue
         for p in parts:
-            try:
-                float(p)
-            except ValueError:
-                return BVHError(path, f"non-numeric value {p!r} in frame data", i + 1)
+            if not (_NUMBER.match(p) or _NON_FINITE.match(p)):
+                raise _error(path, f"non-numeric value {_q(p)} in frame {r}", i + 1)
         if len(parts) != n_channels:
-            last = all(not l.strip() for l in lines[i + 1:])
-            hint = " (truncated file?)" if last and len(parts) < n_channels else ""
-            return BVHError(path, f"expected {n_channels} values in the frame, found {len(parts)}{hint}", i + 1)
-    return BVHError(path, "frame data could not be parsed", first + 1)
-
-
-def _parse_frames(lines: list[str], first: int, n_frames: int, n_channels: int, path) -> np.ndarray:
-    """The motion block as a ``(n_frames, n_channels)`` float64 array."""
-    data_lines = lines[first:]
-    if n_channels == 0:
-        return np.zeros((n_frames, 0))
-    try:
-        data = np.loadtxt(data_lines, dtype=np.float64, comments=None, ndmin=2)
-    except ValueError:
-        raise _locate_bad_line(lines, first, n_channels, path) from None
-    if data.shape[0] and data.shape[1] != n_channels:
-        raise _locate_bad_line(lines, first, n_channels, path)
-    if data.shape[0] != n_frames:
-        what = "truncated file" if data.shape[0] < n_frames else "extra frame lines"
-        raise BVHError(path, f"{what}: header says {n_frames} frames, found {data.shape[0]}", len(lines))
-    bad = ~np.isfinite(data)
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        nonblank = [i for i in range(first, len(lines)) if lines[i].strip()]
-        raise BVHError(path, f"{data[r, c]} value in frame {r} (channel {c})", nonblank[r] + 1)
+            cut = i == last_row and len(parts) < n_channels and not any(l.strip() for l in lines[i + 1:])
+            hint = " (truncated file?)" if cut else ""
+            raise _error(path, f"expected {n_channels} values in the frame, found {len(parts)}{hint}", i + 1)
+        data[r] = [float(p) for p in parts]
     return data
+
+
+def _parse_frames(lines: list[str], first: int, n_frames: int, labels: list[str], path):
+    """The declared frames as a ``(n_frames, C)`` float64 array, with the number of non-blank
+    lines after them and the line number of the first (``0, None`` when there are none).
+
+    ``labels`` names the ``C`` channel columns (``"joint channel"``) for messages. The frame
+    count is never used to allocate: a file that declares more frames than it holds is
+    refused once its lines run out.
+    """
+    n_channels = len(labels)
+    if n_channels == 0:
+        raise _error(path, "no joint has CHANNELS, so the frames hold nothing to animate", first)
+    rows, i, L = [], first, len(lines)
+    while i < L and len(rows) < n_frames:
+        if lines[i].strip():
+            rows.append(i)
+        i += 1
+    if not rows:
+        raise _error(path, f"truncated file: header says {n_frames} frames, found 0", L)
+    data = None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = np.loadtxt([lines[j] for j in rows], dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        pass
+    if data is None or data.shape != (len(rows), n_channels):
+        data = _parse_rows_slowly(lines, rows, n_channels, path)
+    if len(rows) < n_frames:
+        raise _error(path, f"truncated file: header says {n_frames} frames, found {len(rows)}", L)
+    finite = np.isfinite(data)
+    bad = ~finite | (np.abs(np.where(finite, data, 0.0)) > MAX_ABS_VALUE)
+    if bad.any():
+        r, c = (int(v) for v in np.argwhere(bad)[0])
+        parts = lines[rows[r]].split()
+        token = parts[c] if c < len(parts) else str(data[r, c])
+        what = f"non-finite value {_q(token)}" if not finite[r, c] else \
+            f"absurd value {_q(token)} (beyond {MAX_ABS_VALUE:g})"
+        raise _error(path, f"{what} in frame {r} (channel {c}: {_q(labels[c], 50)})", rows[r] + 1)
+    extra = [j for j in range(i, L) if lines[j].strip()]
+    return data, len(extra), (extra[0] + 1 if extra else None)
 
 
 def _columns(channels: list[list[str]]):
@@ -261,12 +384,26 @@ def _columns(channels: list[list[str]]):
 
 
 def parse_bvh(text: str, path="<string>", dtype: torch.dtype = torch.float32, name: str = "") -> Motion:
-    """Parse BVH text into a :class:`Motion`; ``path`` is only used in error messages."""
-    lines = text.splitlines()
+    """Parse BVH text into a :class:`Motion`; ``path`` is only used in messages.
+
+    ``text`` may also be the file's bytes (decoded as :func:`read_bvh` does). Raises
+    :class:`BVHError`; warns with :class:`BVHWarning` when lines after the declared frames
+    are ignored (once the rest of the file has been read without error).
+    """
+    if isinstance(text, (bytes, bytearray)):
+        text = _decode(bytes(text))
+    if not isinstance(text, str):
+        raise TypeError(f"parse_bvh: text must be a str or bytes, got {type(text).__name__}")
+    if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+        raise TypeError(f"parse_bvh: dtype must be a floating torch.dtype, got {dtype!r}")
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    lines = _split_lines(text)
     motion_line, n_frames, dt, first = _find_motion(lines, path)
     h = _parse_hierarchy(lines, motion_line, path)
     cols, n_channels = _columns(h.channels)
-    data = _parse_frames(lines, first, n_frames, n_channels, path)
+    labels = [f"{jn} {c}" for jn, ch in zip(h.names, h.channels) for c in ch]
+    data, n_extra, extra_line = _parse_frames(lines, first, n_frames, labels, path)
 
     J = len(h.names)
     offsets = torch.tensor(h.offsets, dtype=torch.float64)
@@ -293,16 +430,19 @@ def parse_bvh(text: str, path="<string>", dtype: torch.dtype = torch.float32, na
         bad = ~np.isclose(data[:, [c for _, _, c in scale_cols]], 1.0, atol=1e-6).all(axis=0)
         if bad.any():
             j, a, _ = scale_cols[int(np.argmax(bad))]
-            raise BVHError(path, f"joint {h.names[j]!r} has non-unit {a}scale values; scaling is not supported")
+            raise _error(path, f"joint {_q(h.names[j])} has non-unit {a}scale values; scaling is not supported")
 
     channels = [[c for c in ch if c not in _SCALE_CHANNELS] for ch in h.channels]
     try:
         skeleton = Skeleton(h.names, h.parents, offsets, channels, h.end_parents, h.end_offsets)
     except ValueError as exc:
-        raise BVHError(path, str(exc)) from None
+        raise _error(path, str(exc)) from None
     fps = 1.0 / dt
     if abs(fps - round(fps)) <= 1e-4 * fps:
         fps = float(round(fps))
+    if n_extra:
+        warnings.warn(BVHWarning(path, f"{n_extra} line{'s' if n_extra > 1 else ''} after the declared "
+                                       f"{n_frames} frames ignored", extra_line), stacklevel=2)
     return Motion(
         skeleton=skeleton,
         rotations=rot.to(dtype),
@@ -338,24 +478,27 @@ def _hierarchy_text(sk: Skeleton) -> str:
         items[j] += [(e, 0, e) for e in ends[j]]
         items[j].sort()
     out = ["HIERARCHY"]
-
-    def emit(j, depth):
+    offsets, end_offsets = sk.offsets.tolist(), sk.end_site_offsets.tolist()
+    # iterative depth-first walk (a chain of thousands of joints must not hit the recursion limit):
+    # ("open", joint, depth) writes a joint's head and queues its items, then ("close", ...) its '}'
+    todo = [("open", 0, 0)]
+    while todo:
+        what, j, depth = todo.pop()
         ind = "\t" * depth
+        if what == "close":
+            out.append(f"{ind}}}")
+            continue
+        if what == "end":
+            out.extend([f"{ind}End Site", f"{ind}{{",
+                        f"{ind}\tOFFSET " + " ".join(_fmt(v) for v in end_offsets[j]), f"{ind}}}"])
+            continue
         out.append(f"{ind}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(f"{ind}{{")
-        out.append(f"{ind}\tOFFSET " + " ".join(_fmt(v) for v in sk.offsets[j].tolist()))
+        out.append(f"{ind}\tOFFSET " + " ".join(_fmt(v) for v in offsets[j]))
         if sk.channels[j]:
             out.append(f"{ind}\tCHANNELS {len(sk.channels[j])} " + " ".join(sk.channels[j]))
-        for _, kind, k in items[j]:
-            if kind == 1:
-                emit(k, depth + 1)
-            else:
-                out.extend([f"{ind}\tEnd Site", f"{ind}\t{{",
-                            f"{ind}\t\tOFFSET " + " ".join(_fmt(v) for v in sk.end_site_offsets[k].tolist()),
-                            f"{ind}\t}}"])
-        out.append(f"{ind}}}")
-
-    emit(0, 0)
+        todo.append(("close", j, depth))
+        todo.extend(("open" if kind == 1 else "end", k, depth + 1) for _, kind, k in reversed(items[j]))
     return "\n".join(out)
 
 
@@ -384,14 +527,15 @@ def _frame_columns(motion: Motion) -> np.ndarray:
             for k, a in enumerate(order):
                 out[:, cols[j][f"{a}rotation"]] = eul[:, k]
         elif (rot[:, j] @ identity).abs().min() < 1 - 1e-6:
-            raise MotionError(f"clip {motion.name!r}: joint {sk.names[j]!r} rotates but has no rotation channels")
+            raise MotionError(f"clip {_q(motion.name)}: joint {_q(sk.names[j])} rotates but has no rotation channels")
         for axis, a in enumerate("XYZ"):
             c = cols[j].get(f"{a}position")
             if c is not None:
                 out[:, c] = trans[:, j, axis].numpy()
             elif (trans[:, j, axis] - sk.offsets[j, axis]).abs().max() > 1e-5 * max(sk.size(), 1.0):
                 raise MotionError(
-                    f"clip {motion.name!r}: joint {sk.names[j]!r} translates along {a} but has no {a}position channel"
+                    f"clip {_q(motion.name)}: joint {_q(sk.names[j])} translates along {a} but has no "
+                    f"{a}position channel"
                 )
     return out
 
@@ -400,11 +544,22 @@ def format_bvh(motion: Motion) -> str:
     """The clip as BVH text (channel layout and Euler orders from its skeleton).
 
     The skeleton must be in depth-first order (every skeleton read from BVH is), since BVH
-    nesting cannot express any other joint order.
+    nesting cannot express any other joint order. Raises :class:`MotionError` (one line naming
+    the clip) for what :func:`read_bvh` would refuse: non-finite values (naming the first bad
+    frame), values beyond 1e12, fps outside 1 to 1,000, joint names that would not read back.
     """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"format_bvh: motion must be a Motion, got {type(motion).__name__}")
+    _check_writable(motion)
     if not motion.skeleton.is_depth_first:
-        raise MotionError(f"clip {motion.name!r}: skeleton joints are not in depth-first order, which BVH cannot keep")
+        raise MotionError(f"clip {_q(motion.name)}: skeleton joints are not in depth-first order, "
+                          "which BVH cannot keep")
     data = _frame_columns(motion)
+    bad = ~np.isfinite(data) | (np.abs(np.nan_to_num(data)) > MAX_ABS_VALUE)
+    if bad.any():
+        f = int(np.argwhere(bad)[0][0])
+        raise MotionError(f"clip {_q(motion.name)}: frame {f} gives a non-finite or absurd (beyond "
+                          f"{MAX_ABS_VALUE:g}) channel value; nothing written")
     buf = io.StringIO()
     buf.write(_hierarchy_text(motion.skeleton))
     buf.write(f"\nMOTION\nFrames: {motion.num_frames}\nFrame Time: {1.0 / motion.fps:.7f}\n")
@@ -412,8 +567,48 @@ def format_bvh(motion: Motion) -> str:
     return buf.getvalue()
 
 
+def _check_writable(motion: Motion) -> None:
+    """Refuse (:class:`MotionError`) a clip whose BVH text :func:`read_bvh` would refuse."""
+    clip = f"clip {_q(motion.name)}"
+    if motion.num_frames == 0:
+        raise MotionError(f"{clip}: no frames; BVH needs at least one")
+    fps = motion.fps
+    if not (math.isfinite(fps) and MIN_FRAME_TIME <= float(f"{1.0 / fps:.7f}") <= MAX_FRAME_TIME):
+        raise MotionError(f"{clip}: fps {fps:g} is outside 1 to 1,000, which BVH readers refuse; nothing written")
+    for what, t in (("rotation", motion.rotations), ("root translation", motion.root_translation),
+                    ("translation", motion.translations)):
+        if t is None:
+            continue
+        bad = ~torch.isfinite(t.detach().reshape(t.shape[0], -1)).all(dim=1)
+        if bool(bad.any()):
+            raise MotionError(f"{clip}: non-finite {what} value at frame {int(bad.nonzero()[0])}; nothing written")
+    sk = motion.skeleton
+    for what, t, owners in (("OFFSET", sk.offsets, sk.names),
+                            ("End Site OFFSET", sk.end_site_offsets, [sk.names[p] for p in sk.end_site_parents])):
+        bad = ~torch.isfinite(t).all(dim=1) | (t.abs() > MAX_ABS_VALUE).any(dim=1)
+        if bool(bad.any()):
+            j = int(bad.nonzero()[0])
+            raise MotionError(f"{clip}: {what} of joint {_q(owners[j])} is non-finite or absurd; nothing written")
+    for jname in sk.names:
+        toks = jname.split()
+        if not toks or " ".join(toks) != jname or "{" in toks or _CONTROL.search(jname):
+            raise MotionError(f"{clip}: joint name {_q(jname)} would not read back from BVH (empty, control "
+                              "characters, a '{' word or stray whitespace); nothing written")
+
+
 def write_bvh(motion: Motion, path) -> None:
-    """Write the clip to ``path`` atomically (a partial file never replaces a good one)."""
+    """Write the clip to ``path`` atomically (a partial file never replaces a good one).
+
+    Raises ``TypeError`` for arguments of the wrong type (e.g. ``write_bvh(path, motion)``)
+    and :class:`MotionError` for a clip BVH cannot hold (see :func:`format_bvh`); nothing is
+    written then.
+    """
+    if not isinstance(motion, Motion):
+        swapped = isinstance(path, Motion) and isinstance(motion, (str, os.PathLike))
+        raise TypeError("write_bvh(motion, path): the arguments are swapped; pass the Motion first" if swapped
+                        else f"write_bvh(motion, path): motion must be a Motion, got {type(motion).__name__}")
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"write_bvh(motion, path): path must be a str or os.PathLike, got {type(path).__name__}")
     text = format_bvh(motion)
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text)

@@ -4,7 +4,8 @@ Layout (schema version 1; readable with plain h5py, see ``datasets_spec/README.m
 project README for a ten-line example)::
 
     /                       attrs: format="torchsplice.motiondb", schema_version=1,
-                                   quaternion_order="wxyz", units, up_axis, created_by
+                                   quaternion_order="wxyz", units, up_axis (those of the
+                                   skeletons, or "mixed" where they differ), created_by
     /skeletons/<k>/         one group per skeleton k = 0, 1, ...
         names               (J,) str      joint names, topological order
         parents             (J,) int32    parent index, -1 for the root
@@ -39,9 +40,13 @@ complete at the target path.
 from __future__ import annotations
 
 import difflib
+import errno
+import functools
+import inspect
 import json
 import os
 import shutil
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -55,7 +60,7 @@ from ..core.errors import DatabaseError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
-from .lock import host_pid
+from .lock import host_pid, output_lock
 
 __all__ = ["MotionDatabase", "ClipBatch", "SCHEMA_VERSION", "FORMAT", "COMPRESSIONS"]
 
@@ -67,7 +72,52 @@ _COLUMNS = {  # name: (dtype, numpy fill for an empty table)
     "skeleton": np.int32, "start": np.int64, "length": np.int64, "fps": np.float64,
 }
 _FLUSH_FRAMES = 1 << 16
+MIXED = "mixed"  # the file's units or up axis when its skeletons differ in them
+_SPACE_MARGIN = 4 << 20  # bytes kept free beyond each write, for HDF5's caches and metadata
 COMPRESSIONS = ("gzip", "lzf", "auto", None)
+
+
+def _io_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` is HDF5 failing to write the file (a full disk, an I/O error), not a bug."""
+    if isinstance(exc, OSError):
+        return True
+    text = str(exc)
+    return isinstance(exc, RuntimeError) and ("write failed" in text or "errno" in text or "flush" in text)
+
+
+def _no_space(exc: BaseException) -> bool:
+    text = str(exc)
+    return getattr(exc, "errno", None) == errno.ENOSPC or "No space left" in text or "errno = 28" in text
+
+
+def _mb(n: float) -> str:
+    return f"{n / 1e6:,.1f} MB" if n < 1e9 else f"{n / 1e9:,.2f} GB"
+
+
+def _guarded(method):
+    """Make a write method of :class:`MotionDatabase` fail cleanly when the file cannot be written.
+
+    HDF5 cannot carry on after a failed write (a full disk leaves its metadata cache dirty, and
+    closing the file later crashes the process), so the write in progress is discarded at once
+    (:meth:`MotionDatabase.abort`) and one :class:`DatabaseError` line says what happened.
+    """
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except (OSError, RuntimeError) as exc:
+            if not _io_failure(exc) or self._tmp is None:
+                raise
+            raise DatabaseError(self._write_failed(exc)) from None
+    return wrapper
+
+
+def _writer_lock(path: Path):
+    """Take the lock that lets one writer at a time at ``path`` (refused at once otherwise)."""
+    import shlex
+    import sys
+
+    return output_lock(path, shlex.join(sys.argv)[:300]).acquire()
 
 
 def _dataset_compression(policy: str | None, dataset: str) -> str | None:
@@ -124,15 +174,222 @@ def _skeleton_to_group(g: h5py.Group, sk: Skeleton) -> None:
     g["end_site_offsets"] = sk.end_site_offsets.numpy().reshape(-1, 3)
 
 
-def _skeleton_from_group(g: h5py.Group) -> Skeleton:
-    return Skeleton(
-        names=[s for s in g["names"].asstr()[()]],
-        parents=g["parents"][()].tolist(),
-        offsets=torch.from_numpy(g["offsets"][()]),
-        channels=[c.split() for c in g["channels"].asstr()[()]],
-        end_site_parents=g["end_site_parents"][()].tolist(),
-        end_site_offsets=torch.from_numpy(g["end_site_offsets"][()]),
-    )
+class _Damage(Exception):
+    """What is wrong with a database file's structure (one line, without the file's name)."""
+
+
+def _cap(value, n: int = 40) -> str:
+    """A value quoted for a one-line message: on one line, cut after ``n`` characters."""
+    if isinstance(value, bytes):
+        value = value.decode(errors="replace")
+    text = " ".join(str(value).split())
+    return repr(text if len(text) <= n else text[:n] + "...")
+
+
+def _short(exc: BaseException, n: int = 120) -> str:
+    """The first line of an exception's message, at most ``n`` characters."""
+    text = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    return text if len(text) <= n else text[:n] + "..."
+
+
+def _dataset(g: h5py.Group, name: str, where: str, shape: tuple | None = None, kind: str = "") -> h5py.Dataset:
+    """``g[name]``, checked: a dataset, of ``shape`` (``None`` entries: any size) and dtype
+    ``kind`` (numpy kind letters, or ``"str"``); raises :class:`_Damage` otherwise."""
+    obj = g.get(name)
+    if obj is None:
+        raise _Damage(f"{where}/{name} is missing")
+    if not isinstance(obj, h5py.Dataset):
+        raise _Damage(f"{where}/{name} is not a dataset")
+    if shape is not None and (len(obj.shape) != len(shape) or any(w is not None and s != w for s, w in zip(obj.shape, shape))):
+        want = "(" + ", ".join("N" if w is None else str(w) for w in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise _Damage(f"{where}/{name} has shape {obj.shape}, expected {want}")
+    if kind == "str" and h5py.check_string_dtype(obj.dtype) is None:
+        raise _Damage(f"{where}/{name} holds {obj.dtype}, not text")
+    if kind and kind != "str" and obj.dtype.kind not in kind:
+        raise _Damage(f"{where}/{name} holds {obj.dtype}, expected {'whole numbers' if kind == 'iu' else 'numbers'}")
+    return obj
+
+
+def _skeleton_from_group(g: h5py.Group, where: str = "skeleton") -> Skeleton:
+    """The skeleton stored in ``g``; :class:`_Damage` says what is wrong if it cannot be one."""
+    names = _dataset(g, "names", where, (None,), "str")
+    J = names.shape[0]
+    E = _dataset(g, "end_site_parents", where, (None,), "iu").shape[0]
+    offsets = _dataset(g, "offsets", where, (J, 3), "fiu")[()].astype(np.float64)
+    ends = _dataset(g, "end_site_offsets", where, (E, 3) if E else None, "fiu")[()].astype(np.float64).reshape(-1, 3)
+    if not (np.isfinite(offsets).all() and np.isfinite(ends).all()):
+        raise _Damage(f"{where} has non-finite offsets")
+    try:
+        return Skeleton(
+            names=[s for s in names.asstr()[()]],
+            parents=_dataset(g, "parents", where, (J,), "iu")[()].tolist(),
+            offsets=torch.from_numpy(offsets),
+            channels=[c.split() for c in _dataset(g, "channels", where, (J,), "str").asstr()[()]],
+            end_site_parents=g["end_site_parents"][()].tolist(),
+            end_site_offsets=torch.from_numpy(ends),
+        )
+    except ValueError as exc:  # Skeleton's own checks: channels, parents, roots, End Sites
+        raise _Damage(f"{where}: {_short(exc, 160)}") from None
+
+
+def _whole_number(v) -> int | None:
+    """An attribute's value as an int, or ``None`` when it is not one whole number."""
+    if isinstance(v, bytes):
+        v = v.decode(errors="replace")
+    if isinstance(v, str):
+        v = v.strip()
+        return int(v) if v.lstrip("+-").isdigit() and v.isascii() else None
+    if np.ndim(v) != 0 or isinstance(v, (bool, np.bool_)):
+        return None
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)) and float(v).is_integer():
+        return int(v)
+    return None
+
+
+def _text_attr(attrs, key: str, where: str) -> str:
+    """A text attribute (``""`` when absent)."""
+    v = attrs.get(key, "")
+    if isinstance(v, bytes):
+        v = v.decode(errors="replace")
+    if not isinstance(v, str):
+        raise _Damage(f"{where}{key} is not text ({_cap(v)})")
+    return v
+
+
+def _extra_columns(attrs) -> tuple[dict[str, str], tuple[str, ...]]:
+    """The declared extra columns ``(clip name -> kind, frame names)`` of the root attribute."""
+    text = _text_attr(attrs, "extra_columns", "")
+    try:
+        extra = json.loads(text or "{}")
+    except ValueError:
+        raise _Damage(f"extra_columns is not valid JSON ({_cap(text)})") from None
+    clip = extra.get("clip", {}) if isinstance(extra, dict) else None
+    frame = extra.get("frame", []) if isinstance(extra, dict) else None
+    if not isinstance(clip, dict) or not isinstance(frame, list):
+        raise _Damage(f"extra_columns is not an object of clip columns and frame columns ({_cap(text)})")
+    reserved = (*_COLUMNS, "rotations", "root_translation", "translations")
+    for name, kind in clip.items():
+        if kind not in _KINDS or name in reserved or not name.isidentifier():
+            raise _Damage(f"extra_columns declares clip column {_cap(name)} of kind {_cap(kind)} "
+                          f"(a column needs a new name and a kind of {', '.join(_KINDS)})")
+    for name in frame:
+        if not isinstance(name, str) or name in reserved or not name.isidentifier() or frame.count(name) > 1:
+            raise _Damage(f"extra_columns declares a bad frame column {_cap(name)}")
+    return dict(clip), tuple(frame)
+
+
+def _check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
+    """Check a database's structure without reading its frames; returns its skeletons.
+
+    Shapes and dtypes of every dataset, attributes, JSON, and the clip table's index ranges
+    (vectorised: a 100,000-clip file opens in milliseconds). Raises :class:`_Damage` naming
+    the first problem.
+    """
+    if mode == "a":
+        if (_whole_number(h5.attrs.get("chunk_frames")) or 0) < 1:
+            raise _Damage(f"chunk_frames is not a positive whole number ({_cap(h5.attrs.get('chunk_frames'))})")
+        comp = _text_attr(h5.attrs, "compression", "")
+        if comp and comp not in COMPRESSIONS:
+            raise _Damage(f"compression {_cap(comp)} is not one of {', '.join(c for c in COMPRESSIONS if c)}")
+    columns, frame_columns = _extra_columns(h5.attrs)
+    for group in ("skeletons", "clips"):
+        if not isinstance(h5.get(group), h5py.Group):
+            raise _Damage(f"the {group} group is missing")
+    keys = list(h5["skeletons"])
+    if sorted(keys, key=lambda k: (len(k), k)) != [str(k) for k in range(len(keys))]:
+        raise _Damage(f"skeletons holds {_cap(', '.join(keys))}, expected groups 0..{len(keys) - 1}")
+    skeletons, frames = [], []
+    for k in range(len(keys)):
+        where = f"skeletons/{k}"
+        g = h5[where]
+        if not isinstance(g, h5py.Group):
+            raise _Damage(f"{where} is not a group")
+        sk = _skeleton_from_group(g, where)
+        spec = _text_attr(g.attrs, "spec", f"{where} ")
+        if spec.strip():
+            try:
+                ok = isinstance(json.loads(spec), dict)
+            except ValueError:
+                ok = False
+            if not ok:
+                raise _Damage(f"{where} spec is not valid JSON ({_cap(spec)})")
+        J = sk.num_joints
+        rot = _dataset(g, "rotations", where, (None, J, 4), "f")
+        N = rot.shape[0]
+        if rot.is_virtual and not os.environ.get("HDF5_VDS_PREFIX"):  # a missing source reads as NaN, silently
+            folder = Path(h5.filename).resolve().parent
+            for src in sorted({vs.file_name for vs in rot.virtual_sources()} - {"."}):
+                if not (folder / src).is_file():
+                    raise _Damage(f"the frames of {where} are in {_cap(src, 80)}, which is missing "
+                                  "(keep the shards folder beside the database)")
+        _dataset(g, "root_translation", where, (N, 3), "f")
+        if "translations" in g or sk.has_joint_translations:
+            _dataset(g, "translations", where, (N, J, 3), "f")
+        for name in frame_columns:
+            _dataset(g, name, where, (N,), "f")
+        skeletons.append(sk)
+        frames.append(N)
+    c = h5["clips"]
+    C = _dataset(c, "name", "clips", (None,), "str").shape[0]
+    kinds = {"str": "str", "int": "iu", "float": "fiu"}
+    for name, kind in [("name", "str"), ("source", "str"), ("role", "str"), ("labels", "str"), ("skeleton", "int"),
+                       ("start", "int"), ("length", "int"), ("fps", "float"), *columns.items()]:
+        ds = _dataset(c, name, "clips", (None,), kinds[kind])
+        if ds.shape[0] != C:
+            raise _Damage(f"clips/{name} has {ds.shape[0]} rows, clips/name {C}")
+    if C == 0:
+        return skeletons
+    sk, start, length, fps = (c[n][()] for n in ("skeleton", "start", "length", "fps"))
+
+    def clip(i: int) -> str:
+        try:
+            return f"clip {_cap(c['name'].asstr()[i])}"
+        except (OSError, ValueError):
+            return f"clip row {i}"
+
+    def first(bad: np.ndarray) -> int | None:
+        hits = np.flatnonzero(bad)
+        return int(hits[0]) if hits.size else None
+
+    K = len(skeletons)
+    if (i := first((sk < 0) | (sk >= K))) is not None:
+        have = f"the file has skeletons 0..{K - 1}" if K > 1 else "the file has only skeleton 0" if K else "the file has none"
+        raise _Damage(f"{clip(i)} points at skeleton {int(sk[i])}; {have}")
+    if (i := first(start < 0)) is not None:
+        raise _Damage(f"{clip(i)} starts at row {int(start[i])} of skeleton {int(sk[i])}")
+    if (i := first(length < 0)) is not None:
+        raise _Damage(f"{clip(i)} has {int(length[i])} frames")
+    rows = np.asarray(frames, dtype=np.int64)[sk.astype(np.int64)]
+    if (i := first(start.astype(np.int64) + length.astype(np.int64) > rows)) is not None:
+        raise _Damage(f"{clip(i)} ends at row {int(start[i]) + int(length[i])} of skeleton {int(sk[i])}, "
+                      f"which has {int(rows[i])} frames")
+    if (i := first(~(np.isfinite(fps) & (fps > 0)))) is not None:
+        raise _Damage(f"{clip(i)} has fps {float(fps[i]):g}")
+    return skeletons
+
+
+def _reads(method):
+    """Make a read method of :class:`MotionDatabase` turn HDF5's ``OSError`` (a damaged file:
+    a chunk that does not decompress, a truncated file) into one :class:`DatabaseError` line
+    naming the file; reads of frames name the clip too (:meth:`MotionDatabase._frames`)."""
+    if inspect.isgeneratorfunction(method):
+        @functools.wraps(method)
+        def generator(self, *args, **kwargs):
+            try:
+                yield from method(self, *args, **kwargs)
+            except OSError as exc:
+                raise self._unreadable(exc, "the file") from None
+        return generator
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except OSError as exc:
+            raise self._unreadable(exc, "the file") from None
+    return wrapper
 
 
 def _json_value(v):
@@ -160,15 +417,16 @@ class MotionDatabase:
     file appears at its path); leaving it by an exception discards the write.
     """
 
-    def __init__(self, path: Path, h5: h5py.File, mode: str, tmp: Path | None, dtype):
+    def __init__(self, path: Path, h5: h5py.File, mode: str, tmp: Path | None, dtype, skeletons: list | None = None):
         self.path, self._h5, self.mode, self._tmp, self._dtype = path, h5, mode, tmp, dtype
-        self._skeletons = [_skeleton_from_group(h5["skeletons"][k]) for k in sorted(h5["skeletons"], key=int)]
+        self._lock = None
+        self._skeletons = skeletons if skeletons is not None else [_skeleton_from_group(h5["skeletons"][k]) for k in sorted(h5["skeletons"], key=int)]
         self._names: list[str] | None = None
         self._name_index: dict[str, int] | None = None
         self._flushed = h5["clips/name"].shape[0]
-        extra = json.loads(str(h5.attrs.get("extra_columns", "")) or "{}")
-        self.columns: dict[str, str] = dict(extra.get("clip", {}))
-        self.frame_columns: tuple[str, ...] = tuple(extra.get("frame", ()))
+        columns, frame_columns = _extra_columns(h5.attrs)
+        self.columns: dict[str, str] = columns
+        self.frame_columns: tuple[str, ...] = frame_columns
         self._staged: list[tuple] = []
         self._staged_frames = 0
         self._skeleton_ids: dict[int, tuple[Skeleton, int]] = {}  # id -> (object kept alive, row)
@@ -198,10 +456,14 @@ class MotionDatabase:
         if compression not in COMPRESSIONS:
             raise ValueError(f"compression must be one of {COMPRESSIONS}, got {compression!r}")
         path = Path(path)
-        if path.exists() and not overwrite:
-            raise DatabaseError(f"{path}: already exists (use --force to overwrite)")
         if not path.parent.exists():
             raise DatabaseError(f"{path}: folder {path.parent} does not exist")
+        if path.is_dir():
+            raise DatabaseError(f"{path}: is a folder; give the database a file name ending in .h5")
+        lock = _writer_lock(path)
+        if path.exists() and not overwrite:
+            lock.release()
+            raise DatabaseError(f"{path}: already exists (use --force to overwrite)")
         tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
         try:
             h5 = h5py.File(tmp, "w")
@@ -219,14 +481,20 @@ class MotionDatabase:
                 clips.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dt, chunks=(4096,))
         except OSError as exc:
             tmp.unlink(missing_ok=True)
+            lock.release()
             raise DatabaseError(os_error_message(path, exc)) from None
-        return cls(path, h5, "w", tmp, np.dtype(dtype))
+        db = cls(path, h5, "w", tmp, np.dtype(dtype))
+        db._lock = lock
+        return db
 
     @classmethod
     def open(cls, path, mode: str = "r") -> "MotionDatabase":
         """Open an existing database, ``mode`` ``"r"`` (read) or ``"a"`` (append).
 
-        Appending works on a copy beside the file that replaces it on a clean close.
+        Appending works on a copy beside the file that replaces it on a clean close. The file's
+        structure is checked first (attributes, shapes, dtypes, JSON, the clip table's ranges;
+        not the frames, whose damaged chunks are reported by the reads that meet them): a
+        damaged file is one :class:`DatabaseError` naming it and its first problem.
         """
         path = Path(path)
         if mode not in ("r", "a"):
@@ -236,34 +504,60 @@ class MotionDatabase:
         if not h5py.is_hdf5(path):
             raise DatabaseError(f"{path}: not an HDF5 file")
         tmp = None
+        lock = _writer_lock(path) if mode == "a" else None
         try:
             if mode == "a":
                 tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
+                free = shutil.disk_usage(path.parent).free
+                if free < path.stat().st_size + _SPACE_MARGIN:
+                    raise DatabaseError(f"{path}: no space left on the device to append: appending works on a copy "
+                                        f"of {_mb(path.stat().st_size)} and {path.parent} has {_mb(free)} free")
                 shutil.copyfile(path, tmp)
             h5 = h5py.File(tmp or path, "r+" if mode == "a" else "r")
-        except OSError as exc:
+        except (OSError, DatabaseError) as exc:
             if tmp is not None:
                 tmp.unlink(missing_ok=True)
+            if lock is not None:
+                lock.release()
+            if isinstance(exc, DatabaseError):
+                raise
             raise DatabaseError(os_error_message(path, exc)) from None
         try:
-            cls._check_header(path, h5)
+            skeletons = cls._check_header(path, h5, mode)
         except DatabaseError:
             h5.close()
             if tmp is not None:
                 tmp.unlink(missing_ok=True)
+            if lock is not None:
+                lock.release()
             raise
         dtype = h5["skeletons/0/rotations"].dtype if "0" in h5["skeletons"] else np.dtype(np.float32)
-        return cls(path, h5, mode, tmp, dtype)
+        db = cls(path, h5, mode, tmp, dtype, skeletons)
+        db._lock = lock
+        return db
 
     @staticmethod
-    def _check_header(path: Path, h5: h5py.File) -> None:
-        if h5.attrs.get("format") != FORMAT:
+    def _check_header(path: Path, h5: h5py.File, mode: str = "r") -> list[Skeleton]:
+        """Check the file's format, version and structure (see :func:`_check_structure`); returns
+        its skeletons, or raises one :class:`DatabaseError` line naming the file and the first problem."""
+        fmt = h5.attrs.get("format")
+        if not isinstance(fmt, (str, bytes)) or (fmt.decode(errors="replace") if isinstance(fmt, bytes) else fmt) != FORMAT:
             raise DatabaseError(f"{path}: not a torchsplice motion database (no format attribute {FORMAT!r})")
-        version = int(h5.attrs.get("schema_version", -1))
+        raw = h5.attrs.get("schema_version")
+        version = _whole_number(raw) if raw is not None else None
+        if version is None:
+            have = "no schema_version attribute" if raw is None else f"schema_version is not a whole number ({_cap(raw)})"
+            raise DatabaseError(f"{path}: damaged database: {have}")
         if version > SCHEMA_VERSION:
             raise DatabaseError(f"{path}: schema version {version} is newer than this torchsplice reads ({SCHEMA_VERSION}); upgrade torchsplice")
-        if version < 1 or "skeletons" not in h5 or "clips" not in h5:
-            raise DatabaseError(f"{path}: damaged database (schema version {version}, missing groups)")
+        if version < 1:
+            raise DatabaseError(f"{path}: damaged database: schema version {version}")
+        try:
+            return _check_structure(h5, mode)
+        except _Damage as exc:
+            raise DatabaseError(f"{path}: damaged database: {exc}") from None
+        except (OSError, KeyError, TypeError, ValueError, IndexError, AttributeError, RuntimeError) as exc:
+            raise DatabaseError(f"{path}: damaged database: cannot read its structure ({_short(exc)})") from None
 
     def close(self) -> None:
         """Commit (for a write) and close. Safe to call twice."""
@@ -279,15 +573,26 @@ class MotionDatabase:
             self._h5.close()
             self._h5 = None
             os.replace(self._tmp, self.path)
-        except OSError as exc:
+            self._unlock()
+        except DatabaseError:
             self.abort()
-            raise DatabaseError(os_error_message(self.path, exc)) from None
+            raise
+        except (OSError, RuntimeError) as exc:
+            if not _io_failure(exc):
+                self.abort()
+                raise
+            raise DatabaseError(self._write_failed(exc)) from None
         except BaseException:
             self.abort()
             raise
 
     def abort(self) -> None:
         """Discard a write in progress: the file at ``path`` stays as it was."""
+        if self._h5 is not None and self._tmp is not None:
+            try:  # free the space first: closing flushes HDF5's cache, which needs room on the disk
+                os.truncate(self._tmp, 0)
+            except OSError:
+                pass
         if self._h5 is not None:
             try:
                 self._h5.close()
@@ -296,6 +601,48 @@ class MotionDatabase:
             self._h5 = None
         if self._tmp is not None:
             self._tmp.unlink(missing_ok=True)
+        self._unlock()
+
+    def _unlock(self) -> None:
+        lock, self._lock = getattr(self, "_lock", None), None
+        if lock is not None:
+            lock.release()
+
+    def _reserve(self, nbytes: int) -> None:
+        """Refuse to write ``nbytes`` (uncompressed) where the disk has no room for them.
+
+        HDF5 reports a full disk only while it frees its objects, where the error cannot be
+        caught and the process later crashes; so the room is checked before every write, with
+        a margin for the data HDF5 still holds in its caches (``_SPACE_MARGIN``).
+        """
+        if self._tmp is None:
+            return
+        try:
+            free = shutil.disk_usage(self._tmp.parent).free
+        except OSError:
+            return
+        if free < nbytes + _SPACE_MARGIN:
+            raise DatabaseError(self._write_failed(OSError(errno.ENOSPC, "No space left on device"), nbytes))
+
+    def _write_failed(self, exc: BaseException, pending: int = 0) -> str:
+        """Discard the write after ``exc`` and return the line that says so."""
+        try:
+            written = self._tmp.stat().st_size if self._tmp is not None else 0
+        except OSError:
+            written = 0
+        pending = pending or self._staged_bytes()
+        self.abort()
+        if not _no_space(exc):
+            return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({str(exc).splitlines()[0][:120]})"
+        folder = self.path.parent.resolve()
+        free = shutil.disk_usage(folder).free
+        return (f"{self.path}: no space left on the device; the database needs more than {_mb(written + pending)} "
+                f"and {folder} has {_mb(free)} free (nothing was written; free some space and run the command again)")
+
+    def _staged_bytes(self) -> int:
+        """Uncompressed bytes of the clips waiting in the buffer (an upper bound of their size)."""
+        size = self._dtype.itemsize
+        return sum(m.num_frames * (7 * m.skeleton.num_joints + 3 + len(self.frame_columns)) * size for m, *_ in self._staged)
 
     def __enter__(self) -> "MotionDatabase":
         return self
@@ -338,7 +685,52 @@ class MotionDatabase:
         """The dataset spec (JSON) stored with skeleton ``k``, or ``""``."""
         return str(self.h5[f"skeletons/{skeleton}"].attrs.get("spec", ""))
 
+    def _unreadable(self, exc: BaseException, what: str) -> DatabaseError:
+        return DatabaseError(f"{self.path}: damaged database: cannot read {what} ({_short(exc)})")
+
+    def _frames_error(self, exc: OSError, k: int, rows) -> DatabaseError:
+        """The error for a failed read of skeleton ``k``'s frames: names the first of the clips
+        ``rows`` (``None``: every clip of the skeleton) whose own frames cannot be read."""
+        try:
+            c = self.h5["clips"]
+            start, length = c["start"][()], c["length"][()]
+            if rows is None:
+                rows = np.flatnonzero(c["skeleton"][()] == k)
+            g = self.h5[f"skeletons/{k}"]
+            sets = [n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g]
+            for i in sorted((int(i) for i in rows), key=lambda i: int(start[i])):
+                s, n = int(start[i]), int(length[i])
+                for name in sets:
+                    try:
+                        g[name][s:s + n]
+                    except OSError as inner:
+                        return self._unreadable(inner, f"the frames of clip {_cap(self.names[i], 60)}")
+        except (OSError, DatabaseError):
+            pass
+        return self._unreadable(exc, f"the frames of skeleton {k}")
+
+    @contextmanager
+    def _frames(self, k: int, rows=None):
+        """Reads of skeleton ``k``'s frames for the clips ``rows``: a damaged chunk is one
+        :class:`DatabaseError` naming the file and the clip."""
+        try:
+            yield
+        except OSError as exc:
+            raise self._frames_error(exc, k, rows) from None
+
+    def _labels(self, text, clip) -> dict:
+        """A clip's labels column (JSON) as a dict; a clear error when it is not one."""
+        try:
+            labels = json.loads(text or "{}")
+        except ValueError:
+            labels = None
+        if not isinstance(labels, dict):
+            raise DatabaseError(f"{self.path}: damaged database: the labels of clip {_cap(clip, 60)} "
+                                f"are not a JSON object ({_cap(text)})")
+        return labels
+
     @property
+    @_reads
     def names(self) -> list[str]:
         """Every clip's name, in row order."""
         if self._names is None:
@@ -364,6 +756,7 @@ class MotionDatabase:
             self._name_index = {n: i for i, n in enumerate(self.names)}
         return self._name_index
 
+    @_reads
     def clip_info(self, clip: str | int) -> dict:
         """Metadata of one clip: name, source, role, labels, skeleton, start, length, fps."""
         i = self.index(clip)
@@ -374,24 +767,34 @@ class MotionDatabase:
             info[k] = info[k].decode() if isinstance(info[k], bytes) else str(info[k])
         for n, kind in self.columns.items():
             info[n] = float(info[n]) if kind == "float" else int(info[n]) if kind == "int" else info[n]
-        info["labels"] = json.loads(info["labels"] or "{}")
+        info["labels"] = self._labels(info["labels"], info["name"])
         for k in ("skeleton", "start", "length"):
             info[k] = int(info[k])
         info["fps"] = float(info["fps"])
         return info
 
+    @_reads
     def table(self) -> dict[str, np.ndarray]:
-        """Every metadata column, extra ones too, as an array (labels as JSON strings)."""
+        """Every metadata column, extra ones too, as an array (labels as JSON strings, each
+        checked to be a JSON object, so that callers may ``json.loads`` them)."""
         self.flush()
         c = self.h5["clips"]
-        return {k: (c[k].asstr()[()] if c[k].dtype == object else c[k][()]) for k in [*_COLUMNS, *self.columns]}
+        t = {k: (c[k].asstr()[()] if h5py.check_string_dtype(c[k].dtype) else c[k][()]) for k in [*_COLUMNS, *self.columns]}
+        checked: set[str] = set()
+        for i, text in enumerate(t["labels"]):
+            if text not in checked:
+                self._labels(text, t["name"][i])
+                checked.add(text)
+        return t
 
+    @_reads
     def read_frame_column(self, clip: str | int, name: str) -> np.ndarray:
         """A clip's values ``(T,)`` of the per-frame column ``name``."""
         if name not in self.frame_columns:
             raise DatabaseError(f"{self.path}: no per-frame column {name!r} (has: {', '.join(self.frame_columns) or 'none'})")
         info = self.clip_info(clip)
-        return self.h5[f"skeletons/{info['skeleton']}/{name}"][info["start"]:info["start"] + info["length"]]
+        with self._frames(info["skeleton"], [self.index(clip)]):
+            return self.h5[f"skeletons/{info['skeleton']}/{name}"][info["start"]:info["start"] + info["length"]]
 
     def _require_flushed(self, i: int) -> None:
         if i >= self._flushed:
@@ -402,11 +805,13 @@ class MotionDatabase:
         if self.mode == "r":
             raise DatabaseError(f"{self.path}: opened read-only")
 
+    @_guarded
     def add_skeleton(self, skeleton: Skeleton, spec=None) -> int:
         """Index of a stored skeleton that matches ``skeleton``, storing it if none does.
 
         ``spec`` (a :class:`~torchsplice.io.spec.DatasetSpec` or ``None``) is stored with a new
-        skeleton; its units and up axis must agree with the database's.
+        skeleton, with its units and up axis (each skeleton keeps its own: datasets of different
+        units share one file; the file's ``units`` and ``up_axis`` attributes then say ``"mixed"``).
         """
         known = self._skeleton_ids.get(id(skeleton))
         if known is not None and known[0] is skeleton:
@@ -418,10 +823,10 @@ class MotionDatabase:
         self._writable()
         units = getattr(spec, "units", "") or ""
         up = getattr(spec, "up_axis", "") or ""
-        for key, value in (("units", units), ("up_axis", up)):
+        for key, value in (("units", units), ("up_axis", up)):  # each skeleton keeps its own; the file's is their common one
             have = str(self.h5.attrs.get(key, ""))
             if value and have and have != value:
-                raise DatabaseError(f"{self.path}: database {key} is {have!r}, the new skeleton's spec says {value!r}")
+                self.h5.attrs[key] = MIXED
             if value and not have:
                 self.h5.attrs[key] = value
         k = len(self._skeletons)
@@ -472,6 +877,7 @@ class MotionDatabase:
             self.flush()
         return len(self) - 1
 
+    @_guarded
     def append_packed(self, skeleton: Skeleton, rotations, root_translation, translations, lengths, names, fps,
                       spec=None, sources="", roles="", labels=None, extra: dict | None = None,
                       frame_extra: dict | None = None, check: bool = True) -> None:
@@ -553,6 +959,7 @@ class MotionDatabase:
                 t = trans.copy() if trans is not None else np.broadcast_to(skeleton.offsets.numpy(), (N, J, 3)).copy()
                 t[:, 0] = root
                 arrays["translations"] = t
+        self._reserve(sum(a.nbytes for a in arrays.values()) + 200 * C)
         c = self.h5["clips"]
         n0, m0 = g["rotations"].shape[0], c["name"].shape[0]
         rows["skeleton"], rows["start"] = [k] * C, n0 + starts
@@ -566,6 +973,8 @@ class MotionDatabase:
                 c[name].resize(m0 + C, axis=0)
                 c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
         except BaseException as exc:
+            if _io_failure(exc):
+                raise  # the whole write is discarded (see _guarded)
             try:  # leave the file as it was before the call: no half-written rows
                 for name in arrays:
                     g[name].resize(n0, axis=0)
@@ -584,6 +993,7 @@ class MotionDatabase:
             self._names += names
         self._flushed += C
 
+    @_guarded
     def append_virtual(self, source: Path, skeleton: Skeleton, lengths, names, fps, spec=None, sources="", roles="",
                        labels=None, extra: dict | None = None, refer_as: Path | None = None) -> None:
         """Add the clips of skeleton 0 of the database file ``source`` without copying their frames.
@@ -642,10 +1052,10 @@ class MotionDatabase:
                 c[name].resize(m0 + C, axis=0)
                 c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
         except BaseException as exc:
+            if _io_failure(exc):
+                raise  # the whole write is discarded (see _guarded)
             for name in rows:
                 c[name].resize(m0, axis=0)
-            if isinstance(exc, OSError):
-                raise DatabaseError(os_error_message(self.path, exc)) from None
             raise
         for n in names:
             index[n] = len(index)
@@ -670,21 +1080,21 @@ class MotionDatabase:
                 g.create_virtual_dataset(name, layout, fillvalue=np.nan)
         self._virtual = {}
 
+    @_reads
     def packed(self, skeleton: int = 0) -> dict[str, np.ndarray]:
         """Every frame of skeleton ``k`` as whole arrays: ``rotations``, ``root_translation``,
         ``translations`` (when stored) and the per-frame columns, rows as in the file (read at
         once: meant for a splice job's parts and other small files)."""
         g = self.h5[f"skeletons/{skeleton}"]
-        return {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
+        with self._frames(skeleton):
+            return {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
 
+    @_guarded
     def flush(self) -> None:
         """Write buffered clips to the file."""
         if not self._staged:
             return
-        try:
-            self._write_staged()
-        except OSError as exc:
-            raise DatabaseError(os_error_message(self.path, exc)) from None
+        self._write_staged()
         if self._names is not None:
             self._names += [m.name for m, *_ in self._staged]
         self._flushed += len(self._staged)
@@ -696,6 +1106,7 @@ class MotionDatabase:
 
     def _write_staged(self) -> None:
         h5 = self.h5
+        self._reserve(self._staged_bytes() + 200 * len(self._staged))
         starts = {}
         for k in sorted({k for _, k, *_ in self._staged}):
             self._no_virtual(k)
@@ -736,6 +1147,7 @@ class MotionDatabase:
             c[name][n:] = np.array(values, dtype=object if dt is _STR else dt)
 
     # -- reading ------------------------------------------------------------------------------
+    @_reads
     def read_many(self, clips: Sequence[str | int], dtype: torch.dtype = torch.float32) -> list[Motion]:
         """Several clips as :class:`Motion` objects, in the order asked; the metadata table is
         read once (faster than :meth:`read` per clip)."""
@@ -751,7 +1163,8 @@ class MotionDatabase:
             hi = max(int(t["start"][i] + t["length"][i]) for i in mine)
             if hi - lo <= 2 * sum(int(t["length"][i]) for i in mine):  # one read, each chunk decompressed once
                 g = self.h5[f"skeletons/{k}"]
-                blocks[k] = (lo, {n: g[n][lo:hi] for n in ("rotations", "root_translation", "translations") if n in g})
+                with self._frames(k, mine):
+                    blocks[k] = (lo, {n: g[n][lo:hi] for n in ("rotations", "root_translation", "translations") if n in g})
         out = []
         for i in idx:
             k, s, n = int(t["skeleton"][i]), int(t["start"][i]), int(t["length"][i])
@@ -759,17 +1172,19 @@ class MotionDatabase:
             lo, block = blocks.get(k, (0, None))
 
             def get(name):
-                a = block[name][s - lo:s - lo + n] if block is not None else g[name][s:s + n]
+                with self._frames(k, [i]):
+                    a = block[name][s - lo:s - lo + n] if block is not None else g[name][s:s + n]
                 return torch.from_numpy(np.ascontiguousarray(a)).to(dtype)
 
             out.append(Motion(
                 skeleton=self._skeletons[k], rotations=get("rotations"), root_translation=get("root_translation"),
                 translations=get("translations") if "translations" in g else None, fps=float(t["fps"][i]),
                 name=str(t["name"][i]), source=str(t["source"][i]), role=str(t["role"][i]),
-                labels=json.loads(t["labels"][i] or "{}"),
+                labels=self._labels(t["labels"][i], t["name"][i]),
             ))
         return out
 
+    @_reads
     def read(self, clip: str | int, dtype: torch.dtype = torch.float32, device=None) -> Motion:
         """One clip as a :class:`Motion` (``dtype`` and ``device`` as asked)."""
         info = self.clip_info(clip)
@@ -777,7 +1192,9 @@ class MotionDatabase:
         s, n = info["start"], info["length"]
 
         def get(name):
-            return torch.from_numpy(g[name][s:s + n]).to(device=device, dtype=dtype)
+            with self._frames(info["skeleton"], [self.index(clip)]):
+                a = g[name][s:s + n]
+            return torch.from_numpy(a).to(device=device, dtype=dtype)
 
         return Motion(
             skeleton=self._skeletons[info["skeleton"]],
@@ -787,6 +1204,7 @@ class MotionDatabase:
             fps=info["fps"], name=info["name"], source=info["source"], role=info["role"], labels=info["labels"],
         )
 
+    @_reads
     def read_batch(self, clips: Sequence[str | int], dtype: torch.dtype = torch.float32, device=None) -> ClipBatch:
         """Several clips of one skeleton as a padded :class:`ClipBatch`."""
         if len(clips) == 0:
@@ -809,11 +1227,12 @@ class MotionDatabase:
 
         def gather(name):
             ds = g[name]
-            if contiguous:
-                block = ds[lo:hi]
-                out = block[rows - lo]
-            else:
-                out = np.stack([ds[s:s + n][np.minimum(np.arange(T), n - 1)] for s, n in zip(starts, lengths)])
+            with self._frames(k, idx):
+                if contiguous:
+                    block = ds[lo:hi]
+                    out = block[rows - lo]
+                else:
+                    out = np.stack([ds[s:s + n][np.minimum(np.arange(T), n - 1)] for s, n in zip(starts, lengths)])
             return torch.from_numpy(out).to(device=device, dtype=dtype)
 
         lengths_t = torch.from_numpy(lengths).to(device)
@@ -830,6 +1249,7 @@ class MotionDatabase:
             skeleton=self._skeletons[k],
         )
 
+    @_reads
     def read_all(self, dtype: torch.dtype = torch.float32) -> Iterator[tuple[Motion, dict, dict]]:
         """Every clip in row order as ``(motion, extra columns, per-frame columns)``.
 
@@ -842,7 +1262,8 @@ class MotionDatabase:
             k = int(t["skeleton"][i])
             if k not in frames:
                 g = self.h5[f"skeletons/{k}"]
-                frames[k] = {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
+                with self._frames(k):
+                    frames[k] = {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
             f, s, n = frames[k], int(t["start"][i]), int(t["length"][i])
 
             def get(name):
@@ -850,10 +1271,11 @@ class MotionDatabase:
 
             motion = Motion(self._skeletons[k], get("rotations"), get("root_translation"), float(t["fps"][i]),
                             get("translations") if "translations" in f else None, name=str(t["name"][i]),
-                            source=str(t["source"][i]), role=str(t["role"][i]), labels=json.loads(t["labels"][i] or "{}"))
+                            source=str(t["source"][i]), role=str(t["role"][i]), labels=self._labels(t["labels"][i], t["name"][i]))
             extra = {c: _json_value(t[c][i]) for c in self.columns}
             yield motion, extra, {c: f[c][s:s + n] for c in self.frame_columns}
 
+    @_reads
     def batches(self, clips: Sequence[str | int] | None = None, batch_size: int = 32,
                 dtype: torch.dtype = torch.float32, device=None, sort_by_length: bool = False) -> Iterator[ClipBatch]:
         """Iterate padded batches of up to ``batch_size`` clips, each batch on one skeleton.
@@ -873,13 +1295,14 @@ class MotionDatabase:
             for b in range(0, len(group), batch_size):
                 yield self.read_batch(group[b:b + batch_size], dtype=dtype, device=device)
 
+    @_reads
     def summary(self) -> dict:
         """A JSON-ready description: file attributes, skeletons, roles and every clip."""
         t = self.table()
         clips = [
             {"name": str(t["name"][i]), "frames": int(t["length"][i]), "fps": float(t["fps"][i]),
              "duration_s": round(float(t["length"][i] / t["fps"][i]), 3), "role": str(t["role"][i]),
-             "labels": json.loads(t["labels"][i] or "{}"), "skeleton": int(t["skeleton"][i]),
+             "labels": self._labels(t["labels"][i], t["name"][i]), "skeleton": int(t["skeleton"][i]),
              "source": str(t["source"][i]),
              **{n: _json_value(t[n][i]) for n in self.columns}}
             for i in range(len(t["name"]))
@@ -892,7 +1315,10 @@ class MotionDatabase:
             spec = json.loads(self.spec_json(k) or "{}")
             skeletons.append({"id": k, "joints": sk.num_joints, "root": sk.names[0],
                               "spec": spec.get("name", "") if isinstance(spec, dict) else "",
-                              "clips": sum(c["skeleton"] == k for c in clips), "joint_names": list(sk.names)})
+                              "clips": sum(c["skeleton"] == k for c in clips), "joint_names": list(sk.names),
+                              "units": str(self.h5[f"skeletons/{k}"].attrs.get("units", "")),
+                              "up_axis": str(self.h5[f"skeletons/{k}"].attrs.get("up_axis", "")),
+                              "guessed_roles": (spec.get("guessed") or {}) if isinstance(spec, dict) else {}})
         attrs = self.attrs
         return {
             "path": str(self.path), "format": attrs.get("format"), "schema_version": int(attrs.get("schema_version", 0)),

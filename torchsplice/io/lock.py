@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..core.errors import TorchspliceError
 
-__all__ = ["FileLock", "LockedError", "host_pid", "pid_alive"]
+__all__ = ["FileLock", "LockedError", "host_pid", "pid_alive", "output_lock"]
 
 
 class LockedError(TorchspliceError):
@@ -42,12 +42,27 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
+_HELD: dict[str, list] = {}  # absolute lock path -> [fd, holds] of the locks this process holds
+
+
+def output_lock(output, command: str = "") -> "FileLock":
+    """The lock that guards writing ``output``: ``.NAME.lock`` beside it (not yet taken)."""
+    output = Path(output)
+    return FileLock(output.with_name(f".{output.name}.lock"), str(output), command)
+
+
 class FileLock:
-    """``with FileLock(path, what):`` holds ``path`` for this process (``what`` names the guarded output)."""
+    """``with FileLock(path, what):`` holds ``path`` for this process (``what`` names the guarded output).
+
+    Re-entrant within a process: a second :class:`FileLock` on a path this process already
+    holds shares the hold (a job that locks its output, then writes it through
+    :class:`~torchsplice.io.database.MotionDatabase`, which locks it too).
+    """
 
     def __init__(self, path: Path, what: str, command: str = ""):
         self.path, self.what, self.command = Path(path), what, command
         self.fd: int | None = None
+        self._key = os.path.abspath(self.path)
 
     @property
     def held(self) -> bool:
@@ -71,6 +86,13 @@ class FileLock:
                           f"since {h.get('started', '?')} (lock {self.path}); wait for it to finish, or stop it")
 
     def acquire(self) -> "FileLock":
+        if self.fd is not None:
+            return self
+        held = _HELD.get(self._key)
+        if held is not None:
+            held[1] += 1
+            self.fd = held[0]
+            return self
         for _ in range(20):
             try:
                 fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o644)
@@ -100,11 +122,18 @@ class FileLock:
             os.ftruncate(fd, 0)
             os.pwrite(fd, json.dumps(me).encode(), 0)
             self.fd = fd
+            _HELD[self._key] = [fd, 1]
             return self
         raise LockedError(f"{self.what}: the lock {self.path} keeps changing; is another job starting?")
 
     def release(self) -> None:
         if self.fd is not None:
+            held = _HELD.get(self._key)
+            if held is not None and held[1] > 1:
+                held[1] -= 1
+                self.fd = None
+                return
+            _HELD.pop(self._key, None)
             try:
                 self.path.unlink(missing_ok=True)  # while still held: a waiter then finds a new file
             finally:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..core.errors import TorchspliceError
+from ..io.atomic import same_file
 from ..io.database import COMPRESSIONS
 from ..splice import METHODS, AlignOptions, SpliceOptions
 
@@ -92,10 +93,23 @@ class JobConfig:
             raise TorchspliceError("--copy-sources needs --layout copy: a virtual output holds only the spliced clips")
         if c.workers is not None and c.workers < 1:
             raise TorchspliceError(f"--workers must be at least 1, got {c.workers}")
+        dup = sorted({m for m in c.methods if c.methods.count(m) > 1})
+        if dup:
+            raise TorchspliceError(f"method {dup[0]!r} is asked for twice; name each method once")
         c = replace(c, database=Path(c.database), output=Path(c.output),
                     actions_db=Path(c.actions_db) if c.actions_db is not None else None)
         if c.actions_db is not None and c.actions_db.resolve() == c.database.resolve():
             c = replace(c, actions_db=None)
+        out = c.output
+        if out.suffix.lower() not in (".h5", ".hdf5"):
+            raise TorchspliceError(f"{out}: the output is a database, so its name must end in .h5 or .hdf5")
+        if out.is_dir():
+            raise TorchspliceError(f"{out}: is a folder; give the output a file name ending in .h5")
+        if not out.parent.is_dir():
+            raise TorchspliceError(f"{out}: folder {out.parent} does not exist")
+        for source in (c.database, c.actions_db):
+            if source is not None and same_file(out, source):
+                raise TorchspliceError(f"{out}: is also the job's input; write the output to another file")
         return c
 
     @property

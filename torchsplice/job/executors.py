@@ -25,6 +25,7 @@ shard is on disk, and the merge reads it from there).
 
 from __future__ import annotations
 
+import logging
 import multiprocessing as mp
 import os
 import signal
@@ -40,6 +41,8 @@ from .plan import Plan, Task
 from .sink import Sink
 from .sources import Sources
 from .task import run_task
+
+log = logging.getLogger("torchsplice.job")
 
 __all__ = ["InlineEngine", "LocalEngine", "RayEngine", "make_engine", "MAX_ATTEMPTS"]
 
@@ -265,6 +268,22 @@ def _ray_run(config: JobConfig, digest: str, plan_box: list, index: int, group_b
     return run_task(plan, plan.tasks[index], sources, config)
 
 
+def _check_reachable(address: str, timeout: float = 10.0) -> None:
+    """Refuse at once a ``HOST:PORT`` nobody answers on (Ray itself waits long, saying nothing)."""
+    import socket
+
+    host, _, port = address.rpartition(":")
+    try:
+        port_n = int(port)
+    except ValueError:
+        raise TorchspliceError(f"--ray-address {address!r}: expected HOST:PORT (the head's GCS port, 6379 by default)") from None
+    try:
+        socket.create_connection((host.strip("[]") or "127.0.0.1", port_n), timeout=timeout).close()
+    except OSError as exc:
+        raise TorchspliceError(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc} "
+                               f"(is `ray start --head` running there, and the port open?)") from None
+
+
 class RayEngine:
     """Ray tasks on a cluster (see the module docstring)."""
 
@@ -278,7 +297,10 @@ class RayEngine:
             raise TorchspliceError("--engine ray needs Ray: pip install 'torchsplice[ray]'") from None
         self.ray = ray
         self.started = not ray.is_initialized()
+        if self.started and config.ray_address not in (None, "", "auto", "local") and "://" not in config.ray_address:
+            _check_reachable(config.ray_address)
         if self.started:
+            log.info("connecting to Ray at %s", config.ray_address or "(a new local instance)")
             try:
                 ray.init(address=config.ray_address, include_dashboard=False, log_to_driver=False,
                          logging_level="ERROR", configure_logging=True)

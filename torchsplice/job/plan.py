@@ -172,7 +172,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     if not same:
         for k in ("units", "up_axis"):
             a, b = str(loco_db.attrs.get(k) or ""), str(act_db.attrs.get(k) or "")
-            if a and b and a != b:
+            if a and b and a != b and "mixed" not in (a, b):
                 raise TorchspliceError(f"{c.actions_db}: {k} {b!r} differs from {c.database}'s {a!r}; "
                                        "splice clips of one unit and up axis")
     specs = {}
@@ -285,11 +285,12 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
         need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
         if int(table["length"][row]) < need:
             return f"{table['name'][row]} is too short to splice ({int(table['length'][row])} frames, at least {need})"
-    if not c.force_locomotion:
-        for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
-            check = checks.get(key)
-            if check is not None and not check.locomoting:
-                return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
+    for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
+        check = checks.get(key)
+        if check is not None and not check.finite:
+            return f"{name} {check.reason}"
+        if check is not None and not check.locomoting and not c.force_locomotion:
+            return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
     if method == "cpmc" and refs.get(j) is None:
         return f"no plain-locomotion reference for {ta['name'][j]} (cpmc)"
     return None

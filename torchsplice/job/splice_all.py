@@ -154,6 +154,7 @@ class SpliceJob:
         plan = make_plan(c, sources)
         plan_path = self.work / "plan.json"
         self.work.mkdir(exist_ok=True)
+        new_plan = False
         if plan_path.exists():
             saved = Plan.load(plan_path)
             if saved.digest() != plan.digest():
@@ -162,13 +163,23 @@ class SpliceJob:
                     "arguments to finish it, or pass --restart to discard it")
         else:
             plan.save(plan_path)
+            new_plan = True
         shard_dir = self.work
         tasks = plan.tasks if self.shard is None else _slice(plan.tasks, *self.shard)
         have = {t.id for t in tasks if (shard_dir / self.sink.shard_name(t.id)).exists()}
         pending = [t for t in tasks if t.id not in have]
         summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), shard=self.shard,
                              tasks=len(tasks), resumed=sum(t.size for t in tasks if t.id in have))
-        engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir)
+        try:
+            engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir)
+        except BaseException:
+            if new_plan and not have:  # nothing was done: leave no plan that would tie the next run to these arguments
+                plan_path.unlink(missing_ok=True)
+                try:
+                    self.work.rmdir()  # only when empty
+                except OSError:
+                    pass
+            raise
         summary.engine = engine.describe()
         log.info("%d pairs in %d tasks (%d already done) on %s", sum(t.size for t in tasks), len(tasks), len(have),
                  summary.engine)

@@ -200,6 +200,8 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
     notes: list[list[str]] = [[] for _ in range(B)]
     for b in range(B):
         for clip, check in ((pairs[b][0], checks_l[int(li[b])]), (pairs[b][1], checks_a[int(ai[b])])):
+            if not check.finite:
+                raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
                 if not options.force:
                     raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
@@ -256,6 +258,8 @@ def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str
     notes: list[list[str]] = [[] for _ in pairs]
     for b, (lo, ac) in enumerate(pairs):
         for clip, check in ((lo, checks_l[li[b]]), (ac, checks_a[ai[b]])):
+            if not check.finite:
+                raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
                 if not options.force:
                     raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")

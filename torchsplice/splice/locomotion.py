@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import torch
+
 from ..io.spec import SkeletonRoles
 from ..kinematics.contacts import gait_summary
 from .clips import ClipTensors
@@ -24,7 +26,8 @@ class LocomotionCheck:
     """Verdict for one clip: ``locomoting``, and ``reason`` (empty when locomoting).
 
     ``swings`` are the (left, right) steps counted, ``travel`` the root's floor path in leg
-    lengths, ``duration`` in seconds.
+    lengths, ``duration`` in seconds. ``finite`` is false for a damaged clip (NaN or infinite
+    joint positions), which cannot be spliced at all (``reason`` then says so).
     """
 
     locomoting: bool
@@ -32,13 +35,22 @@ class LocomotionCheck:
     swings: tuple[int, int]
     travel: float
     duration: float
+    finite: bool = True
 
 
 def check_locomotion(clips: ClipTensors, roles: SkeletonRoles, fps: float) -> list[LocomotionCheck]:
     """One :class:`LocomotionCheck` per clip of the batch (computed batched)."""
+    pos, lengths = clips.positions, clips.lengths
+    valid = torch.arange(pos.shape[1], device=pos.device)[None, :] < lengths.to(pos.device)[:, None]  # (B, T)
+    bad = (~torch.isfinite(pos).all(dim=(-1, -2))) & valid
+    first_bad = torch.where(bad.any(1), bad.float().argmax(1), torch.full_like(lengths, -1, device=pos.device))
     g = gait_summary(clips.positions, clips.lengths, fps, roles.feet, roles.hips, roles.root, roles.up_axis)
     out = []
-    for swings, travel, duration in zip(g.swings.tolist(), g.travel.tolist(), g.duration.tolist()):
+    for swings, travel, duration, f in zip(g.swings.tolist(), g.travel.tolist(), g.duration.tolist(), first_bad.tolist()):
+        if f >= 0:
+            out.append(LocomotionCheck(False, f"has non-finite values (NaN or infinity) from frame {f}; the clip is "
+                                       "damaged: import it again", tuple(swings), float("nan"), duration, finite=False))
+            continue
         reasons = []
         if min(swings) < 1:
             reasons.append(f"no alternating steps (left {swings[0]}, right {swings[1]} in {duration:.1f} s)")
