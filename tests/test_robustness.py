@@ -500,3 +500,22 @@ def test_import_warns_in_one_line_about_lines_after_the_declared_frames(bandai, 
     warned = [ln for ln in err.splitlines() if ln.startswith("warning: ")]
     assert len(warned) == 1 and str(f) in warned[0] and "ignored" in warned[0]
     assert names(tmp_path / "k.h5") == ["keyframes"]
+
+
+@pytest.mark.parametrize("preload", [False, True])
+def test_a_training_dataset_over_a_damaged_chunk_raises_one_clear_error(sample_db, tmp_path, preload):
+    from torchsplice.core.errors import DatabaseError
+    from torchsplice.data import MotionDataset
+
+    db = tmp_path / "damaged.h5"
+    shutil.copy(sample_db, db)
+    with h5py.File(db, "r") as f:
+        info = f["skeletons/0/rotations"].id.get_chunk_info(0)
+    with open(db, "r+b") as fh:
+        fh.seek(info.byte_offset + info.size // 2)
+        raw = fh.read(64)
+        fh.seek(info.byte_offset + info.size // 2)
+        fh.write(bytes(b ^ 0xFF for b in raw))
+    with pytest.raises(DatabaseError, match="damaged database: cannot read /skeletons/0/rotations"):
+        ds = MotionDataset(db, preload=preload)
+        ds[0]

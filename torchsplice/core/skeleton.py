@@ -200,8 +200,12 @@ class Skeleton:
         tips: list[list[float]] = [[] for _ in range(J)]
         for e, p in enumerate(self.end_site_parents):
             tips[p].append(float(self.end_site_offsets[e].norm()))
+        kids: list[list[int]] = [[] for _ in range(J)]
+        for c, p in enumerate(self.parents):
+            if p >= 0:
+                kids[p].append(c)
         for j in range(J - 1, -1, -1):
-            branches = sorted(tips[j] + [down[c] + length[c] for c in self.children(j)], reverse=True)
+            branches = sorted(tips[j] + [down[c] + length[c] for c in kids[j]], reverse=True)
             down[j] = branches[0] if branches else 0.0
             best = max(best, sum(branches[:2]))
         return best

@@ -235,6 +235,19 @@ def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Ske
     return out
 
 
+def _read_rows(ds, lo: int, hi: int) -> np.ndarray:
+    """Rows ``lo:hi`` of an h5py dataset (a damaged chunk: one clear error)."""
+    try:
+        return ds[lo:hi]
+    except OSError as exc:
+        raise _damaged(ds, lo, hi, exc) from None
+
+
+def _damaged(ds, lo: int, hi: int, exc: OSError) -> DatabaseError:
+    return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
+                         f"({str(exc).splitlines()[0][:120]})")
+
+
 def _gather_rows(ds, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     """Rows ``start:start+length`` of an h5py dataset for several clips, concatenated.
 
@@ -244,11 +257,14 @@ def _gather_rows(ds, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
         return ds[0:0]
     lo, hi = int(starts.min()), int((starts + lengths).max())
     total = int(lengths.sum())
-    if hi - lo <= 2 * total:
-        block = ds[lo:hi]
-        rel = np.repeat(starts - lo - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
-        return block[rel]
-    return np.concatenate([ds[int(s):int(s + n)] for s, n in zip(starts, lengths)])
+    try:
+        if hi - lo <= 2 * total:
+            block = ds[lo:hi]
+            rel = np.repeat(starts - lo - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
+            return block[rel]
+        return np.concatenate([ds[int(s):int(s + n)] for s, n in zip(starts, lengths)])
+    except OSError as exc:  # a damaged chunk: one clear line, not HDF5's traceback
+        raise _damaged(ds, lo, hi, exc) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -488,7 +504,7 @@ class MotionDataset(Dataset):
                 ctx = 1 if (vel and start > 0) else 0  # the frame before, for velocities
                 lo = int(self._row0[c]) + start - ctx
                 for name in raw:
-                    raw[name].append(torch.from_numpy(self._dataset(k, name)[lo:lo + n + ctx]))
+                    raw[name].append(torch.from_numpy(_read_rows(self._dataset(k, name), lo, lo + n + ctx)))
                 ctxs.append(ctx)
                 sizes.append(n + ctx)
                 fps.append(float(self._fps[c]))
