@@ -191,7 +191,10 @@ def test_sample_job_counts_and_provenance(sample_db, default_out, capsys):
         assert src["name"][c["locomotion_id"]] == c["locomotion"] and src["role"][c["locomotion_id"]] == "locomotion"
         assert src["name"][c["action_id"]] == c["action"] and src["role"][c["action_id"]] == "action"
         assert c["method"] == "splice" and c["reference"] == "" and c["flags"] == ""
-        assert c["labels"] == {"method": "splice", "locomotion": c["locomotion"], "action": c["action"]}
+        own = {"method": "splice", "locomotion": c["locomotion"], "action": c["action"]}
+        from_sources = {f"{tag}.{k}": v for tag in ("locomotion", "action")
+                        for k, v in json.loads(src["labels"][c[f"{tag}_id"]] or "{}").items()}
+        assert from_sources and c["labels"] == {**own, **from_sources}  # the sources' labels are kept
         assert c["fps"] == 30.0 and c["skeleton"] == 0
         params = json.loads(c["params"])
         assert params["max_run"] == 3 and params["posture"] is True and params["force_locomotion"] is False

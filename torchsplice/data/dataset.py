@@ -27,7 +27,12 @@ Features (``features=``):
 name                   shape            meaning
 =====================  ===============  ===================================================
 ``rotations``          ``(T, J, 4)``    local joint rotations, WXYZ, as stored
-``root_translation``   ``(T, 3)``       world position of joint 0, as stored
+``root_translation``   ``(T, 3)``       world position of joint 0, as stored (on datasets whose
+                                        BVH root stands still, e.g. Bandai Namco, it is zero:
+                                        read ``trajectory``)
+``trajectory``         ``(T, 3)``       world position of the joint carrying the character's
+                                        trajectory: the dataset spec's ``root`` role (Bandai
+                                        Namco ``Hips``; joint 0 for most datasets)
 ``translations``       ``(T, J, 3)``    local joint translations in the parent's frame:
                                         the animated ones where the skeleton animates
                                         them, the rest offsets elsewhere; row 0 is the
@@ -70,21 +75,22 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from ..core.errors import DatabaseError
+from ..core.errors import DatabaseError, TorchspliceError
 from ..core.skeleton import Skeleton
 from ..io.database import MotionDatabase
 from ..kinematics.fk import forward_kinematics
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "BUILTIN_FEATURES", "ITEM_KEYS"]
 
-BUILTIN_FEATURES = ("rotations", "root_translation", "translations", "positions", "global_rotations", "velocities")
+BUILTIN_FEATURES = ("rotations", "root_translation", "trajectory", "translations", "positions", "global_rotations",
+                    "velocities")
 """The features every database offers (its per-frame columns come on top)."""
 
 ITEM_KEYS = ("name", "length", "fps", "index", "start", "skeleton")
 """The metadata keys of every item, besides its features."""
 
 _BASE_COLUMNS = ("name", "source", "role", "labels", "skeleton", "start", "length", "fps")
-_NEEDS_FK = {"positions", "global_rotations", "velocities"}
+_NEEDS_FK = {"positions", "global_rotations", "velocities", "trajectory"}
 
 
 class DatasetError(DatabaseError, ValueError):
@@ -198,8 +204,22 @@ def _velocities(pos: torch.Tensor, fps: torch.Tensor, clip_first: torch.Tensor, 
     return vel
 
 
+def _trajectory_joint(db: MotionDatabase, k: int, skeleton: Skeleton) -> int:
+    """Index of the joint carrying skeleton ``k``'s world trajectory: its spec's ``root`` role
+    (Bandai Namco: ``Hips``, under a ``joint_Root`` that stands still), else joint 0."""
+    from ..io.spec import DatasetSpec, detect_spec
+
+    text = db.spec_json(k)
+    try:
+        spec = DatasetSpec.from_json(text) if text else detect_spec(skeleton)
+        return int(spec.bind(skeleton).root)
+    except TorchspliceError:  # no spec fits: the BVH root
+        return 0
+
+
 def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Skeleton,
-            fps: torch.Tensor, clip_first: torch.Tensor, seg_first: torch.Tensor) -> dict[str, torch.Tensor]:
+            fps: torch.Tensor, clip_first: torch.Tensor, seg_first: torch.Tensor,
+            trajectory_joint: int = 0) -> dict[str, torch.Tensor]:
     """The asked ``features`` of ``N`` frames from the raw stored arrays ``raw`` (see the module table).
 
     ``raw`` holds ``rotations`` (N, J, 4), ``root_translation`` (N, 3) and, where stored,
@@ -228,6 +248,8 @@ def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Ske
             out[f] = fk[0]
         elif f == "global_rotations":
             out[f] = fk[1]
+        elif f == "trajectory":
+            out[f] = fk[0][:, trajectory_joint]
         elif f == "velocities":
             out[f] = _velocities(fk[0], fps, clip_first, seg_first)
         else:  # a per-frame column
@@ -346,6 +368,8 @@ class MotionDataset(Dataset):
             self.frame_columns: tuple[str, ...] = tuple(db.frame_columns)
             self.columns: dict[str, str] = dict(db.columns)
             stored = {k: set(db.h5[f"skeletons/{k}"].keys()) for k in range(len(self.skeletons))}
+            self.trajectory_joints: dict[int, int] = (
+                {k: _trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)} if "trajectory" in self.features else {})
             self._check_features()
             keep = np.ones(len(table["name"]), dtype=bool)
             if clips is not None:
@@ -456,7 +480,8 @@ class MotionDataset(Dataset):
             fps = torch.from_numpy(np.repeat(self._fps[clips], lengths)).to(self.dtype)
             first = torch.zeros(N, dtype=torch.bool)
             first[torch.from_numpy(offs[lengths > 0])] = True
-            self._pre[k] = _derive(raw, self.features, self.skeletons[k], fps, first, first)
+            self._pre[k] = _derive(raw, self.features, self.skeletons[k], fps, first, first,
+                                   self.trajectory_joints.get(k, 0))
 
     # -- items ------------------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -517,7 +542,8 @@ class MotionDataset(Dataset):
             clip_first_rows[offsets[(sizes_t > 0) & ~torch.tensor(clip_first)]] = False
             frames = {name: (torch.cat(v) if len(v) > 1 else v[0]).to(self.dtype) for name, v in raw.items()}
             fps_rows = torch.repeat_interleave(torch.tensor(fps, dtype=self.dtype), sizes_t)
-            derived = _derive(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first)
+            derived = _derive(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first,
+                              self.trajectory_joints.get(k, 0))
             for p, o, size, ctx in zip(members, offsets.tolist(), sizes, ctxs):
                 results[p] = {f: t[o + ctx:o + size] for f, t in derived.items()}
         return results

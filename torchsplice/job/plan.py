@@ -32,7 +32,7 @@ from .sources import Sources, clip_key
 
 __all__ = ["Pair", "Task", "Group", "Plan", "make_plan", "PLAN_VERSION", "MIN_SECONDS"]
 
-PLAN_VERSION = 1
+PLAN_VERSION = 2
 MIN_SECONDS = SpliceOptions().min_seconds
 
 
@@ -115,7 +115,8 @@ class Plan:
     def from_json(cls, text: str) -> "Plan":
         d = json.loads(text)
         if d.get("version") != PLAN_VERSION:
-            raise TorchspliceError(f"the job's plan has version {d.get('version')}, this torchsplice writes {PLAN_VERSION}")
+            raise TorchspliceError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
+                                   f"{PLAN_VERSION}: finish it with the torchsplice that started it, or pass --restart")
         return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
                    groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"], clips=d["clips"], flags=d["flags"],
                    version=d["version"])
@@ -201,7 +202,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         for key in g.clips:
             tag, row = key.split(":")
             t = tables[tag]
-            clips[key] = {"name": str(t["name"][int(row)]), "frames": int(t["length"][int(row)]), "fps": float(t["fps"][int(row)])}
+            clips[key] = {"name": str(t["name"][int(row)]), "frames": int(t["length"][int(row)]), "fps": float(t["fps"][int(row)]),
+                          "labels": json.loads(t["labels"][int(row)] or "{}")}
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
     pairs: list[Pair] = []

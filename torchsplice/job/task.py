@@ -19,7 +19,7 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..splice import splice_pairs
-from ..splice.api import align_kwargs
+from ..splice.api import align_kwargs, spliced_labels
 from .config import JobConfig
 from .plan import Plan, Task
 from .sources import Sources
@@ -169,6 +169,8 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         task=task.id, skeleton=skeleton, spec=group.spec,
         names=[f"{lo}+{ac}{suffix}" for lo, ac in zip(lnames, anames)], lengths=frames, fps=np.full(len(keys), fps),
         rotations=rot, translations=trans,
-        labels=[json.dumps({"method": method, "locomotion": lo, "action": ac}, sort_keys=True) for lo, ac in zip(lnames, anames)],
+        labels=[json.dumps(spliced_labels(method, plan.clips[k[0]]["name"], plan.clips[k[0]].get("labels", {}),
+                                          plan.clips[k[1]]["name"], plan.clips[k[1]].get("labels", {})), sort_keys=True)
+                for k in keys],
         extra=extra, action_frame=(curve * np.repeat(scale, frames)).astype(np.float32),
     )

@@ -42,6 +42,16 @@ METHODS = ("splice", "naive", "cpmc")
 BACKENDS = ("auto", "compiled", "torch")
 
 
+def spliced_labels(method: str, locomotion: str, locomotion_labels: dict, action: str, action_labels: dict) -> dict:
+    """A spliced clip's labels: ``method``, the source clips' names (``locomotion``, ``action``)
+    and every label of each source, as ``locomotion.KEY`` and ``action.KEY`` (so that
+    ``where={"labels.action.style": ["elderly"]}`` selects by the action's style)."""
+    out = {f"locomotion.{k}": str(v) for k, v in (locomotion_labels or {}).items()}
+    out.update({f"action.{k}": str(v) for k, v in (action_labels or {}).items()})
+    out.update({"method": method, "locomotion": locomotion, "action": action})
+    return out
+
+
 class NotLocomotingError(MotionError):
     """A clip that does not locomote, refused unless ``force`` is set."""
 
@@ -240,7 +250,7 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
             name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
             source=f"splice:{method}",
             role="spliced",
-            labels={"method": method, "locomotion": lo.name, "action": ac.name},
+            labels=spliced_labels(method, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
             motion=motion, method=method, locomotion=lo.name, action=ac.name,
@@ -303,7 +313,7 @@ def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: str, optio
             translations=trans if lo.skeleton.has_joint_translations else None, fps=fps,
             name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
             source=f"splice:{method}", role="spliced",
-            labels={"method": method, "locomotion": lo.name, "action": ac.name},
+            labels=spliced_labels(method, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
             motion=motion, method=method, locomotion=lo.name, action=ac.name,
