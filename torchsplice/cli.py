@@ -144,7 +144,9 @@ def cmd_import(args) -> int:
     else:
         db = MotionDatabase.create(out, overwrite=args.force, dtype="float64" if args.float64 else "float32")
     dtype = torch.float64 if args.float64 else torch.float32
-    imported, frames, origin, warned = 0, 0, {}, []
+    imported, frames, origin, warned, windows, cut = 0, 0, {}, [], 0, 0
+    if args.split is not None and not 0 <= args.split_overlap < args.split:
+        raise TorchspliceError(f"--split-overlap ({args.split_overlap:g} s) must be at least 0 and shorter than --split ({args.split:g} s)")
     with db:
         for f in _progress(files, len(files), "import", args.quiet):
             try:
@@ -159,7 +161,12 @@ def cmd_import(args) -> int:
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
                 known = len(db.skeletons)
-                db.append(m, spec=spec)
+                pieces = m.windows(args.split, args.split_overlap) if args.split else [m]
+                for piece in pieces:
+                    db.append(piece, spec=spec)
+                if len(pieces) > 1:
+                    windows += 1
+                    cut += len(pieces)
                 if len(db.skeletons) > known and spec.is_guessed:
                     _say(args, f"skeleton {known} (first seen in {f}): joint roles guessed by the {spec.name!r} spec "
                                "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in spec.guess_summary()))
@@ -183,7 +190,8 @@ def cmd_import(args) -> int:
                 print(f"skipped {_at(f, why)}", file=sys.stderr)
             raise TorchspliceError(f"no clip could be imported; {args.output} was not written")
         total = len(db)
-    _say(args, f"imported {imported} clips ({frames} frames) into {args.output} ({total} clips in all)")
+    _say(args, f"imported {imported} clips ({frames} frames) into {args.output} ({total} clips in all)"
+               + (f"; {windows} long takes cut into {cut} windows of {args.split:g} s" if windows else ""))
     for f, why in warned:
         print(f"warning: {_at(f, why)}", file=sys.stderr)
     for f, why in skipped:
@@ -358,6 +366,14 @@ def cmd_splice(args) -> int:
                f"at {result.motion.fps:g} fps{detail}")
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
+    if args.method != "naive":
+        from .job.plan import leg_length
+        from .job.task import poor_alignment
+
+        poor = poor_alignment(result.cost, leg_length(loco.skeleton, spec.bind(loco.skeleton)))
+        if poor:
+            print(f"note: {poor}: the two gaits match worse than 95% of walk-onto-walk pairs (whose median is "
+                  f"0.05); check the result, or cut long takes with import --split", file=sys.stderr)
     return 0
 
 
@@ -455,6 +471,7 @@ def cmd_splice_all(args) -> int:
         locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
         methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
         force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
+        max_length_ratio=args.max_length_ratio,
         posture=not args.no_posture, device=_device(args.device), compression=args.compression, layout=args.layout,
         engine=args.engine, workers=args.workers, ray_address=args.ray_address,
     )
@@ -532,6 +549,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--append", action="store_true", help="add to an existing database")
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
+    s.add_argument("--split", type=_positive_float, default=None, metavar="SECONDS",
+                   help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, ...; "
+                        "labels split_from and split_frame say where each came from), so that long takes splice in reasonable "
+                        "time and memory")
+    s.add_argument("--split-overlap", type=float, default=1.0, metavar="SECONDS",
+                   help="overlap of consecutive windows (default 1 s)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     s.set_defaults(func=cmd_import)
 
@@ -621,6 +644,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
     s.add_argument("--copy-sources", action="store_true", help="copy the source clips into the output too")
+    s.add_argument("--max-length-ratio", type=_positive_float, default=None, metavar="R",
+                   help="skip pairs whose longer clip lasts more than R times the shorter (e.g. 3); long takes are "
+                        "better cut with import --split")
     s.add_argument("--engine", default="local", choices=["local", "ray"],
                    help="local: worker processes on this machine (default); ray: Ray tasks on a cluster")
     s.add_argument("--workers", type=_positive_int, default=None, metavar="N",

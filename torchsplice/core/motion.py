@@ -109,6 +109,38 @@ class Motion:
             labels=dict(self.labels),
         )
 
+    def window_starts(self, seconds: float, overlap: float = 0.0) -> list[int]:
+        """First frames of the windows :meth:`windows` cuts (``[0]`` for a clip that fits in one)."""
+        if not seconds > 0 or not 0 <= overlap < seconds:
+            raise ValueError(f"windows need seconds > 0 and 0 <= overlap < seconds, got {seconds} and {overlap}")
+        n, T = max(2, int(round(seconds * self.fps))), self.num_frames
+        if T <= n * 1.25:  # a take a little longer than a window stays whole
+            return [0]
+        step = max(1, n - int(round(overlap * self.fps)))
+        starts = list(range(0, T - n + 1, step))
+        if starts[-1] != T - n:
+            starts.append(T - n)  # the last window ends with the take (it overlaps its neighbour more)
+        return starts
+
+    def windows(self, seconds: float, overlap: float = 0.0) -> list["Motion"]:
+        """The clip cut into windows of ``seconds`` that overlap by ``overlap`` seconds.
+
+        Windows are named ``NAME#k`` (k = 0, 1, ...; three digits) and carry the clip's labels plus
+        ``split_from`` (the clip's name) and ``split_frame`` (the window's first frame in the take). The
+        last window ends with the take; a clip no longer than 1.25 windows is returned whole,
+        unchanged. Views, no copy.
+        """
+        starts = self.window_starts(seconds, overlap)
+        if starts == [0]:
+            return [self]
+        n = max(2, int(round(seconds * self.fps)))
+        out = []
+        for k, s in enumerate(starts):
+            w = self.slice(s, s + n)
+            out.append(replace(w, name=f"{self.name}#{k:03d}",
+                               labels={**self.labels, "split_from": self.name, "split_frame": str(s)}))
+        return out
+
     def check_finite(self) -> "Motion":
         """Raise :class:`MotionError` naming the clip and frame if any value is NaN or infinite."""
         for what, t in (("rotation", self.rotations), ("root translation", self.root_translation), ("translation", self.translations)):

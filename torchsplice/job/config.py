@@ -38,6 +38,8 @@ class JobConfig:
         locomotions, actions: selectors, all of which must select a clip.
         methods: one or several of ``splice``, ``naive``, ``cpmc``.
         force_locomotion: splice clips that do not locomote instead of skipping their pairs.
+        max_length_ratio: skip pairs whose longer clip lasts more than this many times the
+            shorter one (``None``: no limit).
         copy_sources: copy the selected source clips into the output too.
         max_run, posture: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
@@ -63,6 +65,7 @@ class JobConfig:
     actions: tuple[str, ...] = DEFAULT_ACTIONS
     methods: tuple[str, ...] = ("splice",)
     force_locomotion: bool = False
+    max_length_ratio: float | None = None
     copy_sources: bool = False
     max_run: int = 3
     posture: bool = True
@@ -91,6 +94,8 @@ class JobConfig:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
         if c.layout == "virtual" and c.copy_sources:
             raise TorchspliceError("--copy-sources needs --layout copy: a virtual output holds only the spliced clips")
+        if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
+            raise TorchspliceError(f"--max-length-ratio must be at least 1, got {c.max_length_ratio}")
         if c.workers is not None and c.workers < 1:
             raise TorchspliceError(f"--workers must be at least 1, got {c.workers}")
         dup = sorted({m for m in c.methods if c.methods.count(m) > 1})
@@ -155,6 +160,7 @@ class JobConfig:
             "locomotions": list(self.locomotions), "actions": list(self.actions), "methods": list(self.methods),
             "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
+            **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
         }
 
 

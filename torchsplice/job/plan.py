@@ -287,6 +287,10 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
         need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
         if int(table["length"][row]) < need:
             return f"{table['name'][row]} is too short to splice ({int(table['length'][row])} frames, at least {need})"
+    if c.max_length_ratio is not None:
+        dl, da = float(tl["length"][i] / tl["fps"][i]), float(ta["length"][j] / ta["fps"][j])
+        if max(dl, da) > c.max_length_ratio * min(dl, da):
+            return f"lengths differ by more than --max-length-ratio {c.max_length_ratio:g}"
     for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
         check = checks.get(key)
         if check is not None and not check.finite:
