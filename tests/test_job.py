@@ -311,17 +311,26 @@ def test_real_clips_selected_by_labels(bandai_db, tmp_path, capsys):
         assert m.translations is not None  # Bandai Namco animates joint translations; they are kept
 
 
-def test_in_place_action_is_skipped_with_its_reason(bandai_db, tmp_path, capsys):
+def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_db, tmp_path, capsys):
     out = tmp_path / "wave.h5"
     code, text, err = run(capsys, "splice-all", bandai_db, "-o", out, "--locomotions", "role:locomotion")
     assert code == 0, err
     cs = clips(out)
-    # 3 locomotions x (2 'both' clips + the wave) - the 3 wave pairs
-    assert len(cs) == 6 and WAVE not in {c["action"] for c in cs}
-    assert "skipped 3 pairs:" in text
-    line = [l for l in text.splitlines() if WAVE in l]
-    assert len(line) == 1 and line[0].strip().startswith("3 x") and "does not locomote" in line[0]
-    assert "--force-locomotion" in line[0]
+    # 3 locomotions x (2 'both' clips + the standing wave): nothing skipped
+    assert len(cs) == 9 and "skipped" not in text
+    assert "6 time-aligned (timewarp), 3 standing actions (loop)" in text
+    for c in cs:
+        standing = c["action"] == WAVE
+        assert c["timing"] == ("loop" if standing else "timewarp")
+        assert (c["acting"] == "left_arm") if standing else c["acting"] == ""
+        if standing:
+            assert c["coverage"] == 1.0 and "does not locomote" not in c["flags"]
+    for timing in ("hold", "fit"):
+        code, text, err = run(capsys, "splice-all", bandai_db, "-o", tmp_path / f"{timing}.h5", "--locomotions",
+                              "role:locomotion", "--actions", WAVE, "--timing", timing, "--acting-limbs", "none")
+        assert code == 0, err
+        assert f"3 standing actions ({timing})" in text
+        assert {(c["timing"], c["acting"], c["coverage"]) for c in clips(tmp_path / f"{timing}.h5")} == {(timing, "", 1.0)}
 
 
 def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_path, capsys):

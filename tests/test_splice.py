@@ -509,18 +509,19 @@ def test_cmu_walk_at_120_fps_onto_itself_at_30_fps(mocap_dir):
 
 
 @pytest.mark.parametrize("clip", ["dataset-2_wave-left-hand_normal_001", "dataset-1_bow_normal_001"])
-def test_in_place_clips_are_refused_unless_forced(bandai, clip):
+def test_in_place_locomotions_are_refused_unless_forced_and_in_place_actions_stand(bandai, clip):
     read, spec = bandai
     walk, still = read(WALK2), read(clip)
     with pytest.raises(NotLocomotingError) as e:
-        splice(walk, still, spec, options=OPT)
+        splice(still, walk, spec, options=OPT)  # as the locomotion: nothing to walk on
     msg = str(e.value)
     assert clip in msg and "does not locomote" in msg and "no alternating steps" in msg and "\n" not in msg
-    with pytest.raises(NotLocomotingError, match=clip):
-        splice(still, walk, spec, options=OPT)  # as the locomotion too
     with pytest.raises(NotLocomotingError, match=clip):  # within a batch
-        splice_pairs([(walk, walk), (walk, still)], spec, options=OPT)
-    r = splice(walk, still, spec, options=replace(OPT, force=True))
+        splice_pairs([(walk, walk), (still, walk)], spec, options=OPT)
+    standing = splice_pairs([(walk, walk), (walk, still)], spec, options=OPT)  # as the action: a standing action
+    assert [r.timing for r in standing] == ["timewarp", "loop"]
+    assert standing[1].motion.num_frames == walk.num_frames and "standing action" in standing[1].notes[-1]
+    r = splice(walk, still, spec, options=replace(OPT, force=True))  # forced through the timewarp
     assert r.motion.num_frames > 0
     assert len(r.notes) == 1 and clip in r.notes[0] and "does not locomote" in r.notes[0]
     assert r.checks[0].locomoting and not r.checks[1].locomoting and r.checks[1].reason

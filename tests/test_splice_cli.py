@@ -127,13 +127,21 @@ def bandai_db(mocap_dir, tmp_path, capsys):
     return db
 
 
-def test_in_place_action_is_refused_without_force_locomotion(bandai_db, tmp_path, capsys):
+def test_in_place_action_stands_and_in_place_locomotion_is_refused_without_force_locomotion(bandai_db, tmp_path, capsys):
     out = tmp_path / "wave.bvh"
-    code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WALK, "--action", WAVE, "-o", out)
+    code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WAVE, "--action", WALK, "-o", out)
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("torchsplice: error: ")
     assert WAVE in err and "does not locomote" in err and "--force-locomotion" in err
     assert "Traceback" not in err and stdout == "" and not out.exists()
+    code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WALK, "--action", WAVE, "-o", out)
+    assert code == 0, err
+    assert "standing action (loop; acting limbs: left_arm)" in stdout
+    from torchsplice.io.database import MotionDatabase
+
+    with MotionDatabase.open(bandai_db) as db:
+        assert read_bvh(out).num_frames == db.read(WALK).num_frames  # as long as the locomotion
+    out.unlink()
     code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WALK, "--action", WAVE, "-o", out,
                             "--force-locomotion")
     assert code == 0, err

@@ -328,7 +328,17 @@ def _splice_options(args):
     from .splice import AlignOptions, SpliceOptions
 
     return SpliceOptions(align=AlignOptions(max_run=args.max_run), posture=not args.no_posture,
-                         force=args.force_locomotion, device=_device(args.device))
+                         force=args.force_locomotion, device=_device(args.device), timing=args.timing,
+                         acting_limbs=_acting_limbs(args))
+
+
+def _acting_limbs(args):
+    from .splice.standing import parse_limbs
+
+    try:
+        return parse_limbs(args.acting_limbs)
+    except ValueError as exc:
+        raise TorchspliceError(f"--acting-limbs: {exc}") from None
 
 
 def cmd_splice(args) -> int:
@@ -349,17 +359,25 @@ def cmd_splice(args) -> int:
                 t = db.table()
                 cands = [(str(n), str(r), _json.loads(lab or "{}")) for n, r, lab in zip(t["name"], t["role"], t["labels"])]
                 name = find_reference(act.name, act.labels, cands, spec)
-                if name is None:
-                    raise TorchspliceError(f"no plain-locomotion reference found for action {act.name!r}: "
-                                           "name one with --reference (or add a [clips.reference] rule to the spec)")
-            ref = db.read(name)
+            ref = db.read(name) if name is not None else None  # a standing action needs none
         elif args.reference is not None:
             raise TorchspliceError("--reference is only used by --method cpmc")
-    result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
+    try:
+        result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
+    except TorchspliceError as exc:
+        if args.method == "cpmc" and ref is None and "reference" in str(exc):
+            raise TorchspliceError(f"no plain-locomotion reference found for action {act.name!r}: name one with "
+                                   "--reference (or add a [clips.reference] rule to the spec)") from None
+        raise
     with _locked(out, args):
         write_bvh(result.motion, out)
     extra = f", reference {result.reference}" if result.reference else ""
-    detail = "" if args.method == "naive" else (
+    if result.timing != "timewarp":
+        acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if args.method == "splice" else ""
+        detail = f"; standing action ({result.timing}{acting})"
+    else:
+        detail = None
+    detail = detail if detail is not None else "" if args.method == "naive" else (
         f"; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames"
         + (f", posture rotation {result.posture_deg:.1f} deg" if args.method == "splice" else ""))
     _say(args, f"wrote {out}: {args.method} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
@@ -393,7 +411,15 @@ def _add_splice_options(s) -> None:
                    help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
     s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
     s.add_argument("--force-locomotion", action="store_true",
-                   help="splice clips that do not locomote (the method's limit) instead of refusing them")
+                   help="time-align clips that do not locomote (the method's limit) instead of refusing a locomotion "
+                        "that does not locomote and splicing a standing action by --timing")
+    s.add_argument("--timing", choices=("loop", "hold", "fit"), default="loop",
+                   help="how an action that does not locomote (a standing action: a wave, a bow) fills the locomotion: "
+                        "loop it with a seamless blend (default), play it once and hold its last frame, or fit it "
+                        "(time-scale) to the locomotion's length")
+    s.add_argument("--acting-limbs", default="auto", metavar="LIMBS",
+                   help="the arms standing actions act with: auto (default: found from each clip's data), none, or "
+                        "left_arm, right_arm or both; the other arm keeps the locomotion's swing (splice method)")
     s.add_argument("--device", default=None,
                    help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
 
@@ -471,7 +497,7 @@ def cmd_splice_all(args) -> int:
         locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
         methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
         force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
-        max_length_ratio=args.max_length_ratio,
+        max_length_ratio=args.max_length_ratio, timing=args.timing, acting_limbs=_acting_limbs(args),
         posture=not args.no_posture, device=_device(args.device), compression=args.compression, layout=args.layout,
         engine=args.engine, workers=args.workers, ray_address=args.ray_address,
     )

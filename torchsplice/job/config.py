@@ -40,6 +40,10 @@ class JobConfig:
         force_locomotion: splice clips that do not locomote instead of skipping their pairs.
         max_length_ratio: skip pairs whose longer clip lasts more than this many times the
             shorter one (``None``: no limit).
+        timing: how a standing action (one that does not locomote) fills its locomotion:
+            ``"loop"`` (default), ``"hold"`` or ``"fit"``; unless ``force_locomotion`` makes
+            the timewarp align it anyway.
+        acting_limbs: the arms standing actions act with (``None``: found per clip).
         copy_sources: copy the selected source clips into the output too.
         max_run, posture: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
@@ -66,6 +70,8 @@ class JobConfig:
     methods: tuple[str, ...] = ("splice",)
     force_locomotion: bool = False
     max_length_ratio: float | None = None
+    timing: str = "loop"
+    acting_limbs: tuple[str, ...] | None = None
     copy_sources: bool = False
     max_run: int = 3
     posture: bool = True
@@ -94,6 +100,12 @@ class JobConfig:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
         if c.layout == "virtual" and c.copy_sources:
             raise TorchspliceError("--copy-sources needs --layout copy: a virtual output holds only the spliced clips")
+        from ..splice.standing import LIMBS, TIMINGS
+
+        if c.timing not in TIMINGS:
+            raise TorchspliceError(f"unknown timing {c.timing!r}; choose {', '.join(TIMINGS)}")
+        if c.acting_limbs is not None and any(x not in LIMBS for x in c.acting_limbs):
+            raise TorchspliceError(f"unknown acting limb in {','.join(c.acting_limbs)!r}; choose from {', '.join(LIMBS)}")
         if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
             raise TorchspliceError(f"--max-length-ratio must be at least 1, got {c.max_length_ratio}")
         if c.workers is not None and c.workers < 1:
@@ -139,13 +151,14 @@ class JobConfig:
     def splice_options(self) -> SpliceOptions:
         """Options for :func:`~torchsplice.splice.splice_pairs` (the plan has checked every clip)."""
         return SpliceOptions(align=self.align_options(), posture=self.posture, force=True, check_locomotion=False,
-                             device=self.device)
+                             device=self.device, timing=self.timing, acting_limbs=self.acting_limbs)
 
     def params(self) -> str:
         """The ``params`` column of every spliced clip (JSON)."""
         return json.dumps({"max_run": self.max_run, "posture": self.posture,
                            "heading_window_deg": self.align_options().heading_window_deg,
-                           "force_locomotion": self.force_locomotion})
+                           "force_locomotion": self.force_locomotion, "timing": self.timing,
+                           "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs)})
 
     def backend(self) -> str:
         """``"compiled"`` (the CPU splicer) or ``"torch"`` (CUDA, or no numba)."""
@@ -161,6 +174,7 @@ class JobConfig:
             "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
+            "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
         }
 
 

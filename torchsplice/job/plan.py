@@ -44,17 +44,19 @@ class Pair:
     loco: int
     action: int
     reference: int | None = None
+    mode: str = "timewarp"  # "timewarp" (time-aligned) or "standing" (an action that does not locomote)
 
 
 @dataclass
 class Task:
-    """Pairs ``start:stop`` of the plan, all of one method and locomotion group."""
+    """Pairs ``start:stop`` of the plan, all of one method, locomotion group and mode."""
 
     id: str
     method: str
     group: int
     start: int
     stop: int
+    mode: str = "timewarp"
 
     @property
     def size(self) -> int:
@@ -108,7 +110,7 @@ class Plan:
         return json.dumps({"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
                            "groups": [asdict(g) for g in self.groups], "clips": self.clips,
                            "tasks": [asdict(t) for t in self.tasks],
-                           "pairs": [[p.method, p.loco, p.action, p.reference] for p in self.pairs]},
+                           "pairs": [[p.method, p.loco, p.action, p.reference, p.mode] for p in self.pairs]},
                           sort_keys=True, separators=(",", ":"))
 
     @classmethod
@@ -209,13 +211,16 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     pairs: list[Pair] = []
     skipped: dict[str, int] = {}
     for method in c.methods:
-        for i in locos:
-            for j in acts:
-                why = _skip_reason(c, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs)
-                if why:
-                    skipped[why] = skipped.get(why, 0) + 1
-                else:
-                    pairs.append(Pair(method, int(i), int(j), refs.get(j)))
+        for mode in ("timewarp", "standing"):
+            for i in locos:
+                for j in acts:
+                    why = _skip_reason(c, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs)
+                    if why:
+                        if mode == "timewarp":
+                            skipped[why] = skipped.get(why, 0) + 1
+                    elif _mode(c, checks, clip_key("A", j, same)) == mode:
+                        pairs.append(Pair(method, int(i), int(j), refs.get(j) if mode == "timewarp" else None, mode))
+    _acting(c, sources, groups, clips, sk_l, {clip_key("A", p.action, same) for p in pairs if p.mode == "standing"})
     if not pairs:
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
         raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
@@ -229,8 +234,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         if not end:
             p = pairs[n]
             g = group_of[(int(tl["skeleton"][p.loco]), float(tl["fps"][p.loco]))]
-        if end or n - start >= size or p.method != p0.method or g != g0:
-            tasks.append(Task(f"{len(tasks):06d}", p0.method, g0, start, n))
+        if end or n - start >= size or p.method != p0.method or g != g0 or p.mode != p0.mode:
+            tasks.append(Task(f"{len(tasks):06d}", p0.method, g0, start, n, p0.mode))
             start = n
     flags = {k: chk.reason for k, chk in checks.items() if not chk.locomoting}
     key = plan_key(c)
@@ -278,6 +283,37 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
     return out
 
 
+def _mode(c: JobConfig, checks: dict, action_key: str) -> str:
+    """``"standing"`` for an action that does not locomote (unless forced through the timewarp)."""
+    check = checks.get(action_key)
+    return "standing" if check is not None and not check.locomoting and not c.force_locomotion else "timewarp"
+
+
+def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l, keys: set[str]) -> None:
+    """Record in ``clips[key]["acting"]`` the arms each standing action acts with (found once per
+    clip from its own frames, or ``config.acting_limbs``)."""
+    from ..splice.standing import acting_limbs
+
+    for n, g in enumerate(groups):
+        todo = [k for k in g.clips if k in keys and "acting" not in clips[k]]
+        if config.acting_limbs is not None:
+            for k in todo:
+                clips[k]["acting"] = list(config.acting_limbs)
+            continue
+        roles = g.roles(sk_l[g.skeleton])
+        for b in range(0, len(todo), 64):
+            chunk = todo[b:b + 64]
+            motions = [sources.motion(k) for k in chunk]
+            by_rate: dict[float, list[int]] = {}
+            for m_i, m in enumerate(motions):
+                by_rate.setdefault(m.fps, []).append(m_i)
+            for rate, idx in by_rate.items():
+                found = acting_limbs(clips_to_tensors([motions[i] for i in idx], motions[idx[0]].skeleton), roles,
+                                     motions[idx[0]].skeleton)
+                for i, (limbs, measure) in zip(idx, found):
+                    clips[chunk[i]]["acting"] = list(limbs)
+
+
 def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs) -> str | None:
     if same and i == j:
         return "a clip is not spliced onto itself"
@@ -295,9 +331,11 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
         check = checks.get(key)
         if check is not None and not check.finite:
             return f"{name} {check.reason}"
-        if check is not None and not check.locomoting and not c.force_locomotion:
-            return f"{name} does not locomote ({check.reason}; --force-locomotion splices it)"
-    if method == "cpmc" and refs.get(j) is None:
+    check = checks.get(clip_key("L", i, same))
+    if check is not None and not check.locomoting and not c.force_locomotion:
+        return f"{tl['name'][i]} does not locomote ({check.reason}; --force-locomotion splices it)"
+    standing = _mode(c, checks, clip_key("A", j, same)) == "standing"
+    if method == "cpmc" and refs.get(j) is None and not standing:
         return f"no plain-locomotion reference for {ta['name'][j]} (cpmc)"
     return None
 

@@ -48,6 +48,7 @@ class OutputWriter:
         self.clips = self.flagged_clips = self.copied = 0
         self.flagged: dict[str, int] = {}
         self.skipped: dict[str, int] = {}
+        self.timings: dict[str, int] = {}  # clips by timing: "timewarp", or a standing action's "loop", "hold", "fit"
         self.expect_plan: str | None = None  # the plan digest every shard must carry
 
     def set_spliced(self, n: int) -> None:
@@ -57,7 +58,10 @@ class OutputWriter:
             run["pairs_spliced"] = int(n)
             self.db.h5.attrs["run"] = json.dumps(run)
 
-    def _count(self, flags, skipped: dict) -> None:
+    def _count(self, flags, skipped: dict, timings=()) -> None:
+        for t in timings:
+            t = str(t) or "timewarp"
+            self.timings[t] = self.timings.get(t, 0) + 1
         for f in flags:
             kinds = {flag_kind(x) for x in str(f).split(FLAG_SEPARATOR) if x}
             for kind in kinds:
@@ -71,7 +75,7 @@ class OutputWriter:
         with ``virtual``, only the shard's table (its frames stay in the shard, which the output
         refers to as ``refer_as``, where it will be once the output is complete)."""
         if part is not None and not virtual:
-            self._count(part.extra["flags"], part.skipped)
+            self._count(part.extra["flags"], part.skipped, part.extra["timing"])
             if part.names:
                 self.db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations,
                                       part.lengths, part.names, part.fps, spec=DatasetSpec.from_json(part.spec),
@@ -89,7 +93,7 @@ class OutputWriter:
                 return
             spec = DatasetSpec.from_json(shard.spec_json(0)) if shard.spec_json(0) else None
             t = shard.table()
-            self._count(t["flags"], skipped)
+            self._count(t["flags"], skipped, t["timing"])
             extra = {col: t[col] for col in OUTPUT_COLUMNS}
             if virtual:
                 self.db.append_virtual(path, shard.skeletons[0], t["length"], t["name"], t["fps"], spec=spec, refer_as=refer_as,

@@ -70,6 +70,7 @@ class JobSummary:
     skipped: dict[str, int] = field(default_factory=dict)
     flagged: dict[str, int] = field(default_factory=dict)
     flagged_clips: int = 0
+    timings: dict[str, int] = field(default_factory=dict)
     copied: int = 0
     seconds: float = 0.0
     compute_seconds: float = 0.0
@@ -94,6 +95,10 @@ class JobSummary:
             out = [f"wrote {self.output}: {self.spliced} spliced clips"
                    + (f" ({self.resumed} pairs from an earlier run)" if self.resumed else "")
                    + (f" + {self.copied} source clips" if self.copied else "") + done]
+        standing = {t: n for t, n in self.timings.items() if t != "timewarp"}
+        if standing:
+            out.append(f"  {self.timings.get('timewarp', 0)} time-aligned (timewarp), "
+                       + ", ".join(f"{n} standing actions ({t})" for t, n in sorted(standing.items())))
         if self.skipped:
             out.append(f"skipped {sum(self.skipped.values())} pairs:")
             out += [f"  {n} x {why}" for why, n in sorted(self.skipped.items(), key=lambda kv: -kv[1])]
@@ -230,8 +235,8 @@ class SpliceJob:
                 if c.layout == "virtual":
                     _install_shards(shard_dir, c.shards_folder, [self.sink.shard_name(t.id) for t in tasks])
                 out.close()
-                summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = (
-                    out.clips, out.flagged, out.flagged_clips, out.copied)
+                summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
+                    out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
                 for why, n in out.skipped.items():
                     summary.skipped[why] = summary.skipped.get(why, 0) + n
         except BaseException:
@@ -317,7 +322,8 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
             bar.close()
             sources.close()
         shutil.rmtree(work, ignore_errors=True)
-    summary.spliced, summary.flagged, summary.flagged_clips, summary.copied = out.clips, out.flagged, out.flagged_clips, out.copied
+    summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
+        out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
     for why, n in out.skipped.items():
         summary.skipped[why] = summary.skipped.get(why, 0) + n
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
-from ..splice import splice_pairs
+from ..splice import splice_pairs, splice_standing
 from ..splice.api import align_kwargs, spliced_labels
 from .config import JobConfig
 from .plan import Plan, Task
@@ -33,6 +33,7 @@ OUTPUT_COLUMNS = {
     "locomotion": "str", "action": "str", "reference": "str", "method": "str", "params": "str", "flags": "str",
     "locomotion_id": "int", "action_id": "int", "crop": "int",
     "cost": "float", "posture_deg": "float", "pelvis_correction_deg": "float", "coverage": "float",
+    "timing": "str", "acting": "str",
 }
 FRAME_COLUMNS = ("action_frame",)
 POOR_ALIGNMENT = 0.10
@@ -100,7 +101,8 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     fps = group.fps
     method = task.method
     failed: dict[int, str] = {}
-    if config.backend() == "compiled":
+    standing = getattr(task, "mode", "timewarp") == "standing"
+    if config.backend() == "compiled" and not standing:
         from ..cpu.bank import splice_bank
         from ..cpu.splice import STATUS
 
@@ -115,16 +117,22 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         cost, posture = out.cost[ok], out.posture[ok]
     else:
         motions = [(sources.motion(k[0]), sources.motion(k[1])) for k in keys]
-        refs = [sources.motion(k[2]) for k in keys] if method == "cpmc" else None
+        refs = [sources.motion(k[2]) for k in keys] if method == "cpmc" and not standing else None
         opts = config.splice_options()
         results = []
+        if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
+            acting = [tuple(plan.clips[k[1]].get("acting", ())) for k in keys]
+            splice_some = lambda sl: splice_standing(motions[sl], roles, method=method, options=opts,  # noqa: E731
+                                                     acting=acting[sl])
+        else:
+            splice_some = lambda sl: splice_pairs(motions[sl], roles, method=method,  # noqa: E731
+                                                  references=refs[sl] if refs else None, options=opts)
         try:
-            results = splice_pairs(motions, roles, method=method, references=refs, options=opts)
+            results = splice_some(slice(0, len(motions)))
         except (ValueError, TorchspliceError):  # one pair cannot be aligned: the others still are
             for b in range(len(motions)):
                 try:
-                    results += splice_pairs(motions[b:b + 1], roles, method=method,
-                                            references=refs[b:b + 1] if refs else None, options=opts)
+                    results += splice_some(slice(b, b + 1))
                 except (ValueError, TorchspliceError) as exc:
                     failed[b] = str(exc)
         kept = [b for b in range(len(pairs)) if b not in failed]
@@ -162,9 +170,10 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     mean_corr = np.add.reduceat(corr_deg, starts) / frames if len(corr_deg) else np.zeros(len(keys))
     loco_frames = np.array([plan.clips[k[0]]["frames"] for k in keys])
     flags = []
+    standing = getattr(task, "mode", "timewarp") == "standing"
     for b, k in enumerate(keys):
         f = [f"{name} does not locomote ({plan.flags[key]})"
-             for key, name in ((k[0], lnames[b]), (k[1], anames[b])) if key in plan.flags]
+             for key, name in ((k[0], lnames[b]), (k[1], anames[b]))[:1 if standing else 2] if key in plan.flags]
         poor = poor_alignment(float(cost[b]), group.leg)
         if poor:
             f.append(poor)
@@ -177,6 +186,8 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         "locomotion_id": [p.loco for p in pairs], "action_id": [p.action for p in pairs],
         "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": np.degrees(posture),
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
+        "timing": [config.timing if standing else "timewarp"] * len(keys),
+        "acting": [",".join(plan.clips[k[1]].get("acting", ())) if standing else "" for k in keys],
     }
     return Part(
         task=task.id, skeleton=skeleton, spec=group.spec,

@@ -34,9 +34,10 @@ from .clips import ClipTensors, check_clip, check_pair, clips_to_tensors, resamp
 from .heck import AlignOptions, splice_tensors
 from .locomotion import LocomotionCheck, check_locomotion
 from .methods import cpmc_tensors, naive_tensors
+from .standing import TIMINGS, acting_limbs, standing_tensors
 
-__all__ = ["METHODS", "BACKENDS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice", "splice_pairs",
-           "resolve_backend"]
+__all__ = ["METHODS", "BACKENDS", "TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
+           "splice_pairs", "splice_standing", "resolve_backend"]
 
 METHODS = ("splice", "naive", "cpmc")
 BACKENDS = ("auto", "compiled", "torch")
@@ -71,6 +72,11 @@ class SpliceOptions:
             compiled backend computes in float64 and returns ``dtype``.
         backend: ``"auto"`` (the compiled splicer on the CPU, torch on other devices),
             ``"compiled"`` or ``"torch"``.
+        timing: how an action that does not locomote (a standing action) fills the
+            locomotion: ``"loop"`` (default), ``"hold"`` or ``"fit"`` (see
+            :mod:`torchsplice.splice.standing`).
+        acting_limbs: the arms standing actions act with (``None``: found per clip from the
+            data; ``()``: none, only the spine and head come from the action).
     """
 
     align: AlignOptions = field(default_factory=AlignOptions)
@@ -81,6 +87,8 @@ class SpliceOptions:
     dtype: torch.dtype = torch.float32
     device: str | None = None
     backend: str = "auto"
+    timing: str = "loop"
+    acting_limbs: tuple[str, ...] | None = None
 
 
 def resolve_backend(options: SpliceOptions) -> str:
@@ -116,6 +124,10 @@ class SpliceResult:
         posture_deg: angle of the posture-transfer rotation ``q_G``, degrees.
         checks: the locomotion checks of (locomotion, action).
         notes: warnings, e.g. a clip that was forced although it does not locomote.
+        timing: ``"timewarp"`` (the two clips were time-aligned) or, for a standing action,
+            its timing: ``"loop"``, ``"hold"`` or ``"fit"``.
+        acting: for a standing action, the arms taken from it (the others keep the
+            locomotion's swing).
     """
 
     motion: Motion
@@ -131,6 +143,8 @@ class SpliceResult:
     posture_deg: float
     checks: tuple[LocomotionCheck, LocomotionCheck] | None = None
     notes: tuple[str, ...] = ()
+    timing: str = "timewarp"
+    acting: tuple[str, ...] = ()
 
 
 def splice(locomotion: Motion, action: Motion, spec: DatasetSpec | SkeletonRoles, method: str = "splice",
@@ -166,27 +180,122 @@ def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | Ske
         raise TorchspliceError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if not pairs:
         return []
-    if method == "cpmc" and (references is None or len(references) != len(pairs) or any(r is None for r in references)):
-        raise TorchspliceError("method 'cpmc' needs a plain-locomotion reference clip for every action")
+    if method == "cpmc" and references is not None and len(references) != len(pairs):
+        raise TorchspliceError(f"method 'cpmc' needs one reference per pair: {len(references)} for {len(pairs)} pairs")
+    if method == "cpmc" and references is None:
+        references = [None] * len(pairs)
     skeleton = pairs[0][0].skeleton
     roles = spec.bind(skeleton) if isinstance(spec, DatasetSpec) else spec
     groups: dict[float, list[int]] = {}
-    clips = _unique([m for p in pairs for m in p] + list(references if method == "cpmc" else []))[0]
+    clips = _unique([m for p in pairs for m in p] + [r for r in (references or []) if r is not None])[0]
     for m in clips:
         check_clip(m, max(4, int(options.min_seconds * m.fps)))
     for k, (loco, act) in enumerate(pairs):
-        for other in (act, references[k] if method == "cpmc" else None):
+        for other in (act, references[k] if references is not None else None):
             if other is not None and other.skeleton is not loco.skeleton:
                 check_pair(loco, other)
         if not loco.skeleton.same_topology(skeleton):
             raise MotionError(f"clip {loco.name!r} has another skeleton than {pairs[0][0].name!r}; splice one skeleton per call")
         groups.setdefault(loco.fps, []).append(k)
+    if options.timing not in TIMINGS:
+        raise TorchspliceError(f"unknown timing {options.timing!r}; choose one of {', '.join(TIMINGS)}")
     results: list[SpliceResult | None] = [None] * len(pairs)
     for fps, ks in groups.items():
-        refs = [references[k] for k in ks] if method == "cpmc" else None
-        for k, r in zip(ks, _splice_group([pairs[k] for k in ks], refs, roles, method, options, fps)):
+        standing = _standing_pairs([pairs[k] for k in ks], roles, skeleton, options, fps)
+        for part in (standing, None):
+            sel = [k for n, k in enumerate(ks) if (n in standing) == (part is not None)]
+            if not sel:
+                continue
+            refs = [references[k] for k in sel] if method == "cpmc" else None
+            if part is None and refs is not None and any(r is None for r in refs):
+                raise TorchspliceError("method 'cpmc' needs a plain-locomotion reference clip for every action that "
+                                       "locomotes (standing actions need none)")
+            run = _splice_standing if part is not None else _splice_group
+            for k, r in zip(sel, run([pairs[k] for k in sel], refs, roles, method, options, fps)):
+                results[k] = r
+    return results  # type: ignore[return-value]
+
+
+def _standing_pairs(pairs, roles: SkeletonRoles, skeleton, options: SpliceOptions, fps: float) -> set[int]:
+    """Indices of the pairs whose action does not locomote (and is not forced through the
+    timewarp): they are spliced as standing actions."""
+    if options.force or not options.check_locomotion:
+        return set()
+    acts, ai = _unique([p[1] for p in pairs])
+    A = clips_to_tensors([resample_motion(a, fps) for a in acts], skeleton, dtype=options.dtype)
+    checks = check_locomotion(A, roles, fps)
+    return {b for b in range(len(pairs)) if checks[int(ai[b])].finite and not checks[int(ai[b])].locomoting}
+
+
+def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str = "splice",
+                    options: SpliceOptions | None = None,
+                    acting: Sequence[tuple[str, ...]] | None = None) -> list[SpliceResult]:
+    """Splice ``(locomotion, action)`` pairs as standing actions (see :mod:`torchsplice.splice.standing`),
+    whether or not the actions locomote; results in the order of ``pairs``, each as long as its
+    locomotion. ``acting`` gives each pair's acting arms (default: ``options.acting_limbs``, or
+    found from each action). :func:`splice_pairs` calls it for the actions that do not locomote.
+    """
+    options = options or SpliceOptions()
+    if not pairs:
+        return []
+    roles = spec.bind(pairs[0][0].skeleton) if isinstance(spec, DatasetSpec) else spec
+    groups: dict[float, list[int]] = {}
+    for k, (loco, _) in enumerate(pairs):
+        groups.setdefault(loco.fps, []).append(k)
+    results: list[SpliceResult | None] = [None] * len(pairs)
+    for fps, ks in groups.items():
+        sub = [acting[k] for k in ks] if acting is not None else None
+        for k, r in zip(ks, _splice_standing([pairs[k] for k in ks], None, roles, method, options, fps, sub)):
             results[k] = r
     return results  # type: ignore[return-value]
+
+
+def _splice_standing(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float,
+                     acting: list | None = None) -> list[SpliceResult]:
+    """Pairs whose action does not locomote (see :mod:`torchsplice.splice.standing`); any backend."""
+    skeleton = pairs[0][0].skeleton
+    locos, li = _unique([p[0] for p in pairs])
+    acts, ai = _unique([p[1] for p in pairs])
+    kw = dict(dtype=options.dtype, device=options.device)
+    L = clips_to_tensors(locos, skeleton, **kw)
+    A = clips_to_tensors([resample_motion(a, fps) for a in acts], skeleton, **kw)
+    checks_l = check_locomotion(L, roles, fps) if options.check_locomotion else None
+    checks_a = check_locomotion(A, roles, fps) if options.check_locomotion else None
+    notes: list[list[str]] = [[] for _ in pairs]
+    for b, (lo, _) in enumerate(pairs):
+        check = checks_l[int(li[b])] if checks_l is not None else None
+        if check is not None and not check.finite:
+            raise NotLocomotingError(f"clip {lo.name!r} {check.reason}")
+        if check is not None and not check.locomoting:
+            if not options.force:
+                raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+            notes[b].append(f"{lo.name} does not locomote: {check.reason}")
+    if acting is None:
+        found = acting_limbs(A, roles, skeleton) if options.acting_limbs is None else None
+        acting = [tuple(options.acting_limbs) if found is None else found[int(ai[b])][0] for b in range(len(pairs))]
+    acting = [tuple(a) for a in acting]
+    loco, act = L.take(li), A.take(ai)
+    clips, times = standing_tensors(loco, act, roles, skeleton, fps, method, options.timing, acting)
+    results = []
+    for b, (lo, ac) in enumerate(pairs):
+        n = int(clips.lengths[b])
+        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method == "splice" else ""
+        notes[b].append(f"{ac.name} does not locomote: spliced as a standing action ({options.timing}{limbs})")
+        motion = Motion(
+            skeleton=lo.skeleton, rotations=clips.rotations[b, :n], root_translation=clips.translations[b, :n, 0].clone(),
+            translations=clips.translations[b, :n] if lo.skeleton.has_joint_translations else None, fps=fps,
+            name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
+            source=f"splice:{method}", role="spliced",
+            labels=spliced_labels(method, lo.name, lo.labels, ac.name, ac.labels),
+        )
+        results.append(SpliceResult(
+            motion=motion, method=method, locomotion=lo.name, action=ac.name,
+            reference=None, cost=float("nan"), curve=(times[b, :n] * (ac.fps / fps)).cpu(), crop=0,
+            path=torch.zeros(0, 2, dtype=torch.long), pelvis_correction=torch.zeros(n, dtype=torch.float64),
+            posture_deg=0.0, checks=(checks_l[int(li[b])], checks_a[int(ai[b])]) if checks_l is not None else None,
+            notes=tuple(notes[b]), timing=options.timing, acting=acting[b],
+        ))
+    return results
 
 
 def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float) -> list[SpliceResult]:
