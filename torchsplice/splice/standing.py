@@ -5,7 +5,9 @@ captured standing (a wave, a bow, a punch), with no gait to align. For such an a
 result lasts as long as the locomotion, and:
 
 - **timing**: the action plays at its own speed, ``"loop"``-ed with a seamless blend (the
-  default), ``"hold"``-ing its last frame, or ``"fit"``-ted (time-scaled) to the locomotion;
+  default: it loops between the two frames whose neighbourhoods match best, as motion graphs
+  pick transitions, and cross-fades there), ``"hold"``-ing its last frame, or ``"fit"``-ted
+  (time-scaled) to the locomotion;
 - **acting limbs** (the arms the action really uses, e.g. the waving one) come from the action;
 - **idle limbs** keep the locomotion's motion, so the free arm swings in phase with the legs;
 - **the spine** carries the action's posture with the locomotion's secondary motion on top
@@ -31,7 +33,7 @@ import math
 
 import torch
 
-from ..core.rotations import quat_conj, quat_mul, quat_normalize, quat_slerp, quat_apply
+from ..core.rotations import axis_angle_to_quat, quat_apply, quat_conj, quat_mul, quat_normalize, quat_to_axis_angle
 from ..core.skeleton import Skeleton
 from ..io.spec import SkeletonRoles
 from ..align.curve import interpolate_frames, slerp_frames
@@ -39,7 +41,7 @@ from .clips import ClipTensors, without_fk
 from .methods import upper_mask
 
 __all__ = ["TIMINGS", "LIMBS", "ACTING_THRESHOLD", "LOOP_BLEND_SECONDS", "arm_chains", "acting_limbs",
-           "action_times", "standing_tensors", "parse_limbs"]
+           "blend_frames", "loop_points", "action_times", "standing_tensors", "parse_limbs"]
 
 TIMINGS = ("loop", "hold", "fit")
 """How a standing action fills a longer (or shorter) locomotion."""
@@ -52,7 +54,10 @@ ACTING_THRESHOLD = 0.3
 in the chest's frame, exceeds this many arm lengths."""
 
 LOOP_BLEND_SECONDS = 0.5
-"""Length of the cross-fade at each loop point (at most a quarter of the action)."""
+"""Length of the fade at each loop point (at most a third of the action)."""
+
+MATCH_SECONDS = 0.1
+"""Length of the windows compared to choose the loop points (pose and velocity)."""
 
 
 def parse_limbs(text: str | None) -> tuple[str, ...] | None:
@@ -124,17 +129,57 @@ def acting_limbs(clips: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton) -
     return out
 
 
+def blend_frames(act_lengths: torch.Tensor, fps: float) -> torch.Tensor:
+    """``(B,)`` frames of each loop fade: :data:`LOOP_BLEND_SECONDS`, at most a third of the action."""
+    return torch.minimum(torch.full_like(act_lengths, round(LOOP_BLEND_SECONDS * fps)), act_lengths // 3).clamp(min=1)
+
+
+def loop_points(act: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton, fps: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(start, end)`` ``(B,)`` frames where each action loops back: after frame ``end`` it plays
+    from ``start`` again, cross-fading over :func:`blend_frames` frames.
+
+    Chosen as motion graphs choose transitions: the pair whose following windows of
+    :data:`MATCH_SECONDS` look most alike (upper-body joint positions in the chest frame, the
+    distance over the window, so that velocities match too), with ``start`` in the first third
+    of the action and ``end`` in the last third, so that the loop keeps most of the action (a
+    fade that runs past the clip's end holds its last frame). Batched over clips.
+    """
+    pos, grot, lengths = act.positions, act.global_rotations, act.lengths
+    Bn, T = pos.shape[:2]
+    chest = arm_chains(roles, skeleton)[LIMBS[0]][0]
+    upper = [j for j in roles.upper_body if j != chest]
+    feat = quat_apply(quat_conj(grot[:, :, chest:chest + 1]), pos[:, :, upper] - pos[:, :, chest:chest + 1]).reshape(Bn, T, -1)
+    W = max(2, round(MATCH_SECONDS * fps))
+    if T < W + 2:
+        return torch.zeros_like(lengths), (lengths - 1).clamp(min=1)
+    windows = feat.unfold(1, W, 1).reshape(Bn, T - W + 1, -1)  # (B, T', F*W): frames t..t+W-1
+    d = torch.cdist(windows, windows)  # (B, T', T'): d[b, i, j] between the windows at end i and start j
+    i = torch.arange(T - W + 1, device=pos.device)
+    L = lengths[:, None, None]
+    ok = ((i[None, None, :] * 3 <= L) & (i[None, :, None] * 3 >= 2 * L)  # start in the first third, end in the last
+          & (i[None, :, None] + W <= L))  # the end's window inside the clip (past its end, the fade holds the last frame)
+    d = torch.where(ok, d, torch.full_like(d, float("inf")))
+    best = d.reshape(Bn, -1).argmin(1)
+    end, start = best // (T - W + 1), best % (T - W + 1)
+    fallback = ~torch.isfinite(d.reshape(Bn, -1).min(1).values)  # too short to choose: loop the whole clip
+    start = torch.where(fallback, torch.zeros_like(start), start)
+    end = torch.where(fallback, (lengths - 1).clamp(min=1), end)
+    return start, end
+
+
 def action_times(loco_lengths: torch.Tensor, act_lengths: torch.Tensor, timing: str, fps: float,
-                 T: int | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """For every result frame, where in the action it plays: ``(times, blend_from, weight)``.
+                 T: int | None = None, loop: tuple[torch.Tensor, torch.Tensor] | None = None
+                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """For every result frame, where in the action it plays: ``(times, blend_from, phase)``.
 
     All ``(B, T)`` with ``T`` the longest locomotion. ``times`` are action frames (float64).
-    For ``"loop"``, each pass after the first starts with a cross-fade of ``B`` frames from the
-    end of the previous pass: result frame ``t`` is ``slerp(action[blend_from], action[times],
-    weight)`` where ``weight`` rises smoothly from 0 to 1 (elsewhere ``weight`` is 1). The loop
-    period is ``Ta - B`` frames, so the motion is continuous at both ends of the fade.
     ``"hold"`` plays the action once, then holds its last frame; ``"fit"`` scales the action's
-    time to the locomotion's length.
+    time to the locomotion's length. ``"loop"`` plays the action up to its loop ``end``, then
+    from its loop ``start`` again (``loop``, see :func:`loop_points`; default: the whole clip),
+    again and again. Each jump back is smoothed by inertialization (as game engines blend, see
+    :func:`_sample`) over :func:`blend_frames` frames: ``blend_from`` holds ``end`` during
+    those frames, and ``phase`` goes from 0 at the jump to 1 at the end of the fade (it is 1
+    everywhere else).
     """
     if timing not in TIMINGS:
         raise ValueError(f"unknown timing {timing!r}; choose from {', '.join(TIMINGS)}")
@@ -148,27 +193,54 @@ def action_times(loco_lengths: torch.Tensor, act_lengths: torch.Tensor, timing: 
         return torch.minimum(t, Ta - 1), t.clone(), ones
     if timing == "fit":
         return t * (Ta - 1) / (Tl - 1).clamp(min=1), t.clone(), ones
-    blend = torch.minimum(torch.full_like(Ta, round(LOOP_BLEND_SECONDS * fps)), torch.floor(Ta / 4)).clamp(min=1)
-    period = (Ta - blend).clamp(min=1)
-    cycle = torch.floor(t / period)
-    u = t - cycle * period
-    fading = (cycle >= 1) & (u < blend)
-    s = (u / blend).clamp(0, 1)
-    weight = torch.where(fading, s * s * (3 - 2 * s), ones)  # smoothstep: no velocity kink at the ends
-    return u, torch.where(fading, u + period, u), weight
+    blend = blend_frames(act_lengths, fps).to(torch.float64)[:, None]
+    if loop is None:
+        start, end = torch.zeros_like(Ta), (Ta - blend).clamp(min=1)
+    else:
+        start, end = loop[0].to(torch.float64)[:, None], loop[1].to(torch.float64)[:, None]
+    period = (end - start).clamp(min=1)
+    after = (t - end).clamp(min=0)
+    cycle = torch.floor(after / period)
+    u = after - cycle * period
+    looping = t >= end
+    fading = looping & (u < blend)
+    phase = torch.where(fading, (u / blend).clamp(0, 1), ones)
+    times = torch.where(looping, start + u, t)
+    return times, torch.where(fading, end.expand_as(t), times), phase
 
 
-def _sample(act: ClipTensors, times: torch.Tensor, blend_from: torch.Tensor, weight: torch.Tensor):
-    """Action rotations and translations at ``times``, cross-faded from ``blend_from`` by ``weight``."""
+def _sample(act: ClipTensors, times: torch.Tensor, blend_from: torch.Tensor, phase: torch.Tensor,
+            loop_start: torch.Tensor | None, blend: torch.Tensor | None):
+    """Action rotations and translations at ``times``, with each loop's jump back smoothed.
+
+    Inertialization: at a jump from frame ``end`` (``blend_from``) to ``start`` (``loop_start``
+    ``(B,)``), the new pass ``q(t)`` is shifted by an offset that starts as the pose difference
+    ``r = log(q[end] q[start]^-1)`` and the velocity difference ``w`` (angular velocity at
+    ``end`` minus at ``start``, per frame) and decays over ``blend`` ``(B,)`` frames:
+    ``exp(r f(u) + w g(u)) q(t)``, with ``f = 1 - smoothstep(u / blend)`` and
+    ``g = u (1 - u / blend)^2`` (translations alike). Pose and velocity are continuous at the
+    jump, and the offset fades with zero velocity: the new pass goes on with its own motion.
+    """
     rot = slerp_frames(act.rotations, times, act.lengths)
     trans = interpolate_frames(act.translations, times, act.lengths)
-    if bool((weight < 1).any()):
-        rot0 = slerp_frames(act.rotations, blend_from, act.lengths)
-        trans0 = interpolate_frames(act.translations, blend_from, act.lengths)
-        w = weight.to(rot.dtype)
-        rot = quat_slerp(rot0, rot, w[..., None])
-        trans = trans0 + w[..., None, None] * (trans - trans0)
-    return rot, trans
+    if loop_start is None or not bool((phase < 1).any()):
+        return rot, trans
+    L = act.lengths
+    start = loop_start.to(times.dtype)[:, None].expand_as(times)
+    at = lambda x: slerp_frames(act.rotations, x, L)  # noqa: E731
+    lin = lambda x: interpolate_frames(act.translations, x, L)  # noqa: E731
+    r = quat_to_axis_angle(quat_mul(at(blend_from), quat_conj(at(start))))
+    w = (quat_to_axis_angle(quat_mul(at(blend_from), quat_conj(at(blend_from - 1))))
+         - quat_to_axis_angle(quat_mul(at(start + 1), quat_conj(at(start)))))
+    tr = lin(blend_from) - lin(start)
+    tw = (lin(blend_from) - lin(blend_from - 1)) - (lin(start + 1) - lin(start))
+    s = phase.to(rot.dtype)
+    u = s * blend.to(rot.dtype)[:, None]
+    f = (1 - s * s * (3 - 2 * s))[..., None, None]
+    g = (u * (1 - s) ** 2)[..., None, None]
+    rot = quat_normalize(quat_mul(axis_angle_to_quat(r * f + w * g), rot))
+    return rot, trans + tr * f + tw * g
+
 
 
 def _mean_rotation(q: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
@@ -192,8 +264,10 @@ def standing_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, 
     """
     B, T, J = loco.rotations.shape[0], int(loco.lengths.max()), skeleton.num_joints
     dev = loco.rotations.device
-    times, blend_from, weight = action_times(loco.lengths, act.lengths, timing, fps, T)
-    a_rot, a_trans = _sample(act, times, blend_from, weight)  # (B, T, J, 4), (B, T, J, 3)
+    loop = loop_points(act, roles, skeleton, fps) if timing == "loop" else None
+    times, blend_from, phase = action_times(loco.lengths, act.lengths, timing, fps, T, loop)
+    a_rot, a_trans = _sample(act, times, blend_from, phase, loop[0] if loop is not None else None,
+                             blend_frames(act.lengths, fps))  # (B, T, J, 4), (B, T, J, 3)
     l_rot, l_trans = loco.rotations[:, :T], loco.translations[:, :T]
     upper = upper_mask(roles, J, dev)
     if method == "naive":
