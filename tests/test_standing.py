@@ -204,3 +204,30 @@ def test_the_default_job_on_bandai_skips_no_standing_action(mocap_dir, tmp_path,
         assert len(waves) >= 7  # every standing wave, raise-hand and bow of the folder is spliced
         standing = t["timing"] == "loop"
         assert (t["coverage"][standing] == 1.0).all()
+
+
+def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_path, capsys):
+    folder = tmp_path / "bvh"
+    folder.mkdir()
+    import shutil
+
+    for n in (WALK, WALK_OLD, TURN, WAVE_L, WAVE_R, RAISE_LEFT):
+        shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", folder)
+    db, out, report = tmp_path / "b.h5", tmp_path / "o.h5", tmp_path / "r.md"
+    assert main(["import", str(folder), "-o", str(db), "-q"]) == 0
+    assert main(["splice-all", str(db), "-o", str(out), "-q", "--locomotions", "role:locomotion,role:both",
+                 "--actions", "role:action", "--method", "splice,naive,cpmc", "--workers", "1"]) == 0
+    assert main(["evaluate", str(out), "-o", str(report), "-q"]) == 0
+    capsys.readouterr()
+    text = report.read_text()
+    section = text[text.index("## Standing actions"):text.index("## Pictures")]
+    rows = {ln.split("|")[1].strip(): [x.strip() for x in ln.split("|")[2:-1]]
+            for ln in section.splitlines() if ln.startswith("| ") and not ln.startswith("| method")}
+    assert set(rows) == {"splice", "naive", "cpmc"} and all(r[0] == "9" for r in rows.values())
+    kept = {m: float(r[1]) for m, r in rows.items()}
+    assert kept["splice"] < 1.0 < kept["cpmc"]  # the acting wrist moves as in the action (cm)
+    assert float(rows["splice"][4]) <= 1.5  # the worst seam: about as smooth as the capture
+    in_range = {m: int(r[2].split("%")[0]) for m, r in rows.items()}
+    assert in_range["splice"] > in_range["naive"]  # the idle arm swings with the walk, not held still
+    assert len(re.findall(r"^\*\*\S+ \(standing action, loop;", text, re.M)) == 2
+    assert len(list((tmp_path / "r_files").glob("*_filmstrip.png"))) >= 2

@@ -8,7 +8,9 @@ For every spliced clip (and, in aggregate, every method) the report gives:
 - **posture kept**: distance between the result's and the action's mean shoulder offset from
   the pelvis in the heading frame (small: the action's posture, e.g. a lean, survived);
 - **ground-truth error**: mean upper-body joint error against the real capture of the same
-  combination, where the spec declares ground truth (``[clips.ground_truth]``).
+  combination, where the spec declares ground truth (``[clips.ground_truth]``);
+- for **standing actions** (see :mod:`torchsplice.evaluation.standing`): the action kept, the
+  idle arms' phase, the smoothness of the loop seams, and filmstrips of two such pairs.
 
 The source clips come from the databases recorded in the output's ``run`` attribute, from
 ``sources`` given explicitly, or from the output itself when the job copied them in.
@@ -30,6 +32,7 @@ from ..io.spec import DatasetSpec, detect_spec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
+from .standing import standing_measures
 
 __all__ = ["evaluate_database"]
 
@@ -146,12 +149,14 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                 err = upper_body_error([results[n] for n in have], [sources.get(caps[n]) for n in have], roles)
                 for n, e in zip(have, err.tolist()):
                     gt[n] = e
+            stand = _standing_rows(db, t, chunk, results, acts, roles)
             for n, i in enumerate(chunk):
                 per_clip.append({
                     "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
                     "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
                     "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
                     "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
+                    **stand.get(n, {"timing": "timewarp"}),
                 })
     captured = [sources.get(n) for n in sorted(captured_names)]
     lo, hi = _captured_phase_band(captured, roles)
@@ -164,6 +169,58 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
     with atomic_path(output) as tmp:
         Path(tmp).write_text(text)
     return aggregates
+
+
+def _standing_rows(db, t, chunk, results, acts, roles) -> dict[int, dict]:
+    """Per position in ``chunk`` of a standing action's result: timing, acting arms and the
+    measures of :mod:`torchsplice.evaluation.standing`."""
+    if "timing" not in t:
+        return {}
+    idx = [n for n, i in enumerate(chunk) if str(t["timing"][i]) not in ("", "timewarp")]
+    if not idx:
+        return {}
+    acting = [tuple(x for x in str(t["acting"][chunk[n]]).split(",") if x) for n in idx]
+    curves = [torch.from_numpy(db.read_frame_column(chunk[n], "action_frame").astype("float64")) for n in idx]
+    sm = standing_measures([results[n] for n in idx], [acts[n] for n in idx], curves, acting, roles)
+    return {n: {"timing": str(t["timing"][chunk[n]]), "acting": ",".join(acting[k]),
+                "action_kept": float(sm.action_kept[k]), "idle_lag": float(sm.idle_lag[k]),
+                "seam_ratio": float(sm.seam_ratio[k])} for k, n in enumerate(idx)}
+
+
+def _standing_section(per_clip: list[dict], methods: list[str], units: str, band: tuple[float, float]) -> list[str]:
+    """The report's section on standing actions (empty when there are none)."""
+    stand = [c for c in per_clip if c.get("timing", "timewarp") != "timewarp"]
+    if not stand:
+        return []
+    lo, hi = band
+
+    def stats(vals):
+        vals = [v for v in vals if v is not None and math.isfinite(v)]
+        return (sum(vals) / len(vals), max(vals)) if vals else (None, None)
+
+    lines = ["## Standing actions", "",
+             f"{len(stand)} clips put an action that does not locomote onto a locomotion "
+             f"({', '.join(sorted({c['timing'] for c in stand}))}).", "",
+             f"| method | clips | action kept ({units}), mean | idle arms: lag within captured range | seam jump / "
+             f"capture's 99th pct., mean | worst | foot skate ({units}/s), standing | foot skate, time-aligned |",
+             "|---|---|---|---|---|---|---|---|"]
+    for m in methods:
+        cs = [c for c in stand if c["method"] == m]
+        if not cs:
+            continue
+        kept, _ = stats([c["action_kept"] for c in cs])
+        idle = [c["idle_lag"] for c in cs if math.isfinite(c["idle_lag"])]
+        in_range = f"{100 * sum(lo <= x <= hi for x in idle) / len(idle):.0f}% of {len(idle)}" if idle else "-"
+        seam, worst = stats([c["seam_ratio"] for c in cs])
+        skate, _ = stats([c["foot_skate"] for c in cs])
+        other, _ = stats([c["foot_skate"] for c in per_clip if c["method"] == m and c.get("timing", "timewarp") == "timewarp"])
+        lines.append(f"| {m} | {len(cs)} | {_fmt(kept)} | {in_range} | {_fmt(seam)} | {_fmt(worst)} | {_fmt(skate)} | {_fmt(other)} |")
+    lines += ["", "Action kept: mean distance of the acting arms' wrists, in the chest's frame, from the action's at "
+              "the same action frame (0: the action's arm motion exactly). Idle arms: the arm-leg lag of the arms the "
+              "action does not use, against the range of the captured walks. Seam jump: the largest change of the "
+              "acting wrists' velocity around each loop point, over the 99th percentile of the same in the captured "
+              "action (about 1 or less: as smooth as the capture). Foot skate as above: the locomotion's, unchanged.", ""]
+    return lines
 
 
 def _captured_phase_band(captured: list[Motion], roles) -> tuple[float, float]:
@@ -206,10 +263,17 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
     folder.mkdir(exist_ok=True)
     first = [c for c in per_clip if c["method"] == per_clip[0]["method"]]
     chosen, seen = [], set()  # long pairs with a capture first, one per locomotion
-    for c in sorted(first, key=lambda c: (c["capture"] is None, -c["frames"], c["name"])):
+    aligned = [c for c in first if c.get("timing", "timewarp") == "timewarp"]
+    for c in sorted(aligned, key=lambda c: (c["capture"] is None, -c["frames"], c["name"])):
         if c["locomotion"] not in seen and len(chosen) < examples:
             chosen.append(c)
             seen.add(c["locomotion"])
+    standing, acts = [], set()  # and two standing actions, of different actions
+    for c in sorted((c for c in first if c.get("timing", "timewarp") != "timewarp"), key=lambda c: (-c["frames"], c["name"])):
+        if c["action"] not in acts and len(standing) < 2:
+            standing.append(c)
+            acts.add(c["action"])
+    chosen += standing
     figures = []
     for c in chosen:
         loco, act = sources.get(c["locomotion"]), sources.get(c["action"])
@@ -222,6 +286,10 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
         stem = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in c["name"])
         strip = folder / f"{stem}_filmstrip.png"
         render(clips, strip, titles=titles, frames=6, up_axis=spec.up_axis)
+        if c.get("timing", "timewarp") != "timewarp":  # a standing action: no time alignment to plot
+            figures.append((f"{c['name']} (standing action, {c['timing']}; acting: {c.get('acting') or 'none'})",
+                            str(strip.relative_to(output.parent))))
+            continue
         align = folder / f"{stem}_alignment.png"
         plot_alignment(loco, act, spec, align)
         figures.append((c["name"], str(strip.relative_to(output.parent))))
@@ -248,6 +316,7 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
               "result's and the action's mean shoulder offset from the pelvis in the heading frame. Ground-truth "
               "error: mean upper-body joint distance to the real capture of the same combination, each in its root "
               "heading frame after time alignment. Lower is better everywhere.", ""]
+    lines += _standing_section(per_clip, methods, units, phase_band)
     if figures:
         lines += ["## Pictures", ""]
         lines += [f"**{title}**\n\n![{title}]({file})\n" for title, file in figures]
