@@ -135,6 +135,45 @@ def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path)
     assert not out.exists() and (tmp_path / ".out.h5.parts" / "plan.json").is_file()  # kept, to resume
 
 
+def test_a_pool_that_breaks_while_tasks_are_handed_out_is_a_break_not_a_crash(monkeypatch):
+    """A worker can die between two submissions; the engine must retry, not raise a traceback."""
+    from concurrent.futures import Future
+    from concurrent.futures.process import BrokenProcessPool
+    from types import SimpleNamespace
+
+    from torchsplice.job import executors
+
+    tasks = [SimpleNamespace(id=f"t{k}") for k in range(4)]
+    starts = []
+
+    class Pool:
+        def __init__(self, broken_after):
+            self.broken_after, self.handed = broken_after, 0
+            self._processes = {}
+
+        def submit(self, fn, index):
+            if self.handed == self.broken_after:
+                raise BrokenProcessPool("a child process terminated abruptly")
+            self.handed += 1
+            f = Future()
+            f.set_result((tasks[index].id, 0))
+            return f
+
+        def shutdown(self, wait=True, cancel_futures=False):
+            pass
+
+    engine = executors.LocalEngine(None, SimpleNamespace(tasks=tasks), Path("plan.json"), Path("."), 2)
+
+    def start():  # the first pool breaks after two tasks were handed out, the next one works
+        starts.append(1)
+        engine.pool = Pool(2 if len(starts) == 1 else None)
+
+    monkeypatch.setattr(engine, "_start", start)
+    finished = []
+    engine.run(tasks, lambda task, _: finished.append(task.id))
+    assert sorted(finished) == [t.id for t in tasks] and len(starts) == 2
+
+
 def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")

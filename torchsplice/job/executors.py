@@ -193,11 +193,16 @@ class LocalEngine:
         rounds = 0  # pool breaks in a row without a task finished
         while todo:
             self._start()
-            futures = {self.pool.submit(_worker_task, index[tid]): tid for tid in todo}
             before = len(todo)
             rounds += 1
             broken = False
+            futures = {}
             try:
+                try:
+                    for tid in todo:
+                        futures[self.pool.submit(_worker_task, index[tid])] = tid
+                except BrokenProcessPool:  # a worker died while the tasks were being handed out
+                    broken = True
                 remaining = set(futures)
                 while remaining:
                     finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
