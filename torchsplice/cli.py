@@ -124,6 +124,7 @@ def cmd_import(args) -> int:
     from .io.bvh import read_bvh
     from .io.database import MotionDatabase
     from .io.spec import detect_spec, load_spec
+    from .io.units import convert_units
 
     files, skipped = _collect_bvh(args.paths)
     if args.append:
@@ -157,6 +158,8 @@ def cmd_import(args) -> int:
                 m.check_finite()
                 spec = (fixed_spec or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
                 spec.bind(m.skeleton)
+                if args.units:  # lengths in one unit, so that datasets share the database
+                    m, spec = convert_units(m, spec, args.units)
                 m.role, m.labels = spec.clip_metadata(m.name)
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
@@ -548,6 +551,8 @@ def cmd_merge(args) -> int:
 # parser and entry point
 # --------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
+    from .io.units import CONVERTIBLE_UNITS
+
     p = argparse.ArgumentParser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
@@ -575,6 +580,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--append", action="store_true", help="add to an existing database")
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
+    s.add_argument("--units", choices=CONVERTIBLE_UNITS, default=None,
+                   help="convert every clip from its spec's units to these (m, cm, mm, in, ft; CMU's own unit is 'cmu'), "
+                        "so that datasets in different units share one database; default: keep each file's units")
     s.add_argument("--split", type=_positive_float, default=None, metavar="SECONDS",
                    help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, ...; "
                         "labels split_from and split_frame say where each came from), so that long takes splice in reasonable "
