@@ -286,6 +286,7 @@ def cmd_export(args) -> int:
 
     from .io.bvh import write_bvh
     from .io.database import MotionDatabase
+    from .io.npz import select_rows
 
     if args.all == bool(args.clips):
         raise TorchspliceError("name the clips to export, or pass --all (not both)" if args.all else
@@ -322,13 +323,8 @@ def cmd_export(args) -> int:
                    + (f", features {args.features} with statistics over all of them" if args.features else ""))
         return 0
     with MotionDatabase.open(args.database) as db:
-        names = db.names if args.all else list(dict.fromkeys(args.clips))
-        for n in names:
-            db.index(n)  # an unknown clip: one line before anything is written
-        if skeletons is not None:
-            names = [n for n in names if db.clip_info(n)["skeleton"] in skeletons]
-            if not names:
-                raise TorchspliceError(f"{args.database}: no clip to export on skeleton(s) {args.skeleton}")
+        all_names = db.names
+        names = [all_names[r] for r in select_rows(db, None if args.all else args.clips, skeletons)]
         files, folder = _export_targets(args, names, ".bvh", single_file=len(names) == 1 and not args.all)
         if folder is not None:
             folder.mkdir()

@@ -96,7 +96,7 @@ from .atomic import atomic_path
 from .database import MotionDatabase
 
 __all__ = ["NPZ_FORMAT", "NPZ_VERSION", "FRAME_ARRAYS", "FEATURE_SETS", "NpzExport", "write_npz", "read_npz",
-           "clip_of_packed", "clip_filename"]
+           "clip_of_packed", "clip_filename", "select_rows"]
 
 NPZ_FORMAT = "torchsplice.npz"
 NPZ_VERSION = 1
@@ -104,6 +104,23 @@ FRAME_ARRAYS = ("rotations", "root_translation", "trajectory", "translations", "
 """The per-frame arrays of every exported clip."""
 FEATURE_SETS = {"6d": ("rotations_6d", "velocities", "trajectory_velocity", "root_velocity")}
 """``--features`` choices: the extra per-frame arrays they add (with statistics)."""
+
+
+def select_rows(db: MotionDatabase, clips: Sequence[str] | None, skeletons: Sequence[int] | None = None) -> list[int]:
+    """Database rows of ``clips`` (names, in the order given, repeats dropped; ``None``: every clip
+    in row order), kept only on ``skeletons`` (ids; ``None``: any). One-line errors for an
+    unknown clip or skeleton and for an empty result."""
+    rows = list(range(len(db))) if clips is None else list(dict.fromkeys(db.index(c) for c in clips))
+    if skeletons is not None:
+        unknown = [k for k in skeletons if k not in range(len(db.skeletons))]
+        if unknown:
+            raise TorchspliceError(f"{db.path}: no skeleton {unknown[0]} (it has {len(db.skeletons)}, numbered from 0; "
+                                   "see torchsplice info)")
+        t = db.table()
+        rows = [r for r in rows if int(t["skeleton"][r]) in set(skeletons)]
+    if not rows:
+        raise TorchspliceError(f"{db.path}: no clip to export" + (" on the skeletons asked for" if skeletons is not None else ""))
+    return rows
 
 
 def clip_filename(name: str, suffix: str) -> str:
@@ -144,21 +161,7 @@ class NpzExport:
         if self.features is not None and self.features not in FEATURE_SETS:
             raise TorchspliceError(f"unknown feature set {self.features!r} (known: {', '.join(FEATURE_SETS)})")
         with MotionDatabase.open(self.database) as db:
-            if self.clips is None:
-                rows = list(range(len(db)))
-            else:
-                rows = list(dict.fromkeys(db.index(c) for c in self.clips))  # unknown names: one line from the database
-            t = db.table()
-            if self.skeletons is not None:
-                have = sorted(set(int(k) for k in t["skeleton"]))
-                unknown = [k for k in self.skeletons if k not in range(len(db.skeletons))]
-                if unknown:
-                    raise TorchspliceError(f"{self.database}: no skeleton {unknown[0]} (it has {', '.join(map(str, have))}; "
-                                           "see torchsplice info)")
-                rows = [r for r in rows if int(t["skeleton"][r]) in set(self.skeletons)]
-            if not rows:
-                raise TorchspliceError(f"{self.database}: no clip to export" + (" on the skeletons asked for"
-                                                                               if self.skeletons is not None else ""))
+            rows = select_rows(db, self.clips, self.skeletons)
             self._attrs = {}
             for k in range(len(db.skeletons)):
                 g = db.h5[f"skeletons/{k}"]
