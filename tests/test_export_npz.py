@@ -339,3 +339,36 @@ def test_library_export_without_the_command_line(db, bandai_names, tmp_path):
         assert str(z["format"]) == "torchsplice.npz" and json.loads(str(z["labels"]))
     with pytest.raises(TorchspliceError, match="unknown feature set"):
         NpzExport(db, features="9d")
+
+
+def test_the_readme_npz_snippet_runs(db, bandai_names, tmp_path, capsys, monkeypatch):
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    start = text.index("### Exporting for other tools (.npz)")
+    code = re.search(r"```python\n(.*?)```", text[start:], re.S).group(1)
+    rc, _, err = run(capsys, "export", db, *bandai_names, "--packed", "--features", "6d", "-o", tmp_path / "train.npz", "-q")
+    assert rc == 0, err
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    x, first, z = scope["x"], scope["first"], scope["z"]
+    with MotionDatabase.open(db) as d:
+        assert first.shape == (d.clip_info(str(z["names"][0]))["length"], 22, 6)
+    moving = z["rotations_6d_std"] > 1e-6
+    np.testing.assert_allclose(x.mean(0)[moving], 0, atol=1e-4)  # normalised: zero mean, unit variance
+    np.testing.assert_allclose(x.std(0)[moving], 1, atol=1e-4)
+
+
+def test_window_velocities_are_slices_of_the_clips(db, bandai_names):
+    feats = ("trajectory_velocity", "root_velocity", "rotations_6d")
+    whole = MotionDataset(db, clips=bandai_names, features=feats, dtype=F64)
+    win = MotionDataset(db, clips=bandai_names, features=feats, dtype=F64, window=40, stride=25)
+    items = win.__getitems__(list(range(len(win))))
+    for it in items:
+        c = whole.names.index(it["name"])
+        ref = whole[c]
+        for f in feats:
+            torch.testing.assert_close(it[f], ref[f][it["start"]:it["start"] + 40], rtol=0, atol=1e-9)
+    assert any(it["start"] > 0 for it in items)
+    assert float(whole[0]["trajectory_velocity"][:, [0, 2]].norm(dim=1).mean()) > 10  # Bandai walks move (cm/s)
