@@ -659,7 +659,7 @@ class MotionDataset(Dataset):
         for k in ks[1:]:
             if not self.skeletons[k].same_topology(self.skeletons[ks[0]]):
                 raise DatasetError(f"{self.path}: statistics need clips of one skeleton topology; the selected clips "
-                                   f"are on skeletons {ks} ({self.skeletons[ks[0]].mismatch(self.skeletons[k])}); "
+                                   f"are on skeletons {ks} (skeleton {k} against {ks[0]}: {self.skeletons[ks[0]].mismatch(self.skeletons[k])}); "
                                    "filter with where={'skeleton': k}")
         units = sorted({self.units.get(k, "") for k in ks})
         if len(units) > 1:
