@@ -33,6 +33,7 @@ def _progress(iterable, total: int, desc: str, quiet: bool):
 _OUTPUTS = {  # kind of output: (suffixes, what it is)
     "database": ((".h5", ".hdf5"), "a database"),
     "bvh": ((".bvh",), "BVH"),
+    "npz": ((".npz",), "a NumPy .npz file"),
     "report": ((".md",), "a Markdown report"),
     "plot": ((".png", ".pdf", ".svg"), "a picture"),
     "render": ((".gif", ".mp4", ".png"), "a GIF, MP4 or PNG filmstrip"),
@@ -124,6 +125,7 @@ def cmd_import(args) -> int:
     from .io.bvh import read_bvh
     from .io.database import MotionDatabase
     from .io.spec import detect_spec, load_spec
+    from .io.units import convert_units
 
     files, skipped = _collect_bvh(args.paths)
     if args.append:
@@ -157,6 +159,8 @@ def cmd_import(args) -> int:
                 m.check_finite()
                 spec = (fixed_spec or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
                 spec.bind(m.skeleton)
+                if args.units:  # lengths in one unit, so that datasets share the database
+                    m, spec = convert_units(m, spec, args.units)
                 m.role, m.labels = spec.clip_metadata(m.name)
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
@@ -248,18 +252,92 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> tuple[list[Path], Path | None]:
+    """The files ``export`` writes (one per clip, or one), checked before any work, and the folder
+    to create (``None`` if none): ``-o`` is a file for one clip or a packed file, else a folder."""
+    from .io.atomic import check_output
+    from .io.npz import clip_filename
+
+    kind = "npz" if suffix == ".npz" else "bvh"
+    out = Path(args.output)
+    if single_file and not out.is_dir():
+        return [_output(args, kind, inputs=[args.database])], None
+    if out.suffix.lower() in (".bvh", ".npz") and not out.is_dir():
+        raise TorchspliceError(f"{out}: {len(names)} clips go to a folder, one file each: give -o a folder "
+                               "(or --packed for one .npz)")
+    if out.exists() and not out.is_dir():
+        raise TorchspliceError(f"{out}: is a file; several clips go to a folder, one file each")
+    if not out.parent.is_dir():
+        raise TorchspliceError(f"{out}: folder {out.parent} does not exist")
+    files, seen = [], {}
+    for n in names:
+        f = out / clip_filename(n, suffix)
+        if f.name in seen:
+            raise TorchspliceError(f"{out}: clips {seen[f.name]!r} and {n!r} would both be written to {f.name}")
+        seen[f.name] = n
+        if out.is_dir():
+            check_output(f, (suffix,), _OUTPUTS[kind][1], inputs=[args.database], overwrite=args.force)
+        files.append(f)
+    return files, None if out.is_dir() else out
+
+
 def cmd_export(args) -> int:
     import torch
 
     from .io.bvh import write_bvh
     from .io.database import MotionDatabase
+    from .io.npz import select_rows
 
-    out = _output(args, "bvh", inputs=[args.database])
+    if args.all == bool(args.clips):
+        raise TorchspliceError("name the clips to export, or pass --all (not both)" if args.all else
+                               "name the clips to export (as `torchsplice info` lists them), or pass --all")
+    fmt = args.format or ("npz" if Path(args.output).suffix.lower() == ".npz" or args.packed or args.features else "bvh")
+    if fmt == "bvh" and (args.packed or args.features):
+        raise TorchspliceError(f"{'--packed' if args.packed else '--features'} needs --format npz (BVH holds one clip per file)")
+    skeletons = None
+    if args.skeleton is not None:
+        try:
+            skeletons = sorted({int(k) for k in args.skeleton.split(",") if k.strip()})
+        except ValueError:
+            raise TorchspliceError(f"--skeleton: expected skeleton ids such as 0 or 0,1, got {args.skeleton!r}") from None
+    if fmt == "npz":
+        from .io.npz import NpzExport, write_npz
+
+        export = NpzExport(args.database, None if args.all else args.clips, features=args.features, skeletons=skeletons)
+        names = export.names
+        files, folder = _export_targets(args, names, ".npz", single_file=args.packed or (len(names) == 1 and not args.all))
+        if args.packed:
+            arrays = export.packed()
+            with _locked(files[0], args):
+                write_npz(files[0], arrays)
+            _say(args, f"wrote {files[0]}: {len(names)} clips packed, {export.num_frames} frames"
+                       + (f", features {args.features} with statistics" if args.features else ""))
+            return 0
+        if folder is not None:
+            folder.mkdir()
+        for (name, arrays), f in zip(export.per_clip(), files):
+            with _locked(f, args):
+                write_npz(f, arrays, what=f"clip {name!r}")
+        where = files[0] if len(files) == 1 else Path(args.output)
+        _say(args, f"wrote {where}: {len(names)} clip{'s' if len(names) != 1 else ''} as .npz, {export.num_frames} frames"
+                   + (f", features {args.features} with statistics over all of them" if args.features else ""))
+        return 0
     with MotionDatabase.open(args.database) as db:
-        m = db.read(args.clip, dtype=torch.float64)
-    with _locked(out, args):
-        write_bvh(m, out)
-    _say(args, f"wrote {out}: {m.name}, {m.num_frames} frames at {m.fps:g} fps")
+        all_names = db.names
+        names = [all_names[r] for r in select_rows(db, None if args.all else args.clips, skeletons)]
+        files, folder = _export_targets(args, names, ".bvh", single_file=len(names) == 1 and not args.all)
+        if folder is not None:
+            folder.mkdir()
+        frames = 0
+        for b in range(0, len(names), 64):
+            for m, f in zip(db.read_many(names[b:b + 64], dtype=torch.float64), files[b:b + 64]):
+                with _locked(f, args):
+                    write_bvh(m, f)
+                frames += m.num_frames
+    if len(names) == 1:
+        _say(args, f"wrote {files[0]}: {m.name}, {m.num_frames} frames at {m.fps:g} fps")
+    else:
+        _say(args, f"wrote {args.output}: {len(names)} clips as BVH, {frames} frames")
     return 0
 
 
@@ -548,6 +626,8 @@ def cmd_merge(args) -> int:
 # parser and entry point
 # --------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
+    from .io.units import CONVERTIBLE_UNITS
+
     p = argparse.ArgumentParser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
@@ -575,6 +655,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--append", action="store_true", help="add to an existing database")
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
+    s.add_argument("--units", choices=CONVERTIBLE_UNITS, default=None,
+                   help="convert every clip from its spec's units to these (m, cm, mm, in, ft; CMU's own unit is 'cmu'), "
+                        "so that datasets in different units share one database; default: keep each file's units")
     s.add_argument("--split", type=_positive_float, default=None, metavar="SECONDS",
                    help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, ...; "
                         "labels split_from and split_frame say where each came from), so that long takes splice in reasonable "
@@ -591,12 +674,26 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.set_defaults(func=cmd_info)
 
-    s = sub.add_parser("export", help="write one clip of a database as BVH",
-                       description="Write one clip (by name, as `info` lists it) as a BVH file, with the skeleton's "
-                                   "original channel layout.")
+    s = sub.add_parser("export", help="write clips of a database as BVH or NumPy .npz (for training and other tools)",
+                       description="Write clips (by name, as `info` lists them, or --all) as BVH files with the "
+                                   "skeleton's original channel layout, or as .npz: local rotations (WXYZ), root "
+                                   "translation, trajectory, local translations, world positions, fps, joints, parents, "
+                                   "offsets and labels (layout: torchsplice/io/npz.py). -o is a file for one clip (or "
+                                   "--packed), else a folder, one file per clip.")
     s.add_argument("database", help="motion database (.h5)")
-    s.add_argument("clip", help="clip name")
-    s.add_argument("-o", "--output", required=True, help="BVH file to write")
+    s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names")
+    s.add_argument("-o", "--output", required=True, help="file to write (one clip, --packed), or folder (several clips)")
+    s.add_argument("--all", action="store_true", help="export every clip (or every clip of --skeleton)")
+    s.add_argument("--format", choices=("bvh", "npz"), default=None,
+                   help="bvh or npz (default: from -o's suffix; bvh for a folder unless --packed or --features)")
+    s.add_argument("--packed", action="store_true",
+                   help="npz: one file with every clip concatenated along frames and offsets[i]:offsets[i+1] "
+                        "slicing clip i (clips of one skeleton topology)")
+    s.add_argument("--features", choices=("6d",), default=None,
+                   help="npz: add 6D rotations (Zhou et al. 2019), joint, root and trajectory velocities, and per-"
+                        "dimension mean and std of every array over all exported clips, for normalisation")
+    s.add_argument("--skeleton", default=None, metavar="K[,K...]",
+                   help="only clips on these skeletons (ids as `info` lists them)")
     _add_output_flags(s)
     s.set_defaults(func=cmd_export)
 

@@ -39,6 +39,8 @@ __all__ = [
     "quat_to_euler",
     "quat_slerp",
     "random_quat",
+    "quat_to_6d",
+    "rotation_6d_to_rotmat",
 ]
 
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
@@ -268,3 +270,27 @@ def random_quat(shape=(), dtype=torch.float32, device=None, generator=None) -> t
     """Uniformly distributed random unit WXYZ quaternions of shape ``(*shape, 4)``."""
     q = torch.randn(*shape, 4, dtype=dtype, device=device, generator=generator)
     return quat_normalize(q)
+
+
+def quat_to_6d(q: torch.Tensor) -> torch.Tensor:
+    """``(..., 4)`` unit WXYZ quaternions to the ``(..., 6)`` continuous rotation representation
+    of Zhou et al. 2019 (*On the Continuity of Rotation Representations in Neural Networks*): the
+    first two columns of the rotation matrix, ``(R[0,0], R[1,0], R[2,0], R[0,1], R[1,1], R[2,1])``.
+
+    :func:`rotation_6d_to_rotmat` inverts it (and maps any 6 numbers to a rotation)."""
+    m = quat_to_rotmat(q)
+    return torch.cat((m[..., :, 0], m[..., :, 1]), dim=-1)
+
+
+def rotation_6d_to_rotmat(d: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
+    """``(..., 6)`` 6D rotations (two matrix columns, as :func:`quat_to_6d`) to ``(..., 3, 3)``
+    rotation matrices by Gram-Schmidt: ``b1 = a1/|a1|``, ``b2`` is ``a2`` less its ``b1`` part,
+    normalised, ``b3 = b1 x b2``. Exact for the output of :func:`quat_to_6d`; a network's
+    unnormalised output maps to the nearest such frame (:func:`rotmat_to_quat` gives quaternions)."""
+    _check_last(d, 6, "d")
+    a1, a2 = d[..., :3], d[..., 3:]
+    b1 = a1 / a1.norm(dim=-1, keepdim=True).clamp_min(eps)
+    b2 = a2 - (b1 * a2).sum(-1, keepdim=True) * b1
+    b2 = b2 / b2.norm(dim=-1, keepdim=True).clamp_min(eps)
+    b3 = torch.linalg.cross(b1, b2, dim=-1)
+    return torch.stack((b1, b2, b3), dim=-1)

@@ -44,11 +44,25 @@ name                   shape            meaning
                                         clip). A window that does not start a clip uses
                                         the frame before it, so a window's velocities are
                                         exactly the slice of its clip's velocities.
+``rotations_6d``       ``(T, J, 6)``    local rotations in the 6D representation of Zhou et
+                                        al. 2019: the first two columns of each rotation
+                                        matrix (:func:`~torchsplice.core.rotations.quat_to_6d`;
+                                        ``rotation_6d_to_rotmat`` inverts it)
+``trajectory_velocity`` ``(T, 3)``      velocity of ``trajectory``, as ``velocities``
+``root_velocity``      ``(T, 3)``       velocity of ``root_translation``, as ``velocities``
+``labels``             a dict           the clip's labels (not per frame: ``collate_motion``
+                                        gives a list of dicts)
 any per-frame column   ``(T,)``         e.g. ``action_frame`` of a spliced database
                                         (stored as float32, NaN where not given)
 =====================  ===============  ===================================================
 
-Every feature comes as ``dtype`` (float32 by default).
+Every feature but ``labels`` comes as ``dtype`` (float32 by default).
+
+Normalisation statistics: :meth:`MotionDataset.statistics` gives, per feature, the mean and
+standard deviation of every dimension over every frame of the selected clips, computed in
+batches (``(x - mean) / std`` then has zero mean and unit variance over them; see the method
+for dimensions that never change). ``torchsplice export --format npz --features 6d`` stores the
+same numbers beside the exported features.
 
 Workers: the dataset holds no open HDF5 file when it is made or pickled; each process opens
 the file itself on its first read (and a process forked from one that had it open opens its
@@ -69,28 +83,46 @@ import json
 import operator
 import os
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 import torch
 from torch.utils.data import Dataset
 
 from ..core.errors import DatabaseError, TorchspliceError
+from ..core.rotations import quat_to_6d
 from ..core.skeleton import Skeleton
 from ..io.database import MotionDatabase
 from ..kinematics.fk import forward_kinematics
 
-__all__ = ["MotionDataset", "collate_motion", "DatasetError", "BUILTIN_FEATURES", "ITEM_KEYS"]
+__all__ = ["MotionDataset", "collate_motion", "DatasetError", "FeatureStatistics", "BUILTIN_FEATURES", "ITEM_KEYS"]
 
 BUILTIN_FEATURES = ("rotations", "root_translation", "trajectory", "translations", "positions", "global_rotations",
-                    "velocities")
+                    "velocities", "rotations_6d", "trajectory_velocity", "root_velocity", "labels")
 """The features every database offers (its per-frame columns come on top)."""
 
 ITEM_KEYS = ("name", "length", "fps", "index", "start", "skeleton")
 """The metadata keys of every item, besides its features."""
 
 _BASE_COLUMNS = ("name", "source", "role", "labels", "skeleton", "start", "length", "fps")
-_NEEDS_FK = {"positions", "global_rotations", "velocities", "trajectory"}
+_NEEDS_FK = {"positions", "global_rotations", "velocities", "trajectory", "trajectory_velocity"}
+_VELOCITY = {"velocities", "trajectory_velocity", "root_velocity"}  # need the frame before a window
+_NOT_PER_FRAME = {"labels"}  # features that are clip metadata, not tensors
+
+
+class FeatureStatistics(NamedTuple):
+    """Normalisation statistics of one feature (float64 tensors of the feature's per-frame shape).
+
+    Attributes:
+        mean: per-dimension mean over every frame, e.g. ``(J, 6)`` for ``rotations_6d``.
+        std: per-dimension population standard deviation (``ddof=0``); zero where a dimension
+            never changes (a joint that does not move, a fixed root).
+        frames: how many frames they were computed over.
+    """
+
+    mean: torch.Tensor
+    std: torch.Tensor
+    frames: int
 
 
 class DatasetError(DatabaseError, ValueError):
@@ -252,6 +284,14 @@ def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Ske
             out[f] = fk[0][:, trajectory_joint]
         elif f == "velocities":
             out[f] = _velocities(fk[0], fps, clip_first, seg_first)
+        elif f == "rotations_6d":
+            out[f] = quat_to_6d(raw["rotations"])
+        elif f == "trajectory_velocity":
+            out[f] = _velocities(fk[0][:, trajectory_joint:trajectory_joint + 1], fps, clip_first, seg_first)[:, 0]
+        elif f == "root_velocity":
+            out[f] = _velocities(raw["root_translation"][:, None], fps, clip_first, seg_first)[:, 0]
+        elif f in _NOT_PER_FRAME:
+            continue
         else:  # a per-frame column
             out[f] = raw[f]
     return out
@@ -314,8 +354,10 @@ class MotionDataset(Dataset):
             are counted in :attr:`num_too_short`.
         stride: ``S``, frames between window starts; defaults to ``window``. Only with ``window``.
         features: names of the per-frame tensors of each item, see the module docstring
-            (``rotations``, ``root_translation``, ``translations``, ``positions``,
-            ``global_rotations``, ``velocities`` or any per-frame column of the database).
+            (``rotations``, ``root_translation``, ``trajectory``, ``translations``, ``positions``,
+            ``global_rotations``, ``velocities``, ``rotations_6d``, ``trajectory_velocity``,
+            ``root_velocity``, ``labels`` — a dict, not a tensor — or any per-frame column of
+            the database).
         dtype: floating dtype of every feature tensor.
         preload: read every selected clip and compute its features once, here; items are then
             slices of memory (fast for datasets that fit in RAM; no file access afterwards).
@@ -369,7 +411,9 @@ class MotionDataset(Dataset):
             self.columns: dict[str, str] = dict(db.columns)
             stored = {k: set(db.h5[f"skeletons/{k}"].keys()) for k in range(len(self.skeletons))}
             self.trajectory_joints: dict[int, int] = (
-                {k: _trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)} if "trajectory" in self.features else {})
+                {k: _trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)}
+                if {"trajectory", "trajectory_velocity"} & set(self.features) else {})
+            self.units: dict[int, str] = {k: str(db.h5[f"skeletons/{k}"].attrs.get("units", "")) for k in range(len(self.skeletons))}
             self._check_features()
             keep = np.ones(len(table["name"]), dtype=bool)
             if clips is not None:
@@ -392,9 +436,9 @@ class MotionDataset(Dataset):
             self._raw: dict[int, tuple[str, ...]] = {}
             for k in sorted(set(self._skel.tolist())):
                 need = []
-                if set(self.features) & ({"rotations", "translations"} | _NEEDS_FK):
+                if set(self.features) & ({"rotations", "rotations_6d", "translations"} | _NEEDS_FK):
                     need.append("rotations")
-                if set(self.features) & ({"root_translation", "translations"} | _NEEDS_FK):
+                if set(self.features) & ({"root_translation", "root_velocity", "translations"} | _NEEDS_FK):
                     need.append("root_translation")
                 if "translations" in stored[k] and set(self.features) & ({"translations"} | _NEEDS_FK):
                     need.append("translations")
@@ -520,7 +564,7 @@ class MotionDataset(Dataset):
         by_skeleton: dict[int, list[int]] = {}
         for p, (c, _, _) in enumerate(parts):
             by_skeleton.setdefault(int(self._skel[c]), []).append(p)
-        vel = "velocities" in self.features
+        vel = bool(_VELOCITY & set(self.features))
         for k, members in by_skeleton.items():
             raw: dict[str, list[torch.Tensor]] = {name: [] for name in self._raw[k]}
             ctxs, sizes, fps, clip_first = [], [], [], []
@@ -552,6 +596,8 @@ class MotionDataset(Dataset):
         item: dict[str, Any] = frames
         item.update(name=str(self._names_arr[c]), length=n, fps=float(self._fps[c]), index=int(self.indices[c]),
                     start=start, skeleton=int(self._skel[c]))
+        if "labels" in self.features:
+            item["labels"] = json.loads(self.table["labels"][c] or "{}")
         return item
 
     def __getitem__(self, i: int) -> dict:
@@ -575,6 +621,84 @@ class MotionDataset(Dataset):
             raise DatasetError(f"{self.path}: the selected clips are on skeletons {ks}; filter with where={{'skeleton': k}}")
         return self.skeletons[ks[0]]
 
+    def statistics(self, features: Sequence[str] | None = None,
+                   batch_frames: int = 1 << 16) -> dict[str, FeatureStatistics]:
+        """Per-dimension mean and standard deviation of ``features`` over the selected clips.
+
+        Args:
+            features: feature names (any of this database's per-frame features, asked for at
+                construction or not); default: this dataset's features (``labels`` left out).
+            batch_frames: about how many frames are read and computed at once (whole clips).
+
+        Returns ``{name: FeatureStatistics(mean, std, frames)}``, float64 tensors of the
+        feature's per-frame shape (``(J, 6)`` for ``rotations_6d``, ``(3,)`` for
+        ``trajectory``): over every frame of every selected clip, whole clips whatever
+        ``window`` says (so overlapping windows do not count frames twice), ``ddof=0``. Clips
+        are read and their features computed in batches of about ``batch_frames`` frames,
+        in float64 (one forward kinematics per batch), and the batches' moments are merged
+        exactly (Chan et al.'s pairwise update), so the result does not depend on
+        ``batch_frames`` beyond rounding.
+
+        Normalise with ``(x - mean) / torch.where(std > eps, std, 1)`` (``eps`` e.g. 1e-6):
+        a dimension that never changes (a joint's fixed translation, Bandai Namco's still
+        ``joint_Root``) has ``std == 0``.
+
+        The selected clips must share one skeleton topology and one unit (means of different
+        joints or units mean nothing): otherwise :class:`DatasetError` says how to filter.
+        """
+        names = [f for f in (self.features if features is None else ([features] if isinstance(features, str) else features))
+                 if f not in _NOT_PER_FRAME]
+        names = list(dict.fromkeys(names))
+        if not names:
+            raise ValueError("statistics need at least one per-frame feature (labels have none)")
+        available = (*BUILTIN_FEATURES, *self.frame_columns)
+        bad = [f for f in names if f not in available]
+        if bad:
+            raise ValueError(f"unknown feature {bad[0]!r}; this database offers: {', '.join(available)}")
+        ks = sorted(set(self._skel.tolist()))
+        for k in ks[1:]:
+            if not self.skeletons[k].same_topology(self.skeletons[ks[0]]):
+                raise DatasetError(f"{self.path}: statistics need clips of one skeleton topology; the selected clips "
+                                   f"are on skeletons {ks} (skeleton {k} against {ks[0]}: {self.skeletons[ks[0]].mismatch(self.skeletons[k])}); "
+                                   "filter with where={'skeleton': k}")
+        units = sorted({self.units.get(k, "") for k in ks})
+        if len(units) > 1:
+            raise DatasetError(f"{self.path}: statistics need clips of one unit; the selected clips are in {units} "
+                               "(import them with --units to convert, or filter with where={'skeleton': k})")
+        same = set(names) <= set(self.features) and self.dtype == torch.float64
+        ds = self if same else MotionDataset(self.path, clips=self.indices.tolist(), features=names, dtype=torch.float64)
+        order = np.argsort(ds._skel, kind="stable")  # batches of one skeleton: one FK each
+        count = 0
+        mean: dict[str, torch.Tensor] = {}
+        m2: dict[str, torch.Tensor] = {}
+        lo = 0
+        while lo < len(order):
+            hi, frames = lo, 0
+            while hi < len(order) and (hi == lo or frames + int(ds._len[order[hi]]) <= batch_frames):
+                frames += int(ds._len[order[hi]])
+                hi += 1
+            parts = [(int(c), 0, int(ds._len[c])) for c in order[lo:hi] if ds._len[c] > 0]
+            lo = hi
+            if not parts:
+                continue
+            got = ds._fetch(parts)
+            n_b = sum(p[2] for p in parts)
+            n = count + n_b
+            for f in names:
+                x = torch.cat([g[f] for g in got]).to(torch.float64)
+                mb = x.mean(0)
+                m2b = ((x - mb) ** 2).sum(0)
+                if count == 0:
+                    mean[f], m2[f] = mb, m2b
+                else:
+                    delta = mb - mean[f]
+                    mean[f] = mean[f] + delta * (n_b / n)
+                    m2[f] = m2[f] + m2b + delta ** 2 * (count * n_b / n)
+            count = n
+        if count == 0:
+            raise DatasetError(f"{self.path}: the selected clips have no frames to compute statistics over")
+        return {f: FeatureStatistics(mean[f], (m2[f] / count).sqrt(), count) for f in names}
+
     def __repr__(self) -> str:
         what = "clips" if self.window is None else f"windows of {self.window} (stride {self.stride})"
         return (f"MotionDataset({str(self.path)!r}, {len(self)} {what} from {self.num_clips} clips, "
@@ -595,7 +719,8 @@ def collate_motion(items: Sequence[dict]) -> dict:
 
     - ``lengths``: ``(B,)`` int64 real frames per item; ``mask``: ``(B, T)`` bool, True on real frames;
     - ``fps``: ``(B,)`` float64;
-    - ``name``, ``index``, ``start``, ``skeleton``: lists (and any other non-tensor key as a list).
+    - ``name``, ``index``, ``start``, ``skeleton``: lists (and any other non-tensor key as a list,
+      e.g. ``labels``: a list of dicts).
 
     Raises ``ValueError`` when a feature's per-frame shape differs between items (e.g. clips
     on skeletons with different numbers of joints).

@@ -30,10 +30,14 @@ from .config import JobConfig
 from .select import select_clips
 from .sources import Sources, clip_key
 
-__all__ = ["Pair", "Task", "Group", "Plan", "make_plan", "PLAN_VERSION", "MIN_SECONDS"]
+__all__ = ["Pair", "Task", "Group", "Plan", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
 PLAN_VERSION = 2
 MIN_SECONDS = SpliceOptions().min_seconds
+SKELETONS_DIFFER = "skeletons differ: "
+"""How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
+such reason names the two skeletons (``skeletons differ: locomotions on skeleton 0 (bandai_namco,
+22 joints) x actions on skeleton 2 (cmu, 31 joints)``), so the summary counts them by skeleton."""
 
 
 @dataclass
@@ -168,6 +172,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     locos = select_clips(tl, c.locomotions, "--locomotions", str(c.database))
     acts = select_clips(ta, c.actions, "--actions", str(c.actions_db or c.database))
     sk_l, sk_a = loco_db.skeletons, act_db.skeletons
+    described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db))
     if not any(sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]) for i in locos for j in acts):
         a, b = sk_l[int(tl["skeleton"][locos[0]])], sk_a[int(ta["skeleton"][acts[0]])]
         raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
@@ -214,7 +219,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         for mode in ("timewarp", "standing"):
             for i in locos:
                 for j in acts:
-                    why = _skip_reason(c, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs)
+                    why = _skip_reason(c, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs, described)
                     if why:
                         if mode == "timewarp":
                             skipped[why] = skipped.get(why, 0) + 1
@@ -314,11 +319,24 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
                     clips[chunk[i]]["acting"] = list(limbs)
 
 
-def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs) -> str | None:
+def _describe_skeletons(db, path) -> dict[int, str]:
+    """Skeleton id -> ``skeleton K (spec, J joints)`` (``of FILE`` added when ``path`` is given)."""
+    out = {}
+    for k, sk in enumerate(db.skeletons):
+        try:
+            spec = json.loads(db.spec_json(k) or "{}").get("name", "") or "no spec"
+        except (ValueError, AttributeError):
+            spec = "no spec"
+        out[k] = f"skeleton {k}{f' of {Path(path).name}' if path else ''} ({spec}, {sk.num_joints} joints)"
+    return out
+
+
+def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs, described) -> str | None:
     if same and i == j:
         return "a clip is not spliced onto itself"
-    if not sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]):
-        return "skeletons differ"
+    kl, ka = int(tl["skeleton"][i]), int(ta["skeleton"][j])
+    if not sk_l[kl].same_topology(sk_a[ka]):  # not formed: splicing needs one joint hierarchy
+        return f"{SKELETONS_DIFFER}locomotions on {described[0][kl]} x actions on {described[1][ka]}"
     for table, row in ((tl, i), (ta, j)):
         need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
         if int(table["length"][row]) < need:

@@ -47,7 +47,7 @@ from ..core.errors import TorchspliceError
 from ..io.lock import FileLock, pid_alive
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .executors import make_engine
-from .plan import Plan, make_plan
+from .plan import SKELETONS_DIFFER, Plan, make_plan
 from .sink import HDF5Sink
 from .sources import Sources
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT
@@ -99,9 +99,15 @@ class JobSummary:
         if standing:
             out.append(f"  {self.timings.get('timewarp', 0)} time-aligned (timewarp), "
                        + ", ".join(f"{n} standing actions ({t})" for t, n in sorted(standing.items())))
-        if self.skipped:
-            out.append(f"skipped {sum(self.skipped.values())} pairs:")
-            out += [f"  {n} x {why}" for why, n in sorted(self.skipped.items(), key=lambda kv: -kv[1])]
+        skipped = {w: n for w, n in self.skipped.items() if not w.startswith(SKELETONS_DIFFER)}
+        apart = {w[len(SKELETONS_DIFFER):]: n for w, n in self.skipped.items() if w.startswith(SKELETONS_DIFFER)}
+        if skipped:
+            out.append(f"skipped {sum(skipped.values())} pairs:")
+            out += [f"  {n} x {why}" for why, n in sorted(skipped.items(), key=lambda kv: -kv[1])]
+        if apart:
+            out.append(f"not formed: {sum(apart.values())} pairs whose clips are on skeletons of different joints "
+                       "(splicing needs one joint hierarchy):")
+            out += [f"  {n} x {why}" for why, n in sorted(apart.items(), key=lambda kv: -kv[1])]
         if self.flagged:
             out.append(f"flagged {self.flagged_clips} clips (see the 'flags' column):")
             out += [f"  {n} x {why}" for why, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
