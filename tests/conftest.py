@@ -37,9 +37,23 @@ def real_bvh_files() -> list[Path]:
     return sorted(MOCAP.rglob("*.bvh")) if MOCAP.is_dir() else []
 
 
+#: real files per folder that the quick suite checks; the others are marked ``slow``
+QUICK_FILES_PER_FOLDER = 2
+
+
 def bvh_params():
-    """pytest parameters over every real BVH file, with short ids; one skipping placeholder if none."""
+    """pytest parameters over every real BVH file, with short ids; one skipping placeholder if none.
+
+    The first :data:`QUICK_FILES_PER_FOLDER` files of each folder run in the quick suite; the
+    rest are marked ``slow`` (``scripts/test.sh --all`` and CI run them too).
+    """
     files = real_bvh_files()
     if not files:
         return [pytest.param(None, id="no-real-data")]
-    return [pytest.param(f, id=f"{f.parent.name[:6]}/{f.stem}") for f in files]
+    seen: dict[Path, int] = {}
+    params = []
+    for f in files:
+        seen[f.parent] = seen.get(f.parent, 0) + 1
+        marks = [pytest.mark.slow] if seen[f.parent] > QUICK_FILES_PER_FOLDER else []
+        params.append(pytest.param(f, id=f"{f.parent.name[:6]}/{f.stem}", marks=marks))
+    return params

@@ -145,6 +145,7 @@ def _cli_subset(corpus) -> list[Variant]:
     return [v for v in corpus.variants if v.parses] + invalid[::3]
 
 
+@pytest.mark.slow
 def test_cli_import_of_the_corpus_skips_bad_files_one_line_each(corpus, tmp_path, capsys):
     from torchsplice.cli import main
     from torchsplice.io.database import MotionDatabase

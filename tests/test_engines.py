@@ -88,6 +88,7 @@ def start_job(db, out, *extra):
 # --------------------------------------------------------------------------------------------
 # local worker processes
 # --------------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
 def test_a_killed_worker_is_replaced_and_the_output_is_unchanged(sample_db, reference, tmp_path):
     out = tmp_path / "out.h5"
@@ -112,6 +113,7 @@ def test_a_killed_worker_is_replaced_and_the_output_is_unchanged(sample_db, refe
     assert frames_and_table(out) == frames_and_table(reference)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
 def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path):
     out = tmp_path / "out.h5"
@@ -174,6 +176,7 @@ def test_a_pool_that_breaks_while_tasks_are_handed_out_is_a_break_not_a_crash(mo
     assert sorted(finished) == [t.id for t in tasks] and len(starts) == 2
 
 
+@pytest.mark.slow
 def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
@@ -200,6 +203,7 @@ def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
     assert not alive, f"workers {alive} outlived their driver"
 
 
+@pytest.mark.slow
 def test_an_unguarded_script_gets_a_clear_error(sample_db, tmp_path):
     script = tmp_path / "unguarded.py"
     out = tmp_path / "out.h5"

@@ -355,6 +355,7 @@ def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_pat
 # --------------------------------------------------------------------------------------------
 # 4. resume after SIGKILL
 # --------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     out = tmp_path / "killed" / "out.h5"
     out.parent.mkdir()
@@ -582,6 +583,7 @@ print(json.dumps({"code": code, "before_kb": before, "after_kb": peak_kb()}))
 """
 
 
+@pytest.mark.slow
 def test_peak_memory_does_not_grow_with_the_number_of_pairs(tmp_path):
     """5 x 5 pairs against 40 x 40 (64 times as many), same skeleton, 60-frame clips, same batch size.
 

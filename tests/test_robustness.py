@@ -370,6 +370,7 @@ def test_a_folder_mixing_datasets_imports_every_file_whatever_the_order(mocap_di
 # --------------------------------------------------------------------------------------------
 # termination
 # --------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_sigterm_stops_a_job_like_ctrl_c_and_the_rerun_resumes(sample_db, tmp_path):
     out = tmp_path / "o.h5"
     p = cli("splice-all", sample_db, "-o", out, "--workers", "1", "--batch-size", "2")
@@ -421,6 +422,7 @@ def test_import_gives_the_same_bits_with_any_thread_count(bandai, tmp_path, caps
     assert len(digests) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["compiled", "torch"])
 def test_splice_all_gives_the_same_bits_with_any_workers_and_threads(backend, sample_db, tmp_path, monkeypatch):
     import torch

@@ -770,6 +770,7 @@ def test_find_reference_bandai(mocap_dir):
 # ------------------------------------------------------------------------------ 14. ground truth
 
 
+@pytest.mark.slow
 def test_splice_beats_naive_on_bandai_namco_ground_truth(mocap_dir, bandai, capsys):
     read, spec = bandai
     names = sorted(p.stem for p in (mocap_dir / BANDAI).glob("*.bvh"))

@@ -180,6 +180,7 @@ def test_the_baselines_handle_standing_actions(clips, method):
         assert torch.allclose(r.motion.rotations[0, upper].abs(), loco.rotations[0, upper].abs(), atol=1e-9)
 
 
+@pytest.mark.slow
 def test_the_default_job_on_bandai_skips_no_standing_action(mocap_dir, tmp_path, capsys):
     db = tmp_path / "bandai.h5"
     assert main(["import", str(mocap_dir / BANDAI), "-o", str(db), "-q"]) == 0
@@ -206,6 +207,7 @@ def test_the_default_job_on_bandai_skips_no_standing_action(mocap_dir, tmp_path,
         assert (t["coverage"][standing] == 1.0).all()
 
 
+@pytest.mark.slow
 def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_path, capsys):
     folder = tmp_path / "bvh"
     folder.mkdir()
