@@ -88,7 +88,7 @@ def test_the_h5py_snippet_runs_and_names_the_trajectory_joint(spliced, monkeypat
 
 def test_a_single_splice_keeps_its_sources_labels_too(spliced):
     from torchsplice.io.database import MotionDatabase
-    from torchsplice.io.spec import DatasetSpec
+    from torchsplice.specs import DatasetSpec
     from torchsplice.splice import splice
 
     with MotionDatabase.open(spliced / "bandai.h5") as db:

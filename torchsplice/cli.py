@@ -75,8 +75,8 @@ def _say(args, msg: str) -> None:
 # --------------------------------------------------------------------------------------------
 def cmd_sample(args) -> int:
     from .io.database import MotionDatabase
-    from .io.sample import sample_motions
-    from .io.spec import load_spec
+    from .sample import sample_motions
+    from .specs import load_spec
 
     out = _output(args, "database")
     spec = load_spec("sample")
@@ -123,7 +123,7 @@ def cmd_import(args) -> int:
 
     from .io.bvh import read_bvh
     from .io.database import MotionDatabase
-    from .io.spec import detect_spec, load_spec
+    from .specs import detect_spec, load_spec
 
     files, skipped = _collect_bvh(args.paths)
     if args.append:
@@ -268,7 +268,7 @@ def cmd_export(args) -> int:
 # --------------------------------------------------------------------------------------------
 def _db_spec(db, skeleton_id: int, skeleton):
     """The spec stored with a skeleton of the database, or one detected for it."""
-    from .io.spec import DatasetSpec, detect_spec
+    from .specs import DatasetSpec, detect_spec
 
     text = db.spec_json(skeleton_id)
     return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
@@ -348,12 +348,14 @@ def cmd_splice(args) -> int:
     from .io.database import MotionDatabase
     from .splice import splice
     from .splice.references import find_reference
+    from .splice.registry import get_method
 
+    method = get_method(args.method)
     out = _output(args, "bvh", inputs=[args.database])
     with MotionDatabase.open(args.database) as db:
         loco, act, spec = _read_pair(db, args)
         ref = None
-        if args.method == "cpmc":
+        if method.needs_reference:
             name = args.reference
             if name is None:
                 t = db.table()
@@ -361,11 +363,11 @@ def cmd_splice(args) -> int:
                 name = find_reference(act.name, act.labels, cands, spec)
             ref = db.read(name) if name is not None else None  # a standing action needs none
         elif args.reference is not None:
-            raise TorchspliceError("--reference is only used by --method cpmc")
+            raise TorchspliceError(f"--reference is only used by methods that need a reference clip (cpmc), not {method.name}")
     try:
-        result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
+        result = splice(loco, act, spec, method=method, reference=ref, options=_splice_options(args))
     except TorchspliceError as exc:
-        if args.method == "cpmc" and ref is None and "reference" in str(exc):
+        if method.needs_reference and ref is None and "reference" in str(exc):
             raise TorchspliceError(f"no plain-locomotion reference found for action {act.name!r}: name one with "
                                    "--reference (or add a [clips.reference] rule to the spec)") from None
         raise
@@ -373,18 +375,18 @@ def cmd_splice(args) -> int:
         write_bvh(result.motion, out)
     extra = f", reference {result.reference}" if result.reference else ""
     if result.timing != "timewarp":
-        acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if args.method == "splice" else ""
+        acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if method.name == "splice" else ""
         detail = f"; standing action ({result.timing}{acting})"
     else:
-        detail = None
-    detail = detail if detail is not None else "" if args.method == "naive" else (
-        f"; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames"
-        + (f", posture rotation {result.posture_deg:.1f} deg" if args.method == "splice" else ""))
-    _say(args, f"wrote {out}: {args.method} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
+        shown = [f"alignment cost {result.cost:.3g}" if "cost" in method.diagnostics else "",
+                 f"action cropped by {result.crop} frames" if "crop" in method.diagnostics else "",
+                 f"posture rotation {result.posture_deg:.1f} deg" if "posture" in method.diagnostics else ""]
+        detail = "".join(f"{'; ' if not k else ', '}{t}" for k, t in enumerate(t for t in shown if t))
+    _say(args, f"wrote {out}: {method.name} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
                f"at {result.motion.fps:g} fps{detail}")
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
-    if args.method != "naive":
+    if "cost" in method.diagnostics:
         from .job.plan import leg_length
         from .job.task import poor_alignment
 
@@ -547,12 +549,34 @@ def cmd_merge(args) -> int:
 # --------------------------------------------------------------------------------------------
 # parser and entry point
 # --------------------------------------------------------------------------------------------
+def _methods() -> tuple[str, ...]:
+    """The registered methods, for --help and --method (the registry loads no torch)."""
+    from .splice.registry import available_methods
+
+    return available_methods()
+
+
+def _plugins_in(argv: list[str]) -> list[str]:
+    """The ``--plugin MODULE`` values of a command line, read before the parser is built (so that
+    plug-in methods appear in its help)."""
+    out = []
+    for k, a in enumerate(argv):
+        if a == "--plugin" and k + 1 < len(argv):
+            out.append(argv[k + 1])
+        elif a.startswith("--plugin="):
+            out.append(a.split("=", 1)[1])
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
     )
     p.add_argument("--version", action="version", version=f"torchsplice {__version__}")
+    p.add_argument("--plugin", action="append", metavar="MODULE", default=[],
+                   help="import this module first: a plug-in that registers splicing methods (repeatable; "
+                        "also TORCHSPLICE_PLUGINS=MODULE[,MODULE...] and the torchsplice.methods entry point group)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     s = sub.add_parser("sample", help="write the built-in synthetic sample database (no data needed)",
@@ -609,7 +633,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "[clips.reference] rule or named with --reference).")
     _add_pair_args(s)
     s.add_argument("-o", "--output", required=True, help="BVH file to write")
-    s.add_argument("--method", default="splice", choices=["splice", "naive", "cpmc"], help="splicing method (default splice)")
+    s.add_argument("--method", default="splice", choices=_methods(),
+                   help="splicing method (default splice; plug-ins add more, see --plugin)")
     s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
     _add_splice_options(s)
     _add_output_flags(s)
@@ -665,7 +690,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="clips giving the upper body (default: role:action,role:both)")
     s.add_argument("--actions-db", metavar="DB", help="take the actions from this database (same skeleton)")
     s.add_argument("--method", default="splice", metavar="M[,M...]",
-                   help="splice, naive, cpmc, or several comma-separated (default splice)")
+                   help=f"{', '.join(_methods())}, or several comma-separated (default splice)")
     s.add_argument("--memory-budget", type=_positive_int, default=1024, metavar="MB",
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
@@ -728,7 +753,15 @@ def main(argv: list[str] | None = None) -> int:
     import threading
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(argv)
+    try:
+        from .splice.registry import load_plugins
+
+        load_plugins(_plugins_in(argv))
+        parser = build_parser()
+    except TorchspliceError as exc:
+        print(f"torchsplice: error: {_one_line(exc, limit=1000)}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
     args.argv = argv
     if args.func is cmd_splice_all:
         _prestart_workers(args)

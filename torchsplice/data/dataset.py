@@ -207,7 +207,7 @@ def _velocities(pos: torch.Tensor, fps: torch.Tensor, clip_first: torch.Tensor, 
 def _trajectory_joint(db: MotionDatabase, k: int, skeleton: Skeleton) -> int:
     """Index of the joint carrying skeleton ``k``'s world trajectory: its spec's ``root`` role
     (Bandai Namco: ``Hips``, under a ``joint_Root`` that stands still), else joint 0."""
-    from ..io.spec import DatasetSpec, detect_spec
+    from ..specs import DatasetSpec, detect_spec
 
     text = db.spec_json(k)
     try:

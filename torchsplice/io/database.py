@@ -809,7 +809,7 @@ class MotionDatabase:
     def add_skeleton(self, skeleton: Skeleton, spec=None) -> int:
         """Index of a stored skeleton that matches ``skeleton``, storing it if none does.
 
-        ``spec`` (a :class:`~torchsplice.io.spec.DatasetSpec` or ``None``) is stored with a new
+        ``spec`` (a :class:`~torchsplice.specs.DatasetSpec` or ``None``) is stored with a new
         skeleton, with its units and up axis (each skeleton keeps its own: datasets of different
         units share one file; the file's ``units`` and ``up_axis`` attributes then say ``"mixed"``).
         """

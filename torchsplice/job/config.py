@@ -17,7 +17,9 @@ from pathlib import Path
 from ..core.errors import TorchspliceError
 from ..io.atomic import same_file
 from ..io.database import COMPRESSIONS
-from ..splice import METHODS, AlignOptions, SpliceOptions
+from ..splice.heck import AlignOptions
+from ..splice.api import SpliceOptions
+from ..splice.registry import available_methods, get_method, plugin_modules
 
 __all__ = ["JobConfig", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
 
@@ -36,7 +38,8 @@ class JobConfig:
         output: the database to write.
         actions_db: another database holding the actions (same skeleton, units and up axis).
         locomotions, actions: selectors, all of which must select a clip.
-        methods: one or several of ``splice``, ``naive``, ``cpmc``.
+        methods: one or several registered methods: ``splice``, ``naive``, ``cpmc`` or plug-ins
+            (see :mod:`torchsplice.splice.registry`).
         force_locomotion: splice clips that do not locomote instead of skipping their pairs.
         max_length_ratio: skip pairs whose longer clip lasts more than this many times the
             shorter one (``None``: no limit).
@@ -91,9 +94,10 @@ class JobConfig:
             c = replace(c, compression=None)
         if c.compression not in COMPRESSIONS:
             raise TorchspliceError(f"unknown compression {c.compression!r}; choose auto, lzf, gzip or none")
-        bad = [m for m in c.methods if m not in METHODS]
-        if bad or not c.methods:
-            raise TorchspliceError(f"unknown method {bad[0] if bad else '(none)'!r}; choose from {', '.join(METHODS)}")
+        if not c.methods:
+            raise TorchspliceError(f"no method given; choose from {', '.join(available_methods())}")
+        for m in c.methods:
+            get_method(m)  # a clear error naming the available methods
         if c.engine not in ENGINES:
             raise TorchspliceError(f"unknown engine {c.engine!r}; choose {' or '.join(ENGINES)}")
         if c.layout not in LAYOUTS:
@@ -175,6 +179,7 @@ class JobConfig:
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
+            **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }
 
 

@@ -21,11 +21,12 @@ from pathlib import Path
 from .. import __version__
 from ..core.errors import TorchspliceError
 from ..io.lock import host_pid
-from ..io.spec import DatasetSpec, SkeletonRoles, detect_spec
+from ..specs import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import SpliceOptions
 from ..splice.clips import ClipTensors, clips_to_tensors
 from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
+from ..splice.registry import get_method
 from .config import JobConfig
 from .select import select_clips
 from .sources import Sources, clip_key
@@ -94,7 +95,8 @@ class Plan:
 
     def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
         return (clip_key("L", p.loco, same_db), clip_key("A", p.action, same_db),
-                clip_key("A", p.reference, same_db) if p.reference is not None and p.method == "cpmc" else None)
+                clip_key("A", p.reference, same_db) if p.reference is not None and get_method(p.method).needs_reference
+                else None)
 
     @property
     def same_db(self) -> bool:
@@ -182,7 +184,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     for k in sorted({int(tl["skeleton"][i]) for i in locos}):
         text = loco_db.spec_json(k)
         specs[k] = DatasetSpec.from_json(text) if text else detect_spec(sk_l[k])
-    refs = _references(ta, acts, next(iter(specs.values()))) if "cpmc" in c.methods else {}
+    needs_ref = any(get_method(m).needs_reference for m in c.methods)
+    refs = _references(ta, acts, next(iter(specs.values()))) if needs_ref else {}
 
     # groups: a locomotion skeleton and rate, its locomotions, then every action and reference of its topology
     others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
@@ -218,7 +221,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
                     if why:
                         if mode == "timewarp":
                             skipped[why] = skipped.get(why, 0) + 1
-                    elif _mode(c, checks, clip_key("A", j, same)) == mode:
+                    elif _mode(c, checks, clip_key("A", j, same), method) == mode:
                         pairs.append(Pair(method, int(i), int(j), refs.get(j) if mode == "timewarp" else None, mode))
     _acting(c, sources, groups, clips, sk_l, {clip_key("A", p.action, same) for p in pairs if p.mode == "standing"})
     if not pairs:
@@ -283,10 +286,12 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
     return out
 
 
-def _mode(c: JobConfig, checks: dict, action_key: str) -> str:
-    """``"standing"`` for an action that does not locomote (unless forced through the timewarp)."""
+def _mode(c: JobConfig, checks: dict, action_key: str, method: str) -> str:
+    """``"standing"`` for an action that does not locomote (unless forced through the timewarp,
+    or the method has no standing variant: its own function then takes the pair)."""
     check = checks.get(action_key)
-    return "standing" if check is not None and not check.locomoting and not c.force_locomotion else "timewarp"
+    standing = check is not None and not check.locomoting and not c.force_locomotion
+    return "standing" if standing and get_method(method).standing is not None else "timewarp"
 
 
 def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l, keys: set[str]) -> None:
@@ -334,9 +339,9 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
     check = checks.get(clip_key("L", i, same))
     if check is not None and not check.locomoting and not c.force_locomotion:
         return f"{tl['name'][i]} does not locomote ({check.reason}; --force-locomotion splices it)"
-    standing = _mode(c, checks, clip_key("A", j, same)) == "standing"
-    if method == "cpmc" and refs.get(j) is None and not standing:
-        return f"no plain-locomotion reference for {ta['name'][j]} (cpmc)"
+    standing = _mode(c, checks, clip_key("A", j, same), method) == "standing"
+    if get_method(method).needs_reference and refs.get(j) is None and not standing:
+        return f"no plain-locomotion reference for {ta['name'][j]} ({method})"
     return None
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..core.errors import DatabaseError
 from ..io.database import MotionDatabase
-from ..io.spec import DatasetSpec
+from ..specs import DatasetSpec
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
 
 __all__ = ["Sink", "HDF5Sink", "OutputWriter"]

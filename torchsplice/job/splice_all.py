@@ -45,6 +45,7 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..io.lock import FileLock, pid_alive
+from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .executors import make_engine
 from .plan import Plan, make_plan
@@ -256,7 +257,8 @@ class SpliceJob:
         # locomotions first, then actions and references; one database when both are one file
         out.copy_sources([(sources.db("L"), sorted({p.loco for p in plan.pairs})),
                           (sources.db("A"), sorted({p.action for p in plan.pairs}
-                                                   | {p.reference for p in plan.pairs if p.reference is not None and p.method == "cpmc"}))])
+                                                   | {p.reference for p in plan.pairs if p.reference is not None
+                                                      and get_method(p.method).needs_reference}))])
 
 
 def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None) -> JobSummary:
