@@ -17,9 +17,29 @@ import warnings
 from pathlib import Path
 
 from . import __version__
-from .core.errors import DatabaseError, TorchspliceError
+from .core.errors import DatabaseError, OutputExistsError, TorchspliceError
 
 __all__ = ["main", "build_parser"]
+
+
+_CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS) are on the command line
+    "overwrite": "use --force to overwrite",
+    "force_locomotion": "--force-locomotion splices it anyway",
+    "restart": "pass --restart to discard it",
+}
+_FLAGS = {"overwrite": "--force"}  # library option -> flag, where it is not --the-same-name
+
+
+def cli_message(exc: BaseException) -> str:
+    """An error's message as the command line says it: the options it names as flags
+    (``{max_length_ratio}`` -> ``--max-length-ratio``) and its hint in flag terms."""
+    from .core.errors import HINTS, render_message
+
+    if not isinstance(exc, TorchspliceError) or not hasattr(exc, "message"):
+        return str(exc)
+    text = render_message(exc.message, exc.options, lambda o: _FLAGS.get(o, "--" + o.replace("_", "-")))
+    hint = _CLI_HINTS.get(exc.hint) or HINTS.get(exc.hint) if exc.hint else None
+    return f"{text} ({hint})" if hint else text
 
 
 def _progress(iterable, total: int, desc: str, quiet: bool):
@@ -55,7 +75,7 @@ def _locked(out: Path, args):
 
     with output_lock(out, "torchsplice " + shlex.join(getattr(args, "argv", []))):
         if out.exists() and not getattr(args, "force", False):  # written meanwhile by another process
-            raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+            raise OutputExistsError(f"{out}: already exists")
         yield out
 
 
@@ -759,7 +779,7 @@ def main(argv: list[str] | None = None) -> int:
         load_plugins(_plugins_in(argv))
         parser = build_parser()
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {_one_line(exc, limit=1000)}", file=sys.stderr)
+        print(f"torchsplice: error: {_one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
         return 2
     args = parser.parse_args(argv)
     args.argv = argv
@@ -771,7 +791,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {_one_line(exc, limit=1000)}", file=sys.stderr)
+        print(f"torchsplice: error: {_one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         print(f"torchsplice: {_stopped(exc)}", file=sys.stderr)

@@ -62,7 +62,8 @@ class _Sources:
         if name not in self.cache:
             db = next((d for d in self.dbs if name in d._index_map()), None)
             if db is None:
-                raise TorchspliceError(f"source clip {name!r} is in no source database; pass them with --sources")
+                raise TorchspliceError(f"source clip {name!r} is in no source database; name them with {{sources}}",
+                                       options=("sources",))
             self.cache[name] = db.read(name)
         return self.cache[name]
 

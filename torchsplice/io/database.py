@@ -56,7 +56,7 @@ import numpy as np
 import torch
 
 from .. import __version__
-from ..core.errors import DatabaseError
+from ..core.errors import DatabaseError, OutputExistsError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
@@ -463,7 +463,7 @@ class MotionDatabase:
         lock = _writer_lock(path)
         if path.exists() and not overwrite:
             lock.release()
-            raise DatabaseError(f"{path}: already exists (use --force to overwrite)")
+            raise OutputExistsError(f"{path}: already exists")
         tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
         try:
             h5 = h5py.File(tmp, "w")

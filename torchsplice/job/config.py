@@ -103,7 +103,8 @@ class JobConfig:
         if c.layout not in LAYOUTS:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
         if c.layout == "virtual" and c.copy_sources:
-            raise TorchspliceError("--copy-sources needs --layout copy: a virtual output holds only the spliced clips")
+            raise TorchspliceError("{copy_sources} needs {layout} copy: a virtual output holds only the spliced clips",
+                                   options=("copy_sources", "layout"))
         from ..splice.standing import LIMBS, TIMINGS
 
         if c.timing not in TIMINGS:
@@ -111,9 +112,10 @@ class JobConfig:
         if c.acting_limbs is not None and any(x not in LIMBS for x in c.acting_limbs):
             raise TorchspliceError(f"unknown acting limb in {','.join(c.acting_limbs)!r}; choose from {', '.join(LIMBS)}")
         if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
-            raise TorchspliceError(f"--max-length-ratio must be at least 1, got {c.max_length_ratio}")
+            raise TorchspliceError(f"{{max_length_ratio}} must be at least 1, got {c.max_length_ratio}",
+                                   options=("max_length_ratio",))
         if c.workers is not None and c.workers < 1:
-            raise TorchspliceError(f"--workers must be at least 1, got {c.workers}")
+            raise TorchspliceError(f"{{workers}} must be at least 1, got {c.workers}", options=("workers",))
         dup = sorted({m for m in c.methods if c.methods.count(m) > 1})
         if dup:
             raise TorchspliceError(f"method {dup[0]!r} is asked for twice; name each method once")
@@ -188,7 +190,7 @@ def parse_shard(text: str) -> tuple[int, int]:
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
-        raise TorchspliceError(f"--shard must look like K/N (e.g. 2/8), got {text!r}") from None
+        raise TorchspliceError(f"{{shard}} must look like K/N (e.g. 2/8), got {text!r}", options=("shard",)) from None
     if not 1 <= k <= n:
-        raise TorchspliceError(f"--shard {text}: K must be between 1 and N")
+        raise TorchspliceError(f"{{shard}} {text}: K must be between 1 and N", options=("shard",))
     return k, n

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from .. import __version__
-from ..core.errors import TorchspliceError
+from ..core.errors import TorchspliceError, UnfinishedJobError
 from ..io.lock import host_pid
 from ..specs import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import SpliceOptions
@@ -119,8 +119,8 @@ class Plan:
     def from_json(cls, text: str) -> "Plan":
         d = json.loads(text)
         if d.get("version") != PLAN_VERSION:
-            raise TorchspliceError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
-                                   f"{PLAN_VERSION}: finish it with the torchsplice that started it, or pass --restart")
+            raise UnfinishedJobError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
+                                     f"{PLAN_VERSION}: finish it with the torchsplice that started it")
         return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
                    groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"], clips=d["clips"], flags=d["flags"],
                    version=d["version"])
@@ -167,8 +167,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     same = act_db is loco_db or c.actions_db is None
     tl = loco_db.table()
     ta = tl if same else act_db.table()
-    locos = select_clips(tl, c.locomotions, "--locomotions", str(c.database))
-    acts = select_clips(ta, c.actions, "--actions", str(c.actions_db or c.database))
+    locos = select_clips(tl, c.locomotions, "{locomotions}", str(c.database))
+    acts = select_clips(ta, c.actions, "{actions}", str(c.actions_db or c.database))
     sk_l, sk_a = loco_db.skeletons, act_db.skeletons
     if not any(sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]) for i in locos for j in acts):
         a, b = sk_l[int(tl["skeleton"][locos[0]])], sk_a[int(ta["skeleton"][acts[0]])]

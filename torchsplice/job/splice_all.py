@@ -43,7 +43,7 @@ from pathlib import Path
 
 import torch
 
-from ..core.errors import TorchspliceError
+from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
 from ..io.lock import FileLock, pid_alive
 from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
@@ -129,10 +129,11 @@ class SpliceJob:
         if not c.output.parent.exists():
             raise TorchspliceError(f"{c.output}: folder {c.output.parent} does not exist")
         if self.shard is None and c.output.exists() and not self.overwrite:
-            raise TorchspliceError(f"{c.output}: already exists (use --force to overwrite)")
+            raise OutputExistsError(f"{c.output}: already exists")
         _prestart_workers(c)
         if self.shard is not None and self.restart:
-            raise TorchspliceError("--restart discards the whole job, every slice's work too: run it once without --shard")
+            raise TorchspliceError("{restart} discards the whole job, every slice's work too: run it once without {shard}",
+                                   options=("restart", "shard"))
         if self.shard is None:
             lock = FileLock(_output_lock(c.output), str(c.output), self.command)
         else:
@@ -164,9 +165,9 @@ class SpliceJob:
         if plan_path.exists():
             saved = Plan.load(plan_path)
             if saved.digest() != plan.digest():
-                raise TorchspliceError(
+                raise UnfinishedJobError(
                     f"{self.work} holds an unfinished job with other arguments or inputs; rerun it with the same "
-                    "arguments to finish it, or pass --restart to discard it")
+                    "arguments to finish it")
         else:
             plan.save(plan_path)
             new_plan = True
@@ -269,7 +270,7 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
     if not plan_path.exists():
         raise TorchspliceError(f"{output}: no unfinished splice-all job to merge (no {plan_path})")
     if output.exists() and not overwrite:
-        raise TorchspliceError(f"{output}: already exists (use --force to overwrite)")
+        raise OutputExistsError(f"{output}: already exists")
     plan = Plan.load(plan_path)
     key = plan.key
     config = JobConfig(database=Path(key["database"]["path"]), output=output,
@@ -280,8 +281,8 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
 
         now = _key(config)
         if now["database"] != key["database"] or now["actions_db"] != key["actions_db"]:
-            raise TorchspliceError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
-                                   "source clips (run splice-all again with --restart)")
+            raise UnfinishedJobError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
+                                     "source clips")
     t0 = time.perf_counter()
     sink = HDF5Sink()
     shard_dir = work

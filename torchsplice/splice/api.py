@@ -28,7 +28,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from ..core.errors import MotionError, TorchspliceError
+from ..core.errors import MotionError, NotLocomotingError, TorchspliceError
 from ..core.motion import Motion
 from ..specs import DatasetSpec, SkeletonRoles
 from .clips import ClipTensors, check_clip, check_pair, clips_to_tensors, resample_motion
@@ -51,10 +51,6 @@ def spliced_labels(method: str, locomotion: str, locomotion_labels: dict, action
     out.update({f"action.{k}": str(v) for k, v in (action_labels or {}).items()})
     out.update({"method": method, "locomotion": locomotion, "action": action})
     return out
-
-
-class NotLocomotingError(MotionError):
-    """A clip that does not locomote, refused unless ``force`` is set."""
 
 
 @dataclass(frozen=True)
@@ -275,7 +271,7 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options:
             raise NotLocomotingError(f"clip {lo.name!r} {check.reason}")
         if check is not None and not check.locomoting:
             if not options.force:
-                raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason}")
             notes[b].append(f"{lo.name} does not locomote: {check.reason}")
     if acting is None:
         found = acting_limbs(A, roles, skeleton) if options.acting_limbs is None else None
@@ -329,7 +325,7 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: Sp
                 raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
                 if not options.force:
-                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
                 notes[b].append(f"{clip.name} does not locomote: {check.reason}")
     loco, act = L.take(li), A.take(ai[:B])
     out: MethodOutput = method.run(MethodInput(loco, act, A.take(ai[B:]) if refs else None, roles, skeleton, options, fps))
@@ -375,7 +371,7 @@ def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str
                 raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
                 if not options.force:
-                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
                 notes[b].append(f"{clip.name} does not locomote: {check.reason}")
     return notes
 
