@@ -13,11 +13,10 @@ import contextlib
 import json
 import shlex
 import sys
-import warnings
 from pathlib import Path
 
 from . import __version__
-from .core.errors import DatabaseError, OutputExistsError, TorchspliceError
+from .core.errors import OutputExistsError, TorchspliceError
 
 __all__ = ["main", "build_parser"]
 
@@ -117,108 +116,32 @@ def cmd_sample(args) -> int:
 # --------------------------------------------------------------------------------------------
 # import
 # --------------------------------------------------------------------------------------------
-def _collect_bvh(paths: list[str]) -> tuple[list[Path], list[tuple[str, str]]]:
-    files, missing = [], []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() == ".bvh")
-            if not found:
-                missing.append((str(p), "folder holds no .bvh files"))
-            files += found
-        elif p.is_file():
-            files.append(p)
-        else:
-            missing.append((str(p), "no such file or folder"))
-    seen, unique = set(), []
-    for f in files:
-        key = f.resolve()
-        if key not in seen:
-            seen.add(key)
-            unique.append(f)
-    return unique, missing
-
-
 def cmd_import(args) -> int:
-    import torch
+    from .io.importer import NothingImportedError, import_bvh
 
-    from .io.bvh import read_bvh
-    from .io.database import MotionDatabase
-    from .specs import detect_spec, load_spec
-
-    files, skipped = _collect_bvh(args.paths)
-    if args.append:
-        out = Path(args.output)
-        if out.suffix.lower() not in _OUTPUTS["database"][0]:
-            raise TorchspliceError(f"{out}: --append adds to a database, so its name must end in .h5 or .hdf5")
-        if not out.is_file():
-            raise TorchspliceError(f"{out}: no such database to append to (leave out --append to make a new one)")
-    else:
-        out = _output(args, "database", inputs=files)
-    if not files:
+    def skipped_lines(skipped):
         for f, why in skipped:
             print(f"skipped {_at(f, why)}", file=sys.stderr)
-        raise TorchspliceError("no BVH files to import")
-    fixed_spec = None if args.spec == "auto" else load_spec(args.spec)
-    if args.append:
-        db = MotionDatabase.open(out, mode="a")
-    else:
-        db = MotionDatabase.create(out, overwrite=args.force, dtype="float64" if args.float64 else "float32")
-    dtype = torch.float64 if args.float64 else torch.float32
-    imported, frames, origin, warned, windows, cut = 0, 0, {}, [], 0, 0
-    if args.split is not None and not 0 <= args.split_overlap < args.split:
-        raise TorchspliceError(f"--split-overlap ({args.split_overlap:g} s) must be at least 0 and shorter than --split ({args.split:g} s)")
-    with db:
-        for f in _progress(files, len(files), "import", args.quiet):
-            try:
-                with warnings.catch_warnings(record=True) as caught:
-                    warnings.simplefilter("always")
-                    m = read_bvh(f, dtype=dtype)
-                warned += [(str(f), _one_line(w.message, f)) for w in caught]
-                m.check_finite()
-                spec = (fixed_spec or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
-                spec.bind(m.skeleton)
-                m.role, m.labels = spec.clip_metadata(m.name)
-                if m.name in origin:
-                    raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
-                known = len(db.skeletons)
-                pieces = m.windows(args.split, args.split_overlap) if args.split else [m]
-                for piece in pieces:
-                    db.append(piece, spec=spec)
-                if len(pieces) > 1:
-                    windows += 1
-                    cut += len(pieces)
-                if len(db.skeletons) > known and spec.is_guessed:
-                    _say(args, f"skeleton {known} (first seen in {f}): joint roles guessed by the {spec.name!r} spec "
-                               "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in spec.guess_summary()))
-            except DatabaseError:
-                raise  # the output itself failed (a full disk): nothing more can be written
-            except TorchspliceError as exc:
-                skipped.append((str(f), _one_line(exc, f)))
-                continue
-            except (KeyboardInterrupt, MemoryError):
-                raise
-            except Exception as exc:  # a bug met on this file: skip it, keep the others, say what to report
-                skipped.append((str(f), f"unexpected error ({type(exc).__name__}: {_one_line(exc, f)}); "
-                                        "please report it with the file"))
-                continue
-            origin[m.name] = f
-            imported += 1
-            frames += m.num_frames
-        if imported == 0:
-            db.abort()
-            for f, why in skipped:
-                print(f"skipped {_at(f, why)}", file=sys.stderr)
-            raise TorchspliceError(f"no clip could be imported; {args.output} was not written")
-        total = len(db)
-    _say(args, f"imported {imported} clips ({frames} frames) into {args.output} ({total} clips in all)"
-               + (f"; {windows} long takes cut into {cut} windows of {args.split:g} s" if windows else ""))
-    for f, why in warned:
+
+    try:
+        report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
+                            float64=args.float64, split=args.split, split_overlap=args.split_overlap,
+                            progress=lambda it, total, desc: _progress(it, total, desc, args.quiet))
+    except NothingImportedError as exc:
+        skipped_lines(exc.report.skipped)
+        raise
+    for g in report.guessed:
+        _say(args, f"skeleton {g.skeleton} (first seen in {g.path}): joint roles guessed by the {g.spec!r} spec "
+                   "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in g.summary))
+    cut = report.cut
+    _say(args, f"imported {len(report.imported)} clips ({report.frames} frames) into {args.output} ({report.clips} clips in all)"
+               + (f"; {len(cut)} long takes cut into {sum(c.windows for c in cut)} windows of {args.split:g} s" if cut else ""))
+    for f, why in report.warnings:
         print(f"warning: {_at(f, why)}", file=sys.stderr)
-    for f, why in skipped:
-        print(f"skipped {_at(f, why)}", file=sys.stderr)
-    if skipped:
-        print(f"{len(skipped)} input(s) skipped, {imported} imported", file=sys.stderr)
-    return 1 if skipped else 0
+    skipped_lines(report.skipped)
+    if report.skipped:
+        print(f"{len(report.skipped)} input(s) skipped, {len(report.imported)} imported", file=sys.stderr)
+    return 1 if report.skipped else 0
 
 
 def _at(path, why: str) -> str:
@@ -229,10 +152,9 @@ def _at(path, why: str) -> str:
 
 def _one_line(message, path=None, limit: int = 300) -> str:
     """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
-    text = " ".join(str(message).split())
-    if path is not None:
-        text = text.removeprefix(f"{path}: ").removeprefix(f"{path}:").lstrip()
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    from .io.importer import one_line
+
+    return one_line(message, path, limit)
 
 
 # --------------------------------------------------------------------------------------------
