@@ -1,4 +1,4 @@
-"""``torchsplice splice-all``: the n x m database job (:mod:`torchsplice.job.splice_all`).
+"""``torchsplice splice-all``: the n x m database job (:mod:`torchsplice.job.run`).
 
 Counts and provenance on the built-in sample and on real Bandai Namco clips, several methods,
 resuming after SIGKILL and after an interrupt (bit-identical to an uninterrupted run), refusing

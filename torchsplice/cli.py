@@ -430,18 +430,15 @@ def cmd_evaluate(args) -> int:
 def cmd_splice_all(args) -> int:
     import logging
 
-    from .job import JobConfig, SpliceJob
-    from .job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, parse_shard
+    from .job import SpliceJob, job_config
+    from .job.config import parse_shard
 
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="torchsplice: %(message)s", stream=sys.stderr)
-    methods = tuple(m.strip() for m in args.method.split(",") if m.strip())
-    config = JobConfig(
-        database=Path(args.database), output=Path(args.output),
-        actions_db=Path(args.actions_db) if args.actions_db else None,
-        locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
-        methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
-        force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
-        max_length_ratio=args.max_length_ratio, timing=args.timing, acting_limbs=_acting_limbs(args),
+    config = job_config(  # the options of torchsplice.job.splice_all, from the flags
+        args.database, args.output, actions_db=Path(args.actions_db) if args.actions_db else None,
+        locomotions=args.locomotions, actions=args.actions, methods=args.method, memory_budget_mb=args.memory_budget,
+        batch_pairs=args.batch_size, force_locomotion=args.force_locomotion, copy_sources=args.copy_sources,
+        max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing, acting_limbs=args.acting_limbs,
         posture=not args.no_posture, device=_device(args.device), compression=args.compression, layout=args.layout,
         engine=args.engine, workers=args.workers, ray_address=args.ray_address,
     )

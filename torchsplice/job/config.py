@@ -21,7 +21,7 @@ from ..splice.heck import AlignOptions
 from ..splice.api import SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules
 
-__all__ = ["JobConfig", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
+__all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
 
 DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
 DEFAULT_ACTIONS = ("role:action,role:both",)
@@ -183,6 +183,43 @@ class JobConfig:
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
             **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }
+
+
+def job_config(database, output, **options) -> JobConfig:
+    """A checked :class:`JobConfig` from the same values the command line takes, as the Python
+    API (:func:`torchsplice.job.splice_all`) and ``torchsplice splice-all`` both build it.
+
+    ``options`` are :class:`JobConfig` fields. For convenience, ``locomotions`` and ``actions``
+    may be one selector string (``"role:locomotion,role:both"``) or a sequence of them (every one
+    must match), ``None`` for the default; ``methods`` a comma-separated string
+    (``"splice,naive"``) or a sequence; ``acting_limbs`` ``"auto"``, ``"none"``, ``"both"`` or
+    ``"left_arm,right_arm"`` as well as a tuple. An unknown option is an error naming the
+    options there are.
+    """
+    from dataclasses import fields
+
+    known = [f.name for f in fields(JobConfig) if f.name not in ("database", "output")]
+    bad = sorted(set(options) - set(known))
+    if bad:
+        raise TorchspliceError(f"unknown job option {bad[0]!r}; the options are {', '.join(known)}")
+    for key, default in (("locomotions", DEFAULT_LOCOMOTIONS), ("actions", DEFAULT_ACTIONS)):
+        value = options.get(key, default)
+        options[key] = default if value is None or value == () or value == [] else (
+            (value,) if isinstance(value, str) else tuple(value))
+    methods = options.get("methods", ("splice",))
+    options["methods"] = tuple(m.strip() for m in (methods.split(",") if isinstance(methods, str) else methods)
+                               if m.strip())
+    limbs = options.get("acting_limbs")
+    if isinstance(limbs, str):
+        from ..splice.standing import parse_limbs
+
+        try:
+            options["acting_limbs"] = parse_limbs(limbs)
+        except ValueError as exc:
+            raise TorchspliceError(f"{{acting_limbs}}: {exc}", options=("acting_limbs",)) from None
+    elif limbs is not None:
+        options["acting_limbs"] = tuple(limbs)
+    return JobConfig(database=Path(database), output=Path(output), **options).checked()
 
 
 def parse_shard(text: str) -> tuple[int, int]:

@@ -262,6 +262,47 @@ class SpliceJob:
                                                       and get_method(p.method).needs_reference}))])
 
 
+def splice_all(database, output, *, restart: bool = False, overwrite: bool = False, shard=None,
+               progress: bool = False, command: str | None = None, **options) -> JobSummary:
+    """Splice every selected locomotion x action pair of ``database`` into the new database
+    ``output``: what ``torchsplice splice-all DATABASE -o OUTPUT ...`` does, from Python.
+
+    ``options`` take the same selections and settings as the command line's flags, under the
+    names of :class:`~torchsplice.job.config.JobConfig` (built by
+    :func:`~torchsplice.job.config.job_config`, as the command line builds it)::
+
+        summary = splice_all("bandai.h5", "spliced.h5", locomotions="label:style=normal",
+                             actions=["role:action,role:both", "*walk*"], methods="splice,naive",
+                             engine="local", workers=2, timing="loop", copy_sources=True)
+
+    - selections: ``locomotions``, ``actions`` (a selector string or a list that must all
+      match; ``None``: the spec's roles), ``actions_db``, ``max_length_ratio``;
+    - splicing: ``methods`` (``"splice,naive"`` or a sequence; plug-ins included),
+      ``force_locomotion``, ``timing``, ``acting_limbs``, ``max_run``, ``posture``, ``device``;
+    - output: ``copy_sources``, ``compression``, ``layout``;
+    - running: ``engine`` (``"local"`` or ``"ray"``), ``workers``, ``ray_address``,
+      ``memory_budget_mb``, ``batch_pairs``.
+
+    ``restart`` discards an unfinished run of another plan (``--restart``), ``overwrite``
+    replaces an existing output (``--force``), ``shard`` (``"K/N"`` or ``(K, N)``) runs one
+    slice into the work folder and writes no output (``--shard``); ``progress`` shows the
+    progress bar. An interrupted call (Ctrl-C) keeps its finished tasks: the same call resumes.
+    With ``engine="local"`` and more than one worker, a script must guard its entry point with
+    ``if __name__ == "__main__":`` (multiprocessing re-imports it).
+
+    Returns the :class:`JobSummary` (``spliced``, ``skipped`` by reason, ``flagged``,
+    ``seconds``; ``lines()`` is what the command line prints).
+    """
+    from .config import job_config, parse_shard
+
+    config = job_config(database, output, **options)
+    if isinstance(shard, str):
+        shard = parse_shard(shard)
+    job = SpliceJob(config, progress=progress, restart=restart, overwrite=overwrite,
+                    command=command or "torchsplice.job.splice_all (Python API)", shard=tuple(shard) if shard else None)
+    return job.run()
+
+
 def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None) -> JobSummary:
     """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs)."""
     output = Path(output)
