@@ -181,6 +181,9 @@ def cmd_info(args) -> int:
               f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "
               f"up axis {k['up_axis'] or '?'}, {k['clips']} clips")
     print("roles: " + ", ".join(f"{r} {n}" for r, n in sorted(s["roles"].items())))
+    run = s.get("run")
+    if isinstance(run, dict):
+        print(f"run: {run.get('command', '?')} ({run.get('tool', 'torchsplice')}, started {run.get('started', '?')})")
     if s["clips"]:
         w = max(4, max(len(c["name"]) for c in s["clips"]))
         print(f"{'name':<{w}}  {'frames':>6}  {'fps':>5}  {'sec':>6}  {'role':<10}  labels")

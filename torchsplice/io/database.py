@@ -392,6 +392,18 @@ def _reads(method):
     return wrapper
 
 
+def _run_record(text) -> dict | str | None:
+    """The root attribute ``run`` (JSON written by ``splice-all``) as a dict; ``None`` when absent,
+    the raw text when it is not a JSON object."""
+    if text is None or str(text) == "":
+        return None
+    try:
+        value = json.loads(str(text))
+    except ValueError:
+        return str(text)
+    return value if isinstance(value, dict) else str(text)
+
+
 def _json_value(v):
     """A numpy scalar as a JSON-ready Python value (NaN as None)."""
     if isinstance(v, (str, bytes)):
@@ -1297,7 +1309,9 @@ class MotionDatabase:
 
     @_reads
     def summary(self) -> dict:
-        """A JSON-ready description: file attributes, skeletons, roles and every clip."""
+        """A JSON-ready description: file attributes, skeletons, roles, every clip and, for a
+        database written by ``splice-all``, its run record ``run`` (tool version, command,
+        settings, inputs, time; ``None`` otherwise)."""
         t = self.table()
         clips = [
             {"name": str(t["name"][i]), "frames": int(t["length"][i]), "fps": float(t["fps"][i]),
@@ -1326,7 +1340,7 @@ class MotionDatabase:
             "created_by": attrs.get("created_by"), "num_clips": len(clips),
             "num_frames": int(sum(c["frames"] for c in clips)),
             "duration_s": round(sum(c["duration_s"] for c in clips), 3),
-            "roles": roles, "skeletons": skeletons, "clips": clips,
+            "roles": roles, "skeletons": skeletons, "clips": clips, "run": _run_record(attrs.get("run")),
         }
 
     def __repr__(self) -> str:
