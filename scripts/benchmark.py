@@ -64,7 +64,7 @@ def real_files(mocap: Path) -> list[Path]:
 
 def sample_files(tmp: Path) -> list[Path]:
     """The built-in sample written out as BVH, for machines without the real data."""
-    from torchsplice.io.sample import sample_motions
+    from torchsplice.sample import sample_motions
 
     paths = []
     for m in sample_motions():
@@ -97,7 +97,7 @@ def bench_parse(files: list[Path]) -> None:
 
 def _bank(files: list[Path]):
     from torchsplice.cpu.bank import ClipBank
-    from torchsplice.io.spec import detect_spec
+    from torchsplice.specs import detect_spec
 
     clips = [read_bvh(f) for f in files]
     spec = detect_spec(clips[0].skeleton, files[0].name)

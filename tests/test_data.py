@@ -15,7 +15,7 @@ from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.data import DatasetError, MotionDataset, collate_motion
 from torchsplice.io.database import MotionDatabase
-from torchsplice.io.sample import sample_motions
+from torchsplice.sample import sample_motions
 from torchsplice.kinematics.fk import forward_kinematics
 
 ALL_FEATURES = ("rotations", "root_translation", "translations", "positions", "global_rotations", "velocities")

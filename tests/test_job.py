@@ -1,4 +1,4 @@
-"""``torchsplice splice-all``: the n x m database job (:mod:`torchsplice.job.splice_all`).
+"""``torchsplice splice-all``: the n x m database job (:mod:`torchsplice.job.run`).
 
 Counts and provenance on the built-in sample and on real Bandai Namco clips, several methods,
 resuming after SIGKILL and after an interrupt (bit-identical to an uninterrupted run), refusing
@@ -25,8 +25,8 @@ from torchsplice import __version__
 from torchsplice.cli import main
 from torchsplice.core.motion import Motion
 from torchsplice.io.database import MotionDatabase
-from torchsplice.io.sample import sample_motions
-from torchsplice.io.spec import load_spec
+from torchsplice.sample import sample_motions
+from torchsplice.specs import load_spec
 from torchsplice.core.rotations import quat_angle
 from torchsplice.job import JobConfig, SpliceJob
 

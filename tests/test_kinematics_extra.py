@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply, quat_to_rotmat
-from torchsplice.io.sample import sample_motion
-from torchsplice.io.spec import load_spec
+from torchsplice.sample import sample_motion
+from torchsplice.specs import load_spec
 from torchsplice.kinematics.contacts import count_runs, foot_contacts, gait_summary
 from torchsplice.kinematics.heading import heading_frame, lateral_axis, to_heading_frame
 

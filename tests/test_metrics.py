@@ -22,8 +22,8 @@ from torchsplice.evaluation.metrics import (
     leg_length, phase_range, posture_kept, posture_offset,
 )
 from torchsplice.io.bvh import read_bvh
-from torchsplice.io.sample import sample_motions
-from torchsplice.io.spec import SkeletonRoles, load_spec
+from torchsplice.sample import sample_motions
+from torchsplice.specs import SkeletonRoles, load_spec
 from torchsplice.splice import SpliceOptions, splice
 from torchsplice.splice.clips import ClipTensors, clips_to_tensors
 

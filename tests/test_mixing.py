@@ -16,8 +16,8 @@ import pytest
 from torchsplice.cli import main
 from torchsplice.io.bvh import read_bvh
 from torchsplice.io.database import MotionDatabase
-from torchsplice.io.sample import sample_motions
-from torchsplice.io.spec import load_spec
+from torchsplice.sample import sample_motions
+from torchsplice.specs import load_spec
 
 BANDAI = "bandai_namco_research_motiondataset"
 LOCOS = ["dataset-2_walk_normal_008", "dataset-1_walk_proud_001", "cmu_12_01_walk", "walk_curve", "test#001"]

@@ -88,7 +88,7 @@ def test_the_h5py_snippet_runs_and_names_the_trajectory_joint(spliced, monkeypat
 
 def test_a_single_splice_keeps_its_sources_labels_too(spliced):
     from torchsplice.io.database import MotionDatabase
-    from torchsplice.io.spec import DatasetSpec
+    from torchsplice.specs import DatasetSpec
     from torchsplice.splice import splice
 
     with MotionDatabase.open(spliced / "bandai.h5") as db:
@@ -98,3 +98,48 @@ def test_a_single_splice_keeps_its_sources_labels_too(spliced):
         labels = splice(loco, act, spec, method=method).motion.labels
         assert labels["action.style"] == "old" and labels["locomotion.style"] == "normal"
         assert labels["method"] == method and labels["action"] == act.name
+
+
+def test_the_pipeline_snippet_imports_and_splices_like_the_commands(spliced, tmp_path, monkeypatch, capsys):
+    """``import_bvh`` then ``splice_all`` give the clips ``torchsplice import`` and ``splice-all`` gave."""
+    import h5py
+    import numpy as np
+
+    code = snippet("### The whole pipeline from Python")
+    shutil.copytree(spliced / "bvh", tmp_path / "bvh")
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    report, summary = scope["report"], scope["summary"]
+    assert sorted(c.name for c in report.imported) == sorted(BANDAI) and report.skipped == []
+    assert "spliced" in capsys.readouterr().out
+    with h5py.File(spliced / "out" / "spliced.h5", "r") as f:
+        cli_names = list(f["clips/name"].asstr()[()])
+        cli_rot = f["skeletons/0/rotations"][()]
+    with h5py.File(tmp_path / "spliced.h5", "r") as f:
+        names = list(f["clips/name"].asstr()[()])
+        methods = list(f["clips/method"].asstr()[()])
+        starts, lengths = f["clips/start"][()], f["clips/length"][()]
+        rot = f["skeletons/0/rotations"][()]
+    assert summary.spliced == len(names) == 2 * len(cli_names)
+    assert sorted(n for n, m in zip(names, methods) if m == "splice") == sorted(cli_names)
+    kept = np.concatenate([rot[s:s + n] for s, n, m in zip(starts, lengths, methods) if m == "splice"])
+    assert np.array_equal(kept, cli_rot)  # the splice method's clips, bit for bit (both in plan order)
+
+
+def test_the_plugin_snippet_registers_a_method_every_command_takes(spliced):
+    """The "Plug-in methods" snippet: the locomotion unchanged, spliced through the registry."""
+    from torchsplice.io.database import MotionDatabase
+    from torchsplice.splice import splice
+    from torchsplice.splice.registry import available_methods, get_method
+    from torchsplice.specs import DatasetSpec
+
+    if "locomotion_only" not in available_methods():
+        exec(compile(snippet("**Plug-in methods.**"), "README.md", "exec"), {})
+    assert get_method("locomotion_only").description == "the locomotion unchanged"
+    with MotionDatabase.open(spliced / "bandai.h5") as db:
+        loco, act = db.read(BANDAI[1]), db.read(BANDAI[2])
+        spec = DatasetSpec.from_json(db.spec_json(0))
+    r = splice(loco, act, spec, method="locomotion_only")
+    assert r.motion.name == f"{BANDAI[1]}+{BANDAI[2]}.locomotion_only"
+    assert torch.equal(r.motion.rotations, loco.rotations.to(r.motion.rotations.dtype))

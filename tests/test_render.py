@@ -15,7 +15,7 @@ import torchsplice.viz.render as render_mod
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.sample import sample_motion
+from torchsplice.sample import sample_motion
 from torchsplice.viz.render import project, render, view_rotation
 
 SMALL = dict(size=1.6, dpi=50)  # small pictures keep the file fast

@@ -7,8 +7,8 @@ import pytest
 
 from torchsplice.cli import main
 from torchsplice.core.errors import SpecError, TorchspliceError
-from torchsplice.io.sample import sample_motions
-from torchsplice.io.spec import DatasetSpec, load_spec
+from torchsplice.sample import sample_motions
+from torchsplice.specs import DatasetSpec, load_spec
 from torchsplice.viz.alignment import alignment_data, plot_alignment
 
 BANDAI = "bandai_namco_research_motiondataset"

@@ -1,4 +1,4 @@
-"""The built-in procedural sample (torchsplice.io.sample): checks that can fail.
+"""The built-in procedural sample (torchsplice.sample): checks that can fail.
 
 Everything is measured on forward-kinematics output (Y up, cm, quaternions WXYZ), not on the
 generator's internals: foot plants, floor, arm-leg phase, trunk lean, heading along the paths.
@@ -17,7 +17,7 @@ import torch
 
 from torchsplice.core.motion import Motion
 from torchsplice.core.rotations import quat_to_euler
-from torchsplice.io.sample import SAMPLE_CLIPS, SAMPLE_FPS, sample_motion, sample_motions, sample_skeleton
+from torchsplice.sample import SAMPLE_CLIPS, SAMPLE_FPS, sample_motion, sample_motions, sample_skeleton
 from torchsplice.kinematics.fk import end_site_positions, forward_kinematics
 
 SPEC = Path(__file__).resolve().parents[1] / "datasets_spec" / "sample.toml"

@@ -11,7 +11,7 @@ import torch
 from conftest import bvh_params, real_bvh_files
 from torchsplice.core.errors import SpecError
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.spec import (
+from torchsplice.specs import (
     DatasetSpec, SkeletonRoles, detect_spec, guess_spec, list_specs, load_spec,
 )
 

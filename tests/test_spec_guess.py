@@ -16,7 +16,7 @@ import pytest
 from conftest import real_bvh_files
 from torchsplice.core.errors import SpecError
 from torchsplice.io.bvh import parse_bvh
-from torchsplice.io.spec import DatasetSpec, detect_spec, guess_spec, load_spec
+from torchsplice.specs import DatasetSpec, detect_spec, guess_spec, load_spec
 
 # --------------------------------------------------------------------------------------------
 # building skeletons as BVH text

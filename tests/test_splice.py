@@ -21,8 +21,8 @@ from torchsplice.core.motion import Motion
 from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply, quat_mul
 from torchsplice.evaluation.ground_truth import bandai_namco_triples, upper_body_error
 from torchsplice.io.bvh import read_bvh
-from torchsplice.io.sample import sample_motions
-from torchsplice.io.spec import detect_spec, load_spec
+from torchsplice.sample import sample_motions
+from torchsplice.specs import detect_spec, load_spec
 from torchsplice.kinematics.heading import heading_frame, to_heading_frame
 from torchsplice.splice import NotLocomotingError, SpliceOptions, splice, splice_pairs
 from torchsplice.splice.clips import clips_to_tensors

@@ -11,7 +11,7 @@ from torchsplice.cli import build_parser, main
 from torchsplice.core.rotations import quat_angle
 from torchsplice.io.bvh import read_bvh
 from torchsplice.io.database import MotionDatabase
-from torchsplice.io.spec import load_spec
+from torchsplice.specs import load_spec
 from torchsplice.splice import AlignOptions, SpliceOptions, splice
 
 BANDAI = "bandai_namco_research_motiondataset"

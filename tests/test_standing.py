@@ -17,7 +17,7 @@ import torch
 from torchsplice.cli import main
 from torchsplice.core.rotations import quat_apply, quat_conj
 from torchsplice.io.bvh import read_bvh
-from torchsplice.io.spec import load_spec
+from torchsplice.specs import load_spec
 from torchsplice.kinematics.fk import forward_kinematics
 from torchsplice.splice import SpliceOptions, splice
 from torchsplice.splice.standing import (ACTING_THRESHOLD, LOOP_BLEND_SECONDS, action_times, arm_chains,

@@ -13,13 +13,32 @@ import contextlib
 import json
 import shlex
 import sys
-import warnings
 from pathlib import Path
 
 from . import __version__
-from .core.errors import DatabaseError, TorchspliceError
+from .core.errors import OutputExistsError, TorchspliceError
 
 __all__ = ["main", "build_parser"]
+
+
+_CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS) are on the command line
+    "overwrite": "use --force to overwrite",
+    "force_locomotion": "--force-locomotion splices it anyway",
+    "restart": "pass --restart to discard it",
+}
+_FLAGS = {"overwrite": "--force"}  # library option -> flag, where it is not --the-same-name
+
+
+def cli_message(exc: BaseException) -> str:
+    """An error's message as the command line says it: the options it names as flags
+    (``{max_length_ratio}`` -> ``--max-length-ratio``) and its hint in flag terms."""
+    from .core.errors import HINTS, render_message
+
+    if not isinstance(exc, TorchspliceError) or not hasattr(exc, "message"):
+        return str(exc)
+    text = render_message(exc.message, exc.options, lambda o: _FLAGS.get(o, "--" + o.replace("_", "-")))
+    hint = _CLI_HINTS.get(exc.hint) or HINTS.get(exc.hint) if exc.hint else None
+    return f"{text} ({hint})" if hint else text
 
 
 def _progress(iterable, total: int, desc: str, quiet: bool):
@@ -56,7 +75,7 @@ def _locked(out: Path, args):
 
     with output_lock(out, "torchsplice " + shlex.join(getattr(args, "argv", []))):
         if out.exists() and not getattr(args, "force", False):  # written meanwhile by another process
-            raise TorchspliceError(f"{out}: already exists (use --force to overwrite)")
+            raise OutputExistsError(f"{out}: already exists")
         yield out
 
 
@@ -76,8 +95,8 @@ def _say(args, msg: str) -> None:
 # --------------------------------------------------------------------------------------------
 def cmd_sample(args) -> int:
     from .io.database import MotionDatabase
-    from .io.sample import sample_motions
-    from .io.spec import load_spec
+    from .sample import sample_motions
+    from .specs import load_spec
 
     out = _output(args, "database")
     spec = load_spec("sample")
@@ -98,111 +117,32 @@ def cmd_sample(args) -> int:
 # --------------------------------------------------------------------------------------------
 # import
 # --------------------------------------------------------------------------------------------
-def _collect_bvh(paths: list[str]) -> tuple[list[Path], list[tuple[str, str]]]:
-    files, missing = [], []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() == ".bvh")
-            if not found:
-                missing.append((str(p), "folder holds no .bvh files"))
-            files += found
-        elif p.is_file():
-            files.append(p)
-        else:
-            missing.append((str(p), "no such file or folder"))
-    seen, unique = set(), []
-    for f in files:
-        key = f.resolve()
-        if key not in seen:
-            seen.add(key)
-            unique.append(f)
-    return unique, missing
-
-
 def cmd_import(args) -> int:
-    import torch
+    from .io.importer import NothingImportedError, import_bvh
 
-    from .io.bvh import read_bvh
-    from .io.database import MotionDatabase
-    from .io.spec import detect_spec, load_spec
-    from .io.units import convert_units
-
-    files, skipped = _collect_bvh(args.paths)
-    if args.append:
-        out = Path(args.output)
-        if out.suffix.lower() not in _OUTPUTS["database"][0]:
-            raise TorchspliceError(f"{out}: --append adds to a database, so its name must end in .h5 or .hdf5")
-        if not out.is_file():
-            raise TorchspliceError(f"{out}: no such database to append to (leave out --append to make a new one)")
-    else:
-        out = _output(args, "database", inputs=files)
-    if not files:
+    def skipped_lines(skipped):
         for f, why in skipped:
             print(f"skipped {_at(f, why)}", file=sys.stderr)
-        raise TorchspliceError("no BVH files to import")
-    fixed_spec = None if args.spec == "auto" else load_spec(args.spec)
-    if args.append:
-        db = MotionDatabase.open(out, mode="a")
-    else:
-        db = MotionDatabase.create(out, overwrite=args.force, dtype="float64" if args.float64 else "float32")
-    dtype = torch.float64 if args.float64 else torch.float32
-    imported, frames, origin, warned, windows, cut = 0, 0, {}, [], 0, 0
-    if args.split is not None and not 0 <= args.split_overlap < args.split:
-        raise TorchspliceError(f"--split-overlap ({args.split_overlap:g} s) must be at least 0 and shorter than --split ({args.split:g} s)")
-    with db:
-        for f in _progress(files, len(files), "import", args.quiet):
-            try:
-                with warnings.catch_warnings(record=True) as caught:
-                    warnings.simplefilter("always")
-                    m = read_bvh(f, dtype=dtype)
-                warned += [(str(f), _one_line(w.message, f)) for w in caught]
-                m.check_finite()
-                spec = (fixed_spec or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
-                spec.bind(m.skeleton)
-                if args.units:  # lengths in one unit, so that datasets share the database
-                    m, spec = convert_units(m, spec, args.units)
-                m.role, m.labels = spec.clip_metadata(m.name)
-                if m.name in origin:
-                    raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
-                known = len(db.skeletons)
-                pieces = m.windows(args.split, args.split_overlap) if args.split else [m]
-                for piece in pieces:
-                    db.append(piece, spec=spec)
-                if len(pieces) > 1:
-                    windows += 1
-                    cut += len(pieces)
-                if len(db.skeletons) > known and spec.is_guessed:
-                    _say(args, f"skeleton {known} (first seen in {f}): joint roles guessed by the {spec.name!r} spec "
-                               "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in spec.guess_summary()))
-            except DatabaseError:
-                raise  # the output itself failed (a full disk): nothing more can be written
-            except TorchspliceError as exc:
-                skipped.append((str(f), _one_line(exc, f)))
-                continue
-            except (KeyboardInterrupt, MemoryError):
-                raise
-            except Exception as exc:  # a bug met on this file: skip it, keep the others, say what to report
-                skipped.append((str(f), f"unexpected error ({type(exc).__name__}: {_one_line(exc, f)}); "
-                                        "please report it with the file"))
-                continue
-            origin[m.name] = f
-            imported += 1
-            frames += m.num_frames
-        if imported == 0:
-            db.abort()
-            for f, why in skipped:
-                print(f"skipped {_at(f, why)}", file=sys.stderr)
-            raise TorchspliceError(f"no clip could be imported; {args.output} was not written")
-        total = len(db)
-    _say(args, f"imported {imported} clips ({frames} frames) into {args.output} ({total} clips in all)"
-               + (f"; {windows} long takes cut into {cut} windows of {args.split:g} s" if windows else ""))
-    for f, why in warned:
+
+    try:
+        report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
+                            float64=args.float64, split=args.split, split_overlap=args.split_overlap, units=args.units,
+                            progress=lambda it, total, desc: _progress(it, total, desc, args.quiet))
+    except NothingImportedError as exc:
+        skipped_lines(exc.report.skipped)
+        raise
+    for g in report.guessed:
+        _say(args, f"skeleton {g.skeleton} (first seen in {g.path}): joint roles guessed by the {g.spec!r} spec "
+                   "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in g.summary))
+    cut = report.cut
+    _say(args, f"imported {len(report.imported)} clips ({report.frames} frames) into {args.output} ({report.clips} clips in all)"
+               + (f"; {len(cut)} long takes cut into {sum(c.windows for c in cut)} windows of {args.split:g} s" if cut else ""))
+    for f, why in report.warnings:
         print(f"warning: {_at(f, why)}", file=sys.stderr)
-    for f, why in skipped:
-        print(f"skipped {_at(f, why)}", file=sys.stderr)
-    if skipped:
-        print(f"{len(skipped)} input(s) skipped, {imported} imported", file=sys.stderr)
-    return 1 if skipped else 0
+    skipped_lines(report.skipped)
+    if report.skipped:
+        print(f"{len(report.skipped)} input(s) skipped, {len(report.imported)} imported", file=sys.stderr)
+    return 1 if report.skipped else 0
 
 
 def _at(path, why: str) -> str:
@@ -213,10 +153,9 @@ def _at(path, why: str) -> str:
 
 def _one_line(message, path=None, limit: int = 300) -> str:
     """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
-    text = " ".join(str(message).split())
-    if path is not None:
-        text = text.removeprefix(f"{path}: ").removeprefix(f"{path}:").lstrip()
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    from .io.importer import one_line
+
+    return one_line(message, path, limit)
 
 
 # --------------------------------------------------------------------------------------------
@@ -243,6 +182,9 @@ def cmd_info(args) -> int:
               f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "
               f"up axis {k['up_axis'] or '?'}, {k['clips']} clips")
     print("roles: " + ", ".join(f"{r} {n}" for r, n in sorted(s["roles"].items())))
+    run = s.get("run")
+    if isinstance(run, dict):
+        print(f"run: {run.get('command', '?')} ({run.get('tool', 'torchsplice')}, started {run.get('started', '?')})")
     if s["clips"]:
         w = max(4, max(len(c["name"]) for c in s["clips"]))
         print(f"{'name':<{w}}  {'frames':>6}  {'fps':>5}  {'sec':>6}  {'role':<10}  labels")
@@ -346,7 +288,7 @@ def cmd_export(args) -> int:
 # --------------------------------------------------------------------------------------------
 def _db_spec(db, skeleton_id: int, skeleton):
     """The spec stored with a skeleton of the database, or one detected for it."""
-    from .io.spec import DatasetSpec, detect_spec
+    from .specs import DatasetSpec, detect_spec
 
     text = db.spec_json(skeleton_id)
     return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
@@ -426,12 +368,14 @@ def cmd_splice(args) -> int:
     from .io.database import MotionDatabase
     from .splice import splice
     from .splice.references import find_reference
+    from .splice.registry import get_method
 
+    method = get_method(args.method)
     out = _output(args, "bvh", inputs=[args.database])
     with MotionDatabase.open(args.database) as db:
         loco, act, spec = _read_pair(db, args)
         ref = None
-        if args.method == "cpmc":
+        if method.needs_reference:
             name = args.reference
             if name is None:
                 t = db.table()
@@ -439,11 +383,11 @@ def cmd_splice(args) -> int:
                 name = find_reference(act.name, act.labels, cands, spec)
             ref = db.read(name) if name is not None else None  # a standing action needs none
         elif args.reference is not None:
-            raise TorchspliceError("--reference is only used by --method cpmc")
+            raise TorchspliceError(f"--reference is only used by methods that need a reference clip (cpmc), not {method.name}")
     try:
-        result = splice(loco, act, spec, method=args.method, reference=ref, options=_splice_options(args))
+        result = splice(loco, act, spec, method=method, reference=ref, options=_splice_options(args))
     except TorchspliceError as exc:
-        if args.method == "cpmc" and ref is None and "reference" in str(exc):
+        if method.needs_reference and ref is None and "reference" in str(exc):
             raise TorchspliceError(f"no plain-locomotion reference found for action {act.name!r}: name one with "
                                    "--reference (or add a [clips.reference] rule to the spec)") from None
         raise
@@ -451,18 +395,18 @@ def cmd_splice(args) -> int:
         write_bvh(result.motion, out)
     extra = f", reference {result.reference}" if result.reference else ""
     if result.timing != "timewarp":
-        acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if args.method == "splice" else ""
+        acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if method.name == "splice" else ""
         detail = f"; standing action ({result.timing}{acting})"
     else:
-        detail = None
-    detail = detail if detail is not None else "" if args.method == "naive" else (
-        f"; alignment cost {result.cost:.3g}, action cropped by {result.crop} frames"
-        + (f", posture rotation {result.posture_deg:.1f} deg" if args.method == "splice" else ""))
-    _say(args, f"wrote {out}: {args.method} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
+        shown = [f"alignment cost {result.cost:.3g}" if "cost" in method.diagnostics else "",
+                 f"action cropped by {result.crop} frames" if "crop" in method.diagnostics else "",
+                 f"posture rotation {result.posture_deg:.1f} deg" if "posture" in method.diagnostics else ""]
+        detail = "".join(f"{'; ' if not k else ', '}{t}" for k, t in enumerate(t for t in shown if t))
+    _say(args, f"wrote {out}: {method.name} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
                f"at {result.motion.fps:g} fps{detail}")
     for note in result.notes:
         print(f"note: {note}", file=sys.stderr)
-    if args.method != "naive":
+    if "cost" in method.diagnostics:
         from .job.plan import leg_length
         from .job.task import poor_alignment
 
@@ -564,18 +508,15 @@ def cmd_evaluate(args) -> int:
 def cmd_splice_all(args) -> int:
     import logging
 
-    from .job import JobConfig, SpliceJob
-    from .job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, parse_shard
+    from .job import SpliceJob, job_config
+    from .job.config import parse_shard
 
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="torchsplice: %(message)s", stream=sys.stderr)
-    methods = tuple(m.strip() for m in args.method.split(",") if m.strip())
-    config = JobConfig(
-        database=Path(args.database), output=Path(args.output),
-        actions_db=Path(args.actions_db) if args.actions_db else None,
-        locomotions=tuple(args.locomotions or DEFAULT_LOCOMOTIONS), actions=tuple(args.actions or DEFAULT_ACTIONS),
-        methods=methods, memory_budget_mb=args.memory_budget, batch_pairs=args.batch_size,
-        force_locomotion=args.force_locomotion, copy_sources=args.copy_sources, max_run=args.max_run,
-        max_length_ratio=args.max_length_ratio, timing=args.timing, acting_limbs=_acting_limbs(args),
+    config = job_config(  # the options of torchsplice.job.splice_all, from the flags
+        args.database, args.output, actions_db=Path(args.actions_db) if args.actions_db else None,
+        locomotions=args.locomotions, actions=args.actions, methods=args.method, memory_budget_mb=args.memory_budget,
+        batch_pairs=args.batch_size, force_locomotion=args.force_locomotion, copy_sources=args.copy_sources,
+        max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing, acting_limbs=args.acting_limbs,
         posture=not args.no_posture, device=_device(args.device), compression=args.compression, layout=args.layout,
         engine=args.engine, workers=args.workers, ray_address=args.ray_address,
     )
@@ -625,14 +566,34 @@ def cmd_merge(args) -> int:
 # --------------------------------------------------------------------------------------------
 # parser and entry point
 # --------------------------------------------------------------------------------------------
-def build_parser() -> argparse.ArgumentParser:
-    from .io.units import CONVERTIBLE_UNITS
+def _methods() -> tuple[str, ...]:
+    """The registered methods, for --help and --method (the registry loads no torch)."""
+    from .splice.registry import available_methods
 
+    return available_methods()
+
+
+def _plugins_in(argv: list[str]) -> list[str]:
+    """The ``--plugin MODULE`` values of a command line, read before the parser is built (so that
+    plug-in methods appear in its help)."""
+    out = []
+    for k, a in enumerate(argv):
+        if a == "--plugin" and k + 1 < len(argv):
+            out.append(argv[k + 1])
+        elif a.startswith("--plugin="):
+            out.append(a.split("=", 1)[1])
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
     )
     p.add_argument("--version", action="version", version=f"torchsplice {__version__}")
+    p.add_argument("--plugin", action="append", metavar="MODULE", default=[],
+                   help="import this module first: a plug-in that registers splicing methods (repeatable; "
+                        "also TORCHSPLICE_PLUGINS=MODULE[,MODULE...] and the torchsplice.methods entry point group)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     s = sub.add_parser("sample", help="write the built-in synthetic sample database (no data needed)",
@@ -655,7 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--append", action="store_true", help="add to an existing database")
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
     s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
-    s.add_argument("--units", choices=CONVERTIBLE_UNITS, default=None,
+    s.add_argument("--units", default=None, metavar="UNIT",  # checked by import_bvh before any work
                    help="convert every clip from its spec's units to these (m, cm, mm, in, ft; CMU's own unit is 'cmu'), "
                         "so that datasets in different units share one database; default: keep each file's units")
     s.add_argument("--split", type=_positive_float, default=None, metavar="SECONDS",
@@ -706,7 +667,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "[clips.reference] rule or named with --reference).")
     _add_pair_args(s)
     s.add_argument("-o", "--output", required=True, help="BVH file to write")
-    s.add_argument("--method", default="splice", choices=["splice", "naive", "cpmc"], help="splicing method (default splice)")
+    s.add_argument("--method", default="splice", choices=_methods(),
+                   help="splicing method (default splice; plug-ins add more, see --plugin)")
     s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
     _add_splice_options(s)
     _add_output_flags(s)
@@ -762,7 +724,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="clips giving the upper body (default: role:action,role:both)")
     s.add_argument("--actions-db", metavar="DB", help="take the actions from this database (same skeleton)")
     s.add_argument("--method", default="splice", metavar="M[,M...]",
-                   help="splice, naive, cpmc, or several comma-separated (default splice)")
+                   help=f"{', '.join(_methods())}, or several comma-separated (default splice)")
     s.add_argument("--memory-budget", type=_positive_int, default=1024, metavar="MB",
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
@@ -825,7 +787,15 @@ def main(argv: list[str] | None = None) -> int:
     import threading
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(argv)
+    try:
+        from .splice.registry import load_plugins
+
+        load_plugins(_plugins_in(argv))
+        parser = build_parser()
+    except TorchspliceError as exc:
+        print(f"torchsplice: error: {_one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
     args.argv = argv
     if args.func is cmd_splice_all:
         _prestart_workers(args)
@@ -835,7 +805,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {_one_line(exc, limit=1000)}", file=sys.stderr)
+        print(f"torchsplice: error: {_one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         print(f"torchsplice: {_stopped(exc)}", file=sys.stderr)

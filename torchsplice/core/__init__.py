@@ -3,9 +3,11 @@
 The errors import at once; the torch-based types on first use.
 """
 
-from .errors import BVHError, DatabaseError, MotionError, SpecError, TorchspliceError
+from .errors import (BVHError, DatabaseError, MotionError, NotLocomotingError, OutputExistsError, SpecError,
+                     TorchspliceError, UnfinishedJobError)
 
-__all__ = ["Motion", "Skeleton", "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError"]
+__all__ = ["Motion", "Skeleton", "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError",
+           "NotLocomotingError", "OutputExistsError", "UnfinishedJobError"]
 
 
 def __getattr__(name):

@@ -18,7 +18,7 @@ from numba import njit, prange
 
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..splice.heck import landmark_indices
 from .fk import fk_clips, joint_closure
 from .grid import clip_features

@@ -30,8 +30,8 @@ def warm_up(quiet: bool = False) -> float:
     t0 = time.perf_counter()
     if not quiet:
         print("setup: compiling the CPU splicer for this machine (once; about a minute)", file=sys.stderr, flush=True)
-    from ..io.sample import sample_motions
-    from ..io.spec import load_spec
+    from ..sample import sample_motions
+    from ..specs import load_spec
     from .bank import ClipBank, splice_bank
 
     clips = sample_motions()[:4]

@@ -239,7 +239,7 @@ def _velocities(pos: torch.Tensor, fps: torch.Tensor, clip_first: torch.Tensor, 
 def _trajectory_joint(db: MotionDatabase, k: int, skeleton: Skeleton) -> int:
     """Index of the joint carrying skeleton ``k``'s world trajectory: its spec's ``root`` role
     (Bandai Namco: ``Hips``, under a ``joint_Root`` that stands still), else joint 0."""
-    from ..io.spec import DatasetSpec, detect_spec
+    from ..specs import DatasetSpec, detect_spec
 
     text = db.spec_json(k)
     try:
@@ -664,7 +664,7 @@ class MotionDataset(Dataset):
         units = sorted({self.units.get(k, "") for k in ks})
         if len(units) > 1:
             raise DatasetError(f"{self.path}: statistics need clips of one unit; the selected clips are in {units} "
-                               "(import them with --units to convert, or filter with where={'skeleton': k})")
+                               "(convert them on import, see torchsplice.io.units, or filter with where={'skeleton': k})")
         same = set(names) <= set(self.features) and self.dtype == torch.float64
         ds = self if same else MotionDataset(self.path, clips=self.indices.tolist(), features=names, dtype=torch.float64)
         order = np.argsort(ds._skel, kind="stable")  # batches of one skeleton: one FK each

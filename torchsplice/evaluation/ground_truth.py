@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 
 from ..core.motion import Motion
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..kinematics.heading import heading_frame, to_heading_frame
 from ..splice.clips import clips_to_tensors, resample_motion
 from ..splice.heck import AlignOptions, time_align

@@ -33,7 +33,7 @@ from typing import Sequence, Union
 import torch
 
 from ..core.motion import Motion
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..kinematics.contacts import _floor_speed, foot_contacts
 from ..kinematics.heading import heading_frame, lateral_axis, to_heading_frame
 from ..splice.clips import ClipTensors, clips_to_tensors

@@ -28,7 +28,7 @@ from ..core.errors import TorchspliceError
 from ..core.motion import Motion
 from ..io.atomic import atomic_path
 from ..io.database import MotionDatabase
-from ..io.spec import DatasetSpec, detect_spec
+from ..specs import DatasetSpec, detect_spec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
@@ -62,7 +62,8 @@ class _Sources:
         if name not in self.cache:
             db = next((d for d in self.dbs if name in d._index_map()), None)
             if db is None:
-                raise TorchspliceError(f"source clip {name!r} is in no source database; pass them with --sources")
+                raise TorchspliceError(f"source clip {name!r} is in no source database; name them with {{sources}}",
+                                       options=("sources",))
             self.cache[name] = db.read(name)
         return self.cache[name]
 
@@ -122,6 +123,15 @@ def evaluate_database(path, output, sources=None, pictures: bool = True, max_row
                 s.close()
 
 
+def _method_order(names) -> list[str]:
+    """The methods of a database in the registry's order (built-ins first), then any method
+    not registered in this process (its plug-in was not loaded) by name."""
+    from ..splice.registry import available_methods
+
+    known = available_methods()
+    return sorted(names, key=lambda m: (known.index(m), "") if m in known else (len(known), m))
+
+
 def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, examples) -> dict:
     k = int(t["skeleton"][rows[0]])
     sk = db.skeletons[k]
@@ -129,7 +139,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
     roles = spec.bind(sk)
     units = spec.units if spec.units != "unknown" else "units"
     candidates = sources.captures()
-    methods = sorted({str(t["method"][i]) for i in rows}, key=lambda m: ("splice", "naive", "cpmc").index(m) if m in ("splice", "naive", "cpmc") else 9)
+    methods = _method_order({str(t["method"][i]) for i in rows})
     per_clip: list[dict] = []
     captured_names = set()
     for method in methods:

@@ -22,7 +22,7 @@ import torch
 
 from ..core.motion import Motion
 from ..core.rotations import quat_apply, quat_conj
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..splice.clips import clips_to_tensors, resample_motion
 from ..splice.standing import LIMBS, arm_chains
 from .metrics import arm_leg_phase_stats

@@ -13,7 +13,7 @@ import errno
 import os
 from pathlib import Path
 
-from ..core.errors import TorchspliceError
+from ..core.errors import OutputExistsError, TorchspliceError
 
 __all__ = ["atomic_path", "os_error_message", "same_file", "check_output"]
 
@@ -57,7 +57,7 @@ def check_output(path, suffixes: tuple[str, ...], what: str, inputs=(), overwrit
     if not path.parent.is_dir():
         raise TorchspliceError(f"{path}: folder {path.parent} does not exist")
     if path.exists() and not overwrite:
-        raise TorchspliceError(f"{path}: already exists (use --force to overwrite)")
+        raise OutputExistsError(f"{path}: already exists")
     return path
 
 

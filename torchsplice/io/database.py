@@ -56,7 +56,7 @@ import numpy as np
 import torch
 
 from .. import __version__
-from ..core.errors import DatabaseError
+from ..core.errors import DatabaseError, OutputExistsError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
@@ -392,6 +392,18 @@ def _reads(method):
     return wrapper
 
 
+def _run_record(text) -> dict | str | None:
+    """The root attribute ``run`` (JSON written by ``splice-all``) as a dict; ``None`` when absent,
+    the raw text when it is not a JSON object."""
+    if text is None or str(text) == "":
+        return None
+    try:
+        value = json.loads(str(text))
+    except ValueError:
+        return str(text)
+    return value if isinstance(value, dict) else str(text)
+
+
 def _json_value(v):
     """A numpy scalar as a JSON-ready Python value (NaN as None)."""
     if isinstance(v, (str, bytes)):
@@ -463,7 +475,7 @@ class MotionDatabase:
         lock = _writer_lock(path)
         if path.exists() and not overwrite:
             lock.release()
-            raise DatabaseError(f"{path}: already exists (use --force to overwrite)")
+            raise OutputExistsError(f"{path}: already exists")
         tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
         try:
             h5 = h5py.File(tmp, "w")
@@ -809,7 +821,7 @@ class MotionDatabase:
     def add_skeleton(self, skeleton: Skeleton, spec=None) -> int:
         """Index of a stored skeleton that matches ``skeleton``, storing it if none does.
 
-        ``spec`` (a :class:`~torchsplice.io.spec.DatasetSpec` or ``None``) is stored with a new
+        ``spec`` (a :class:`~torchsplice.specs.DatasetSpec` or ``None``) is stored with a new
         skeleton, with its units and up axis (each skeleton keeps its own: datasets of different
         units share one file; the file's ``units`` and ``up_axis`` attributes then say ``"mixed"``).
         """
@@ -1297,7 +1309,9 @@ class MotionDatabase:
 
     @_reads
     def summary(self) -> dict:
-        """A JSON-ready description: file attributes, skeletons, roles and every clip."""
+        """A JSON-ready description: file attributes, skeletons, roles, every clip and, for a
+        database written by ``splice-all``, its run record ``run`` (tool version, command,
+        settings, inputs, time; ``None`` otherwise)."""
         t = self.table()
         clips = [
             {"name": str(t["name"][i]), "frames": int(t["length"][i]), "fps": float(t["fps"][i]),
@@ -1326,7 +1340,7 @@ class MotionDatabase:
             "created_by": attrs.get("created_by"), "num_clips": len(clips),
             "num_frames": int(sum(c["frames"] for c in clips)),
             "duration_s": round(sum(c["duration_s"] for c in clips), 3),
-            "roles": roles, "skeletons": skeletons, "clips": clips,
+            "roles": roles, "skeletons": skeletons, "clips": clips, "run": _run_record(attrs.get("run")),
         }
 
     def __repr__(self) -> str:

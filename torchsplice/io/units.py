@@ -5,7 +5,7 @@ cgspeed BVH in its own unit (``"cmu"``: the ASF ``length 0.45``, 1 unit = 1/0.45
 1 unit = 5.644 cm). Converting every clip to one unit lets datasets share a database
 (``torchsplice import ... --units cm``) with one ``units`` attribute, not ``mixed``.
 
-The table of units is :data:`torchsplice.io.spec.UNITS` (metres per unit): ``m``, ``cm``,
+The table of units is :data:`torchsplice.specs.UNITS` (metres per unit): ``m``, ``cm``,
 ``mm``, ``in`` (inches), ``ft`` (feet) and ``cmu``. A conversion multiplies every length by
 :func:`unit_factor`: the skeleton's rest offsets and End Site offsets, the root translation
 and the animated joint translations. Rotations have no length and stay as they are, so the
@@ -19,7 +19,7 @@ from dataclasses import replace
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
-from .spec import UNITS, DatasetSpec
+from ..specs import UNITS, DatasetSpec
 
 __all__ = ["UNITS", "CONVERTIBLE_UNITS", "unit_factor", "scale_skeleton", "scale_motion", "convert_units"]
 

@@ -17,9 +17,11 @@ from pathlib import Path
 from ..core.errors import TorchspliceError
 from ..io.atomic import same_file
 from ..io.database import COMPRESSIONS
-from ..splice import METHODS, AlignOptions, SpliceOptions
+from ..splice.heck import AlignOptions
+from ..splice.api import SpliceOptions
+from ..splice.registry import available_methods, get_method, plugin_modules
 
-__all__ = ["JobConfig", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
+__all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
 
 DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
 DEFAULT_ACTIONS = ("role:action,role:both",)
@@ -36,7 +38,8 @@ class JobConfig:
         output: the database to write.
         actions_db: another database holding the actions (same skeleton, units and up axis).
         locomotions, actions: selectors, all of which must select a clip.
-        methods: one or several of ``splice``, ``naive``, ``cpmc``.
+        methods: one or several registered methods: ``splice``, ``naive``, ``cpmc`` or plug-ins
+            (see :mod:`torchsplice.splice.registry`).
         force_locomotion: splice clips that do not locomote instead of skipping their pairs.
         max_length_ratio: skip pairs whose longer clip lasts more than this many times the
             shorter one (``None``: no limit).
@@ -91,15 +94,17 @@ class JobConfig:
             c = replace(c, compression=None)
         if c.compression not in COMPRESSIONS:
             raise TorchspliceError(f"unknown compression {c.compression!r}; choose auto, lzf, gzip or none")
-        bad = [m for m in c.methods if m not in METHODS]
-        if bad or not c.methods:
-            raise TorchspliceError(f"unknown method {bad[0] if bad else '(none)'!r}; choose from {', '.join(METHODS)}")
+        if not c.methods:
+            raise TorchspliceError(f"no method given; choose from {', '.join(available_methods())}")
+        for m in c.methods:
+            get_method(m)  # a clear error naming the available methods
         if c.engine not in ENGINES:
             raise TorchspliceError(f"unknown engine {c.engine!r}; choose {' or '.join(ENGINES)}")
         if c.layout not in LAYOUTS:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
         if c.layout == "virtual" and c.copy_sources:
-            raise TorchspliceError("--copy-sources needs --layout copy: a virtual output holds only the spliced clips")
+            raise TorchspliceError("{copy_sources} needs {layout} copy: a virtual output holds only the spliced clips",
+                                   options=("copy_sources", "layout"))
         from ..splice.standing import LIMBS, TIMINGS
 
         if c.timing not in TIMINGS:
@@ -107,9 +112,10 @@ class JobConfig:
         if c.acting_limbs is not None and any(x not in LIMBS for x in c.acting_limbs):
             raise TorchspliceError(f"unknown acting limb in {','.join(c.acting_limbs)!r}; choose from {', '.join(LIMBS)}")
         if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
-            raise TorchspliceError(f"--max-length-ratio must be at least 1, got {c.max_length_ratio}")
+            raise TorchspliceError(f"{{max_length_ratio}} must be at least 1, got {c.max_length_ratio}",
+                                   options=("max_length_ratio",))
         if c.workers is not None and c.workers < 1:
-            raise TorchspliceError(f"--workers must be at least 1, got {c.workers}")
+            raise TorchspliceError(f"{{workers}} must be at least 1, got {c.workers}", options=("workers",))
         dup = sorted({m for m in c.methods if c.methods.count(m) > 1})
         if dup:
             raise TorchspliceError(f"method {dup[0]!r} is asked for twice; name each method once")
@@ -175,7 +181,45 @@ class JobConfig:
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
+            **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }
+
+
+def job_config(database, output, **options) -> JobConfig:
+    """A checked :class:`JobConfig` from the same values the command line takes, as the Python
+    API (:func:`torchsplice.job.splice_all`) and ``torchsplice splice-all`` both build it.
+
+    ``options`` are :class:`JobConfig` fields. For convenience, ``locomotions`` and ``actions``
+    may be one selector string (``"role:locomotion,role:both"``) or a sequence of them (every one
+    must match), ``None`` for the default; ``methods`` a comma-separated string
+    (``"splice,naive"``) or a sequence; ``acting_limbs`` ``"auto"``, ``"none"``, ``"both"`` or
+    ``"left_arm,right_arm"`` as well as a tuple. An unknown option is an error naming the
+    options there are.
+    """
+    from dataclasses import fields
+
+    known = [f.name for f in fields(JobConfig) if f.name not in ("database", "output")]
+    bad = sorted(set(options) - set(known))
+    if bad:
+        raise TorchspliceError(f"unknown job option {bad[0]!r}; the options are {', '.join(known)}")
+    for key, default in (("locomotions", DEFAULT_LOCOMOTIONS), ("actions", DEFAULT_ACTIONS)):
+        value = options.get(key, default)
+        options[key] = default if value is None or value == () or value == [] else (
+            (value,) if isinstance(value, str) else tuple(value))
+    methods = options.get("methods", ("splice",))
+    options["methods"] = tuple(m.strip() for m in (methods.split(",") if isinstance(methods, str) else methods)
+                               if m.strip())
+    limbs = options.get("acting_limbs")
+    if isinstance(limbs, str):
+        from ..splice.standing import parse_limbs
+
+        try:
+            options["acting_limbs"] = parse_limbs(limbs)
+        except ValueError as exc:
+            raise TorchspliceError(f"{{acting_limbs}}: {exc}", options=("acting_limbs",)) from None
+    elif limbs is not None:
+        options["acting_limbs"] = tuple(limbs)
+    return JobConfig(database=Path(database), output=Path(output), **options).checked()
 
 
 def parse_shard(text: str) -> tuple[int, int]:
@@ -183,7 +227,7 @@ def parse_shard(text: str) -> tuple[int, int]:
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
-        raise TorchspliceError(f"--shard must look like K/N (e.g. 2/8), got {text!r}") from None
+        raise TorchspliceError(f"{{shard}} must look like K/N (e.g. 2/8), got {text!r}", options=("shard",)) from None
     if not 1 <= k <= n:
-        raise TorchspliceError(f"--shard {text}: K must be between 1 and N")
+        raise TorchspliceError(f"{{shard}} {text}: K must be between 1 and N", options=("shard",))
     return k, n

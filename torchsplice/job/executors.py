@@ -281,7 +281,8 @@ def _check_reachable(address: str, timeout: float = 10.0) -> None:
     try:
         port_n = int(port)
     except ValueError:
-        raise TorchspliceError(f"--ray-address {address!r}: expected HOST:PORT (the head's GCS port, 6379 by default)") from None
+        raise TorchspliceError(f"{{ray_address}} {address!r}: expected HOST:PORT (the head's GCS port, 6379 by default)",
+                               options=("ray_address",)) from None
     try:
         socket.create_connection((host.strip("[]") or "127.0.0.1", port_n), timeout=timeout).close()
     except OSError as exc:
@@ -299,7 +300,7 @@ class RayEngine:
         try:
             import ray
         except ImportError:
-            raise TorchspliceError("--engine ray needs Ray: pip install 'torchsplice[ray]'") from None
+            raise TorchspliceError("{engine} ray needs Ray: pip install 'torchsplice[ray]'", options=("engine",)) from None
         self.ray = ray
         self.started = not ray.is_initialized()
         if self.started and config.ray_address not in (None, "", "auto", "local") and "://" not in config.ray_address:

@@ -19,13 +19,14 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from .. import __version__
-from ..core.errors import TorchspliceError
+from ..core.errors import TorchspliceError, UnfinishedJobError
 from ..io.lock import host_pid
-from ..io.spec import DatasetSpec, SkeletonRoles, detect_spec
+from ..specs import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import SpliceOptions
 from ..splice.clips import ClipTensors, clips_to_tensors
 from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
+from ..splice.registry import get_method
 from .config import JobConfig
 from .select import select_clips
 from .sources import Sources, clip_key
@@ -98,7 +99,8 @@ class Plan:
 
     def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
         return (clip_key("L", p.loco, same_db), clip_key("A", p.action, same_db),
-                clip_key("A", p.reference, same_db) if p.reference is not None and p.method == "cpmc" else None)
+                clip_key("A", p.reference, same_db) if p.reference is not None and get_method(p.method).needs_reference
+                else None)
 
     @property
     def same_db(self) -> bool:
@@ -121,8 +123,8 @@ class Plan:
     def from_json(cls, text: str) -> "Plan":
         d = json.loads(text)
         if d.get("version") != PLAN_VERSION:
-            raise TorchspliceError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
-                                   f"{PLAN_VERSION}: finish it with the torchsplice that started it, or pass --restart")
+            raise UnfinishedJobError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
+                                     f"{PLAN_VERSION}: finish it with the torchsplice that started it")
         return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
                    groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"], clips=d["clips"], flags=d["flags"],
                    version=d["version"])
@@ -169,8 +171,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     same = act_db is loco_db or c.actions_db is None
     tl = loco_db.table()
     ta = tl if same else act_db.table()
-    locos = select_clips(tl, c.locomotions, "--locomotions", str(c.database))
-    acts = select_clips(ta, c.actions, "--actions", str(c.actions_db or c.database))
+    locos = select_clips(tl, c.locomotions, "{locomotions}", str(c.database))
+    acts = select_clips(ta, c.actions, "{actions}", str(c.actions_db or c.database))
     sk_l, sk_a = loco_db.skeletons, act_db.skeletons
     described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db))
     if not any(sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]) for i in locos for j in acts):
@@ -187,7 +189,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     for k in sorted({int(tl["skeleton"][i]) for i in locos}):
         text = loco_db.spec_json(k)
         specs[k] = DatasetSpec.from_json(text) if text else detect_spec(sk_l[k])
-    refs = _references(ta, acts, next(iter(specs.values()))) if "cpmc" in c.methods else {}
+    needs_ref = any(get_method(m).needs_reference for m in c.methods)
+    refs = _references(ta, acts, next(iter(specs.values()))) if needs_ref else {}
 
     # groups: a locomotion skeleton and rate, its locomotions, then every action and reference of its topology
     others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
@@ -223,7 +226,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
                     if why:
                         if mode == "timewarp":
                             skipped[why] = skipped.get(why, 0) + 1
-                    elif _mode(c, checks, clip_key("A", j, same)) == mode:
+                    elif _mode(c, checks, clip_key("A", j, same), method) == mode:
                         pairs.append(Pair(method, int(i), int(j), refs.get(j) if mode == "timewarp" else None, mode))
     _acting(c, sources, groups, clips, sk_l, {clip_key("A", p.action, same) for p in pairs if p.mode == "standing"})
     if not pairs:
@@ -288,10 +291,12 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
     return out
 
 
-def _mode(c: JobConfig, checks: dict, action_key: str) -> str:
-    """``"standing"`` for an action that does not locomote (unless forced through the timewarp)."""
+def _mode(c: JobConfig, checks: dict, action_key: str, method: str) -> str:
+    """``"standing"`` for an action that does not locomote (unless forced through the timewarp,
+    or the method has no standing variant: its own function then takes the pair)."""
     check = checks.get(action_key)
-    return "standing" if check is not None and not check.locomoting and not c.force_locomotion else "timewarp"
+    standing = check is not None and not check.locomoting and not c.force_locomotion
+    return "standing" if standing and get_method(method).standing is not None else "timewarp"
 
 
 def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l, keys: set[str]) -> None:
@@ -352,9 +357,9 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
     check = checks.get(clip_key("L", i, same))
     if check is not None and not check.locomoting and not c.force_locomotion:
         return f"{tl['name'][i]} does not locomote ({check.reason}; --force-locomotion splices it)"
-    standing = _mode(c, checks, clip_key("A", j, same)) == "standing"
-    if method == "cpmc" and refs.get(j) is None and not standing:
-        return f"no plain-locomotion reference for {ta['name'][j]} (cpmc)"
+    standing = _mode(c, checks, clip_key("A", j, same), method) == "standing"
+    if get_method(method).needs_reference and refs.get(j) is None and not standing:
+        return f"no plain-locomotion reference for {ta['name'][j]} ({method})"
     return None
 
 

@@ -55,11 +55,18 @@ def _matches(alts, name: str, role: str, labels: dict) -> bool:
     return False
 
 
+def _option(what: str) -> tuple[str, ...]:
+    """``("locomotions",)`` for the placeholder ``"{locomotions}"``; ``()`` for plain text."""
+    return (what[1:-1],) if what.startswith("{") and what.endswith("}") else ()
+
+
 def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) -> list[int]:
     """Rows of a database ``table`` (:meth:`MotionDatabase.table`) that every selector selects.
 
-    ``what`` (e.g. ``"--locomotions"``) and ``source`` (the database path) only serve error
-    messages: a selector that selects nothing is an error naming it.
+    ``what`` (e.g. ``"{locomotions}"``, an option placeholder of
+    :class:`~torchsplice.core.errors.TorchspliceError`, or plain text) and ``source`` (the
+    database path) only serve error messages: a selector that selects nothing is an error
+    naming it.
     """
     names = [str(n) for n in table["name"]]
     roles = [str(r) for r in table["role"]]
@@ -70,9 +77,11 @@ def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) 
         hit = [i for i in range(len(names)) if _matches(alts, names[i], roles[i], labels[i])]
         if not hit:
             sample = ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
-            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} (its clips: {sample or 'none'})")
+            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} (its clips: {sample or 'none'})",
+                                   options=_option(what))
         keep = set(hit)
         rows = [i for i in rows if i in keep]
     if not rows:
-        raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}")
+        raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
+                               options=_option(what))
     return rows

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..core.errors import DatabaseError
 from ..io.database import MotionDatabase
-from ..io.spec import DatasetSpec
+from ..specs import DatasetSpec
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
 
 __all__ = ["Sink", "HDF5Sink", "OutputWriter"]
@@ -86,7 +86,8 @@ class OutputWriter:
         with MotionDatabase.open(path) as shard:
             made_for = str(shard.attrs.get("plan", ""))
             if self.expect_plan is not None and made_for != self.expect_plan:
-                raise DatabaseError(f"{path}: this shard belongs to another plan of the job; rerun with --restart")
+                raise DatabaseError(f"{path}: this shard belongs to another plan of the job; rerun with {{restart}}",
+                                    options=("restart",))
             skipped = json.loads(str(shard.attrs.get("skipped", "")) or "{}")
             if len(shard) == 0:
                 self._count([], skipped)

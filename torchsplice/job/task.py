@@ -21,6 +21,7 @@ import torch
 from ..core.errors import TorchspliceError
 from ..splice import splice_pairs, splice_standing
 from ..splice.api import align_kwargs, spliced_labels
+from ..splice.registry import get_method, load_plugins
 from .config import JobConfig
 from .plan import Plan, Task
 from .sources import Sources
@@ -92,6 +93,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {config.backend()} splicer, but the job "
                                f"was planned by {plan.key['tool']} with the {plan.key['backend']} splicer: install the same "
                                "version (and numba) everywhere")
+    load_plugins(plan.key.get("plugins", ()))  # plug-in methods register themselves in this process too
     group = plan.groups[task.group]
     pairs = plan.pairs[task.start:task.stop]
     keys = [plan.pair_keys(p, plan.same_db) for p in pairs]
@@ -100,15 +102,16 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     align = config.align_options()
     fps = group.fps
     method = task.method
+    spec_m = get_method(method)
     failed: dict[int, str] = {}
     standing = getattr(task, "mode", "timewarp") == "standing"
-    if config.backend() == "compiled" and not standing:
+    if config.backend() == "compiled" and spec_m.compiled and not standing:
         from ..cpu.bank import splice_bank
         from ..cpu.splice import STATUS
 
         bank, index = sources.bank(task.group, group.clips, fps, roles, align.landmarks)
         out = splice_bank(bank, [index[k[0]] for k in keys], [index[k[1]] for k in keys], method,
-                          ref=[index[k[2]] for k in keys] if method == "cpmc" else None, posture=config.posture,
+                          ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None, posture=config.posture,
                           buffers=buffers, on_error="keep", **align_kwargs(align, fps))
         failed = {b: STATUS[int(s)] for b, s in enumerate(out.status) if s != 0}
         ok = out.status == 0
@@ -117,7 +120,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         cost, posture = out.cost[ok], out.posture[ok]
     else:
         motions = [(sources.motion(k[0]), sources.motion(k[1])) for k in keys]
-        refs = [sources.motion(k[2]) for k in keys] if method == "cpmc" and not standing else None
+        refs = [sources.motion(k[2]) for k in keys] if spec_m.needs_reference and not standing else None
         opts = config.splice_options()
         results = []
         if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
@@ -178,7 +181,7 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         if poor:
             f.append(poor)
         flags.append(FLAG_SEPARATOR.join(f))
-    suffix = "" if method == "splice" else f".{method}"
+    named = get_method(method).clip_name
     extra = {
         "locomotion": lnames, "action": anames,
         "reference": [plan.clips[k[2]]["name"] if k[2] else "" for k in keys], "method": [method] * len(keys),
@@ -191,7 +194,7 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     }
     return Part(
         task=task.id, skeleton=skeleton, spec=group.spec,
-        names=[f"{lo}+{ac}{suffix}" for lo, ac in zip(lnames, anames)], lengths=frames, fps=np.full(len(keys), fps),
+        names=[named(lo, ac) for lo, ac in zip(lnames, anames)], lengths=frames, fps=np.full(len(keys), fps),
         rotations=rot, translations=trans,
         labels=[json.dumps(spliced_labels(method, plan.clips[k[0]]["name"], plan.clips[k[0]].get("labels", {}),
                                           plan.clips[k[1]]["name"], plan.clips[k[1]].get("labels", {})), sort_keys=True)

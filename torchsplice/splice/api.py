@@ -5,10 +5,11 @@
     result.motion                                          # the spliced Motion
     results = splice_pairs([(walk, wave), (turn, wave)], spec, method="naive")
 
-Methods: ``"splice"`` (Heck, Kovar & Gleicher 2006), ``"naive"`` (per-bone replacement of the
-upper body, no timewarp: what per-bone layer masks do) and ``"cpmc"`` (differencing against a
+Methods come from the registry (:mod:`torchsplice.splice.registry`): the built-in ``"splice"``
+(Heck, Kovar & Gleicher 2006), ``"naive"`` (per-bone replacement of the upper body, no
+timewarp: what per-bone layer masks do) and ``"cpmc"`` (differencing against a
 plain-locomotion ``reference`` of the action's performer, as in Al-Ghreimil & Hahn 2003 and
-engines' additive layers).
+engines' additive layers), and any plug-in method.
 
 Pairs are batched: clips used by several pairs are prepared (resampled to the locomotion's
 frame rate, forward kinematics) once. On the CPU the pairs then run through the compiled
@@ -27,19 +28,18 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from ..core.errors import MotionError, TorchspliceError
+from ..core.errors import MotionError, NotLocomotingError, TorchspliceError
 from ..core.motion import Motion
-from ..io.spec import DatasetSpec, SkeletonRoles
+from ..specs import DatasetSpec, SkeletonRoles
 from .clips import ClipTensors, check_clip, check_pair, clips_to_tensors, resample_motion
-from .heck import AlignOptions, splice_tensors
+from .heck import AlignOptions
 from .locomotion import LocomotionCheck, check_locomotion
-from .methods import cpmc_tensors, naive_tensors
-from .standing import TIMINGS, acting_limbs, standing_tensors
+from .registry import Method, MethodInput, MethodOutput, get_method
+from .standing import TIMINGS, acting_limbs
 
-__all__ = ["METHODS", "BACKENDS", "TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
+__all__ = ["BACKENDS", "TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
            "splice_pairs", "splice_standing", "resolve_backend"]
 
-METHODS = ("splice", "naive", "cpmc")
 BACKENDS = ("auto", "compiled", "torch")
 
 
@@ -51,10 +51,6 @@ def spliced_labels(method: str, locomotion: str, locomotion_labels: dict, action
     out.update({f"action.{k}": str(v) for k, v in (action_labels or {}).items()})
     out.update({"method": method, "locomotion": locomotion, "action": action})
     return out
-
-
-class NotLocomotingError(MotionError):
-    """A clip that does not locomote, refused unless ``force`` is set."""
 
 
 @dataclass(frozen=True)
@@ -111,10 +107,11 @@ class SpliceResult:
 
     Attributes:
         motion: the spliced clip (locomotion's skeleton and frame rate), role ``"spliced"``.
-        method: ``"splice"``, ``"naive"`` or ``"cpmc"``.
-        locomotion, action, reference: source clip names (``reference`` for ``cpmc``).
+        method: the method's name (``"splice"``, ``"naive"``, ``"cpmc"`` or a plug-in's).
+        locomotion, action, reference: source clip names (``reference`` for methods that
+            need one, such as ``cpmc``).
         cost: average lower-body frame distance along the alignment path (file units squared);
-            NaN for ``naive``.
+            NaN for methods that do not align (``naive``).
         curve: ``(T,)`` float64, for each result frame the action frame (at the action's own
             frame rate, from its first frame) whose upper body it carries.
         crop: action frames skipped at the start (at the action's frame rate).
@@ -147,7 +144,7 @@ class SpliceResult:
     acting: tuple[str, ...] = ()
 
 
-def splice(locomotion: Motion, action: Motion, spec: DatasetSpec | SkeletonRoles, method: str = "splice",
+def splice(locomotion: Motion, action: Motion, spec: DatasetSpec | SkeletonRoles, method: str | Method = "splice",
            reference: Motion | None = None, options: SpliceOptions | None = None) -> SpliceResult:
     """Splice the upper body of ``action`` onto the lower body of ``locomotion``."""
     return splice_pairs([(locomotion, action)], spec, method, None if reference is None else [reference], options)[0]
@@ -166,23 +163,25 @@ def _unique(motions: Sequence[Motion]) -> tuple[list[Motion], torch.Tensor]:
     return uniq, torch.tensor(idx)
 
 
-def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str = "splice",
+def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str | Method = "splice",
                  references: Sequence[Motion] | None = None, options: SpliceOptions | None = None) -> list[SpliceResult]:
     """Splice every ``(locomotion, action)`` pair, batched; results in the order of ``pairs``.
 
-    ``references`` (one per pair) are required for ``cpmc``. Pairs must share one skeleton
-    topology. Raises :class:`~torchsplice.core.errors.MotionError` naming the clip for a pair
+    ``method`` is a registered method's name (see :func:`~torchsplice.splice.registry.available_methods`)
+    or a :class:`~torchsplice.splice.registry.Method`. ``references`` (one per pair) are
+    required by methods that need them (``cpmc``). Pairs must share one skeleton topology. Raises :class:`~torchsplice.core.errors.MotionError` naming the clip for a pair
     that cannot be spliced, and :class:`NotLocomotingError` for a clip that does not locomote
     (unless ``options.force``).
     """
     options = options or SpliceOptions()
-    if method not in METHODS:
-        raise TorchspliceError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    meth = get_method(method)
     if not pairs:
         return []
-    if method == "cpmc" and references is not None and len(references) != len(pairs):
-        raise TorchspliceError(f"method 'cpmc' needs one reference per pair: {len(references)} for {len(pairs)} pairs")
-    if method == "cpmc" and references is None:
+    if not meth.needs_reference:
+        references = None
+    if meth.needs_reference and references is not None and len(references) != len(pairs):
+        raise TorchspliceError(f"method {meth.name!r} needs one reference per pair: {len(references)} for {len(pairs)} pairs")
+    if meth.needs_reference and references is None:
         references = [None] * len(pairs)
     skeleton = pairs[0][0].skeleton
     roles = spec.bind(skeleton) if isinstance(spec, DatasetSpec) else spec
@@ -201,17 +200,17 @@ def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | Ske
         raise TorchspliceError(f"unknown timing {options.timing!r}; choose one of {', '.join(TIMINGS)}")
     results: list[SpliceResult | None] = [None] * len(pairs)
     for fps, ks in groups.items():
-        standing = _standing_pairs([pairs[k] for k in ks], roles, skeleton, options, fps)
+        standing = _standing_pairs([pairs[k] for k in ks], roles, skeleton, options, fps) if meth.standing else set()
         for part in (standing, None):
             sel = [k for n, k in enumerate(ks) if (n in standing) == (part is not None)]
             if not sel:
                 continue
-            refs = [references[k] for k in sel] if method == "cpmc" else None
+            refs = [references[k] for k in sel] if meth.needs_reference else None
             if part is None and refs is not None and any(r is None for r in refs):
-                raise TorchspliceError("method 'cpmc' needs a plain-locomotion reference clip for every action that "
+                raise TorchspliceError(f"method {meth.name!r} needs a plain-locomotion reference clip for every action that "
                                        "locomotes (standing actions need none)")
             run = _splice_standing if part is not None else _splice_group
-            for k, r in zip(sel, run([pairs[k] for k in sel], refs, roles, method, options, fps)):
+            for k, r in zip(sel, run([pairs[k] for k in sel], refs, roles, meth, options, fps)):
                 results[k] = r
     return results  # type: ignore[return-value]
 
@@ -227,7 +226,7 @@ def _standing_pairs(pairs, roles: SkeletonRoles, skeleton, options: SpliceOption
     return {b for b in range(len(pairs)) if checks[int(ai[b])].finite and not checks[int(ai[b])].locomoting}
 
 
-def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str = "splice",
+def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str | Method = "splice",
                     options: SpliceOptions | None = None,
                     acting: Sequence[tuple[str, ...]] | None = None) -> list[SpliceResult]:
     """Splice ``(locomotion, action)`` pairs as standing actions (see :mod:`torchsplice.splice.standing`),
@@ -236,6 +235,10 @@ def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | 
     found from each action). :func:`splice_pairs` calls it for the actions that do not locomote.
     """
     options = options or SpliceOptions()
+    method = get_method(method)
+    if method.standing is None:
+        raise TorchspliceError(f"method {method.name!r} has no standing-action variant; splice_pairs runs its own "
+                               "function on every pair")
     if not pairs:
         return []
     roles = spec.bind(pairs[0][0].skeleton) if isinstance(spec, DatasetSpec) else spec
@@ -250,7 +253,7 @@ def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | 
     return results  # type: ignore[return-value]
 
 
-def _splice_standing(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float,
+def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float,
                      acting: list | None = None) -> list[SpliceResult]:
     """Pairs whose action does not locomote (see :mod:`torchsplice.splice.standing`); any backend."""
     skeleton = pairs[0][0].skeleton
@@ -268,28 +271,27 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: str, options: Sp
             raise NotLocomotingError(f"clip {lo.name!r} {check.reason}")
         if check is not None and not check.locomoting:
             if not options.force:
-                raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason}")
             notes[b].append(f"{lo.name} does not locomote: {check.reason}")
     if acting is None:
         found = acting_limbs(A, roles, skeleton) if options.acting_limbs is None else None
         acting = [tuple(options.acting_limbs) if found is None else found[int(ai[b])][0] for b in range(len(pairs))]
     acting = [tuple(a) for a in acting]
     loco, act = L.take(li), A.take(ai)
-    clips, times = standing_tensors(loco, act, roles, skeleton, fps, method, options.timing, acting)
+    clips, times = method.standing(MethodInput(loco, act, None, roles, skeleton, options, fps), options.timing, acting)
     results = []
     for b, (lo, ac) in enumerate(pairs):
         n = int(clips.lengths[b])
-        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method == "splice" else ""
+        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method.name == "splice" else ""
         notes[b].append(f"{ac.name} does not locomote: spliced as a standing action ({options.timing}{limbs})")
         motion = Motion(
             skeleton=lo.skeleton, rotations=clips.rotations[b, :n], root_translation=clips.translations[b, :n, 0].clone(),
             translations=clips.translations[b, :n] if lo.skeleton.has_joint_translations else None, fps=fps,
-            name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
-            source=f"splice:{method}", role="spliced",
-            labels=spliced_labels(method, lo.name, lo.labels, ac.name, ac.labels),
+            name=method.clip_name(lo.name, ac.name), source=f"splice:{method.name}", role="spliced",
+            labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
-            motion=motion, method=method, locomotion=lo.name, action=ac.name,
+            motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
             reference=None, cost=float("nan"), curve=(times[b, :n] * (ac.fps / fps)).cpu(), crop=0,
             path=torch.zeros(0, 2, dtype=torch.long), pelvis_correction=torch.zeros(n, dtype=torch.float64),
             posture_deg=0.0, checks=(checks_l[int(li[b])], checks_a[int(ai[b])]) if checks_l is not None else None,
@@ -298,9 +300,9 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: str, options: Sp
     return results
 
 
-def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float) -> list[SpliceResult]:
+def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> list[SpliceResult]:
     """Pairs whose locomotions share a frame rate ``fps``."""
-    if resolve_backend(options) == "compiled":
+    if method.compiled and resolve_backend(options) == "compiled":
         return _splice_group_compiled(pairs, refs, roles, method, options, fps)
     if options.backend == "torch":  # every step in torch, the DP too
         options = replace(options, align=replace(options.align, dp_backend="torch"))
@@ -323,29 +325,17 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
                 raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
                 if not options.force:
-                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
                 notes[b].append(f"{clip.name} does not locomote: {check.reason}")
     loco, act = L.take(li), A.take(ai[:B])
+    out: MethodOutput = method.run(MethodInput(loco, act, A.take(ai[B:]) if refs else None, roles, skeleton, options, fps))
+    clips, times = out.clips, out.times
     empty = torch.zeros(0, 2, dtype=torch.long)
-    if method == "splice":
-        out = splice_tensors(loco, act, roles, skeleton, options.align, fps, posture=options.posture)
-        clips, al = out.clips, out.alignment
-        times = al.curve + al.crop[:, None]
-        corr = torch.rad2deg(out.pelvis_correction).to(torch.float64)
-        posture = torch.rad2deg(2 * torch.atan2(out.posture_rotation[:, 1:].norm(dim=-1), out.posture_rotation[:, 0].abs()))
-        cost, crop, paths = al.cost, al.crop, [al.cells[b, : int(al.path_length[b])] for b in range(B)]
-    elif method == "naive":
-        clips, times = naive_tensors(loco, act, roles, skeleton)
-        corr = torch.zeros(times.shape, dtype=torch.float64)
-        posture = torch.zeros(B)
-        cost, crop, paths = torch.full((B,), float("nan")), torch.zeros(B, dtype=torch.long), [empty] * B
-    else:
-        ref = A.take(ai[B:])
-        clips, al, _ = cpmc_tensors(loco, act, ref, roles, skeleton, options.align, fps)
-        times = al.curve + al.crop[:, None]
-        corr = torch.zeros(times.shape, dtype=torch.float64)
-        posture = torch.zeros(B)
-        cost, crop, paths = al.cost, al.crop, [al.cells[b, : int(al.path_length[b])] for b in range(B)]
+    corr = out.pelvis_correction if out.pelvis_correction is not None else torch.zeros(times.shape, dtype=torch.float64)
+    posture = out.posture_deg if out.posture_deg is not None else torch.zeros(B)
+    cost = out.cost if out.cost is not None else torch.full((B,), float("nan"))
+    crop = out.crop if out.crop is not None else torch.zeros(B, dtype=torch.long)
+    paths = out.paths if out.paths is not None else [empty] * B
     results = []
     for b, (lo, ac) in enumerate(pairs):
         n = int(clips.lengths[b])
@@ -356,13 +346,13 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: str, options: Splic
             root_translation=clips.translations[b, :n, 0],
             translations=clips.translations[b, :n] if lo.skeleton.has_joint_translations else None,
             fps=fps,
-            name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
-            source=f"splice:{method}",
+            name=method.clip_name(lo.name, ac.name),
+            source=f"splice:{method.name}",
             role="spliced",
-            labels=spliced_labels(method, lo.name, lo.labels, ac.name, ac.labels),
+            labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
-            motion=motion, method=method, locomotion=lo.name, action=ac.name,
+            motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
             reference=refs[b].name if refs else None, cost=float(cost[b]),
             curve=(times[b, :n].to(torch.float64) * scale).cpu(), crop=int(round(float(crop[b]) * scale)),
             path=paths[b].cpu(), pelvis_correction=corr[b, :n].cpu(), posture_deg=float(posture[b]),
@@ -381,12 +371,12 @@ def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str
                 raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
                 if not options.force:
-                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason} (force=True, or --force-locomotion on the command line, splices it anyway)")
+                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
                 notes[b].append(f"{clip.name} does not locomote: {check.reason}")
     return notes
 
 
-def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: str, options: SpliceOptions, fps: float) -> list[SpliceResult]:
+def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> list[SpliceResult]:
     """:func:`_splice_group` through the compiled splicer (:mod:`torchsplice.cpu`)."""
     from ..cpu.bank import ClipBank, CompiledSpliceError, splice_bank
 
@@ -404,7 +394,7 @@ def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: str, optio
     notes = _notes_or_raise(pairs, li, ai, checks[:len(locos)], checks[len(locos):], options)
     act_idx = [len(locos) + a for a in ai]
     try:
-        out = splice_bank(bank, li, act_idx[:B], method, ref=act_idx[B:] if method == "cpmc" else None,
+        out = splice_bank(bank, li, act_idx[:B], method.name, ref=act_idx[B:] if method.needs_reference else None,
                           posture=options.posture, dtype=np.float64 if options.dtype == torch.float64 else np.float32,
                           **align_kwargs(options.align, fps))
     except CompiledSpliceError as exc:
@@ -420,12 +410,11 @@ def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: str, optio
         motion = Motion(
             skeleton=lo.skeleton, rotations=rot, root_translation=trans[:, 0].clone(),
             translations=trans if lo.skeleton.has_joint_translations else None, fps=fps,
-            name=f"{lo.name}+{ac.name}" if method == "splice" else f"{lo.name}+{ac.name}.{method}",
-            source=f"splice:{method}", role="spliced",
-            labels=spliced_labels(method, lo.name, lo.labels, ac.name, ac.labels),
+            name=method.clip_name(lo.name, ac.name), source=f"splice:{method.name}", role="spliced",
+            labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
-            motion=motion, method=method, locomotion=lo.name, action=ac.name,
+            motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
             reference=refs[b].name if refs else None, cost=float(out.cost[b]),
             curve=torch.from_numpy(out.curve[s:s + n] * scale), crop=int(round(float(out.crop[b]) * scale)),
             path=torch.from_numpy(out.cells[b, : int(out.path_length[b])].copy()),

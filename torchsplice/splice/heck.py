@@ -36,7 +36,7 @@ from ..align.horn import horn_rotation
 from ..align.timewarp import timewarp
 from ..core.rotations import quat_apply, quat_conj, quat_mul
 from ..core.skeleton import Skeleton
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..kinematics.heading import heading_frame, to_heading_frame
 from .clips import ClipTensors, shift_frames, with_fk, without_fk
 

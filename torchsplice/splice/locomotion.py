@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..kinematics.contacts import gait_summary
 from .clips import ClipTensors
 

@@ -18,7 +18,7 @@ import torch
 
 from ..core.rotations import quat_conj, quat_mul
 from ..core.skeleton import Skeleton
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..align.curve import slerp_frames
 from .clips import ClipTensors, shift_frames, without_fk
 from .heck import AlignOptions, TimeAlignment, time_align

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Iterable
 
-from ..io.spec import DatasetSpec
+from ..specs import DatasetSpec
 
 __all__ = ["find_reference"]
 

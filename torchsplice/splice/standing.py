@@ -35,7 +35,7 @@ import torch
 
 from ..core.rotations import axis_angle_to_quat, quat_apply, quat_conj, quat_mul, quat_normalize, quat_to_axis_angle
 from ..core.skeleton import Skeleton
-from ..io.spec import SkeletonRoles
+from ..specs import SkeletonRoles
 from ..align.curve import interpolate_frames, slerp_frames
 from .clips import ClipTensors, without_fk
 from .methods import upper_mask

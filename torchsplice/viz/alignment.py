@@ -15,7 +15,7 @@ import torch
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
 from ..io.atomic import atomic_path
-from ..io.spec import DatasetSpec
+from ..specs import DatasetSpec
 from ..splice import SpliceOptions, splice
 from ..splice.clips import clips_to_tensors, resample_motion
 from ..splice.heck import _grid

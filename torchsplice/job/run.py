@@ -43,8 +43,9 @@ from pathlib import Path
 
 import torch
 
-from ..core.errors import TorchspliceError
+from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
 from ..io.lock import FileLock, pid_alive
+from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .executors import make_engine
 from .plan import SKELETONS_DIFFER, Plan, make_plan
@@ -134,10 +135,11 @@ class SpliceJob:
         if not c.output.parent.exists():
             raise TorchspliceError(f"{c.output}: folder {c.output.parent} does not exist")
         if self.shard is None and c.output.exists() and not self.overwrite:
-            raise TorchspliceError(f"{c.output}: already exists (use --force to overwrite)")
+            raise OutputExistsError(f"{c.output}: already exists")
         _prestart_workers(c)
         if self.shard is not None and self.restart:
-            raise TorchspliceError("--restart discards the whole job, every slice's work too: run it once without --shard")
+            raise TorchspliceError("{restart} discards the whole job, every slice's work too: run it once without {shard}",
+                                   options=("restart", "shard"))
         if self.shard is None:
             lock = FileLock(_output_lock(c.output), str(c.output), self.command)
         else:
@@ -169,9 +171,9 @@ class SpliceJob:
         if plan_path.exists():
             saved = Plan.load(plan_path)
             if saved.digest() != plan.digest():
-                raise TorchspliceError(
+                raise UnfinishedJobError(
                     f"{self.work} holds an unfinished job with other arguments or inputs; rerun it with the same "
-                    "arguments to finish it, or pass --restart to discard it")
+                    "arguments to finish it")
         else:
             plan.save(plan_path)
             new_plan = True
@@ -262,7 +264,49 @@ class SpliceJob:
         # locomotions first, then actions and references; one database when both are one file
         out.copy_sources([(sources.db("L"), sorted({p.loco for p in plan.pairs})),
                           (sources.db("A"), sorted({p.action for p in plan.pairs}
-                                                   | {p.reference for p in plan.pairs if p.reference is not None and p.method == "cpmc"}))])
+                                                   | {p.reference for p in plan.pairs if p.reference is not None
+                                                      and get_method(p.method).needs_reference}))])
+
+
+def splice_all(database, output, *, restart: bool = False, overwrite: bool = False, shard=None,
+               progress: bool = False, command: str | None = None, **options) -> JobSummary:
+    """Splice every selected locomotion x action pair of ``database`` into the new database
+    ``output``: what ``torchsplice splice-all DATABASE -o OUTPUT ...`` does, from Python.
+
+    ``options`` take the same selections and settings as the command line's flags, under the
+    names of :class:`~torchsplice.job.config.JobConfig` (built by
+    :func:`~torchsplice.job.config.job_config`, as the command line builds it)::
+
+        summary = splice_all("bandai.h5", "spliced.h5", locomotions="label:style=normal",
+                             actions=["role:action,role:both", "*walk*"], methods="splice,naive",
+                             engine="local", workers=2, timing="loop", copy_sources=True)
+
+    - selections: ``locomotions``, ``actions`` (a selector string or a list that must all
+      match; ``None``: the spec's roles), ``actions_db``, ``max_length_ratio``;
+    - splicing: ``methods`` (``"splice,naive"`` or a sequence; plug-ins included),
+      ``force_locomotion``, ``timing``, ``acting_limbs``, ``max_run``, ``posture``, ``device``;
+    - output: ``copy_sources``, ``compression``, ``layout``;
+    - running: ``engine`` (``"local"`` or ``"ray"``), ``workers``, ``ray_address``,
+      ``memory_budget_mb``, ``batch_pairs``.
+
+    ``restart`` discards an unfinished run of another plan (``--restart``), ``overwrite``
+    replaces an existing output (``--force``), ``shard`` (``"K/N"`` or ``(K, N)``) runs one
+    slice into the work folder and writes no output (``--shard``); ``progress`` shows the
+    progress bar. An interrupted call (Ctrl-C) keeps its finished tasks: the same call resumes.
+    With ``engine="local"`` and more than one worker, a script must guard its entry point with
+    ``if __name__ == "__main__":`` (multiprocessing re-imports it).
+
+    Returns the :class:`JobSummary` (``spliced``, ``skipped`` by reason, ``flagged``,
+    ``seconds``; ``lines()`` is what the command line prints).
+    """
+    from .config import job_config, parse_shard
+
+    config = job_config(database, output, **options)
+    if isinstance(shard, str):
+        shard = parse_shard(shard)
+    job = SpliceJob(config, progress=progress, restart=restart, overwrite=overwrite,
+                    command=command or "torchsplice.job.splice_all (Python API)", shard=tuple(shard) if shard else None)
+    return job.run()
 
 
 def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None) -> JobSummary:
@@ -273,7 +317,7 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
     if not plan_path.exists():
         raise TorchspliceError(f"{output}: no unfinished splice-all job to merge (no {plan_path})")
     if output.exists() and not overwrite:
-        raise TorchspliceError(f"{output}: already exists (use --force to overwrite)")
+        raise OutputExistsError(f"{output}: already exists")
     plan = Plan.load(plan_path)
     key = plan.key
     config = JobConfig(database=Path(key["database"]["path"]), output=output,
@@ -284,8 +328,8 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
 
         now = _key(config)
         if now["database"] != key["database"] or now["actions_db"] != key["actions_db"]:
-            raise TorchspliceError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
-                                   "source clips (run splice-all again with --restart)")
+            raise UnfinishedJobError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
+                                     "source clips")
     t0 = time.perf_counter()
     sink = HDF5Sink()
     shard_dir = work

@@ -1,0 +1,96 @@
+"""The import pipeline as a library function (:func:`torchsplice.io.importer.import_bvh`), on
+real clips: the report (imported clips, skipped files and why, guessed roles), appending, the
+same database as ``torchsplice import``, and nothing written when nothing can be imported."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from torchsplice.cli import main
+from torchsplice.core.errors import OutputExistsError, TorchspliceError
+from torchsplice.io.database import MotionDatabase
+from torchsplice.io.importer import NothingImportedError, import_bvh
+
+BANDAI = "bandai_namco_research_motiondataset"
+WALKS = ["dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025"]
+
+
+@pytest.fixture()
+def inputs(mocap_dir, tmp_path):
+    files = [mocap_dir / BANDAI / f"{n}.bvh" for n in WALKS]
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
+    return files, bad
+
+
+def test_report_of_a_mixed_import(inputs, tmp_path):
+    files, bad = inputs
+    out = tmp_path / "db.h5"
+    report = import_bvh([*files, bad, tmp_path / "missing"], out, spec="bandai_namco")
+    assert [c.name for c in report.imported] == WALKS and [c.path for c in report.imported] == [str(f) for f in files]
+    with MotionDatabase.open(out) as db:
+        assert report.clips == len(db) == 2
+        assert [c.frames for c in report.imported] == [db.read(n).num_frames for n in WALKS]
+        assert report.frames == sum(db.read(n).num_frames for n in WALKS)
+    reasons = dict(report.skipped)
+    assert set(reasons) == {str(bad), str(tmp_path / "missing")} and not report.ok
+    assert reasons[str(tmp_path / "missing")] == "no such file or folder"
+    assert reasons[str(bad)].split(":")[0].isdigit()  # LINE: why, from the BVH reader
+    assert report.guessed == []  # the spec names every role
+    with pytest.raises(OutputExistsError):
+        import_bvh(files, out)
+
+
+def test_guessed_roles_and_append(mocap_dir, inputs, tmp_path):
+    files, _ = inputs
+    out = tmp_path / "db.h5"
+    import_bvh(files[:1], out, spec="bandai_namco")
+    cmu = mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"
+    report = import_bvh([cmu], out, spec="generic", append=True)
+    assert [c.name for c in report.imported] == ["cmu_12_01_walk"] and report.clips == 2
+    (g,) = report.guessed
+    assert g.skeleton == 1 and g.path == str(cmu) and g.spec == "generic" and g.summary
+    assert g.roles["pelvis"] and g.roles["left_leg"] and g.roles["right_arm"]
+    with MotionDatabase.open(out) as db:
+        assert db.summary()["skeletons"][1]["guessed_roles"] == g.roles
+    with pytest.raises(TorchspliceError, match="no such database to append to"):
+        import_bvh([cmu], tmp_path / "none.h5", append=True)
+
+
+def test_same_database_as_the_command_line(inputs, tmp_path):
+    files, bad = inputs
+    a, b = tmp_path / "api.h5", tmp_path / "cli.h5"
+    import_bvh([*files, bad], a, split=2.0, split_overlap=0.5)
+    assert main(["import", *map(str, files), str(bad), "-o", str(b), "--split", "2", "--split-overlap", "0.5", "-q"]) == 1
+    with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
+        names = []
+        fa.visit(names.append)
+        for n in names:
+            if isinstance(fa[n], h5py.Dataset):
+                assert np.array_equal(fa[n][()], fb[n][()]), n
+
+
+def test_nothing_imported_writes_nothing(inputs, tmp_path, capsys):
+    _, bad = inputs
+    out = tmp_path / "db.h5"
+    with pytest.raises(NothingImportedError) as e:
+        import_bvh([bad], out)
+    assert not out.exists() and [p for p, _ in e.value.report.skipped] == [str(bad)]
+    assert main(["import", str(bad), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"skipped {bad}:") and err[1] == f"torchsplice: error: no clip could be imported; {out} was not written"
+    with pytest.raises(TorchspliceError, match="unknown length unit 'furlong'"):  # checked before any work
+        import_bvh([bad], out, units="furlong")
+    assert not out.exists()
+
+
+def test_units_convert_every_clip(inputs, tmp_path):
+    files, _ = inputs
+    import_bvh(files[:1], tmp_path / "cm.h5")
+    import_bvh(files[:1], tmp_path / "m.h5", units="m")
+    with MotionDatabase.open(tmp_path / "cm.h5") as a, MotionDatabase.open(tmp_path / "m.h5") as b:
+        assert a.h5.attrs["units"] == "cm" and b.h5.attrs["units"] == "m"
+        ma, mb = a.read(WALKS[0]), b.read(WALKS[0])
+    np.testing.assert_allclose(mb.global_positions().numpy() * 100, ma.global_positions().numpy(), rtol=1e-5, atol=1e-3)

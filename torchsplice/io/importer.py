@@ -1,0 +1,231 @@
+"""Importing BVH files into a motion database: the whole ``torchsplice import`` pipeline as one
+function, :func:`import_bvh`, returning an :class:`ImportReport`.
+
+    from torchsplice.io.importer import import_bvh
+    report = import_bvh(["path/to/bandai_namco/"], "bandai.h5", spec="bandai_namco")
+    report.imported          # [ImportedClip(name, path, frames, windows), ...]
+    report.skipped           # [(path, why), ...]: files that could not be used, the others landed
+    report.guessed           # skeletons whose roles the ``generic`` spec guessed, with what it guessed
+
+Folders are searched recursively for ``.bvh`` files; each file is read (lengths in the file's
+units, quaternions WXYZ), checked, matched to a dataset spec (``spec="auto"``: per file), bound
+to its skeleton, given its role and labels from its name, optionally cut into windows
+(``split``), and appended. A file that cannot be used is skipped with a one-line reason; the
+database is written atomically (appending works on a copy that replaces the file at the end).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+from ..core.errors import DatabaseError, TorchspliceError
+
+__all__ = ["import_bvh", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh"]
+
+DATABASE_SUFFIXES = (".h5", ".hdf5")
+
+
+@dataclass
+class ImportedClip:
+    """One imported file: its clip ``name`` (the file's stem), ``path``, ``frames`` and the
+    ``windows`` it was cut into (1 when not cut)."""
+
+    name: str
+    path: str
+    frames: int
+    windows: int = 1
+
+
+@dataclass
+class GuessedSkeleton:
+    """A new skeleton whose joint roles a guessing spec (``generic``) found: its id in the
+    database, the file it was first seen in, the spec's name, and what was guessed
+    (:meth:`~torchsplice.specs.DatasetSpec.guess_summary` lines; roles as a dict)."""
+
+    skeleton: int
+    path: str
+    spec: str
+    summary: list[str]
+    roles: dict
+
+
+@dataclass
+class ImportReport:
+    """What :func:`import_bvh` did.
+
+    Attributes:
+        output: the database written.
+        imported: the files imported, in order.
+        skipped: ``(path, why)`` of every input that could not be used (``why`` may start with
+            ``LINE:`` for a BVH error).
+        warnings: ``(path, message)`` of readable files with something odd (trailing lines).
+        guessed: the skeletons whose roles were guessed.
+        clips: clips in the database afterwards (all of them, when appending).
+        split: the window length asked for (seconds), or ``None``.
+    """
+
+    output: Path
+    imported: list[ImportedClip] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+    warnings: list[tuple[str, str]] = field(default_factory=list)
+    guessed: list[GuessedSkeleton] = field(default_factory=list)
+    clips: int = 0
+    split: float | None = None
+
+    @property
+    def frames(self) -> int:
+        """Frames imported (before cutting into windows)."""
+        return sum(c.frames for c in self.imported)
+
+    @property
+    def cut(self) -> list[ImportedClip]:
+        """The imported takes that were cut into windows."""
+        return [c for c in self.imported if c.windows > 1]
+
+    @property
+    def ok(self) -> bool:
+        """Whether every input was imported."""
+        return not self.skipped
+
+
+class NothingImportedError(TorchspliceError):
+    """No clip could be imported; ``report`` says why for every input (nothing was written)."""
+
+    def __init__(self, message: str, report: ImportReport):
+        super().__init__(message)
+        self.report = report
+
+
+def collect_bvh(paths: Iterable) -> tuple[list[Path], list[tuple[str, str]]]:
+    """The ``.bvh`` files under ``paths`` (files, and folders searched recursively), each once,
+    in order; and ``(path, why)`` for each path that holds none."""
+    files, missing = [], []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() == ".bvh")
+            if not found:
+                missing.append((str(p), "folder holds no .bvh files"))
+            files += found
+        elif p.is_file():
+            files.append(p)
+        else:
+            missing.append((str(p), "no such file or folder"))
+    seen, unique = set(), []
+    for f in files:
+        key = f.resolve()
+        if key not in seen:
+            seen.add(key)
+            unique.append(f)
+    return unique, missing
+
+
+def one_line(message, path=None, limit: int = 300) -> str:
+    """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
+    text = " ".join(str(message).split())
+    if path is not None:
+        text = text.removeprefix(f"{path}: ").removeprefix(f"{path}:").lstrip()
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overwrite: bool = False,
+               float64: bool = False, split: float | None = None, split_overlap: float = 1.0,
+               units: str | None = None, progress: Callable | None = None) -> ImportReport:
+    """Import BVH files and folders into the database ``output`` (see the module docstring).
+
+    Args:
+        paths: files and folders (searched recursively for ``.bvh``).
+        output: the database to write (``.h5`` or ``.hdf5``).
+        spec: ``"auto"`` (a spec per file, :func:`~torchsplice.specs.detect_spec`), a shipped
+            spec's name, a ``.toml`` path or a :class:`~torchsplice.specs.DatasetSpec`.
+        append: add to the existing database ``output`` instead of making a new one.
+        overwrite: replace an existing ``output`` (a new database only).
+        float64: store frames in float64 (default float32).
+        split: cut takes longer than 1.25 x ``split`` seconds into windows of ``split`` seconds
+            overlapping by ``split_overlap`` (named ``NAME#000``, ...).
+        units: convert every clip's lengths from its spec's units to these (``"cm"``, ``"m"``,
+            ... see :mod:`torchsplice.io.units`), so that datasets share one database;
+            ``None`` keeps the files' own units.
+        progress: ``progress(iterable, total, desc) -> iterable`` to show progress (e.g. tqdm).
+
+    Returns the :class:`ImportReport`. Raises :class:`NothingImportedError` (with the report)
+    when no clip could be imported, and :class:`~torchsplice.core.errors.TorchspliceError` for
+    a bad output or option; a full disk (:class:`~torchsplice.core.errors.DatabaseError`)
+    stops the import with nothing written.
+    """
+    import torch
+
+    from ..specs import DatasetSpec, detect_spec, load_spec
+    from .atomic import check_output
+    from .bvh import read_bvh
+    from .database import MotionDatabase
+    from .units import convert_units, unit_factor
+
+    if units is not None:
+        unit_factor(units, units)  # a known unit, checked before any work
+    files, skipped = collect_bvh(paths)
+    out = Path(output)
+    if append:
+        if out.suffix.lower() not in DATABASE_SUFFIXES:
+            raise TorchspliceError(f"{out}: {{append}} adds to a database, so its name must end in .h5 or .hdf5",
+                                   options=("append",))
+        if not out.is_file():
+            raise TorchspliceError(f"{out}: no such database to append to (leave out {{append}} to make a new one)",
+                                   options=("append",))
+    else:
+        out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=files, overwrite=overwrite)
+    report = ImportReport(output=out, skipped=skipped, split=split)
+    if not files:
+        raise NothingImportedError("no BVH files to import", report)
+    if split is not None and not 0 <= split_overlap < split:
+        raise TorchspliceError(f"{{split_overlap}} ({split_overlap:g} s) must be at least 0 and shorter than "
+                               f"{{split}} ({split:g} s)", options=("split_overlap", "split"))
+    fixed = None if isinstance(spec, str) and spec == "auto" else spec if isinstance(spec, DatasetSpec) else load_spec(spec)
+    if append:
+        db = MotionDatabase.open(out, mode="a")
+    else:
+        db = MotionDatabase.create(out, overwrite=overwrite, dtype="float64" if float64 else "float32")
+    dtype = torch.float64 if float64 else torch.float32
+    origin: dict[str, Path] = {}
+    todo = progress(files, len(files), "import") if progress is not None else files
+    with db:
+        for f in todo:
+            try:
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    m = read_bvh(f, dtype=dtype)
+                report.warnings += [(str(f), one_line(w.message, f)) for w in caught]
+                m.check_finite()
+                s = (fixed or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
+                s.bind(m.skeleton)
+                if units is not None:  # lengths in one unit, so that datasets share the database
+                    m, s = convert_units(m, s, units)
+                m.role, m.labels = s.clip_metadata(m.name)
+                if m.name in origin:
+                    raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
+                known = len(db.skeletons)
+                pieces = m.windows(split, split_overlap) if split else [m]
+                for piece in pieces:
+                    db.append(piece, spec=s)
+                if len(db.skeletons) > known and s.is_guessed:
+                    report.guessed.append(GuessedSkeleton(known, str(f), s.name, s.guess_summary(), s.guessed_roles()))
+            except DatabaseError:
+                raise  # the output itself failed (a full disk): nothing more can be written
+            except TorchspliceError as exc:
+                report.skipped.append((str(f), one_line(exc, f)))
+                continue
+            except (KeyboardInterrupt, MemoryError):
+                raise
+            except Exception as exc:  # a bug met on this file: skip it, keep the others, say what to report
+                report.skipped.append((str(f), f"unexpected error ({type(exc).__name__}: {one_line(exc, f)}); "
+                                               "please report it with the file"))
+                continue
+            origin[m.name] = f
+            report.imported.append(ImportedClip(m.name, str(f), m.num_frames, len(pieces)))
+        if not report.imported:
+            db.abort()
+            raise NothingImportedError(f"no clip could be imported; {output} was not written", report)
+        report.clips = len(db)
+    return report

@@ -1,0 +1,10 @@
+"""The built-in synthetic sample: procedurally generated locomotions and actions on a standard
+22-joint skeleton (Y up, centimetres, 30 fps), made by :mod:`.generate`; no data needed.
+
+    from torchsplice.sample import sample_motions
+    motions = sample_motions()                  # list of Motion, deterministic
+"""
+
+from .generate import SAMPLE_FPS, SAMPLE_SOURCE, SAMPLE_CLIPS, sample_skeleton, sample_motions, sample_motion
+
+__all__ = ["SAMPLE_FPS", "SAMPLE_SOURCE", "SAMPLE_CLIPS", "sample_skeleton", "sample_motions", "sample_motion"]

@@ -1,0 +1,262 @@
+"""Splicing methods as plug-ins: one :class:`Method` object per method, in a registry.
+
+A method is its name, a description, whether it needs a plain-locomotion reference clip, and a
+function that splices a padded batch of pairs (:class:`MethodInput`) into a common result
+(:class:`MethodOutput`: the clips, the action frame of every result frame and the method's
+diagnostics). :func:`~torchsplice.splice.splice_pairs`, the ``splice`` and ``splice-all``
+commands, the n x m job and the evaluation report all read the registry, so a new method is
+one file that calls :func:`register_method`::
+
+    from torchsplice.splice.registry import Method, MethodOutput, register_method
+
+    def copy_upper(inp):                       # inp.loco, inp.act: ClipTensors (B, T, J, ...)
+        ...
+        return MethodOutput(clips, times)      # cost, crop, paths ... default to "not measured"
+
+    register_method(Method("copy_upper", "the action's upper body, frame by frame", copy_upper))
+
+Plug-in modules are found in three ways: installed packages declaring an entry point in the
+group ``torchsplice.methods`` (``toy = "mypackage.toy"``; the module is imported, and an entry
+point naming a :class:`Method` or a function registers it or calls it), the environment
+variable ``TORCHSPLICE_PLUGINS`` (comma-separated module names) and the command line's
+``--plugin MODULE``. The job records the module of every plug-in method it runs in its plan,
+and each worker (local processes or Ray) imports it before splicing, so the module must be
+importable there (installed, or on ``PYTHONPATH``).
+
+The built-in ``splice``, ``naive`` and ``cpmc`` register themselves in
+:mod:`torchsplice.splice.builtin_methods`. They also run in the compiled CPU splicer
+(:mod:`torchsplice.cpu`, ``compiled=True``); a plug-in method runs in torch on any device.
+
+This module imports no torch: the command line lists the methods without loading it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import re
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, Callable, Iterable
+
+from ..core.errors import TorchspliceError
+
+if TYPE_CHECKING:  # pragma: no cover
+    import torch
+
+    from ..specs.roles import SkeletonRoles
+    from .api import SpliceOptions
+    from .clips import ClipTensors
+
+__all__ = ["Method", "MethodInput", "MethodOutput", "register_method", "get_method", "available_methods",
+           "load_plugins", "plugin_modules", "PLUGINS_ENV", "ENTRY_POINT_GROUP", "BUILTIN_METHODS"]
+
+PLUGINS_ENV = "TORCHSPLICE_PLUGINS"
+ENTRY_POINT_GROUP = "torchsplice.methods"
+BUILTIN_METHODS = ("splice", "naive", "cpmc")
+_NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
+
+
+@dataclass
+class MethodInput:
+    """A padded batch of ``B`` pairs for a method's function, all at the locomotion's frame rate.
+
+    Attributes:
+        loco, act: :class:`~torchsplice.splice.clips.ClipTensors` of the pairs' locomotions and
+            actions (row ``b`` of each is pair ``b``): rotations ``(B, T, J, 4)`` local WXYZ,
+            translations ``(B, T, J, 3)`` (file units, Y up as the spec says), lengths ``(B,)``,
+            positions and global rotations by FK.
+        ref: the plain-locomotion references of the actions, for a method with
+            ``needs_reference`` (else ``None``).
+        roles: the skeleton's joint roles (:class:`~torchsplice.specs.roles.SkeletonRoles`).
+        skeleton: the shared :class:`~torchsplice.core.skeleton.Skeleton`.
+        options: the :class:`~torchsplice.splice.SpliceOptions` of the call.
+        fps: the frame rate of every clip in the batch.
+    """
+
+    loco: "ClipTensors"
+    act: "ClipTensors"
+    ref: "ClipTensors | None"
+    roles: "SkeletonRoles"
+    skeleton: Any
+    options: "SpliceOptions"
+    fps: float
+
+
+@dataclass
+class MethodOutput:
+    """What a method's function returns for a batch of ``B`` pairs.
+
+    Attributes:
+        clips: the spliced clips (:class:`~torchsplice.splice.clips.ClipTensors`, no FK needed):
+            rotations ``(B, T, J, 4)``, translations ``(B, T, J, 3)``, lengths ``(B,)``. They keep
+            the locomotion's skeleton and frame rate.
+        times: ``(B, T)`` float, for each result frame the action frame (at the locomotion's
+            rate, counted from the action's first frame) whose upper body it carries.
+        cost: ``(B,)`` average lower-body frame distance along the alignment (file units
+            squared); ``None``: not aligned (NaN in the results).
+        crop: ``(B,)`` action frames skipped at the start (at the locomotion's rate); ``None``: 0.
+        paths: per pair, the ``(P, 2)`` DP path (locomotion frame, cropped action frame);
+            ``None``: empty.
+        pelvis_correction: ``(B, T)`` per-frame spatial-alignment angle, degrees; ``None``: 0.
+        posture_deg: ``(B,)`` posture-transfer angle, degrees; ``None``: 0.
+    """
+
+    clips: "ClipTensors"
+    times: "torch.Tensor"
+    cost: "torch.Tensor | None" = None
+    crop: "torch.Tensor | None" = None
+    paths: "list[torch.Tensor] | None" = None
+    pelvis_correction: "torch.Tensor | None" = None
+    posture_deg: "torch.Tensor | None" = None
+
+
+@dataclass(frozen=True)
+class Method:
+    """One splicing method (see the module docstring).
+
+    Attributes:
+        name: what users type (``--method NAME``): lower case letters, digits, ``_`` and ``-``.
+            A result clip is named ``LOCO+ACTION.NAME`` (``LOCO+ACTION`` for ``splice``).
+        description: one line for ``--help`` and the documentation.
+        run: ``run(MethodInput) -> MethodOutput``, batched over pairs (torch, any device).
+        needs_reference: the method needs a plain-locomotion reference clip of the action's
+            performer for actions that locomote (found by the spec's ``[clips.reference]`` rule).
+        compiled: the compiled CPU splicer implements it under ``name`` (built-ins only).
+        standing: for actions that do not locomote (standing actions),
+            ``standing(MethodInput, timing, acting) -> (clips, times)``; ``None``: the method's
+            ``run`` takes every pair, standing or not.
+        diagnostics: which of ``"cost"``, ``"crop"`` and ``"posture"`` it measures (what
+            ``torchsplice splice`` prints and the poor-alignment check reads).
+        module: the module that defines it (set on registration; imported by job workers).
+    """
+
+    name: str
+    description: str
+    run: Callable[[MethodInput], MethodOutput]
+    needs_reference: bool = False
+    compiled: bool = False
+    standing: Callable | None = None
+    diagnostics: tuple[str, ...] = ()
+    module: str = ""
+
+    @property
+    def builtin(self) -> bool:
+        return self.name in BUILTIN_METHODS and self.module.startswith("torchsplice.")
+
+    def clip_name(self, locomotion: str, action: str) -> str:
+        """The name of a spliced clip: ``LOCO+ACTION`` for ``splice``, else ``LOCO+ACTION.NAME``."""
+        return f"{locomotion}+{action}" if self.name == "splice" else f"{locomotion}+{action}.{self.name}"
+
+
+_REGISTRY: dict[str, Method] = {}
+_LOADED = {"builtins": False, "entry_points": False, "env": None}
+_PLUGIN_MODULES: list[str] = []
+
+
+def register_method(method: Method, replace_existing: bool = False) -> Method:
+    """Add ``method`` to the registry and return it (with ``module`` filled in).
+
+    Raises :class:`~torchsplice.core.errors.TorchspliceError` for a malformed name, a name
+    already taken by another method (unless ``replace_existing``) or a missing function.
+    Registering the same method again (a module imported twice) is harmless.
+    """
+    if not isinstance(method, Method):
+        raise TorchspliceError(f"register_method takes a torchsplice.splice.registry.Method, got {type(method).__name__}")
+    if not _NAME.match(method.name or ""):
+        raise TorchspliceError(f"method name {method.name!r} must be lower case letters, digits, '_' or '-', "
+                               "starting with a letter")
+    if not callable(method.run):
+        raise TorchspliceError(f"method {method.name!r}: run must be a function MethodInput -> MethodOutput")
+    if not method.module:
+        method = replace(method, module=getattr(method.run, "__module__", "") or "")
+    old = _REGISTRY.get(method.name)
+    if old is not None and not replace_existing and (old.module, getattr(old.run, "__qualname__", None)) != (
+            method.module, getattr(method.run, "__qualname__", None)):
+        raise TorchspliceError(f"method {method.name!r} is already registered (by {old.module}); choose another name")
+    _REGISTRY[method.name] = method
+    return method
+
+
+def _ensure_loaded() -> None:
+    """Register the built-ins, the entry points and ``TORCHSPLICE_PLUGINS`` (each once)."""
+    _ensure_loaded_builtins()
+    if not _LOADED["entry_points"]:
+        _LOADED["entry_points"] = True
+        from importlib.metadata import entry_points
+
+        for ep in entry_points(group=ENTRY_POINT_GROUP):
+            try:
+                obj = ep.load()
+            except Exception as exc:
+                raise TorchspliceError(f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP}) "
+                                       f"cannot be loaded: {type(exc).__name__}: {exc}") from None
+            if isinstance(obj, Method):
+                register_method(obj)
+            elif callable(obj):
+                obj()
+            _remember(ep.value.split(":")[0])
+    env = os.environ.get(PLUGINS_ENV, "")
+    if env != _LOADED["env"]:
+        _LOADED["env"] = env
+        load_plugins([m for m in env.split(",") if m.strip()])
+
+
+def _remember(module: str) -> None:
+    if module not in _PLUGIN_MODULES:
+        _PLUGIN_MODULES.append(module)
+
+
+def load_plugins(modules: Iterable[str]) -> list[str]:
+    """Import plug-in modules by name (each registers its methods on import); returns the
+    names of the methods registered now. A module that cannot be imported gives one clear
+    :class:`~torchsplice.core.errors.TorchspliceError`."""
+    _ensure_loaded_builtins()
+    before = set(_REGISTRY)
+    for name in modules:
+        name = name.strip()
+        if not name:
+            continue
+        try:
+            importlib.import_module(name)
+        except Exception as exc:
+            raise TorchspliceError(f"plug-in module {name!r} cannot be imported: {type(exc).__name__}: {exc} "
+                                   "(is it installed, or on PYTHONPATH?)") from None
+        _remember(name)
+    return [n for n in _REGISTRY if n not in before]
+
+
+def _ensure_loaded_builtins() -> None:
+    if not _LOADED["builtins"]:
+        _LOADED["builtins"] = True
+        importlib.import_module("torchsplice.splice.builtin_methods")
+
+
+def get_method(name: str | Method) -> Method:
+    """The registered method called ``name`` (a :class:`Method` is returned as it is); a clear
+    error naming the available methods otherwise."""
+    if isinstance(name, Method):
+        return name
+    _ensure_loaded()
+    method = _REGISTRY.get(name)
+    if method is None:
+        raise TorchspliceError(f"unknown method {name!r}; choose one of {', '.join(available_methods())}")
+    return method
+
+
+def available_methods() -> tuple[str, ...]:
+    """The names of every registered method: the built-ins first, then plug-ins in the order
+    they registered."""
+    _ensure_loaded()
+    return tuple(_REGISTRY)
+
+
+def plugin_modules(names: Iterable[str]) -> list[str]:
+    """The modules a process must import to run the methods ``names``: those of the plug-in
+    methods among them (the built-ins need none), in a stable order."""
+    out = []
+    for n in names:
+        m = get_method(n)
+        if not m.builtin and m.module and m.module not in out:
+            out.append(m.module)
+    return sorted(out)
+
