@@ -223,8 +223,30 @@ def _head(sk, pts: np.ndarray, up: int) -> tuple[np.ndarray | None, float]:
     return pts[:, h] + 0.5 * d * unit, d
 
 
-def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
-    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy."""
+@dataclass
+class Figure3D:
+    """A clip's points in the world and the bones between them, as the pictures draw them.
+
+    ``points``: ``(T, P, 3)`` float64 world positions in file units and axes, joints
+    ``0..J-1`` then end sites (head top, hands, toes); ``lines``: per side (0 centre, 1 left,
+    2 right), an index array ``a, b, P, a, b, P, ...`` into the points, ``P`` a line break;
+    ``follow``: the joint whose floor path is the character's (the root, or a root child with
+    animated translation such as Bandai Namco's ``Hips`` under ``joint_Root``); ``drawn``:
+    indices of the points some bone uses.
+    """
+
+    points: np.ndarray
+    lines: dict[int, np.ndarray]
+    follow: int
+    drawn: np.ndarray
+
+
+def figure_points(motion: Motion) -> Figure3D:
+    """Forward kinematics once for the whole clip (vectorised over frames) and its bones by side.
+
+    Bones run parent -> joint and joint -> end site, coloured by the side of the joint's name
+    (:func:`_side`); a root child with animated translation is a trajectory, not a bone.
+    """
     sk = motion.skeleton
     rot = motion.rotations.detach().to("cpu", torch.float64)
     root_t = motion.root_translation.detach().to("cpu", torch.float64)
@@ -235,17 +257,11 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
         pts = torch.cat([pos, ends], dim=1).numpy()
     else:
         pts = pos.numpy()
-    T, P = pts.shape[:2]
+    P = pts.shape[1]
     J = sk.num_joints
-    axes = _canonical_axes(up)
-
-    # the followed joint: the root, or a root child whose translation is animated (Bandai
-    # Namco's Hips under joint_Root, which stays on the ground), whose path is the character's
     animated = sk.translation_animated
     skip_bone = [c for c in sk.children(0) if animated[c]]  # a trajectory, not a bone
     follow = skip_bone[0] if skip_bone else 0
-
-    # bones per side: parent -> joint, joint -> end site; NaN (index P) between segments
     segs: dict[int, list[int]] = {_CENTER: [], _LEFT: [], _RIGHT: []}
     for j in range(1, J):
         if j not in skip_bone:
@@ -254,6 +270,16 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
         segs[_side(sk.names[p])] += [p, J + e, P]
     lines = {k: np.asarray(v, dtype=np.int64) for k, v in segs.items() if v}
     drawn = np.unique(np.concatenate(list(lines.values())))[:-1] if lines else np.array([follow])
+    return Figure3D(points=pts, lines=lines, follow=follow, drawn=drawn)
+
+
+def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
+    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy."""
+    sk = motion.skeleton
+    fig3 = figure_points(motion)
+    pts, lines, follow, drawn = fig3.points, fig3.lines, fig3.follow, fig3.drawn
+    T = pts.shape[0]
+    axes = _canonical_axes(up)
 
     height = pts[:, drawn, up]
     finite = np.isfinite(height)
