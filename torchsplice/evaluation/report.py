@@ -18,7 +18,6 @@ The source clips come from the databases recorded in the output's ``run`` attrib
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
