@@ -663,7 +663,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sources", nargs="+", metavar="DB",
                    help="databases holding the spliced clips' locomotions and actions (default: as recorded)")
     s.add_argument("--max-clips", type=_positive_int, default=100,
-                   help="at most this many clips when none are named (default 100, about 7 MB for 10 s clips)")
+                   help="at most this many clips when none are named (default 100, about 8 MB for 10 s clips)")
     _add_output_flags(s)
     s.set_defaults(func=cmd_view)
 

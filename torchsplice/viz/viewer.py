@@ -14,7 +14,7 @@ What goes in, per clip (:func:`clip_payload`):
 - quantised per clip and axis to int16 around the middle of its range, with the offset and
   step to decode ``p = q * scale + offset`` (a step of 0.15 mm over a 10 m walk), little
   endian, base64: about 8 bytes per point per frame in the page, so 100 clips of 10 s of a
-  28-point skeleton at 30 fps take about 7 MB;
+  28-point skeleton at 30 fps take about 8 MB;
 - the bones (point pairs) with their side (0 centre, 1 left, 2 right, by joint name), the
   head's point and radius, the followed joint, the frame rate, role, labels and the splice
   job's columns (``locomotion``, ``action``, ``method`` ...).
@@ -48,7 +48,7 @@ from .sources import SourceClips, clip_spec, source_databases
 __all__ = ["write_viewer", "build_viewer", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS"]
 
 DEFAULT_MAX_CLIPS = 100
-"""Clips in a viewer when none are named (``--max-clips``): about 7 MB for clips of 10 s."""
+"""Clips in a viewer when none are named (``--max-clips``): about 8 MB for clips of 10 s."""
 
 _UNKNOWN_UNITS_HEIGHT = 1.7  # metres: a skeleton of unknown units is scaled to this size
 _THREE_CORE_IMPORT = '"./three.core.min.js"'
