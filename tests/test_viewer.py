@@ -225,6 +225,17 @@ def _browser_or_skip():
     return chromium, driver
 
 
+def test_missing_browser_skips_but_fails_under_ci(monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    monkeypatch.setattr(os.path, "exists", lambda p: False)
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="chromium and chromedriver are not installed"):
+        _browser_or_skip()
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI must run the browser tests"):
+        _browser_or_skip()
+
+
 @pytest.fixture(scope="module")
 def browser():
     chromium, driver_path = _browser_or_skip()

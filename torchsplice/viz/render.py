@@ -26,8 +26,12 @@ Camera and projection (:func:`view_rotation`, :func:`project`):
   units); then each panel is scaled to its own skeleton.
 
 Forward kinematics runs once per clip, vectorised over frames; drawing a frame only sets the
-data of a few ``Line2D`` artists. Clips of different lengths play to the longest, each holding
-its last frame. Figures are made with :class:`matplotlib.figure.Figure` on the Agg canvas
+data of a few ``Line2D`` artists. An animation plays in real time to the longest clip; a
+shorter clip stops at its last frame, drawn faded (opacity :data:`_ENDED_ALPHA`) with
+``(end)`` under it. A filmstrip row spans its own clip (:func:`filmstrip_frames`), so every
+column shows another frame of it. Left and right are named in a legend above the panels.
+GIFs default to :data:`GIF_FPS` and :data:`GIF_DPI` and draw the grid's crossings as dots
+(lines sliding under a followed figure would make most of the file). Figures are made with :class:`matplotlib.figure.Figure` on the Agg canvas
 directly (no pyplot, no display, no global backend switch) and are released when done. Every
 output is written atomically (:func:`~torchsplice.io.atomic.atomic_path`).
 """
@@ -724,22 +728,24 @@ def render(
         output: the file to write; its suffix picks the type (see :data:`SUPPORTED_SUFFIXES`):
             ``.gif`` an animation (matplotlib's PillowWriter), ``.mp4`` an animation (matplotlib's
             FFMpegWriter, H.264; needs ``ffmpeg`` on ``PATH``), ``.png`` a filmstrip: one row per
-            clip, ``frames`` columns at evenly spaced times over the longest clip (the same
-            times in every row), the time and frame number under each figure.
+            clip, ``frames`` columns at evenly spaced frames from the clip's first to its last
+            (each row its own length), the time and frame number under each figure.
         titles: one title per clip; the clips' names by default.
         up_axis: the vertical axis of the data (0, 1, 2 or ``"x"``, ``"y"``, ``"z"``); the
             dataset spec's.
-        fps: the animation's frame rate; the clips' (the highest, if they differ) by default,
-            at most 50 for a GIF (see :data:`_GIF_MAX_FPS`). Each output frame shows, per clip,
-            the frame nearest its time.
+        fps: the animation's frame rate; for MP4 the clips' (the highest, if they differ) by
+            default; for a GIF :data:`GIF_FPS` by default, and any rate becomes the nearest one
+            GIF stores exactly, ``100 / gif_delay(fps)``, at most 50 (see :data:`_GIF_MAX_FPS`).
+            Each output frame shows, per clip, the frame nearest its time, so the output
+            plays in real time.
         frames: number of columns of the PNG filmstrip.
         size: width of one panel in inches (its height follows the figures' proportions).
-        dpi: pixels per inch.
+        dpi: pixels per inch; :data:`GIF_DPI` for a GIF, 100 otherwise, by default.
         max_seconds: keep only the first ``max_seconds`` of each clip.
         azimuth, elevation: the fixed camera, degrees (see :func:`view_rotation`).
 
     The animation has as many frames as the longest clip needs at ``fps``; shorter clips hold
-    their last frame (their label says ``(end)``). A GIF is assembled in memory and refused
+    their last frame, faded (their label says ``(end)``). A GIF is assembled in memory and refused
     beyond about a gigapixel over all frames (a minute of four panels at the defaults); MP4
     streams to ffmpeg. The output appears complete or not at all: it is written to a
     temporary file beside it and renamed.
