@@ -12,7 +12,6 @@ import os
 import re
 import shutil
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -342,5 +341,8 @@ def test_viewer_in_chromium(job, tmp_path, browser):
     _settle(d)
     shot = tmp_path / "viewer.png"
     d.save_screenshot(str(shot))
-    if os.environ.get("TORCHSPLICE_UPDATE_PICTURES") == "1":
-        shutil.copy(shot, REPO / "torchsplice" / "viz" / "viewer.png")
+    if os.environ.get("TORCHSPLICE_UPDATE_PICTURES") == "1":  # 256 colours keep the file small
+        from PIL import Image
+        with Image.open(shot) as im:
+            im.convert("RGB").quantize(colors=256, dither=Image.Dither.NONE).save(
+                REPO / "torchsplice" / "viz" / "viewer.png", optimize=True)
