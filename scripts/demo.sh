@@ -2,7 +2,8 @@
 # The main job, end to end, on the built-in synthetic sample (no data needed):
 # set up ./.venv, write the sample database, splice every locomotion x action pair with
 # all three methods into out/spliced.h5 (source clips copied in), describe the result, and
-# draw a preview (locomotion, action, naive, splice side by side) and an alignment plot.
+# draw a preview (locomotion, action, naive, splice side by side), an alignment plot and the
+# browser viewer.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/setup_env.sh
@@ -14,4 +15,5 @@ echo "..."
 torchsplice render out/spliced.h5 walk_curve carry_box walk_curve+carry_box.naive walk_curve+carry_box \
     -o out/preview.png --frames 6 --force
 torchsplice plot-alignment out/sample.h5 --locomotion walk_curve --action carry_box -o out/alignment.png --force
-echo "output: $(pwd)/out/spliced.h5 (read it with torchsplice.data.MotionDataset); pictures: out/preview.png, out/alignment.png"
+torchsplice view out/spliced.h5 -o out/viewer.html --force
+echo "output: $(pwd)/out/spliced.h5 (read it with torchsplice.data.MotionDataset); pictures: out/preview.png, out/alignment.png; open out/viewer.html in a browser"

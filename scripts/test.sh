@@ -2,13 +2,22 @@
 # Set up ./.venv and run the test suite (extra arguments go to pytest).
 #   bash scripts/test.sh          the quick suite: every test but those marked slow (a few minutes)
 #   bash scripts/test.sh --all    every test; CI (CI=true) always runs every test
-# Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it
-# (under CI its absence fails them instead).
+# Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it.
+# The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
+# apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
+# tests skip, saying why. Under CI=true, missing real data or browser fail those tests instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 all=0
 if [ "${1:-}" = "--all" ]; then all=1; shift; fi
 case "${CI:-}" in true|1|yes) all=1 ;; esac
+if ! { command -v chromium >/dev/null && command -v chromedriver >/dev/null; } \
+    && [ "$(id -u)" = 0 ] && [ -z "${TORCHSPLICE_NO_APT:-}" ] && command -v apt-get >/dev/null; then
+  echo "setup: installing chromium and chromium-driver for the browser tests" >&2
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq >/dev/null
+  apt-get install -y -qq --no-install-recommends chromium chromium-driver >/dev/null
+fi
 TORCHSPLICE_EXTRAS="test,ray" . scripts/setup_env.sh
 if [ "$all" = 0 ]; then
   echo "test: the quick suite (tests marked slow left out; --all runs them too)" >&2

@@ -139,6 +139,7 @@ COMMANDS = {  # name: (database it damages, argv after the database path; OUT is
     "splice": ("sample", ["splice", "DB", "--locomotion", LOCO, "--action", ACTION, "-o", "OUT.bvh", "-q"]),
     "splice-all": ("sample", ["splice-all", "DB", "-o", "OUT.h5", "--workers", "1", "-q"]),
     "render": ("sample", ["render", "DB", LOCO, "-o", "OUT.png", "-q"]),
+    "view": ("sample", ["view", "DB", LOCO, "-o", "OUT.html", "-q"]),
     "evaluate": ("spliced", ["evaluate", "DB", "-o", "OUT.md", "--no-pictures", "-q"]),
 }
 # info reads no frame data, so a damaged frame chunk is for the commands that read frames

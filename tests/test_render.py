@@ -176,6 +176,48 @@ def test_up_axis_is_followed(tmp_path, clips):
     assert wrong.shape != y_up.shape or np.abs(wrong - y_up).mean() > 1
 
 
+def strip_cells(rgb: np.ndarray, rows: int, cols: int, size: float, dpi: int) -> list[list[np.ndarray]]:
+    """The panels of a filmstrip, cut by the layout of ``_filmstrip_figure`` (inches to pixels)."""
+    H, W = rgb.shape[:2]
+    row_h = (H - (render_mod._MARGIN + render_mod._LEGEND_H) * dpi) / rows
+    top0 = (render_mod._LEGEND_H + render_mod._MARGIN / 2) * dpi
+    col_w = W / cols
+    cells = []
+    for r in range(rows):
+        y0 = int(top0 + r * row_h + render_mod._TITLE_H * dpi) + 2
+        y1 = int(top0 + (r + 1) * row_h - render_mod._LABEL_H * dpi) - 2
+        w = int(col_w) - 8
+        cells.append([rgb[y0:y1, int(k * col_w) + 4:int(k * col_w) + 4 + w] for k in range(cols)])
+    return cells
+
+
+def test_filmstrip_rows_show_their_own_frames(tmp_path, clips):
+    """Each row spans its own clip: a 15-frame clip beside a 45-frame one shows 5 different
+    frames, its first and its last, not its last frame repeated after its end."""
+    assert list(render_mod.filmstrip_frames(15, 5)) == [0, 4, 7, 10, 14]
+    assert list(render_mod.filmstrip_frames(45, 5)) == [0, 11, 22, 33, 44]
+    assert list(render_mod.filmstrip_frames(3, 1)) == [0]
+    short = clips["box"].slice(0, 15)
+    rgb = pixels(render([clips["walk"], short], tmp_path / "two.png", frames=5, **SMALL))
+    cells = strip_cells(rgb, rows=2, cols=5, size=1.6, dpi=50)
+    for row in cells:
+        for a, b in zip(row, row[1:]):
+            assert a.shape == b.shape and np.abs(a - b).mean() > 0.3  # every column another frame
+
+
+def test_pictures_have_a_legend(tmp_path, clips):
+    """The side colours are named in a band above the panels: its blue and red ink are there."""
+    for name in ("strip.png", "anim.gif"):
+        out = render([clips["walk"]], tmp_path / name, frames=2, size=2.0, dpi=60)
+        with Image.open(out) as im:
+            rgb = np.asarray(im.convert("RGB"), dtype=np.int16)
+        band = rgb[:int(render_mod._LEGEND_H * 60)]
+        blue = (band[..., 2] > 150) & (band[..., 0] < 90)
+        red = (band[..., 0] > 170) & (band[..., 2] < 90)
+        assert blue.sum() >= 5 and red.sum() >= 5, name
+        assert (band.max(axis=-1) < 160).sum() > 20, name  # the words
+
+
 # -- GIF ----------------------------------------------------------------------------------------
 
 
@@ -192,31 +234,88 @@ def gif_info(path):
     return n, durations, first, last
 
 
-def test_gif_plays_to_the_longest_clip(tmp_path, clips):
+def test_gif_plays_to_the_longest_clip_at_20_fps(tmp_path, clips):
+    """30 fps clips are sampled at the GIF's 20 fps (delays of exactly 5 hundredths), in real
+    time: the frames span the longest clip's 44 frame steps (1.467 s)."""
     out = render([clips["walk"], clips["box"]], tmp_path / "anim.gif", **SMALL)  # 45 and 30 frames
     n, durations, first, last = gif_info(out)
-    assert n == 45
-    assert all(abs(d - 1000 / 30) <= 10 for d in durations)  # GIF keeps hundredths of a second
+    assert render_mod.GIF_FPS == 20.0 and render_mod.gif_delay(20.0) == 5
+    assert n == math.floor(44 / 30 * 20) + 1 == 30
+    assert all(d == 50 for d in durations)  # GIF keeps hundredths of a second: 5 of them
+    assert (n - 1) * 0.05 <= 44 / 30 < n * 0.05  # the last frame shows the clip's end, on time
     assert np.abs(first - last).mean() > 0.5  # it moves
     assert plt.get_fignums() == []
 
 
+@pytest.mark.parametrize("fps, delay", [(30.0, 3), (25.0, 4), (24.0, 4), (60.0, 2), (7.0, 14)])
+def test_gif_rate_is_what_the_file_plays(tmp_path, clips, fps, delay):
+    """A requested rate becomes the nearest one GIF stores exactly (100 / whole hundredths) and
+    the clip is sampled at that rate, so the GIF lasts as long as the clip: 30 fps is written
+    as 3 hundredths and sampled at 33.3 fps, not sampled at 30 and played 11% fast."""
+    assert render_mod.gif_delay(fps) == delay
+    n, durations, _, _ = gif_info(render([clips["walk"]], tmp_path / "r.gif", fps=fps, size=1.0, dpi=30))
+    assert all(d == 10 * delay for d in durations)
+    assert n == math.floor(44 / 30 * 100 / delay + 1e-6) + 1
+    assert abs(sum(durations[:-1]) / 1000 - 44 / 30) < delay / 100  # as long as the clip
+
+
 def test_gif_max_seconds_and_fps(tmp_path, clips):
     n, _, _, _ = gif_info(render([clips["walk"], clips["box"]], tmp_path / "cut.gif", max_seconds=0.5, **SMALL))
-    assert n == 15  # 0.5 s at 30 fps
+    assert n == 10  # 0.5 s at 30 fps keeps 15 frames, 0 to 0.467 s: at 20 fps 0, 0.05, ..., 0.45 s
     n, durations, _, _ = gif_info(render([clips["walk"]], tmp_path / "slow.gif", fps=10, **SMALL))
     assert n == 15  # 44 frames at 30 fps last 1.47 s: frames at 0, 0.1, ..., 1.4 s
     assert all(d == 100 for d in durations)
 
 
 def test_gif_of_fast_clips_plays_at_50_fps(tmp_path, clips):
-    """GIF delays are whole hundredths and browsers slow down shorter ones: a 120 fps clip
-    (CMU's rate) beside a 30 fps one is sampled at 50 fps, in real time."""
+    """GIF delays are whole hundredths and browsers slow down shorter ones: asked for 120 fps
+    (CMU's rate), a GIF is sampled at 50 fps, in real time."""
     walk = clips["walk"]
     fast = Motion(walk.skeleton, walk.rotations, walk.root_translation, 120.0, name="fast")  # 44/120 s
-    n, durations, _, _ = gif_info(render([walk, fast], tmp_path / "fast.gif", **SMALL))
+    n, durations, _, _ = gif_info(render([walk, fast], tmp_path / "fast.gif", fps=120.0, **SMALL))
     assert n == math.floor(44 / 30 * 50) + 1
     assert all(d == 20 for d in durations)
+
+
+def test_finished_clip_fades_and_playing_ones_move(tmp_path, clips):
+    """In a GIF a clip shorter than the longest stops at its last frame, drawn faded: the same
+    pose, lighter; the other panel keeps moving."""
+    walk, box = clips["walk"], clips["box"].slice(0, 15)  # 1.47 s and 0.47 s
+    out = render([walk, box], tmp_path / "fade.gif", size=1.6, dpi=50)
+    frames = []
+    with Image.open(out) as im:
+        for k in range(im.n_frames):
+            im.seek(k)
+            frames.append(np.asarray(im.convert("RGB"), dtype=np.int16))
+    W = frames[0].shape[1]
+    left, right = slice(0, W // 2), slice(W // 2, W)
+    end = round(14 / 30 * 20)  # the GIF frame showing the short clip's last frame (frame 14)
+    at_end, later = frames[end][:, right], frames[-1][:, right]
+    changed = np.abs(at_end - later).max(axis=-1) > 20
+    changed[-int(0.55 * 50):] = False  # the "(end)" label and the clock under the panels
+    assert changed.sum() > 30
+    assert (later[changed].sum(-1) > at_end[changed].sum(-1)).mean() > 0.9  # lighter where they differ
+    before = frames[end - 1][:, right]
+    assert np.abs(before - at_end)[: -int(0.55 * 50)].mean() > 0.05  # it moved until its end
+    assert np.abs(frames[-2][:, left] - frames[-1][:, left]).mean() > 0.05  # the walk still moves
+
+
+def ten_seconds(name: str) -> Motion:
+    """A sample clip played forwards then backwards, cut to 10 s at 30 fps (300 frames)."""
+    m = sample_motion(name)
+    idx = torch.cat([torch.arange(m.num_frames), torch.arange(m.num_frames - 1, -1, -1)])[:300]
+    return Motion(m.skeleton, m.rotations[idx], m.root_translation[idx], 30.0, name=name)
+
+
+def test_ten_second_gif_of_four_clips_is_under_3_mb(tmp_path):
+    """The defaults (20 fps, 80 dpi, a quarter-step palette, the grid's crossings as dots) keep
+    a 10 s GIF of four 30 fps clips under 3 MB, 201 frames of 5 hundredths: 10 s."""
+    motions = [ten_seconds(n) for n in ("walk_straight", "walk_curve", "carry_box", "jog")]
+    out = render(motions, tmp_path / "ten.gif")
+    n, durations, first, last = gif_info(out)
+    assert n == math.floor(299 / 30 * 20) + 1 == 200 and set(durations) == {50}
+    assert out.stat().st_size < 3_000_000
+    assert np.abs(first - last).mean() > 0.5
 
 
 # -- errors and atomic output ---------------------------------------------------------------------

@@ -56,6 +56,7 @@ _OUTPUTS = {  # kind of output: (suffixes, what it is)
     "report": ((".md",), "a Markdown report"),
     "plot": ((".png", ".pdf", ".svg"), "a picture"),
     "render": ((".gif", ".mp4", ".png"), "a GIF, MP4 or PNG filmstrip"),
+    "viewer": ((".html", ".htm"), "an HTML page"),
 }
 
 
@@ -460,14 +461,11 @@ def cmd_plot_alignment(args) -> int:
 
 
 def cmd_render(args) -> int:
-    from .io.database import MotionDatabase
     from .viz.render import render
+    from .viz.sources import read_clips
 
-    out = _output(args, "render", inputs=[args.database])
-    with MotionDatabase.open(args.database) as db:
-        clips = [db.read(name) for name in args.clips]
-        k = db.clip_info(args.clips[0])["skeleton"]
-        spec = _db_spec(db, k, clips[0].skeleton)
+    out = _output(args, "render", inputs=[args.database] + list(args.sources or []))
+    clips, spec = read_clips(args.database, args.clips, sources=args.sources)
     longest = max(c.num_frames for c in clips)
     frames = args.frames
     if out.suffix.lower() == ".png" and frames > longest:
@@ -478,6 +476,17 @@ def cmd_render(args) -> int:
         render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=frames,
                max_seconds=args.max_seconds)
     _say(args, f"wrote {out}: {len(clips)} clip{'s' if len(clips) != 1 else ''}")
+    return 0
+
+
+def cmd_view(args) -> int:
+    from .viz.viewer import write_viewer
+
+    out = _output(args, "viewer", inputs=[args.database] + list(args.sources or []))
+    with _locked(out, args):
+        got = write_viewer(args.database, out, clips=args.clips, sources=args.sources, max_clips=args.max_clips,
+                           quiet=args.quiet)
+    _say(args, f"wrote {out}: {len(got.names)} clip{'s' if len(got.names) != 1 else ''}, {got.size / 1e6:.1f} MB")
     return 0
 
 
@@ -694,8 +703,28 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--frames", type=_bounded_int(1, _MAX_FILMSTRIP), default=8,
                    help=f"frames per clip in a PNG filmstrip (default 8, at most {_MAX_FILMSTRIP})")
     s.add_argument("--max-seconds", type=_positive_float, default=None, help="show at most this many seconds")
+    s.add_argument("--sources", nargs="+", metavar="DB",
+                   help="databases holding clips not in DATABASE, e.g. a spliced clip's locomotion and action "
+                        "(default: the inputs its run record names)")
     _add_output_flags(s)
     s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("view", help="one self-contained HTML page that plays clips in 3D in a browser",
+                       description="Write an HTML file (no server, no network: three.js is inlined) that plays the "
+                                   "database's clips side by side in 3D, with an orbit camera, a timeline and a "
+                                   "picker filtered by role, method and label; a spliced clip shows with its "
+                                   "locomotion, its action and the other methods' results in one click.")
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("clips", nargs="*", metavar="CLIP",
+                   help="clips to include (with the sources and other methods of spliced ones); default: all, "
+                        "up to --max-clips")
+    s.add_argument("-o", "--output", required=True, help="page to write (.html)")
+    s.add_argument("--sources", nargs="+", metavar="DB",
+                   help="databases holding the spliced clips' locomotions and actions (default: as recorded)")
+    s.add_argument("--max-clips", type=_positive_int, default=100,
+                   help="at most this many clips when none are named (default 100, about 8 MB for 10 s clips)")
+    _add_output_flags(s)
+    s.set_defaults(func=cmd_view)
 
     s = sub.add_parser("evaluate", help="Markdown report judging a spliced database, per clip and per method",
                        description="Judge a database written by splice-all: foot skate, arm-leg phase coherence, "

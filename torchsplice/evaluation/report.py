@@ -18,7 +18,6 @@ The source clips come from the databases recorded in the output's ``run`` attrib
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -33,46 +32,9 @@ from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
 from .standing import standing_measures
+from ..viz.sources import SourceClips as _Sources, source_databases as _source_dbs
 
 __all__ = ["evaluate_database"]
-
-
-def _source_dbs(out_db: MotionDatabase, sources) -> list[MotionDatabase]:
-    paths = [Path(p) for p in sources] if sources else []
-    if not paths:
-        run = json.loads(str(out_db.attrs.get("run", "")) or "{}")
-        for key in ("database", "actions_db"):
-            rec = run.get(key)
-            if rec and Path(rec["path"]).is_file():
-                paths.append(Path(rec["path"]))
-    return [MotionDatabase.open(p) for p in paths]
-
-
-class _Sources:
-    """Find source clips by name in the source databases (or the output itself)."""
-
-    def __init__(self, dbs: list[MotionDatabase], out_db: MotionDatabase):
-        self.dbs = dbs + [out_db]
-        self.cache: dict[str, Motion] = {}
-
-    def has(self, name: str) -> bool:
-        return any(name in db._index_map() for db in self.dbs)
-
-    def get(self, name: str) -> Motion:
-        if name not in self.cache:
-            db = next((d for d in self.dbs if name in d._index_map()), None)
-            if db is None:
-                raise TorchspliceError(f"source clip {name!r} is in no source database; name them with {{sources}}",
-                                       options=("sources",))
-            self.cache[name] = db.read(name)
-        return self.cache[name]
-
-    def captures(self) -> list[tuple[str, str, dict]]:
-        out = []
-        for db in self.dbs[:-1] or self.dbs:
-            t = db.table()
-            out += [(str(n), str(r), json.loads(lab or "{}")) for n, r, lab in zip(t["name"], t["role"], t["labels"])]
-        return out
 
 
 def _find_capture(spec: DatasetSpec, loco: Motion, act: Motion, candidates) -> str | None:

@@ -26,8 +26,12 @@ Camera and projection (:func:`view_rotation`, :func:`project`):
   units); then each panel is scaled to its own skeleton.
 
 Forward kinematics runs once per clip, vectorised over frames; drawing a frame only sets the
-data of a few ``Line2D`` artists. Clips of different lengths play to the longest, each holding
-its last frame. Figures are made with :class:`matplotlib.figure.Figure` on the Agg canvas
+data of a few ``Line2D`` artists. An animation plays in real time to the longest clip; a
+shorter clip stops at its last frame, drawn faded (opacity :data:`_ENDED_ALPHA`) with
+``(end)`` under it. A filmstrip row spans its own clip (:func:`filmstrip_frames`), so every
+column shows another frame of it. Left and right are named in a legend above the panels.
+GIFs default to :data:`GIF_FPS` and :data:`GIF_DPI` and draw the grid's crossings as dots
+(lines sliding under a followed figure would make most of the file). Figures are made with :class:`matplotlib.figure.Figure` on the Agg canvas
 directly (no pyplot, no display, no global backend switch) and are released when done. Every
 output is written atomically (:func:`~torchsplice.io.atomic.atomic_path`).
 """
@@ -62,6 +66,7 @@ DEFAULT_ELEVATION = 22.0
 _CENTER, _LEFT, _RIGHT = 0, 1, 2
 _COLORS = {_CENTER: "#2b2b2b", _LEFT: "#1f6fb4", _RIGHT: "#d0342c"}
 _GRID_COLOR = "#cfd3d8"
+_DOT_COLOR = "#a9b0b8"  # the grid's crossings in a GIF, a little darker than its lines
 _TRAIL_COLOR = "#8fb9d9"
 _FOLLOW_SECONDS = 0.5  # smoothing window of the follow camera
 _TRAIL_SECONDS = 2.0
@@ -223,8 +228,30 @@ def _head(sk, pts: np.ndarray, up: int) -> tuple[np.ndarray | None, float]:
     return pts[:, h] + 0.5 * d * unit, d
 
 
-def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
-    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy."""
+@dataclass
+class Figure3D:
+    """A clip's points in the world and the bones between them, as the pictures draw them.
+
+    ``points``: ``(T, P, 3)`` float64 world positions in file units and axes, joints
+    ``0..J-1`` then end sites (head top, hands, toes); ``lines``: per side (0 centre, 1 left,
+    2 right), an index array ``a, b, P, a, b, P, ...`` into the points, ``P`` a line break;
+    ``follow``: the joint whose floor path is the character's (the root, or a root child with
+    animated translation such as Bandai Namco's ``Hips`` under ``joint_Root``); ``drawn``:
+    indices of the points some bone uses.
+    """
+
+    points: np.ndarray
+    lines: dict[int, np.ndarray]
+    follow: int
+    drawn: np.ndarray
+
+
+def figure_points(motion: Motion) -> Figure3D:
+    """Forward kinematics once for the whole clip (vectorised over frames) and its bones by side.
+
+    Bones run parent -> joint and joint -> end site, coloured by the side of the joint's name
+    (:func:`_side`); a root child with animated translation is a trajectory, not a bone.
+    """
     sk = motion.skeleton
     rot = motion.rotations.detach().to("cpu", torch.float64)
     root_t = motion.root_translation.detach().to("cpu", torch.float64)
@@ -235,17 +262,11 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
         pts = torch.cat([pos, ends], dim=1).numpy()
     else:
         pts = pos.numpy()
-    T, P = pts.shape[:2]
+    P = pts.shape[1]
     J = sk.num_joints
-    axes = _canonical_axes(up)
-
-    # the followed joint: the root, or a root child whose translation is animated (Bandai
-    # Namco's Hips under joint_Root, which stays on the ground), whose path is the character's
     animated = sk.translation_animated
     skip_bone = [c for c in sk.children(0) if animated[c]]  # a trajectory, not a bone
     follow = skip_bone[0] if skip_bone else 0
-
-    # bones per side: parent -> joint, joint -> end site; NaN (index P) between segments
     segs: dict[int, list[int]] = {_CENTER: [], _LEFT: [], _RIGHT: []}
     for j in range(1, J):
         if j not in skip_bone:
@@ -254,6 +275,16 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
         segs[_side(sk.names[p])] += [p, J + e, P]
     lines = {k: np.asarray(v, dtype=np.int64) for k, v in segs.items() if v}
     drawn = np.unique(np.concatenate(list(lines.values())))[:-1] if lines else np.array([follow])
+    return Figure3D(points=pts, lines=lines, follow=follow, drawn=drawn)
+
+
+def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
+    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy."""
+    sk = motion.skeleton
+    fig3 = figure_points(motion)
+    pts, lines, follow, drawn = fig3.points, fig3.lines, fig3.follow, fig3.drawn
+    T = pts.shape[0]
+    axes = _canonical_axes(up)
 
     height = pts[:, drawn, up]
     finite = np.isfinite(height)
@@ -367,6 +398,21 @@ def _grid_lines(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple[np.
     return xy[:, 0], xy[:, 1]
 
 
+def _grid_crossings(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The crossings of :func:`_grid_lines`' lines, as points ``x``, ``y`` (screen, relative to
+    the camera at frame ``f``): the same world-fixed grid, drawn as dots."""
+    R = k * scene.reach
+    s = max(_nice(k * scene.height / 1.75), _nice(R / 30))
+    c = clip.floor_center[f]
+    a = [np.arange(math.ceil((c[i] - R) / s), math.floor((c[i] + R) / s) + 1) * s - c[i] for i in (0, 1)]
+    A, B = np.meshgrid(a[0], a[1], indexing="ij")
+    canon = np.stack([A.ravel(), B.ravel(), np.zeros(A.size)], axis=-1)
+    world = np.zeros_like(canon)
+    world[:, _canonical_axes(scene.up)] = canon
+    xy = world @ scene.view[:2].T
+    return xy[:, 0], xy[:, 1]
+
+
 class _Panel:
     """One axes showing one clip; :meth:`show` puts frame ``f`` on it by setting line data.
 
@@ -374,7 +420,8 @@ class _Panel:
     draws the static background once and blits them over it each frame (:meth:`blit`).
     """
 
-    def __init__(self, fig, rect, scene: _Scene, clip: _Clip, k: float, title: str | None, animated: bool):
+    def __init__(self, fig, rect, scene: _Scene, clip: _Clip, k: float, title: str | None, animated: bool,
+                 grid_dots: bool = False):
         from matplotlib.lines import Line2D
         from matplotlib.patches import Rectangle
 
@@ -387,7 +434,12 @@ class _Panel:
         ax.add_patch(Rectangle((0, 0), 1, 1, transform=ax.transAxes, facecolor="white", edgecolor="#b5b5b5",
                                lw=0.8, zorder=0, clip_on=False))
         self.ax = ax
-        self.grid = ax.add_line(Line2D([], [], color=_GRID_COLOR, lw=0.7, zorder=1))
+        self.grid_dots = grid_dots
+        if grid_dots:  # the grid's crossings only (a GIF: moving lines would triple the file)
+            self.grid = ax.add_line(Line2D([], [], ls="none", marker="o", markersize=2.5, markeredgewidth=0,
+                                           markerfacecolor=_DOT_COLOR, zorder=1))
+        else:
+            self.grid = ax.add_line(Line2D([], [], color=_GRID_COLOR, lw=0.7, zorder=1))
         self.trail = ax.add_line(Line2D([], [], color=_TRAIL_COLOR, lw=1.8, zorder=2, solid_capstyle="round"))
         lw = max(1.2, min(2.6, 0.9 * scene.panel_w))
         self.bones = []
@@ -418,7 +470,7 @@ class _Panel:
     def show(self, f: int, held: bool = False) -> None:
         """Set every moving artist to frame ``f`` (``held``: past the clip's end, for the label)."""
         c = self.clip
-        gx, gy = _grid_lines(self.scene, c, f, self.k)
+        gx, gy = (_grid_crossings if self.grid_dots else _grid_lines)(self.scene, c, f, self.k)
         self.grid.set_data(gx, gy)
         tr = c.root[max(0, f - self._trail_frames):f + 1] - c.center[f]
         self.trail.set_data(tr[:, 0], tr[:, 1])
@@ -428,10 +480,14 @@ class _Panel:
             ln.set_data(xy[:, 0], xy[:, 1])
         if self.head is not None:
             self.head.set_data(c.head[f, :1], c.head[f, 1:])
+        if held != self.held:  # past its end the clip holds its last frame, faded
+            for ln, _ in self.bones:
+                ln.set_alpha(_ENDED_ALPHA if held else None)
+            if self.head is not None:
+                self.head.set_alpha(_ENDED_ALPHA if held else None)
         self.held = held
         if not self.animated:
-            end = "  (end)" if held else ""
-            self.label.set_text(f"{f / c.fps:.2f} s  frame {f}{end}")
+            self.label.set_text(f"{f / c.fps:.2f} s  frame {f}")
 
     def blit(self) -> None:
         """Draw the moving artists onto the canvas (after the background was restored)."""
@@ -457,36 +513,54 @@ def _new_figure(width_in: float, height_in: float, dpi: int):
 _TITLE_H = 0.32
 _LABEL_H = 0.24
 _MARGIN = 0.08
+_LEGEND_H = 0.2  # a band at the top for the side colours' legend
 
 
-def _animation_figure(scene: _Scene, clips: list[_Clip], titles: list[str], dpi: int):
-    """One row of panels, a title above and a time label under each."""
+def _legend(fig, x_in: float, y_in: float) -> None:
+    """The side colours, left to right from (``x_in``, ``y_in``) inches: a short bone of each
+    colour and its name ("left side", "right side": the character's own)."""
+    from matplotlib.lines import Line2D
+
+    W, H = fig.get_size_inches()
+    x = x_in
+    for side, text in ((_LEFT, "left side"), (_RIGHT, "right side")):
+        fig.add_artist(Line2D([x / W, (x + 0.22) / W], [y_in / H, y_in / H], transform=fig.transFigure,
+                              color=_COLORS[side], lw=2.2, solid_capstyle="round"))
+        fig.text((x + 0.28) / W, y_in / H, text, ha="left", va="center", fontsize=8, color="#666666")
+        x += 1.05
+
+
+def _animation_figure(scene: _Scene, clips: list[_Clip], titles: list[str], dpi: int, grid_dots: bool = False):
+    """One row of panels, a title above and a time label under each, the side colours' legend."""
     n = len(clips)
     gap = 0.1
     W = n * scene.panel_w + (n + 1) * gap
-    Hh = scene.panel_h + _TITLE_H + 2 * _LABEL_H + _MARGIN
+    Hh = scene.panel_h + _TITLE_H + 2 * _LABEL_H + _MARGIN + _LEGEND_H
     fig = _new_figure(W, Hh, dpi)
     W, Hh = fig.get_size_inches()
     panels = []
     for i, (clip, title) in enumerate(zip(clips, titles)):
         rect = ((gap + i * (scene.panel_w + gap)) / W, (2 * _LABEL_H + _MARGIN / 2) / Hh, scene.panel_w / W, scene.panel_h / Hh)
-        panels.append(_Panel(fig, rect, scene, clip, scene.scale[i], title, animated=True))
+        panels.append(_Panel(fig, rect, scene, clip, scene.scale[i], title, animated=True, grid_dots=grid_dots))
     clock = fig.text(0.5, 0.04 / Hh, "", ha="center", va="bottom", fontsize=9, color="#333333", animated=True)
+    _legend(fig, gap, Hh - _LEGEND_H / 2 - 0.02)
     return fig, panels, clock
 
 
 def _filmstrip_figure(scene: _Scene, clips: list[_Clip], titles: list[str], frames: int, dpi: int):
-    """One row per clip (its name above the row), one column per time, a time label under each."""
+    """One row per clip (its name above the row), one column per frame shown, a time label under
+    each, the side colours' legend at the top right."""
     n = len(clips)
     gap = 0.06
     row_h = _TITLE_H + scene.panel_h + _LABEL_H
     W = frames * scene.panel_w + (frames + 1) * gap
-    Hh = n * row_h + _MARGIN
+    Hh = n * row_h + _MARGIN + _LEGEND_H
     fig = _new_figure(W, Hh, dpi)
     W, Hh = fig.get_size_inches()
+    _legend(fig, gap, Hh - _LEGEND_H / 2 - 0.02)
     cells = []
     for r, (clip, title) in enumerate(zip(clips, titles)):
-        top = Hh - _MARGIN / 2 - r * row_h
+        top = Hh - _LEGEND_H - _MARGIN / 2 - r * row_h
         fig.text(gap / W, (top - 0.04) / Hh, title, ha="left", va="top", fontsize=11, fontweight="bold")
         row = []
         for k in range(frames):
@@ -506,11 +580,33 @@ _GIF_MAX_FPS = 50.0
 """GIF frame delays are whole hundredths of a second and browsers slow down delays under two,
 so a GIF plays at most 50 frames per second; faster clips (CMU's 120) are sampled down."""
 
+GIF_FPS = 20.0
+"""A GIF's default frame rate: its delay (5 hundredths) is exact in the format (30 fps is not
+a whole number of hundredths: written as 3, it would play 11% fast), and it keeps a 10 s GIF
+of four clips under 3 MB (see :data:`GIF_DPI`). Clips are sampled at it, each output frame
+showing each clip's frame nearest its time."""
+
+_ENDED_ALPHA = 0.5
+"""Opacity of a figure past its clip's end (a quarter step, so the GIF palette holds it)."""
+
+GIF_DPI = 80
+"""A GIF's default pixels per inch (PNG and MP4: 100): with :data:`GIF_FPS` and the grid's
+crossings as dots, a 10 s GIF of four clips at 30 fps is about 2.6 MB."""
+
+
+def gif_delay(fps: float) -> int:
+    """The GIF frame delay in hundredths of a second nearest to ``1 / fps``, at least 2
+    (browsers slow down shorter delays); the GIF then plays at ``100 / delay`` fps."""
+    return max(2, int(round(100.0 / fps)))
+
 _GIF_MAX_PIXELS = 1.2e9
 """A GIF is assembled in memory (one byte a pixel, twice over while Pillow encodes it): more
 pixels over all frames than this is refused with a hint (``max_seconds``, smaller, ``.mp4``)."""
 
 _TEXT_COLORS = ("#000000", "#333333", "#444444", "#b5b5b5")
+_PALETTE_LEVELS = 4
+"""Blends of each ink with white and with the grid in quarters: antialiased edges take fewer
+distinct colours, which GIF's LZW compresses better (10% smaller than eighths)."""
 
 
 def _palette():
@@ -526,7 +622,7 @@ def _palette():
     inks = [np.array(to_rgb(c)) for c in (*_COLORS.values(), _GRID_COLOR, _TRAIL_COLOR, *_TEXT_COLORS)]
     entries = {(255, 255, 255)}
     for ink in inks:
-        for a in np.linspace(0.125, 1.0, 8):
+        for a in np.linspace(1.0 / _PALETTE_LEVELS, 1.0, _PALETTE_LEVELS):
             for under in (white, grid):
                 entries.add(tuple(int(round(255 * v)) for v in a * ink + (1 - a) * under))
     flat = [v for rgb in sorted(entries) for v in rgb][:768]
@@ -563,8 +659,9 @@ class _GifWriter(PillowWriter):
         self._frames.append(frame)
 
     def finish(self):
+        # Pillow takes milliseconds and stores hundredths: a whole number of them, exactly
         self._frames[0].save(self.outfile, format="GIF", save_all=True, append_images=self._frames[1:],
-                             duration=int(round(1000 / self.fps)), loop=0)
+                             duration=10 * gif_delay(self.fps), loop=0)
 
 
 class _MP4Writer(FFMpegWriter):
@@ -593,6 +690,14 @@ def _make_writer(suffix: str, fps: float):
 # ---------------------------------------------------------------------------------------------
 
 
+def filmstrip_frames(num_frames: int, columns: int) -> np.ndarray:
+    """The frames a filmstrip row shows: ``columns`` evenly spaced over the clip's own length,
+    first and last frame included (distinct whenever the clip has that many frames)."""
+    if columns <= 1 or num_frames <= 1:
+        return np.zeros(max(1, columns), dtype=np.int64)
+    return np.rint(np.linspace(0.0, num_frames - 1, columns)).astype(np.int64)
+
+
 def _truncate(m: Motion, max_seconds: float | None) -> Motion:
     if max_seconds is None:
         return m
@@ -608,7 +713,7 @@ def render(
     fps: float | None = None,
     frames: int = 8,
     size: float = 3.0,
-    dpi: int = 100,
+    dpi: int | None = None,
     max_seconds: float | None = None,
     *,
     azimuth: float = DEFAULT_AZIMUTH,
@@ -623,22 +728,24 @@ def render(
         output: the file to write; its suffix picks the type (see :data:`SUPPORTED_SUFFIXES`):
             ``.gif`` an animation (matplotlib's PillowWriter), ``.mp4`` an animation (matplotlib's
             FFMpegWriter, H.264; needs ``ffmpeg`` on ``PATH``), ``.png`` a filmstrip: one row per
-            clip, ``frames`` columns at evenly spaced times over the longest clip (the same
-            times in every row), the time and frame number under each figure.
+            clip, ``frames`` columns at evenly spaced frames from the clip's first to its last
+            (each row its own length), the time and frame number under each figure.
         titles: one title per clip; the clips' names by default.
         up_axis: the vertical axis of the data (0, 1, 2 or ``"x"``, ``"y"``, ``"z"``); the
             dataset spec's.
-        fps: the animation's frame rate; the clips' (the highest, if they differ) by default,
-            at most 50 for a GIF (see :data:`_GIF_MAX_FPS`). Each output frame shows, per clip,
-            the frame nearest its time.
+        fps: the animation's frame rate; for MP4 the clips' (the highest, if they differ) by
+            default; for a GIF :data:`GIF_FPS` by default, and any rate becomes the nearest one
+            GIF stores exactly, ``100 / gif_delay(fps)``, at most 50 (see :data:`_GIF_MAX_FPS`).
+            Each output frame shows, per clip, the frame nearest its time, so the output
+            plays in real time.
         frames: number of columns of the PNG filmstrip.
         size: width of one panel in inches (its height follows the figures' proportions).
-        dpi: pixels per inch.
+        dpi: pixels per inch; :data:`GIF_DPI` for a GIF, 100 otherwise, by default.
         max_seconds: keep only the first ``max_seconds`` of each clip.
         azimuth, elevation: the fixed camera, degrees (see :func:`view_rotation`).
 
     The animation has as many frames as the longest clip needs at ``fps``; shorter clips hold
-    their last frame (their label says ``(end)``). A GIF is assembled in memory and refused
+    their last frame, faded (their label says ``(end)``). A GIF is assembled in memory and refused
     beyond about a gigapixel over all frames (a minute of four panels at the defaults); MP4
     streams to ffmpeg. The output appears complete or not at all: it is written to a
     temporary file beside it and renamed.
@@ -668,6 +775,8 @@ def render(
         raise TorchspliceError(f"fps must be positive, got {fps}")
     if int(frames) < 1:
         raise TorchspliceError(f"frames must be at least 1, got {frames}")
+    if dpi is None:
+        dpi = GIF_DPI if suffix == ".gif" else 100
     if not size > 0 or not dpi > 0:
         raise TorchspliceError(f"size and dpi must be positive, got size={size}, dpi={dpi}")
     if max_seconds is not None and not max_seconds > 0:
@@ -677,8 +786,8 @@ def render(
     clips = [_prepare(_truncate(m, max_seconds), up, view) for m in motions]
     scene = _scene(clips, up, view, float(size))
     rate = float(fps) if fps is not None else max(c.fps for c in clips)
-    if suffix == ".gif":
-        rate = min(rate, _GIF_MAX_FPS)
+    if suffix == ".gif":  # a rate GIF stores exactly: 100 / a whole number of hundredths
+        rate = 100.0 / gif_delay(min(float(fps) if fps is not None else GIF_FPS, _GIF_MAX_FPS))
     last = max((c.num_frames - 1) / c.fps for c in clips)  # time of the last frame of the longest clip
 
     def frame_of(c: _Clip, t: float) -> tuple[int, bool]:
@@ -688,18 +797,17 @@ def render(
     with atomic_path(output) as tmp:
         if suffix == ".png":
             n_cols = int(frames)
-            times = np.linspace(0.0, last, n_cols) if n_cols > 1 else np.zeros(1)
             fig, cells = _filmstrip_figure(scene, clips, titles, n_cols, int(dpi))
             try:
                 for row, c in zip(cells, clips):
-                    for panel, t in zip(row, times):
-                        panel.show(*frame_of(c, float(t)))
+                    for panel, f in zip(row, filmstrip_frames(c.num_frames, n_cols)):
+                        panel.show(int(f))
                 fig.savefig(tmp, format="png", dpi=int(dpi))
             finally:
                 _release(fig)
         else:
             n_out = int(math.floor(last * rate + 1e-6)) + 1
-            fig, panels, clock = _animation_figure(scene, clips, titles, int(dpi))
+            fig, panels, clock = _animation_figure(scene, clips, titles, int(dpi), grid_dots=suffix == ".gif")
             same_rate = all(c.fps == rate for c in clips)
             try:
                 canvas = fig.canvas
