@@ -32,7 +32,7 @@ from ..io.atomic import atomic_path
 from ..io.database import MotionDatabase
 from ..io.spec import DatasetSpec, detect_spec
 from ..splice.clips import clips_to_tensors, resample_motion
-from .ground_truth import upper_body_error
+from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
 from .standing import standing_measures
 
@@ -57,40 +57,50 @@ def error_stats(errors) -> dict:
     return {"n": n, "mean": sum(vals) / n, "median": median, "worst": vals[-1]}
 
 
-def ground_truth_by_type(per_clip: list[dict], methods: list[str]) -> dict:
-    """Per method, per locomotion type (and ``"all"``): :func:`error_stats` of the ground-truth
-    errors of ``per_clip`` rows (keys ``method``, ``loco_type``, ``gt_error``)."""
+def ground_truth_by_type(per_clip: list[dict], methods: list[str], key: str = "gt_error") -> dict:
+    """Per method, per locomotion type (and ``"all"``): :func:`error_stats` of ``key`` (the
+    ground-truth error, or ``"gt_bound"``: its best-constant-posture bound) over ``per_clip``
+    rows (keys ``method``, ``loco_type`` and ``key``)."""
     out: dict = {}
     for m in methods:
-        rows = [c for c in per_clip if c["method"] == m and c["gt_error"] is not None]
+        rows = [c for c in per_clip if c["method"] == m and c.get(key) is not None]
         if not rows:
             continue
-        out[m] = {"all": error_stats([c["gt_error"] for c in rows])}
+        out[m] = {"all": error_stats([c[key] for c in rows])}
         for kind in sorted({c["loco_type"] for c in rows}):
-            out[m][kind] = error_stats([c["gt_error"] for c in rows if c["loco_type"] == kind])
+            out[m][kind] = error_stats([c[key] for c in rows if c["loco_type"] == kind])
     return out
 
 
 def _ground_truth_section(per_clip: list[dict], methods: list[str], units: str) -> list[str]:
-    """The report's table of ground-truth errors per locomotion type (empty without ground truth)."""
+    """The report's tables of ground-truth errors per locomotion type, and of their
+    best-constant-posture bound (empty without ground truth)."""
     table = ground_truth_by_type(per_clip, methods)
     if not table:
         return []
+    bound = ground_truth_by_type(per_clip, methods, "gt_bound")
     shown = [m for m in methods if m in table]
     kinds = sorted({k for m in shown for k in table[m] if k != "all"}) + ["all"]
-    lines = ["## Ground truth per locomotion type", "",
-             f"Upper-body joint error against the capture ({units}): mean / median / worst over the triples.", "",
-             "| locomotion | triples | " + " | ".join(shown) + " |", "|---|---|" + "---|" * len(shown)]
-    for kind in kinds:
-        n = max(table[m].get(kind, {"n": 0})["n"] for m in shown)
-        cells = []
-        for m in shown:
-            st = table[m].get(kind)
-            cells.append("-" if st is None or not st["n"] else
-                         f"{_fmt(st['mean'])} / {_fmt(st['median'])} / {_fmt(st['worst'])}")
-        name = "**all**" if kind == "all" else kind
-        lines.append(f"| {name} | {n} | " + " | ".join(cells) + " |")
-    return lines + [""]
+
+    def rows(tab):
+        out = ["| locomotion | triples | " + " | ".join(shown) + " |", "|---|---|" + "---|" * len(shown)]
+        for kind in kinds:
+            n = max(tab.get(m, {}).get(kind, {"n": 0})["n"] for m in shown)
+            cells = []
+            for m in shown:
+                st = tab.get(m, {}).get(kind)
+                cells.append("-" if st is None or not st["n"] else
+                             f"{_fmt(st['mean'])} / {_fmt(st['median'])} / {_fmt(st['worst'])}")
+            out.append(f"| {'**all**' if kind == 'all' else kind} | {n} | " + " | ".join(cells) + " |")
+        return out
+
+    return (["## Ground truth per locomotion type", "",
+             f"Upper-body joint error against the capture ({units}): mean / median / worst over the triples.", ""]
+            + rows(table)
+            + ["", "The same after the best constant posture change per triple (one rotation of the upper body "
+               "about the pelvis, chosen with the capture's help: an oracle). No method that keeps the action's "
+               "motion and changes its posture by a constant rotation can go below it.", ""]
+            + rows(bound) + [""])
 
 
 def _source_dbs(out_db: MotionDatabase, sources) -> list[MotionDatabase]:
@@ -199,12 +209,13 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
             fps = results[0].fps
             m = _metrics(results, locos, acts, roles, fps)
             caps = [_find_capture(spec, lo, ac, candidates) for lo, ac in zip(locos, acts)]
-            gt = [None] * len(chunk)
+            gt, bound = [None] * len(chunk), [None] * len(chunk)
             have = [n for n, c in enumerate(caps) if c is not None]
             if have:
-                err = upper_body_error([results[n] for n in have], [sources.get(caps[n]) for n in have], roles)
-                for n, e in zip(have, err.tolist()):
-                    gt[n] = e
+                got, want = [results[n] for n in have], [sources.get(caps[n]) for n in have]
+                err, best = upper_body_error(got, want, roles), best_posture_error(got, want, roles)
+                for n, e, o in zip(have, err.tolist(), best.tolist()):
+                    gt[n], bound[n] = e, o
             stand = _standing_rows(db, t, chunk, results, acts, roles)
             for n, i in enumerate(chunk):
                 per_clip.append({
@@ -212,6 +223,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                     "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
                     "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
                     "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
+                    "gt_bound": bound[n],
                     "loco_type": locomotion_type(locos[n]),
                     **stand.get(n, {"timing": "timewarp"}),
                 })
@@ -308,6 +320,8 @@ def _aggregate(per_clip: list[dict], methods: list[str]) -> dict:
             "phase_in_range": sum(c["phase_ok"] for c in cs) / len(cs), "posture": mean("posture"),
             "gt_error": sum(gt) / len(gt) if gt else None, "gt_pairs": len(gt), "cost": mean("cost"),
             "gt_by_type": ground_truth_by_type(cs, [method]).get(method, {}),
+            "gt_bound": error_stats([c.get("gt_bound") for c in cs])["mean"],
+            "gt_bound_by_type": ground_truth_by_type(cs, [method], "gt_bound").get(method, {}),
         }
     return out
 
