@@ -628,15 +628,17 @@ SPLICE_PAIRS = {
 REFERENCES = {"sample": "walk_straight", "bandai": WALKS[4]}
 
 
-@pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
+@pytest.mark.parametrize("method", ["splice", "naive", "cpmc", "splice-twist"])
 @pytest.mark.parametrize("source", ["sample", "bandai"])
 def test_whole_splice_compiled_equals_torch(request, source, method):
     clips, spec, _ = clips_of(request, source)
     pairs = [(clips[a], clips[b]) for a, b in SPLICE_PAIRS[source]]
+    twist = 0.5 if method == "splice-twist" else 0.0          # a share of the locomotion's twist
+    method = method.split("-")[0]
     refs = [clips[REFERENCES[source]]] * len(pairs) if method == "cpmc" else None
     size = pairs[0][0].skeleton.size()
-    comp = splice_pairs(pairs, spec, method, refs, SpliceOptions(backend="compiled", dtype=F64, force=True))
-    ref = splice_pairs(pairs, spec, method, refs, SpliceOptions(backend="torch", dtype=F64, force=True))
+    comp = splice_pairs(pairs, spec, method, refs, SpliceOptions(backend="compiled", dtype=F64, force=True, twist=twist))
+    ref = splice_pairs(pairs, spec, method, refs, SpliceOptions(backend="torch", dtype=F64, force=True, twist=twist))
     assert len(comp) == len(ref) == len(pairs)
     for x, y in zip(comp, ref):
         assert (x.motion.name, x.locomotion, x.action, x.reference) == (y.motion.name, y.locomotion, y.action, y.reference)
@@ -657,6 +659,9 @@ def test_whole_splice_compiled_equals_torch(request, source, method):
         assert any(x.crop > 0 for x in comp) and all(x.path.shape[0] > 10 for x in comp)
     if method == "splice":
         assert max(float(x.pelvis_correction.max()) for x in comp) > 0.1 and max(x.posture_deg for x in comp) > 0.1
+    if twist:                                                     # the twist changed the posture
+        plain = splice_pairs(pairs, spec, method, refs, SpliceOptions(backend="compiled", dtype=F64, force=True))
+        assert max(abs(x.posture_deg - y.posture_deg) for x, y in zip(comp, plain)) > 0.1
 
 
 # ------------------------------------------------------------------------------ 7. determinism

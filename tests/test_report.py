@@ -4,6 +4,7 @@ import shutil
 
 import numpy as np
 import pytest
+import torch
 
 from torchsplice.cli import main
 from torchsplice.core.errors import SpecError, TorchspliceError
@@ -135,3 +136,49 @@ def test_report_with_ground_truth_on_real_clips(mocap_dir, tmp_path):
     assert agg["splice"]["gt_pairs"] == agg["naive"]["gt_pairs"] == 4  # 2 turns x 2 styles
     assert agg["splice"]["gt_error"] < agg["naive"]["gt_error"]
     assert "dataset-2_walk-turn-left_elderly_003" in report.read_text()
+    for m in ("splice", "naive"):  # the breakdown per locomotion type: 2 styles per turn
+        by = agg[m]["gt_by_type"]
+        assert set(by) == {"all", "walk-turn-left", "walk-turn-right"}
+        assert by["walk-turn-left"]["n"] == by["walk-turn-right"]["n"] == 2 and by["all"]["n"] == 4
+        assert by["all"]["mean"] == pytest.approx(agg[m]["gt_error"])
+        assert by["all"]["worst"] == max(by[k]["worst"] for k in ("walk-turn-left", "walk-turn-right"))
+        assert agg[m]["gt_bound"] < agg[m]["gt_error"]  # the oracle posture beats the real one
+        assert set(agg[m]["gt_bound_by_type"]) == set(by)
+    text = report.read_text()
+    assert "## Ground truth per locomotion type" in text and "| walk-turn-left | 2 |" in text and "| **all** | 4 |" in text
+
+
+def test_best_constant_posture_bound_known_answers():
+    from torchsplice.core.rotations import quat_to_rotmat, random_quat
+    from torchsplice.evaluation.ground_truth import _best_posture_clouds, _mean_error
+
+    g = torch.Generator().manual_seed(3)
+    b = torch.randn(2, 9, 5, 3, generator=g, dtype=torch.float64) * 20      # (B, T, U, 3) capture
+    R = quat_to_rotmat(random_quat((2,), dtype=torch.float64, generator=g))  # one rotation per pair
+    pivot = 2
+    a = torch.einsum("bij,btuj->btui", R, b - b[:, :, pivot:pivot + 1]) + b[:, :, pivot:pivot + 1]
+    valid = torch.ones(2, 9, dtype=torch.float64)
+    valid[1, 6:] = 0                                                         # pair 1: 6 aligned frames
+    assert float(_mean_error(a, b, valid).min()) > 1.0                       # turned: far off
+    assert float(_best_posture_clouds(a, b, valid, pivot).max()) < 1e-9      # the bound undoes the turn
+    noisy = a.clone()
+    noisy[1, 6:] += 1e3                                                      # frames past the alignment: ignored
+    assert float(_best_posture_clouds(noisy, b, valid, pivot)[1]) < 1e-9
+    moved = b + torch.tensor([0.0, 0.0, 5.0], dtype=torch.float64)           # a shift is no rotation
+    assert float(_best_posture_clouds(moved, b, valid, pivot).min()) > 1.0
+
+
+def test_error_stats_and_breakdown_by_type():
+    from torchsplice.evaluation.report import error_stats, ground_truth_by_type
+
+    assert error_stats([3.0, None, 1.0, 2.0]) == {"n": 3, "mean": 2.0, "median": 2.0, "worst": 3.0}
+    assert error_stats([4.0, 1.0, 2.0, 10.0])["median"] == 3.0  # even count: the two middle values
+    assert error_stats([None, float("nan")]) == {"n": 0, "mean": None, "median": None, "worst": None}
+    rows = [{"method": "splice", "loco_type": t, "gt_error": e}
+            for t, e in (("run", 1.0), ("run", 3.0), ("dash", 5.0), ("dash", None))]
+    rows.append({"method": "naive", "loco_type": "run", "gt_error": 7.0})
+    by = ground_truth_by_type(rows, ["splice", "naive", "cpmc"])
+    assert set(by) == {"splice", "naive"}  # cpmc has no ground-truth row
+    assert by["splice"]["run"] == {"n": 2, "mean": 2.0, "median": 2.0, "worst": 3.0}
+    assert by["splice"]["dash"]["n"] == 1 and by["splice"]["all"]["mean"] == 3.0
+    assert set(by["naive"]) == {"all", "run"}

@@ -128,8 +128,8 @@ def check_path(path: torch.Tensor, max_run: int) -> None:
 # ------------------------------------------------------------------------------ 1. self-splice
 
 
-def assert_returns_itself(m: Motion, spec) -> None:
-    r = splice(m, m, spec, options=OPT)
+def assert_returns_itself(m: Motion, spec, options: SpliceOptions = OPT) -> None:
+    r = splice(m, m, spec, options=options)
     n = r.motion.num_frames
     assert n == m.num_frames
     assert angle(r.motion.rotations, m.rotations) < 1e-5
@@ -151,6 +151,13 @@ def test_splicing_a_sample_clip_onto_itself_returns_it(sample, name):
 def test_splicing_a_bandai_namco_walk_onto_itself_returns_it(bandai, name):
     read, spec = bandai
     assert_returns_itself(read(name), spec)
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+@pytest.mark.parametrize("name", [WALK2, "dataset-1_walk-left_normal_001", "dataset-1_walk-right_normal_001"])
+def test_with_the_locomotions_twist_a_clip_onto_itself_still_returns_it(bandai, name, backend):
+    read, spec = bandai  # the side walks twist their shoulders by about 16 degrees: none is added to their own
+    assert_returns_itself(read(name), spec, replace(OPT, twist=1.0, force=True, backend=backend))
 
 
 def test_splicing_the_cmu_walk_onto_itself_returns_it(mocap_dir):
@@ -586,6 +593,54 @@ def test_short_and_non_finite_clips_are_refused_by_name(sample):
         splice(replace(L, root_translation=root, name="inf_clip"), A, spec)
     with pytest.raises(MotionError, match="nan_clip"):  # a bad reference is named too
         splice(L, A, spec, "cpmc", bad)
+
+
+# ------------------------------------------------------------------------------ 6b. the locomotion's twist
+
+
+def shoulder_yaw_deg(m: Motion, roles) -> float:
+    """Yaw (degrees) of the frame-averaged shoulder line against the hips, in heading frames."""
+    from torchsplice.splice.heck import shoulder_yaw
+
+    p = m.global_positions().to(F64)
+    H = heading_frame(p[:, roles.hips[0]], p[:, roles.hips[1]], roles.up_axis)
+    cloud = to_heading_frame(p[:, list(roles.shoulders)], p[:, roles.pelvis], H).mean(0)
+    return math.degrees(float(shoulder_yaw(cloud, roles.up_axis)))
+
+
+@pytest.mark.parametrize("up", [0, 1, 2])
+def test_twist_target_known_answers(up):
+    from torchsplice.splice.heck import shoulder_yaw, twist_target
+
+    g = torch.Generator().manual_seed(up)
+    act, loco = torch.randn(5, 2, 3, generator=g, dtype=F64), torch.randn(5, 2, 3, generator=g, dtype=F64)
+    assert twist_target(act, loco, 0.0, up) is act                      # share 0: the paper's target
+    full, half = twist_target(act, loco, 1.0, up), twist_target(act, loco, 0.5, up)
+    ya, yl = shoulder_yaw(act, up), shoulder_yaw(loco, up)
+    wrap = lambda x: torch.remainder(x + math.pi, 2 * math.pi) - math.pi  # noqa: E731
+    assert torch.allclose(wrap(shoulder_yaw(full, up) - yl), torch.zeros(5, dtype=F64), atol=1e-12)
+    assert torch.allclose(wrap(shoulder_yaw(half, up) - ya), 0.5 * (yl - ya), atol=1e-12)
+    for out in (full, half):                                            # a turn about the up axis only
+        assert torch.allclose(out.norm(dim=-1), act.norm(dim=-1), atol=1e-12)
+        assert torch.equal(out[..., up], act[..., up])
+    square = torch.tensor([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]], dtype=F64)[None][..., [(k - (1 if up == 0 else 0)) % 3 for k in range(3)]]
+    assert abs(float(shoulder_yaw(square, up))) < 1e-12                 # square shoulders: yaw 0
+
+
+def test_the_twist_share_moves_the_shoulders_towards_the_side_walks(bandai):
+    read, spec = bandai
+    act, roles = read("dataset-1_walk_happy_001"), spec.bind(read(WALK2).skeleton)
+    for name, sign in (("dataset-1_walk-left_normal_001", 1), ("dataset-1_walk-right_normal_001", -1)):
+        loco = read(name)
+        y_loco, y_act = shoulder_yaw_deg(loco, roles), shoulder_yaw_deg(act, roles)
+        assert sign * y_loco > 10 and abs(y_act) < 5                    # the side walk twists, the walk does not
+        got = {tw: shoulder_yaw_deg(splice(loco, act, spec, options=replace(OPT, twist=tw, force=True)).motion, roles)
+               for tw in (0.0, 0.5, 1.0)}
+        assert abs(got[0.0] - y_act) < 1.5                              # the paper: the action's posture
+        assert abs(got[1.0] - y_loco) < 1.5                             # all of the locomotion's twist
+        assert abs(got[0.5] - 0.5 * (got[0.0] + got[1.0])) < 1.0        # half of it
+    with pytest.raises(TorchspliceError, match="twist"):
+        splice(loco, act, spec, options=replace(OPT, twist=1.5, force=True))
 
 
 def test_unknown_method_and_missing_reference(sample):

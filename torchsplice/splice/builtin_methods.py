@@ -22,7 +22,7 @@ def _run_splice(inp: MethodInput) -> MethodOutput:
     from .heck import splice_tensors
 
     out = splice_tensors(inp.loco, inp.act, inp.roles, inp.skeleton, inp.options.align, inp.fps,
-                         posture=inp.options.posture)
+                         posture=inp.options.posture, twist=inp.options.twist)
     al = out.alignment
     B = inp.loco.lengths.shape[0]
     q = out.posture_rotation
