@@ -67,3 +67,29 @@ def test_options_are_the_config_fields(tmp_path, sample_db):
         job_config(sample_db, tmp_path / "o.h5", method="naive")
     with pytest.raises(TorchspliceError, match="acting_limbs: unknown limb 'tail'"):
         job_config(sample_db, tmp_path / "o.h5", acting_limbs="tail")
+
+
+def test_twist_reaches_every_splice_and_is_recorded(sample_db, tmp_path, capsys):
+    """``--twist`` (``twist=``) gives the clips ``splice_pairs(..., SpliceOptions(twist=...))`` gives,
+    differs from the default on a sharp turn, and is recorded in ``params``."""
+    import json
+
+    from torchsplice.specs import load_spec
+    from torchsplice.splice import SpliceOptions, splice_pairs
+
+    out0, out5 = tmp_path / "t0.h5", tmp_path / "t5.h5"
+    for out, extra in ((out0, []), (out5, ["--twist", "1"])):
+        assert main(["splice-all", str(sample_db), "-o", str(out), "--locomotions", "turn_sharp", "--actions", "carry_box",
+                     "--workers", "1", "-q", *extra]) == 0
+    with MotionDatabase.open(out0) as a, MotionDatabase.open(out5) as b, MotionDatabase.open(sample_db) as src:
+        r0, r5 = a.read("turn_sharp+carry_box"), b.read("turn_sharp+carry_box")
+        assert json.loads(b.table()["params"][0])["twist"] == 1 and json.loads(a.table()["params"][0])["twist"] == 0
+        want = splice_pairs([(src.read("turn_sharp"), src.read("carry_box"))], load_spec("sample"),
+                            options=SpliceOptions(twist=1.0))[0].motion
+    assert not np.allclose(r0.rotations.numpy(), r5.rotations.numpy(), atol=1e-4)
+    np.testing.assert_allclose(r5.rotations.numpy(), want.rotations.numpy(), atol=1e-5)
+    with pytest.raises(TorchspliceError, match="twist"):
+        splice_all(sample_db, tmp_path / "bad.h5", twist=1.5, workers=1)
+    with pytest.raises(SystemExit):
+        main(["splice-all", str(sample_db), "-o", str(tmp_path / "bad.h5"), "--twist", "2"])
+    assert "must be a number from 0 to 1" in capsys.readouterr().err

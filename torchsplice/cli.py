@@ -335,6 +335,17 @@ def _bounded_int(lo: int, hi: int):
     return parse
 
 
+def _share(text: str) -> float:
+    """argparse type: a number from 0 to 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a number from 0 to 1, got {text!r}")
+    return value
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -350,7 +361,7 @@ def _splice_options(args):
 
     return SpliceOptions(align=AlignOptions(max_run=args.max_run), posture=not args.no_posture,
                          force=args.force_locomotion, device=_device(args.device), timing=args.timing,
-                         acting_limbs=_acting_limbs(args))
+                         acting_limbs=_acting_limbs(args), twist=args.twist)
 
 
 def _acting_limbs(args):
@@ -433,6 +444,9 @@ def _add_splice_options(s) -> None:
     s.add_argument("--max-run", type=_positive_int, default=3, metavar="L",
                    help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
     s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
+    s.add_argument("--twist", type=_share, default=0.0, metavar="SHARE",
+                   help="share (0 to 1) of the locomotion's torso twist that posture transfer adds, e.g. 0.5 on side "
+                        "steps (splice method; default 0: the action's posture as it is)")
     s.add_argument("--force-locomotion", action="store_true",
                    help="time-align clips that do not locomote (the method's limit) instead of refusing a locomotion "
                         "that does not locomote and splicing a standing action by --timing")
@@ -526,7 +540,7 @@ def cmd_splice_all(args) -> int:
         locomotions=args.locomotions, actions=args.actions, methods=args.method, memory_budget_mb=args.memory_budget,
         batch_pairs=args.batch_size, force_locomotion=args.force_locomotion, copy_sources=args.copy_sources,
         max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing, acting_limbs=args.acting_limbs,
-        posture=not args.no_posture, device=_device(args.device), compression=args.compression, layout=args.layout,
+        posture=not args.no_posture, twist=args.twist, device=_device(args.device), compression=args.compression, layout=args.layout,
         engine=args.engine, workers=args.workers, ray_address=args.ray_address,
     )
     if args.ray_address and args.engine != "ray":

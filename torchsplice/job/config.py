@@ -48,7 +48,7 @@ class JobConfig:
             the timewarp align it anyway.
         acting_limbs: the arms standing actions act with (``None``: found per clip).
         copy_sources: copy the selected source clips into the output too.
-        max_run, posture: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
+        max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
             (LZF on everything but rotations: fast, read by h5py), ``"lzf"``, ``"gzip"`` (read by
             every HDF5 tool, several times slower to write) or ``None``.
@@ -78,6 +78,7 @@ class JobConfig:
     copy_sources: bool = False
     max_run: int = 3
     posture: bool = True
+    twist: float = 0.0
     compression: str | None = "auto"
     layout: str = "copy"
     memory_budget_mb: int = 1024
@@ -111,6 +112,8 @@ class JobConfig:
             raise TorchspliceError(f"unknown timing {c.timing!r}; choose {', '.join(TIMINGS)}")
         if c.acting_limbs is not None and any(x not in LIMBS for x in c.acting_limbs):
             raise TorchspliceError(f"unknown acting limb in {','.join(c.acting_limbs)!r}; choose from {', '.join(LIMBS)}")
+        if not 0.0 <= c.twist <= 1.0:
+            raise TorchspliceError(f"{{twist}} must be a share from 0 to 1, got {c.twist}", options=("twist",))
         if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
             raise TorchspliceError(f"{{max_length_ratio}} must be at least 1, got {c.max_length_ratio}",
                                    options=("max_length_ratio",))
@@ -157,11 +160,11 @@ class JobConfig:
     def splice_options(self) -> SpliceOptions:
         """Options for :func:`~torchsplice.splice.splice_pairs` (the plan has checked every clip)."""
         return SpliceOptions(align=self.align_options(), posture=self.posture, force=True, check_locomotion=False,
-                             device=self.device, timing=self.timing, acting_limbs=self.acting_limbs)
+                             device=self.device, timing=self.timing, acting_limbs=self.acting_limbs, twist=self.twist)
 
     def params(self) -> str:
         """The ``params`` column of every spliced clip (JSON)."""
-        return json.dumps({"max_run": self.max_run, "posture": self.posture,
+        return json.dumps({"max_run": self.max_run, "posture": self.posture, "twist": self.twist,
                            "heading_window_deg": self.align_options().heading_window_deg,
                            "force_locomotion": self.force_locomotion, "timing": self.timing,
                            "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs)})
@@ -180,6 +183,7 @@ class JobConfig:
             "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
+            **({"twist": self.twist} if self.twist else {}),  # plans of runs without it stay valid
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
             **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }

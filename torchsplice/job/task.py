@@ -112,6 +112,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         bank, index = sources.bank(task.group, group.clips, fps, roles, align.landmarks)
         out = splice_bank(bank, [index[k[0]] for k in keys], [index[k[1]] for k in keys], method,
                           ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None, posture=config.posture,
+                          twist=config.twist,
                           buffers=buffers, on_error="keep", **align_kwargs(align, fps))
         failed = {b: STATUS[int(s)] for b, s in enumerate(out.status) if s != 0}
         ok = out.status == 0
