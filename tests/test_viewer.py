@@ -272,6 +272,7 @@ def _settle(d):
 
 
 @pytest.mark.browser
+@pytest.mark.slow
 def test_viewer_in_chromium(job, tmp_path, browser):
     """The page opens without console errors, draws the clips (not a blank canvas), scrubbing
     changes the picture, the picker lists the database's clips and filters them, and one click
