@@ -30,6 +30,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import re
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -37,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import TorchspliceError
+from ..core.errors import MotionError, TorchspliceError
 from ..core.motion import Motion
 from ..io.atomic import atomic_path
 from ..io.database import MotionDatabase
@@ -288,7 +289,7 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
         TorchspliceError: an unknown clip, an unreadable database, a broken installation.
     """
     if int(max_clips) < 1:
-        raise TorchspliceError(f"max_clips must be at least 1, got {max_clips}")
+        raise TorchspliceError(f"{{max_clips}} must be at least 1, got {max_clips}", options=("max_clips",))
     database = Path(database)
     with MotionDatabase.open(database) as db:
         if len(db) == 0:
@@ -304,6 +305,11 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
                 home = db if name in db._index_map() else lookup.where(name)
                 info = home.clip_info(name)
                 motion = home.read(name)
+                try:
+                    motion.check_finite()
+                except TorchspliceError as exc:
+                    raise MotionError(f"{home.path}: {exc.message}; the viewer shows only finite clips "
+                                      "(name the others to view them)") from None
                 key = (id(home), info["skeleton"])
                 if key not in specs:
                     specs[key] = clip_spec(home, name, motion.skeleton)
@@ -321,9 +327,10 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
         "clips": payload,
     }
     template = resources.files("torchsplice.viz").joinpath("viewer_template.html").read_text(encoding="utf-8")
-    html = (template.replace("__TITLE__", _html_escape(f"torchsplice view: {database.name}"))
-                    .replace("__IMPORTMAP__", _import_map())
-                    .replace("__DATA__", _script_json(data)))
+    fill = {"__TITLE__": _html_escape(f"torchsplice view: {database.name}"), "__IMPORTMAP__": _import_map(),
+            "__DATA__": _script_json(data)}
+    # one pass: a placeholder inside a filled value (a database called __DATA__.h5) stays text
+    html = re.sub("|".join(fill), lambda m: fill[m.group(0)], template)
     contents.size = len(html.encode("utf-8"))
     return html, contents
 
