@@ -203,7 +203,7 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
 
     kind = "npz" if suffix == ".npz" else "bvh"
     out = Path(args.output)
-    if single_file and not out.is_dir():
+    if single_file and (not out.is_dir() or getattr(args, "packed", False)):  # a packed file is never a folder
         return [_output(args, kind, inputs=[args.database])], None
     if out.suffix.lower() in (".bvh", ".npz") and not out.is_dir():
         raise TorchspliceError(f"{out}: {len(names)} clips go to a folder, one file each: give -o a folder "
@@ -222,6 +222,18 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
             check_output(f, (suffix,), _OUTPUTS[kind][1], inputs=[args.database], overwrite=args.force)
         files.append(f)
     return files, None if out.is_dir() else out
+
+
+def _make_folder(folder: Path) -> None:
+    """Create the output folder of an export; an OS error (permission, full disk) is one line."""
+    from .io.atomic import os_error_message
+
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise TorchspliceError(os_error_message(folder, exc)) from None
+    if not folder.is_dir():
+        raise TorchspliceError(f"{folder}: is a file; several clips go to a folder, one file each")
 
 
 def cmd_export(args) -> int:
@@ -256,8 +268,9 @@ def cmd_export(args) -> int:
             _say(args, f"wrote {files[0]}: {len(names)} clips packed, {export.num_frames} frames"
                        + (f", features {args.features} with statistics" if args.features else ""))
             return 0
+        export.statistics  # computed (and checked) before anything is made
         if folder is not None:
-            folder.mkdir()
+            _make_folder(folder)
         for (name, arrays), f in zip(export.per_clip(), files):
             with _locked(f, args):
                 write_npz(f, arrays, what=f"clip {name!r}")
@@ -270,7 +283,7 @@ def cmd_export(args) -> int:
         names = [all_names[r] for r in select_rows(db, None if args.all else args.clips, skeletons)]
         files, folder = _export_targets(args, names, ".bvh", single_file=len(names) == 1 and not args.all)
         if folder is not None:
-            folder.mkdir()
+            _make_folder(folder)
         frames = 0
         for b in range(0, len(names), 64):
             for m, f in zip(db.read_many(names[b:b + 64], dtype=torch.float64), files[b:b + 64]):

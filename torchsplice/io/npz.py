@@ -213,7 +213,12 @@ class NpzExport:
         if self.features is None:
             return {}
         if self._stats is None:
-            self._stats = self._ds.statistics(self.frame_arrays, batch_frames=self.batch_frames)
+            stats = self._ds.statistics(self.frame_arrays, batch_frames=self.batch_frames)
+            if not all(bool(torch.isfinite(s.mean).all() and torch.isfinite(s.std).all()) for s in stats.values()):
+                for _ in self._items():  # find the clip to blame: raises naming it
+                    pass
+                raise TorchspliceError(f"{self.database}: the feature statistics are not finite; nothing written")
+            self._stats = stats
         return self._stats
 
     def _stat_arrays(self) -> dict[str, np.ndarray]:
@@ -235,8 +240,19 @@ class NpzExport:
             while hi < len(self._order) and (hi == lo or frames + int(self._ds._len[self._order[hi]]) <= self.batch_frames):
                 frames += int(self._ds._len[self._order[hi]])
                 hi += 1
-            yield from self._ds.__getitems__(self._order[lo:hi])
+            for item in self._ds.__getitems__(self._order[lo:hi]):
+                self._check_finite(item)
+                yield item
             lo = hi
+
+    def _check_finite(self, item: dict) -> None:
+        """A one-line error naming the clip, the array and the frame of a value that is not finite."""
+        for f in self.frame_arrays:
+            x = item[f]
+            bad = ~torch.isfinite(x.reshape(x.shape[0], -1)).all(dim=1)
+            if bool(bad.any()):
+                raise TorchspliceError(f"{self.database}: clip {item['name']!r}: non-finite value in {f} at frame "
+                                       f"{int(bad.nonzero()[0])}; nothing written")
 
     def _skeleton_arrays(self, k: int) -> dict[str, np.ndarray]:
         sk, a = self._ds.skeletons[k], self._attrs[k]
