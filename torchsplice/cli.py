@@ -310,19 +310,9 @@ def _db_spec(db, skeleton_id: int, skeleton):
 
 def _device(name: str | None):
     """A torch device name checked up front: one clear line instead of a traceback later."""
-    if name is None:
-        return None
-    import torch
+    from .job.config import check_device
 
-    try:
-        dev = torch.device(name)
-    except (RuntimeError, ValueError):
-        raise TorchspliceError(f"unknown device {name!r} (use cpu, cuda or cuda:N)") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise TorchspliceError(f"device {name!r} asked for, but this torch sees no CUDA device")
-    if dev.type not in ("cpu", "cuda"):
-        raise TorchspliceError(f"device {name!r} is not supported (use cpu or cuda)")
-    return name
+    return check_device(name)
 
 
 def _positive_int(text: str) -> int:

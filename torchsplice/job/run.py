@@ -302,7 +302,7 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
     from .config import job_config, parse_shard
 
     config = job_config(database, output, **options)
-    if isinstance(shard, str):
+    if shard is not None:
         shard = parse_shard(shard)
     job = SpliceJob(config, progress=progress, restart=restart, overwrite=overwrite,
                     command=command or "torchsplice.job.splice_all (Python API)", shard=tuple(shard) if shard else None)
