@@ -106,3 +106,32 @@ def test_a_folder_that_cannot_be_made_is_one_line(tmp_path, capsys, monkeypatch)
         rc = main(["export", str(db), "--all", "--format", fmt, "-o", str(tmp_path / "clips")])
         err = capsys.readouterr().err
         assert rc == 2 and err.count("\n") == 1 and "permission denied" in err and "clips" in err, err
+
+
+@pytest.fixture(scope="module")
+def spliced(tmp_path_factory):
+    d = tmp_path_factory.mktemp("spliced")
+    assert main(["sample", "-o", str(d / "sample.h5"), "-q"]) == 0
+    assert main(["splice-all", str(d / "sample.h5"), "-o", str(d / "sp.h5"), "--workers", "1", "-q",
+                 "--locomotions", "walk_curve", "--actions", "carry_box,wave"]) == 0
+    (d / "notes.txt").write_text("not a database")
+    return d
+
+
+@pytest.mark.parametrize("command", ["evaluate", "render"])
+def test_sources_that_are_not_databases_are_one_line(spliced, tmp_path, capsys, command):
+    out = tmp_path / ("r.md" if command == "evaluate" else "r.png")
+    clips = [] if command == "evaluate" else ["walk_curve+carry_box"]
+    for bad, why in ((spliced / "notes.txt", "not an HDF5 file"), (tmp_path / "nope.h5", "no such file")):
+        rc = main([command, str(spliced / "sp.h5"), *clips, "-o", str(out), "--sources", str(bad), "--no-pictures"][
+                  :None if command == "evaluate" else -1])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and why in err and str(bad) in err, err
+        assert not out.exists()
+
+
+def test_evaluate_takes_its_sources(spliced, tmp_path, capsys):
+    out = tmp_path / "r.md"
+    rc = main(["evaluate", str(spliced / "sp.h5"), "-o", str(out), "--sources", str(spliced / "sample.h5"),
+               "--no-pictures", "-q"])
+    assert rc == 0 and out.exists()

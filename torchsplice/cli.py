@@ -496,7 +496,7 @@ def cmd_view(args) -> int:
 def cmd_evaluate(args) -> int:
     from .evaluation.report import evaluate_database
 
-    out = _output(args, "report", inputs=[args.database] + ([args.sources] if args.sources else []))
+    out = _output(args, "report", inputs=[args.database] + list(args.sources or []))
     with _locked(out, args):
         agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
                                 max_rows=args.max_rows)
