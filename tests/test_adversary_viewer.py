@@ -135,3 +135,27 @@ def test_evaluate_takes_its_sources(spliced, tmp_path, capsys):
     rc = main(["evaluate", str(spliced / "sp.h5"), "-o", str(out), "--sources", str(spliced / "sample.h5"),
                "--no-pictures", "-q"])
     assert rc == 0 and out.exists()
+
+
+def test_dataset_statistics_refuse_values_that_are_not_finite_naming_the_clip(tmp_path, spliced):
+    from torchsplice.core.errors import TorchspliceError
+    from torchsplice.data import MotionDataset
+
+    db = _db(tmp_path / "nan.h5", nan_clip=True)
+    with pytest.raises(TorchspliceError, match=r"clip 'nanclip': non-finite value in rotations at frame 5"):
+        MotionDataset(db, features=("rotations",)).statistics()
+    s = MotionDataset(db, clips=EVIL, features=("rotations",)).statistics()  # the finite clips still do
+    assert torch_finite(s["rotations"].mean)
+    out = tmp_path / "copied.h5"  # sources copied in: their action_frame is NaN ("not given")
+    assert main(["splice-all", str(spliced / "sample.h5"), "-o", str(out), "--workers", "1", "-q", "--copy-sources",
+                 "--locomotions", "walk_curve", "--actions", "carry_box"]) == 0
+    with pytest.raises(TorchspliceError, match=r"clip 'walk_curve': non-finite value in action_frame"):
+        MotionDataset(out).statistics(("action_frame",))
+    s = MotionDataset(out, where={"role": "spliced"}).statistics(("action_frame",))
+    assert torch_finite(s["action_frame"].mean)
+
+
+def torch_finite(x) -> bool:
+    import torch
+
+    return bool(torch.isfinite(x).all())
