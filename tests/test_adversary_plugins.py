@@ -35,9 +35,14 @@ def _short_times(inp):
 
 @pytest.fixture(scope="module")
 def methods():
+    from torchsplice.splice import registry
+
     register_method(Method("adv_nan", "returns NaN", _nan_run))
     register_method(Method("adv_raises", "raises", _raising_run))
     register_method(Method("adv_times", "times of the wrong shape", _short_times))
+    yield
+    for n in ("adv_nan", "adv_raises", "adv_times"):
+        registry._REGISTRY.pop(n, None)
 
 
 @pytest.fixture(scope="module")
@@ -73,6 +78,9 @@ def test_splice_command_refuses_a_misbehaving_method_in_one_line(methods, sample
 
 
 def test_registering_a_builtin_name_says_so_without_an_install_hint(tmp_path, monkeypatch, capsys):
+    from torchsplice.splice.registry import available_methods
+
+    assert available_methods()[:3] == ("splice", "naive", "cpmc")  # built-ins first, whoever registered first
     (tmp_path / "adv_dup.py").write_text(
         "from torchsplice.splice.registry import Method, register_method\n"
         "register_method(Method('splice', 'a second splice', lambda inp: None))\n")
@@ -81,3 +89,30 @@ def test_registering_a_builtin_name_says_so_without_an_install_hint(tmp_path, mo
     err = capsys.readouterr().err
     assert rc == 2 and "'splice' is already registered" in err and "adv_dup" in err
     assert "PYTHONPATH" not in err  # it was imported fine: the name is the problem
+
+
+class _EntryPoint:
+    """A stand-in for an installed package's entry point of the group torchsplice.methods."""
+
+    def __init__(self, obj):
+        self.name, self.value, self.obj = "adv_ep", "adv_pkg.methods:setup", obj
+
+    def load(self):
+        return self.obj
+
+
+def _boom():
+    raise ValueError("setup failed")
+
+
+@pytest.mark.parametrize("obj, why", [(_boom, "ValueError: setup failed"), (42, "neither a Method nor a function")])
+def test_an_entry_point_that_fails_is_one_line(monkeypatch, capsys, obj, why):
+    import importlib.metadata
+
+    from torchsplice.splice import registry
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group=None: [_EntryPoint(obj)])
+    monkeypatch.setitem(registry._LOADED, "entry_points", False)
+    rc = main(["info", "--help"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "adv_ep" in err and why in err, err

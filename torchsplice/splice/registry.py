@@ -35,6 +35,7 @@ from __future__ import annotations
 import importlib
 import os
 import re
+import types
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
@@ -217,6 +218,7 @@ def register_method(method: Method, replace_existing: bool = False) -> Method:
     already taken by another method (unless ``replace_existing``) or a missing function.
     Registering the same method again (a module imported twice) is harmless.
     """
+    _ensure_loaded_builtins()  # the built-ins come first, whoever registers first
     if not isinstance(method, Method):
         raise TorchspliceError(f"register_method takes a torchsplice.splice.registry.Method, got {type(method).__name__}")
     if not _NAME.match(method.name or ""):
@@ -242,15 +244,19 @@ def _ensure_loaded() -> None:
         from importlib.metadata import entry_points
 
         for ep in entry_points(group=ENTRY_POINT_GROUP):
+            where = f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})"
             try:
                 obj = ep.load()
+                if isinstance(obj, Method):
+                    register_method(obj)
+                elif callable(obj):
+                    obj()
+                elif not isinstance(obj, types.ModuleType):  # a module registered its methods on import
+                    raise TorchspliceError(f"names a {type(obj).__name__}, neither a Method nor a function")
+            except TorchspliceError as exc:
+                raise TorchspliceError(f"{where}: {exc}") from None
             except Exception as exc:
-                raise TorchspliceError(f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP}) "
-                                       f"cannot be loaded: {type(exc).__name__}: {exc}") from None
-            if isinstance(obj, Method):
-                register_method(obj)
-            elif callable(obj):
-                obj()
+                raise TorchspliceError(f"{where} cannot be loaded: {type(exc).__name__}: {exc}") from None
             _remember(ep.value.split(":")[0])
     env = os.environ.get(PLUGINS_ENV, "")
     if env != _LOADED["env"]:
