@@ -50,3 +50,23 @@ def test_the_command_line_still_builds_its_configuration(sample_db, tmp_path):
     c = job_config(sample_db, tmp_path / "o.h5", methods="splice,naive", workers=2, max_length_ratio=3,
                    memory_budget_mb=512, batch_pairs=4, max_run=2, copy_sources=True)
     assert c.methods == ("splice", "naive") and c.max_length_ratio == 3 and c.workers == 2
+
+
+def test_skip_reasons_name_options_as_the_caller_does(sample_db, tmp_path, capsys):
+    summary = splice_all(sample_db, tmp_path / "api.h5", workers=1, locomotions="walk_curve,jog",
+                         actions="carry_box", max_length_ratio=1.1)
+    text = "\n".join(summary.lines())
+    assert "more than max_length_ratio 1.1" in text and "--" not in text
+    assert main(["splice-all", str(sample_db), "-o", str(tmp_path / "cli.h5"), "--workers", "1",
+                 "--locomotions", "walk_curve,jog", "--actions", "carry_box", "--max-length-ratio", "1.1"]) == 0
+    assert "more than --max-length-ratio 1.1" in capsys.readouterr().out
+
+
+def test_viewer_notes_name_options_as_the_caller_does(sample_db, tmp_path, capsys):
+    from torchsplice.viz.viewer import write_viewer
+
+    write_viewer(sample_db, tmp_path / "a.html", max_clips=2)
+    err = capsys.readouterr().err
+    assert "(max_clips 2)" in err and "--" not in err
+    assert main(["view", str(sample_db), "-o", str(tmp_path / "b.html"), "--max-clips", "2"]) == 0
+    assert "(--max-clips 2)" in capsys.readouterr().err

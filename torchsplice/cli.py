@@ -29,6 +29,11 @@ _CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS)
 _FLAGS = {"overwrite": "--force"}  # library option -> flag, where it is not --the-same-name
 
 
+def _flag(option: str) -> str:
+    """A library option's command-line flag (``max_length_ratio`` -> ``--max-length-ratio``)."""
+    return _FLAGS.get(option, "--" + option.replace("_", "-"))
+
+
 def cli_message(exc: BaseException) -> str:
     """An error's message as the command line says it: the options it names as flags
     (``{max_length_ratio}`` -> ``--max-length-ratio``) and its hint in flag terms."""
@@ -36,7 +41,7 @@ def cli_message(exc: BaseException) -> str:
 
     if not isinstance(exc, TorchspliceError) or not hasattr(exc, "message"):
         return str(exc)
-    text = render_message(exc.message, exc.options, lambda o: _FLAGS.get(o, "--" + o.replace("_", "-")))
+    text = render_message(exc.message, exc.options, _flag)
     hint = _CLI_HINTS.get(exc.hint) or HINTS.get(exc.hint) if exc.hint else None
     return f"{text} ({hint})" if hint else text
 
@@ -483,12 +488,15 @@ def cmd_render(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from .viz.viewer import write_viewer
+    from .viz.viewer import viewer_notes, write_viewer
 
     out = _output(args, "viewer", inputs=[args.database] + list(args.sources or []))
     with _locked(out, args):
         got = write_viewer(args.database, out, clips=args.clips, sources=args.sources, max_clips=args.max_clips,
-                           quiet=args.quiet)
+                           quiet=True)
+    if not args.quiet:
+        for line in viewer_notes(got, args.database, args.max_clips, _flag):
+            print(line, file=sys.stderr)
     _say(args, f"wrote {out}: {len(got.names)} clip{'s' if len(got.names) != 1 else ''}, {got.size / 1e6:.1f} MB")
     return 0
 
@@ -544,7 +552,7 @@ def cmd_splice_all(args) -> int:
               "run the same command again to resume", file=sys.stderr)
         return _stop_code(exc)
     if not args.quiet:
-        print("\n".join(summary.lines()))
+        print("\n".join(summary.lines(_flag)))
     return 0
 
 
@@ -571,7 +579,7 @@ def cmd_merge(args) -> int:
     summary = merge_job(Path(args.output), overwrite=args.force, progress=not args.quiet,
                         command="torchsplice " + shlex.join(args.argv))
     if not args.quiet:
-        print("\n".join(summary.lines()))
+        print("\n".join(summary.lines(_flag)))
     return 0
 
 

@@ -368,14 +368,14 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
     if c.max_length_ratio is not None:
         dl, da = float(tl["length"][i] / tl["fps"][i]), float(ta["length"][j] / ta["fps"][j])
         if max(dl, da) > c.max_length_ratio * min(dl, da):
-            return f"lengths differ by more than --max-length-ratio {c.max_length_ratio:g}"
+            return f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"
     for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
         check = checks.get(key)
         if check is not None and not check.finite:
             return f"{name} {check.reason}"
     check = checks.get(clip_key("L", i, same))
     if check is not None and not check.locomoting and not c.force_locomotion:
-        return f"{tl['name'][i]} does not locomote ({check.reason}; --force-locomotion splices it)"
+        return f"{tl['name'][i]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
     standing = _mode(c, checks, clip_key("A", j, same), method) == "standing"
     if get_method(method).needs_reference and refs.get(j) is None and not standing:
         return f"no plain-locomotion reference for {ta['name'][j]} ({method})"

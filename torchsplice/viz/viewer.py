@@ -46,7 +46,7 @@ from ..specs import DatasetSpec
 from .render import _canonical_axes, _check_up_axis, _head, figure_points
 from .sources import SourceClips, clip_spec, source_databases
 
-__all__ = ["write_viewer", "build_viewer", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS"]
+__all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS"]
 
 DEFAULT_MAX_CLIPS = 100
 """Clips in a viewer when none are named (``--max-clips``): about 8 MB for clips of 10 s."""
@@ -351,12 +351,20 @@ def write_viewer(database, output, clips=None, sources=None, max_clips: int = DE
     with atomic_path(output) as tmp:  # an OSError becomes one line naming the file
         Path(tmp).write_text(html, encoding="utf-8")
     if not quiet:
-        if contents.cut:
-            print(f"note: the viewer holds {len(contents.names)} clips (--max-clips {max_clips}) of the "
-                  f"{contents.total} in {Path(database).name}; name clips or raise --max-clips for others",
-                  file=sys.stderr)
-        if contents.missing:
-            shown = ", ".join(contents.missing[:5]) + (" ..." if len(contents.missing) > 5 else "")
-            print(f"note: {len(contents.missing)} source clips are in no database ({shown}); pass them with --sources",
-                  file=sys.stderr)
+        for line in viewer_notes(contents, database, max_clips):
+            print(line, file=sys.stderr)
     return contents
+
+
+def viewer_notes(contents: ViewerContents, database, max_clips: int, option_name=lambda o: o) -> list[str]:
+    """The notes on what a page left out: ``max_clips`` cut the selection, source clips that no
+    database holds. ``option_name(option)`` writes the options named (the command line: flags)."""
+    out = []
+    if contents.cut:
+        out.append(f"note: the viewer holds {len(contents.names)} clips ({option_name('max_clips')} {max_clips}) of the "
+                   f"{contents.total} in {Path(database).name}; name clips or raise {option_name('max_clips')} for others")
+    if contents.missing:
+        shown = ", ".join(contents.missing[:5]) + (" ..." if len(contents.missing) > 5 else "")
+        out.append(f"note: {len(contents.missing)} source clips are in no database ({shown}); pass them with "
+                   f"{option_name('sources')}")
+    return out
