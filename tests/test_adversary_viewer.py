@@ -159,3 +159,33 @@ def torch_finite(x) -> bool:
     import torch
 
     return bool(torch.isfinite(x).all())
+
+
+@pytest.mark.parametrize("fmt", ["bvh", "npz"])
+def test_an_export_of_several_clips_is_all_or_nothing(tmp_path, capsys, monkeypatch, fmt):
+    """A clip that cannot be written (not finite), or an interrupt half-way, leaves no file of the
+    export and no folder: the same command then runs again without --force."""
+    db = _db(tmp_path / "nan.h5", nan_clip=True)
+    out = tmp_path / "clips"
+    rc = main(["export", str(db), "--all", "--format", fmt, "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "'nanclip'" in err and not out.exists(), err
+    import torchsplice.io.bvh as bvh
+    import torchsplice.io.npz as npz
+
+    calls = []
+    real = bvh.write_bvh if fmt == "bvh" else npz.write_npz
+
+    def interrupted(*a, **k):
+        calls.append(1)
+        if len(calls) % 3 == 0:  # the third file of each run
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(bvh if fmt == "bvh" else npz, "write_bvh" if fmt == "bvh" else "write_npz", interrupted)
+    args = ["export", str(db), *EVIL, "--format", fmt, "-o", str(out)]
+    assert main(args) == 130 and not out.exists()
+    out.mkdir()
+    assert main(args) == 130 and list(out.iterdir()) == []  # an existing folder stays, empty
+    monkeypatch.undo()
+    assert main(args + ["-q"]) == 0 and len(list(out.iterdir())) == len(EVIL)

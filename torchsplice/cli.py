@@ -241,6 +241,48 @@ def _make_folder(folder: Path) -> None:
         raise TorchspliceError(f"{folder}: is a file; several clips go to a folder, one file each")
 
 
+@contextlib.contextmanager
+def _all_or_nothing(args, folder: Path | None):
+    """Write an export's files all or none: yields ``stage(file) -> path`` to write each one to
+    (a hidden name beside it, with this process's id); at the end every staged file is renamed
+    to its name. On an error or an interrupt the staged files go, with the ``folder`` made for
+    them (``None``: none to make), and no file of the export appears, so the same command runs
+    again as it was. The output (``-o``: a file or the folder) is locked meanwhile: a second
+    export to it is refused at once."""
+    import os
+
+    from .io.atomic import os_error_message
+    from .io.lock import output_lock
+
+    staged: dict[Path, Path] = {}
+
+    def stage(f: Path) -> Path:
+        staged[f] = f.with_name(f".{f.name}.staged-{os.getpid()}")
+        return staged[f]
+
+    with output_lock(Path(args.output), "torchsplice " + shlex.join(getattr(args, "argv", []))):
+        if folder is not None:
+            _make_folder(folder)
+        try:
+            yield stage
+            taken = [f for f in staged if f.exists()] if not args.force else []
+            if taken:  # written meanwhile by another process
+                raise OutputExistsError(f"{taken[0]}: already exists")
+            for f, tmp in staged.items():
+                try:
+                    os.replace(tmp, f)
+                except OSError as exc:
+                    raise TorchspliceError(os_error_message(f, exc)) from None
+        except BaseException:
+            for tmp in staged.values():
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+            if folder is not None:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()  # made for this export, and empty again
+            raise
+
+
 def cmd_export(args) -> int:
     import torch
 
@@ -274,11 +316,9 @@ def cmd_export(args) -> int:
                        + (f", features {args.features} with statistics" if args.features else ""))
             return 0
         export.statistics  # computed (and checked) before anything is made
-        if folder is not None:
-            _make_folder(folder)
-        for (name, arrays), f in zip(export.per_clip(), files):
-            with _locked(f, args):
-                write_npz(f, arrays, what=f"clip {name!r}")
+        with _all_or_nothing(args, folder) as stage:
+            for (name, arrays), f in zip(export.per_clip(), files):
+                write_npz(stage(f), arrays, what=f"clip {name!r}")
         where = files[0] if len(files) == 1 else Path(args.output)
         _say(args, f"wrote {where}: {len(names)} clip{'s' if len(names) != 1 else ''} as .npz, {export.num_frames} frames"
                    + (f", features {args.features} with statistics over all of them" if args.features else ""))
@@ -287,14 +327,12 @@ def cmd_export(args) -> int:
         all_names = db.names
         names = [all_names[r] for r in select_rows(db, None if args.all else args.clips, skeletons)]
         files, folder = _export_targets(args, names, ".bvh", single_file=len(names) == 1 and not args.all)
-        if folder is not None:
-            _make_folder(folder)
         frames = 0
-        for b in range(0, len(names), 64):
-            for m, f in zip(db.read_many(names[b:b + 64], dtype=torch.float64), files[b:b + 64]):
-                with _locked(f, args):
-                    write_bvh(m, f)
-                frames += m.num_frames
+        with _all_or_nothing(args, folder) as stage:
+            for b in range(0, len(names), 64):
+                for m, f in zip(db.read_many(names[b:b + 64], dtype=torch.float64), files[b:b + 64]):
+                    write_bvh(m, stage(f))
+                    frames += m.num_frames
     if len(names) == 1:
         _say(args, f"wrote {files[0]}: {m.name}, {m.num_frames} frames at {m.fps:g} fps")
     else:
