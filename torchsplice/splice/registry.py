@@ -202,7 +202,8 @@ def run_checked(method: Method, fn: Callable, inp: MethodInput, *args):
         ok = torch.isfinite(x).reshape(B, T, -1).all(-1) | ~valid
         if not bool(ok.all()):
             b, t = (int(v) for v in (~ok).nonzero()[0])
-            raise MethodFailedError(f"{who} returned {what} that are not finite (pair {b}, frame {t})")
+            at = f"pair {b} of {B}, frame {t}" if B > 1 else f"frame {t}"
+            raise MethodFailedError(f"{who} returned {what} that are not finite ({at})")
     return got
 
 
