@@ -39,6 +39,13 @@ def test_bad_option_types_are_one_line_naming_the_option(sample_db, tmp_path, op
     assert not (tmp_path / "out.h5").exists() and not (tmp_path / ".out.h5.parts").exists()
 
 
+@pytest.mark.parametrize("database, output", [(123, "o.h5"), ("sample.h5", None)])
+def test_paths_of_the_wrong_type_are_one_line(tmp_path, monkeypatch, database, output):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(TorchspliceError, match="must be a path"):
+        splice_all(database, output, workers=1)
+
+
 @pytest.mark.parametrize("shard", [(5, 2), (0, 3), ("1", 2), (1, 2, 3), 7])
 def test_bad_shards_are_refused(sample_db, tmp_path, shard):
     with pytest.raises(TorchspliceError, match="shard"):

@@ -297,6 +297,9 @@ def job_config(database, output, **options) -> JobConfig:
             raise TorchspliceError(f"{{acting_limbs}} must be None, 'auto', 'none', 'both' or arm names, got {limbs!r}",
                                    options=("acting_limbs",))
         options["acting_limbs"] = tuple(limbs)
+    for name, v in (("database", database), ("output", output)):
+        if not isinstance(v, (str, os.PathLike)):
+            raise TorchspliceError(f"{name} must be a path, got {v!r}")
     return JobConfig(database=Path(database), output=Path(output), **options).checked()
 
 
