@@ -189,3 +189,16 @@ def test_an_export_of_several_clips_is_all_or_nothing(tmp_path, capsys, monkeypa
     assert main(args) == 130 and list(out.iterdir()) == []  # an existing folder stays, empty
     monkeypatch.undo()
     assert main(args + ["-q"]) == 0 and len(list(out.iterdir())) == len(EVIL)
+
+
+def test_read_npz_of_files_that_are_not_exports_is_one_line(tmp_path):
+    from torchsplice.core.errors import TorchspliceError
+    from torchsplice.io.npz import read_npz
+
+    np.savez(tmp_path / "pickled.npz", a=np.array([{"x": 1}], dtype=object))
+    np.save(tmp_path / "array.npy", np.zeros(3))
+    (tmp_path / "text.npz").write_text("not a zip")
+    for name, why in (("pickled.npz", "not a torchsplice .npz export"), ("array.npy", "not a torchsplice .npz export"),
+                      ("text.npz", "not a torchsplice .npz export"), ("missing.npz", "no such file")):
+        with pytest.raises(TorchspliceError, match=why):
+            read_npz(tmp_path / name)

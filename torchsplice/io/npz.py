@@ -332,8 +332,16 @@ def write_npz(path, arrays: dict[str, np.ndarray], what: str = "") -> None:
 def read_npz(path) -> dict:
     """An exported ``.npz`` as a dict of numpy arrays; strings as ``str``, labels decoded from JSON
     (a dict, or for a packed file a list of dicts), scalars as Python numbers."""
-    with np.load(path, allow_pickle=False) as z:
-        out = {k: z[k] for k in z.files}
+    if not Path(path).is_file():
+        raise TorchspliceError(f"{path}: no such file")
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # a .npy array
+            raise ValueError("a single array, not an .npz archive")
+        with z:
+            out = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError) as exc:  # not a .npz, or one with pickled objects (never loaded)
+        raise TorchspliceError(f"{path}: not a torchsplice .npz export ({type(exc).__name__}: {exc})") from None
     if str(out.get("format", "")) != NPZ_FORMAT:
         raise TorchspliceError(f"{path}: not a torchsplice .npz export (no format {NPZ_FORMAT!r})")
     for k, v in list(out.items()):
