@@ -326,7 +326,7 @@ def test_values_that_are_not_finite_are_refused(db, bandai_names, tmp_path, caps
         f[f"skeletons/{k}/rotations"][int(f["clips/start"][row]) + 5, 3, 0] = np.nan
     rc, _, err = run(capsys, "export", bad, bandai_names[0], "-o", tmp_path / "x.npz")
     line = error_line(err)
-    assert rc == 2 and "non-finite" in line and bandai_names[0] in line and "row 5" in line
+    assert rc == 2 and "non-finite" in line and bandai_names[0] in line and "frame 5" in line
     assert not (tmp_path / "x.npz").exists() and leftovers(tmp_path) == []
 
 

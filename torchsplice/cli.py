@@ -29,6 +29,11 @@ _CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS)
 _FLAGS = {"overwrite": "--force"}  # library option -> flag, where it is not --the-same-name
 
 
+def _flag(option: str) -> str:
+    """A library option's command-line flag (``max_length_ratio`` -> ``--max-length-ratio``)."""
+    return _FLAGS.get(option, "--" + option.replace("_", "-"))
+
+
 def cli_message(exc: BaseException) -> str:
     """An error's message as the command line says it: the options it names as flags
     (``{max_length_ratio}`` -> ``--max-length-ratio``) and its hint in flag terms."""
@@ -36,7 +41,7 @@ def cli_message(exc: BaseException) -> str:
 
     if not isinstance(exc, TorchspliceError) or not hasattr(exc, "message"):
         return str(exc)
-    text = render_message(exc.message, exc.options, lambda o: _FLAGS.get(o, "--" + o.replace("_", "-")))
+    text = render_message(exc.message, exc.options, _flag)
     hint = _CLI_HINTS.get(exc.hint) or HINTS.get(exc.hint) if exc.hint else None
     return f"{text} ({hint})" if hint else text
 
@@ -203,7 +208,7 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
 
     kind = "npz" if suffix == ".npz" else "bvh"
     out = Path(args.output)
-    if single_file and not out.is_dir():
+    if single_file and (not out.is_dir() or getattr(args, "packed", False)):  # a packed file is never a folder
         return [_output(args, kind, inputs=[args.database])], None
     if out.suffix.lower() in (".bvh", ".npz") and not out.is_dir():
         raise TorchspliceError(f"{out}: {len(names)} clips go to a folder, one file each: give -o a folder "
@@ -222,6 +227,60 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
             check_output(f, (suffix,), _OUTPUTS[kind][1], inputs=[args.database], overwrite=args.force)
         files.append(f)
     return files, None if out.is_dir() else out
+
+
+def _make_folder(folder: Path) -> None:
+    """Create the output folder of an export; an OS error (permission, full disk) is one line."""
+    from .io.atomic import os_error_message
+
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise TorchspliceError(os_error_message(folder, exc)) from None
+    if not folder.is_dir():
+        raise TorchspliceError(f"{folder}: is a file; several clips go to a folder, one file each")
+
+
+@contextlib.contextmanager
+def _all_or_nothing(args, folder: Path | None):
+    """Write an export's files all or none: yields ``stage(file) -> path`` to write each one to
+    (a hidden name beside it, with this process's id); at the end every staged file is renamed
+    to its name. On an error or an interrupt the staged files go, with the ``folder`` made for
+    them (``None``: none to make), and no file of the export appears, so the same command runs
+    again as it was. The output (``-o``: a file or the folder) is locked meanwhile: a second
+    export to it is refused at once."""
+    import os
+
+    from .io.atomic import os_error_message
+    from .io.lock import output_lock
+
+    staged: dict[Path, Path] = {}
+
+    def stage(f: Path) -> Path:
+        staged[f] = f.with_name(f".{f.name}.staged-{os.getpid()}")
+        return staged[f]
+
+    with output_lock(Path(args.output), "torchsplice " + shlex.join(getattr(args, "argv", []))):
+        if folder is not None:
+            _make_folder(folder)
+        try:
+            yield stage
+            taken = [f for f in staged if f.exists()] if not args.force else []
+            if taken:  # written meanwhile by another process
+                raise OutputExistsError(f"{taken[0]}: already exists")
+            for f, tmp in staged.items():
+                try:
+                    os.replace(tmp, f)
+                except OSError as exc:
+                    raise TorchspliceError(os_error_message(f, exc)) from None
+        except BaseException:
+            for tmp in staged.values():
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+            if folder is not None:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()  # made for this export, and empty again
+            raise
 
 
 def cmd_export(args) -> int:
@@ -256,11 +315,10 @@ def cmd_export(args) -> int:
             _say(args, f"wrote {files[0]}: {len(names)} clips packed, {export.num_frames} frames"
                        + (f", features {args.features} with statistics" if args.features else ""))
             return 0
-        if folder is not None:
-            folder.mkdir()
-        for (name, arrays), f in zip(export.per_clip(), files):
-            with _locked(f, args):
-                write_npz(f, arrays, what=f"clip {name!r}")
+        export.statistics  # computed (and checked) before anything is made
+        with _all_or_nothing(args, folder) as stage:
+            for (name, arrays), f in zip(export.per_clip(), files):
+                write_npz(stage(f), arrays, what=f"clip {name!r}")
         where = files[0] if len(files) == 1 else Path(args.output)
         _say(args, f"wrote {where}: {len(names)} clip{'s' if len(names) != 1 else ''} as .npz, {export.num_frames} frames"
                    + (f", features {args.features} with statistics over all of them" if args.features else ""))
@@ -269,14 +327,12 @@ def cmd_export(args) -> int:
         all_names = db.names
         names = [all_names[r] for r in select_rows(db, None if args.all else args.clips, skeletons)]
         files, folder = _export_targets(args, names, ".bvh", single_file=len(names) == 1 and not args.all)
-        if folder is not None:
-            folder.mkdir()
         frames = 0
-        for b in range(0, len(names), 64):
-            for m, f in zip(db.read_many(names[b:b + 64], dtype=torch.float64), files[b:b + 64]):
-                with _locked(f, args):
-                    write_bvh(m, f)
-                frames += m.num_frames
+        with _all_or_nothing(args, folder) as stage:
+            for b in range(0, len(names), 64):
+                for m, f in zip(db.read_many(names[b:b + 64], dtype=torch.float64), files[b:b + 64]):
+                    write_bvh(m, stage(f))
+                    frames += m.num_frames
     if len(names) == 1:
         _say(args, f"wrote {files[0]}: {m.name}, {m.num_frames} frames at {m.fps:g} fps")
     else:
@@ -297,19 +353,9 @@ def _db_spec(db, skeleton_id: int, skeleton):
 
 def _device(name: str | None):
     """A torch device name checked up front: one clear line instead of a traceback later."""
-    if name is None:
-        return None
-    import torch
+    from .job.config import check_device
 
-    try:
-        dev = torch.device(name)
-    except (RuntimeError, ValueError):
-        raise TorchspliceError(f"unknown device {name!r} (use cpu, cuda or cuda:N)") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise TorchspliceError(f"device {name!r} asked for, but this torch sees no CUDA device")
-    if dev.type not in ("cpu", "cuda"):
-        raise TorchspliceError(f"device {name!r} is not supported (use cpu or cuda)")
-    return name
+    return check_device(name)
 
 
 def _positive_int(text: str) -> int:
@@ -494,12 +540,15 @@ def cmd_render(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from .viz.viewer import write_viewer
+    from .viz.viewer import viewer_notes, write_viewer
 
     out = _output(args, "viewer", inputs=[args.database] + list(args.sources or []))
     with _locked(out, args):
         got = write_viewer(args.database, out, clips=args.clips, sources=args.sources, max_clips=args.max_clips,
-                           quiet=args.quiet)
+                           quiet=True)
+    if not args.quiet:
+        for line in viewer_notes(got, args.database, args.max_clips, _flag):
+            print(line, file=sys.stderr)
     _say(args, f"wrote {out}: {len(got.names)} clip{'s' if len(got.names) != 1 else ''}, {got.size / 1e6:.1f} MB")
     return 0
 
@@ -507,7 +556,7 @@ def cmd_view(args) -> int:
 def cmd_evaluate(args) -> int:
     from .evaluation.report import evaluate_database
 
-    out = _output(args, "report", inputs=[args.database] + ([args.sources] if args.sources else []))
+    out = _output(args, "report", inputs=[args.database] + list(args.sources or []))
     with _locked(out, args):
         agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
                                 max_rows=args.max_rows)
@@ -555,7 +604,7 @@ def cmd_splice_all(args) -> int:
               "run the same command again to resume", file=sys.stderr)
         return _stop_code(exc)
     if not args.quiet:
-        print("\n".join(summary.lines()))
+        print("\n".join(summary.lines(_flag)))
     return 0
 
 
@@ -582,7 +631,7 @@ def cmd_merge(args) -> int:
     summary = merge_job(Path(args.output), overwrite=args.force, progress=not args.quiet,
                         command="torchsplice " + shlex.join(args.argv))
     if not args.quiet:
-        print("\n".join(summary.lines()))
+        print("\n".join(summary.lines(_flag)))
     return 0
 
 

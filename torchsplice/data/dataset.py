@@ -644,7 +644,9 @@ class MotionDataset(Dataset):
         ``joint_Root``) has ``std == 0``.
 
         The selected clips must share one skeleton topology and one unit (means of different
-        joints or units mean nothing): otherwise :class:`DatasetError` says how to filter.
+        joints or units mean nothing), and their values must be finite (a per-frame column is
+        NaN on clips that do not give it, such as the sources copied into a spliced database):
+        otherwise :class:`DatasetError` names the skeletons or the clip, and says how to filter.
         """
         names = [f for f in (self.features if features is None else ([features] if isinstance(features, str) else features))
                  if f not in _NOT_PER_FRAME]
@@ -686,6 +688,14 @@ class MotionDataset(Dataset):
             n = count + n_b
             for f in names:
                 x = torch.cat([g[f] for g in got]).to(torch.float64)
+                bad = ~torch.isfinite(x.reshape(x.shape[0], -1)).all(dim=1)
+                if bool(bad.any()):  # a NaN would poison every mean it enters: name the clip instead
+                    row = int(bad.nonzero()[0])
+                    ends = np.cumsum([p[2] for p in parts])
+                    k = int(np.searchsorted(ends, row, side="right"))
+                    frame = row - (int(ends[k - 1]) if k else 0)
+                    raise DatasetError(f"{self.path}: clip {ds.names[parts[k][0]]!r}: non-finite value in {f} at frame "
+                                       f"{frame}; statistics need finite values (leave the clip out with clips= or where=)")
                 mb = x.mean(0)
                 m2b = ((x - mb) ** 2).sum(0)
                 if count == 0:

@@ -161,10 +161,12 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     from .atomic import check_output
     from .bvh import read_bvh
     from .database import MotionDatabase
-    from .units import convert_units, unit_factor
+    from .units import CONVERTIBLE_UNITS, UNITS, convert_units
 
-    if units is not None:
-        unit_factor(units, units)  # a known unit, checked before any work
+    if units is not None and units not in CONVERTIBLE_UNITS:  # a known unit, checked before any work
+        why = f"unknown length unit {units!r}" if units not in UNITS else f"cannot convert to {units!r} units"
+        raise TorchspliceError(f"{{units}}: {why}; name a length unit ({', '.join(CONVERTIBLE_UNITS)})",
+                               options=("units",))
     files, skipped = collect_bvh(paths)
     out = Path(output)
     if append:
@@ -205,8 +207,11 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                 m.role, m.labels = s.clip_metadata(m.name)
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
-                known = len(db.skeletons)
                 pieces = m.windows(split, split_overlap) if split else [m]
+                taken = [p.name for p in pieces if p.name in db._index_map()]
+                if taken:  # appending: this file is skipped, the others land
+                    raise TorchspliceError(f"clip name {taken[0]!r} is already in the database")
+                known = len(db.skeletons)
                 for piece in pieces:
                     db.append(piece, spec=s)
                 if len(db.skeletons) > known and s.is_guessed:

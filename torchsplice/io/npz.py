@@ -213,7 +213,7 @@ class NpzExport:
         if self.features is None:
             return {}
         if self._stats is None:
-            self._stats = self._ds.statistics(self.frame_arrays, batch_frames=self.batch_frames)
+            self._stats = self._ds.statistics(self.frame_arrays, batch_frames=self.batch_frames)  # finite, or names the clip
         return self._stats
 
     def _stat_arrays(self) -> dict[str, np.ndarray]:
@@ -235,8 +235,19 @@ class NpzExport:
             while hi < len(self._order) and (hi == lo or frames + int(self._ds._len[self._order[hi]]) <= self.batch_frames):
                 frames += int(self._ds._len[self._order[hi]])
                 hi += 1
-            yield from self._ds.__getitems__(self._order[lo:hi])
+            for item in self._ds.__getitems__(self._order[lo:hi]):
+                self._check_finite(item)
+                yield item
             lo = hi
+
+    def _check_finite(self, item: dict) -> None:
+        """A one-line error naming the clip, the array and the frame of a value that is not finite."""
+        for f in self.frame_arrays:
+            x = item[f]
+            bad = ~torch.isfinite(x.reshape(x.shape[0], -1)).all(dim=1)
+            if bool(bad.any()):
+                raise TorchspliceError(f"{self.database}: clip {item['name']!r}: non-finite value in {f} at frame "
+                                       f"{int(bad.nonzero()[0])}; nothing written")
 
     def _skeleton_arrays(self, k: int) -> dict[str, np.ndarray]:
         sk, a = self._ds.skeletons[k], self._attrs[k]
@@ -321,8 +332,16 @@ def write_npz(path, arrays: dict[str, np.ndarray], what: str = "") -> None:
 def read_npz(path) -> dict:
     """An exported ``.npz`` as a dict of numpy arrays; strings as ``str``, labels decoded from JSON
     (a dict, or for a packed file a list of dicts), scalars as Python numbers."""
-    with np.load(path, allow_pickle=False) as z:
-        out = {k: z[k] for k in z.files}
+    if not Path(path).is_file():
+        raise TorchspliceError(f"{path}: no such file")
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # a .npy array
+            raise ValueError("a single array, not an .npz archive")
+        with z:
+            out = {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError) as exc:  # not a .npz, or one with pickled objects (never loaded)
+        raise TorchspliceError(f"{path}: not a torchsplice .npz export ({type(exc).__name__}: {exc})") from None
     if str(out.get("format", "")) != NPZ_FORMAT:
         raise TorchspliceError(f"{path}: not a torchsplice .npz export (no format {NPZ_FORMAT!r})")
     for k, v in list(out.items()):

@@ -10,9 +10,12 @@ resume may use another engine or worker count. The splice options are derived he
 from __future__ import annotations
 
 import json
+import numbers
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
+
+import numpy as np
 
 from ..core.errors import TorchspliceError
 from ..io.atomic import same_file
@@ -90,6 +93,7 @@ class JobConfig:
 
     def checked(self) -> "JobConfig":
         """The configuration with paths and names normalised; a clear error for a bad value."""
+        _check_types(self)
         c = self
         if c.compression == "none":
             c = replace(c, compression=None)
@@ -189,6 +193,70 @@ class JobConfig:
         }
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+
+def _check_types(c: JobConfig) -> None:
+    """One-line errors, naming the option, for values of the wrong type or range (the Python
+    API takes anything; the command line's parsers already checked theirs)."""
+    def bad(name: str, want: str, value) -> TorchspliceError:
+        return TorchspliceError(f"{{{name}}} must be {want}, got {value!r}", options=(name,))
+
+    for name in ("database", "output", "actions_db"):
+        v = getattr(c, name)
+        if not (isinstance(v, (str, os.PathLike)) or (v is None and name == "actions_db")):
+            raise bad(name, "a path", v)
+    for name in ("locomotions", "actions", "methods"):
+        v = getattr(c, name)
+        if not isinstance(v, tuple) or not all(isinstance(x, str) for x in v):
+            raise bad(name, "a string or a sequence of strings", v)
+    for name in ("force_locomotion", "copy_sources", "posture"):
+        if not isinstance(getattr(c, name), (bool, np.bool_)):
+            raise bad(name, "True or False", getattr(c, name))
+    for name, lo, optional in (("max_run", 1, False), ("memory_budget_mb", 1, False), ("batch_pairs", 1, True),
+                               ("workers", 1, True)):
+        v = getattr(c, name)
+        if v is None and optional:
+            continue
+        if not _is_int(v):
+            raise bad(name, "a whole number" + (" or None" if optional else ""), v)
+        if v < lo:
+            raise bad(name, f"at least {lo}", v)
+    v = c.max_length_ratio
+    if v is not None and (not isinstance(v, numbers.Real) or isinstance(v, bool)):
+        raise bad("max_length_ratio", "a number or None", v)
+    if c.acting_limbs is not None and (not isinstance(c.acting_limbs, tuple)
+                                       or not all(isinstance(x, str) for x in c.acting_limbs)):
+        raise bad("acting_limbs", "None, 'auto', 'none', 'both' or arm names", c.acting_limbs)
+    for name in ("ray_address", "device", "compression"):
+        v = getattr(c, name)
+        if v is not None and not isinstance(v, str):
+            raise bad(name, "a string or None", v)
+
+
+def check_device(name: str | None) -> str | None:
+    """A torch device name checked up front (``None``: the CPU): one clear line for an unknown,
+    unsupported or absent device instead of a traceback later."""
+    if name is None:
+        return None
+    if not isinstance(name, str):
+        raise TorchspliceError(f"{{device}} must be a string such as 'cpu' or 'cuda', got {name!r}", options=("device",))
+    import torch
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError):
+        raise TorchspliceError(f"unknown device {name!r} (use cpu, cuda or cuda:N)") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise TorchspliceError(f"device {name!r} asked for, but this torch sees no CUDA device")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise TorchspliceError(f"device {name!r} asked for, but this torch sees {torch.cuda.device_count()} CUDA devices")
+    if dev.type not in ("cpu", "cuda"):
+        raise TorchspliceError(f"device {name!r} is not supported (use cpu or cuda)")
+    return name
+
+
 def job_config(database, output, **options) -> JobConfig:
     """A checked :class:`JobConfig` from the same values the command line takes, as the Python
     API (:func:`torchsplice.job.splice_all`) and ``torchsplice splice-all`` both build it.
@@ -206,13 +274,20 @@ def job_config(database, output, **options) -> JobConfig:
     bad = sorted(set(options) - set(known))
     if bad:
         raise TorchspliceError(f"unknown job option {bad[0]!r}; the options are {', '.join(known)}")
+    def strings(key: str, value) -> tuple:
+        if isinstance(value, str):
+            return (value,)
+        if not isinstance(value, (list, tuple)) or not all(isinstance(x, str) for x in value):
+            raise TorchspliceError(f"{{{key}}} must be a string or a sequence of strings, got {value!r}", options=(key,))
+        return tuple(value)
+
     for key, default in (("locomotions", DEFAULT_LOCOMOTIONS), ("actions", DEFAULT_ACTIONS)):
         value = options.get(key, default)
-        options[key] = default if value is None or value == () or value == [] else (
-            (value,) if isinstance(value, str) else tuple(value))
+        options[key] = default if value is None or value == () or value == [] else strings(key, value)
     methods = options.get("methods", ("splice",))
-    options["methods"] = tuple(m.strip() for m in (methods.split(",") if isinstance(methods, str) else methods)
-                               if m.strip())
+    methods = methods.split(",") if isinstance(methods, str) else strings("methods", methods)
+    options["methods"] = tuple(m.strip() for m in methods if m.strip())
+    options["device"] = check_device(options.get("device"))
     limbs = options.get("acting_limbs")
     if isinstance(limbs, str):
         from ..splice.standing import parse_limbs
@@ -222,12 +297,24 @@ def job_config(database, output, **options) -> JobConfig:
         except ValueError as exc:
             raise TorchspliceError(f"{{acting_limbs}}: {exc}", options=("acting_limbs",)) from None
     elif limbs is not None:
+        if not isinstance(limbs, (list, tuple)):
+            raise TorchspliceError(f"{{acting_limbs}} must be None, 'auto', 'none', 'both' or arm names, got {limbs!r}",
+                                   options=("acting_limbs",))
         options["acting_limbs"] = tuple(limbs)
+    for name, v in (("database", database), ("output", output)):
+        if not isinstance(v, (str, os.PathLike)):
+            raise TorchspliceError(f"{name} must be a path, got {v!r}")
     return JobConfig(database=Path(database), output=Path(output), **options).checked()
 
 
-def parse_shard(text: str) -> tuple[int, int]:
-    """``"K/N"`` as ``(K, N)`` with ``1 <= K <= N``; a clear error otherwise."""
+def parse_shard(text) -> tuple[int, int]:
+    """``"K/N"`` (or ``(K, N)``) as ``(K, N)`` with ``1 <= K <= N``; a clear error otherwise."""
+    if isinstance(text, (tuple, list)):
+        if len(text) != 2 or not all(_is_int(x) for x in text):
+            raise TorchspliceError(f"{{shard}} must be 'K/N' or (K, N), got {text!r}", options=("shard",))
+        text = f"{text[0]}/{text[1]}"
+    if not isinstance(text, str):
+        raise TorchspliceError(f"{{shard}} must be 'K/N' or (K, N), got {text!r}", options=("shard",))
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:

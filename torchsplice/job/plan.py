@@ -174,7 +174,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     locos = select_clips(tl, c.locomotions, "{locomotions}", str(c.database))
     acts = select_clips(ta, c.actions, "{actions}", str(c.actions_db or c.database))
     sk_l, sk_a = loco_db.skeletons, act_db.skeletons
-    described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db))
+    described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db),
+                 _skeleton_units(loco_db), _skeleton_units(act_db))
     if not any(sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]) for i in locos for j in acts):
         a, b = sk_l[int(tl["skeleton"][locos[0]])], sk_a[int(ta["skeleton"][acts[0]])]
         raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
@@ -192,7 +193,9 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     needs_ref = any(get_method(m).needs_reference for m in c.methods)
     refs = _references(ta, acts, next(iter(specs.values()))) if needs_ref else {}
 
+    units_l, units_a = described[2], described[3]
     # groups: a locomotion skeleton and rate, its locomotions, then every action and reference of its topology
+    # and units
     others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
     by_group: dict[tuple[int, float], list[str]] = {}
     for i in locos:
@@ -201,7 +204,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     for (k, fps), keys in by_group.items():
         for j in others:
             key = clip_key("A", j, same)
-            if key not in keys and sk_l[k].same_topology(sk_a[int(ta["skeleton"][j])]):
+            ka = int(ta["skeleton"][j])
+            if key not in keys and sk_l[k].same_topology(sk_a[ka]) and not _units_clash(units_l[k], units_a[ka]):
                 keys.append(key)
         roles = specs[k].bind(sk_l[k])
         groups.append(Group(k, fps, keys, specs[k].to_json(), leg_length(sk_l[k], roles)))
@@ -324,6 +328,17 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
                     clips[chunk[i]]["acting"] = list(limbs)
 
 
+def _skeleton_units(db) -> dict[int, tuple[str, str]]:
+    """Skeleton id -> its ``(units, up_axis)`` as stored (``""`` where not recorded)."""
+    return {k: (str(db.h5[f"skeletons/{k}"].attrs.get("units", "") or ""),
+                str(db.h5[f"skeletons/{k}"].attrs.get("up_axis", "") or "")) for k in range(len(db.skeletons))}
+
+
+def _units_clash(a: tuple[str, str], b: tuple[str, str]) -> bool:
+    """Whether two skeletons' ``(units, up_axis)`` differ where both are recorded."""
+    return any(x and y and x != y for x, y in zip(a, b))
+
+
 def _describe_skeletons(db, path) -> dict[int, str]:
     """Skeleton id -> ``skeleton K (spec, J joints)`` (``of FILE`` added when ``path`` is given)."""
     out = {}
@@ -342,6 +357,10 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
     kl, ka = int(tl["skeleton"][i]), int(ta["skeleton"][j])
     if not sk_l[kl].same_topology(sk_a[ka]):  # not formed: splicing needs one joint hierarchy
         return f"{SKELETONS_DIFFER}locomotions on {described[0][kl]} x actions on {described[1][ka]}"
+    ul, ua = described[2][kl], described[3][ka]
+    if _units_clash(ul, ua):  # one topology in two units (or up axes): lengths and positions would not compare
+        return (f"units differ: locomotions on {described[0][kl]} in {'/'.join(x or '?' for x in ul)} x actions on "
+                f"{described[1][ka]} in {'/'.join(x or '?' for x in ua)} (import with one units setting)")
     for table, row in ((tl, i), (ta, j)):
         need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
         if int(table["length"][row]) < need:
@@ -349,14 +368,14 @@ def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, r
     if c.max_length_ratio is not None:
         dl, da = float(tl["length"][i] / tl["fps"][i]), float(ta["length"][j] / ta["fps"][j])
         if max(dl, da) > c.max_length_ratio * min(dl, da):
-            return f"lengths differ by more than --max-length-ratio {c.max_length_ratio:g}"
+            return f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"
     for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
         check = checks.get(key)
         if check is not None and not check.finite:
             return f"{name} {check.reason}"
     check = checks.get(clip_key("L", i, same))
     if check is not None and not check.locomoting and not c.force_locomotion:
-        return f"{tl['name'][i]} does not locomote ({check.reason}; --force-locomotion splices it)"
+        return f"{tl['name'][i]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
     standing = _mode(c, checks, clip_key("A", j, same), method) == "standing"
     if get_method(method).needs_reference and refs.get(j) is None and not standing:
         return f"no plain-locomotion reference for {ta['name'][j]} ({method})"

@@ -59,10 +59,16 @@ __all__ = ["JobConfig", "JobSummary", "SpliceJob", "merge_job", "OUTPUT_COLUMNS"
 log = logging.getLogger("torchsplice.job")
 
 
+REASON_OPTIONS = ("max_length_ratio", "force_locomotion")
+"""Options that skip reasons may name, as ``{name}``."""
+
+
 @dataclass
 class JobSummary:
     """What a run did. ``skipped`` maps a reason to the number of pairs it skipped, ``flagged``
-    a kind of flag to the number of clips carrying it (``flagged_clips`` clips in all)."""
+    a kind of flag to the number of clips carrying it (``flagged_clips`` clips in all). A reason
+    may name an option as ``{name}`` (of :data:`REASON_OPTIONS`, as errors do, see
+    :mod:`torchsplice.core.errors`); :meth:`lines` writes it out."""
 
     output: Path
     pairs: int = 0
@@ -81,8 +87,13 @@ class JobSummary:
     tasks_done: int = 0
     merge: bool = False
 
-    def lines(self) -> list[str]:
-        """The closing summary, as printed by the command line."""
+    def lines(self, option_name=None) -> list[str]:
+        """The closing summary, as printed by the command line; ``option_name(option)`` writes the
+        options a skip reason names (default: the library's names; the command line: its flags)."""
+        from ..core.errors import render_message
+
+        name = option_name or (lambda o: o)
+        say = lambda why: render_message(why, REASON_OPTIONS, name)  # noqa: E731
         rate = (self.spliced - self.resumed) / self.compute_seconds if self.compute_seconds > 0 else float("nan")
         where = f" with {self.engine}" if self.engine else ""
         if self.shard is not None:
@@ -104,7 +115,7 @@ class JobSummary:
         apart = {w[len(SKELETONS_DIFFER):]: n for w, n in self.skipped.items() if w.startswith(SKELETONS_DIFFER)}
         if skipped:
             out.append(f"skipped {sum(skipped.values())} pairs:")
-            out += [f"  {n} x {why}" for why, n in sorted(skipped.items(), key=lambda kv: -kv[1])]
+            out += [f"  {n} x {say(why)}" for why, n in sorted(skipped.items(), key=lambda kv: -kv[1])]
         if apart:
             out.append(f"not formed: {sum(apart.values())} pairs whose clips are on skeletons of different joints "
                        "(splicing needs one joint hierarchy):")
@@ -302,7 +313,7 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
     from .config import job_config, parse_shard
 
     config = job_config(database, output, **options)
-    if isinstance(shard, str):
+    if shard is not None:
         shard = parse_shard(shard)
     job = SpliceJob(config, progress=progress, restart=restart, overwrite=overwrite,
                     command=command or "torchsplice.job.splice_all (Python API)", shard=tuple(shard) if shard else None)

@@ -21,7 +21,7 @@ import torch
 from ..core.errors import TorchspliceError
 from ..splice import splice_pairs, splice_standing
 from ..splice.api import align_kwargs, spliced_labels
-from ..splice.registry import get_method, load_plugins
+from ..splice.registry import MethodFailedError, get_method, load_plugins
 from .config import JobConfig
 from .plan import Plan, Task
 from .sources import Sources
@@ -114,7 +114,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
                           ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None, posture=config.posture,
                           twist=config.twist,
                           buffers=buffers, on_error="keep", **align_kwargs(align, fps))
-        failed = {b: STATUS[int(s)] for b, s in enumerate(out.status) if s != 0}
+        failed = {b: f"the alignment failed ({STATUS[int(s)]})" for b, s in enumerate(out.status) if s != 0}
         ok = out.status == 0
         frames, rot, trans = out.frames[ok], out.rotations, out.translations
         curve, corr, crop = out.curve, out.correction, out.crop[ok].astype(np.float64)
@@ -138,7 +138,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
                 try:
                     results += splice_some(slice(b, b + 1))
                 except (ValueError, TorchspliceError) as exc:
-                    failed[b] = str(exc)
+                    failed[b] = str(exc) if isinstance(exc, MethodFailedError) else f"the alignment failed ({exc})"
         kept = [b for b in range(len(pairs)) if b not in failed]
         back = np.array([fps / motions[b][1].fps for b in kept])
         frames = np.array([r.motion.num_frames for r in results], dtype=np.int64)
@@ -150,8 +150,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         cost = np.array([r.cost for r in results], dtype=np.float64)
         posture = np.radians(np.array([r.posture_deg for r in results], dtype=np.float64))
     skipped: dict[str, int] = {}
-    for b, reason in failed.items():
-        why = f"the alignment failed ({reason})"
+    for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
         log.warning("%s + %s: %s", plan.clips[keys[b][0]]["name"], plan.clips[keys[b][1]]["name"], why)
     kept = [b for b in range(len(pairs)) if b not in failed]

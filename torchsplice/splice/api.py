@@ -34,7 +34,7 @@ from ..specs import DatasetSpec, SkeletonRoles
 from .clips import ClipTensors, check_clip, check_pair, clips_to_tensors, resample_motion
 from .heck import AlignOptions
 from .locomotion import LocomotionCheck, check_locomotion
-from .registry import Method, MethodInput, MethodOutput, get_method
+from .registry import Method, MethodInput, MethodOutput, get_method, run_checked
 from .standing import TIMINGS, acting_limbs
 
 __all__ = ["BACKENDS", "TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
@@ -285,7 +285,8 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options:
         acting = [tuple(options.acting_limbs) if found is None else found[int(ai[b])][0] for b in range(len(pairs))]
     acting = [tuple(a) for a in acting]
     loco, act = L.take(li), A.take(ai)
-    clips, times = method.standing(MethodInput(loco, act, None, roles, skeleton, options, fps), options.timing, acting)
+    clips, times = run_checked(method, method.standing, MethodInput(loco, act, None, roles, skeleton, options, fps),
+                               options.timing, acting)
     results = []
     for b, (lo, ac) in enumerate(pairs):
         n = int(clips.lengths[b])
@@ -335,7 +336,8 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: Sp
                     raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
                 notes[b].append(f"{clip.name} does not locomote: {check.reason}")
     loco, act = L.take(li), A.take(ai[:B])
-    out: MethodOutput = method.run(MethodInput(loco, act, A.take(ai[B:]) if refs else None, roles, skeleton, options, fps))
+    out: MethodOutput = run_checked(method, method.run,
+                                    MethodInput(loco, act, A.take(ai[B:]) if refs else None, roles, skeleton, options, fps))
     clips, times = out.clips, out.times
     empty = torch.zeros(0, 2, dtype=torch.long)
     corr = out.pelvis_correction if out.pelvis_correction is not None else torch.zeros(times.shape, dtype=torch.float64)

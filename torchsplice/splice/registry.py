@@ -35,10 +35,11 @@ from __future__ import annotations
 import importlib
 import os
 import re
+import types
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
-from ..core.errors import TorchspliceError
+from ..core.errors import MotionError, TorchspliceError
 
 if TYPE_CHECKING:  # pragma: no cover
     import torch
@@ -47,7 +48,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .api import SpliceOptions
     from .clips import ClipTensors
 
-__all__ = ["Method", "MethodInput", "MethodOutput", "register_method", "get_method", "available_methods",
+__all__ = ["Method", "MethodInput", "MethodOutput", "MethodFailedError", "run_checked", "register_method", "get_method", "available_methods",
            "load_plugins", "plugin_modules", "PLUGINS_ENV", "ENTRY_POINT_GROUP", "BUILTIN_METHODS"]
 
 PLUGINS_ENV = "TORCHSPLICE_PLUGINS"
@@ -148,6 +149,64 @@ class Method:
         return f"{locomotion}+{action}" if self.name == "splice" else f"{locomotion}+{action}.{self.name}"
 
 
+class MethodFailedError(MotionError):
+    """A plug-in method's function raised, or returned a malformed or non-finite result: the
+    pairs it was given are not spliced (the job skips them with this reason)."""
+
+
+def run_checked(method: Method, fn: Callable, inp: MethodInput, *args):
+    """``fn(inp, *args)`` (a method's ``run`` or ``standing``), checked for a plug-in method.
+
+    Returns what ``fn`` returns: a :class:`MethodOutput`, or ``(clips, times)`` for ``standing``.
+    A plug-in whose function raises anything but a :class:`TorchspliceError`, or returns clips
+    whose rotations ``(B, T, J, 4)``, translations ``(B, T, J, 3)``, lengths ``(B,)`` (1 to
+    ``T``) or times ``(B, T)`` are missing, of the wrong shape or not finite on a valid frame,
+    raises a one-line :class:`MethodFailedError` naming the method. Built-ins are trusted.
+    """
+    import torch
+
+    who = f"method {method.name!r}" + (f" ({method.module})" if method.module else "")
+    try:
+        got = fn(inp, *args)
+    except TorchspliceError:
+        raise
+    except Exception as exc:
+        if method.builtin:
+            raise
+        raise MethodFailedError(f"{who} failed: {type(exc).__name__}: {exc}") from None
+    if method.builtin:
+        return got
+    if isinstance(got, MethodOutput):
+        clips, times = got.clips, got.times
+    elif isinstance(got, tuple) and len(got) == 2 and fn is method.standing:
+        clips, times = got
+    else:
+        raise MethodFailedError(f"{who} returned {type(got).__name__}, not a MethodOutput")
+    B, J = int(inp.loco.rotations.shape[0]), int(inp.skeleton.num_joints)
+    rot, trans = getattr(clips, "rotations", None), getattr(clips, "translations", None)
+    lengths = getattr(clips, "lengths", None)
+    tensors = all(isinstance(x, torch.Tensor) for x in (rot, trans, lengths, times))
+    T = int(rot.shape[1]) if tensors and rot.ndim == 4 else -1
+    shapes = tensors and (tuple(rot.shape), tuple(trans.shape), tuple(lengths.shape), tuple(times.shape)) == (
+        (B, T, J, 4), (B, T, J, 3), (B,), (B, T))
+    if not shapes:
+        got_shapes = ", ".join(f"{k} {tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__}"
+                               for k, x in (("rotations", rot), ("translations", trans), ("lengths", lengths),
+                                            ("times", times)))
+        raise MethodFailedError(f"{who} returned arrays of the wrong shape for {B} pairs of {J} joints: {got_shapes} "
+                                "(expected (B, T, J, 4), (B, T, J, 3), (B,) and (B, T))")
+    if T < 1 or bool((lengths < 1).any()) or bool((lengths > T).any()):
+        raise MethodFailedError(f"{who} returned lengths {lengths.tolist()} outside 1 to {T} frames")
+    valid = torch.arange(T, device=lengths.device)[None] < lengths[:, None]  # (B, T)
+    for what, x in (("rotations", rot), ("translations", trans), ("times", times)):
+        ok = torch.isfinite(x).reshape(B, T, -1).all(-1) | ~valid
+        if not bool(ok.all()):
+            b, t = (int(v) for v in (~ok).nonzero()[0])
+            at = f"pair {b} of {B}, frame {t}" if B > 1 else f"frame {t}"
+            raise MethodFailedError(f"{who} returned {what} that are not finite ({at})")
+    return got
+
+
 _REGISTRY: dict[str, Method] = {}
 _LOADED = {"builtins": False, "entry_points": False, "env": None}
 _PLUGIN_MODULES: list[str] = []
@@ -160,6 +219,7 @@ def register_method(method: Method, replace_existing: bool = False) -> Method:
     already taken by another method (unless ``replace_existing``) or a missing function.
     Registering the same method again (a module imported twice) is harmless.
     """
+    _ensure_loaded_builtins()  # the built-ins come first, whoever registers first
     if not isinstance(method, Method):
         raise TorchspliceError(f"register_method takes a torchsplice.splice.registry.Method, got {type(method).__name__}")
     if not _NAME.match(method.name or ""):
@@ -185,15 +245,19 @@ def _ensure_loaded() -> None:
         from importlib.metadata import entry_points
 
         for ep in entry_points(group=ENTRY_POINT_GROUP):
+            where = f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})"
             try:
                 obj = ep.load()
+                if isinstance(obj, Method):
+                    register_method(obj)
+                elif callable(obj):
+                    obj()
+                elif not isinstance(obj, types.ModuleType):  # a module registered its methods on import
+                    raise TorchspliceError(f"names a {type(obj).__name__}, neither a Method nor a function")
+            except TorchspliceError as exc:
+                raise TorchspliceError(f"{where}: {exc}") from None
             except Exception as exc:
-                raise TorchspliceError(f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP}) "
-                                       f"cannot be loaded: {type(exc).__name__}: {exc}") from None
-            if isinstance(obj, Method):
-                register_method(obj)
-            elif callable(obj):
-                obj()
+                raise TorchspliceError(f"{where} cannot be loaded: {type(exc).__name__}: {exc}") from None
             _remember(ep.value.split(":")[0])
     env = os.environ.get(PLUGINS_ENV, "")
     if env != _LOADED["env"]:
@@ -218,6 +282,8 @@ def load_plugins(modules: Iterable[str]) -> list[str]:
             continue
         try:
             importlib.import_module(name)
+        except TorchspliceError as exc:  # it imports, but registers what it cannot (a taken name)
+            raise TorchspliceError(f"plug-in module {name!r}: {exc}") from None
         except Exception as exc:
             raise TorchspliceError(f"plug-in module {name!r} cannot be imported: {type(exc).__name__}: {exc} "
                                    "(is it installed, or on PYTHONPATH?)") from None

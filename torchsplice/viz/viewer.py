@@ -30,6 +30,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import re
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -37,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import TorchspliceError
+from ..core.errors import MotionError, TorchspliceError
 from ..core.motion import Motion
 from ..io.atomic import atomic_path
 from ..io.database import MotionDatabase
@@ -45,7 +46,7 @@ from ..specs import DatasetSpec
 from .render import _canonical_axes, _check_up_axis, _head, figure_points
 from .sources import SourceClips, clip_spec, source_databases
 
-__all__ = ["write_viewer", "build_viewer", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS"]
+__all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS"]
 
 DEFAULT_MAX_CLIPS = 100
 """Clips in a viewer when none are named (``--max-clips``): about 8 MB for clips of 10 s."""
@@ -288,7 +289,7 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
         TorchspliceError: an unknown clip, an unreadable database, a broken installation.
     """
     if int(max_clips) < 1:
-        raise TorchspliceError(f"max_clips must be at least 1, got {max_clips}")
+        raise TorchspliceError(f"{{max_clips}} must be at least 1, got {max_clips}", options=("max_clips",))
     database = Path(database)
     with MotionDatabase.open(database) as db:
         if len(db) == 0:
@@ -304,6 +305,11 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
                 home = db if name in db._index_map() else lookup.where(name)
                 info = home.clip_info(name)
                 motion = home.read(name)
+                try:
+                    motion.check_finite()
+                except TorchspliceError as exc:
+                    raise MotionError(f"{home.path}: {exc.message}; the viewer shows only finite clips "
+                                      "(name the others to view them)") from None
                 key = (id(home), info["skeleton"])
                 if key not in specs:
                     specs[key] = clip_spec(home, name, motion.skeleton)
@@ -321,9 +327,10 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
         "clips": payload,
     }
     template = resources.files("torchsplice.viz").joinpath("viewer_template.html").read_text(encoding="utf-8")
-    html = (template.replace("__TITLE__", _html_escape(f"torchsplice view: {database.name}"))
-                    .replace("__IMPORTMAP__", _import_map())
-                    .replace("__DATA__", _script_json(data)))
+    fill = {"__TITLE__": _html_escape(f"torchsplice view: {database.name}"), "__IMPORTMAP__": _import_map(),
+            "__DATA__": _script_json(data)}
+    # one pass: a placeholder inside a filled value (a database called __DATA__.h5) stays text
+    html = re.sub("|".join(fill), lambda m: fill[m.group(0)], template)
     contents.size = len(html.encode("utf-8"))
     return html, contents
 
@@ -344,12 +351,20 @@ def write_viewer(database, output, clips=None, sources=None, max_clips: int = DE
     with atomic_path(output) as tmp:  # an OSError becomes one line naming the file
         Path(tmp).write_text(html, encoding="utf-8")
     if not quiet:
-        if contents.cut:
-            print(f"note: the viewer holds {len(contents.names)} clips (--max-clips {max_clips}) of the "
-                  f"{contents.total} in {Path(database).name}; name clips or raise --max-clips for others",
-                  file=sys.stderr)
-        if contents.missing:
-            shown = ", ".join(contents.missing[:5]) + (" ..." if len(contents.missing) > 5 else "")
-            print(f"note: {len(contents.missing)} source clips are in no database ({shown}); pass them with --sources",
-                  file=sys.stderr)
+        for line in viewer_notes(contents, database, max_clips):
+            print(line, file=sys.stderr)
     return contents
+
+
+def viewer_notes(contents: ViewerContents, database, max_clips: int, option_name=lambda o: o) -> list[str]:
+    """The notes on what a page left out: ``max_clips`` cut the selection, source clips that no
+    database holds. ``option_name(option)`` writes the options named (the command line: flags)."""
+    out = []
+    if contents.cut:
+        out.append(f"note: the viewer holds {len(contents.names)} clips ({option_name('max_clips')} {max_clips}) of the "
+                   f"{contents.total} in {Path(database).name}; name clips or raise {option_name('max_clips')} for others")
+    if contents.missing:
+        shown = ", ".join(contents.missing[:5]) + (" ..." if len(contents.missing) > 5 else "")
+        out.append(f"note: {len(contents.missing)} source clips are in no database ({shown}); pass them with "
+                   f"{option_name('sources')}")
+    return out
