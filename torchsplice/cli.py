@@ -91,6 +91,11 @@ def _say(args, msg: str) -> None:
         print(msg)
 
 
+def _n(count: int, word: str) -> str:
+    """``"1 clip"``, ``"2 clips"``: a count with its noun, plural unless one."""
+    return f"{count} {word}{'' if count == 1 else 's'}"
+
+
 # --------------------------------------------------------------------------------------------
 # sample
 # --------------------------------------------------------------------------------------------
@@ -136,8 +141,10 @@ def cmd_import(args) -> int:
         _say(args, f"skeleton {g.skeleton} (first seen in {g.path}): joint roles guessed by the {g.spec!r} spec "
                    "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in g.summary))
     cut = report.cut
-    _say(args, f"imported {len(report.imported)} clips ({report.frames} frames) into {args.output} ({report.clips} clips in all)"
-               + (f"; {len(cut)} long takes cut into {sum(c.windows for c in cut)} windows of {args.split:g} s" if cut else ""))
+    _say(args, f"imported {_n(len(report.imported), 'clip')} ({report.frames} frames) into {args.output} "
+               f"({_n(report.clips, 'clip')} in all)"
+               + (f"; {_n(len(cut), 'long take')} cut into {sum(c.windows for c in cut)} windows of {args.split:g} s"
+                  if cut else ""))
     for f, why in report.warnings:
         print(f"warning: {_at(f, why)}", file=sys.stderr)
     skipped_lines(report.skipped)
@@ -175,13 +182,13 @@ def cmd_info(args) -> int:
         print(json.dumps(s, indent=2))
         return 0
     minutes = s["duration_s"] / 60
-    print(f"{s['path']}: {s['num_clips']} clips, {s['num_frames']} frames ({minutes:.1f} min); "
+    print(f"{s['path']}: {_n(s['num_clips'], 'clip')}, {s['num_frames']} frames ({minutes:.1f} min); "
           f"schema {s['schema_version']}, units {s['units'] or '?'}, up axis {s['up_axis'] or '?'}, "
           f"quaternions {s['quaternion_order']}")
     for k in s["skeletons"]:
         print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}"
               f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "
-              f"up axis {k['up_axis'] or '?'}, {k['clips']} clips")
+              f"up axis {k['up_axis'] or '?'}, {_n(k['clips'], 'clip')}")
     print("roles: " + ", ".join(f"{r} {n}" for r, n in sorted(s["roles"].items())))
     run = s.get("run")
     if isinstance(run, dict):
@@ -261,7 +268,7 @@ def cmd_export(args) -> int:
         for (name, arrays), f in zip(export.per_clip(), files):
             with _locked(f, args):
                 write_npz(f, arrays, what=f"clip {name!r}")
-        where = files[0] if len(files) == 1 else Path(args.output)
+        where = files[0] if len(files) == 1 else args.output
         _say(args, f"wrote {where}: {len(names)} clip{'s' if len(names) != 1 else ''} as .npz, {export.num_frames} frames"
                    + (f", features {args.features} with statistics over all of them" if args.features else ""))
         return 0
@@ -700,9 +707,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("database", help="motion database (.h5)")
     s.add_argument("clips", nargs="+", metavar="CLIP", help="clip names")
     s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
-    s.add_argument("--frames", type=_bounded_int(1, _MAX_FILMSTRIP), default=8,
+    s.add_argument("--frames", type=_bounded_int(1, _MAX_FILMSTRIP), default=8, metavar="N",
                    help=f"frames per clip in a PNG filmstrip (default 8, at most {_MAX_FILMSTRIP})")
-    s.add_argument("--max-seconds", type=_positive_float, default=None, help="show at most this many seconds")
+    s.add_argument("--max-seconds", type=_positive_float, default=None, metavar="SECONDS", help="show at most this many seconds")
     s.add_argument("--sources", nargs="+", metavar="DB",
                    help="databases holding clips not in DATABASE, e.g. a spliced clip's locomotion and action "
                         "(default: the inputs its run record names)")
@@ -721,7 +728,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="page to write (.html)")
     s.add_argument("--sources", nargs="+", metavar="DB",
                    help="databases holding the spliced clips' locomotions and actions (default: as recorded)")
-    s.add_argument("--max-clips", type=_positive_int, default=100,
+    s.add_argument("--max-clips", type=_positive_int, default=100, metavar="N",
                    help="at most this many clips when none are named (default 100, about 8 MB for 10 s clips)")
     _add_output_flags(s)
     s.set_defaults(func=cmd_view)
@@ -734,7 +741,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="report to write (.md); pictures go to <stem>_files/")
     s.add_argument("--sources", nargs="+", metavar="DB", help="databases holding the source clips (default: as recorded)")
     s.add_argument("--no-pictures", action="store_true", help="tables only")
-    s.add_argument("--max-rows", type=_positive_int, default=60, help="per-clip rows per method (default 60)")
+    s.add_argument("--max-rows", type=_positive_int, default=60, metavar="N", help="per-clip rows per method (default 60)")
     _add_output_flags(s, force_help="overwrite an existing report")
     s.set_defaults(func=cmd_evaluate)
 
@@ -753,7 +760,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="clips giving the upper body (default: role:action,role:both)")
     s.add_argument("--actions-db", metavar="DB", help="take the actions from this database (same skeleton)")
     s.add_argument("--method", default="splice", metavar="M[,M...]",
-                   help=f"{', '.join(_methods())}, or several comma-separated (default splice)")
+                   help=f"{', '.join(_methods())}, or several comma-separated (default splice; plug-ins add "
+                        "more, see --plugin)")
     s.add_argument("--memory-budget", type=_positive_int, default=1024, metavar="MB",
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")
