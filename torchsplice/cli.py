@@ -436,10 +436,21 @@ def _add_output_flags(s, force_help: str = "overwrite an existing file", quiet_h
     s.add_argument("-q", "--quiet", action="store_true", help=quiet_help)
 
 
-def _add_splice_options(s) -> None:
+def _add_splice_options(s, standing: bool = True) -> None:
+    """The splice's flags; ``standing=False`` leaves out those about clips that do not locomote
+    (plot-alignment always time-aligns)."""
     s.add_argument("--max-run", type=_positive_int, default=3, metavar="L",
                    help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
     s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
+    if not standing:
+        s.set_defaults(force_locomotion=True, timing="loop", acting_limbs="auto")
+    else:
+        _add_standing_options(s)
+    s.add_argument("--device", default=None,
+                   help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
+
+
+def _add_standing_options(s) -> None:
     s.add_argument("--force-locomotion", action="store_true",
                    help="time-align clips that do not locomote (the method's limit) instead of refusing a locomotion "
                         "that does not locomote and splicing a standing action by --timing")
@@ -450,8 +461,6 @@ def _add_splice_options(s) -> None:
     s.add_argument("--acting-limbs", default="auto", metavar="LIMBS",
                    help="the arms standing actions act with: auto (default: found from each clip's data), none, or "
                         "left_arm, right_arm or both; the other arm keeps the locomotion's swing (splice method)")
-    s.add_argument("--device", default=None,
-                   help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
 
 
 def cmd_plot_alignment(args) -> int:
@@ -693,12 +702,14 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("plot-alignment", help="picture of one pair's time alignment (distance grid, DP path, curve)",
                        description="Draw the lower-body distance grid of a locomotion and an action as a heat map with "
                                    "the optimal DP path and the fitted alignment curve over it (Heck et al. 2006, "
-                                   "Figure 3), and the per-frame pelvis correction angle below. PNG, PDF or SVG.")
+                                   "Figure 3), and the per-frame pelvis correction angle below. PNG, PDF or SVG. "
+                                   "Clips that do not locomote are time-aligned anyway, as splice --force-locomotion "
+                                   "does (without it, splice fills the locomotion with a standing action by --timing).")
     _add_pair_args(s)
     s.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
-    _add_splice_options(s)
+    _add_splice_options(s, standing=False)
     _add_output_flags(s)
-    s.set_defaults(func=cmd_plot_alignment, force_locomotion=True)
+    s.set_defaults(func=cmd_plot_alignment)
 
     s = sub.add_parser("render", help="stick-figure preview of clips side by side (GIF, MP4 or PNG filmstrip)",
                        description="Draw clips as stick figures side by side (e.g. locomotion, action, naive, spliced) "
