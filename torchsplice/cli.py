@@ -610,8 +610,16 @@ def _plugins_in(argv: list[str]) -> list[str]:
     return out
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a usage mistake (a missing or malformed flag) said in one line, as every
+    other error is, pointing at ``--help`` instead of printing the whole usage."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
     )
