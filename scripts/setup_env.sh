@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Make ./.venv with torchsplice installed, once; later runs reuse it.
 #
-# torch comes first so that pip installs nothing more for it: by default the pinned CPU build
-# (torch==2.13.0). Choose another with TORCHSPLICE_TORCH (a pip requirement) and
-# TORCHSPLICE_TORCH_INDEX (an index URL, e.g. https://download.pytorch.org/whl/cpu).
+# torch comes first so that pip installs nothing more for it: by default torch==2.13.0 from
+# pip's configured index (PyPI's Linux build includes CUDA). Choose another with TORCHSPLICE_TORCH
+# (a pip requirement) and TORCHSPLICE_TORCH_INDEX (an index URL, e.g.
+# https://download.pytorch.org/whl/cpu for the CPU-only build).
 # Source it (". scripts/setup_env.sh") to get the environment activated.
 set -euo pipefail
 # pip's notes about unused local package folders on some machines are noise here
@@ -23,12 +24,26 @@ if ! python -c "import torch" >/dev/null 2>&1; then
 fi
 # extras: the tests also install Ray (TORCHSPLICE_EXTRAS=test,ray, set by scripts/test.sh)
 _extras="${TORCHSPLICE_EXTRAS:-test}"
+# The stamp holds the pyproject.toml checksum and the extras installed: a later run with fewer
+# extras (the demo after the tests) reuses the environment instead of reinstalling.
 _stamp="$_root/.venv/.torchsplice-installed"
-_want="$(cat "$_root/pyproject.toml" | cksum) $_extras"
-if [ ! -f "$_stamp" ] || [ "$(cat "$_stamp")" != "$_want" ]; then
+_sum="$(cksum < "$_root/pyproject.toml")"
+_have="$(cat "$_stamp" 2>/dev/null || true)"
+_install=0
+if [ "${_have% *}" != "$_sum" ]; then
+  _install=1
+else
+  _had="${_have##* }"
+  _add=""
+  for _e in ${_extras//,/ }; do
+    case ",$_had," in *",$_e,"*) ;; *) _add="$_add,$_e" ;; esac
+  done
+  if [ -n "$_add" ]; then _install=1; _extras="$_had$_add"; fi
+fi
+if [ "$_install" = 1 ]; then
   echo "setup: installing torchsplice and its dependencies" >&2
   _pip install -e "$_root[$_extras]"
-  echo "$_want" > "$_stamp"
+  echo "$_sum $_extras" > "$_stamp"
 fi
 # compile the CPU splicer's kernels once per version of their sources (numba caches them)
 _kernels="$(cat "$_root"/torchsplice/cpu/*.py | cksum)"

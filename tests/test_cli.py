@@ -38,6 +38,19 @@ def test_help_for_every_command(command, capsys):
     assert "usage: torchsplice " + command in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("argv, says", [
+    (["splice-all", "db.h5", "-o", "out.h5", "--workers", "0"], "torchsplice splice-all: error: argument --workers"),
+    (["splice", "db.h5", "-o", "x.bvh"], "torchsplice splice: error: the following arguments are required"),
+    (["nope"], "torchsplice: error: argument COMMAND: invalid choice: 'nope'"),
+])
+def test_a_usage_mistake_is_one_line_pointing_at_help(argv, says, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and err.startswith(says) and err.rstrip().endswith("--help)")
+
+
 def test_import_info_export_round_trip(bandai_folder, tmp_path, capsys):
     db = tmp_path / "db.h5"
     code, out, err = run(capsys, "import", bandai_folder, "--spec", "bandai_namco", "-o", db, "-q")

@@ -38,7 +38,7 @@ def test_split_cuts_long_takes_into_overlapping_windows_equal_to_the_take(lafan,
     T, n, step = take.num_frames, 600, 540
     expect = list(range(0, T - n + 1, step))
     expect += [T - n] if expect[-1] != T - n else []
-    assert f"1 long takes cut into {len(expect)} windows of 20 s" in text
+    assert f"1 long take cut into {len(expect)} windows of 20 s" in text
     with MotionDatabase.open(out) as db:
         assert db.names == [f"test#{k:03d}" for k in range(len(expect))]
         for k, s in enumerate(expect):

@@ -33,15 +33,14 @@ def snippet(after_heading: str) -> str:
 
 @pytest.fixture(scope="module")
 def spliced(mocap_dir, tmp_path_factory) -> Path:
-    """``out/spliced.h5``: the Bandai Namco styled walks spliced onto two normal-style locomotions."""
+    """``spliced.h5``: the Bandai Namco styled walks spliced onto two normal-style locomotions."""
     root = tmp_path_factory.mktemp("readme")
     folder = root / "bvh"
     folder.mkdir()
     for stem in BANDAI:
         shutil.copy(mocap_dir / "bandai_namco_research_motiondataset" / f"{stem}.bvh", folder)
-    (root / "out").mkdir()
     assert main(["import", str(folder), "-o", str(root / "bandai.h5"), "-q"]) == 0
-    assert main(["splice-all", str(root / "bandai.h5"), "-o", str(root / "out" / "spliced.h5"), "-q",
+    assert main(["splice-all", str(root / "bandai.h5"), "-o", str(root / "spliced.h5"), "-q",
                  "--locomotions", "role:locomotion", "--actions", "role:both", "--workers", "1"]) == 0
     return root
 
@@ -65,7 +64,7 @@ def test_the_trajectory_is_the_characters_world_position_where_root_translation_
     from torchsplice.data import MotionDataset
     from torchsplice.kinematics import forward_kinematics  # noqa: F401 (the public FK, as users call it)
 
-    ds = MotionDataset(spliced / "out" / "spliced.h5", features=("root_translation", "trajectory", "positions"))
+    ds = MotionDataset(spliced / "spliced.h5", features=("root_translation", "trajectory", "positions"))
     item = ds[0]
     assert torch.count_nonzero(item["root_translation"]) == 0  # Bandai's joint_Root stays at the origin
     hips = ds.skeletons[0].names.index("Hips")
@@ -113,7 +112,7 @@ def test_the_pipeline_snippet_imports_and_splices_like_the_commands(spliced, tmp
     report, summary = scope["report"], scope["summary"]
     assert sorted(c.name for c in report.imported) == sorted(BANDAI) and report.skipped == []
     assert "spliced" in capsys.readouterr().out
-    with h5py.File(spliced / "out" / "spliced.h5", "r") as f:
+    with h5py.File(spliced / "spliced.h5", "r") as f:
         cli_names = list(f["clips/name"].asstr()[()])
         cli_rot = f["skeletons/0/rotations"][()]
     with h5py.File(tmp_path / "spliced.h5", "r") as f:

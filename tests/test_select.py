@@ -90,6 +90,21 @@ def test_selector_matching_nothing_names_it_and_the_database(table):
     assert "'ROLE:action'" in str(e.value)
 
 
+def test_selector_matching_nothing_says_what_the_database_has_of_its_kind(table):
+    """A role selector lists the roles there are, a label selector that key's values (or the
+    keys), a name glob the first clip names."""
+    def message(selector):
+        with pytest.raises(TorchspliceError) as e:
+            select_clips(table, [selector], "--actions", "db.h5")
+        return str(e.value)
+
+    assert message("role:walker").endswith("(its roles: action, both, locomotion)")
+    assert message("label:style=angry").endswith("(its style labels: normal, proud)")
+    assert message("label:mood=x").endswith("(its label keys: content, dataset, style)")
+    assert message("zz*").endswith("(its clips: walk_normal, walk-turn-left_normal, walk-turn-right_proud, "
+                                   "run_Proud, wave_normal, carry_box, ...)")
+
+
 def test_selectors_each_matching_but_not_together(table):
     with pytest.raises(TorchspliceError) as e:
         select_clips(table, ["role:action", "label:style=proud"], "--locomotions", "db.h5")

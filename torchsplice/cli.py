@@ -96,6 +96,11 @@ def _say(args, msg: str) -> None:
         print(msg)
 
 
+def _n(count: int, word: str) -> str:
+    """``"1 clip"``, ``"2 clips"``: a count with its noun, plural unless one."""
+    return f"{count} {word}{'' if count == 1 else 's'}"
+
+
 # --------------------------------------------------------------------------------------------
 # sample
 # --------------------------------------------------------------------------------------------
@@ -141,8 +146,10 @@ def cmd_import(args) -> int:
         _say(args, f"skeleton {g.skeleton} (first seen in {g.path}): joint roles guessed by the {g.spec!r} spec "
                    "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in g.summary))
     cut = report.cut
-    _say(args, f"imported {len(report.imported)} clips ({report.frames} frames) into {args.output} ({report.clips} clips in all)"
-               + (f"; {len(cut)} long takes cut into {sum(c.windows for c in cut)} windows of {args.split:g} s" if cut else ""))
+    _say(args, f"imported {_n(len(report.imported), 'clip')} ({report.frames} frames) into {args.output} "
+               f"({_n(report.clips, 'clip')} in all)"
+               + (f"; {_n(len(cut), 'long take')} cut into {sum(c.windows for c in cut)} windows of {args.split:g} s"
+                  if cut else ""))
     for f, why in report.warnings:
         print(f"warning: {_at(f, why)}", file=sys.stderr)
     skipped_lines(report.skipped)
@@ -180,13 +187,13 @@ def cmd_info(args) -> int:
         print(json.dumps(s, indent=2))
         return 0
     minutes = s["duration_s"] / 60
-    print(f"{s['path']}: {s['num_clips']} clips, {s['num_frames']} frames ({minutes:.1f} min); "
+    print(f"{s['path']}: {_n(s['num_clips'], 'clip')}, {s['num_frames']} frames ({minutes:.1f} min); "
           f"schema {s['schema_version']}, units {s['units'] or '?'}, up axis {s['up_axis'] or '?'}, "
           f"quaternions {s['quaternion_order']}")
     for k in s["skeletons"]:
         print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}"
               f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "
-              f"up axis {k['up_axis'] or '?'}, {k['clips']} clips")
+              f"up axis {k['up_axis'] or '?'}, {_n(k['clips'], 'clip')}")
     print("roles: " + ", ".join(f"{r} {n}" for r, n in sorted(s["roles"].items())))
     run = s.get("run")
     if isinstance(run, dict):
@@ -486,13 +493,24 @@ def _add_output_flags(s, force_help: str = "overwrite an existing file", quiet_h
     s.add_argument("-q", "--quiet", action="store_true", help=quiet_help)
 
 
-def _add_splice_options(s) -> None:
+def _add_splice_options(s, standing: bool = True) -> None:
+    """The splice's flags; ``standing=False`` leaves out those about clips that do not locomote
+    (plot-alignment always time-aligns)."""
     s.add_argument("--max-run", type=_positive_int, default=3, metavar="L",
                    help="slope limit of the timewarp: at most L frames of one clip while the other waits (default 3)")
     s.add_argument("--no-posture", action="store_true", help="skip posture transfer (splice method)")
     s.add_argument("--twist", type=_share, default=0.0, metavar="SHARE",
                    help="share (0 to 1) of the locomotion's torso twist that posture transfer adds, e.g. 0.5 on side "
                         "steps (splice method; default 0: the action's posture as it is)")
+    if not standing:
+        s.set_defaults(force_locomotion=True, timing="loop", acting_limbs="auto")
+    else:
+        _add_standing_options(s)
+    s.add_argument("--device", default=None,
+                   help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
+
+
+def _add_standing_options(s) -> None:
     s.add_argument("--force-locomotion", action="store_true",
                    help="time-align clips that do not locomote (the method's limit) instead of refusing a locomotion "
                         "that does not locomote and splicing a standing action by --timing")
@@ -503,8 +521,6 @@ def _add_splice_options(s) -> None:
     s.add_argument("--acting-limbs", default="auto", metavar="LIMBS",
                    help="the arms standing actions act with: auto (default: found from each clip's data), none, or "
                         "left_arm, right_arm or both; the other arm keeps the locomotion's swing (splice method)")
-    s.add_argument("--device", default=None,
-                   help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
 
 
 def cmd_plot_alignment(args) -> int:
@@ -657,8 +673,16 @@ def _plugins_in(argv: list[str]) -> list[str]:
     return out
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a usage mistake (a missing or malformed flag) said in one line, as every
+    other error is, pointing at ``--help`` instead of printing the whole usage."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
     )
@@ -749,12 +773,14 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("plot-alignment", help="picture of one pair's time alignment (distance grid, DP path, curve)",
                        description="Draw the lower-body distance grid of a locomotion and an action as a heat map with "
                                    "the optimal DP path and the fitted alignment curve over it (Heck et al. 2006, "
-                                   "Figure 3), and the per-frame pelvis correction angle below. PNG, PDF or SVG.")
+                                   "Figure 3), and the per-frame pelvis correction angle below. PNG, PDF or SVG. "
+                                   "Clips that do not locomote are time-aligned anyway, as splice --force-locomotion "
+                                   "does (without it, splice fills the locomotion with a standing action by --timing).")
     _add_pair_args(s)
     s.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
-    _add_splice_options(s)
+    _add_splice_options(s, standing=False)
     _add_output_flags(s)
-    s.set_defaults(func=cmd_plot_alignment, force_locomotion=True)
+    s.set_defaults(func=cmd_plot_alignment)
 
     s = sub.add_parser("render", help="stick-figure preview of clips side by side (GIF, MP4 or PNG filmstrip)",
                        description="Draw clips as stick figures side by side (e.g. locomotion, action, naive, spliced) "
@@ -763,9 +789,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("database", help="motion database (.h5)")
     s.add_argument("clips", nargs="+", metavar="CLIP", help="clip names")
     s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
-    s.add_argument("--frames", type=_bounded_int(1, _MAX_FILMSTRIP), default=8,
+    s.add_argument("--frames", type=_bounded_int(1, _MAX_FILMSTRIP), default=8, metavar="N",
                    help=f"frames per clip in a PNG filmstrip (default 8, at most {_MAX_FILMSTRIP})")
-    s.add_argument("--max-seconds", type=_positive_float, default=None, help="show at most this many seconds")
+    s.add_argument("--max-seconds", type=_positive_float, default=None, metavar="SECONDS", help="show at most this many seconds")
     s.add_argument("--sources", nargs="+", metavar="DB",
                    help="databases holding clips not in DATABASE, e.g. a spliced clip's locomotion and action "
                         "(default: the inputs its run record names)")
@@ -784,7 +810,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="page to write (.html)")
     s.add_argument("--sources", nargs="+", metavar="DB",
                    help="databases holding the spliced clips' locomotions and actions (default: as recorded)")
-    s.add_argument("--max-clips", type=_positive_int, default=100,
+    s.add_argument("--max-clips", type=_positive_int, default=100, metavar="N",
                    help="at most this many clips when none are named (default 100, about 8 MB for 10 s clips)")
     _add_output_flags(s)
     s.set_defaults(func=cmd_view)
@@ -797,7 +823,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="report to write (.md); pictures go to <stem>_files/")
     s.add_argument("--sources", nargs="+", metavar="DB", help="databases holding the source clips (default: as recorded)")
     s.add_argument("--no-pictures", action="store_true", help="tables only")
-    s.add_argument("--max-rows", type=_positive_int, default=60, help="per-clip rows per method (default 60)")
+    s.add_argument("--max-rows", type=_positive_int, default=60, metavar="N", help="per-clip rows per method (default 60)")
     _add_output_flags(s, force_help="overwrite an existing report")
     s.set_defaults(func=cmd_evaluate)
 
@@ -816,7 +842,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="clips giving the upper body (default: role:action,role:both)")
     s.add_argument("--actions-db", metavar="DB", help="take the actions from this database (same skeleton)")
     s.add_argument("--method", default="splice", metavar="M[,M...]",
-                   help=f"{', '.join(_methods())}, or several comma-separated (default splice)")
+                   help=f"{', '.join(_methods())}, or several comma-separated (default splice; plug-ins add "
+                        "more, see --plugin)")
     s.add_argument("--memory-budget", type=_positive_int, default=1024, metavar="MB",
                    help="memory for one batch of pairs (default 1024 MB); sets the batch size")
     s.add_argument("--batch-size", type=_positive_int, default=None, metavar="N", help="pairs per batch (overrides the budget)")

@@ -48,7 +48,8 @@ def check_output(path, suffixes: tuple[str, ...], what: str, inputs=(), overwrit
     """
     path = Path(path)
     if path.suffix.lower() not in suffixes:
-        raise TorchspliceError(f"{path}: the output is {what}, so its name must end in {' or '.join(suffixes)}")
+        ends = suffixes[0] if len(suffixes) == 1 else f"{', '.join(suffixes[:-1])} or {suffixes[-1]}"
+        raise TorchspliceError(f"{path}: the output is {what}, so its name must end in {ends}")
     if path.is_dir():
         raise TorchspliceError(f"{path}: is a folder; give the output a file name ending in {suffixes[0]}")
     for source in inputs:

@@ -114,7 +114,8 @@ class JobSummary:
         skipped = {w: n for w, n in self.skipped.items() if not w.startswith(SKELETONS_DIFFER)}
         apart = {w[len(SKELETONS_DIFFER):]: n for w, n in self.skipped.items() if w.startswith(SKELETONS_DIFFER)}
         if skipped:
-            out.append(f"skipped {sum(skipped.values())} pairs:")
+            out.append(f"skipped {sum(skipped.values())} pairs:" if self.shard is None else
+                       f"the whole job (every slice) skips {sum(skipped.values())} pairs:")
             out += [f"  {n} x {say(why)}" for why, n in sorted(skipped.items(), key=lambda kv: -kv[1])]
         if apart:
             out.append(f"not formed: {sum(apart.values())} pairs whose clips are on skeletons of different joints "

@@ -60,6 +60,20 @@ def _option(what: str) -> tuple[str, ...]:
     return (what[1:-1],) if what.startswith("{") and what.endswith("}") else ()
 
 
+def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict]) -> str:
+    """For an error: the database's roles, label keys or first clip names, as the selector asked."""
+    kinds = {kind for kind, _, _ in alts}
+    if kinds == {"role"}:
+        return "its roles: " + (", ".join(sorted({r for r in roles if r})) or "none")
+    if kinds == {"label"}:
+        keys = {key for _, key, _ in alts}
+        values = sorted({str(lab[k]) for lab in labels for k in keys if k in lab})
+        if len(keys) == 1 and values:
+            return f"its {next(iter(keys))} labels: " + ", ".join(values[:8]) + (", ..." if len(values) > 8 else "")
+        return "its label keys: " + (", ".join(sorted({k for lab in labels for k in lab})) or "none")
+    return "its clips: " + (", ".join(names[:6]) + (", ..." if len(names) > 6 else "") or "none")
+
+
 def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) -> list[int]:
     """Rows of a database ``table`` (:meth:`MotionDatabase.table`) that every selector selects.
 
@@ -76,8 +90,7 @@ def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) 
         alts = parse_selector(text)
         hit = [i for i in range(len(names)) if _matches(alts, names[i], roles[i], labels[i])]
         if not hit:
-            sample = ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
-            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} (its clips: {sample or 'none'})",
+            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} ({_what_there_is(alts, names, roles, labels)})",
                                    options=_option(what))
         keep = set(hit)
         rows = [i for i in rows if i in keep]

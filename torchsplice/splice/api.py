@@ -279,7 +279,7 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options:
         if check is not None and not check.locomoting:
             if not options.force:
                 raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason}")
-            notes[b].append(f"{lo.name} does not locomote: {check.reason}")
+            notes[b].append(f"{lo.name} does not locomote: {check.reason}; spliced anyway (forced)")
     if acting is None:
         found = acting_limbs(A, roles, skeleton) if options.acting_limbs is None else None
         acting = [tuple(options.acting_limbs) if found is None else found[int(ai[b])][0] for b in range(len(pairs))]
@@ -334,7 +334,7 @@ def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: Sp
             if not check.locomoting:
                 if not options.force:
                     raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
-                notes[b].append(f"{clip.name} does not locomote: {check.reason}")
+                notes[b].append(f"{clip.name} does not locomote: {check.reason}; spliced anyway (forced)")
     loco, act = L.take(li), A.take(ai[:B])
     out: MethodOutput = run_checked(method, method.run,
                                     MethodInput(loco, act, A.take(ai[B:]) if refs else None, roles, skeleton, options, fps))
@@ -381,7 +381,7 @@ def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str
             if not check.locomoting:
                 if not options.force:
                     raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
-                notes[b].append(f"{clip.name} does not locomote: {check.reason}")
+                notes[b].append(f"{clip.name} does not locomote: {check.reason}; spliced anyway (forced)")
     return notes
 
 
