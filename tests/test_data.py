@@ -484,3 +484,10 @@ def test_batched_fetch_equals_single_items(spliced_db, two_skeleton_db):
                     torch.testing.assert_close(b[key], value, rtol=0, atol=0, equal_nan=True, msg=f"{key} of item {i}")
                 else:
                     assert b[key] == value
+
+
+def test_a_window_longer_than_every_clip_is_refused_in_one_line(plain_db, motions):
+    longest = max(m.num_frames for m in motions)
+    assert len(MotionDataset(plain_db, window=longest)) >= 1  # the longest clip still gives one window
+    with pytest.raises(DatasetError, match=f"no selected clip is as long as window={longest + 1} frames .*has {longest}\\)"):
+        MotionDataset(plain_db, window=longest + 1)

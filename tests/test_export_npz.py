@@ -11,6 +11,7 @@ NumPy computation from independently computed features.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -372,3 +373,25 @@ def test_window_velocities_are_slices_of_the_clips(db, bandai_names):
             torch.testing.assert_close(it[f], ref[f][it["start"]:it["start"] + 40], rtol=0, atol=1e-9)
     assert any(it["start"] > 0 for it in items)
     assert float(whole[0]["trajectory_velocity"][:, [0, 2]].norm(dim=1).mean()) > 10  # Bandai walks move (cm/s)
+
+
+def test_a_killed_exports_staged_files_are_removed_by_the_next_export(db, bandai_names, tmp_path, capsys):
+    """A SIGKILLed export leaves ``.NAME.staged-HOST-PID`` files; the next export into that folder
+    removes those of dead processes of this host and keeps the others'."""
+    import socket
+    import subprocess
+
+    out = tmp_path / "npz"
+    out.mkdir()
+    p = subprocess.Popen(["true"])
+    p.wait()  # a process that is gone
+    host = socket.gethostname()
+    dead = out / f".{bandai_names[0]}.npz.staged-{host}-{p.pid}"
+    alive = out / f".{bandai_names[0]}.npz.staged-{host}-{os.getppid()}"
+    other = out / f".{bandai_names[0]}.npz.staged-elsewhere-{p.pid}"
+    for f in (dead, alive, other):
+        f.write_bytes(b"partial")
+    rc, _, err = run(capsys, "export", db, *bandai_names[:2], "--format", "npz", "-o", out, "-f")
+    assert rc == 0, err
+    assert not dead.exists() and alive.exists() and other.exists()
+    assert sorted(f.name for f in out.glob("*.npz")) == sorted(f"{n}.npz" for n in bandai_names[:2])

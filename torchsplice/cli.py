@@ -251,7 +251,8 @@ def _make_folder(folder: Path) -> None:
 @contextlib.contextmanager
 def _all_or_nothing(args, folder: Path | None):
     """Write an export's files all or none: yields ``stage(file) -> path`` to write each one to
-    (a hidden name beside it, with this process's id); at the end every staged file is renamed
+    (a hidden name beside it, ``.NAME.staged-HOST-PID``; those a killed export left are removed
+    first); at the end every staged file is renamed
     to its name. On an error or an interrupt the staged files go, with the ``folder`` made for
     them (``None``: none to make), and no file of the export appears, so the same command runs
     again as it was. The output (``-o``: a file or the folder) is locked meanwhile: a second
@@ -259,12 +260,14 @@ def _all_or_nothing(args, folder: Path | None):
     import os
 
     from .io.atomic import os_error_message
-    from .io.lock import output_lock
+    from .io.lock import host_pid, output_lock, remove_stale_temporaries
 
     staged: dict[Path, Path] = {}
 
     def stage(f: Path) -> Path:
-        staged[f] = f.with_name(f".{f.name}.staged-{os.getpid()}")
+        if f.parent not in {g.parent for g in staged}:  # what a killed export left there goes first
+            remove_stale_temporaries(f.parent, "staged")
+        staged[f] = f.with_name(f".{f.name}.staged-{host_pid()}")
         return staged[f]
 
     with output_lock(Path(args.output), "torchsplice " + shlex.join(getattr(args, "argv", []))):

@@ -376,7 +376,8 @@ class MotionDataset(Dataset):
             :meth:`MotionDatabase.table`, labels as JSON strings).
         skeletons: every skeleton of the database (``item["skeleton"]`` indexes it).
         num_clips: number of selected clips; num_too_short: how many of them are shorter than
-            ``window`` (and so give no item); too_short: their names.
+            ``window`` (and so give no item; when all are, the dataset is refused with a
+            :class:`DatasetError`); too_short: their names.
     """
 
     def __init__(self, path, clips: Iterable[str | int] | None = None, where: Mapping[str, Any] | None = None,
@@ -459,6 +460,9 @@ class MotionDataset(Dataset):
             short = np.flatnonzero(counts == 0)
             self.num_too_short = int(len(short))
             self.too_short = tuple(self.names[i] for i in short)
+            if self.num_clips and not counts.any():  # an empty dataset would only fail later, in the loader
+                raise DatasetError(f"{self.path}: no selected clip is as long as window={window} frames "
+                                   f"(the longest of the {self.num_clips} has {int(self._len.max())})")
 
     # -- checks and files -------------------------------------------------------------------------
     def _check_features(self) -> None:

@@ -13,13 +13,14 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import re
 import socket
 import time
 from pathlib import Path
 
 from ..core.errors import TorchspliceError
 
-__all__ = ["FileLock", "LockedError", "host_pid", "pid_alive", "output_lock"]
+__all__ = ["FileLock", "LockedError", "host_pid", "pid_alive", "output_lock", "remove_stale_temporaries"]
 
 
 class LockedError(TorchspliceError):
@@ -29,6 +30,23 @@ class LockedError(TorchspliceError):
 def host_pid() -> str:
     """``HOST-PID``: what temporary names of this process carry."""
     return f"{socket.gethostname()}-{os.getpid()}"
+
+
+_TEMP = re.compile(r"\.(?P<kind>partial|staged)-(?P<host>.+)-(?P<pid>\d+)$")
+
+
+def remove_stale_temporaries(folder: Path, kind: str = "partial") -> None:
+    """Delete temporary files (``.NAME.KIND-HOST-PID``, ``kind`` ``"partial"`` or
+    ``"staged"``) of dead processes on this host in ``folder``; those of other hosts are left
+    alone (their processes cannot be checked from here)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return
+    me = socket.gethostname()
+    for f in folder.glob(f".*.{kind}-*"):
+        m = _TEMP.search(f.name)
+        if m and m["kind"] == kind and m["host"] == me and not pid_alive(int(m["pid"])):
+            f.unlink(missing_ok=True)
 
 
 def pid_alive(pid: int) -> bool:

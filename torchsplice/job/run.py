@@ -44,7 +44,7 @@ from pathlib import Path
 import torch
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
-from ..io.lock import FileLock, pid_alive
+from ..io.lock import FileLock, pid_alive, remove_stale_temporaries
 from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .executors import make_engine
@@ -163,7 +163,7 @@ class SpliceJob:
             if self.restart and self.work.exists():
                 _clear_work(self.work, keep=lock.path)
             for folder in (self.work, c.output.parent):
-                _remove_stale_files(folder)
+                remove_stale_temporaries(folder)
             sources = Sources(c.database, c.actions_db)
             try:
                 summary = self._run(sources, t0)
@@ -431,21 +431,6 @@ def _clear_work(work: Path, keep: Path) -> None:
     for f in work.iterdir():
         if f != keep:
             shutil.rmtree(f, ignore_errors=True) if f.is_dir() else f.unlink(missing_ok=True)
-
-
-_TEMP = re.compile(r"\.partial-(?P<host>.+)-(?P<pid>\d+)$")
-
-
-def _remove_stale_files(folder: Path) -> None:
-    """Delete temporary files (``.NAME.partial-HOST-PID``) of dead processes on this host; those
-    of other hosts are left alone (their processes cannot be checked from here)."""
-    if not folder.is_dir():
-        return
-    me = socket.gethostname()
-    for f in folder.glob(".*.partial-*"):
-        m = _TEMP.search(f.name)
-        if m and m["host"] == me and not pid_alive(int(m["pid"])):
-            f.unlink(missing_ok=True)
 
 
 def _prestart_workers(config: JobConfig) -> None:
