@@ -182,3 +182,13 @@ def test_error_stats_and_breakdown_by_type():
     assert by["splice"]["run"] == {"n": 2, "mean": 2.0, "median": 2.0, "worst": 3.0}
     assert by["splice"]["dash"]["n"] == 1 and by["splice"]["all"]["mean"] == 3.0
     assert set(by["naive"]) == {"all", "run"}
+
+
+def test_an_out_of_range_lag_never_prints_as_its_bound():
+    from torchsplice.evaluation.report import _lag_text
+
+    band = (-0.0469, 0.089)
+    assert _lag_text(0.01, True, band) == "0.010"
+    assert _lag_text(-0.0474, False, band) == "-0.0474 (out of range: below -0.0469)"
+    assert _lag_text(0.2, False, band) == "0.200 (out of range: above 0.089)"
+    assert _lag_text(float("nan"), False, band) == "-"

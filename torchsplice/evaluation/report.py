@@ -341,6 +341,22 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
     return figures
 
 
+def _lag_text(lag: float, ok: bool, band: tuple[float, float]) -> str:
+    """A clip's arm-leg lag for the per-clip table, 3 decimals; one out of the captured ``band``
+    names the bound it passes, with as many decimals as it takes to tell the two apart
+    (``-0.0474 (out of range: below -0.0469)``)."""
+    if lag is None or not math.isfinite(lag):
+        return "-"
+    if ok:
+        return f"{lag:.3f}"
+    below = lag < band[0]
+    bound = band[0] if below else band[1]
+    digits = 3
+    while round(lag, digits) == round(bound, digits) and digits < 8:
+        digits += 1
+    return f"{lag:.{digits}f} (out of range: {'below' if below else 'above'} {bound:.{digits}f})"
+
+
 def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, max_rows, n_captured) -> str:
     lines = [f"# torchsplice evaluation: `{path.name}`", "",
              f"{len(per_clip)} spliced clips, methods: {', '.join(methods)}; spec `{spec.name}`, lengths in {units}.", "",
@@ -371,8 +387,8 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
         lines += [f"### {m}", "", "| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
                   "|---|---|---|---|---|---|---|"]
         for c in cs[:max_rows]:
-            lines.append(f"| {c['name']} | {c['frames']} | {_fmt(c['foot_skate'])} | {_fmt(c['phase'], 3)}"
-                         f"{'' if c['phase_ok'] else ' (out of range)'} | {_fmt(c['posture'])} | "
+            lines.append(f"| {c['name']} | {c['frames']} | {_fmt(c['foot_skate'])} | {_lag_text(c['phase'], c['phase_ok'], phase_band)}"
+                         f" | {_fmt(c['posture'])} | "
                          f"{c['capture'] or '-'} | {_fmt(c['gt_error'])} |")
         if len(cs) > max_rows:
             lines.append(f"| ... {len(cs) - max_rows} more | | | | | | |")
