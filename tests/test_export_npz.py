@@ -28,24 +28,12 @@ from torchsplice.io.bvh import read_bvh
 from torchsplice.io.database import MotionDatabase
 from torchsplice.io.npz import NpzExport, clip_of_packed, read_npz, write_npz
 from torchsplice.kinematics.fk import forward_kinematics
+from cli_helpers import run, error_line
 
 F64 = torch.float64
 BANDAI = "bandai_namco_research_motiondataset"
 CLIPS = ["dataset-1_walk_proud_001", "dataset-1_bye_normal_001", "dataset-2_walk_normal_008",
          "dataset-2_wave-left-hand_normal_001", "dataset-2_walk-turn-left_normal_025"]
-
-
-def run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
-def error_line(err: str) -> str:
-    assert "Traceback" not in err, err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("torchsplice: error: "), err
-    return lines[0]
 
 
 def leftovers(folder: Path) -> list[str]:

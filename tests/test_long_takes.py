@@ -17,12 +17,7 @@ import torch
 from torchsplice.cli import main
 from torchsplice.io.bvh import read_bvh
 from torchsplice.io.database import MotionDatabase
-
-
-def run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
+from cli_helpers import run
 
 
 @pytest.fixture(scope="module")

@@ -18,16 +18,11 @@ from torchsplice.io.bvh import read_bvh
 from torchsplice.io.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
+from cli_helpers import run
 
 BANDAI = "bandai_namco_research_motiondataset"
 LOCOS = ["dataset-2_walk_normal_008", "dataset-1_walk_proud_001", "cmu_12_01_walk", "walk_curve", "test#001"]
 ACTIONS = ["dataset-2_wave-left-hand_normal_001", "dataset-1_bye_normal_001", "131_02", "carry_box", "test2#002"]
-
-
-def run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 @pytest.fixture(scope="module")

@@ -24,22 +24,9 @@ import pytest
 
 from torchsplice.cli import main
 from torchsplice.io.database import MotionDatabase
+from cli_helpers import run, error_line
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
-def error_line(err: str) -> str:
-    """The single ``torchsplice: error:`` line of a refusal (and no traceback)."""
-    assert "Traceback" not in err, err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("torchsplice: error: "), err
-    return lines[0]
 
 
 def cli(*argv, env: dict | None = None) -> subprocess.Popen:

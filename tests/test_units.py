@@ -13,21 +13,15 @@ import json
 import pytest
 import torch
 
-from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.io.bvh import read_bvh
 from torchsplice.io.database import MotionDatabase
 from torchsplice.specs import UNITS, detect_spec, load_spec
 from torchsplice.io.units import convert_units, scale_motion, unit_factor
 from torchsplice.job.plan import leg_length
+from cli_helpers import run
 
 F64 = torch.float64
-
-
-def run(capsys, *argv):
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 @pytest.fixture(scope="module")
