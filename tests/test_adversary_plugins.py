@@ -91,6 +91,14 @@ def test_registering_a_builtin_name_says_so_without_an_install_hint(tmp_path, mo
     assert "PYTHONPATH" not in err  # it was imported fine: the name is the problem
 
 
+def test_a_plugin_that_exits_on_import_is_one_line_not_a_quiet_exit(tmp_path, monkeypatch, capsys):
+    (tmp_path / "adv_exit.py").write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    rc = main(["--plugin", "adv_exit", "info", "--help"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "'adv_exit' called sys.exit(3) on import" in err and len(err.strip().splitlines()) == 1
+
+
 class _EntryPoint:
     """A stand-in for an installed package's entry point of the group torchsplice.methods."""
 

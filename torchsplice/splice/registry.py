@@ -256,7 +256,7 @@ def _ensure_loaded() -> None:
                     raise TorchspliceError(f"names a {type(obj).__name__}, neither a Method nor a function")
             except TorchspliceError as exc:
                 raise TorchspliceError(f"{where}: {exc}") from None
-            except Exception as exc:
+            except (Exception, SystemExit) as exc:
                 raise TorchspliceError(f"{where} cannot be loaded: {type(exc).__name__}: {exc}") from None
             _remember(ep.value.split(":")[0])
     env = os.environ.get(PLUGINS_ENV, "")
@@ -284,6 +284,9 @@ def load_plugins(modules: Iterable[str]) -> list[str]:
             importlib.import_module(name)
         except TorchspliceError as exc:  # it imports, but registers what it cannot (a taken name)
             raise TorchspliceError(f"plug-in module {name!r}: {exc}") from None
+        except SystemExit as exc:  # a script's sys.exit() on import would end the job quietly
+            raise TorchspliceError(f"plug-in module {name!r} called sys.exit({exc.code!r}) on import; "
+                                   "a plug-in registers its methods and returns") from None
         except Exception as exc:
             raise TorchspliceError(f"plug-in module {name!r} cannot be imported: {type(exc).__name__}: {exc} "
                                    "(is it installed, or on PYTHONPATH?)") from None
