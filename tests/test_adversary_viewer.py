@@ -202,3 +202,24 @@ def test_read_npz_of_files_that_are_not_exports_is_one_line(tmp_path):
                       ("text.npz", "not a torchsplice .npz export"), ("missing.npz", "no such file")):
         with pytest.raises(TorchspliceError, match=why):
             read_npz(tmp_path / name)
+
+
+def test_a_damaged_recorded_source_is_skipped_with_one_warning(tmp_path, capsys):
+    """The run record names the job's input; damaged since, it is skipped with one warning line
+    (the spliced clips still render and view), and only a clip that needed it is refused."""
+    from cli_helpers import run
+
+    db, out = tmp_path / "sample.h5", tmp_path / "out.h5"
+    assert run(capsys, "sample", "-o", db, "-q")[0] == 0
+    assert run(capsys, "splice-all", db, "-o", out, "--locomotions", "walk_curve", "--actions", "carry_box",
+               "--workers", "1", "-q")[0] == 0
+    db.write_bytes(b"not a database any more")
+    rc, _, err = run(capsys, "render", out, "walk_curve+carry_box", "-o", tmp_path / "x.png", "-q")
+    lines = err.strip().splitlines()
+    assert rc == 0 and len(lines) == 1 and lines[0].startswith("torchsplice: warning:") and str(db) in lines[0], err
+    rc, _, err = run(capsys, "view", out, "-o", tmp_path / "v.html", "-q")
+    assert rc == 0 and any(ln.startswith("torchsplice: warning:") for ln in err.splitlines()), err
+    rc, _, err = run(capsys, "render", out, "walk_curve", "-o", tmp_path / "y.png", "-q")
+    assert rc == 2 and "walk_curve" in err.strip().splitlines()[-1] and "Traceback" not in err
+    rc, _, err = run(capsys, "render", out, "walk_curve+carry_box", "-o", tmp_path / "z.png", "--sources", db, "-q")
+    assert rc == 2 and err.strip().splitlines()[-1].startswith("torchsplice: error:")  # named explicitly: refused

@@ -13,6 +13,7 @@ import contextlib
 import json
 import shlex
 import sys
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -903,6 +904,11 @@ def _stop_code(exc: BaseException) -> int:
     return 143 if isinstance(exc, Terminated) else 130
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """``warnings.showwarning`` for the command line: ``torchsplice: warning: ...``, one line."""
+    print(f"torchsplice: warning: {_one_line(message, limit=1000)}", file=file or sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     import signal
@@ -925,7 +931,9 @@ def main(argv: list[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _on_sigterm)  # stop as Ctrl-C does: outputs discarded, work kept
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning  # the library's warnings as one line each
+            return args.func(args)
     except TorchspliceError as exc:
         print(f"torchsplice: error: {_one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
         return 2

@@ -10,9 +10,10 @@ where the files still exist), and in the output itself when the job ran with
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
-from ..core.errors import TorchspliceError
+from ..core.errors import DatabaseError, TorchspliceError
 from ..core.motion import Motion
 from ..io.database import MotionDatabase
 from ..specs import DatasetSpec, detect_spec
@@ -40,13 +41,20 @@ def source_databases(db: MotionDatabase, sources=None) -> list[MotionDatabase]:
     record names (see :func:`recorded_sources`). The caller closes them.
 
     Raises:
-        DatabaseError: a given path that is missing or not a database (one line naming it).
+        DatabaseError: a given path that is missing or not a database (one line naming it). A
+        recorded one that can no longer be opened (damaged, or replaced by another file since)
+        is skipped with a warning: its clips are then missing, as are those of a moved one.
     """
     paths = [Path(p) for p in sources] if sources else recorded_sources(db)
     opened: list[MotionDatabase] = []
     try:
         for p in paths:
-            opened.append(MotionDatabase.open(p))
+            try:
+                opened.append(MotionDatabase.open(p))
+            except DatabaseError as exc:
+                if sources:
+                    raise
+                warnings.warn(f"{db.path}: its run record's source database is skipped: {exc}", stacklevel=2)
     except BaseException:
         for o in opened:
             o.close()
