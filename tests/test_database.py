@@ -282,6 +282,22 @@ def test_append_mode_adds_clips(db_path, two_skeleton_clips):
             assert_same_clip(db.read(m.name), m)
 
 
+def test_append_through_a_link_updates_the_file_it_names(db_path, tmp_path, two_skeleton_clips):
+    """A symbolic link to a database, appended to, stays a link: its target gets the clip, and
+    the copy appending works on is made beside the target (none left beside the link)."""
+    link = tmp_path / "elsewhere" / "link.h5"
+    link.parent.mkdir()
+    link.symlink_to(db_path)
+    extra = random_clip(chain_skeleton(3), 12, "appended", 9)
+    with MotionDatabase.open(link, "a") as db:
+        db.append(extra)
+    assert link.is_symlink() and link.resolve() == db_path.resolve()
+    with MotionDatabase.open(db_path) as db:
+        assert db.names == [m.name for m in two_skeleton_clips] + ["appended"]
+        assert_same_clip(db.read("appended"), extra)
+    assert sorted(p.name for p in link.parent.iterdir()) == ["link.h5"]
+
+
 REAL = {
     "bandai_namco_research_motiondataset": ["dataset-1_dash_normal_001.bvh", "dataset-2_raise-up-both-hands_normal_001.bvh"],
     "cmu_graphics_lab": ["cmu_12_01_walk.bvh", "131_01.bvh"],

@@ -34,6 +34,7 @@ def test_split_cuts_long_takes_into_overlapping_windows_equal_to_the_take(lafan,
     expect = list(range(0, T - n + 1, step))
     expect += [T - n] if expect[-1] != T - n else []
     assert f"1 long take cut into {len(expect)} windows of 20 s" in text
+    assert text.startswith(f"imported {len(expect)} clips from 1 file ")  # the clips written, not the files
     with MotionDatabase.open(out) as db:
         assert db.names == [f"test#{k:03d}" for k in range(len(expect))]
         for k, s in enumerate(expect):

@@ -147,7 +147,10 @@ def cmd_import(args) -> int:
         _say(args, f"skeleton {g.skeleton} (first seen in {g.path}): joint roles guessed by the {g.spec!r} spec "
                    "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in g.summary))
     cut = report.cut
-    _say(args, f"imported {_n(len(report.imported), 'clip')} ({report.frames} frames) into {args.output} "
+    # a cut take is one file but several clips: count the clips written, and the files when they differ
+    added = sum(c.windows for c in report.imported)
+    files = f" from {_n(len(report.imported), 'file')}" if added != len(report.imported) else ""
+    _say(args, f"imported {_n(added, 'clip')}{files} ({report.frames} frames) into {args.output} "
                f"({_n(report.clips, 'clip')} in all)"
                + (f"; {_n(len(cut), 'long take')} cut into {sum(c.windows for c in cut)} windows of {args.split:g} s"
                   if cut else ""))

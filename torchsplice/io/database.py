@@ -431,6 +431,7 @@ class MotionDatabase:
 
     def __init__(self, path: Path, h5: h5py.File, mode: str, tmp: Path | None, dtype, skeletons: list | None = None):
         self.path, self._h5, self.mode, self._tmp, self._dtype = path, h5, mode, tmp, dtype
+        self._target = path  # the file a write replaces on close (an append through a link: its target)
         self._lock = None
         self._skeletons = skeletons if skeletons is not None else [_skeleton_from_group(h5["skeletons"][k]) for k in sorted(h5["skeletons"], key=int)]
         self._names: list[str] | None = None
@@ -503,7 +504,8 @@ class MotionDatabase:
     def open(cls, path, mode: str = "r") -> "MotionDatabase":
         """Open an existing database, ``mode`` ``"r"`` (read) or ``"a"`` (append).
 
-        Appending works on a copy beside the file that replaces it on a clean close. The file's
+        Appending works on a copy beside the file that replaces it on a clean close (through a
+        symbolic link: beside the file it names, which is replaced; the link stays). The file's
         structure is checked first (attributes, shapes, dtypes, JSON, the clip table's ranges;
         not the frames, whose damaged chunks are reported by the reads that meet them): a
         damaged file is one :class:`DatabaseError` naming it and its first problem.
@@ -516,14 +518,15 @@ class MotionDatabase:
         if not h5py.is_hdf5(path):
             raise DatabaseError(f"{path}: not an HDF5 file")
         tmp = None
-        lock = _writer_lock(path) if mode == "a" else None
+        real = path.resolve() if mode == "a" else path  # an append through a link writes its target
+        lock = _writer_lock(real) if mode == "a" else None
         try:
             if mode == "a":
-                tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
-                free = shutil.disk_usage(path.parent).free
+                tmp = real.with_name(f".{real.name}.partial-{host_pid()}")
+                free = shutil.disk_usage(real.parent).free
                 if free < path.stat().st_size + _SPACE_MARGIN:
                     raise DatabaseError(f"{path}: no space left on the device to append: appending works on a copy "
-                                        f"of {_mb(path.stat().st_size)} and {path.parent} has {_mb(free)} free")
+                                        f"of {_mb(path.stat().st_size)} and {real.parent} has {_mb(free)} free")
                 shutil.copyfile(path, tmp)
             h5 = h5py.File(tmp or path, "r+" if mode == "a" else "r")
         except (OSError, DatabaseError) as exc:
@@ -545,7 +548,7 @@ class MotionDatabase:
             raise
         dtype = h5["skeletons/0/rotations"].dtype if "0" in h5["skeletons"] else np.dtype(np.float32)
         db = cls(path, h5, mode, tmp, dtype, skeletons)
-        db._lock = lock
+        db._lock, db._target = lock, real
         return db
 
     @staticmethod
@@ -584,7 +587,7 @@ class MotionDatabase:
             self._build_virtual()
             self._h5.close()
             self._h5 = None
-            os.replace(self._tmp, self.path)
+            os.replace(self._tmp, self._target)
             self._unlock()
         except DatabaseError:
             self.abort()
