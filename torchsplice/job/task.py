@@ -20,7 +20,7 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..splice import splice_pairs, splice_standing
-from ..splice.api import align_kwargs, spliced_labels
+from ..splice.api import bank_kwargs, spliced_labels
 from ..splice.registry import MethodFailedError, get_method, load_plugins
 from .config import JobConfig
 from .plan import Plan, Task
@@ -111,9 +111,8 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
 
         bank, index = sources.bank(task.group, group.clips, fps, roles, align.landmarks)
         out = splice_bank(bank, [index[k[0]] for k in keys], [index[k[1]] for k in keys], method,
-                          ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None, posture=config.posture,
-                          twist=config.twist,
-                          buffers=buffers, on_error="keep", **align_kwargs(align, fps))
+                          ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None,
+                          buffers=buffers, on_error="keep", **bank_kwargs(config.splice_options(), fps))
         failed = {b: f"the alignment failed ({STATUS[int(s)]})" for b, s in enumerate(out.status) if s != 0}
         ok = out.status == 0
         frames, rot, trans = out.frames[ok], out.rotations, out.translations

@@ -404,8 +404,8 @@ def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: Method, op
     act_idx = [len(locos) + a for a in ai]
     try:
         out = splice_bank(bank, li, act_idx[:B], method.name, ref=act_idx[B:] if method.needs_reference else None,
-                          posture=options.posture, twist=options.twist, dtype=np.float64 if options.dtype == torch.float64 else np.float32,
-                          **align_kwargs(options.align, fps))
+                          dtype=np.float64 if options.dtype == torch.float64 else np.float32,
+                          **bank_kwargs(options, fps))
     except CompiledSpliceError as exc:
         lo, ac = pairs[exc.pair]
         raise MotionError(f"clips {lo.name!r} and {ac.name!r} cannot be aligned: {exc.reason}") from None
@@ -432,6 +432,14 @@ def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: Method, op
             notes=tuple(notes[b]),
         ))
     return results
+
+
+def bank_kwargs(options: SpliceOptions, fps: float) -> dict:
+    """The compiled splicer's (:func:`~torchsplice.cpu.bank.splice_bank`) method arguments for
+    ``options``: posture, twist and the alignment's (:func:`align_kwargs`). The one place that
+    maps options to the kernels, for :func:`splice_pairs` and the n x m job alike, so that an
+    option cannot reach one and miss the other."""
+    return dict(posture=options.posture, twist=options.twist, **align_kwargs(options.align, fps))
 
 
 def align_kwargs(align: AlignOptions, fps: float) -> dict:
