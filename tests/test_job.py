@@ -360,12 +360,13 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     out = tmp_path / "killed" / "out.h5"
     out.parent.mkdir()
     work = work_folder(out)
+    held = lambda: (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)  # noqa: E731
     cmd = [sys.executable, "scripts/splice_all.py", str(sample_db), "-o", str(out), "--batch-size", "2"]
     proc = subprocess.Popen(cmd, cwd=REPO, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:
-            if len(list(work.glob("part-*.h5"))) >= 2:
+            if held() >= 2:
                 break
             time.sleep(0.005)
         assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read().decode()[-2000:]
@@ -378,15 +379,17 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
         proc.stderr.close()
     assert proc.returncode == -signal.SIGKILL
     assert not out.exists()  # the output appears only once complete
-    kept = sorted(work.glob("part-*.h5"))
-    assert 2 <= len(kept) < 13 and (work / "plan.json").is_file()
-    kept_pairs = sum(1 if p.name == "part-000012.h5" else 2 for p in kept)  # 12 tasks of 2 pairs, then 1
+    k = held()
+    assert 2 <= k < 13 and (work / "plan.json").is_file()
+    kept_pairs = 2 * k  # 12 tasks of 2 pairs, then 1
+    shards = sorted(int(p.stem[5:]) for p in work.glob("part-*.h5"))
+    assert all(t >= k for t in shards)  # no shard of a task the output holds is left
 
     done = subprocess.run(cmd, cwd=REPO, env=env(), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     m = re.search(r"25 spliced clips \((\d+) pairs from an earlier run\)", done.stdout)
     assert m, done.stdout
-    assert kept_pairs <= int(m.group(1)) < 25
+    assert kept_pairs <= int(m.group(1)) <= 25  # what the output held, and the shards finished since
     assert not work.exists()
     assert sorted(p.name for p in out.parent.iterdir()) == ["out.h5"]  # nothing else left behind
     names = [c["name"] for c in clips(out)]
@@ -417,7 +420,9 @@ def test_interrupt_then_resume_in_process(sample_db, batch2_out, tmp_path, monke
         job.run()
     work = work_folder(out)
     assert job.work == work and not out.exists()
-    assert sorted(p.name for p in work.glob("part-*.h5")) == ["part-000000.h5", "part-000001.h5"]
+    # the two finished tasks are in the staged output, checkpointed; their shards are gone
+    assert not list(work.glob("part-*.h5"))
+    assert MotionDatabase.checkpoint_note(work / "output.h5")["tasks"] == 2
     leftovers = [p.name for p in out.parent.glob(f".{out.name}.*") if p != work]
     assert not list(work.glob(".part-*")) and not leftovers  # no temporary file, no lock
 
@@ -426,6 +431,7 @@ def test_interrupt_then_resume_in_process(sample_db, batch2_out, tmp_path, monke
     summary = SpliceJob(config, progress=False).run()
     assert summary.resumed == 4 and summary.spliced == 25 and summary.pairs == 25
     assert len(calls) == 11 and sum(calls) == 21  # only the unfinished tasks are spliced
+    assert summary.merged_shards == 11  # and only their shards merged: the first two are not copied again
     assert "(4 pairs from an earlier run)" in summary.lines()[0]
     assert not work.exists()
     assert_same_file(out, batch2_out)
@@ -453,16 +459,17 @@ def test_other_arguments_refuse_to_mix_until_restart(sample_db, tmp_path, capsys
     code, _, err = run(capsys, *base)
     assert code == 130 and str(work) in err and "resume" in err
     monkeypatch.setattr(executors, "run_task", real)
-    parts = sorted(p.name for p in work.glob("part-*.h5"))
+    state = lambda: (sorted(p.name for p in work.iterdir()), MotionDatabase.checkpoint_note(work / "output.h5"))  # noqa: E731
     plan = (work / "plan.json").read_text()
-    assert len(parts) == 2
+    before = state()
+    assert before[1]["tasks"] == 2  # two tasks finished, in the staged output
 
     for other in (["--method", "naive"], ["--actions", "carry_box"], ["--batch-size", "3"], ["--no-posture"]):
         code, text, err = run(capsys, *base, *other)
         assert code == 2, other
         assert err.count("\n") == 1 and str(work) in err and "--restart" in err and "Traceback" not in err, err
         assert not out.exists()
-        assert sorted(p.name for p in work.glob("part-*.h5")) == parts and (work / "plan.json").read_text() == plan
+        assert state() == before and (work / "plan.json").read_text() == plan
 
     code, _, err = run(capsys, *base, "--method", "naive", "--restart")
     assert code == 0, err

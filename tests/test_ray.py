@@ -95,9 +95,9 @@ def test_a_lost_node_is_survived(scenarios):
     assert_same(tmp / "node.h5", want, "run that lost a node")
 
 
-def test_a_killed_driver_resumes_from_the_finished_shards(scenarios):
+def test_a_killed_driver_resumes_from_the_finished_tasks(scenarios):
     res, tmp, want = scenarios
-    assert res["driver_killed"]["cut"] and res["driver_killed"]["shards"] >= 3
+    assert res["driver_killed"]["cut"] and res["driver_killed"]["finished"] >= 3
     assert res["driver"]["code"] == 0, res["driver"]["stderr"]
     assert "from an earlier run" in res["driver"]["stdout"]
     assert_same(tmp / "driver.h5", want, "resumed run")

@@ -120,9 +120,11 @@ def test_loop_seams_are_continuous(clips, action):
     seams = [t for t in range(1, len(curve)) if curve[t] < curve[t - 1]]  # where the action jumps back
     assert seams and all(t - 2 >= 0 for t in seams)
     worst = max(float(out[t - 2:t + 1].max()) for t in seams)  # the jumps of the frames around each seam
-    # the waving loop is as smooth as the capture at its seams; the short raise-hand gesture, which
-    # starts moving and ends moving the other way, stays within twice the capture's largest jump
-    bound = float(torch.quantile(captured, 0.99)) if action == WAVE_L else 2 * float(captured.max())
+    # the loop holds the whole gesture, so its seam joins the end of the lowering to the clip's first
+    # frame; both takes start already raising the arm (the wave at 1.9 cm a frame), so the seam carries
+    # the capture's own start-up acceleration: within 1.25 times the capture's largest jump for the
+    # wave, twice for the short raise-hand gesture, which also ends moving the other way
+    bound = (1.25 if action == WAVE_L else 2.0) * float(captured.max())
     assert worst <= bound, (worst, bound)
     # the pose is continuous at every seam: no frame-to-frame step larger than the capture's largest
     steps = (in_chest(m, roles, roles.hands[0], chest).diff(dim=0)).norm(dim=-1)
@@ -226,10 +228,13 @@ def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_pa
     rows = {ln.split("|")[1].strip(): [x.strip() for x in ln.split("|")[2:-1]]
             for ln in section.splitlines() if ln.startswith("| ") and not ln.startswith("| method")}
     assert set(rows) == {"splice", "naive", "cpmc"} and all(r[0] == "9" for r in rows.values())
-    kept = {m: float(r[1]) for m, r in rows.items()}
-    assert kept["splice"] < 1.0 < kept["cpmc"]  # the acting wrist moves as in the action (cm)
-    assert float(rows["splice"][4]) <= 1.5  # the worst seam: about as smooth as the capture
-    in_range = {m: int(r[2].split("%")[0]) for m, r in rows.items()}
+    # the action shows: the acting wrist's range against the whole action's and against its best window
+    assert float(rows["splice"][1]) >= 0.8 and float(rows["splice"][3]) >= 0.9 and float(rows["splice"][4]) >= 0.8
+    assert "Worst pairs (action kept against the best window):" in section
+    error = {m: float(r[5]) for m, r in rows.items()}
+    assert error["splice"] < 1.0 < error["cpmc"]  # the acting wrist moves as in the frames played (cm)
+    assert float(rows["splice"][8]) <= 1.5  # the worst seam: about as smooth as the capture
+    in_range = {m: int(r[6].split("%")[0]) for m, r in rows.items()}
     assert in_range["splice"] > in_range["naive"]  # the idle arm swings with the walk, not held still
     assert len(re.findall(r"^\*\*\S+ \(standing action, loop;", text, re.M)) == 2
     assert len(list((tmp_path / "r_files").glob("*_filmstrip.png"))) >= 2

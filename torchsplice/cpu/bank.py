@@ -24,7 +24,7 @@ from .fk import fk_clips, joint_closure
 from .grid import clip_features
 from .splice import METHOD_CODES, STATUS, compact, splice_batch
 
-__all__ = ["ClipBank", "PackedSplices", "Buffers", "joint_config", "splice_bank"]
+__all__ = ["ClipBank", "PackedSplices", "Buffers", "StandingTables", "joint_config", "splice_bank", "standing_bank"]
 
 
 def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> tuple:
@@ -39,6 +39,29 @@ def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> tuple:
     return (parents, upper, fk_joints, act_joints, np.array(landmark_indices(roles, landmarks), dtype=np.int64),
             np.array(roles.hips, dtype=np.int64), np.array(roles.shoulders, dtype=np.int64), np.array(pcloud, dtype=np.int64),
             int(roles.pelvis), int(parents[roles.pelvis]), int(roles.up_axis))
+
+
+@dataclass(frozen=True)
+class StandingTables:
+    """The joint tables and frame counts of the standing-action kernels
+    (:mod:`torchsplice.cpu.standing`), made by :func:`torchsplice.splice.standing.standing_tables`.
+
+    Attributes:
+        upper ``(J,)`` bool: upper-body joints; spine: the upper-body spine joints; arms
+        ``(2, J)`` bool: the joints of the left and right arm; chest: the joint the arms hang
+        from; hands ``(2,)``: the joints measured (left, right); feat_joints: the joints whose
+        positions in the chest frame choose loop points; blend: frames of a loop's fade (before
+        the cap at a third of the action); window: frames of the windows loop points compare.
+    """
+
+    upper: np.ndarray
+    spine: np.ndarray
+    arms: np.ndarray
+    chest: int
+    hands: np.ndarray
+    feat_joints: np.ndarray
+    blend: int
+    window: int
 
 
 @njit(cache=True, parallel=True)
@@ -95,6 +118,25 @@ class ClipBank:
 
     def __len__(self) -> int:
         return len(self.lengths)
+
+    def loop_points(self, clips, masks, tables: StandingTables) -> np.ndarray:
+        """``(C, 2)`` int64: the loop points (start, end) of bank clips ``clips (C,)`` measured on
+        the hands of ``masks (C, 2)`` (see :func:`torchsplice.cpu.standing.loop_points`). Each
+        clip's are computed once (in parallel over the clips not seen yet) and kept."""
+        from .standing import loop_points_batch
+
+        cache = self.__dict__.setdefault("_loops", {})
+        clips = np.asarray(clips, dtype=np.int64)
+        masks = np.asarray(masks, dtype=np.float64).reshape(len(clips), 2)
+        keys = [(int(c), float(m[0]), float(m[1]), tables.window) for c, m in zip(clips, masks)]
+        todo = sorted({k for k in keys if k not in cache})
+        if todo:
+            out = np.empty((len(todo), 2), np.int64)
+            loop_points_batch(self.pos, self.grot, self.starts, self.lengths, np.array([k[0] for k in todo], np.int64),
+                              np.array([k[1:3] for k in todo], np.float64), tables.chest, tables.hands, tables.feat_joints,
+                              tables.window, out)
+            cache.update({k: (int(a), int(b)) for k, (a, b) in zip(todo, out)})
+        return np.array([cache[k] for k in keys], dtype=np.int64).reshape(len(keys), 2)
 
     def padded_positions(self, clips=None) -> tuple[torch.Tensor, torch.Tensor]:
         """FK positions ``(C, T, J, 3)`` of ``clips`` (default: all), padded by repeating each
@@ -226,3 +268,40 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
     else:
         orot, otrans, ocurve, ocorr = orot[:0], otrans[:0], ocurve[:0], ocorr[:0]
     return PackedSplices(out_start, frames, orot, otrans, ocurve, ocorr, ocrop, cost, angle, cells, plen, status)
+
+
+def standing_bank(bank: ClipBank, loco, act, acting, tables: StandingTables, method: str = "splice",
+                  timing: str = "loop", dtype=np.float32, buffers: Buffers | None = None) -> PackedSplices:
+    """Splice standing actions: pairs of bank clips ``loco``, ``act`` ``(B,)``, with the arms each
+    action acts with ``acting (B, 2)`` bool (left, right), by ``method`` and ``timing`` (see
+    :mod:`torchsplice.cpu.standing`). Results as :func:`splice_bank`'s, each as long as its
+    locomotion: ``curve`` holds the action frame of every result frame (at the bank's rate),
+    ``correction``, ``crop``, ``posture`` are 0, ``cost`` NaN, no DP path; every status 0."""
+    from .splice import METHOD_CODES
+    from .standing import TIMING_CODES, standing_batch
+
+    _note_first_compile()
+    loco = np.ascontiguousarray(loco, dtype=np.int64)
+    act = np.ascontiguousarray(act, dtype=np.int64)
+    B = len(loco)
+    acting = np.ascontiguousarray(acting, dtype=np.bool_).reshape(B, 2)
+    masks = acting.astype(np.float64)
+    masks[masks.sum(1) == 0] = 1.0  # no acting arm: both hands choose the frames
+    frames = bank.lengths[loco].astype(np.int64)
+    start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    M, J = int(frames.sum()), bank.rot.shape[1]
+    if buffers is not None:
+        orot, otrans, ocurve, ocorr = Buffers._get(buffers.packed, M, J, dtype)
+        orot, otrans, ocurve, ocorr = orot[:M], otrans[:M], ocurve[:M], ocorr[:M]
+    else:
+        orot, otrans, ocurve, ocorr = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M), np.empty(M)
+    ocorr[:] = 0.0
+    loops = bank.loop_points(act, masks, tables) if timing == "loop" and B else np.zeros((B, 2), np.int64)
+    if B:
+        sj = (tables.upper, tables.spine, tables.arms, int(tables.chest), tables.hands, tables.feat_joints,
+              int(tables.blend), int(tables.window), bank.pos, bank.grot)
+        standing_batch(bank.rot, bank.trans, bank.starts, bank.lengths, METHOD_CODES[method], TIMING_CODES[timing], loco,
+                       act, masks, acting, loops, sj, start, orot, otrans, ocurve, frames)
+    zeros = np.zeros(B, np.int64)
+    return PackedSplices(start, frames, orot, otrans, ocurve, ocorr, zeros.copy(), np.full(B, np.nan), np.zeros(B),
+                         np.full((B, 1, 2), -1, np.int64), zeros.copy(), zeros.copy())

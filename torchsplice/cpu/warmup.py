@@ -32,13 +32,19 @@ def warm_up(quiet: bool = False) -> float:
         print("setup: compiling the CPU splicer for this machine (once; about a minute)", file=sys.stderr, flush=True)
     from ..sample import sample_motions
     from ..specs import load_spec
-    from .bank import ClipBank, splice_bank
+    from .bank import ClipBank, splice_bank, standing_bank
 
     clips = sample_motions()[:4]
     roles = load_spec("sample").bind(clips[0].skeleton)
     bank = ClipBank.from_motions(clips, clips[0].skeleton, roles)
+    from ..splice.standing import standing_tables
+
+    tables = standing_tables(roles, clips[0].skeleton, clips[0].fps)
     for method in ("splice", "naive", "cpmc"):
         splice_bank(bank, np.array([0, 1]), np.array([2, 3]), method, ref=np.array([0, 1]))
+        for timing in ("loop", "hold", "fit"):
+            standing_bank(bank, np.array([0, 1]), np.array([2, 3]), np.array([[True, False], [True, True]]), tables,
+                          method, timing)
     from ..align.timewarp import timewarp
 
     import torch
@@ -61,6 +67,7 @@ def preload(dtype=np.float32) -> None:
 
     from . import bank as bank_mod
     from . import splice as splice_mod
+    from . import standing as standing_mod
     from .fk import fk_clips
 
     f8, i8 = np.zeros((1, 1, 1)), np.zeros(1, np.int64)
@@ -74,6 +81,10 @@ def preload(dtype=np.float32) -> None:
         splice_mod.compact: (out, out, v8, v8, i8, i8, i8, out, out, v8, v8),
         fk_clips: (f8, f8, i8, i8, i8, f8, f8),
         bank_mod._features: (f8, i8, i8, i8, i8, 0, f8, m8, v8, v8, v8),
+        standing_mod.standing_batch: (f8, f8, i8, i8, 0, 0, i8, i8, m8, np.zeros((1, 2), np.bool_), np.zeros((1, 2), np.int64),
+                                      (np.zeros(1, np.bool_), i8, np.zeros((1, 1), np.bool_), 0, i8, i8, 0, 0, f8, f8), i8,
+                                      out, out, v8, i8),
+        standing_mod.loop_points_batch: (f8, f8, i8, i8, i8, m8, 0, i8, i8, 0, np.zeros((1, 2), np.int64)),
     }
     for kernel, args in kernels.items():
         kernel.compile(tuple(typeof(a) for a in args))

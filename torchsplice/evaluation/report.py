@@ -11,8 +11,10 @@ For every spliced clip (and, in aggregate, every method) the report gives:
   combination, where the spec declares ground truth (``[clips.ground_truth]``), overall and
   per locomotion type (the locomotion's ``content`` label: turn, side walk, run ...) with its
   mean, median and worst;
-- for **standing actions** (see :mod:`torchsplice.evaluation.standing`): the action kept, the
-  idle arms' phase, the smoothness of the loop seams, and filmstrips of two such pairs.
+- for **standing actions** (see :mod:`torchsplice.evaluation.standing`): the action kept (the
+  acting wrists' range of motion against the whole action's and against its best window of
+  the result's length, with the worst pairs named), the wrist error, the idle arms' phase,
+  the smoothness of the loop seams, and filmstrips of two such pairs.
 
 The source clips come from the databases recorded in the output's ``run`` attribute, from
 ``sources`` given explicitly, or from the output itself when the job copied them in.
@@ -224,7 +226,8 @@ def _standing_rows(db, t, chunk, results, acts, roles) -> dict[int, dict]:
     curves = [torch.from_numpy(db.read_frame_column(chunk[n], "action_frame").astype("float64")) for n in idx]
     sm = standing_measures([results[n] for n in idx], [acts[n] for n in idx], curves, acting, roles)
     return {n: {"timing": str(t["timing"][chunk[n]]), "acting": ",".join(acting[k]),
-                "action_kept": float(sm.action_kept[k]), "idle_lag": float(sm.idle_lag[k]),
+                "range_kept": float(sm.range_kept[k]), "window_kept": float(sm.window_kept[k]),
+                "wrist_error": float(sm.wrist_error[k]), "idle_lag": float(sm.idle_lag[k]),
                 "seam_ratio": float(sm.seam_ratio[k])} for k, n in enumerate(idx)}
 
 
@@ -235,32 +238,46 @@ def _standing_section(per_clip: list[dict], methods: list[str], units: str, band
         return []
     lo, hi = band
 
-    def stats(vals):
+    def stats(vals, worst=max):
         vals = [v for v in vals if v is not None and math.isfinite(v)]
-        return (sum(vals) / len(vals), max(vals)) if vals else (None, None)
+        return (sum(vals) / len(vals), worst(vals)) if vals else (None, None)
 
     lines = ["## Standing actions", "",
              f"{len(stand)} clips put an action that does not locomote onto a locomotion "
              f"({', '.join(sorted({c['timing'] for c in stand}))}).", "",
-             f"| method | clips | action kept ({units}), mean | idle arms: lag within captured range | seam jump / "
-             f"capture's 99th pct., mean | worst | foot skate ({units}/s), standing | foot skate, time-aligned |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| method | clips | action kept: range / the action's, mean | worst | range / its best window, mean | "
+             f"worst | wrist error ({units}), mean | idle arms: lag within captured range | seam jump / capture's "
+             f"99th pct., mean | worst | foot skate ({units}/s), standing | foot skate, time-aligned |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for m in methods:
         cs = [c for c in stand if c["method"] == m]
         if not cs:
             continue
-        kept, _ = stats([c["action_kept"] for c in cs])
+        whole, whole_min = stats([c["range_kept"] for c in cs], worst=min)
+        window, window_min = stats([c["window_kept"] for c in cs], worst=min)
+        err, _ = stats([c["wrist_error"] for c in cs])
         idle = [c["idle_lag"] for c in cs if math.isfinite(c["idle_lag"])]
         in_range = f"{100 * sum(lo <= x <= hi for x in idle) / len(idle):.0f}% of {len(idle)}" if idle else "-"
         seam, worst = stats([c["seam_ratio"] for c in cs])
         skate, _ = stats([c["foot_skate"] for c in cs])
         other, _ = stats([c["foot_skate"] for c in per_clip if c["method"] == m and c.get("timing", "timewarp") == "timewarp"])
-        lines.append(f"| {m} | {len(cs)} | {_fmt(kept)} | {in_range} | {_fmt(seam)} | {_fmt(worst)} | {_fmt(skate)} | {_fmt(other)} |")
-    lines += ["", "Action kept: mean distance of the acting arms' wrists, in the chest's frame, from the action's at "
-              "the same action frame (0: the action's arm motion exactly). Idle arms: the arm-leg lag of the arms the "
-              "action does not use, against the range of the captured walks. Seam jump: the largest change of the "
-              "acting wrists' velocity around each loop point, over the 99th percentile of the same in the captured "
-              "action (about 1 or less: as smooth as the capture). Foot skate as above: the locomotion's, unchanged.", ""]
+        lines.append(f"| {m} | {len(cs)} | {_fmt(whole)} | {_fmt(whole_min)} | {_fmt(window)} | {_fmt(window_min)} | "
+                     f"{_fmt(err)} | {in_range} | {_fmt(seam)} | {_fmt(worst)} | {_fmt(skate)} | {_fmt(other)} |")
+    lines += ["", "Action kept: the acting wrists' range of motion in the chest's frame (the extent between their 5th and "
+              "95th percentile positions), in the result over the same in the whole captured action, and over the "
+              "largest such range of any window of the action as long as the result (about 1: the result plays the "
+              "whole gesture, or its best part when the locomotion is shorter). Wrist error: mean distance of the "
+              "acting wrists, in the chest's frame, from the action's at the same action frame (0: the frames played "
+              "are the action's exactly). Idle arms: the arm-leg lag of the arms the action does not use, against the "
+              "range of the captured walks. Seam jump: the largest change of the acting wrists' velocity around each "
+              "loop point, over the 99th percentile of the same in the captured action (about 1 or less: as smooth as "
+              "the capture). Foot skate as above: the locomotion's, unchanged.", ""]
+    worst_pairs = sorted((c for c in stand if math.isfinite(c["window_kept"])), key=lambda c: c["window_kept"])[:5]
+    if worst_pairs:
+        lines += ["Worst pairs (action kept against the best window):", ""]
+        lines += [f"- {c['name']} ({c['method']}, {c['timing']}): {_fmt(c['window_kept'])} of the best window, "
+                  f"{_fmt(c['range_kept'])} of the whole action" for c in worst_pairs]
+        lines.append("")
     return lines
 
 

@@ -35,6 +35,12 @@ file holds 100,000 clips and more. Writing is atomic: a new database is written 
 target and renamed into place when closed; appending works on a copy that replaces the
 original only when closed cleanly. An interrupted write never leaves a file that looks
 complete at the target path.
+
+A *resumable* database (``create(..., staging=PATH)``) is written at a path of the caller's
+that outlives the process, in HDF5's SWMR mode (see :mod:`torchsplice.io.resumable`):
+:meth:`MotionDatabase.checkpoint` makes everything appended so far survive a killed process,
+and :meth:`MotionDatabase.resume` reopens the file at its last checkpoint, so that a long
+write killed at any moment carries on where it stood instead of starting again.
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ import functools
 import inspect
 import json
 import os
+import pickle
 import shutil
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -61,6 +68,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .lock import host_pid, output_lock
+from .resumable import clear_status_flags, detach
 
 __all__ = ["MotionDatabase", "ClipBatch", "SCHEMA_VERSION", "FORMAT", "COMPRESSIONS"]
 
@@ -110,6 +118,58 @@ def _guarded(method):
                 raise
             raise DatabaseError(self._write_failed(exc)) from None
     return wrapper
+
+
+def _column_array(columns: dict, name: str, values) -> np.ndarray:
+    """Values of clip-table column ``name`` (built-in or one of ``columns``) as the array its dataset stores."""
+    dt = _COLUMNS.get(name) or _KINDS[columns[name]][0]
+    return np.array(values, dtype=object if dt is _STR else dt)
+
+
+class _RowLog:
+    """The clip-table rows of a resumable database, appended to a file beside its staging file
+    (``STAGING.rows``): one length-prefixed pickle per append (column -> array). Appends only;
+    :meth:`truncate` returns it to a checkpoint's size."""
+
+    def __init__(self, path: Path, fresh: bool):
+        self.path = path
+        self.file = open(path, "wb" if fresh else "r+b")
+        self.file.seek(0, os.SEEK_END)
+
+    def append(self, rows: dict) -> None:
+        data = pickle.dumps(rows, protocol=pickle.HIGHEST_PROTOCOL)
+        self.file.write(len(data).to_bytes(8, "little") + data)
+
+    def size(self) -> int:
+        self.file.flush()
+        return self.file.tell()
+
+    def truncate(self, size: int) -> None:
+        self.file.flush()
+        if os.fstat(self.file.fileno()).st_size < size:
+            raise ValueError(f"{self.path} holds fewer rows than its checkpoint")
+        self.file.truncate(size)
+        self.file.seek(size)
+
+    def records(self):
+        """Every append, in order."""
+        self.file.flush()
+        with open(self.path, "rb") as f:
+            while head := f.read(8):
+                yield pickle.loads(f.read(int.from_bytes(head, "little")))
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def _commit_path(staging: Path) -> Path:
+    """Where a resumable database staged at ``staging`` records its last checkpoint."""
+    return staging.with_name(f"{staging.name}.commit")
+
+
+def _rows_path(staging: Path) -> Path:
+    """Where a resumable database staged at ``staging`` logs its clip-table rows."""
+    return staging.with_name(f"{staging.name}.rows")
 
 
 def _writer_lock(path: Path):
@@ -444,12 +504,15 @@ class MotionDatabase:
         self._staged_frames = 0
         self._skeleton_ids: dict[int, tuple[Skeleton, int]] = {}  # id -> (object kept alive, row)
         self._virtual: dict[int, list[tuple[str, int]]] = {}  # skeleton -> (source file, frames) in order
+        self._resumable = False  # written at a staging path across runs (see checkpoint, resume)
+        self._row_log: _RowLog | None = None  # a resumable database's clip-table rows until it closes
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod
     def create(cls, path, overwrite: bool = False, dtype=np.float32, chunk_frames: int = 1024,
                compression: str | None = "gzip", columns: dict[str, str] | None = None,
-               frame_columns: tuple[str, ...] = (), attrs: dict | None = None) -> "MotionDatabase":
+               frame_columns: tuple[str, ...] = (), attrs: dict | None = None,
+               staging: Path | None = None) -> "MotionDatabase":
         """Start a new database that appears at ``path`` when closed.
 
         Frames are stored as ``dtype`` (float32 by default) in chunks of ``chunk_frames``,
@@ -460,6 +523,12 @@ class MotionDatabase:
         before compression.
         ``columns`` declares extra per-clip columns (name -> ``"str"``, ``"float"`` or ``"int"``),
         ``frame_columns`` extra per-frame float32 columns; ``attrs`` are extra root attributes.
+
+        With ``staging`` the file is written there (a path that outlives this process, instead
+        of a temporary name beside ``path``) and is *resumable*: see :meth:`checkpoint` and
+        :meth:`resume`. Skeletons added before the first checkpoint (:meth:`add_skeleton`) are
+        covered by the guarantee that a killed process leaves a file that reopens; add every
+        skeleton the file will hold first.
         """
         columns = dict(columns or {})
         bad = [c for c in list(columns) + list(frame_columns)
@@ -477,9 +546,12 @@ class MotionDatabase:
         if path.exists() and not overwrite:
             lock.release()
             raise OutputExistsError(f"{path}: already exists")
-        tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
+        tmp = Path(staging) if staging is not None else path.with_name(f".{path.name}.partial-{host_pid()}")
         try:
-            h5 = h5py.File(tmp, "w")
+            if staging is not None:
+                _commit_path(tmp).unlink(missing_ok=True)
+                _rows_path(tmp).unlink(missing_ok=True)
+            h5 = h5py.File(tmp, "w", **({"libver": "latest"} if staging is not None else {}))
             h5.attrs.update({
                 "format": FORMAT, "schema_version": SCHEMA_VERSION, "quaternion_order": "wxyz",
                 "rotation_convention": "local joint rotation, parent-from-child, column vectors",
@@ -498,7 +570,105 @@ class MotionDatabase:
             raise DatabaseError(os_error_message(path, exc)) from None
         db = cls(path, h5, "w", tmp, np.dtype(dtype))
         db._lock = lock
+        if staging is not None:
+            db._resumable, db._names, db._row_log = True, [], _RowLog(_rows_path(tmp), fresh=True)
         return db
+
+    @_guarded
+    def checkpoint(self, note: dict | None = None) -> None:
+        """Make every clip appended so far survive a killed process (a resumable database only).
+
+        Flushes the file and records, beside the staging file (``STAGING.commit``, written
+        atomically), the size of every dataset, the skeletons, the root attributes and
+        ``note`` (JSON, the caller's own record, e.g. which of its work the clips hold):
+        :meth:`resume` returns the file to exactly this state and gives ``note`` back.
+        """
+        if not self._resumable:
+            raise ValueError(f"{self.path}: only a database created with a staging path has checkpoints")
+        self.flush()
+        h5 = self.h5
+        if not h5.swmr_mode:
+            h5.swmr_mode = True  # from here on the file on disk is consistent at every moment
+        h5.flush()
+        sizes = {}
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None:
+                sizes[name] = int(obj.shape[0])
+        h5.visititems(visit)
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5.attrs.items()}
+        record = {"version": 1, "sizes": sizes, "skeletons": len(self._skeletons), "rows": self._row_log.size(),
+                  "attrs": {k: v for k, v in attrs.items() if isinstance(v, (str, int, float))},
+                  "virtual": {str(k): [list(p) for p in parts] for k, parts in self._virtual.items()},
+                  "note": note or {}}
+        commit = _commit_path(self._tmp)
+        tmp = commit.with_name(f"{commit.name}.partial-{host_pid()}")
+        tmp.write_text(json.dumps(record))
+        os.replace(tmp, commit)
+
+    @staticmethod
+    def checkpoint_note(staging) -> dict | None:
+        """The ``note`` of the last checkpoint of the database staged at ``staging`` (``None``
+        when it has none), read without opening the file."""
+        try:
+            return dict(json.loads(_commit_path(Path(staging)).read_text())["note"])
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+
+    @classmethod
+    def resume(cls, path, staging, overwrite: bool = False) -> "tuple[MotionDatabase, dict] | None":
+        """Reopen the resumable database staged at ``staging`` for ``path`` at its last
+        :meth:`checkpoint`: every dataset cut back to its size then (dropping what a killed or
+        interrupted process appended after it), skeletons added since removed. Returns the
+        database (appends go on from there; closing it puts it at ``path``) and the
+        checkpoint's ``note``, or ``None`` (and removes the staging file) when there is nothing
+        to resume: no staging file, no checkpoint, or a file that does not reopen.
+        """
+        path, staging = Path(path), Path(staging)
+        commit, rows = _commit_path(staging), _rows_path(staging)
+        if not staging.is_file() or not commit.is_file() or not rows.is_file():
+            for f in (staging, commit, rows):
+                f.unlink(missing_ok=True)
+            return None
+        lock = _writer_lock(path)
+        if path.exists() and not overwrite:
+            lock.release()
+            raise OutputExistsError(f"{path}: already exists")
+        h5 = log = None
+        try:
+            record = json.loads(commit.read_text())
+            log = _RowLog(rows, fresh=False)
+            log.truncate(int(record["rows"]))
+            names = [str(n) for r in log.records() for n in r["name"]]
+            clear_status_flags(staging)
+            h5 = h5py.File(staging, "r+", libver="latest")
+            for k in [k for k in h5["skeletons"] if int(k) >= int(record["skeletons"])]:
+                del h5["skeletons"][k]
+            for name, n in record["sizes"].items():
+                ds = h5[name]
+                if ds.shape[0] < n:
+                    raise ValueError(f"{name} holds {ds.shape[0]} rows, the checkpoint {n}")
+                if ds.shape[0] > n:
+                    ds.resize(n, axis=0)
+            for k, v in record["attrs"].items():
+                if h5.attrs.get(k) != v:
+                    h5.attrs[k] = v
+            skeletons = cls._check_header(path, h5, "a")
+            dtype = h5["skeletons/0/rotations"].dtype if "0" in h5["skeletons"] else np.dtype(np.float32)
+        except (OSError, ValueError, KeyError, TypeError, RuntimeError, EOFError, pickle.UnpicklingError, DatabaseError):
+            if h5 is not None:
+                detach(h5)
+            if log is not None:
+                log.close()
+            for f in (staging, commit, rows):
+                f.unlink(missing_ok=True)
+            lock.release()
+            return None
+        db = cls(path, h5, "w", staging, dtype, skeletons)
+        db._lock, db._resumable, db._row_log = lock, True, log
+        db._names, db._flushed = names, len(names)
+        db._virtual = {int(k): [tuple(p) for p in parts] for k, parts in record["virtual"].items()}
+        return db, record["note"]
 
     @classmethod
     def open(cls, path, mode: str = "r") -> "MotionDatabase":
@@ -584,10 +754,16 @@ class MotionDatabase:
             return
         try:
             self.flush()
+            if self._resumable:
+                self._write_logged_rows()
             self._build_virtual()
             self._h5.close()
             self._h5 = None
             os.replace(self._tmp, self._target)
+            if self._resumable:
+                self._row_log.close()
+                _commit_path(self._tmp).unlink(missing_ok=True)
+                _rows_path(self._tmp).unlink(missing_ok=True)
             self._unlock()
         except DatabaseError:
             self.abort()
@@ -601,8 +777,25 @@ class MotionDatabase:
             self.abort()
             raise
 
-    def abort(self) -> None:
-        """Discard a write in progress: the file at ``path`` stays as it was."""
+    def abort(self, failed: bool = False) -> None:
+        """Discard a write in progress: the file at ``path`` stays as it was.
+
+        A resumable database keeps its staging file for :meth:`resume` (which returns it to
+        its last checkpoint); ``failed`` (a write failed) closes it without writing more."""
+        if self._resumable:
+            if self._row_log is not None:
+                self._row_log.close()
+            if self._h5 is not None:
+                if failed:
+                    detach(self._h5)
+                else:
+                    try:
+                        self._h5.close()
+                    except Exception:
+                        detach(self._h5)
+                self._h5 = None
+            self._unlock()
+            return
         if self._h5 is not None and self._tmp is not None:
             try:  # free the space first: closing flushes HDF5's cache, which needs room on the disk
                 os.truncate(self._tmp, 0)
@@ -646,13 +839,14 @@ class MotionDatabase:
         except OSError:
             written = 0
         pending = pending or self._staged_bytes()
-        self.abort()
+        kept = "what was written is kept" if self._resumable else "nothing was written"
+        self.abort(failed=True)
         if not _no_space(exc):
             return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({str(exc).splitlines()[0][:120]})"
         folder = self.path.parent.resolve()
         free = shutil.disk_usage(folder).free
         return (f"{self.path}: no space left on the device; the database needs more than {_mb(written + pending)} "
-                f"and {folder} has {_mb(free)} free (nothing was written; free some space and run the command again)")
+                f"and {folder} has {_mb(free)} free ({kept}; free some space and run the command again)")
 
     def _staged_bytes(self) -> int:
         """Uncompressed bytes of the clips waiting in the buffer (an upper bound of their size)."""
@@ -776,6 +970,7 @@ class MotionDatabase:
         """Metadata of one clip: name, source, role, labels, skeleton, start, length, fps."""
         i = self.index(clip)
         self._require_flushed(i)
+        self._table_written()
         c = self.h5["clips"]
         info = {k: c[k][i] for k in [*_COLUMNS, *self.columns]}
         for k in ("name", "source", "role", "labels", *[n for n, kind in self.columns.items() if kind == "str"]):
@@ -793,6 +988,7 @@ class MotionDatabase:
         """Every metadata column, extra ones too, as an array (labels as JSON strings, each
         checked to be a JSON object, so that callers may ``json.loads`` them)."""
         self.flush()
+        self._table_written()
         c = self.h5["clips"]
         t = {k: (c[k].asstr()[()] if h5py.check_string_dtype(c[k].dtype) else c[k][()]) for k in [*_COLUMNS, *self.columns]}
         checked: set[str] = set()
@@ -810,6 +1006,10 @@ class MotionDatabase:
         info = self.clip_info(clip)
         with self._frames(info["skeleton"], [self.index(clip)]):
             return self.h5[f"skeletons/{info['skeleton']}/{name}"][info["start"]:info["start"] + info["length"]]
+
+    def _table_written(self) -> None:
+        if self._resumable and self._h5 is not None:
+            raise DatabaseError(f"{self.path}: is being written (its clip table is written when it is closed)")
 
     def _require_flushed(self, i: int) -> None:
         if i >= self._flushed:
@@ -975,26 +1175,20 @@ class MotionDatabase:
                 t[:, 0] = root
                 arrays["translations"] = t
         self._reserve(sum(a.nbytes for a in arrays.values()) + 200 * C)
-        c = self.h5["clips"]
-        n0, m0 = g["rotations"].shape[0], c["name"].shape[0]
+        n0 = g["rotations"].shape[0]
         rows["skeleton"], rows["start"] = [k] * C, n0 + starts
         try:
             for name, a in arrays.items():
                 ds = g[name]
                 ds.resize(n0 + N, axis=0)
                 ds[n0:] = a.astype(ds.dtype, copy=False)
-            for name, values in rows.items():
-                dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
-                c[name].resize(m0 + C, axis=0)
-                c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
+            self._store_rows(rows)
         except BaseException as exc:
             if _io_failure(exc):
                 raise  # the whole write is discarded (see _guarded)
             try:  # leave the file as it was before the call: no half-written rows
                 for name in arrays:
                     g[name].resize(n0, axis=0)
-                for name in rows:
-                    c[name].resize(m0, axis=0)
             except Exception:
                 pass
             if isinstance(exc, OSError):
@@ -1033,7 +1227,7 @@ class MotionDatabase:
             raise DatabaseError(f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones")
         parts = self._virtual.setdefault(k, [])
         n0 = sum(n for _, n in parts)
-        rel = os.path.relpath(Path(refer_as or source).resolve(), self._tmp.resolve().parent)
+        rel = os.path.relpath(Path(refer_as or source).resolve(), Path(self._target).resolve().parent)
         self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
         parts.append((rel, N))
 
@@ -1059,19 +1253,7 @@ class MotionDatabase:
         }
         for n, kind in self.columns.items():
             rows[n] = each(extra[n], f"column {n!r}") if n in extra else [_KINDS[kind][1]] * C
-        c = self.h5["clips"]
-        m0 = c["name"].shape[0]
-        try:
-            for name, values in rows.items():
-                dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
-                c[name].resize(m0 + C, axis=0)
-                c[name][m0:] = np.array(values, dtype=object if dt is _STR else dt)
-        except BaseException as exc:
-            if _io_failure(exc):
-                raise  # the whole write is discarded (see _guarded)
-            for name in rows:
-                c[name].resize(m0, axis=0)
-            raise
+        self._store_rows(rows)
         for n in names:
             index[n] = len(index)
         if self._names is not None:
@@ -1154,12 +1336,44 @@ class MotionDatabase:
             for n, kind in self.columns.items():
                 rows[n].append(extra.get(n, _KINDS[kind][1]))
             starts[k] += m.num_frames
-        c = h5["clips"]
-        n = c["name"].shape[0]
-        for name, values in rows.items():
-            dt = _COLUMNS.get(name) or _KINDS[self.columns[name]][0]
-            c[name].resize(n + len(values), axis=0)
-            c[name][n:] = np.array(values, dtype=object if dt is _STR else dt)
+        self._store_rows(rows)
+
+    def _store_rows(self, rows: dict) -> None:
+        """Write clip-table rows (column -> ``C`` values) after the stored ones: into the clips
+        datasets, or, for a resumable database, into its row log (:class:`_RowLog`), which
+        :meth:`close` writes to the datasets at once (HDF5's heap of variable-length strings is
+        not covered by SWMR's ordered writes, so a killed process could leave it torn)."""
+        if self._resumable:
+            self._row_log.append({name: _column_array(self.columns, name, values) for name, values in rows.items()})
+            return
+        c = self.h5["clips"]
+        m0 = c["name"].shape[0]
+        try:
+            for name, values in rows.items():
+                c[name].resize(m0 + len(values), axis=0)
+                c[name][m0:] = _column_array(self.columns, name, values)
+        except BaseException as exc:
+            if _io_failure(exc):
+                raise  # the whole write is discarded (see _guarded)
+            try:  # no half-written rows
+                for name in rows:
+                    c[name].resize(m0, axis=0)
+            except Exception:
+                pass
+            raise
+
+    def _write_logged_rows(self) -> None:
+        """A resumable database's logged rows into its clips datasets (at :meth:`close`)."""
+        c = self.h5["clips"]
+        total = self._flushed
+        for name in c:
+            c[name].resize(total, axis=0)
+        at = 0
+        for rows in self._row_log.records():
+            n = len(rows["name"])
+            for name, values in rows.items():
+                c[name][at:at + n] = values
+            at += n
 
     # -- reading ------------------------------------------------------------------------------
     @_reads

@@ -7,7 +7,8 @@ the output merged from them, are the same bits whatever the engine and the worke
 - :class:`InlineEngine`: this process (one worker, or a CUDA device). A background thread
   writes each task's shard while the next one computes.
 - :class:`LocalEngine`: worker processes on this machine (``--workers N``, default one per
-  core), each computing with one thread and writing its own shards. When a worker dies
+  core), each computing with one thread and writing its own shards, with at most
+  :data:`IN_FLIGHT_PER_WORKER` tasks each handed out at a time. When a worker dies
   (killed, out of memory) the pool is restarted and the unfinished tasks run again; the job
   gives up after :data:`MAX_ATTEMPTS` breaks in a row without a task finishing.
 - :class:`RayEngine`: Ray tasks on a cluster (``--ray-address``), or on a Ray instance started
@@ -47,6 +48,9 @@ log = logging.getLogger("torchsplice.job")
 __all__ = ["InlineEngine", "LocalEngine", "RayEngine", "make_engine", "MAX_ATTEMPTS"]
 
 MAX_ATTEMPTS = 3
+IN_FLIGHT_PER_WORKER = 2
+"""Tasks a local worker has handed out at once (one computing, one waiting): finished tasks
+wait for the driver's merge on disk, so this bounds the disk they take."""
 
 
 def _shard_compression(config: JobConfig):
@@ -190,32 +194,33 @@ class LocalEngine:
     def run(self, tasks: list[Task], done) -> None:
         index = {t.id: n for n, t in enumerate(self.plan.tasks)}
         todo = {t.id: t for t in tasks}
+        window = IN_FLIGHT_PER_WORKER * self.workers  # tasks handed out at once: the driver's merge keeps pace
         rounds = 0  # pool breaks in a row without a task finished
         while todo:
             self._start()
             before = len(todo)
             rounds += 1
             broken = False
-            futures = {}
+            queue = list(todo)
+            futures: dict = {}
             try:
-                try:
-                    for tid in todo:
-                        futures[self.pool.submit(_worker_task, index[tid])] = tid
-                except BrokenProcessPool:  # a worker died while the tasks were being handed out
-                    broken = True
-                remaining = set(futures)
-                while remaining:
-                    finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
-                    for f in finished:
-                        tid = futures[f]
+                while (queue or futures) and not broken:
+                    try:
+                        while queue and len(futures) < window:
+                            tid = queue.pop(0)
+                            futures[self.pool.submit(_worker_task, index[tid])] = tid
+                    except BrokenProcessPool:  # a worker died while the tasks were being handed out
+                        broken = True
+                        break
+                    finished, _ = wait(set(futures), return_when=FIRST_COMPLETED)
+                    for f in sorted(finished, key=lambda f: index[futures[f]]):
+                        tid = futures.pop(f)
                         try:
                             f.result()
                         except BrokenProcessPool:
                             broken = True
                             continue
                         done(todo.pop(tid), None)
-                    if broken:
-                        break
             except BaseException:
                 self.close(kill=True)
                 raise

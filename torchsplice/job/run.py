@@ -86,6 +86,7 @@ class JobSummary:
     tasks: int = 0
     tasks_done: int = 0
     merge: bool = False
+    merged_shards: int = 0  # shards this run appended to the output (an earlier run's are not merged again)
 
     def lines(self, option_name=None) -> list[str]:
         """The closing summary, as printed by the command line; ``option_name(option)`` writes the
@@ -191,77 +192,61 @@ class SpliceJob:
             new_plan = True
         shard_dir = self.work
         tasks = plan.tasks if self.shard is None else _slice(plan.tasks, *self.shard)
-        have = {t.id for t in tasks if (shard_dir / self.sink.shard_name(t.id)).exists()}
-        pending = [t for t in tasks if t.id not in have]
-        summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), shard=self.shard,
-                             tasks=len(tasks), resumed=sum(t.size for t in tasks if t.id in have))
         try:
             engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir)
         except BaseException:
-            if new_plan and not have:  # nothing was done: leave no plan that would tie the next run to these arguments
-                plan_path.unlink(missing_ok=True)
+            if new_plan and not any(shard_dir.glob("part-*")):  # nothing was done: leave no plan that would tie
+                plan_path.unlink(missing_ok=True)                # the next run to these arguments
                 try:
                     self.work.rmdir()  # only when empty
                 except OSError:
                     pass
             raise
-        summary.engine = engine.describe()
-        log.info("%d pairs in %d tasks (%d already done) on %s", sum(t.size for t in tasks), len(tasks), len(have),
-                 summary.engine)
+        out, merged, merge = None, 0, None
+        try:
+            summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), shard=self.shard,
+                                 tasks=len(tasks), engine=engine.describe())
+            if self.shard is None:  # the output, resumed at its last checkpoint if an earlier run left one
+                run = {**plan.key, "pairs": len(plan.pairs), "batch_pairs": plan.key["task_pairs"],
+                       "plan_sha256": plan.digest(), "command": self.command, "started": self._started,
+                       "engine": summary.engine, "pairs_spliced": len(plan.pairs)}
+                out, merged = _open_output(self.sink, c, plan, self.work, run, self.overwrite,
+                                           lambda g: _source_skeleton(plan, g, sources), sources)
+                _remove_merged_shards(shard_dir, self.sink, tasks[:merged], c.layout)
+            have = {t.id for t in tasks[:merged]} | {t.id for t in tasks[merged:]
+                                                     if (shard_dir / self.sink.shard_name(t.id)).exists()}
+            pending = [t for t in tasks if t.id not in have]
+            summary.resumed = sum(t.size for t in tasks if t.id in have)
+            if out is not None:
+                merge = _Merge(out, self.sink, c, plan, tasks, shard_dir, merged, have)
+        except BaseException:
+            if out is not None:
+                out.abort()
+            engine.close()
+            raise
+        log.info("%d pairs in %d tasks (%d already done, %d of them in the output) on %s", sum(t.size for t in tasks),
+                 len(tasks), len(have), merged, summary.engine)
         bar = _progress(sum(t.size for t in tasks), summary.resumed, self.progress)
-        out = None
-        if self.shard is None:
-            run = {**plan.key, "pairs": len(plan.pairs), "batch_pairs": plan.key["task_pairs"], "plan_sha256": plan.digest(),
-                   "command": self.command, "started": self._started, "engine": summary.engine,
-                   "pairs_spliced": len(plan.pairs)}
-            out = self.sink.open_output(c.output, c.compression, run, self.overwrite)
-            out.expect_plan = plan.digest()
-        order = {t.id: n for n, t in enumerate(tasks)}
-        ready: dict[int, object] = {order[tid]: None for tid in have}
-        state = {"next": 0, "done": len(have)}
-
-        def merge_ready() -> None:
-            while state["next"] in ready:
-                n = state["next"]
-                part = ready.pop(n)
-                name = self.sink.shard_name(tasks[n].id)
-                out.append_shard(shard_dir / name, part, virtual=c.layout == "virtual", refer_as=c.shards_folder / name)
-                state["next"] += 1
 
         def done(task, part) -> None:
-            state["done"] += 1
-            if out is not None:
-                # parts that finish ahead of their turn wait on disk, except a few in memory
-                held = sum(p is not None for p in ready.values())
-                ready[order[task.id]] = part if (order[task.id] == state["next"] or held < 4) else None
-                merge_ready()
+            if merge is not None:
+                merge.add(task, part)
             bar.update(task.size)
             bar.set_postfix_str(f"workers {engine.alive()}", refresh=False)
 
         t1 = time.perf_counter()
         try:
-            if out is not None:
-                merge_ready()  # tasks an earlier run finished, ahead of the first new one
+            if merge is not None:
+                merge.flush()  # tasks an earlier run finished, ahead of the first new one
             engine.run(pending, done)
             summary.compute_seconds = time.perf_counter() - t1
-            summary.tasks_done = state["done"]
-            if out is not None:
-                merge_ready()
-                if state["next"] != len(tasks):
-                    raise TorchspliceError(f"{c.output}: task {tasks[state['next']].id} has no shard; rerun to finish the job")
-                if c.copy_sources:
-                    self._copy_sources(out, plan, sources)
-                out.set_spliced(out.clips)
-                if c.layout == "virtual":
-                    _install_shards(shard_dir, c.shards_folder, [self.sink.shard_name(t.id) for t in tasks])
-                out.close()
-                summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
-                    out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
-                for why, n in out.skipped.items():
-                    summary.skipped[why] = summary.skipped.get(why, 0) + n
+            summary.tasks_done = len(have) + len(pending)
+            if merge is not None:
+                merge.finish(sources, self._copy_sources)
+                _summarise_output(summary, out, merge)
         except BaseException:
             if out is not None:
-                out.abort()
+                out.abort()  # the staged output keeps its last checkpoint: a rerun resumes there
             raise
         finally:
             bar.close()
@@ -272,12 +257,17 @@ class SpliceJob:
         return summary
 
     @staticmethod
+    def _source_rows(plan: Plan, sources: Sources) -> list:
+        """``(database, rows)`` of the source clips a ``copy_sources`` output holds: locomotions
+        first, then actions and references (one database when both are one file)."""
+        return [(sources.db("L"), sorted({p.loco for p in plan.pairs})),
+                (sources.db("A"), sorted({p.action for p in plan.pairs}
+                                         | {p.reference for p in plan.pairs if p.reference is not None
+                                            and get_method(p.method).needs_reference}))]
+
+    @staticmethod
     def _copy_sources(out, plan: Plan, sources: Sources) -> None:
-        # locomotions first, then actions and references; one database when both are one file
-        out.copy_sources([(sources.db("L"), sorted({p.loco for p in plan.pairs})),
-                          (sources.db("A"), sorted({p.action for p in plan.pairs}
-                                                   | {p.reference for p in plan.pairs if p.reference is not None
-                                                      and get_method(p.method).needs_reference}))])
+        out.copy_sources(SpliceJob._source_rows(plan, sources))
 
 
 def splice_all(database, output, *, restart: bool = False, overwrite: bool = False, shard=None,
@@ -322,7 +312,9 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
 
 
 def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None) -> JobSummary:
-    """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs)."""
+    """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs).
+
+    Resumable as the job is: a merge killed midway goes on from its last checkpoint."""
     output = Path(output)
     work = output.with_name(f".{output.name}.parts")
     plan_path = work / "plan.json"
@@ -345,7 +337,8 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
     t0 = time.perf_counter()
     sink = HDF5Sink()
     shard_dir = work
-    missing = [t for t in plan.tasks if not (shard_dir / sink.shard_name(t.id)).exists()]
+    merged = _checkpointed_tasks(work, plan)
+    missing = [t for t in plan.tasks[merged:] if not (shard_dir / sink.shard_name(t.id)).exists()]
     if missing:
         done = sorted((int(m.group(1)), int(m.group(2))) for f in work.glob("slice-*-of-*.done")
                       if (m := re.fullmatch(r"slice-(\d+)-of-(\d+)\.done", f.name)))
@@ -362,37 +355,187 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         run = {**key, "pairs": len(plan.pairs), "batch_pairs": key["task_pairs"], "plan_sha256": plan.digest(),
                "command": command or "torchsplice.job.merge_job (Python API)",
                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "engine": "merge", "pairs_spliced": len(plan.pairs)}
-        out = sink.open_output(output, config.compression, run, overwrite)
-        out.expect_plan = plan.digest()
-        bar = _progress(len(plan.pairs), 0, progress)
         sources = Sources(config.database, config.actions_db)
+        out = None
         try:
-            for t in plan.tasks:
-                name = sink.shard_name(t.id)
-                out.append_shard(shard_dir / name, virtual=config.layout == "virtual", refer_as=config.shards_folder / name)
-                bar.update(t.size)
-            if config.copy_sources:
-                SpliceJob._copy_sources(out, plan, sources)
-            out.set_spliced(out.clips)
-            if config.layout == "virtual":
-                _install_shards(shard_dir, config.shards_folder, [sink.shard_name(t.id) for t in plan.tasks])
-            out.close()
+            out, merged = _open_output(sink, config, plan, work, run, overwrite,
+                                       lambda g: _shard_skeleton(plan, g, sink, shard_dir), sources)
+            _remove_merged_shards(shard_dir, sink, plan.tasks[:merged], config.layout)
+            if any(not (shard_dir / sink.shard_name(t.id)).exists() for t in plan.tasks[merged:]):
+                raise TorchspliceError(f"{output}: the merge's staged output could not be resumed and some shards it "
+                                       "held are gone; run the whole job once without {shard} to splice them again",
+                                       options=("shard",))
+            summary.resumed = sum(t.size for t in plan.tasks[:merged])
+            merge = _Merge(out, sink, config, plan, plan.tasks, shard_dir, merged, {t.id for t in plan.tasks})
+            bar = _progress(len(plan.pairs), summary.resumed, progress)
+            try:
+                for t in plan.tasks[merged:]:
+                    merge.flush(limit=1)
+                    bar.update(t.size)
+                merge.finish(sources, SpliceJob._copy_sources)
+            finally:
+                bar.close()
         except BaseException:
-            out.abort()
+            if out is not None:
+                out.abort()
             raise
         finally:
-            bar.close()
             sources.close()
         shutil.rmtree(work, ignore_errors=True)
-    summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
-        out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
-    for why, n in out.skipped.items():
-        summary.skipped[why] = summary.skipped.get(why, 0) + n
+    _summarise_output(summary, out, merge)
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0
     return summary
 
 
 # ----------------------------------------------------------------------------------------- helpers
+STAGING = "output.h5"
+"""The output's name in the work folder while the job writes it (see :mod:`.sink`)."""
+
+
+class _Merge:
+    """Joins finished tasks into the output in plan order, checkpointing after each one: a
+    task's shard is appended once and then deleted (``copy`` layout; a ``virtual`` output's
+    shards are its frames and stay). Tasks that finish ahead of their turn wait on disk, a
+    few of them in memory."""
+
+    def __init__(self, out, sink, config: JobConfig, plan: Plan, tasks: list, shard_dir: Path, merged: int, have):
+        self.out, self.sink, self.config, self.plan, self.tasks, self.shard_dir = out, sink, config, plan, tasks, shard_dir
+        self.order = {t.id: n for n, t in enumerate(tasks)}
+        self.ready: dict[int, object] = {self.order[tid]: None for tid in have if self.order[tid] >= merged}
+        self.next = merged
+        self.appended = 0
+
+    def add(self, task, part) -> None:
+        n = self.order[task.id]
+        held = sum(p is not None for p in self.ready.values())
+        self.ready[n] = part if (n == self.next or held < 4) else None
+        self.flush()
+
+    def flush(self, limit: int | None = None) -> None:
+        """Append every task whose turn has come (at most ``limit``)."""
+        c, done = self.config, 0
+        while self.next in self.ready and (limit is None or done < limit):
+            part = self.ready.pop(self.next)
+            name = self.sink.shard_name(self.tasks[self.next].id)
+            self.out.append_shard(self.shard_dir / name, part, virtual=c.layout == "virtual",
+                                  refer_as=c.shards_folder / name)
+            self.next += 1
+            self.appended += 1
+            done += 1
+            self.out.checkpoint({"plan": self.plan.digest(), "tasks": self.next})
+            if c.layout != "virtual":
+                (self.shard_dir / name).unlink(missing_ok=True)
+
+    def finish(self, sources: Sources, copy_sources) -> None:
+        """After the last task: the source clips (``copy_sources``), the run record, the shards
+        of a virtual output moved into place, and the output renamed into place."""
+        c = self.config
+        self.flush()
+        if self.next != len(self.tasks):
+            raise TorchspliceError(f"{c.output}: task {self.tasks[self.next].id} has no shard; rerun to finish the job")
+        if c.copy_sources:
+            copy_sources(self.out, self.plan, sources)
+        self.out.set_spliced(self.out.clips)
+        if c.layout == "virtual":
+            _install_shards(self.shard_dir, c.shards_folder, [self.sink.shard_name(t.id) for t in self.tasks])
+        self.out.close()
+
+
+def _open_output(sink, config: JobConfig, plan: Plan, work: Path, run: dict, overwrite: bool, group_skeleton,
+                 sources: Sources):
+    """``(output, merged)``: the staged output resumed at its last checkpoint, holding the first
+    ``merged`` tasks of the plan, or a new one holding the output's skeletons (``merged`` 0)."""
+    staging = work / STAGING
+    resumed = sink.resume_output(config.output, staging, overwrite)
+    if resumed is not None:
+        out, note = resumed
+        tasks = note.get("tasks")
+        if note.get("plan") == plan.digest() and isinstance(tasks, int) and 0 <= tasks <= len(plan.tasks):
+            out.expect_plan = plan.digest()
+            return out, tasks
+        out.abort()
+        _discard_staging(work)
+    skeletons = _output_skeletons(plan, group_skeleton, sources if config.copy_sources else None)
+    out = sink.open_output(config.output, config.compression, run, overwrite, staging, skeletons)
+    out.expect_plan = plan.digest()
+    return out, 0
+
+
+def _checkpointed_tasks(work: Path, plan: Plan) -> int:
+    """How many tasks the staged output's last checkpoint holds (0 when none or another plan's)."""
+    from ..io.database import MotionDatabase
+
+    note = MotionDatabase.checkpoint_note(work / STAGING) or {}
+    tasks = note.get("tasks")
+    return tasks if note.get("plan") == plan.digest() and isinstance(tasks, int) and 0 <= tasks <= len(plan.tasks) else 0
+
+
+def _discard_staging(work: Path) -> None:
+    for f in (work / STAGING, work / f"{STAGING}.commit"):
+        f.unlink(missing_ok=True)
+
+
+def _remove_merged_shards(shard_dir: Path, sink, tasks: list, layout: str) -> None:
+    """Shards whose clips the output holds already (left by a job killed between its checkpoint
+    and their removal); a virtual output's shards are its frames and stay."""
+    if layout != "virtual":
+        for t in tasks:
+            (shard_dir / sink.shard_name(t.id)).unlink(missing_ok=True)
+
+
+def _output_skeletons(plan: Plan, group_skeleton, sources: Sources | None) -> list:
+    """``(Skeleton, spec)`` of every skeleton the output will hold, in the order its clips
+    arrive: each locomotion group's (``group_skeleton(g)``, ``(None, None)`` when unknown), in
+    task order, then (``sources``: the source clips are copied) those of the source clips."""
+    from ..specs import DatasetSpec
+
+    out, seen = [], set()
+    for t in plan.tasks:
+        if t.group not in seen:
+            seen.add(t.group)
+            sk, spec = group_skeleton(t.group)
+            if sk is not None:
+                out.append((sk, spec))
+    if sources is not None:
+        for db, rows in SpliceJob._source_rows(plan, sources):
+            ks = db.table()["skeleton"]
+            for r in rows:
+                k = int(ks[r])
+                text = db.spec_json(k)
+                out.append((db.skeletons[k], DatasetSpec.from_json(text) if text else None))
+    return out
+
+
+def _source_skeleton(plan: Plan, g: int, sources: Sources):
+    """A locomotion group's skeleton and spec, from its first clip."""
+    from ..specs import DatasetSpec
+
+    group = plan.groups[g]
+    return sources.motion(group.clips[0]).skeleton, DatasetSpec.from_json(group.spec)
+
+
+def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
+    """A locomotion group's skeleton and spec, from the first of its shards that holds clips."""
+    from ..io.database import MotionDatabase
+    from ..specs import DatasetSpec
+
+    for t in plan.tasks:
+        path = shard_dir / sink.shard_name(t.id)
+        if t.group == g and path.exists():
+            with MotionDatabase.open(path) as shard:
+                if len(shard):
+                    return shard.skeletons[0], DatasetSpec.from_json(plan.groups[g].spec)
+    return None, None
+
+
+def _summarise_output(summary: JobSummary, out, merge: _Merge) -> None:
+    summary.merged_shards = merge.appended
+    summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
+        out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
+    for why, n in out.skipped.items():
+        summary.skipped[why] = summary.skipped.get(why, 0) + n
+
+
 def _slice(tasks: list, k: int, n: int) -> list:
     """The K-th of N contiguous slices of the tasks (1-based)."""
     return tasks[(k - 1) * len(tasks) // n: k * len(tasks) // n]

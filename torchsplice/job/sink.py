@@ -2,13 +2,18 @@
 
 A sink writes each task's :class:`~torchsplice.job.task.Part` as a *shard* (one file per task,
 named by the task's id, written under a temporary name and renamed into place) and joins the
-shards, in plan order, into the output. The plan, the engines and the merge only call the
-methods of :class:`Sink`, so another output format plugs in here without touching them.
+shards, in plan order, into the output as they finish. The output is written at a staging
+path in the job's work folder and checkpointed after each shard, so that a killed job resumes
+into it (:meth:`Sink.resume_output`) and merges only the shards it does not hold yet; a
+shard whose clips a checkpoint holds is deleted. The plan, the engines and the merge only
+call the methods of :class:`Sink`, so another output format plugs in here without touching
+them.
 
-:class:`HDF5Sink` writes torchsplice motion databases. Shards are written without compression
-(they are read once, by the merge) unless the output is *virtual*: then they are compressed
-like the output and stay beside it in ``OUT.shards/``, and the output's frame datasets are
-HDF5 virtual datasets over them, so nothing is copied.
+:class:`HDF5Sink` writes torchsplice motion databases (resumable ones, see
+:meth:`~torchsplice.io.database.MotionDatabase.checkpoint`). Shards are written without
+compression (they live until the merge reads them, seconds later) unless the output is
+*virtual*: then they are compressed like the output and stay beside it in ``OUT.shards/``,
+and the output's frame datasets are HDF5 virtual datasets over them, so nothing is copied.
 """
 
 from __future__ import annotations
@@ -36,7 +41,14 @@ class Sink:
     def shard_skipped(self, path: Path) -> dict:
         raise NotImplementedError
 
-    def open_output(self, path: Path, compression, run: dict, overwrite: bool) -> "OutputWriter":
+    def open_output(self, path: Path, compression, run: dict, overwrite: bool, staging: Path,
+                    skeletons=()) -> "OutputWriter":
+        """A new output written at ``staging``, holding ``skeletons`` (``(Skeleton, spec)``) first."""
+        raise NotImplementedError
+
+    def resume_output(self, path: Path, staging: Path, overwrite: bool) -> "tuple[OutputWriter, dict] | None":
+        """The output staged at ``staging`` at its last checkpoint, and that checkpoint's note;
+        ``None`` when there is none to resume."""
         raise NotImplementedError
 
 
@@ -50,6 +62,21 @@ class OutputWriter:
         self.skipped: dict[str, int] = {}
         self.timings: dict[str, int] = {}  # clips by timing: "timewarp", or a standing action's "loop", "hold", "fit"
         self.expect_plan: str | None = None  # the plan digest every shard must carry
+
+    def counts(self) -> dict:
+        """What the closing summary reports so far (kept in each checkpoint)."""
+        return {"clips": self.clips, "flagged_clips": self.flagged_clips, "copied": self.copied,
+                "flagged": self.flagged, "skipped": self.skipped, "timings": self.timings}
+
+    def checkpoint(self, note: dict) -> None:
+        """Make the clips appended so far survive a killed job, with ``note`` and the counts."""
+        self.db.checkpoint({**note, "counts": self.counts()})
+
+    def restore(self, note: dict) -> None:
+        """The counts of a resumed output (from its checkpoint's ``note``)."""
+        c = note.get("counts", {})
+        self.clips, self.flagged_clips, self.copied = int(c.get("clips", 0)), int(c.get("flagged_clips", 0)), int(c.get("copied", 0))
+        self.flagged, self.skipped, self.timings = dict(c.get("flagged", {})), dict(c.get("skipped", {})), dict(c.get("timings", {}))
 
     def set_spliced(self, n: int) -> None:
         """Record the clips actually spliced in the run record (pairs can fail to align)."""
@@ -146,8 +173,24 @@ class HDF5Sink(Sink):
         with MotionDatabase.open(path) as db:
             return json.loads(str(db.attrs.get("skipped", "")) or "{}")
 
-    def open_output(self, path: Path, compression, run: dict, overwrite: bool) -> OutputWriter:
+    def open_output(self, path: Path, compression, run: dict, overwrite: bool, staging: Path,
+                    skeletons=()) -> OutputWriter:
         # 256-frame chunks: random training windows decompress little (see torchsplice.data)
-        return OutputWriter(MotionDatabase.create(path, overwrite=overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
-                                                  compression=compression, frame_columns=FRAME_COLUMNS,
-                                                  attrs={"run": json.dumps(run)}))
+        db = MotionDatabase.create(path, overwrite=overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
+                                   compression=compression, frame_columns=FRAME_COLUMNS, attrs={"run": json.dumps(run)},
+                                   staging=staging)
+        try:
+            for skeleton, spec in skeletons:  # before the first checkpoint: every write is then crash-safe
+                db.add_skeleton(skeleton, spec)
+        except BaseException:
+            db.abort(failed=True)
+            raise
+        return OutputWriter(db)
+
+    def resume_output(self, path: Path, staging: Path, overwrite: bool) -> tuple[OutputWriter, dict] | None:
+        resumed = MotionDatabase.resume(path, staging, overwrite)
+        if resumed is None:
+            return None
+        out = OutputWriter(resumed[0])
+        out.restore(resumed[1])
+        return out, resumed[1]

@@ -88,3 +88,12 @@ class Sources:
             bank = ClipBank.from_motions([resample_motion(m, fps) for m in motions], motions[0].skeleton, roles, landmarks)
             self.banks[group_id] = (bank, {k: i for i, k in enumerate(keys)})
         return self.banks[group_id]
+
+    def standing_tables(self, group_id: int, roles, skeleton, fps: float):
+        """The group's tables for standing actions (:func:`~torchsplice.splice.standing.standing_tables`), made once."""
+        key = ("standing", group_id)
+        if key not in self.banks:
+            from ..splice.standing import standing_tables
+
+            self.banks[key] = standing_tables(roles, skeleton, fps)
+        return self.banks[key]

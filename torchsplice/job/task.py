@@ -105,14 +105,21 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     spec_m = get_method(method)
     failed: dict[int, str] = {}
     standing = getattr(task, "mode", "timewarp") == "standing"
-    if config.backend() == "compiled" and spec_m.compiled and not standing:
-        from ..cpu.bank import splice_bank
+    if config.backend() == "compiled" and spec_m.compiled:
+        from ..cpu.bank import splice_bank, standing_bank
         from ..cpu.splice import STATUS
 
         bank, index = sources.bank(task.group, group.clips, fps, roles, align.landmarks)
-        out = splice_bank(bank, [index[k[0]] for k in keys], [index[k[1]] for k in keys], method,
-                          ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None,
-                          buffers=buffers, on_error="keep", **bank_kwargs(config.splice_options(), fps))
+        lo, ac = [index[k[0]] for k in keys], [index[k[1]] for k in keys]
+        if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
+            from ..splice.standing import LIMBS
+
+            acting = [[n in plan.clips[k[1]].get("acting", ()) for n in LIMBS] for k in keys]
+            out = standing_bank(bank, lo, ac, acting, sources.standing_tables(task.group, roles, skeleton, fps),
+                                method, config.timing, buffers=buffers)
+        else:
+            out = splice_bank(bank, lo, ac, method, ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None,
+                              buffers=buffers, on_error="keep", **bank_kwargs(config.splice_options(), fps))
         failed = {b: f"the alignment failed ({STATUS[int(s)]})" for b, s in enumerate(out.status) if s != 0}
         ok = out.status == 0
         frames, rot, trans = out.frames[ok], out.rotations, out.translations

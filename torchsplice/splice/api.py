@@ -262,15 +262,28 @@ def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | 
 
 def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float,
                      acting: list | None = None) -> list[SpliceResult]:
-    """Pairs whose action does not locomote (see :mod:`torchsplice.splice.standing`); any backend."""
+    """Pairs whose action does not locomote (see :mod:`torchsplice.splice.standing`): the compiled
+    splicer on the CPU for the built-in methods, else the method's torch function."""
     skeleton = pairs[0][0].skeleton
     locos, li = _unique([p[0] for p in pairs])
     acts, ai = _unique([p[1] for p in pairs])
+    acts = [resample_motion(a, fps) for a in acts]
+    compiled = method.compiled and resolve_backend(options) == "compiled"
     kw = dict(dtype=options.dtype, device=options.device)
-    L = clips_to_tensors(locos, skeleton, **kw)
-    A = clips_to_tensors([resample_motion(a, fps) for a in acts], skeleton, **kw)
-    checks_l = check_locomotion(L, roles, fps) if options.check_locomotion else None
-    checks_a = check_locomotion(A, roles, fps) if options.check_locomotion else None
+    A = None if compiled and (acting is not None or options.acting_limbs is not None) else clips_to_tensors(acts, skeleton, **kw)
+    if compiled:
+        from ..cpu.bank import ClipBank, standing_bank
+
+        bank = ClipBank.from_motions(locos + acts, skeleton, roles, options.align.landmarks)
+        checks = None
+        if options.check_locomotion:
+            positions, lengths = bank.padded_positions()
+            checks = check_locomotion(ClipTensors(None, None, lengths, positions, None), roles, fps)
+        checks_l, checks_a = (checks[:len(locos)], checks[len(locos):]) if checks is not None else (None, None)
+    else:
+        L = clips_to_tensors(locos, skeleton, **kw)
+        checks_l = check_locomotion(L, roles, fps) if options.check_locomotion else None
+        checks_a = check_locomotion(A, roles, fps) if options.check_locomotion else None
     notes: list[list[str]] = [[] for _ in pairs]
     for b, (lo, _) in enumerate(pairs):
         check = checks_l[int(li[b])] if checks_l is not None else None
@@ -284,23 +297,35 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options:
         found = acting_limbs(A, roles, skeleton) if options.acting_limbs is None else None
         acting = [tuple(options.acting_limbs) if found is None else found[int(ai[b])][0] for b in range(len(pairs))]
     acting = [tuple(a) for a in acting]
-    loco, act = L.take(li), A.take(ai)
-    clips, times = run_checked(method, method.standing, MethodInput(loco, act, None, roles, skeleton, options, fps),
-                               options.timing, acting)
+    if compiled:
+        from .standing import LIMBS, standing_tables
+
+        out = standing_bank(bank, li.numpy(), len(locos) + ai.numpy(), [[n in a for n in LIMBS] for a in acting],
+                            standing_tables(roles, skeleton, fps), method.name, options.timing,
+                            dtype=np.float64 if options.dtype == torch.float64 else np.float32)
+        frames = [(torch.from_numpy(out.rotations[s:s + n]).to(options.dtype),
+                   torch.from_numpy(out.translations[s:s + n]).to(options.dtype), torch.from_numpy(out.curve[s:s + n]))
+                  for s, n in zip(out.start.tolist(), out.frames.tolist())]
+    else:
+        clips, times = run_checked(method, method.standing, MethodInput(L.take(li), A.take(ai), None, roles, skeleton,
+                                                                        options, fps), options.timing, acting)
+        n_ = clips.lengths.tolist()
+        frames = [(clips.rotations[b, :n], clips.translations[b, :n], times[b, :n]) for b, n in enumerate(n_)]
     results = []
     for b, (lo, ac) in enumerate(pairs):
-        n = int(clips.lengths[b])
+        rot, trans, times_b = frames[b]
+        n = rot.shape[0]
         limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method.name == "splice" else ""
         notes[b].append(f"{ac.name} does not locomote: spliced as a standing action ({options.timing}{limbs})")
         motion = Motion(
-            skeleton=lo.skeleton, rotations=clips.rotations[b, :n], root_translation=clips.translations[b, :n, 0].clone(),
-            translations=clips.translations[b, :n] if lo.skeleton.has_joint_translations else None, fps=fps,
+            skeleton=lo.skeleton, rotations=rot, root_translation=trans[:, 0].clone(),
+            translations=trans if lo.skeleton.has_joint_translations else None, fps=fps,
             name=method.clip_name(lo.name, ac.name), source=f"splice:{method.name}", role="spliced",
             labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
             motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
-            reference=None, cost=float("nan"), curve=(times[b, :n] * (ac.fps / fps)).cpu(), crop=0,
+            reference=None, cost=float("nan"), curve=(times_b.to(torch.float64) * (ac.fps / fps)).cpu(), crop=0,
             path=torch.zeros(0, 2, dtype=torch.long), pelvis_correction=torch.zeros(n, dtype=torch.float64),
             posture_deg=0.0, checks=(checks_l[int(li[b])], checks_a[int(ai[b])]) if checks_l is not None else None,
             notes=tuple(notes[b]), timing=options.timing, acting=acting[b],

@@ -4,10 +4,18 @@ Heck et al. (2006) align two *locomoting* clips by their gait; most action libra
 captured standing (a wave, a bow, a punch), with no gait to align. For such an action the
 result lasts as long as the locomotion, and:
 
-- **timing**: the action plays at its own speed, ``"loop"``-ed with a seamless blend (the
-  default: it loops between the two frames whose neighbourhoods match best, as motion graphs
-  pick transitions, and cross-fades there), ``"hold"``-ing its last frame, or ``"fit"``-ted
-  (time-scaled) to the locomotion;
+- **timing** (:func:`action_times`): which action frame plays at each result frame.
+
+  - ``"loop"`` (the default): a locomotion no longer than the action plays the action's
+    *best window* of its length (below); a longer one plays the action from its start and then
+    loops it between two frames whose neighbourhoods match best (as motion graphs pick
+    transitions), smoothing each jump back by inertialization. The looped span always holds
+    the action's *main motion* (below), so every pass shows the whole gesture.
+  - ``"hold"``: a locomotion no longer than the action plays its best window; a longer one plays
+    the action once from its start, then holds its last frame.
+  - ``"fit"``: the whole action, time-scaled to the locomotion's length (faster onto a shorter
+    locomotion, slower onto a longer one).
+
 - **acting limbs** (the arms the action really uses, e.g. the waving one) come from the action;
 - **idle limbs** keep the locomotion's motion, so the free arm swings in phase with the legs;
 - **the spine** carries the action's posture with the locomotion's secondary motion on top
@@ -20,11 +28,24 @@ when its hand moves, in the chest's frame, more than :data:`ACTING_THRESHOLD` ar
 its median position over 10% of the clip or more (the 90th percentile of the distance). On
 Bandai Namco's standing actions an idle arm stays under 0.15, an acting one over 0.45.
 
+What "shows the action" means, measured on the acting hands' positions in the chest's frame
+(both hands when no arm acts), in float64 whatever the clips' dtype, so that every backend
+chooses the same frames:
+
+- the **best window** of ``n`` frames (:func:`best_windows`) is the one where the acting hands'
+  positions spread most: the largest sum of their per-axis variances over the window (the
+  first such window, to :data:`TIE` times the largest mean square);
+- the **main motion** (:func:`motion_core`) is the span holding the central
+  :data:`CORE_SHARE` of the acting hands' path length: a wave's raise, waving and lowering,
+  not the still frames before and after. Loop points (:func:`loop_points`) start at or before
+  it and end at or after it.
+
 The baselines handle standing actions too: ``naive`` copies the action's whole upper body as
 it is (on the same timing), and ``cpmc`` adds the action's motion relative to its first frame
 onto the locomotion's upper body (an additive layer over the walk).
 
-Everything is batched over pairs on padded tensors ``(B, T, J, ...)``; quaternions WXYZ.
+Everything is batched over pairs on padded tensors ``(B, T, J, ...)``; quaternions WXYZ. The
+compiled CPU splicer (:mod:`torchsplice.cpu.standing`) computes the same, pair by pair.
 """
 
 from __future__ import annotations
@@ -40,8 +61,9 @@ from ..align.curve import interpolate_frames, slerp_frames
 from .clips import ClipTensors, without_fk
 from .methods import upper_mask
 
-__all__ = ["TIMINGS", "LIMBS", "ACTING_THRESHOLD", "LOOP_BLEND_SECONDS", "arm_chains", "acting_limbs",
-           "blend_frames", "loop_points", "action_times", "standing_tensors", "parse_limbs"]
+__all__ = ["TIMINGS", "LIMBS", "ACTING_THRESHOLD", "LOOP_BLEND_SECONDS", "CORE_SHARE", "arm_chains", "acting_limbs",
+           "blend_frames", "hands_in_chest", "acting_mask", "motion_core", "best_windows", "loop_points", "action_times",
+           "standing_tensors", "standing_tables", "parse_limbs"]
 
 TIMINGS = ("loop", "hold", "fit")
 """How a standing action fills a longer (or shorter) locomotion."""
@@ -134,52 +156,153 @@ def blend_frames(act_lengths: torch.Tensor, fps: float) -> torch.Tensor:
     return torch.minimum(torch.full_like(act_lengths, round(LOOP_BLEND_SECONDS * fps)), act_lengths // 3).clamp(min=1)
 
 
-def loop_points(act: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton, fps: float) -> tuple[torch.Tensor, torch.Tensor]:
+CORE_SHARE = 0.95
+"""The share of the acting hands' path length that a loop span must hold (its central part:
+2.5% of the path may lie before the loop's start and 2.5% after its end)."""
+
+TIE = 1e-9
+"""Relative tolerance of the best window and loop points: the first candidate within it of the
+best wins, so that float64 rounding differences between backends choose the same frames."""
+
+
+def hands_in_chest(clips: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton) -> torch.Tensor:
+    """``(B, T, 2, 3)``: the left and right hands (the shoulders without ``hands`` roles) in the
+    chest's frame, from ``clips``' FK."""
+    chest = arm_chains(roles, skeleton)[LIMBS[0]][0]
+    hands = list(roles.hands) if roles.hands is not None else list(roles.shoulders)
+    pos, grot = clips.positions, clips.global_rotations
+    return quat_apply(quat_conj(grot[:, :, chest:chest + 1]), pos[:, :, hands] - pos[:, :, chest:chest + 1])
+
+
+def acting_mask(acting, B: int, device=None) -> torch.Tensor:
+    """``(B, 2)`` float64: 1 for the arms (left, right) whose hands measure the action, per pair.
+
+    ``acting`` is ``None`` (every arm acts) or per pair a tuple of :data:`LIMBS`; a pair with no
+    acting arm is measured on both hands."""
+    if acting is None:
+        return torch.ones(B, 2, dtype=torch.float64, device=device)
+    m = torch.tensor([[float(n in a) for n in LIMBS] for a in acting], dtype=torch.float64).reshape(B, 2)
+    m[m.sum(1) == 0] = 1.0
+    return m.to(device)
+
+
+def selection_tensors(act: ClipTensors, skeleton: Skeleton) -> ClipTensors:
+    """``act`` in float64 with its FK recomputed in float64: what the best window and the loop
+    points are chosen on (the same frames whatever dtype the splice runs in)."""
+    if act.rotations.dtype == torch.float64 and act.positions is not None:
+        return act
+    from .clips import with_fk
+
+    return with_fk(act.rotations.double(), act.translations.double(), act.lengths, skeleton)
+
+
+def motion_core(rel: torch.Tensor, lengths: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(first, last)`` ``(B,)``: the span of each clip holding the central :data:`CORE_SHARE`
+    of the path its hands ``rel`` ``(B, T, 2, 3)`` travel (hands weighted by ``mask`` ``(B, 2)``).
+
+    With ``path[t]`` the length travelled up to frame ``t``, ``first`` is the last frame with
+    ``path <= (1 - CORE_SHARE) / 2 * total`` and ``last`` the first frame with
+    ``path >= (1 + CORE_SHARE) / 2 * total`` (a still clip: its whole length).
+    """
+    B, T = rel.shape[:2]
+    step = (rel[:, 1:] - rel[:, :-1]).square().sum(-1).sqrt()  # (B, T-1, 2)
+    t = torch.arange(T, device=rel.device)
+    valid = t[None, 1:] < lengths[:, None]  # step t-1 -> t inside the clip
+    e = torch.where(valid, (step * mask[:, None, :]).sum(-1), torch.zeros((), dtype=rel.dtype, device=rel.device))
+    path = torch.cat((torch.zeros(B, 1, dtype=rel.dtype, device=rel.device), torch.cumsum(e, 1)), 1)  # (B, T)
+    total = path.gather(1, (lengths - 1).clamp(min=0)[:, None])
+    inside = t[None, :] < lengths[:, None]
+    lo, hi = (1 - CORE_SHARE) / 2 * total, (1 + CORE_SHARE) / 2 * total
+    first = ((path <= lo) & inside).sum(1) - 1
+    last = torch.minimum(((path < hi) & inside).sum(1), lengths - 1)  # the first frame at or past hi
+    still = total[:, 0] <= 0
+    first = torch.where(still, torch.zeros_like(first), first.clamp(min=0))
+    last = torch.where(still, lengths - 1, last)
+    return first, last
+
+
+def best_windows(rel: torch.Tensor, lengths: torch.Tensor, mask: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+    """``(B,)`` the first frame of each clip's best window of ``n[b]`` frames (see the module
+    docstring): the largest sum, over the hands of ``mask`` ``(B, 2)`` and the three axes, of the
+    variance of the hands' positions ``rel`` ``(B, T, 2, 3)`` over the window. ``n[b]`` must not
+    exceed ``lengths[b]``; windows stay inside the clip."""
+    B, T = rel.shape[:2]
+    z = torch.zeros(B, 1, 2, 3, dtype=rel.dtype, device=rel.device)
+    s1 = torch.cat((z, torch.cumsum(rel, 1)), 1)  # (B, T+1, 2, 3): sums of frames < t
+    s2 = torch.cat((z, torch.cumsum(rel * rel, 1)), 1)
+    w = torch.arange(T, device=rel.device)[None, :].expand(B, T)  # candidate first frames
+    end = (w + n[:, None]).clamp(max=T)
+    idx = lambda i: i[:, :, None, None].expand(B, T, 2, 3)  # noqa: E731
+    k = n.to(rel.dtype)[:, None, None, None]
+    m1 = (s1.gather(1, idx(end)) - s1.gather(1, idx(w))) / k
+    m2 = (s2.gather(1, idx(end)) - s2.gather(1, idx(w))) / k
+    score = ((m2 - m1 * m1) * mask[:, None, :, None]).sum((2, 3))  # (B, T)
+    ok = w <= (lengths - n)[:, None]
+    score = torch.where(ok, score, torch.full_like(score, -math.inf))
+    best = score.max(1, keepdim=True).values
+    # within TIE of the best, relative to the mean squares (the rounding of m2 - m1^2): a still
+    # clip's windows all tie, and the first wins
+    scale = torch.where(ok, (m2 * mask[:, None, :, None]).sum((2, 3)), torch.zeros_like(score)).max(1, keepdim=True).values
+    return (ok & (score >= best - TIE * scale)).to(torch.int64).argmax(1)
+
+
+def loop_points(act: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton, fps: float,
+                acting=None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(start, end)`` ``(B,)`` frames where each action loops back: after frame ``end`` it plays
-    from ``start`` again, cross-fading over :func:`blend_frames` frames.
+    from ``start`` again, smoothed over :func:`blend_frames` frames.
 
     Chosen as motion graphs choose transitions: the pair whose following windows of
     :data:`MATCH_SECONDS` look most alike (upper-body joint positions in the chest frame, the
-    distance over the window, so that velocities match too), with ``start`` in the first third
-    of the action and ``end`` in the last third, so that the loop keeps most of the action (a
-    fade that runs past the clip's end holds its last frame). Batched over clips.
+    distance over the window, so that velocities match too), with ``start`` at or before the
+    action's main motion and ``end`` at or after it (:func:`motion_core`, on the hands of
+    ``acting``, per clip: ``None`` for both), so that the loop holds the whole gesture; the
+    end's window lies inside the clip. Ties go to the earliest end, then the earliest start (to
+    a relative :data:`TIE`). A clip too short to choose loops whole. Batched over clips, in
+    float64 (:func:`selection_tensors`).
     """
+    act = selection_tensors(act, skeleton)
     pos, grot, lengths = act.positions, act.global_rotations, act.lengths
     Bn, T = pos.shape[:2]
     chest = arm_chains(roles, skeleton)[LIMBS[0]][0]
     upper = [j for j in roles.upper_body if j != chest]
-    feat = quat_apply(quat_conj(grot[:, :, chest:chest + 1]), pos[:, :, upper] - pos[:, :, chest:chest + 1]).reshape(Bn, T, -1)
     W = max(2, round(MATCH_SECONDS * fps))
+    whole = torch.zeros_like(lengths), (lengths - 1).clamp(min=1)
     if T < W + 2:
-        return torch.zeros_like(lengths), (lengths - 1).clamp(min=1)
+        return whole
+    first, last = motion_core(hands_in_chest(act, roles, skeleton), lengths, acting_mask(acting, Bn, pos.device))
+    feat = quat_apply(quat_conj(grot[:, :, chest:chest + 1]), pos[:, :, upper] - pos[:, :, chest:chest + 1]).reshape(Bn, T, -1)
     windows = feat.unfold(1, W, 1).reshape(Bn, T - W + 1, -1)  # (B, T', F*W): frames t..t+W-1
-    d = torch.cdist(windows, windows)  # (B, T', T'): d[b, i, j] between the windows at end i and start j
-    i = torch.arange(T - W + 1, device=pos.device)
-    L = lengths[:, None, None]
-    ok = ((i[None, None, :] * 3 <= L) & (i[None, :, None] * 3 >= 2 * L)  # start in the first third, end in the last
-          & (i[None, :, None] + W <= L))  # the end's window inside the clip (past its end, the fade holds the last frame)
-    d = torch.where(ok, d, torch.full_like(d, float("inf")))
-    best = d.reshape(Bn, -1).argmin(1)
-    end, start = best // (T - W + 1), best % (T - W + 1)
-    fallback = ~torch.isfinite(d.reshape(Bn, -1).min(1).values)  # too short to choose: loop the whole clip
-    start = torch.where(fallback, torch.zeros_like(start), start)
-    end = torch.where(fallback, (lengths - 1).clamp(min=1), end)
-    return start, end
+    s_hi, e_lo = int(first.max()) + 1, int(last.min())  # candidate starts < s_hi, ends >= e_lo
+    if e_lo > T - W:
+        return whole
+    # d[b, i, j] between the windows at end e_lo + i and start j
+    d = torch.cdist(windows[:, e_lo:], windows[:, :s_hi], compute_mode="donot_use_mm_for_euclid_dist")
+    end = e_lo + torch.arange(d.shape[1], device=pos.device)[None, :, None]
+    start = torch.arange(s_hi, device=pos.device)[None, None, :]
+    ok = (start <= first[:, None, None]) & (end >= last[:, None, None]) & (end + W <= lengths[:, None, None]) & (end > start)
+    d = torch.where(ok, d, torch.full_like(d, math.inf)).reshape(Bn, -1)
+    best = d.min(1, keepdim=True).values
+    pick = (d <= best + TIE * best).to(torch.int64).argmax(1)
+    e, s = e_lo + pick // s_hi, pick % s_hi
+    fallback = ~torch.isfinite(best[:, 0]) | (lengths < W + 2)  # no candidate, or too short: loop the whole clip
+    return torch.where(fallback, whole[0], s), torch.where(fallback, whole[1], e)
 
 
 def action_times(loco_lengths: torch.Tensor, act_lengths: torch.Tensor, timing: str, fps: float,
-                 T: int | None = None, loop: tuple[torch.Tensor, torch.Tensor] | None = None
-                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                 T: int | None = None, loop: tuple[torch.Tensor, torch.Tensor] | None = None,
+                 window: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """For every result frame, where in the action it plays: ``(times, blend_from, phase)``.
 
     All ``(B, T)`` with ``T`` the longest locomotion. ``times`` are action frames (float64).
-    ``"hold"`` plays the action once, then holds its last frame; ``"fit"`` scales the action's
-    time to the locomotion's length. ``"loop"`` plays the action up to its loop ``end``, then
-    from its loop ``start`` again (``loop``, see :func:`loop_points`; default: the whole clip),
-    again and again. Each jump back is smoothed by inertialization (as game engines blend, see
-    :func:`_sample`) over :func:`blend_frames` frames: ``blend_from`` holds ``end`` during
-    those frames, and ``phase`` goes from 0 at the jump to 1 at the end of the fade (it is 1
-    everywhere else).
+    ``"fit"`` scales the action's time to the locomotion's length. ``"hold"`` and ``"loop"``
+    play, onto a locomotion no longer than the action, its frames from ``window`` ``(B,)``
+    (see :func:`best_windows`; default: the first frames); onto a longer one ``"hold"`` plays
+    the action once, then holds its last frame, and ``"loop"`` plays it up to its loop ``end``,
+    then from its loop ``start`` again (``loop``, see :func:`loop_points`; default: the whole
+    clip), again and again. Each jump back is smoothed by inertialization (as game engines
+    blend, see :func:`_sample`) over :func:`blend_frames` frames: ``blend_from`` holds ``end``
+    during those frames, and ``phase`` goes from 0 at the jump to 1 at the end of the fade (it
+    is 1 everywhere else).
     """
     if timing not in TIMINGS:
         raise ValueError(f"unknown timing {timing!r}; choose from {', '.join(TIMINGS)}")
@@ -189,10 +312,14 @@ def action_times(loco_lengths: torch.Tensor, act_lengths: torch.Tensor, timing: 
     Ta = act_lengths.to(torch.float64)[:, None]
     Tl = loco_lengths.to(torch.float64)[:, None]
     ones = torch.ones_like(t)
-    if timing == "hold":
-        return torch.minimum(t, Ta - 1), t.clone(), ones
     if timing == "fit":
         return t * (Ta - 1) / (Tl - 1).clamp(min=1), t.clone(), ones
+    short = Tl <= Ta  # the locomotion fits in the action: one window of it, no loop
+    w = torch.zeros_like(Ta) if window is None else window.to(torch.float64)[:, None]
+    windowed = torch.minimum(w + t, Ta - 1)
+    if timing == "hold":
+        times = torch.where(short, windowed, torch.minimum(t, Ta - 1))
+        return times, times.clone(), ones
     blend = blend_frames(act_lengths, fps).to(torch.float64)[:, None]
     if loop is None:
         start, end = torch.zeros_like(Ta), (Ta - blend).clamp(min=1)
@@ -202,10 +329,10 @@ def action_times(loco_lengths: torch.Tensor, act_lengths: torch.Tensor, timing: 
     after = (t - end).clamp(min=0)
     cycle = torch.floor(after / period)
     u = after - cycle * period
-    looping = t >= end
+    looping = (t >= end) & ~short
     fading = looping & (u < blend)
     phase = torch.where(fading, (u / blend).clamp(0, 1), ones)
-    times = torch.where(looping, start + u, t)
+    times = torch.where(looping, start + u, torch.where(short, windowed, t))
     return times, torch.where(fading, end.expand_as(t), times), phase
 
 
@@ -238,8 +365,9 @@ def _sample(act: ClipTensors, times: torch.Tensor, blend_from: torch.Tensor, pha
     u = s * blend.to(rot.dtype)[:, None]
     f = (1 - s * s * (3 - 2 * s))[..., None, None]
     g = (u * (1 - s) ** 2)[..., None, None]
-    rot = quat_normalize(quat_mul(axis_angle_to_quat(r * f + w * g), rot))
-    return rot, trans + tr * f + tw * g
+    fading = (phase < 1)[..., None, None]  # elsewhere the offset is zero: the frames stay as sampled
+    rot = torch.where(fading, quat_normalize(quat_mul(axis_angle_to_quat(r * f + w * g), rot)), rot)
+    return rot, torch.where(fading, trans + tr * f + tw * g, trans)
 
 
 
@@ -251,12 +379,36 @@ def _mean_rotation(q: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
     return quat_normalize((q * sign * valid[..., None, None]).sum(1))
 
 
+def standing_tables(roles: SkeletonRoles, skeleton: Skeleton, fps: float):
+    """The compiled splicer's tables for standing actions on ``skeleton`` at ``fps``
+    (:class:`~torchsplice.cpu.bank.StandingTables`): the joints this module's functions use."""
+    import numpy as np
+
+    from ..cpu.bank import StandingTables
+
+    J = skeleton.num_joints
+    upper = np.zeros(J, dtype=np.bool_)
+    upper[list(roles.upper_body)] = True
+    chains = arm_chains(roles, skeleton)
+    arms = np.zeros((2, J), dtype=np.bool_)
+    for side, name in enumerate(LIMBS):
+        arms[side, list(chains[name][1])] = True
+    chest = chains[LIMBS[0]][0]
+    hands = roles.hands if roles.hands is not None else roles.shoulders
+    return StandingTables(
+        upper=upper, spine=np.array([j for j in roles.spine if upper[j]], dtype=np.int64), arms=arms, chest=int(chest),
+        hands=np.array(hands, dtype=np.int64),
+        feat_joints=np.array([j for j in roles.upper_body if j != chest], dtype=np.int64),
+        blend=int(round(LOOP_BLEND_SECONDS * fps)), window=max(2, round(MATCH_SECONDS * fps)))
+
+
 def standing_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, skeleton: Skeleton, fps: float,
                      method: str = "splice", timing: str = "loop", acting: list[tuple[str, ...]] | None = None):
     """Splice standing actions onto locomotions: ``(clips, times)``.
 
     ``loco`` and ``act`` are pairs (row ``b`` of each), at the same frame rate ``fps``.
-    ``acting`` gives, per pair, the limbs the action acts with (``None``: every arm acts).
+    ``acting`` gives, per pair, the limbs the action acts with (``None``: every arm acts); their
+    hands choose the best window and the loop points (see the module docstring).
     ``method`` is ``"splice"`` (see the module docstring), ``"naive"`` (the action's whole upper
     body) or ``"cpmc"`` (the action's motion since its first frame, added to the locomotion's
     upper body). Returns the spliced clips (as long as their locomotions; no FK) and the action
@@ -264,8 +416,14 @@ def standing_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, 
     """
     B, T, J = loco.rotations.shape[0], int(loco.lengths.max()), skeleton.num_joints
     dev = loco.rotations.device
-    loop = loop_points(act, roles, skeleton, fps) if timing == "loop" else None
-    times, blend_from, phase = action_times(loco.lengths, act.lengths, timing, fps, T, loop)
+    loop = window = None
+    if timing != "fit":
+        sel = selection_tensors(act, skeleton)
+        window = best_windows(hands_in_chest(sel, roles, skeleton), act.lengths, acting_mask(acting, B, dev),
+                              torch.minimum(loco.lengths, act.lengths))
+        if timing == "loop":
+            loop = loop_points(sel, roles, skeleton, fps, acting)
+    times, blend_from, phase = action_times(loco.lengths, act.lengths, timing, fps, T, loop, window)
     a_rot, a_trans = _sample(act, times, blend_from, phase, loop[0] if loop is not None else None,
                              blend_frames(act.lengths, fps))  # (B, T, J, 4), (B, T, J, 3)
     l_rot, l_trans = loco.rotations[:, :T], loco.translations[:, :T]
