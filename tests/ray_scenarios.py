@@ -59,7 +59,7 @@ def finished(out: Path) -> int:
 
     work = out.parent / f".{out.name}.parts"
     held = (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)
-    return held + len(list(work.glob("part-*.h5")))
+    return held + len(list(work.glob("part-*")))
 
 
 def ray_task_processes() -> list[int]:

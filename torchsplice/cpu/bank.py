@@ -9,8 +9,11 @@ quaternions WXYZ, lengths in the skeleton's units, the up axis from the spec.
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -118,6 +121,38 @@ class ClipBank:
 
     def __len__(self) -> int:
         return len(self.lengths)
+
+    _ARRAYS = ("rot", "trans", "pos", "grot", "starts", "lengths")
+
+    def save(self, folder: Path) -> None:
+        """Write the bank into ``folder`` (one ``.npy`` file per array, the joint tables as
+        JSON), made under a temporary name and renamed into place."""
+        import shutil
+
+        folder = Path(folder)
+        tmp = folder.with_name(f".{folder.name}.writing")
+        shutil.rmtree(tmp, ignore_errors=True)  # a killed writer's
+        tmp.mkdir(parents=True)
+        for name in self._ARRAYS:
+            np.save(tmp / f"{name}.npy", getattr(self, name))
+        for k, a in enumerate(self.feat):
+            np.save(tmp / f"feat{k}.npy", a)
+        j = self.joints
+        (tmp / "joints.json").write_text(json.dumps([a.tolist() if isinstance(a, np.ndarray) else a for a in j]))
+        os.replace(tmp, folder)
+
+    @classmethod
+    def load(cls, folder: Path) -> "ClipBank":
+        """A bank written by :meth:`save`, its arrays memory-mapped copy-on-write: processes that
+        map one bank share its pages."""
+        folder = Path(folder)
+        arrays = {name: np.load(folder / f"{name}.npy", mmap_mode="c") for name in cls._ARRAYS}
+        feat = tuple(np.load(folder / f"feat{k}.npy", mmap_mode="c") for k in range(5))
+        raw = json.loads((folder / "joints.json").read_text())
+        kinds = (np.int64, np.bool_, np.int64, np.int64, np.int64, np.int64, np.int64, np.int64)
+        joints = tuple(np.array(raw[k], dtype=kinds[k]) for k in range(8)) + tuple(int(x) for x in raw[8:])
+        return cls(arrays["rot"], arrays["trans"], arrays["pos"], arrays["grot"], arrays["starts"], arrays["lengths"],
+                   feat, joints)
 
     def loop_points(self, clips, masks, tables: StandingTables) -> np.ndarray:
         """``(C, 2)`` int64: the loop points (start, end) of bank clips ``clips (C,)`` measured on

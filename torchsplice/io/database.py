@@ -578,10 +578,11 @@ class MotionDatabase:
     def checkpoint(self, note: dict | None = None) -> None:
         """Make every clip appended so far survive a killed process (a resumable database only).
 
-        Flushes the file and records, beside the staging file (``STAGING.commit``, written
-        atomically), the size of every dataset, the skeletons, the root attributes and
+        Flushes the file and records, beside the staging file (one line appended to
+        ``STAGING.commit``), the size of every dataset, the skeletons, the root attributes and
         ``note`` (JSON, the caller's own record, e.g. which of its work the clips hold):
-        :meth:`resume` returns the file to exactly this state and gives ``note`` back.
+        :meth:`resume` returns the file to exactly this state and gives ``note`` back. It costs
+        a flush and a line, so a writer may call it after every batch it appends.
         """
         if not self._resumable:
             raise ValueError(f"{self.path}: only a database created with a staging path has checkpoints")
@@ -590,30 +591,43 @@ class MotionDatabase:
         if not h5.swmr_mode:
             h5.swmr_mode = True  # from here on the file on disk is consistent at every moment
         h5.flush()
-        sizes = {}
-
-        def visit(name, obj):
-            if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None:
-                sizes[name] = int(obj.shape[0])
-        h5.visititems(visit)
-        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5.attrs.items()}
-        record = {"version": 1, "sizes": sizes, "skeletons": len(self._skeletons), "rows": self._row_log.size(),
-                  "attrs": {k: v for k, v in attrs.items() if isinstance(v, (str, int, float))},
+        shape = getattr(self, "_shape_of", None)
+        if shape is None or shape[0] != len(self._skeletons):  # the datasets and root attributes change with the skeletons
+            names = []
+            h5.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) and obj.maxshape
+                          and obj.maxshape[0] is None else None)
+            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5.attrs.items()}
+            shape = self._shape_of = (len(self._skeletons), [(n, h5[n]) for n in names],
+                                      {k: v for k, v in attrs.items() if isinstance(v, (str, int, float))})
+        record = {"version": 1, "sizes": {n: int(ds.shape[0]) for n, ds in shape[1]}, "skeletons": shape[0],
+                  "rows": self._row_log.size(), "attrs": shape[2],
                   "virtual": {str(k): [list(p) for p in parts] for k, parts in self._virtual.items()},
                   "note": note or {}}
-        commit = _commit_path(self._tmp)
-        tmp = commit.with_name(f"{commit.name}.partial-{host_pid()}")
-        tmp.write_text(json.dumps(record))
-        os.replace(tmp, commit)
+        with open(_commit_path(self._tmp), "a") as f:
+            f.write(json.dumps(record) + "\n")  # one write: a killed process leaves whole lines
+
+    @staticmethod
+    def _last_checkpoint(staging: Path) -> dict | None:
+        """The last complete record of ``STAGING.commit`` (``None`` when it has none)."""
+        try:
+            lines = _commit_path(Path(staging)).read_text().splitlines()
+        except OSError:
+            return None
+        for line in reversed(lines):
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(record, dict) and isinstance(record.get("note"), dict):
+                return record
+        return None
 
     @staticmethod
     def checkpoint_note(staging) -> dict | None:
         """The ``note`` of the last checkpoint of the database staged at ``staging`` (``None``
         when it has none), read without opening the file."""
-        try:
-            return dict(json.loads(_commit_path(Path(staging)).read_text())["note"])
-        except (OSError, ValueError, KeyError, TypeError):
-            return None
+        record = MotionDatabase._last_checkpoint(Path(staging))
+        return None if record is None else dict(record["note"])
 
     @classmethod
     def resume(cls, path, staging, overwrite: bool = False) -> "tuple[MotionDatabase, dict] | None":
@@ -636,7 +650,9 @@ class MotionDatabase:
             raise OutputExistsError(f"{path}: already exists")
         h5 = log = None
         try:
-            record = json.loads(commit.read_text())
+            record = cls._last_checkpoint(staging)
+            if record is None:
+                raise ValueError("no complete checkpoint")
             log = _RowLog(rows, fresh=False)
             log.truncate(int(record["rows"]))
             names = [str(n) for r in log.records() for n in r["name"]]

@@ -20,8 +20,12 @@ the output merged from them, are the same bits whatever the engine and the worke
 
 An engine calls ``done(task, part)`` for each finished task, one call at a time, in order of
 completion (the inline engine from its writer thread, the others from the driver's), with the
-task's :class:`~torchsplice.job.task.Part` when it is still in memory (else ``None``: the
-shard is on disk, and the merge reads it from there).
+task's :class:`~torchsplice.job.task.Part` when it is in memory (else ``None``: it is on
+disk, and the merge reads it from there). Shards are written only where they outlive the task
+(``keep_shards``): the slices of a ``--shard`` run, which a later merge joins, and a virtual
+output, whose frames they are. Otherwise a task's part goes to the driver's merge as it is
+(inline and Ray), or through a part file that the merge reads and removes (local workers),
+and the checkpointed output is what a killed job resumes from.
 """
 
 from __future__ import annotations
@@ -63,8 +67,9 @@ class InlineEngine:
 
     name = "inline"
 
-    def __init__(self, config: JobConfig, plan: Plan, sources: Sources, sink: Sink, shard_dir: Path):
+    def __init__(self, config: JobConfig, plan: Plan, sources: Sources, sink: Sink, shard_dir: Path, keep_shards: bool):
         self.config, self.plan, self.sources, self.sink, self.shard_dir = config, plan, sources, sink, shard_dir
+        self.keep_shards = keep_shards
 
     def describe(self) -> str:
         from ..cpu import get_threads
@@ -86,8 +91,9 @@ class InlineEngine:
         comp = _shard_compression(self.config)
         pending: Future | None = None
 
-        def write(task, part):
-            self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
+        def write(task, part):  # in the writer thread, while the next task computes
+            if self.keep_shards:
+                self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
             done(task, part)
 
         with ThreadPoolExecutor(max_workers=1) as writer:
@@ -117,7 +123,7 @@ class InlineEngine:
 _WORKER: dict = {}
 
 
-def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int) -> None:
+def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int, keep_shards: bool) -> None:
     """A worker process: one compute thread, Ctrl-C left to the driver, the plan read once; it
     exits when the driver is gone (a killed job leaves no worker behind)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -131,8 +137,11 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int)
         set_threads(1)
     from .sink import HDF5Sink
 
-    _WORKER.update(config=config, plan=Plan.load(Path(plan_path)), sources=Sources(config.database, config.actions_db),
-                   sink=HDF5Sink(), shard_dir=Path(shard_dir))
+    plan = Plan.load(Path(plan_path))
+    sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir))  # the driver's banks, mapped
+    sources.share_banks(plan.groups)
+    _WORKER.update(config=config, plan=plan, sources=sources, sink=HDF5Sink(), shard_dir=Path(shard_dir),
+                   keep_shards=keep_shards)
 
 
 def _exit_with(driver: int) -> None:
@@ -154,12 +163,17 @@ def _exit_with(driver: int) -> None:
     threading.Thread(target=watch, name="torchsplice-driver-watch", daemon=True).start()
 
 
-def _worker_task(index: int) -> tuple[str, int]:
+def _worker_task(index: int) -> None:
+    """A task in a worker: its shard (``keep_shards``) or its part file (for the driver's merge)
+    written. Results go through files, not the pool's pipe: a worker killed while sending a
+    large result would leave the pool waiting for the rest of it."""
     w = _WORKER
     task = w["plan"].tasks[index]
     part = run_task(w["plan"], task, w["sources"], w["config"])
-    w["sink"].write_shard(part, w["shard_dir"] / w["sink"].shard_name(task.id), _shard_compression(w["config"]))
-    return task.id, os.getpid()
+    if w["keep_shards"]:
+        w["sink"].write_shard(part, w["shard_dir"] / w["sink"].shard_name(task.id), _shard_compression(w["config"]))
+    else:
+        part.save(w["shard_dir"] / w["sink"].part_name(task.id))
 
 
 def _main_reimports() -> bool:
@@ -173,8 +187,9 @@ class LocalEngine:
 
     name = "local"
 
-    def __init__(self, config: JobConfig, plan: Plan, plan_path: Path, shard_dir: Path, workers: int):
+    def __init__(self, config: JobConfig, plan: Plan, plan_path: Path, shard_dir: Path, workers: int, keep_shards: bool):
         self.config, self.plan, self.plan_path, self.shard_dir, self.workers = config, plan, plan_path, shard_dir, workers
+        self.keep_shards = keep_shards
         self.pool: ProcessPoolExecutor | None = None
 
     def describe(self) -> str:
@@ -185,7 +200,8 @@ class LocalEngine:
         if hasattr(ctx, "set_forkserver_preload"):
             ctx.set_forkserver_preload(["torchsplice.job.worker"])  # workers fork with torch and the kernels loaded
         self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_worker_init,
-                                        initargs=(self.config, str(self.plan_path), str(self.shard_dir), os.getpid()))
+                                        initargs=(self.config, str(self.plan_path), str(self.shard_dir), os.getpid(),
+                                                  self.keep_shards))
 
     def alive(self) -> int:
         procs = getattr(self.pool, "_processes", None) or {}
@@ -300,8 +316,9 @@ class RayEngine:
 
     name = "ray"
 
-    def __init__(self, config: JobConfig, plan: Plan, sources: Sources, sink: Sink, shard_dir: Path):
+    def __init__(self, config: JobConfig, plan: Plan, sources: Sources, sink: Sink, shard_dir: Path, keep_shards: bool):
         self.config, self.plan, self.sources, self.sink, self.shard_dir = config, plan, sources, sink, shard_dir
+        self.keep_shards = keep_shards
         try:
             import ray
         except ImportError:
@@ -370,8 +387,9 @@ class RayEngine:
                     except ray.exceptions.RayError as exc:
                         raise TorchspliceError(f"task {task.id} failed on the Ray cluster ({type(exc).__name__}); "
                                                "finished tasks are kept: rerun to resume") from None
-                    self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
-                    done(task, part)  # the driver may append it from memory, saving a read of the shard
+                    if self.keep_shards:
+                        self.sink.write_shard(part, self.shard_dir / self.sink.shard_name(task.id), comp)
+                    done(task, part)  # the driver appends it from memory
         except BaseException:
             for ref in inflight:
                 ray.cancel(ref, force=True)
@@ -382,11 +400,13 @@ class RayEngine:
             self.ray.shutdown()
 
 
-def make_engine(config: JobConfig, plan: Plan, plan_path: Path, sources: Sources, sink: Sink, shard_dir: Path):
-    """The engine ``config`` asks for (a CUDA device, or one worker, runs in this process)."""
+def make_engine(config: JobConfig, plan: Plan, plan_path: Path, sources: Sources, sink: Sink, shard_dir: Path,
+                keep_shards: bool = True):
+    """The engine ``config`` asks for (a CUDA device, or one worker, runs in this process);
+    ``keep_shards``: write each task's shard (see the module docstring)."""
     if config.engine == "ray":
-        return RayEngine(config, plan, sources, sink, shard_dir)
+        return RayEngine(config, plan, sources, sink, shard_dir, keep_shards)
     workers = config.worker_count()
     if workers == 1 or config.backend() != "compiled":
-        return InlineEngine(config, plan, sources, sink, shard_dir)
-    return LocalEngine(config, plan, plan_path, shard_dir, workers)
+        return InlineEngine(config, plan, sources, sink, shard_dir, keep_shards)
+    return LocalEngine(config, plan, plan_path, shard_dir, workers, keep_shards)

@@ -18,6 +18,8 @@ import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..core.errors import TorchspliceError, UnfinishedJobError
 from ..io.lock import host_pid
@@ -209,6 +211,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
                 keys.append(key)
         roles = specs[k].bind(sk_l[k])
         groups.append(Group(k, fps, keys, specs[k].to_json(), leg_length(sk_l[k], roles)))
+    sources.share_banks(groups)
     group_of = {(g.skeleton, g.fps): n for n, g in enumerate(groups)}
     tables = {"L": tl, "A": ta}
     clips = {}
@@ -220,18 +223,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
                           "labels": json.loads(t["labels"][int(row)] or "{}")}
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
-    pairs: list[Pair] = []
-    skipped: dict[str, int] = {}
-    for method in c.methods:
-        for mode in ("timewarp", "standing"):
-            for i in locos:
-                for j in acts:
-                    why = _skip_reason(c, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs, described)
-                    if why:
-                        if mode == "timewarp":
-                            skipped[why] = skipped.get(why, 0) + 1
-                    elif _mode(c, checks, clip_key("A", j, same), method) == mode:
-                        pairs.append(Pair(method, int(i), int(j), refs.get(j) if mode == "timewarp" else None, mode))
+    pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, sk_l, sk_a, checks, refs, described)
     _acting(c, sources, groups, clips, sk_l, {clip_key("A", p.action, same) for p in pairs if p.mode == "standing"})
     if not pairs:
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
@@ -351,35 +343,101 @@ def _describe_skeletons(db, path) -> dict[int, str]:
     return out
 
 
-def _skip_reason(c: JobConfig, method, i, j, same, tl, ta, sk_l, sk_a, checks, refs, described) -> str | None:
-    if same and i == j:
-        return "a clip is not spliced onto itself"
-    kl, ka = int(tl["skeleton"][i]), int(ta["skeleton"][j])
-    if not sk_l[kl].same_topology(sk_a[ka]):  # not formed: splicing needs one joint hierarchy
-        return f"{SKELETONS_DIFFER}locomotions on {described[0][kl]} x actions on {described[1][ka]}"
-    ul, ua = described[2][kl], described[3][ka]
-    if _units_clash(ul, ua):  # one topology in two units (or up axes): lengths and positions would not compare
-        return (f"units differ: locomotions on {described[0][kl]} in {'/'.join(x or '?' for x in ul)} x actions on "
-                f"{described[1][ka]} in {'/'.join(x or '?' for x in ua)} (import with one units setting)")
-    for table, row in ((tl, i), (ta, j)):
-        need = max(4, int(MIN_SECONDS * float(table["fps"][row])))
-        if int(table["length"][row]) < need:
-            return f"{table['name'][row]} is too short to splice ({int(table['length'][row])} frames, at least {need})"
+def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, checks, refs, described):
+    """Every (method, locomotion, action) of the selections: the pairs to splice, method by method,
+    time-aligned ones first, each locomotion against each action; and, for the rest, the
+    number of pairs per skip reason. Each reason is decided once per clip, per skeleton pair or
+    per clip pair, and combined over the ``L x A`` grid by array operations; the first reason
+    wins, in this order: a clip onto itself, skeletons, units, too short, length ratio,
+    damaged, not locomoting, no reference."""
+    L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
+    nl, na = len(L), len(A)
+    reasons: list[str] = []
+    grid = np.zeros((nl, na), dtype=np.int64)  # 1 + the index of each pair's reason in reasons; 0: none
+
+    def code(text: str) -> int:
+        reasons.append(text)
+        return len(reasons)
+
+    def put(codes) -> None:
+        """Give the pairs not skipped yet the reason codes ``codes`` (broadcast to the grid; 0: none)."""
+        np.copyto(grid, np.broadcast_to(codes, grid.shape), where=grid == 0)
+
+    def per_clip(rows, why) -> np.ndarray:
+        """Codes ``(len(rows),)``: ``why(row)`` gives a clip's reason text, or ``None``."""
+        out = np.zeros(len(rows), dtype=np.int64)
+        for n, r in enumerate(rows.tolist()):
+            text = why(r)
+            if text is not None:
+                out[n] = code(text)
+        return out
+
+    if same:
+        put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
+    kl, ka = np.asarray(tl["skeleton"], dtype=np.int64)[L], np.asarray(ta["skeleton"], dtype=np.int64)[A]
+    for stage in ("topology", "units"):
+        by_pair = np.zeros((len(sk_l), len(sk_a)), dtype=np.int64)
+        for x in np.unique(kl).tolist():
+            for y in np.unique(ka).tolist():
+                if stage == "topology" and not sk_l[x].same_topology(sk_a[y]):  # not formed: one joint hierarchy needed
+                    by_pair[x, y] = code(f"{SKELETONS_DIFFER}locomotions on {described[0][x]} x actions on {described[1][y]}")
+                elif stage == "units" and _units_clash(described[2][x], described[3][y]):  # one topology, two units
+                    by_pair[x, y] = code(f"units differ: locomotions on {described[0][x]} in "
+                                         f"{'/'.join(v or '?' for v in described[2][x])} x actions on {described[1][y]} in "
+                                         f"{'/'.join(v or '?' for v in described[3][y])} (import with one units setting)")
+        put(by_pair[kl[:, None], ka[None, :]])
+
+    def too_short(table):
+        def why(r):
+            need = max(4, int(MIN_SECONDS * float(table["fps"][r])))
+            n = int(table["length"][r])
+            return f"{table['name'][r]} is too short to splice ({n} frames, at least {need})" if n < need else None
+        return why
+
+    put(per_clip(L, too_short(tl))[:, None])
+    put(per_clip(A, too_short(ta))[None, :])
     if c.max_length_ratio is not None:
-        dl, da = float(tl["length"][i] / tl["fps"][i]), float(ta["length"][j] / ta["fps"][j])
-        if max(dl, da) > c.max_length_ratio * min(dl, da):
-            return f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"
-    for key, name in ((clip_key("L", i, same), str(tl["name"][i])), (clip_key("A", j, same), str(ta["name"][j]))):
-        check = checks.get(key)
-        if check is not None and not check.finite:
-            return f"{name} {check.reason}"
-    check = checks.get(clip_key("L", i, same))
-    if check is not None and not check.locomoting and not c.force_locomotion:
-        return f"{tl['name'][i]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
-    standing = _mode(c, checks, clip_key("A", j, same), method) == "standing"
-    if get_method(method).needs_reference and refs.get(j) is None and not standing:
-        return f"no plain-locomotion reference for {ta['name'][j]} ({method})"
-    return None
+        dl = np.asarray(tl["length"], dtype=np.float64)[L] / np.asarray(tl["fps"], dtype=np.float64)[L]
+        da = np.asarray(ta["length"], dtype=np.float64)[A] / np.asarray(ta["fps"], dtype=np.float64)[A]
+        apart = np.maximum(dl[:, None], da[None, :]) > c.max_length_ratio * np.minimum(dl[:, None], da[None, :])
+        put(np.where(apart, code(f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"), 0))
+    key_l = {int(i): clip_key("L", i, same) for i in L}
+    key_a = {int(j): clip_key("A", j, same) for j in A}
+
+    def damaged(table, keys):
+        def why(r):
+            check = checks.get(keys[r])
+            return f"{table['name'][r]} {check.reason}" if check is not None and not check.finite else None
+        return why
+
+    put(per_clip(L, damaged(tl, key_l))[:, None])
+    put(per_clip(A, damaged(ta, key_a))[None, :])
+    if not c.force_locomotion:
+        def still(r):
+            check = checks.get(key_l[r])
+            return (f"{tl['name'][r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
+                    if check is not None and not check.locomoting else None)
+        put(per_clip(L, still)[:, None])
+    base = grid.copy()
+    pairs: list[Pair] = []
+    skipped: dict[str, int] = {}
+    for method in c.methods:
+        grid[:] = base
+        standing = np.array([_mode(c, checks, key_a[int(j)], method) == "standing" for j in A], dtype=bool)
+        if get_method(method).needs_reference:
+            noref = np.zeros(na, dtype=np.int64)
+            for n, j in enumerate(A.tolist()):
+                if refs.get(j) is None and not standing[n]:
+                    noref[n] = code(f"no plain-locomotion reference for {ta['name'][j]} ({method})")
+            put(noref[None, :])
+        per = np.bincount(grid.reshape(-1), minlength=len(reasons) + 1)
+        for r in np.nonzero(per[1:])[0].tolist():
+            skipped[reasons[r]] = skipped.get(reasons[r], 0) + int(per[r + 1])
+        for mode, want in (("timewarp", ~standing), ("standing", standing)):
+            rows, cols = np.nonzero((grid == 0) & want[None, :])
+            for i, j in zip(L[rows].tolist(), A[cols].tolist()):
+                pairs.append(Pair(method, i, j, refs.get(j) if mode == "timewarp" else None, mode))
+    return pairs, skipped
 
 
 def _task_size(c: JobConfig, pairs, clips, groups, same, tl, ta) -> int:

@@ -51,7 +51,7 @@ from .executors import make_engine
 from .plan import SKELETONS_DIFFER, Plan, make_plan
 from .sink import HDF5Sink
 from .sources import Sources
-from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT
+from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT, Part
 
 __all__ = ["JobConfig", "JobSummary", "SpliceJob", "merge_job", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT",
            "FLAG_SEPARATOR", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS"]
@@ -192,8 +192,13 @@ class SpliceJob:
             new_plan = True
         shard_dir = self.work
         tasks = plan.tasks if self.shard is None else _slice(plan.tasks, *self.shard)
+        if c.backend() == "compiled":  # the banks hold what splicing needs: shared with the workers, the clips let go
+            if c.engine == "local" and c.worker_count() > 1:
+                sources.save_banks(self.work)
+            sources.release_clips(keep=[g.clips[0] for g in plan.groups])
         try:
-            engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir)
+            engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir,
+                                 keep_shards=self.shard is not None or c.layout == "virtual")
         except BaseException:
             if new_plan and not any(shard_dir.glob("part-*")):  # nothing was done: leave no plan that would tie
                 plan_path.unlink(missing_ok=True)                # the next run to these arguments
@@ -213,12 +218,12 @@ class SpliceJob:
                 out, merged = _open_output(self.sink, c, plan, self.work, run, self.overwrite,
                                            lambda g: _source_skeleton(plan, g, sources), sources)
                 _remove_merged_shards(shard_dir, self.sink, tasks[:merged], c.layout)
-            have = {t.id for t in tasks[:merged]} | {t.id for t in tasks[merged:]
-                                                     if (shard_dir / self.sink.shard_name(t.id)).exists()}
+            have = {t.id for t in tasks[:merged]} | {t.id for t in tasks[merged:] if _finished(shard_dir, self.sink, t)}
             pending = [t for t in tasks if t.id not in have]
             summary.resumed = sum(t.size for t in tasks if t.id in have)
             if out is not None:
-                merge = _Merge(out, self.sink, c, plan, tasks, shard_dir, merged, have)
+                merge = _Merge(out, self.sink, c, plan, tasks, shard_dir, merged, have,
+                               lambda g: _source_skeleton(plan, g, sources))
         except BaseException:
             if out is not None:
                 out.abort()
@@ -398,31 +403,40 @@ class _Merge:
     shards are its frames and stay). Tasks that finish ahead of their turn wait on disk, a
     few of them in memory."""
 
-    def __init__(self, out, sink, config: JobConfig, plan: Plan, tasks: list, shard_dir: Path, merged: int, have):
+    def __init__(self, out, sink, config: JobConfig, plan: Plan, tasks: list, shard_dir: Path, merged: int, have,
+                 group_skeleton=None):
         self.out, self.sink, self.config, self.plan, self.tasks, self.shard_dir = out, sink, config, plan, tasks, shard_dir
+        self.group_skeleton = group_skeleton  # group -> (skeleton, spec): the skeleton of part files
         self.order = {t.id: n for n, t in enumerate(tasks)}
         self.ready: dict[int, object] = {self.order[tid]: None for tid in have if self.order[tid] >= merged}
         self.next = merged
         self.appended = 0
 
     def add(self, task, part) -> None:
+        """A finished task: ``part`` in memory, or ``None`` (its shard or part file is on disk).
+        A part also on disk waits there if four others already wait in memory."""
         n = self.order[task.id]
+        on_disk = part is None or (self.shard_dir / self.sink.shard_name(task.id)).exists()
         held = sum(p is not None for p in self.ready.values())
-        self.ready[n] = part if (n == self.next or held < 4) else None
+        self.ready[n] = part if (n == self.next or held < 4 or not on_disk) else None
         self.flush()
 
     def flush(self, limit: int | None = None) -> None:
         """Append every task whose turn has come (at most ``limit``)."""
         c, done = self.config, 0
         while self.next in self.ready and (limit is None or done < limit):
+            task = self.tasks[self.next]
             part = self.ready.pop(self.next)
-            name = self.sink.shard_name(self.tasks[self.next].id)
+            name, file = self.sink.shard_name(task.id), self.shard_dir / self.sink.part_name(task.id)
+            if part is None and file.exists():
+                part = Part.load(file, self.group_skeleton(task.group)[0])
             self.out.append_shard(self.shard_dir / name, part, virtual=c.layout == "virtual",
                                   refer_as=c.shards_folder / name)
             self.next += 1
             self.appended += 1
             done += 1
             self.out.checkpoint({"plan": self.plan.digest(), "tasks": self.next})
+            file.unlink(missing_ok=True)
             if c.layout != "virtual":
                 (self.shard_dir / name).unlink(missing_ok=True)
 
@@ -475,11 +489,17 @@ def _discard_staging(work: Path) -> None:
         f.unlink(missing_ok=True)
 
 
+def _finished(shard_dir: Path, sink, task) -> bool:
+    """Whether a task's results wait on disk: its shard, or its part file."""
+    return (shard_dir / sink.shard_name(task.id)).exists() or (shard_dir / sink.part_name(task.id)).exists()
+
+
 def _remove_merged_shards(shard_dir: Path, sink, tasks: list, layout: str) -> None:
-    """Shards whose clips the output holds already (left by a job killed between its checkpoint
-    and their removal); a virtual output's shards are its frames and stay."""
-    if layout != "virtual":
-        for t in tasks:
+    """Part files and shards whose clips the output holds already (left by a job killed between
+    its checkpoint and their removal); a virtual output's shards are its frames and stay."""
+    for t in tasks:
+        (shard_dir / sink.part_name(t.id)).unlink(missing_ok=True)
+        if layout != "virtual":
             (shard_dir / sink.shard_name(t.id)).unlink(missing_ok=True)
 
 

@@ -35,6 +35,10 @@ class Sink:
     def shard_name(self, task_id: str) -> str:
         raise NotImplementedError
 
+    def part_name(self, task_id: str) -> str:
+        """The file of a task's part on its way to the merge (:meth:`~torchsplice.job.task.Part.save`)."""
+        return f"part-{task_id}.npz"
+
     def write_shard(self, part: Part, path: Path, compression) -> None:
         raise NotImplementedError
 

@@ -1,11 +1,17 @@
-"""The job's source clips: read once per process, prepared once per locomotion group.
+"""The job's source clips: read once per process, prepared once per job.
 
 Clips are keyed ``"L:ROW"`` (the locomotion database) and ``"A:ROW"`` (the action database;
 ``"L:ROW"`` as well when both are one file). A *group* is a locomotion skeleton and frame rate;
 its bank (:class:`~torchsplice.cpu.bank.ClipBank`) holds the group's locomotions and every
 action and reference of the same topology, resampled to the group's rate, with forward
-kinematics and grid features computed once per clip. Workers build the same bank from the same
-clips, so every engine splices from identical arrays.
+kinematics and grid features computed once per clip. Groups of one topology, spec and rate
+share one bank, holding all their clips (:meth:`Sources.share_banks`): a clip's arrays do not
+depend on which bank holds it.
+
+The driver builds the banks while it plans and writes them into the job's work folder
+(:meth:`Sources.save_banks`); local workers map those files (copy-on-write) instead of
+reading and preparing the clips again, so the clips sit in memory once, whatever the number
+of workers. Every engine splices from identical arrays.
 """
 
 from __future__ import annotations
@@ -36,11 +42,14 @@ class Sources:
     the files (a Ray cluster), from the clips themselves (:meth:`from_motions`).
     """
 
-    def __init__(self, database: Path | None = None, actions_db: Path | None = None, dbs: dict | None = None):
+    def __init__(self, database: Path | None = None, actions_db: Path | None = None, dbs: dict | None = None,
+                 bank_dir: Path | None = None):
         self.paths = {"L": database, "A": actions_db or database}
         self.dbs: dict = dict(dbs or {})
         self.motions: dict[str, Motion] = {}
         self.banks: dict = {}
+        self.shared: dict[int, tuple[int, list[str]]] = {}  # group -> (its bank, the bank's clips)
+        self.bank_dir = bank_dir  # where the driver's banks are, as files (None: built here)
 
     @classmethod
     def from_motions(cls, motions: dict[str, Motion]) -> "Sources":
@@ -78,16 +87,58 @@ class Sources:
         self.load(keys)
         return {k: self.motions[k] for k in keys}
 
+    def share_banks(self, groups) -> None:
+        """Let the locomotion ``groups`` (:class:`~torchsplice.job.plan.Group`) of one topology,
+        spec and frame rate share one bank, holding the clips of all of them."""
+        skeletons = self.db("L").skeletons
+        members: dict[tuple, list[int]] = {}
+        for n, g in enumerate(groups):
+            sk = skeletons[g.skeleton]
+            members.setdefault((g.fps, g.spec, tuple(sk.names), tuple(sk.parents)), []).append(n)
+        self.shared = {}
+        for ns in members.values():
+            keys = list(dict.fromkeys(k for n in ns for k in groups[n].clips))
+            for n in ns:
+                self.shared[n] = (ns[0], keys)
+
     def bank(self, group_id: int, keys: list[str], fps: float, roles, landmarks) -> tuple:
-        """``(bank, index)`` of a group, built on first use: ``index`` maps a clip key to its bank row."""
-        if group_id not in self.banks:
+        """``(bank, index)`` of a group, built (or mapped from :attr:`bank_dir`) on first use:
+        ``index`` maps a clip key to its bank row."""
+        bank_id, keys = self.shared.get(group_id, (group_id, keys))
+        if bank_id not in self.banks:
             from ..cpu.bank import ClipBank
 
-            self.load(keys)
-            motions = [self.motions[k] for k in keys]
-            bank = ClipBank.from_motions([resample_motion(m, fps) for m in motions], motions[0].skeleton, roles, landmarks)
-            self.banks[group_id] = (bank, {k: i for i, k in enumerate(keys)})
-        return self.banks[group_id]
+            folder = self._bank_folder(bank_id)
+            if folder is not None and folder.is_dir():
+                bank = ClipBank.load(folder)
+            else:
+                self.load(keys)
+                motions = [self.motions[k] for k in keys]
+                bank = ClipBank.from_motions([resample_motion(m, fps) for m in motions], motions[0].skeleton, roles,
+                                             landmarks)
+            self.banks[bank_id] = (bank, {k: i for i, k in enumerate(keys)})
+        return self.banks[bank_id]
+
+    def _bank_folder(self, bank_id: int) -> Path | None:
+        return None if self.bank_dir is None else Path(self.bank_dir) / f"bank-{bank_id}"
+
+    def save_banks(self, folder: Path) -> None:
+        """Write the banks built so far into ``folder`` (:meth:`ClipBank.save`, once each), and
+        map them from there from now on, so that this process holds them once too."""
+        from ..cpu.bank import ClipBank
+
+        self.bank_dir = Path(folder)
+        for bank_id, (bank, index) in list(self.banks.items()):
+            if not isinstance(bank_id, int):
+                continue
+            target = self._bank_folder(bank_id)
+            if not target.is_dir():
+                bank.save(target)
+            self.banks[bank_id] = (ClipBank.load(target), index)
+
+    def release_clips(self, keep=()) -> None:
+        """Forget the clips read so far (but ``keep``): the banks hold what splicing needs."""
+        self.motions = {k: m for k, m in self.motions.items() if k in set(keep)}
 
     def standing_tables(self, group_id: int, roles, skeleton, fps: float):
         """The group's tables for standing actions (:func:`~torchsplice.splice.standing.standing_tables`), made once."""

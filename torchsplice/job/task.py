@@ -13,12 +13,15 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
+from ..io.lock import host_pid
 from ..splice import splice_pairs, splice_standing
 from ..splice.api import bank_kwargs, spliced_labels
 from ..splice.registry import MethodFailedError, get_method, load_plugins
@@ -83,6 +86,32 @@ class Part:
     @property
     def sources(self) -> list[str]:
         return [f"splice:{m}" for m in self.extra["method"]]
+
+    def save(self, path: Path) -> None:
+        """Write the part to ``path`` (an uncompressed ``.npz``: its arrays, and the rest as JSON),
+        under a temporary name renamed into place, so that a killed writer leaves no part."""
+        meta = {"task": self.task, "spec": self.spec, "names": list(self.names), "labels": list(self.labels),
+                "skipped": self.skipped, "plan": self.plan,
+                "extra": {k: list(map(str, v)) for k, v in self.extra.items() if OUTPUT_COLUMNS[k] == "str"}}
+        arrays = {"lengths": np.asarray(self.lengths), "fps": np.asarray(self.fps), "rotations": self.rotations,
+                  "translations": self.translations, "action_frame": self.action_frame,
+                  **{f"extra.{k}": np.asarray(v) for k, v in self.extra.items() if OUTPUT_COLUMNS[k] != "str"},
+                  "meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)}
+        tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: Path, skeleton) -> "Part":
+        """A part written by :meth:`save` (on ``skeleton``, its locomotion group's)."""
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(z["meta"].tobytes().decode())
+            extra = {k: z[f"extra.{k}"] for k, kind in OUTPUT_COLUMNS.items() if kind != "str"}
+            extra.update(meta["extra"])
+            return cls(task=meta["task"], skeleton=skeleton, spec=meta["spec"], names=meta["names"], lengths=z["lengths"],
+                       fps=z["fps"], rotations=z["rotations"], translations=z["translations"], labels=meta["labels"],
+                       extra=extra, action_frame=z["action_frame"], skipped=meta["skipped"], plan=meta["plan"])
 
 
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
