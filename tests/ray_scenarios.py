@@ -50,7 +50,8 @@ def job(db: str, out: Path, *extra, quiet: bool = True) -> subprocess.Popen:
     flags = JOB if quiet else [f for f in JOB if f != "-q"]
     return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", db, "-o", str(out), "--engine", "ray",
                              "--ray-address", f"127.0.0.1:{PORT}", *flags, *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0"))  # a checkpoint after each task
 
 
 def finished(out: Path) -> int:

@@ -80,7 +80,7 @@ def workers_of(driver: int) -> list[int]:
 
 
 def start_job(db, out, *extra):
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env = dict(os.environ, PYTHONUNBUFFERED="1", TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task
     return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), *JOB, *extra],
                             cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 

@@ -362,7 +362,8 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     work = work_folder(out)
     held = lambda: (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)  # noqa: E731
     cmd = [sys.executable, "scripts/splice_all.py", str(sample_db), "-o", str(out), "--batch-size", "2"]
-    proc = subprocess.Popen(cmd, cwd=REPO, env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    every_task = dict(env(), TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task, to kill between two
+    proc = subprocess.Popen(cmd, cwd=REPO, env=every_task, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:

@@ -362,7 +362,8 @@ def test_a_folder_mixing_datasets_imports_every_file_whatever_the_order(mocap_di
 @pytest.mark.slow
 def test_sigterm_stops_a_job_like_ctrl_c_and_the_rerun_resumes(sample_db, tmp_path):
     out = tmp_path / "o.h5"
-    p = cli("splice-all", sample_db, "-o", out, "--workers", "1", "--batch-size", "2")
+    p = cli("splice-all", sample_db, "-o", out, "--workers", "1", "--batch-size", "2",
+            env=dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0"))  # a checkpoint after each task
     parts = tmp_path / ".o.h5.parts"
     deadline = time.time() + 120
     held = lambda: (MotionDatabase.checkpoint_note(parts / "output.h5") or {}).get("tasks", 0)  # noqa: E731

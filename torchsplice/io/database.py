@@ -846,17 +846,21 @@ class MotionDatabase:
         except OSError:
             return
         if free < nbytes + _SPACE_MARGIN:
-            raise DatabaseError(self._write_failed(OSError(errno.ENOSPC, "No space left on device"), nbytes))
+            # nothing failed yet: a resumable database stays open, so that its writer can
+            # checkpoint what it holds (within the margin) before it stops
+            raise DatabaseError(self._write_failed(OSError(errno.ENOSPC, "No space left on device"), nbytes,
+                                                   discard=not self._resumable))
 
-    def _write_failed(self, exc: BaseException, pending: int = 0) -> str:
-        """Discard the write after ``exc`` and return the line that says so."""
+    def _write_failed(self, exc: BaseException, pending: int = 0, discard: bool = True) -> str:
+        """Discard the write after ``exc`` (unless not ``discard``) and return the line that says so."""
         try:
             written = self._tmp.stat().st_size if self._tmp is not None else 0
         except OSError:
             written = 0
         pending = pending or self._staged_bytes()
         kept = "what was written is kept" if self._resumable else "nothing was written"
-        self.abort(failed=True)
+        if discard:
+            self.abort(failed=True)
         if not _no_space(exc):
             return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({str(exc).splitlines()[0][:120]})"
         folder = self.path.parent.resolve()
@@ -1379,17 +1383,15 @@ class MotionDatabase:
             raise
 
     def _write_logged_rows(self) -> None:
-        """A resumable database's logged rows into its clips datasets (at :meth:`close`)."""
+        """A resumable database's logged rows into its clips datasets (at :meth:`close`), a
+        column at a time."""
         c = self.h5["clips"]
-        total = self._flushed
+        records = list(self._row_log.records())
         for name in c:
-            c[name].resize(total, axis=0)
-        at = 0
-        for rows in self._row_log.records():
-            n = len(rows["name"])
-            for name, values in rows.items():
-                c[name][at:at + n] = values
-            at += n
+            values = [r[name] for r in records]
+            column = np.concatenate(values) if values else _column_array(self.columns, name, [])
+            c[name].resize(len(column), axis=0)
+            c[name][:] = column
 
     # -- reading ------------------------------------------------------------------------------
     @_reads

@@ -250,10 +250,14 @@ class SpliceJob:
                 merge.finish(sources, self._copy_sources)
                 _summarise_output(summary, out, merge)
         except BaseException:
+            if merge is not None:
+                merge.save_progress()
             if out is not None:
                 out.abort()  # the staged output keeps its last checkpoint: a rerun resumes there
             raise
         finally:
+            if merge is not None:
+                merge.close()
             bar.close()
             engine.close()
         if self.shard is not None:
@@ -378,7 +382,11 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
                     merge.flush(limit=1)
                     bar.update(t.size)
                 merge.finish(sources, SpliceJob._copy_sources)
+            except BaseException:
+                merge.save_progress()
+                raise
             finally:
+                merge.close()
                 bar.close()
         except BaseException:
             if out is not None:
@@ -397,11 +405,25 @@ STAGING = "output.h5"
 """The output's name in the work folder while the job writes it (see :mod:`.sink`)."""
 
 
+CHECKPOINT_SECONDS = 2.0
+"""How often the merge checkpoints the output (and at its end; the environment variable
+``TORCHSPLICE_CHECKPOINT_SECONDS`` overrides it, 0: after every task): a killed job resumes
+from the last checkpoint, and recomputes at most the tasks merged after it whose parts are gone."""
+
+
+def _checkpoint_seconds() -> float:
+    try:
+        return max(0.0, float(os.environ.get("TORCHSPLICE_CHECKPOINT_SECONDS", CHECKPOINT_SECONDS)))
+    except ValueError:
+        return CHECKPOINT_SECONDS
+
+
 class _Merge:
-    """Joins finished tasks into the output in plan order, checkpointing after each one: a
-    task's shard is appended once and then deleted (``copy`` layout; a ``virtual`` output's
-    shards are its frames and stay). Tasks that finish ahead of their turn wait on disk, a
-    few of them in memory."""
+    """Joins finished tasks into the output in plan order, checkpointing it every
+    :data:`CHECKPOINT_SECONDS`: a task's part file or shard is appended once, and deleted once
+    a checkpoint holds it (``copy`` layout; a ``virtual`` output's shards are its frames and
+    stay), by a background thread. Tasks that finish ahead of their turn wait on disk, a few of
+    them in memory."""
 
     def __init__(self, out, sink, config: JobConfig, plan: Plan, tasks: list, shard_dir: Path, merged: int, have,
                  group_skeleton=None):
@@ -411,6 +433,12 @@ class _Merge:
         self.ready: dict[int, object] = {self.order[tid]: None for tid in have if self.order[tid] >= merged}
         self.next = merged
         self.appended = 0
+        self.checkpointed = merged
+        self.rows = len(out.db)
+        self.last = time.monotonic()
+        self.spent: list[Path] = []  # files of tasks merged since the last checkpoint
+        self.remover = None
+        self.every = _checkpoint_seconds()
 
     def add(self, task, part) -> None:
         """A finished task: ``part`` in memory, or ``None`` (its shard or part file is on disk).
@@ -433,12 +461,42 @@ class _Merge:
             self.out.append_shard(self.shard_dir / name, part, virtual=c.layout == "virtual",
                                   refer_as=c.shards_folder / name)
             self.next += 1
+            self.rows = len(self.out.db)  # what a checkpoint at self.next must hold
+            del part  # a mapped part file is let go before it is deleted
             self.appended += 1
             done += 1
-            self.out.checkpoint({"plan": self.plan.digest(), "tasks": self.next})
-            file.unlink(missing_ok=True)
+            self.spent.append(file)
             if c.layout != "virtual":
-                (self.shard_dir / name).unlink(missing_ok=True)
+                self.spent.append(self.shard_dir / name)
+            if time.monotonic() - self.last >= self.every:
+                self.checkpoint()
+
+    def checkpoint(self) -> None:
+        """Checkpoint the output at the tasks appended so far, then delete their files."""
+        if self.checkpointed == self.next:
+            return
+        self.out.checkpoint({"plan": self.plan.digest(), "tasks": self.next})
+        self.checkpointed, self.last = self.next, time.monotonic()
+        spent, self.spent = self.spent, []
+        if self.remover is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self.remover = ThreadPoolExecutor(max_workers=1, thread_name_prefix="torchsplice-remove")
+        self.remover.submit(lambda: [f.unlink(missing_ok=True) for f in spent])  # freeing the pages costs the kernel time
+
+    def save_progress(self) -> None:
+        """Checkpoint what was appended before an interruption, if the output is whole: open,
+        and holding exactly the tasks counted (an append that was cut short rolls itself back)."""
+        try:
+            if self.out.db._h5 is not None and len(self.out.db) == self.rows:
+                self.checkpoint()
+        except Exception:  # the last checkpoint stands
+            pass
+
+    def close(self) -> None:
+        if self.remover is not None:
+            self.remover.shutdown(wait=True)
+            self.remover = None
 
     def finish(self, sources: Sources, copy_sources) -> None:
         """After the last task: the source clips (``copy_sources``), the run record, the shards
@@ -447,6 +505,8 @@ class _Merge:
         self.flush()
         if self.next != len(self.tasks):
             raise TorchspliceError(f"{c.output}: task {self.tasks[self.next].id} has no shard; rerun to finish the job")
+        self.checkpoint()
+        self.close()
         if c.copy_sources:
             copy_sources(self.out, self.plan, sources)
         self.out.set_spliced(self.out.clips)

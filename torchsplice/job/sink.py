@@ -37,7 +37,7 @@ class Sink:
 
     def part_name(self, task_id: str) -> str:
         """The file of a task's part on its way to the merge (:meth:`~torchsplice.job.task.Part.save`)."""
-        return f"part-{task_id}.npz"
+        return f"part-{task_id}.part"
 
     def write_shard(self, part: Part, path: Path, compression) -> None:
         raise NotImplementedError

@@ -88,30 +88,46 @@ class Part:
         return [f"splice:{m}" for m in self.extra["method"]]
 
     def save(self, path: Path) -> None:
-        """Write the part to ``path`` (an uncompressed ``.npz``: its arrays, and the rest as JSON),
-        under a temporary name renamed into place, so that a killed writer leaves no part."""
+        """Write the part to ``path``: a JSON header (everything but the arrays, and where each
+        array lies) then the arrays' raw bytes, under a temporary name renamed into place, so
+        that a killed writer leaves no part. (Neither compressed nor checksummed: a part lives
+        for the seconds between its task and the merge.)"""
         meta = {"task": self.task, "spec": self.spec, "names": list(self.names), "labels": list(self.labels),
                 "skipped": self.skipped, "plan": self.plan,
                 "extra": {k: list(map(str, v)) for k, v in self.extra.items() if OUTPUT_COLUMNS[k] == "str"}}
         arrays = {"lengths": np.asarray(self.lengths), "fps": np.asarray(self.fps), "rotations": self.rotations,
                   "translations": self.translations, "action_frame": self.action_frame,
-                  **{f"extra.{k}": np.asarray(v) for k, v in self.extra.items() if OUTPUT_COLUMNS[k] != "str"},
-                  "meta": np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)}
+                  **{f"extra.{k}": np.asarray(v) for k, v in self.extra.items() if OUTPUT_COLUMNS[k] != "str"}}
+        arrays = {k: np.ascontiguousarray(a) for k, a in arrays.items()}
+        at, table = 0, {}
+        for k, a in arrays.items():
+            table[k] = (at, a.dtype.str, list(a.shape))
+            at += a.nbytes
+        head = json.dumps({"meta": meta, "arrays": table}).encode()
         tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
         with open(tmp, "wb") as f:
-            np.savez(f, **arrays)
+            f.write(len(head).to_bytes(8, "little") + head)
+            for a in arrays.values():
+                a.tofile(f)
         os.replace(tmp, path)
 
     @classmethod
     def load(cls, path: Path, skeleton) -> "Part":
-        """A part written by :meth:`save` (on ``skeleton``, its locomotion group's)."""
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(z["meta"].tobytes().decode())
-            extra = {k: z[f"extra.{k}"] for k, kind in OUTPUT_COLUMNS.items() if kind != "str"}
-            extra.update(meta["extra"])
-            return cls(task=meta["task"], skeleton=skeleton, spec=meta["spec"], names=meta["names"], lengths=z["lengths"],
-                       fps=z["fps"], rotations=z["rotations"], translations=z["translations"], labels=meta["labels"],
-                       extra=extra, action_frame=z["action_frame"], skipped=meta["skipped"], plan=meta["plan"])
+        """A part written by :meth:`save` (on ``skeleton``, its locomotion group's), its arrays
+        mapped from the file rather than read."""
+        with open(path, "rb") as f:
+            n = int.from_bytes(f.read(8), "little")
+            head = json.loads(f.read(n))
+        base = 8 + n
+        arrays = {k: np.memmap(path, dtype=np.dtype(dt), mode="r", offset=base + at, shape=tuple(shape))
+                  if int(np.prod(shape)) else np.zeros(shape, np.dtype(dt)) for k, (at, dt, shape) in head["arrays"].items()}
+        meta = head["meta"]
+        extra = {k: arrays[f"extra.{k}"] for k, kind in OUTPUT_COLUMNS.items() if kind != "str"}
+        extra.update(meta["extra"])
+        return cls(task=meta["task"], skeleton=skeleton, spec=meta["spec"], names=meta["names"], lengths=arrays["lengths"],
+                   fps=arrays["fps"], rotations=arrays["rotations"], translations=arrays["translations"],
+                   labels=meta["labels"], extra=extra, action_frame=arrays["action_frame"], skipped=meta["skipped"],
+                   plan=meta["plan"])
 
 
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
