@@ -100,8 +100,10 @@ class ClipBank:
         """A bank from per-clip ``(T, J, 4)`` rotations and ``(T, J, 3)`` local translations."""
         lengths = np.array([len(r) for r in rotations], dtype=np.int64)
         starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
-        rot = np.ascontiguousarray(np.concatenate(rotations), dtype=np.float64)
-        trans = np.ascontiguousarray(np.concatenate(translations), dtype=np.float64)
+        N, J = int(lengths.sum()), skeleton.num_joints
+        rot, trans = np.empty((N, J, 4)), np.empty((N, J, 3))  # filled in place: float64 of any input dtype
+        np.concatenate(rotations, axis=0, out=rot)
+        np.concatenate(translations, axis=0, out=trans)
         joints = joint_config(roles, skeleton, landmarks)
         pos = np.zeros(trans.shape)
         grot = np.zeros(rot.shape)
@@ -115,8 +117,8 @@ class ClipBank:
     def from_motions(cls, motions: list[Motion], skeleton: Skeleton, roles: SkeletonRoles,
                      landmarks=("root", "knees")) -> "ClipBank":
         """A bank of clips (already at a common frame rate)."""
-        return cls.from_arrays([m.rotations.detach().cpu().double().numpy() for m in motions],
-                               [m.local_translations().detach().cpu().double().numpy() for m in motions],
+        return cls.from_arrays([m.rotations.detach().cpu().numpy() for m in motions],
+                               [m.local_translations().detach().cpu().numpy() for m in motions],
                                skeleton, roles, landmarks)
 
     def __len__(self) -> int:

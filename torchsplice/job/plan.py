@@ -266,7 +266,8 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
     landmarks = config.align_options().landmarks
     for n, g in enumerate(groups):
         roles = g.roles(sk_l[g.skeleton])
-        native = [k for k in g.clips if clips[k]["fps"] == g.fps]
+        # clips in order of length, so that each padded batch holds clips of about one length
+        native = sorted((k for k in g.clips if clips[k]["fps"] == g.fps and k not in out), key=lambda k: clips[k]["frames"])
         if config.backend() == "compiled":
             bank, index = sources.bank(n, g.clips, g.fps, roles, landmarks)
             for b in range(0, len(native), 256):
@@ -275,7 +276,7 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
                 for k, chk in zip(chunk, check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, g.fps)):
                     out[k] = chk
         rest: dict[float, list[str]] = {}
-        for k in g.clips:
+        for k in sorted(g.clips, key=lambda k: clips[k]["frames"]):
             if k not in out:
                 rest.setdefault(clips[k]["fps"], []).append(k)
         for rate, keys in rest.items():
@@ -301,7 +302,7 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
     from ..splice.standing import acting_limbs
 
     for n, g in enumerate(groups):
-        todo = [k for k in g.clips if k in keys and "acting" not in clips[k]]
+        todo = sorted((k for k in g.clips if k in keys and "acting" not in clips[k]), key=lambda k: clips[k]["frames"])
         if config.acting_limbs is not None:
             for k in todo:
                 clips[k]["acting"] = list(config.acting_limbs)

@@ -196,6 +196,7 @@ class SpliceJob:
             if c.engine == "local" and c.worker_count() > 1:
                 sources.save_banks(self.work)
             sources.release_clips(keep=[g.clips[0] for g in plan.groups])
+            _return_freed_memory()
         try:
             engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir,
                                  keep_shards=self.shard is not None or c.layout == "virtual")
@@ -614,6 +615,19 @@ def _summarise_output(summary: JobSummary, out, merge: _Merge) -> None:
         out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
     for why, n in out.skipped.items():
         summary.skipped[why] = summary.skipped.get(why, 0) + n
+
+
+def _return_freed_memory() -> None:
+    """Give the memory planning freed back to the system (glibc keeps freed heap memory, and
+    planning's batches of clips leave much of it), so that the driver holds what it uses."""
+    import ctypes
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
 
 
 def _slice(tasks: list, k: int, n: int) -> list:

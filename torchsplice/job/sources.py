@@ -137,8 +137,14 @@ class Sources:
             self.banks[bank_id] = (ClipBank.load(target), index)
 
     def release_clips(self, keep=()) -> None:
-        """Forget the clips read so far (but ``keep``): the banks hold what splicing needs."""
-        self.motions = {k: m for k, m in self.motions.items() if k in set(keep)}
+        """Forget the clips read so far (but ``keep``, copied: clips read together share one
+        buffer, which a kept clip would hold whole): the banks hold what splicing needs."""
+        from dataclasses import replace
+
+        copy = lambda t: None if t is None else t.clone()  # noqa: E731
+        self.motions = {k: replace(m, rotations=copy(m.rotations), root_translation=copy(m.root_translation),
+                                   translations=copy(m.translations))
+                        for k, m in self.motions.items() if k in set(keep)}
 
     def standing_tables(self, group_id: int, roles, skeleton, fps: float):
         """The group's tables for standing actions (:func:`~torchsplice.splice.standing.standing_tables`), made once."""
