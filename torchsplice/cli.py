@@ -523,8 +523,10 @@ def _add_standing_options(s) -> None:
                         "that does not locomote and splicing a standing action by --timing")
     s.add_argument("--timing", choices=("loop", "hold", "fit"), default="loop",
                    help="how an action that does not locomote (a standing action: a wave, a bow) fills the locomotion: "
-                        "loop it with a seamless blend (default), play it once and hold its last frame, or fit it "
-                        "(time-scale) to the locomotion's length")
+                        "loop: play it from its start and loop it (the loop holds the whole gesture) with a seamless "
+                        "blend (default); hold: play it once and hold its last frame; fit: time-scale the whole action "
+                        "to the locomotion's length (faster onto a shorter one). Onto a locomotion shorter than the "
+                        "action, loop and hold play the window of the action where the acting arms move most")
     s.add_argument("--acting-limbs", default="auto", metavar="LIMBS",
                    help="the arms standing actions act with: auto (default: found from each clip's data), none, or "
                         "left_arm, right_arm or both; the other arm keeps the locomotion's swing (splice method)")
@@ -619,7 +621,8 @@ def cmd_splice_all(args) -> int:
         raise TorchspliceError("--ray-address needs --engine ray")
     command = "torchsplice " + shlex.join(args.argv)
     shard = parse_shard(args.shard) if args.shard else None
-    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command, shard=shard)
+    job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command, shard=shard,
+                    dry_run=args.dry_run)
     try:
         summary = job.run()
     except KeyboardInterrupt as exc:
@@ -637,7 +640,8 @@ def _prestart_workers(args) -> None:
     import os
 
     workers = args.workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-    if args.engine == "local" and workers > 1 and (args.device or "cpu") == "cpu" and sys.platform != "win32":
+    if args.engine == "local" and workers > 1 and (args.device or "cpu") == "cpu" and sys.platform != "win32" \
+            and not getattr(args, "dry_run", False):
         import multiprocessing as mp
         from multiprocessing import forkserver
 
@@ -877,6 +881,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_splice_options(s)
     s.add_argument("-f", "--force", action="store_true", help="overwrite an existing output file")
     s.add_argument("--restart", action="store_true", help="discard an unfinished earlier run instead of resuming it")
+    s.add_argument("--dry-run", action="store_true",
+                   help="plan only: say how many pairs would be spliced and skipped, the output's expected size and "
+                        "the free space, and write nothing")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     s.add_argument("--log-level", default="warning", choices=["debug", "info", "warning", "error"],
                    help="detail of log messages on stderr (default warning)")

@@ -50,14 +50,20 @@ def remove_stale_temporaries(folder: Path, kind: str = "partial") -> None:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process with this PID exists on this host."""
+    """Whether a process with this PID runs on this host (a zombie, dead but not yet reaped by
+    its parent, does not: ``kill(pid, 0)`` alone would say it lives)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            state = f.read().rsplit(b")", 1)[1].split()[0]
+        return state not in (b"Z", b"X")
+    except (OSError, IndexError):  # no /proc (not Linux): kill's answer stands
+        return True
 
 
 _HELD: dict[str, list] = {}  # absolute lock path -> [fd, holds] of the locks this process holds

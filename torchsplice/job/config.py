@@ -47,8 +47,10 @@ class JobConfig:
         max_length_ratio: skip pairs whose longer clip lasts more than this many times the
             shorter one (``None``: no limit).
         timing: how a standing action (one that does not locomote) fills its locomotion:
-            ``"loop"`` (default), ``"hold"`` or ``"fit"``; unless ``force_locomotion`` makes
-            the timewarp align it anyway.
+            ``"loop"`` (default), ``"hold"`` or ``"fit"`` (onto a shorter locomotion, loop and
+            hold play the action's window where the acting arms move most; see
+            :mod:`torchsplice.splice.standing`); unless ``force_locomotion`` makes the timewarp
+            align it anyway.
         acting_limbs: the arms standing actions act with (``None``: found per clip).
         copy_sources: copy the selected source clips into the output too.
         max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).

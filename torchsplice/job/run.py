@@ -51,6 +51,7 @@ from .executors import make_engine
 from .plan import SKELETONS_DIFFER, Plan, make_plan
 from .sink import HDF5Sink
 from .sources import Sources
+from .size import OutputSize, estimate_output, format_bytes
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT, Part
 
 __all__ = ["JobConfig", "JobSummary", "SpliceJob", "merge_job", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT",
@@ -87,6 +88,11 @@ class JobSummary:
     tasks_done: int = 0
     merge: bool = False
     merged_shards: int = 0  # shards this run appended to the output (an earlier run's are not merged again)
+    dry_run: bool = False
+    standing: int = 0  # pairs of standing actions among the pairs
+    expected: OutputSize | None = None  # the output's expected size (see torchsplice.job.size)
+    written: int | None = None  # bytes the output took
+    free: int | None = None  # bytes free beside the output when the job started
 
     def lines(self, option_name=None) -> list[str]:
         """The closing summary, as printed by the command line; ``option_name(option)`` writes the
@@ -97,7 +103,11 @@ class JobSummary:
         say = lambda why: render_message(why, REASON_OPTIONS, name)  # noqa: E731
         rate = (self.spliced - self.resumed) / self.compute_seconds if self.compute_seconds > 0 else float("nan")
         where = f" with {self.engine}" if self.engine else ""
-        if self.shard is not None:
+        if self.dry_run:
+            out = [f"would write {self.output}: {self.pairs} spliced clips in {self.tasks} tasks"
+                   + (f" ({self.pairs - self.standing} time-aligned, {self.standing} standing actions)" if self.standing else "")
+                   + f"; {self._room()}"]
+        elif self.shard is not None:
             k, n = self.shard
             out = [f"slice {k}/{n}: {self.tasks_done} of {self.tasks} tasks done"
                    + (f" ({self.resumed} pairs from an earlier run)" if self.resumed else "")
@@ -112,12 +122,16 @@ class JobSummary:
         if standing:
             out.append(f"  {self.timings.get('timewarp', 0)} time-aligned (timewarp), "
                        + ", ".join(f"{n} standing actions ({t})" for t, n in sorted(standing.items())))
+        if self.written is not None and not self.dry_run:
+            out.append(f"  {format_bytes(self.written)} on disk" + (f" (expected {format_bytes(self.expected.bytes)})"
+                                                                    if self.expected is not None else ""))
         skipped = {w: n for w, n in self.skipped.items() if not w.startswith(SKELETONS_DIFFER)}
         apart = {w[len(SKELETONS_DIFFER):]: n for w, n in self.skipped.items() if w.startswith(SKELETONS_DIFFER)}
         if skipped:
-            out.append(f"skipped {sum(skipped.values())} pairs:" if self.shard is None else
-                       f"the whole job (every slice) skips {sum(skipped.values())} pairs:")
-            out += [f"  {n} x {say(why)}" for why, n in sorted(skipped.items(), key=lambda kv: -kv[1])]
+            out.append(f"skipped {sum(skipped.values())} pairs:" if self.shard is None and not self.dry_run else
+                       f"the whole job (every slice) skips {sum(skipped.values())} pairs:" if self.shard is not None else
+                       f"would skip {sum(skipped.values())} pairs:")
+            out += _reason_lines(skipped, say)
         if apart:
             out.append(f"not formed: {sum(apart.values())} pairs whose clips are on skeletons of different joints "
                        "(splicing needs one joint hierarchy):")
@@ -127,14 +141,52 @@ class JobSummary:
             out += [f"  {n} x {why}" for why, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
         return out
 
+    def _room(self) -> str:
+        folder = self.output.parent
+        expect = (f"expected output about {format_bytes(self.expected.bytes)} ({self.expected.frames:,} frames)"
+                  if self.expected is not None else "")
+        free = f"{format_bytes(self.free)} free in {folder}" if self.free is not None else ""
+        fits = "" if self.expected is None or self.free is None else \
+            ("" if self.free >= self.expected.bytes else " (it does not fit)")
+        return "; ".join(x for x in (expect, free) if x) + fits
+
+
+REASONS_SHOWN = 8
+"""Skip reasons of one kind (clips that do not locomote, clips too short) listed one by one; more
+are summed up in one line."""
+
+
+_KINDS = ((re.compile(r"^\S+ does not locomote \("), "clips that do not locomote"),
+          (re.compile(r"^\S+ is too short to splice \("), "clips too short to splice"),
+          (re.compile(r"^no plain-locomotion reference for \S+ \((\S+)\)$"), "actions with no plain-locomotion reference"))
+
+
+def _reason_lines(skipped: dict[str, int], say) -> list[str]:
+    """``N x reason`` lines, most frequent first; reasons of one kind that name a clip (clips
+    that do not locomote, are too short or have no reference) past the first
+    :data:`REASONS_SHOWN` summed up in one line."""
+    kinds: dict[str, list] = {}
+    for why, n in sorted(skipped.items(), key=lambda kv: -kv[1]):
+        text = say(why)
+        kind = next((label for pattern, label in _KINDS if pattern.search(text)), text)
+        kinds.setdefault(kind, []).append((n, text))
+    out = []
+    for kind, items in kinds.items():
+        out += [f"  {n} x {text}" for n, text in items[:REASONS_SHOWN]]
+        if len(items) > REASONS_SHOWN:
+            rest = items[REASONS_SHOWN:]
+            out.append(f"  {sum(n for n, _ in rest)} x {len(rest)} other {kind}")
+    return out
+
 
 class SpliceJob:
     """Plan and run one splice job, or one slice of it (see the module docstring)."""
 
     def __init__(self, config: JobConfig, progress: bool = True, restart: bool = False, overwrite: bool = False,
-                 command: str | None = None, shard: tuple[int, int] | None = None):
+                 command: str | None = None, shard: tuple[int, int] | None = None, dry_run: bool = False):
         self.config = config.checked()
         self.progress, self.restart, self.overwrite, self.shard = progress, restart, overwrite, shard
+        self.dry_run = dry_run
         self.command = command or "torchsplice.job.SpliceJob (Python API)"
         self.work = self.config.work
         self.sink = HDF5Sink()
@@ -149,6 +201,8 @@ class SpliceJob:
             raise TorchspliceError(f"{c.output}: folder {c.output.parent} does not exist")
         if self.shard is None and c.output.exists() and not self.overwrite:
             raise OutputExistsError(f"{c.output}: already exists")
+        if self.dry_run:
+            return self._dry_run(t0)
         _prestart_workers(c)
         if self.shard is not None and self.restart:
             raise TorchspliceError("{restart} discards the whole job, every slice's work too: run it once without {shard}",
@@ -175,11 +229,49 @@ class SpliceJob:
         summary.seconds = time.perf_counter() - t0
         return summary
 
+    def _dry_run(self, t0: float) -> JobSummary:
+        """Plan, and say what the job would do and how much disk it needs; writes nothing."""
+        c = self.config
+        sources = Sources(c.database, c.actions_db)
+        try:
+            plan = make_plan(c, sources)
+            summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), tasks=len(plan.tasks),
+                                 dry_run=True, standing=sum(p.mode == "standing" for p in plan.pairs))
+            summary.expected = self._expected(plan, sources)
+            summary.free = _free_bytes(c.output.parent)
+        finally:
+            sources.close()
+        summary.seconds = time.perf_counter() - t0
+        return summary
+
+    def _expected(self, plan: Plan, sources: Sources) -> OutputSize:
+        copied = None
+        if self.config.copy_sources:
+            copied = []
+            for db, rows in SpliceJob._source_rows(plan, sources):
+                t = db.table()
+                copied += [(int(t["length"][r]), db.skeletons[int(t["skeleton"][r])]) for r in rows]
+        return estimate_output(plan, lambda g: _source_skeleton(plan, g, sources)[0], self.config.compression, copied)
+
+    def _check_room(self, plan: Plan, sources: Sources) -> tuple[OutputSize, int | None]:
+        """The output's expected size and the free space; refuses, before any work, a job whose
+        output (what is left of it) and banks do not fit."""
+        c = self.config
+        expected, free = self._expected(plan, sources), _free_bytes(c.output.parent)
+        held = sum(f.stat().st_size for f in (self.work / STAGING, self.work / f"{STAGING}.rows") if f.exists())
+        banks = sources.unsaved_bank_bytes(self.work) if _shares_banks(c) else 0
+        need = max(0, expected.bytes - held) + banks
+        if free is not None and need > free:
+            raise TorchspliceError(
+                f"{c.output}: the job needs about {format_bytes(need)} more on the disk (an output of about "
+                f"{format_bytes(expected.bytes)}, {expected.frames:,} frames) and {c.output.parent} has "
+                f"{format_bytes(free)} free; free some space, or splice fewer pairs")
+        return expected, free
+
     def _run(self, sources: Sources, t0: float) -> JobSummary:
         c = self.config
         plan = make_plan(c, sources)
         plan_path = self.work / "plan.json"
-        self.work.mkdir(exist_ok=True)
         new_plan = False
         if plan_path.exists():
             saved = Plan.load(plan_path)
@@ -187,13 +279,15 @@ class SpliceJob:
                 raise UnfinishedJobError(
                     f"{self.work} holds an unfinished job with other arguments or inputs; rerun it with the same "
                     "arguments to finish it")
-        else:
+        expected, free = self._check_room(plan, sources) if self.shard is None else (None, None)  # before any write
+        if not plan_path.exists():
+            self.work.mkdir(exist_ok=True)
             plan.save(plan_path)
             new_plan = True
         shard_dir = self.work
         tasks = plan.tasks if self.shard is None else _slice(plan.tasks, *self.shard)
         if c.backend() == "compiled":  # the banks hold what splicing needs: shared with the workers, the clips let go
-            if c.engine == "local" and c.worker_count() > 1:
+            if _shares_banks(c):
                 sources.save_banks(self.work)
             sources.release_clips(keep=[g.clips[0] for g in plan.groups])
             _return_freed_memory()
@@ -211,7 +305,7 @@ class SpliceJob:
         out, merged, merge = None, 0, None
         try:
             summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), shard=self.shard,
-                                 tasks=len(tasks), engine=engine.describe())
+                                 tasks=len(tasks), engine=engine.describe(), expected=expected, free=free)
             if self.shard is None:  # the output, resumed at its last checkpoint if an earlier run left one
                 run = {**plan.key, "pairs": len(plan.pairs), "batch_pairs": plan.key["task_pairs"],
                        "plan_sha256": plan.digest(), "command": self.command, "started": self._started,
@@ -281,7 +375,7 @@ class SpliceJob:
 
 
 def splice_all(database, output, *, restart: bool = False, overwrite: bool = False, shard=None,
-               progress: bool = False, command: str | None = None, **options) -> JobSummary:
+               progress: bool = False, command: str | None = None, dry_run: bool = False, **options) -> JobSummary:
     """Splice every selected locomotion x action pair of ``database`` into the new database
     ``output``: what ``torchsplice splice-all DATABASE -o OUTPUT ...`` does, from Python.
 
@@ -303,8 +397,10 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
 
     ``restart`` discards an unfinished run of another plan (``--restart``), ``overwrite``
     replaces an existing output (``--force``), ``shard`` (``"K/N"`` or ``(K, N)``) runs one
-    slice into the work folder and writes no output (``--shard``); ``progress`` shows the
-    progress bar. An interrupted call (Ctrl-C) keeps its finished tasks: the same call resumes.
+    slice into the work folder and writes no output (``--shard``); ``dry_run`` plans the job
+    and says what it would do and how much disk its output needs, writing nothing
+    (``--dry-run``); ``progress`` shows the progress bar. An interrupted call (Ctrl-C) keeps its
+    finished tasks: the same call resumes.
     With ``engine="local"`` and more than one worker, a script must guard its entry point with
     ``if __name__ == "__main__":`` (multiprocessing re-imports it).
 
@@ -317,7 +413,8 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
     if shard is not None:
         shard = parse_shard(shard)
     job = SpliceJob(config, progress=progress, restart=restart, overwrite=overwrite,
-                    command=command or "torchsplice.job.splice_all (Python API)", shard=tuple(shard) if shard else None)
+                    command=command or "torchsplice.job.splice_all (Python API)", shard=tuple(shard) if shard else None,
+                    dry_run=dry_run)
     return job.run()
 
 
@@ -409,7 +506,8 @@ STAGING = "output.h5"
 CHECKPOINT_SECONDS = 2.0
 """How often the merge checkpoints the output (and at its end; the environment variable
 ``TORCHSPLICE_CHECKPOINT_SECONDS`` overrides it, 0: after every task): a killed job resumes
-from the last checkpoint, and recomputes at most the tasks merged after it whose parts are gone."""
+from the last checkpoint, and splices again the tasks merged after it (at most these seconds
+of work)."""
 
 
 def _checkpoint_seconds() -> float:
@@ -421,10 +519,10 @@ def _checkpoint_seconds() -> float:
 
 class _Merge:
     """Joins finished tasks into the output in plan order, checkpointing it every
-    :data:`CHECKPOINT_SECONDS`: a task's part file or shard is appended once, and deleted once
-    a checkpoint holds it (``copy`` layout; a ``virtual`` output's shards are its frames and
-    stay), by a background thread. Tasks that finish ahead of their turn wait on disk, a few of
-    them in memory."""
+    :data:`CHECKPOINT_SECONDS`. A task's part file is appended once and deleted at once; a
+    shard (the work of a ``--shard`` run) once a checkpoint holds it (``copy`` layout: a
+    ``virtual`` output's shards are its frames and stay); deletions run in a background thread.
+    Tasks that finish ahead of their turn wait on disk, a few of them in memory."""
 
     def __init__(self, out, sink, config: JobConfig, plan: Plan, tasks: list, shard_dir: Path, merged: int, have,
                  group_skeleton=None):
@@ -466,9 +564,9 @@ class _Merge:
             del part  # a mapped part file is let go before it is deleted
             self.appended += 1
             done += 1
-            self.spent.append(file)
+            self._remove([file])  # a part is recomputed rather than kept until a checkpoint: the disk stays free
             if c.layout != "virtual":
-                self.spent.append(self.shard_dir / name)
+                self.spent.append(self.shard_dir / name)  # a shard may hold another run's work: kept until then
             if time.monotonic() - self.last >= self.every:
                 self.checkpoint()
 
@@ -479,11 +577,17 @@ class _Merge:
         self.out.checkpoint({"plan": self.plan.digest(), "tasks": self.next})
         self.checkpointed, self.last = self.next, time.monotonic()
         spent, self.spent = self.spent, []
+        self._remove(spent)
+
+    def _remove(self, files: list) -> None:
+        """Delete ``files`` in a background thread (freeing their pages costs the kernel time)."""
+        if not files:
+            return
         if self.remover is None:
             from concurrent.futures import ThreadPoolExecutor
 
             self.remover = ThreadPoolExecutor(max_workers=1, thread_name_prefix="torchsplice-remove")
-        self.remover.submit(lambda: [f.unlink(missing_ok=True) for f in spent])  # freeing the pages costs the kernel time
+        self.remover.submit(lambda: [f.unlink(missing_ok=True) for f in files])
 
     def save_progress(self) -> None:
         """Checkpoint what was appended before an interruption, if the output is whole: open,
@@ -611,10 +715,26 @@ def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
 
 def _summarise_output(summary: JobSummary, out, merge: _Merge) -> None:
     summary.merged_shards = merge.appended
+    c = merge.config
+    shards = c.shards_folder
+    summary.written = c.output.stat().st_size + (sum(f.stat().st_size for f in shards.iterdir())
+                                                 if c.layout == "virtual" and shards.is_dir() else 0)
     summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
         out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
     for why, n in out.skipped.items():
         summary.skipped[why] = summary.skipped.get(why, 0) + n
+
+
+def _shares_banks(config: JobConfig) -> bool:
+    """Whether the job's local workers map the driver's banks (see :mod:`.sources`)."""
+    return config.backend() == "compiled" and config.engine == "local" and config.worker_count() > 1
+
+
+def _free_bytes(folder: Path) -> int | None:
+    try:
+        return shutil.disk_usage(folder).free
+    except OSError:
+        return None
 
 
 def _return_freed_memory() -> None:

@@ -136,6 +136,11 @@ class Sources:
                 bank.save(target)
             self.banks[bank_id] = (ClipBank.load(target), index)
 
+    def unsaved_bank_bytes(self, folder: Path) -> int:
+        """Bytes :meth:`save_banks` would write into ``folder`` now (banks not there yet)."""
+        return sum(sum(a.nbytes for a in (b.rot, b.trans, b.pos, b.grot, *b.feat)) for k, (b, _) in self.banks.items()
+                   if isinstance(k, int) and not (Path(folder) / f"bank-{k}").is_dir())
+
     def release_clips(self, keep=()) -> None:
         """Forget the clips read so far (but ``keep``, copied: clips read together share one
         buffer, which a kept clip would hold whole): the banks hold what splicing needs."""
