@@ -10,6 +10,7 @@ from dataclasses import replace
 import h5py
 import numpy as np
 import pytest
+import torch
 
 from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
@@ -33,15 +34,47 @@ def _short_times(inp):
     return MethodOutput(inp.loco, inp.loco.rotations.new_zeros(inp.loco.rotations.shape[0], 3).double())
 
 
+def _rotations(fn):
+    """A method returning the locomotion with its rotations passed through ``fn``."""
+    def run(inp):
+        return MethodOutput(replace(inp.loco, rotations=fn(inp.loco.rotations)),
+                            inp.loco.rotations.new_zeros(inp.loco.rotations.shape[:2]).double())
+    return run
+
+
+def _exits(inp):
+    raise SystemExit(3)
+
+
+def _shouts(inp):
+    raise ValueError("\x1b[2J\x1b]0;owned\x07" + "spam " * 20000)
+
+
+HOSTILE = {  # method -> (its function, what the skip reason says)
+    "adv_nan": (_nan_run, "not finite"),
+    "adv_raises": (_raising_run, "boom inside the plug-in"),
+    "adv_times": (_short_times, "times"),
+    "adv_zero": (_rotations(lambda r: r * 0), "not unit quaternions"),
+    "adv_huge": (_rotations(lambda r: r * 1e30), "not unit quaternions"),
+    "adv_int": (_rotations(lambda r: r.round().int()), "rotations of type torch.int32, not floating point"),
+    "adv_bool": (_rotations(lambda r: r > 0), "rotations of type torch.bool, not floating point"),
+    "adv_complex": (_rotations(lambda r: r.to(torch.complex64)), "not floating point"),
+    "adv_meta": (_rotations(lambda r: r.to("meta")), "meta device"),
+    "adv_exits": (_exits, "called sys.exit(3)"),
+    "adv_shouts": (_shouts, "ValueError: \\x1b[2J"),
+}
+
+
 @pytest.fixture(scope="module")
 def methods():
     from torchsplice.splice import registry
 
-    register_method(Method("adv_nan", "returns NaN", _nan_run))
-    register_method(Method("adv_raises", "raises", _raising_run))
-    register_method(Method("adv_times", "times of the wrong shape", _short_times))
+    for name, (fn, _) in HOSTILE.items():
+        register_method(Method(name, "misbehaves", fn))
+    register_method(Method("adv_grad", "returns tensors that require grad, in float64, nearly unit",
+                           _rotations(lambda r: (r.double() * 1.001).requires_grad_())))
     yield
-    for n in ("adv_nan", "adv_raises", "adv_times"):
+    for n in [*HOSTILE, "adv_grad"]:
         registry._REGISTRY.pop(n, None)
 
 
@@ -52,8 +85,7 @@ def sample_db(tmp_path_factory):
     return db
 
 
-@pytest.mark.parametrize("method, why", [("adv_nan", "not finite"), ("adv_raises", "boom inside the plug-in"),
-                                         ("adv_times", "times")])
+@pytest.mark.parametrize("method, why", [(m, why) for m, (_, why) in HOSTILE.items()])
 def test_job_skips_pairs_of_a_misbehaving_method(methods, sample_db, tmp_path, method, why):
     out = tmp_path / "out.h5"
     summary = splice_all(sample_db, out, methods=f"splice,{method}", workers=1,
@@ -67,7 +99,7 @@ def test_job_skips_pairs_of_a_misbehaving_method(methods, sample_db, tmp_path, m
         assert np.isfinite(f["skeletons/0/rotations"][()]).all()
 
 
-@pytest.mark.parametrize("method", ["adv_nan", "adv_raises", "adv_times"])
+@pytest.mark.parametrize("method", list(HOSTILE))
 def test_splice_command_refuses_a_misbehaving_method_in_one_line(methods, sample_db, tmp_path, capsys, method):
     out = tmp_path / "x.bvh"
     rc = main(["splice", str(sample_db), "--locomotion", "walk_curve", "--action", "carry_box", "-o", str(out),
@@ -75,6 +107,22 @@ def test_splice_command_refuses_a_misbehaving_method_in_one_line(methods, sample
     err = capsys.readouterr().err
     assert rc == 2 and not out.exists()
     assert err.count("\n") == 1 and err.startswith("torchsplice: error:") and method in err, err
+    assert len(err) < 600 and "\x1b" not in err and "\x07" not in err, err
+
+
+def test_results_that_need_no_more_than_detaching_and_normalising_land(methods, sample_db, tmp_path, capsys):
+    """Tensors that require grad, in float64, with quaternions 0.1% off unit norm: detached,
+    cast, normalised, stored."""
+    out = tmp_path / "grad.h5"
+    summary = splice_all(sample_db, out, methods="adv_grad", workers=1, locomotions="walk_curve,jog",
+                         actions="carry_box,wave")
+    assert summary.spliced == 4 and not summary.skipped
+    with h5py.File(out) as f:
+        q = f["skeletons/0/rotations"][()]
+    assert np.abs(np.linalg.norm(q, axis=-1) - 1).max() < 1e-5
+    rc = main(["splice", str(sample_db), "--locomotion", "walk_curve", "--action", "carry_box", "-o",
+               str(tmp_path / "g.bvh"), "--method", "adv_grad"])
+    assert rc == 0, capsys.readouterr().err
 
 
 def test_registering_a_builtin_name_says_so_without_an_install_hint(tmp_path, monkeypatch, capsys):

@@ -115,6 +115,38 @@ def test_a_killed_worker_is_replaced_and_the_output_is_unchanged(sample_db, refe
 
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
+def test_a_worker_killed_before_any_task_finishes_is_retried_under_a_console_script(sample_db, reference, tmp_path):
+    """A console script (``torchsplice``: a file run as ``__main__``, guarded) whose worker is
+    killed in the first round, as an out-of-memory kill would: the task runs again, no
+    misdiagnosis of an unguarded script."""
+    script = tmp_path / "torchsplice-console"
+    script.write_text("import sys\nfrom torchsplice.cli import main\nif __name__ == '__main__':\n    sys.exit(main())\n")
+    out = tmp_path / "out.h5"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=str(REPO))
+    proc = subprocess.Popen([sys.executable, str(script), "splice-all", str(sample_db), "-o", str(out), *JOB,
+                             "--workers", "2", "--batch-size", "1"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    killed = None
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline and killed is None:
+            ws = workers_of(proc.pid)
+            if ws:  # at once: no task has finished yet
+                os.kill(ws[0], signal.SIGKILL)
+                killed = ws[0]
+            time.sleep(0.005)
+        stdout, stderr = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert killed is not None, "no worker was found to kill"
+    assert proc.returncode == 0 and "__main__" not in stderr, stderr
+    assert frames_and_table(out) == frames_and_table(reference)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
 def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
@@ -204,6 +236,29 @@ def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
+def test_a_supervisor_reading_the_output_of_a_killed_driver_is_not_left_waiting(sample_db, tmp_path):
+    """``subprocess.run(..., capture_output=True)`` around a job whose driver is SIGKILLed: the
+    driver stays a zombie until the supervisor reaps it, which it does only once the output
+    pipes close; the workers holding them must notice the zombie and exit."""
+    out = tmp_path / "out.h5"
+    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline and not workers_of(proc.pid):
+            time.sleep(0.01)
+        assert workers_of(proc.pid), "no worker process was seen"
+        os.kill(proc.pid, signal.SIGKILL)  # not reaped: a zombie until communicate() has read both pipes to the end
+        t0 = time.monotonic()
+        proc.communicate(timeout=30)
+        assert time.monotonic() - t0 < 30
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.slow
 def test_an_unguarded_script_gets_a_clear_error(sample_db, tmp_path):
     script = tmp_path / "unguarded.py"
     out = tmp_path / "out.h5"
@@ -223,7 +278,7 @@ def test_slices_then_merge_equal_the_one_shot_run(sample_db, reference, tmp_path
     assert "slice 2/3" in text and "torchsplice merge" in text and not out.exists()
     code, _, err = run(capsys, "merge", out)
     assert code == 2 and err.count("\n") == 1
-    assert "slices done: 2/3; missing: 1/3, 3/3" in err, err
+    assert "slices of 3 done: 2; missing: 1, 3" in err, err
     for k in ("1/3", "3/3"):
         assert run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--shard", k, "--workers", "2")[0] == 0
     code, text, err = run(capsys, "merge", out)
@@ -260,7 +315,7 @@ def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, caps
     code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *job, "--layout", "virtual")
     assert code == 0, err
     shards = tmp_path / "out.h5.shards"
-    assert shards.is_dir() and len(list(shards.glob("part-*.h5"))) > 1
+    assert shards.is_dir() and len(list(shards.glob("*/part-*.h5"))) > 1  # in the run's own folder
     with h5py.File(out, "r") as f:
         assert f["skeletons/0/rotations"].is_virtual and not f["skeletons/0/rotations"][()].size == 0
     want = frames_and_table(reference)

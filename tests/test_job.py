@@ -352,6 +352,57 @@ def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_pat
     assert m and int(m.group(1)) == flagged, text
 
 
+STANDING_LOCOS = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031", "dataset-2_walk_normal_008"]
+STANDING_ACTIONS = ["dataset-2_raise-up-both-hands_normal_001", "dataset-2_raise-up-left-hand_normal_001",
+                    "dataset-2_raise-up-right-hand_normal_001", "dataset-2_wave-both-hands_normal_001",
+                    "dataset-2_wave-left-hand_normal_001", "dataset-2_wave-right-hand_normal_001"]
+
+
+@pytest.fixture(scope="module")
+def standing_out(mocap_dir, tmp_path_factory):
+    """3 normal-style walks and turns x 6 standing raises and waves (18 standing pairs, some
+    locomotions shorter than the action, some longer), in this process, one task per pair."""
+    folder = tmp_path_factory.mktemp("standing")
+    db = folder / "db.h5"
+    files = [str(mocap_dir / BANDAI / f"{n}.bvh") for n in STANDING_LOCOS + STANDING_ACTIONS]
+    assert main(["import", *files, "-o", str(db), "--spec", "bandai_namco", "-q"]) == 0
+    out = folder / "out.h5"
+    assert main(["splice-all", str(db), "-o", str(out), "--locomotions", "role:locomotion", "--actions", "role:action",
+                 "--workers", "1", "--batch-size", "1", "-q"]) == 0
+    return db, out
+
+
+def test_standing_pairs_do_not_depend_on_batch_size_or_workers(standing_out, tmp_path):
+    """Standing pairs run in the compiled splicer one pair per thread, like time-aligned ones:
+    the same bits in any task size on any number of workers."""
+    db, want = standing_out
+    assert {c["timing"] for c in clips(want)} == {"loop"} and len(clips(want)) == 18
+    for batch, workers in (("4", "2"), ("7", "3"), ("18", "1")):
+        out = tmp_path / f"b{batch}_w{workers}.h5"
+        assert main(["splice-all", str(db), "-o", str(out), "--locomotions", "role:locomotion", "--actions", "role:action",
+                     "--batch-size", batch, "--workers", workers, "-q"]) == 0
+        assert datasets(out) == datasets(want), (batch, workers)
+
+
+def test_standing_pairs_on_the_torch_path_equal_the_compiled_ones(standing_out, tmp_path, monkeypatch):
+    """The torch splicer (CUDA's) plays the same action frames (the same windows and loop points)
+    and gives the same rotations to float32 rounding."""
+    import torchsplice.cpu
+
+    db, want = standing_out
+    monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
+    out = tmp_path / "torch.h5"
+    assert main(["splice-all", str(db), "-o", str(out), "--locomotions", "role:locomotion", "--actions", "role:action",
+                 "-q"]) == 0
+    a, b = table(out), table(want)
+    for col in ("name", "length", "timing", "acting", "locomotion", "action"):
+        assert a[col] == b[col], col
+    with h5py.File(out, "r") as fa, h5py.File(want, "r") as fb:
+        qa, qb = (torch.from_numpy(f["skeletons/0/rotations"][()]).double() for f in (fa, fb))
+        assert float(torch.rad2deg(quat_angle(qa, qb)).max()) < 1e-3
+        assert np.array_equal(fa["skeletons/0/action_frame"][()], fb["skeletons/0/action_frame"][()])
+
+
 # --------------------------------------------------------------------------------------------
 # 4. resume after SIGKILL
 # --------------------------------------------------------------------------------------------
@@ -384,7 +435,9 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     assert 2 <= k < 13 and (work / "plan.json").is_file()
     kept_pairs = 2 * k  # 12 tasks of 2 pairs, then 1
     waiting = sorted(int(p.name.split(".")[0][5:]) for p in work.glob("part-*"))
-    assert all(t >= k for t in waiting)  # no part or shard of a task the output holds is left
+    # no part of a task the output holds is left but those whose deletion (in the background, right
+    # after their append) the kill cut short; the rerun removes those
+    assert sum(t < k for t in waiting) <= 2, (k, waiting)
 
     done = subprocess.run(cmd, cwd=REPO, env=env(), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

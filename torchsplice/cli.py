@@ -164,7 +164,10 @@ def cmd_import(args) -> int:
 
 def _at(path, why: str) -> str:
     """``PATH: why``, or ``PATH:LINE: rest`` when ``why`` starts with a line number."""
+    from .core.names import printable
+
     head, sep, _ = why.partition(":")
+    path = printable(path)  # a file's name may hold control characters
     return f"{path}:{why}" if sep and head.isdigit() else f"{path}: {why}"
 
 
@@ -215,7 +218,7 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
     """The files ``export`` writes (one per clip, or one), checked before any work, and the folder
     to create (``None`` if none): ``-o`` is a file for one clip or a packed file, else a folder."""
     from .io.atomic import check_output
-    from .io.npz import clip_filename
+    from .io.npz import clip_filenames
 
     kind = "npz" if suffix == ".npz" else "bvh"
     out = Path(args.output)
@@ -228,12 +231,9 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
         raise TorchspliceError(f"{out}: is a file; several clips go to a folder, one file each")
     if not out.parent.is_dir():
         raise TorchspliceError(f"{out}: folder {out.parent} does not exist")
-    files, seen = [], {}
-    for n in names:
-        f = out / clip_filename(n, suffix)
-        if f.name in seen:
-            raise TorchspliceError(f"{out}: clips {seen[f.name]!r} and {n!r} would both be written to {f.name}")
-        seen[f.name] = n
+    files = []
+    for name in clip_filenames(names, suffix):  # safe everywhere, unique without regard to case
+        f = out / name
         if out.is_dir():
             check_output(f, (suffix,), _OUTPUTS[kind][1], inputs=[args.database], overwrite=args.force)
         files.append(f)
@@ -264,14 +264,14 @@ def _all_or_nothing(args, folder: Path | None):
     import os
 
     from .io.atomic import os_error_message
-    from .io.lock import host_pid, output_lock, remove_stale_temporaries
+    from .io.lock import output_lock, remove_stale_temporaries, temp_path
 
     staged: dict[Path, Path] = {}
 
     def stage(f: Path) -> Path:
         if f.parent not in {g.parent for g in staged}:  # what a killed export left there goes first
             remove_stale_temporaries(f.parent, "staged")
-        staged[f] = f.with_name(f".{f.name}.staged-{host_pid()}")
+        staged[f] = temp_path(f, "staged")
         return staged[f]
 
     with output_lock(Path(args.output), "torchsplice " + shlex.join(getattr(args, "argv", []))):
@@ -620,7 +620,7 @@ def cmd_splice_all(args) -> int:
     if args.ray_address and args.engine != "ray":
         raise TorchspliceError("--ray-address needs --engine ray")
     command = "torchsplice " + shlex.join(args.argv)
-    shard = parse_shard(args.shard) if args.shard else None
+    shard = parse_shard(args.shard) if args.shard is not None else None  # --shard '' is a mistake, not no shard
     job = SpliceJob(config, progress=not args.quiet, restart=args.restart, overwrite=args.force, command=command, shard=shard,
                     dry_run=args.dry_run)
     try:
@@ -935,6 +935,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     args = parser.parse_args(argv)
     args.argv = argv
+    if getattr(args, "output", None) == "":  # an empty name would mean the current folder
+        print("torchsplice: error: the output name is empty; name a file or folder", file=sys.stderr)
+        return 2
     if args.func is cmd_splice_all:
         _prestart_workers(args)
     previous = None

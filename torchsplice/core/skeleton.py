@@ -14,10 +14,13 @@ import torch
 
 from .errors import MotionError
 
-__all__ = ["Skeleton", "ROTATION_CHANNELS", "POSITION_CHANNELS", "hierarchy_levels"]
+__all__ = ["Skeleton", "ROTATION_CHANNELS", "POSITION_CHANNELS", "SCALE_RTOL", "hierarchy_levels"]
 
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
+SCALE_RTOL = 0.2
+"""Two skeletons whose :meth:`Skeleton.size` differ by more than this share of the larger are
+two skeletons (other units, or another body), whatever else they share."""
 
 
 @functools.lru_cache(maxsize=64)
@@ -239,10 +242,20 @@ class Skeleton:
             return False
         if self.end_site_parents != other.end_site_parents:
             return False
+        if not self._same_scale(other):
+            return False
         tol = rtol * max(self.size(), 1e-9)
         if self.end_site_parents and bool(self._end_site_error(other).max() > tol):
             return False
         return bool(self._static_offset_error(other).max() <= tol)
+
+    def _same_scale(self, other: "Skeleton") -> bool:
+        """Whether the two :meth:`size` agree within :data:`SCALE_RTOL`: the rest offsets of
+        animated joints count here, so that a skeleton in metres never matches one in
+        centimetres even when every joint is animated (Bandai Namco), where the offsets
+        themselves are not compared."""
+        a, b = self.size(), other.size()
+        return abs(a - b) <= SCALE_RTOL * max(a, b, 1e-9)
 
     def mismatch(self, other: "Skeleton") -> str | None:
         """A short description of how ``other`` differs, or ``None`` when they match."""
@@ -259,6 +272,9 @@ class Skeleton:
             j = next(i for i, (a, b) in enumerate(zip(self.channels, other.channels)) if a != b)
             return f"joint {self.names[j]!r} has different channels"
         if not self.matches(other):
+            if not self._same_scale(other):
+                return (f"sizes differ ({self.size():.4g} against {other.size():.4g} file units: other units, or another "
+                        "body)")
             d = self._static_offset_error(other)
             j = int(d.argmax())
             if float(d[j]) > 1e-4 * max(self.size(), 1e-9):

@@ -22,15 +22,19 @@ The source clips come from the databases recorded in the output's ``run`` attrib
 
 from __future__ import annotations
 
+import html
 import math
+import re
 from pathlib import Path
 
 import torch
 
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
+from ..core.names import printable
 from ..io.atomic import atomic_path
 from ..io.database import MotionDatabase
+from ..io.npz import clip_filenames
 from ..specs import DatasetSpec, detect_spec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import best_posture_error, upper_body_error
@@ -85,7 +89,7 @@ def _ground_truth_section(per_clip: list[dict], methods: list[str], units: str) 
     kinds = sorted({k for m in shown for k in table[m] if k != "all"}) + ["all"]
 
     def rows(tab):
-        out = ["| locomotion | triples | " + " | ".join(shown) + " |", "|---|---|" + "---|" * len(shown)]
+        out = ["| locomotion | triples | " + " | ".join(map(md, shown)) + " |", "|---|---|" + "---|" * len(shown)]
         for kind in kinds:
             n = max(tab.get(m, {}).get(kind, {"n": 0})["n"] for m in shown)
             cells = []
@@ -93,7 +97,7 @@ def _ground_truth_section(per_clip: list[dict], methods: list[str], units: str) 
                 st = tab.get(m, {}).get(kind)
                 cells.append("-" if st is None or not st["n"] else
                              f"{_fmt(st['mean'])} / {_fmt(st['median'])} / {_fmt(st['worst'])}")
-            out.append(f"| {'**all**' if kind == 'all' else kind} | {n} | " + " | ".join(cells) + " |")
+            out.append(f"| {'**all**' if kind == 'all' else md(kind)} | {n} | " + " | ".join(cells) + " |")
         return out
 
     return (["## Ground truth per locomotion type", "",
@@ -123,6 +127,20 @@ def _metrics(results: list[Motion], locos: list[Motion], acts: list[Motion], rol
         "phase": arm_leg_phase(R, roles, fps),
         "posture": posture_kept(R, A, roles),
     }
+
+
+_MARKDOWN = re.compile(r"([\\`*\[\]|~]|(?<![0-9A-Za-z])_|_(?![0-9A-Za-z]))")  # "a_b" is never emphasis; no [, no link
+_MARKDOWN_START = re.compile(r"^(\s*(?:\d+)?)([-+#=.)])")
+
+
+def md(text) -> str:
+    """``text`` (a clip, method or spec name, a label) safe inside a Markdown report, as plain
+    text: control characters escaped, Markdown's punctuation backslash-escaped (no emphasis,
+    link, image, code span, table cell or HTML tag can start, nor a list or heading at the
+    start), then ``&``, ``<`` and ``>`` as HTML entities (no tag or comment can start)."""
+    text = _MARKDOWN.sub(r"\\\1", printable(str(text)))
+    text = _MARKDOWN_START.sub(lambda m: m.group(1) + "\\" + m.group(2), text)
+    return html.escape(text, quote=False)
 
 
 def _fmt(v, digits=2) -> str:
@@ -275,7 +293,7 @@ def _standing_section(per_clip: list[dict], methods: list[str], units: str, band
     worst_pairs = sorted((c for c in stand if math.isfinite(c["window_kept"])), key=lambda c: c["window_kept"])[:5]
     if worst_pairs:
         lines += ["Worst pairs (action kept against the best window):", ""]
-        lines += [f"- {c['name']} ({c['method']}, {c['timing']}): {_fmt(c['window_kept'])} of the best window, "
+        lines += [f"- {md(c['name'])} ({md(c['method'])}, {md(c['timing'])}): {_fmt(c['window_kept'])} of the best window, "
                   f"{_fmt(c['range_kept'])} of the whole action" for c in worst_pairs]
         lines.append("")
     return lines
@@ -336,7 +354,8 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
             acts.add(c["action"])
     chosen += standing
     figures = []
-    for c in chosen:
+    stems = clip_filenames([c["name"] for c in chosen], "")  # file names safe everywhere, unique whatever the case
+    for c, stem in zip(chosen, stems):
         loco, act = sources.get(c["locomotion"]), sources.get(c["action"])
         same = [d for d in per_clip if d["locomotion"] == c["locomotion"] and d["action"] == c["action"]]
         clips = [loco, act] + [db.read(d["name"]) for d in same]
@@ -344,7 +363,6 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
         if c["capture"]:
             clips.append(sources.get(c["capture"]))
             titles.append(f"captured: {c['capture']}")
-        stem = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in c["name"])
         strip = folder / f"{stem}_filmstrip.png"
         render(clips, strip, titles=titles, frames=6, up_axis=spec.up_axis)
         if c.get("timing", "timewarp") != "timewarp":  # a standing action: no time alignment to plot
@@ -375,15 +393,16 @@ def _lag_text(lag: float, ok: bool, band: tuple[float, float]) -> str:
 
 
 def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, max_rows, n_captured) -> str:
-    lines = [f"# torchsplice evaluation: `{path.name}`", "",
-             f"{len(per_clip)} spliced clips, methods: {', '.join(methods)}; spec `{spec.name}`, lengths in {units}.", "",
+    lines = [f"# torchsplice evaluation: {md(path.name)}", "",
+             f"{len(per_clip)} spliced clips, methods: {', '.join(map(md, methods))}; spec {md(spec.name)}, lengths in "
+             f"{md(units)}.", "",
              "## Per method", "",
              f"| method | clips | foot skate ({units}/s) | arm-leg lag, mean abs. (cycles) | lag within captured range | "
              f"posture kept ({units}) | ground-truth error ({units}) | ground-truth pairs | alignment cost |",
              "|---|---|---|---|---|---|---|---|---|"]
     for m in methods:
         a = agg[m]
-        lines.append(f"| {m} | {a['clips']} | {_fmt(a['foot_skate'])} | {_fmt(a['phase'], 3)} | "
+        lines.append(f"| {md(m)} | {a['clips']} | {_fmt(a['foot_skate'])} | {_fmt(a['phase'], 3)} | "
                      f"{100 * a['phase_in_range']:.0f}% | {_fmt(a['posture'])} | {_fmt(a['gt_error'])} | "
                      f"{a['gt_pairs']} | {_fmt(a['cost'])} |")
     lines += ["", "Foot skate: mean horizontal foot speed while in ground contact. Arm-leg lag: lag between each "
@@ -397,16 +416,16 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
     lines += _standing_section(per_clip, methods, units, phase_band)
     if figures:
         lines += ["## Pictures", ""]
-        lines += [f"**{title}**\n\n![{title}]({file})\n" for title, file in figures]
+        lines += [f"**{md(title)}**\n\n![{md(title)}](<{file}>)\n" for title, file in figures]
     lines += ["## Per clip", ""]
     for m in methods:
         cs = [c for c in per_clip if c["method"] == m]
-        lines += [f"### {m}", "", "| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
+        lines += [f"### {md(m)}", "", "| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
                   "|---|---|---|---|---|---|---|"]
         for c in cs[:max_rows]:
-            lines.append(f"| {c['name']} | {c['frames']} | {_fmt(c['foot_skate'])} | {_lag_text(c['phase'], c['phase_ok'], phase_band)}"
+            lines.append(f"| {md(c['name'])} | {c['frames']} | {_fmt(c['foot_skate'])} | {_lag_text(c['phase'], c['phase_ok'], phase_band)}"
                          f" | {_fmt(c['posture'])} | "
-                         f"{c['capture'] or '-'} | {_fmt(c['gt_error'])} |")
+                         f"{md(c['capture'] or '-')} | {_fmt(c['gt_error'])} |")
         if len(cs) > max_rows:
             lines.append(f"| ... {len(cs) - max_rows} more | | | | | | |")
         lines.append("")

@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 from ..core.errors import OutputExistsError, TorchspliceError
+from .lock import check_name_length, temp_path
 
 __all__ = ["atomic_path", "os_error_message", "same_file", "check_output"]
 
@@ -42,11 +43,13 @@ def check_output(path, suffixes: tuple[str, ...], what: str, inputs=(), overwrit
     """``path`` checked as the output of a command, before any work; one-line errors.
 
     Its suffix must be one of ``suffixes`` (``what`` names the kind of file, e.g. "a report"),
+    its name must fit beside it the files written through it (:func:`check_name_length`),
     it must not be a folder or one of the command's ``inputs`` (whatever ``overwrite`` says:
     writing it would destroy the input), its folder must exist, and an existing file is
     refused unless ``overwrite``.
     """
     path = Path(path)
+    check_name_length(path)
     if path.suffix.lower() not in suffixes:
         ends = suffixes[0] if len(suffixes) == 1 else f"{', '.join(suffixes[:-1])} or {suffixes[-1]}"
         raise TorchspliceError(f"{path}: the output is {what}, so its name must end in {ends}")
@@ -66,14 +69,14 @@ def check_output(path, suffixes: tuple[str, ...], what: str, inputs=(), overwrit
 def atomic_path(path, suffix: str = ".partial"):
     """Yield a temporary path beside ``path``; on success rename it to ``path``.
 
-    The temporary name is ``.NAME<suffix>-PID`` in the same folder (so the rename is atomic
+    The temporary name is ``.NAME<suffix>-HOST-PID`` in the same folder (see :func:`temp_path`) (so the rename is atomic
     on one file system). On any exception the temporary file is removed and the target is
     left untouched; ``OSError`` is re-raised as :class:`TorchspliceError`.
     """
     path = Path(path)
     if path.parent and not path.parent.exists():
         raise TorchspliceError(f"{path}: folder {path.parent} does not exist")
-    tmp = path.with_name(f".{path.name}{suffix}-{os.getpid()}")
+    tmp = temp_path(path, suffix.lstrip("."))
     try:
         yield tmp
         os.replace(tmp, path)

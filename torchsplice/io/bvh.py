@@ -46,6 +46,7 @@ import torch
 
 from ..core.errors import BVHError, MotionError
 from ..core.motion import Motion
+from ..core.names import CONTROL
 from ..core.rotations import euler_to_quat, quat_to_rotmat, rotmat_to_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
 from .atomic import atomic_path
@@ -62,7 +63,6 @@ _MAX_PROBLEM = 200  # characters of a message after "FILE:LINE: "
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
 _NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)\Z", re.IGNORECASE)
 _COUNT = re.compile(r"\d+\Z", re.ASCII)
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\ud800-\udfff]")
 
 
 class BVHWarning(UserWarning):
@@ -209,7 +209,7 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
         if not parts:
             raise err("joint without a name", kw_line)
         jname = " ".join(parts)
-        bad = _CONTROL.search(jname)
+        bad = CONTROL.search(jname)
         if bad:
             raise err(f"joint name {_q(jname)} contains control character U+{ord(bad.group()):04X}", kw_line)
         if jname in seen:
@@ -591,7 +591,7 @@ def _check_writable(motion: Motion) -> None:
             raise MotionError(f"{clip}: {what} of joint {_q(owners[j])} is non-finite or absurd; nothing written")
     for jname in sk.names:
         toks = jname.split()
-        if not toks or " ".join(toks) != jname or "{" in toks or _CONTROL.search(jname):
+        if not toks or " ".join(toks) != jname or "{" in toks or CONTROL.search(jname):
             raise MotionError(f"{clip}: joint name {_q(jname)} would not read back from BVH (empty, control "
                               "characters, a '{' word or stray whitespace); nothing written")
 

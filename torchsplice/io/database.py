@@ -65,9 +65,10 @@ import torch
 from .. import __version__
 from ..core.errors import DatabaseError, OutputExistsError
 from ..core.motion import Motion
+from ..core.names import CONTROL, control_character, printable
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
-from .lock import host_pid, output_lock
+from .lock import check_name_length, output_lock, temp_path
 from .resumable import clear_status_flags, detach
 
 __all__ = ["MotionDatabase", "ClipBatch", "SCHEMA_VERSION", "FORMAT", "COMPRESSIONS"]
@@ -427,7 +428,20 @@ def _check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
                       f"which has {int(rows[i])} frames")
     if (i := first(~(np.isfinite(fps) & (fps > 0)))) is not None:
         raise _Damage(f"{clip(i)} has fps {float(fps[i]):g}")
+    bad = _control_name(c["name"].asstr()[()])
+    if bad is not None:
+        raise _Damage(bad)
     return skeletons
+
+
+def _control_name(names) -> str | None:
+    """What is wrong with the first of ``names`` that holds a control character (see
+    :mod:`torchsplice.core.names`), or ``None``; fast when none does."""
+    names = [str(n) for n in names]
+    if not CONTROL.search("".join(names)):
+        return None
+    row, name = next((k, n) for k, n in enumerate(names) if CONTROL.search(n))
+    return f"clip name {_cap(printable(name))} (row {row}) contains {control_character(name)}"
 
 
 def _reads(method):
@@ -542,11 +556,12 @@ class MotionDatabase:
             raise DatabaseError(f"{path}: folder {path.parent} does not exist")
         if path.is_dir():
             raise DatabaseError(f"{path}: is a folder; give the database a file name ending in .h5")
+        check_name_length(path)
         lock = _writer_lock(path)
         if path.exists() and not overwrite:
             lock.release()
             raise OutputExistsError(f"{path}: already exists")
-        tmp = Path(staging) if staging is not None else path.with_name(f".{path.name}.partial-{host_pid()}")
+        tmp = Path(staging) if staging is not None else temp_path(path)
         try:
             if staging is not None:
                 _commit_path(tmp).unlink(missing_ok=True)
@@ -708,7 +723,7 @@ class MotionDatabase:
         lock = _writer_lock(real) if mode == "a" else None
         try:
             if mode == "a":
-                tmp = real.with_name(f".{real.name}.partial-{host_pid()}")
+                tmp = temp_path(real)
                 free = shutil.disk_usage(real.parent).free
                 if free < path.stat().st_size + _SPACE_MARGIN:
                     raise DatabaseError(f"{path}: no space left on the device to append: appending works on a copy "
@@ -1101,6 +1116,8 @@ class MotionDatabase:
         motion.check_finite()
         if not motion.name:
             raise DatabaseError(f"{self.path}: a clip needs a name")
+        if (bad := _control_name([motion.name])) is not None:
+            raise DatabaseError(f"{self.path}: {bad}")
         index = self._index_map()
         if motion.name in index:
             raise DatabaseError(f"{self.path}: a clip named {motion.name!r} is already in the database")
@@ -1150,6 +1167,8 @@ class MotionDatabase:
         clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
         if clash:
             raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
+        if (bad := _control_name(names)) is not None:
+            raise DatabaseError(f"{self.path}: {bad}")
         starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
         for name, a in (("rotations", rot), ("root translation", root), ("translations", trans)) if check else ():
             if a is not None and not np.isfinite(a).all():
@@ -1258,6 +1277,8 @@ class MotionDatabase:
         clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
         if clash:
             raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
+        if (bad := _control_name(names)) is not None:
+            raise DatabaseError(f"{self.path}: {bad}")
 
         def each(v, what):
             out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(v)

@@ -16,12 +16,14 @@ database is written atomically (appending works on a copy that replaces the file
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from ..core.errors import DatabaseError, TorchspliceError
+from ..core.names import control_character, printable
 
 __all__ = ["import_bvh", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh"]
 
@@ -122,9 +124,14 @@ def collect_bvh(paths: Iterable) -> tuple[list[Path], list[tuple[str, str]]]:
     return unique, missing
 
 
+MIN_SPLIT_SECONDS = 1.0
+"""The shortest window ``split`` cuts takes into (splicing needs at least a stride)."""
+
+
 def one_line(message, path=None, limit: int = 300) -> str:
-    """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
-    text = " ".join(str(message).split())
+    """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``,
+    control characters escaped (see :func:`~torchsplice.core.names.printable`)."""
+    text = printable(" ".join(str(message).split()))
     if path is not None:
         text = text.removeprefix(f"{path}: ").removeprefix(f"{path}:").lstrip()
     return text if len(text) <= limit else text[:limit - 3] + "..."
@@ -161,7 +168,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     from .atomic import check_output
     from .bvh import read_bvh
     from .database import MotionDatabase
-    from .units import CONVERTIBLE_UNITS, UNITS, convert_units
+    from .units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
     if units is not None and units not in CONVERTIBLE_UNITS:  # a known unit, checked before any work
         why = f"unknown length unit {units!r}" if units not in UNITS else f"cannot convert to {units!r} units"
@@ -181,6 +188,9 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     report = ImportReport(output=out, skipped=skipped, split=split)
     if not files:
         raise NothingImportedError("no BVH files to import", report)
+    if split is not None and not (math.isfinite(split) and split >= MIN_SPLIT_SECONDS):
+        raise TorchspliceError(f"{{split}} ({split:g} s) must be at least {MIN_SPLIT_SECONDS:g} s: a window is a clip "
+                               "to splice", options=("split",))
     if split is not None and not 0 <= split_overlap < split:
         raise TorchspliceError(f"{{split_overlap}} ({split_overlap:g} s) must be at least 0 and shorter than "
                                f"{{split}} ({split:g} s)", options=("split_overlap", "split"))
@@ -195,6 +205,9 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     with db:
         for f in todo:
             try:
+                bad = control_character(f.stem)
+                if bad:  # printed raw, such a name would drive the terminal
+                    raise TorchspliceError(f"clip name {f.stem!r} (the file's name) contains {bad}; rename the file")
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
                     m = read_bvh(f, dtype=dtype)
@@ -216,6 +229,8 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                     db.append(piece, spec=s)
                 if len(db.skeletons) > known and s.is_guessed:
                     report.guessed.append(GuessedSkeleton(known, str(f), s.name, s.guess_summary(), s.guessed_roles()))
+                if len(db.skeletons) > known and (odd := implausible_size(m.skeleton, s.units)):  # once a skeleton
+                    report.warnings.append((str(f), odd))
             except DatabaseError:
                 raise  # the output itself failed (a full disk): nothing more can be written
             except TorchspliceError as exc:

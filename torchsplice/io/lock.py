@@ -11,6 +11,7 @@ process cannot be checked from here), even where ``flock`` does not reach across
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import json
 import os
 import re
@@ -30,6 +31,32 @@ class LockedError(TorchspliceError):
 def host_pid() -> str:
     """``HOST-PID``: what temporary names of this process carry."""
     return f"{socket.gethostname()}-{os.getpid()}"
+
+
+def temp_path(path, kind: str = "partial") -> Path:
+    """The temporary file this process writes ``path`` through: ``.NAME.KIND-HOST-PID`` beside
+    it, with a long ``NAME`` cut and ended by a hash of it, so that the temporary name stays
+    within file systems' 255 bytes whatever the output's (see :data:`MAX_NAME_BYTES`)."""
+    path = Path(path)
+    name = path.name
+    if len(name.encode()) > _TEMP_NAME_BYTES:
+        digest = hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:10]
+        name = name.encode()[:_TEMP_NAME_BYTES - 11].decode(errors="ignore") + "~" + digest
+    return path.with_name(f".{name}.{kind}-{host_pid()}")
+
+
+MAX_NAME_BYTES = 240
+"""The longest output file name torchsplice writes (UTF-8 bytes): its lock ``.NAME.lock`` and
+work folder ``.NAME.parts`` beside it must fit the 255 bytes file systems allow."""
+_TEMP_NAME_BYTES = 120
+
+
+def check_name_length(path) -> None:
+    """One line when ``path``'s file name is longer than :data:`MAX_NAME_BYTES`."""
+    n = len(Path(path).name.encode("utf-8", "surrogatepass"))
+    if n > MAX_NAME_BYTES:
+        raise TorchspliceError(f"{path}: the output's file name is {n} bytes long; torchsplice writes files beside it "
+                               f"whose names add a few bytes, so it takes at most {MAX_NAME_BYTES}")
 
 
 _TEMP = re.compile(r"\.(?P<kind>partial|staged)-(?P<host>.+)-(?P<pid>\d+)$")
@@ -70,8 +97,13 @@ _HELD: dict[str, list] = {}  # absolute lock path -> [fd, holds] of the locks th
 
 
 def output_lock(output, command: str = "") -> "FileLock":
-    """The lock that guards writing ``output``: ``.NAME.lock`` beside it (not yet taken)."""
+    """The lock that guards writing ``output``: ``.NAME.lock`` beside it (not yet taken); for a
+    path without a name of its own (``.``, ``""``, ``dir/..``), beside the folder it names."""
     output = Path(output)
+    if output.name in ("", ".", ".."):
+        output = Path(os.path.abspath(output))
+    if not output.name:
+        raise TorchspliceError(f"{output}: the file system's root cannot be written to; name a file or folder")
     return FileLock(output.with_name(f".{output.name}.lock"), str(output), command)
 
 

@@ -82,8 +82,10 @@ is not finite is refused, naming the clip and the array.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -96,7 +98,7 @@ from .atomic import atomic_path
 from .database import MotionDatabase
 
 __all__ = ["NPZ_FORMAT", "NPZ_VERSION", "FRAME_ARRAYS", "FEATURE_SETS", "NpzExport", "write_npz", "read_npz",
-           "clip_of_packed", "clip_filename", "select_rows"]
+           "clip_of_packed", "clip_filename", "clip_filenames", "select_rows"]
 
 NPZ_FORMAT = "torchsplice.npz"
 NPZ_VERSION = 1
@@ -123,12 +125,47 @@ def select_rows(db: MotionDatabase, clips: Sequence[str] | None, skeletons: Sequ
     return rows
 
 
+_UNSAFE = re.compile(r'[\x00-\x1f\x7f<>:"/\\|?*]')
+_RESERVED = re.compile(r"(con|prn|aux|nul|com[0-9¹²³]|lpt[0-9¹²³])(\..*)?", re.IGNORECASE)
+MAX_FILE_BYTES = 200
+"""Longest file name (UTF-8 bytes, suffix included) an export writes: file systems allow 255,
+and the hidden name an export writes first adds a few dozen."""
+
+
 def clip_filename(name: str, suffix: str) -> str:
-    """A file name for clip ``name``: the name with path separators (and a leading dot) replaced by ``_``."""
-    safe = name.replace("/", "_").replace("\\", "_").replace("\0", "_")
+    """A file name for clip ``name`` that is safe on Linux, macOS and Windows: characters that are
+    not allowed there (``< > : " / \\ | ? *``, control characters) and a leading dot become
+    ``_``, trailing dots and spaces go, Windows' device names (``CON``, ``nul.txt``, ``COM1``)
+    get a ``_`` in front, and a name longer than :data:`MAX_FILE_BYTES` is cut and ends with a
+    hash of the whole name. See :func:`clip_filenames` for names that are unique without regard
+    to case."""
+    safe = _UNSAFE.sub("_", name).rstrip(". ")
     if safe.startswith("."):
         safe = "_" + safe[1:]
-    return (safe or "_") + suffix
+    if _RESERVED.fullmatch(safe):
+        safe = "_" + safe
+    safe = safe or "_"
+    room = MAX_FILE_BYTES - len(suffix.encode())
+    if len(safe.encode()) > room:
+        digest = hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+        safe = safe.encode()[:room - 13].decode(errors="ignore") + "~" + digest
+    return safe + suffix
+
+
+def clip_filenames(names, suffix: str) -> list[str]:
+    """:func:`clip_filename` of each name, made unique without regard to case (``dup`` and ``DUP``
+    are one file on macOS and Windows): a name whose file is taken gets ``~2``, ``~3``, ... in
+    the order given, so the same clips always get the same files."""
+    taken, out = set(), []
+    for name in names:
+        f = clip_filename(name, suffix)
+        stem, k = f[:len(f) - len(suffix)], 1
+        while f.casefold() in taken:
+            k += 1
+            f = clip_filename(f"{stem}~{k}", suffix)
+        taken.add(f.casefold())
+        out.append(f)
+    return out
 
 
 @dataclass

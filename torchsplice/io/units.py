@@ -21,10 +21,33 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import UNITS, DatasetSpec
 
-__all__ = ["UNITS", "CONVERTIBLE_UNITS", "unit_factor", "scale_skeleton", "scale_motion", "convert_units"]
+__all__ = ["UNITS", "CONVERTIBLE_UNITS", "HUMAN_SIZE_M", "unit_factor", "scale_skeleton", "scale_motion", "convert_units",
+           "implausible_size"]
 
 CONVERTIBLE_UNITS = tuple(u for u, f in UNITS.items() if f is not None)
 """The units a clip can be converted to or from (every unit of :data:`UNITS` but ``unknown``)."""
+
+
+HUMAN_SIZE_M = (0.4, 4.0)
+"""The range of a human skeleton's :meth:`~torchsplice.core.skeleton.Skeleton.size` (its longest
+path between two leaves: about the height or the arm span), in metres, wide enough for a child
+and a long-tailed costume; a file in other units than its spec says lies a factor 10 or more
+outside it."""
+
+
+def implausible_size(skeleton: Skeleton, units: str) -> str | None:
+    """Why ``skeleton`` cannot be a human in ``units`` (its size far outside
+    :data:`HUMAN_SIZE_M`), or ``None`` (also for unknown units)."""
+    per = UNITS.get(units)
+    size = skeleton.size()
+    if per is None or size <= 0:
+        return None
+    metres = size * per
+    lo, hi = HUMAN_SIZE_M
+    if lo <= metres <= hi:
+        return None
+    return (f"the skeleton measures {size:.3g} {units} across ({metres:.3g} m), not a human's size: are the file's units "
+            f"{units}? (a spec that states its units, or converting them at import, sets them right)")
 
 
 def unit_factor(source: str, target: str, where: str = "") -> float:

@@ -320,7 +320,18 @@ def parse_shard(text) -> tuple[int, int]:
     try:
         k, n = (int(x) for x in text.split("/"))
     except ValueError:
-        raise TorchspliceError(f"{{shard}} must look like K/N (e.g. 2/8), got {text!r}", options=("shard",)) from None
+        raise TorchspliceError(f"{{shard}} must look like K/N (e.g. 2/8), got {_cut(text)!r}", options=("shard",)) from None
     if not 1 <= k <= n:
-        raise TorchspliceError(f"{{shard}} {text}: K must be between 1 and N", options=("shard",))
+        raise TorchspliceError(f"{{shard}} {_cut(text)}: K must be between 1 and N", options=("shard",))
+    if n > MAX_SLICES:
+        raise TorchspliceError(f"{{shard}} {_cut(text)}: at most {MAX_SLICES:,} slices (N); a slice is at least one task",
+                               options=("shard",))
     return k, n
+
+
+MAX_SLICES = 100_000
+"""The most slices (``--shard K/N``'s N) a job is cut into."""
+
+
+def _cut(text: str, n: int = 40) -> str:
+    return text if len(text) <= n else text[:n] + "..."

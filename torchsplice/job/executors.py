@@ -33,6 +33,7 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
+import re
 import signal
 import sys
 import time
@@ -138,7 +139,7 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int,
     from .sink import HDF5Sink
 
     plan = Plan.load(Path(plan_path))
-    sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir))  # the driver's banks, mapped
+    sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir), bank_tag=plan.digest())  # mapped
     sources.share_banks(plan.groups)
     _WORKER.update(config=config, plan=plan, sources=sources, sink=HDF5Sink(), shard_dir=Path(shard_dir),
                    keep_shards=keep_shards)
@@ -176,10 +177,20 @@ def _worker_task(index: int) -> None:
         part.save(w["shard_dir"] / w["sink"].part_name(task.id))
 
 
-def _main_reimports() -> bool:
-    """Whether worker processes re-import the driver's main script (which then must be guarded)."""
+def _main_unguarded() -> bool:
+    """Whether worker processes re-import the driver's main script (run as a file, not ``-m``)
+    and that script does not guard its entry point with ``if __name__ == "__main__":`` (then
+    each worker would run the job again, and fails to start). A console script (such as
+    ``torchsplice``) is guarded; a script that cannot be read is taken as guarded."""
     main = sys.modules.get("__main__")
-    return getattr(main, "__file__", None) is not None and getattr(main, "__spec__", None) is None
+    path = getattr(main, "__file__", None)
+    if path is None or getattr(main, "__spec__", None) is not None:
+        return False
+    try:
+        text = Path(path).read_text(errors="ignore")
+    except OSError:
+        return False
+    return not re.search(r"""__name__\s*==\s*['"]__main__['"]""", text)
 
 
 class LocalEngine:
@@ -244,7 +255,7 @@ class LocalEngine:
                 self.close(kill=True)
                 if len(todo) < before:
                     rounds = 0  # it made progress: only breaks in a row count
-                if rounds == 1 and len(todo) == len(tasks) and _main_reimports():
+                if rounds == 1 and len(todo) == len(tasks) and _main_unguarded():
                     raise TorchspliceError(
                         "local worker processes could not start: a script that runs the job through the Python API "
                         "must guard its entry point with `if __name__ == \"__main__\":` (workers re-import it), or "
@@ -294,21 +305,66 @@ def _ray_run(config: JobConfig, digest: str, plan_box: list, index: int, group_b
     return run_task(plan, plan.tasks[index], sources, config)
 
 
-def _check_reachable(address: str, timeout: float = 10.0) -> None:
-    """Refuse at once a ``HOST:PORT`` nobody answers on (Ray itself waits long, saying nothing)."""
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + b"\x00\x00\x00\x04\x00\x00\x00\x00\x00"  # + empty SETTINGS
+
+
+def _check_reachable(address: str, timeout: float = 10.0, where: str = "{ray_address}") -> None:
+    """Refuse at once, in one line, a ``HOST:PORT`` that is malformed, that nobody answers on, or
+    whose answer is not gRPC's (HTTP/2) as a Ray cluster's GCS port speaks it (a dashboard's
+    HTTP port, another service): Ray itself would wait long there, saying nothing. ``where``
+    names what gave the address."""
     import socket
 
     host, _, port = address.rpartition(":")
     try:
         port_n = int(port)
     except ValueError:
-        raise TorchspliceError(f"{{ray_address}} {address!r}: expected HOST:PORT (the head's GCS port, 6379 by default)",
-                               options=("ray_address",)) from None
+        port_n = -1
+    if not host or not 1 <= port_n <= 65535:
+        raise TorchspliceError(f"{where} {address!r}: expected HOST:PORT with a port from 1 to 65535 (the head's GCS "
+                               "port, 6379 by default)", options=("ray_address",))
     try:
-        socket.create_connection((host.strip("[]") or "127.0.0.1", port_n), timeout=timeout).close()
+        with socket.create_connection((host.strip("[]"), port_n), timeout=timeout) as conn:
+            conn.settimeout(timeout)
+            conn.sendall(_HTTP2_PREFACE)
+            head = b""
+            while len(head) < 9:
+                chunk = conn.recv(9 - len(head))
+                if not chunk:
+                    break
+                head += chunk
+    except socket.timeout:
+        head = b""
     except OSError as exc:
         raise TorchspliceError(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc} "
                                f"(is `ray start --head` running there, and the port open?)") from None
+    if len(head) < 9 or head[3] != 0x04:  # a gRPC server opens with a SETTINGS frame
+        raise TorchspliceError(f"{address} answers, but not as a Ray cluster does (its GCS port, 6379 by default, "
+                               "speaks gRPC; a dashboard's port, 8265, does not): give {ray_address} the head's GCS "
+                               "port", options=("ray_address",))
+
+
+def _ray_address(given: str | None) -> tuple[str, str]:
+    """``(address for ray.init, where it came from)``: ``given``; else ``RAY_ADDRESS``; else
+    ``"local"`` (a new local instance, never a cluster left from earlier). ``"auto"`` reads the
+    address of the cluster started on this machine from Ray's record of it."""
+    if given in (None, ""):
+        env = os.environ.get("RAY_ADDRESS", "").strip()
+        if not env:
+            return "local", ""
+        given, where = env, "RAY_ADDRESS"
+    else:
+        where = "{ray_address}"
+    if given == "auto":
+        record = Path(os.environ.get("RAY_TMPDIR", "/tmp")) / "ray" / "ray_current_cluster"
+        try:
+            given = record.read_text().strip()
+        except OSError:
+            raise TorchspliceError(f"{where} auto: no Ray cluster was started on this machine ({record} is missing); "
+                                   "run `ray start --head`, or give no address for a local instance",
+                                   options=("ray_address",)) from None
+        where = f"{where} auto ({record})"
+    return given, where
 
 
 class RayEngine:
@@ -325,15 +381,24 @@ class RayEngine:
             raise TorchspliceError("{engine} ray needs Ray: pip install 'torchsplice[ray]'", options=("engine",)) from None
         self.ray = ray
         self.started = not ray.is_initialized()
-        if self.started and config.ray_address not in (None, "", "auto", "local") and "://" not in config.ray_address:
-            _check_reachable(config.ray_address)
         if self.started:
-            log.info("connecting to Ray at %s", config.ray_address or "(a new local instance)")
+            address, where = _ray_address(config.ray_address)
+            if address != "local" and "://" not in address:  # a ray:// client address: Ray's client times out itself
+                _check_reachable(address, where=where)
+            log.info("connecting to Ray at %s", address if address != "local" else "(a new local instance)")
+            import threading
+
+            main = threading.current_thread() is threading.main_thread()
+            handlers = {s: h for s in (signal.SIGINT, signal.SIGTERM) if (h := signal.getsignal(s)) is not None} \
+                if main else {}
             try:
-                ray.init(address=config.ray_address, include_dashboard=False, log_to_driver=False,
+                ray.init(address=address, include_dashboard=False, log_to_driver=False,
                          logging_level="ERROR", configure_logging=True)
+                for sig, handler in handlers.items():  # Ray installs its own (SIGTERM: exit 15 after its shutdown)
+                    signal.signal(sig, handler)
             except (ConnectionError, ValueError, RuntimeError) as exc:
-                raise TorchspliceError(f"cannot reach the Ray cluster at {config.ray_address or '(a new local one)'}: {exc}") from None
+                raise TorchspliceError(f"cannot reach the Ray cluster at {address if address != 'local' else '(a new local one)'}: "
+                                       f"{exc}") from None
 
     def describe(self) -> str:
         res = self.ray.cluster_resources()

@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import __version__
 from ..core.errors import TorchspliceError, UnfinishedJobError
-from ..io.lock import host_pid
+from ..io.lock import temp_path
 from ..specs import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import SpliceOptions
 from ..splice.clips import ClipTensors, clips_to_tensors
@@ -35,7 +35,7 @@ from .sources import Sources, clip_key
 
 __all__ = ["Pair", "Task", "Group", "Plan", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
-PLAN_VERSION = 2
+PLAN_VERSION = 3
 MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
@@ -97,6 +97,7 @@ class Plan:
     skipped: dict[str, int]
     clips: dict[str, dict]
     flags: dict[str, str] = field(default_factory=dict)
+    sizing: dict = field(default_factory=dict)  # what set the tasks' size: batch_pairs, memory_budget_mb
     version: int = PLAN_VERSION
 
     def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
@@ -116,6 +117,7 @@ class Plan:
 
     def to_json(self) -> str:
         return json.dumps({"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
+                           "sizing": self.sizing,
                            "groups": [asdict(g) for g in self.groups], "clips": self.clips,
                            "tasks": [asdict(t) for t in self.tasks],
                            "pairs": [[p.method, p.loco, p.action, p.reference, p.mode] for p in self.pairs]},
@@ -124,17 +126,25 @@ class Plan:
     @classmethod
     def from_json(cls, text: str) -> "Plan":
         d = json.loads(text)
+        if not isinstance(d, dict):
+            raise ValueError(f"a JSON {type(d).__name__}, not an object")
         if d.get("version") != PLAN_VERSION:
             raise UnfinishedJobError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
                                      f"{PLAN_VERSION}: finish it with the torchsplice that started it")
         return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
                    groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"], clips=d["clips"], flags=d["flags"],
-                   version=d["version"])
+                   sizing=d["sizing"], version=d["version"])
+
+    def made_for(self, config: JobConfig) -> bool:
+        """Whether this plan is the one :func:`make_plan` would make for ``config`` now: the same
+        inputs (paths, sizes, times), settings, tool and sizing (a resumed job reuses its plan)."""
+        key = {k: v for k, v in self.key.items() if k != "task_pairs"}
+        return key == json.loads(json.dumps(plan_key(config))) and self.sizing == plan_sizing(config)
 
     def save(self, path: Path) -> None:
         """Write the plan atomically (a plan written at the same moment by another process of the
         same job holds the same text)."""
-        tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
+        tmp = temp_path(path)
         tmp.write_text(self.to_json())
         os.replace(tmp, path)
 
@@ -142,8 +152,9 @@ class Plan:
     def load(cls, path: Path) -> "Plan":
         try:
             return cls.from_json(Path(path).read_text())
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise TorchspliceError(f"{path}: not a readable job plan ({exc})") from None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise UnfinishedJobError(f"{path}: not a readable job plan ({type(exc).__name__}: {exc}); its job "
+                                     "cannot be resumed") from None
 
 
 def _fingerprint(path: Path) -> dict:
@@ -155,6 +166,11 @@ def plan_key(config: JobConfig) -> dict:
     """What defines a job: the settings of :meth:`JobConfig.plan_key`, the inputs and the tool."""
     return {"tool": f"torchsplice {__version__}", "database": _fingerprint(config.database),
             "actions_db": _fingerprint(config.actions_db) if config.actions_db else None, **config.plan_key()}
+
+
+def plan_sizing(config: JobConfig) -> dict:
+    """The settings that size the tasks (see :func:`_task_size`)."""
+    return {"batch_pairs": config.batch_pairs, "memory_budget_mb": config.memory_budget_mb}
 
 
 def leg_length(skeleton, roles: SkeletonRoles) -> float:
@@ -244,7 +260,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     flags = {k: chk.reason for k, chk in checks.items() if not chk.locomoting}
     key = plan_key(c)
     key["task_pairs"] = size
-    return Plan(key=key, pairs=pairs, tasks=tasks, groups=groups, skipped=skipped, clips=clips, flags=flags)
+    return Plan(key=key, pairs=pairs, tasks=tasks, groups=groups, skipped=skipped, clips=clips, flags=flags,
+                sizing=plan_sizing(c))
 
 
 def _references(ta, acts, spec: DatasetSpec) -> dict[int, int | None]:

@@ -10,19 +10,28 @@ How it runs:
    with their reasons, cut into tasks with stable ids; saved as ``plan.json`` in the work
    folder ``.OUT.h5.parts/``. A rerun whose plan differs (other arguments or inputs) refuses
    to mix with the unfinished one; ``--restart`` discards it.
-2. **Tasks** (:mod:`.task`, :mod:`.executors`). Each task splices its pairs and becomes one
-   shard, ``part-<task id>.h5``, written under a temporary name (carrying host and PID) and
-   renamed into place. Tasks run in this process, on local worker processes (``--workers``)
-   or on Ray (``--engine ray``); a task gives the same bits wherever it runs.
-3. **Merge** (:mod:`.sink`). The shards are joined in plan order, whole datasets at a time,
-   into ``OUT.h5``, as they finish; the output is written beside its path and renamed into
-   place once complete, with a run record, and the work folder is removed. With
-   ``--layout virtual`` the output's frames are virtual datasets over the shards, which then
-   stay in ``OUT.h5.shards/``.
-4. **Resume.** Killed at any moment, the same command (with any engine or worker count) runs
-   only the tasks whose shards are missing. ``--shard K/N`` runs the K-th of N slices of the
-   tasks and writes no output; ``torchsplice merge OUT.h5`` then joins the finished slices.
+2. **Tasks** (:mod:`.task`, :mod:`.executors`). Each task splices its pairs. Tasks run in
+   this process, on local worker processes (``--workers``) or on Ray (``--engine ray``); a
+   task gives the same bits wherever it runs. A task's results reach the driver as a raw part
+   file, ``part-<task id>.part`` (local workers), or as an object (Ray); ``--shard`` runs and
+   ``--layout virtual`` keep each task as a compressed shard, ``part-<task id>.h5``. Files are
+   written under a temporary name (carrying host and PID) and renamed into place.
+3. **Merge** (:mod:`.sink`). Results are appended in plan order, as they finish, to the staged
+   output ``output.h5`` in the work folder (:meth:`MotionDatabase.create` with ``staging``):
+   a checkpoint every :data:`CHECKPOINT_SECONDS` records which tasks it holds. A part file is
+   deleted as soon as it is appended (a kill before the next checkpoint splices its task
+   again), a shard once a checkpoint holds it, so the job's disk is about its output. The
+   finished output is renamed into place with a run record, and the work folder is removed.
+   With ``--layout virtual`` the output's frames are virtual datasets over the shards, which
+   then stay in ``OUT.h5.shards/``.
+4. **Resume.** Killed at any moment, the same command (with any engine or worker count) reuses
+   its plan, opens the staged output at its last checkpoint and runs only the tasks it does
+   not hold: a resume costs the remaining work, and no task is merged twice. ``--shard K/N``
+   runs the K-th of N slices of the tasks and writes no output; ``torchsplice merge OUT.h5``
+   then joins the finished slices.
 
+Before any write, the job estimates its output's size (:mod:`.size`) and refuses to start
+when the disk cannot hold it; ``dry_run`` (``--dry-run``) plans and reports without splicing.
 The job holds a lock on its output (``--shard`` runs: on their slice), so a second writer is
 refused at once; a lock or temporary file left by a dead process on this host is cleaned up.
 The output has the input's schema plus per-clip columns (source names and rows, method and
@@ -31,6 +40,7 @@ parameters, alignment cost and quality figures) and a per-frame ``action_frame``
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import re
@@ -44,7 +54,7 @@ from pathlib import Path
 import torch
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
-from ..io.lock import FileLock, pid_alive, remove_stale_temporaries
+from ..io.lock import FileLock, check_name_length, pid_alive, remove_stale_temporaries
 from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .executors import make_engine
@@ -199,6 +209,7 @@ class SpliceJob:
         self._started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         if not c.output.parent.exists():
             raise TorchspliceError(f"{c.output}: folder {c.output.parent} does not exist")
+        check_name_length(c.output)
         if self.shard is None and c.output.exists() and not self.overwrite:
             raise OutputExistsError(f"{c.output}: already exists")
         if self.dry_run:
@@ -270,15 +281,17 @@ class SpliceJob:
 
     def _run(self, sources: Sources, t0: float) -> JobSummary:
         c = self.config
-        plan = make_plan(c, sources)
         plan_path = self.work / "plan.json"
+        saved = Plan.load(plan_path) if plan_path.exists() else None
+        if saved is not None and saved.made_for(c):  # a resume of the same job: its plan stands
+            plan = saved
+        else:
+            plan = make_plan(c, sources)
         new_plan = False
-        if plan_path.exists():
-            saved = Plan.load(plan_path)
-            if saved.digest() != plan.digest():
-                raise UnfinishedJobError(
-                    f"{self.work} holds an unfinished job with other arguments or inputs; rerun it with the same "
-                    "arguments to finish it")
+        if saved is not None and saved.digest() != plan.digest():
+            raise UnfinishedJobError(
+                f"{self.work} holds an unfinished job with other arguments or inputs; rerun it with the same "
+                "arguments to finish it")
         expected, free = self._check_room(plan, sources) if self.shard is None else (None, None)  # before any write
         if not plan_path.exists():
             self.work.mkdir(exist_ok=True)
@@ -286,9 +299,15 @@ class SpliceJob:
             new_plan = True
         shard_dir = self.work
         tasks = plan.tasks if self.shard is None else _slice(plan.tasks, *self.shard)
+        sources.share_banks(plan.groups)
         if c.backend() == "compiled":  # the banks hold what splicing needs: shared with the workers, the clips let go
             if _shares_banks(c):
-                sources.save_banks(self.work)
+                if not sources.banks:  # a resumed plan: the banks are in the work folder, or made now
+                    sources.bank_dir, sources.bank_tag = self.work, plan.digest()
+                    for n, g in enumerate(plan.groups):
+                        sources.bank(n, g.clips, g.fps, g.roles(sources.motion(g.clips[0]).skeleton),
+                                     c.align_options().landmarks)
+                sources.save_banks(self.work, plan.digest())
             sources.release_clips(keep=[g.clips[0] for g in plan.groups])
             _return_freed_memory()
         try:
@@ -423,6 +442,9 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
 
     Resumable as the job is: a merge killed midway goes on from its last checkpoint."""
     output = Path(output)
+    if output.name in ("", ".", "..") or output.is_dir():
+        raise TorchspliceError(f"{output}: is a folder; name the job's output database (OUT.h5)")
+    check_name_length(output)
     work = output.with_name(f".{output.name}.parts")
     plan_path = work / "plan.json"
     if not plan_path.exists():
@@ -452,12 +474,14 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         n = done[0][1] if done else None
         hint = ""
         if n is not None:
-            todo = [f"{k}/{n}" for k in range(1, n + 1) if (k, n) not in done]
-            hint = f"; slices done: {', '.join(f'{k}/{m}' for k, m in done)}; missing: {', '.join(todo) or 'none'}"
+            have = sorted({k for k, m in done if m == n})
+            hint = f"; slices of {n} done: {_ranges(have)}; missing: {_ranges(_gaps(have, n)) or 'none'}"
         raise TorchspliceError(f"{output}: {len(missing)} of {len(plan.tasks)} tasks have no shard yet (first: task "
                                f"{missing[0].id}){hint}")
     with FileLock(_output_lock(output), str(output), command or ""):
         _refuse_live_slices(work)
+        for folder in (work, output.parent):  # what a killed merge left
+            remove_stale_temporaries(folder)
         summary = JobSummary(output=output, pairs=len(plan.pairs), skipped=dict(plan.skipped), engine="merge", merge=True)
         run = {**key, "pairs": len(plan.pairs), "batch_pairs": key["task_pairs"], "plan_sha256": plan.digest(),
                "command": command or "torchsplice.job.merge_job (Python API)",
@@ -558,7 +582,7 @@ class _Merge:
             if part is None and file.exists():
                 part = Part.load(file, self.group_skeleton(task.group)[0])
             self.out.append_shard(self.shard_dir / name, part, virtual=c.layout == "virtual",
-                                  refer_as=c.shards_folder / name)
+                                  refer_as=run_shards(c, self.plan) / name)
             self.next += 1
             self.rows = len(self.out.db)  # what a checkpoint at self.next must hold
             del part  # a mapped part file is let go before it is deleted
@@ -615,9 +639,12 @@ class _Merge:
         if c.copy_sources:
             copy_sources(self.out, self.plan, sources)
         self.out.set_spliced(self.out.clips)
+        replaced = _shard_files(c.output)  # the frames of the output this one replaces (a virtual one's)
+        mine = run_shards(c, self.plan)
         if c.layout == "virtual":
-            _install_shards(self.shard_dir, c.shards_folder, [self.sink.shard_name(t.id) for t in self.tasks])
-        self.out.close()
+            _install_shards(self.shard_dir, mine, [self.sink.shard_name(t.id) for t in self.tasks])
+        self.out.close()  # the new output is in place: the old one's shards are its no more
+        _remove_shard_files([f for f in replaced if f.parent != mine], c.shards_folder)
 
 
 def _open_output(sink, config: JobConfig, plan: Plan, work: Path, run: dict, overwrite: bool, group_skeleton,
@@ -716,7 +743,7 @@ def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
 def _summarise_output(summary: JobSummary, out, merge: _Merge) -> None:
     summary.merged_shards = merge.appended
     c = merge.config
-    shards = c.shards_folder
+    shards = run_shards(c, merge.plan)
     summary.written = c.output.stat().st_size + (sum(f.stat().st_size for f in shards.iterdir())
                                                  if c.layout == "virtual" and shards.is_dir() else 0)
     summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
@@ -750,6 +777,29 @@ def _return_freed_memory() -> None:
         pass
 
 
+def _gaps(have: list[int], n: int) -> list[tuple[int, int]]:
+    """The runs ``(first, last)`` of 1..n missing from the sorted ``have``."""
+    out, nxt = [], 1
+    for k in have + [n + 1]:
+        if k > nxt:
+            out.append((nxt, k - 1))
+        nxt = max(nxt, k + 1)
+    return out
+
+
+def _ranges(items, shown: int = 8) -> str:
+    """Numbers (or ``(first, last)`` runs) as ``1-3, 5, 7-9``: at most ``shown`` runs, then a count."""
+    runs = []
+    for x in items:
+        a, b = x if isinstance(x, tuple) else (x, x)
+        if runs and runs[-1][1] + 1 == a:
+            runs[-1] = (runs[-1][0], b)
+        else:
+            runs.append((a, b))
+    text = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs[:shown])
+    return text + (f" and {len(runs) - shown} more runs" if len(runs) > shown else "")
+
+
 def _slice(tasks: list, k: int, n: int) -> list:
     """The K-th of N contiguous slices of the tasks (1-based)."""
     return tasks[(k - 1) * len(tasks) // n: k * len(tasks) // n]
@@ -766,17 +816,61 @@ def _refuse_live_slices(work: Path) -> None:
                                    f"{holder.get('pid')} on {holder.get('host')}); wait for it to finish")
 
 
+def run_shards(config: JobConfig, plan: Plan) -> Path:
+    """Where a ``virtual`` output of ``plan`` keeps its shards: ``OUT.h5.shards/<plan digest>/``.
+    Each run of other settings has its own folder, so that an output renamed away keeps reading
+    its own frames, and replacing an output never touches the frames it reads until the new one
+    is in place."""
+    return config.shards_folder / plan.digest()[:16]
+
+
 def _install_shards(work: Path, folder: Path, names: list[str]) -> None:
-    """Move a virtual output's shards into ``folder`` (an older folder is set aside, then removed)."""
-    fresh = folder.with_name(f".{folder.name}.new-{socket.gethostname()}-{os.getpid()}")
-    fresh.mkdir()
+    """Move a virtual output's shards from ``work`` into ``folder``, one atomic rename each. A
+    shard already there (a rerun of an install that was cut short, or of the same plan, whose
+    shards are the same bits) is replaced in place: at every moment every output that reads
+    ``folder`` finds whole shards."""
+    folder.mkdir(parents=True, exist_ok=True)
     for name in names:
-        os.replace(work / name, fresh / name)
-    old = folder.with_name(f".{folder.name}.old-{socket.gethostname()}-{os.getpid()}")
-    if folder.exists():
-        os.replace(folder, old)
-    os.replace(fresh, folder)
-    shutil.rmtree(old, ignore_errors=True)
+        src = work / name
+        if src.exists():
+            os.replace(src, folder / name)
+        elif not (folder / name).exists():
+            raise TorchspliceError(f"{folder}: shard {name} is missing, and the job's work folder has it no more; "
+                                   "rerun the job with {restart}", options=("restart",))
+
+
+def _shard_files(output: Path) -> set[Path]:
+    """The files whose frames ``output`` reads through virtual datasets (empty for a copy or a
+    file that is not there or not readable)."""
+    import h5py
+
+    if not output.is_file():
+        return set()
+    files: set[Path] = set()
+    try:
+        with h5py.File(output, "r") as f:
+            for g in f["skeletons"].values():
+                for ds in g.values():
+                    if isinstance(ds, h5py.Dataset) and ds.is_virtual:
+                        files |= {(output.parent / vs.file_name).resolve() for vs in ds.virtual_sources()
+                                  if vs.file_name != "."}
+    except (OSError, KeyError, ValueError):
+        return set()
+    return files
+
+
+def _remove_shard_files(files, shards_folder: Path) -> None:
+    """Delete shard files no output reads any more, then the folders of ``shards_folder`` they
+    leave empty (the folder itself too)."""
+    for f in files:
+        if shards_folder.resolve() in f.parents:  # never a file outside the output's shards
+            f.unlink(missing_ok=True)
+    if shards_folder.is_dir():
+        for sub in sorted((p for p in shards_folder.iterdir() if p.is_dir()), reverse=True):
+            with contextlib.suppress(OSError):
+                sub.rmdir()  # only when empty
+        with contextlib.suppress(OSError):
+            shards_folder.rmdir()
 
 
 def _output_lock(output: Path) -> Path:

@@ -43,13 +43,14 @@ class Sources:
     """
 
     def __init__(self, database: Path | None = None, actions_db: Path | None = None, dbs: dict | None = None,
-                 bank_dir: Path | None = None):
+                 bank_dir: Path | None = None, bank_tag: str = ""):
         self.paths = {"L": database, "A": actions_db or database}
         self.dbs: dict = dict(dbs or {})
         self.motions: dict[str, Motion] = {}
         self.banks: dict = {}
         self.shared: dict[int, tuple[int, list[str]]] = {}  # group -> (its bank, the bank's clips)
         self.bank_dir = bank_dir  # where the driver's banks are, as files (None: built here)
+        self.bank_tag = bank_tag  # what the banks there must have been made for (the plan's digest)
 
     @classmethod
     def from_motions(cls, motions: dict[str, Motion]) -> "Sources":
@@ -109,7 +110,7 @@ class Sources:
             from ..cpu.bank import ClipBank
 
             folder = self._bank_folder(bank_id)
-            if folder is not None and folder.is_dir():
+            if folder is not None and self._bank_made_here(folder):
                 bank = ClipBank.load(folder)
             else:
                 self.load(keys)
@@ -122,24 +123,35 @@ class Sources:
     def _bank_folder(self, bank_id: int) -> Path | None:
         return None if self.bank_dir is None else Path(self.bank_dir) / f"bank-{bank_id}"
 
-    def save_banks(self, folder: Path) -> None:
-        """Write the banks built so far into ``folder`` (:meth:`ClipBank.save`, once each), and
-        map them from there from now on, so that this process holds them once too."""
+    def _bank_made_here(self, folder: Path) -> bool:
+        try:
+            return (folder / "made_for").read_text() == self.bank_tag
+        except OSError:
+            return False
+
+    def save_banks(self, folder: Path, tag: str) -> None:
+        """Write the banks built so far into ``folder`` (:meth:`ClipBank.save`, once each, marked
+        as made for ``tag``: the plan's digest), and map them from there from now on, so that
+        this process holds them once too."""
+        import shutil
+
         from ..cpu.bank import ClipBank
 
-        self.bank_dir = Path(folder)
+        self.bank_dir, self.bank_tag = Path(folder), tag
         for bank_id, (bank, index) in list(self.banks.items()):
             if not isinstance(bank_id, int):
                 continue
             target = self._bank_folder(bank_id)
-            if not target.is_dir():
+            if not self._bank_made_here(target):
+                shutil.rmtree(target, ignore_errors=True)  # another plan's
                 bank.save(target)
+                (target / "made_for").write_text(tag)
             self.banks[bank_id] = (ClipBank.load(target), index)
 
     def unsaved_bank_bytes(self, folder: Path) -> int:
         """Bytes :meth:`save_banks` would write into ``folder`` now (banks not there yet)."""
         return sum(sum(a.nbytes for a in (b.rot, b.trans, b.pos, b.grot, *b.feat)) for k, (b, _) in self.banks.items()
-                   if isinstance(k, int) and not (Path(folder) / f"bank-{k}").is_dir())
+                   if isinstance(k, int) and not (Path(folder) / f"bank-{k}" / "made_for").exists())
 
     def release_clips(self, keep=()) -> None:
         """Forget the clips read so far (but ``keep``, copied: clips read together share one

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
-from ..io.lock import host_pid
+from ..io.lock import temp_path
 from ..splice import splice_pairs, splice_standing
 from ..splice.api import bank_kwargs, spliced_labels
 from ..splice.registry import MethodFailedError, get_method, load_plugins
@@ -104,7 +104,7 @@ class Part:
             table[k] = (at, a.dtype.str, list(a.shape))
             at += a.nbytes
         head = json.dumps({"meta": meta, "arrays": table}).encode()
-        tmp = path.with_name(f".{path.name}.partial-{host_pid()}")
+        tmp = temp_path(path)
         with open(tmp, "wb") as f:
             f.write(len(head).to_bytes(8, "little") + head)
             for a in arrays.values():

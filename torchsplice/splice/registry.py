@@ -36,6 +36,7 @@ import importlib
 import os
 import re
 import types
+import warnings
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
@@ -154,26 +155,40 @@ class MethodFailedError(MotionError):
     pairs it was given are not spliced (the job skips them with this reason)."""
 
 
+QUAT_NORM_TOLERANCE = 1e-2
+"""How far from 1 a plug-in's rotation quaternions may be (then they are normalised); further
+is a failure: a zero or huge quaternion is no rotation."""
+
+
 def run_checked(method: Method, fn: Callable, inp: MethodInput, *args):
     """``fn(inp, *args)`` (a method's ``run`` or ``standing``), checked for a plug-in method.
 
     Returns what ``fn`` returns: a :class:`MethodOutput`, or ``(clips, times)`` for ``standing``.
-    A plug-in whose function raises anything but a :class:`TorchspliceError`, or returns clips
-    whose rotations ``(B, T, J, 4)``, translations ``(B, T, J, 3)``, lengths ``(B,)`` (1 to
-    ``T``) or times ``(B, T)`` are missing, of the wrong shape or not finite on a valid frame,
-    raises a one-line :class:`MethodFailedError` naming the method. Built-ins are trusted.
+    A plug-in whose function raises anything but a :class:`TorchspliceError` (``sys.exit``
+    included), or returns clips whose rotations ``(B, T, J, 4)``, translations ``(B, T, J, 3)``,
+    lengths ``(B,)`` (1 to ``T``) or times ``(B, T)`` are missing, of the wrong shape, not
+    floating point (lengths: not integers), on the ``meta`` device, not finite on a valid frame,
+    or whose quaternions are not of unit norm (within :data:`QUAT_NORM_TOLERANCE`), raises a
+    one-line :class:`MethodFailedError` naming the method (its exception's text escaped and
+    cut to 300 characters). What passes is detached from autograd, moved to the input's
+    device and float type, and its quaternions normalised. Built-ins are trusted.
     """
     import torch
+
+    from ..core.names import printable
+    from .clips import ClipTensors
 
     who = f"method {method.name!r}" + (f" ({method.module})" if method.module else "")
     try:
         got = fn(inp, *args)
     except TorchspliceError:
         raise
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:
         if method.builtin:
             raise
-        raise MethodFailedError(f"{who} failed: {type(exc).__name__}: {exc}") from None
+        text = f"called sys.exit({exc.code!r})" if isinstance(exc, SystemExit) else \
+            f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        raise MethodFailedError(f"{who} failed: {printable(text, limit=300)}") from None
     if method.builtin:
         return got
     if isinstance(got, MethodOutput):
@@ -195,16 +210,38 @@ def run_checked(method: Method, fn: Callable, inp: MethodInput, *args):
                                             ("times", times)))
         raise MethodFailedError(f"{who} returned arrays of the wrong shape for {B} pairs of {J} joints: {got_shapes} "
                                 "(expected (B, T, J, 4), (B, T, J, 3), (B,) and (B, T))")
+    named = (("rotations", rot), ("translations", trans), ("lengths", lengths), ("times", times))
+    for what, x in named:
+        if x.device.type == "meta":
+            raise MethodFailedError(f"{who} returned {what} on the meta device (no data)")
+        if what == "lengths" and (x.dtype == torch.bool or x.dtype.is_floating_point or x.dtype.is_complex):
+            raise MethodFailedError(f"{who} returned lengths of type {x.dtype}, not integers")
+        if what != "lengths" and not x.dtype.is_floating_point:
+            raise MethodFailedError(f"{who} returned {what} of type {x.dtype}, not floating point")
+    device, dtype = inp.loco.rotations.device, inp.loco.rotations.dtype
+    rot, trans, times = (x.detach().to(device=device, dtype=dtype) for x in (rot, trans, times))
+    lengths = lengths.detach().to(device=device, dtype=torch.long)
     if T < 1 or bool((lengths < 1).any()) or bool((lengths > T).any()):
-        raise MethodFailedError(f"{who} returned lengths {lengths.tolist()} outside 1 to {T} frames")
-    valid = torch.arange(T, device=lengths.device)[None] < lengths[:, None]  # (B, T)
+        raise MethodFailedError(f"{who} returned lengths {lengths.tolist()[:8]} outside 1 to {T} frames")
+    valid = torch.arange(T, device=device)[None] < lengths[:, None]  # (B, T)
+
+    def first_bad(ok) -> str:
+        b, t = (int(v) for v in (~ok).nonzero()[0])
+        return f"pair {b} of {B}, frame {t}" if B > 1 else f"frame {t}"
+
     for what, x in (("rotations", rot), ("translations", trans), ("times", times)):
         ok = torch.isfinite(x).reshape(B, T, -1).all(-1) | ~valid
         if not bool(ok.all()):
-            b, t = (int(v) for v in (~ok).nonzero()[0])
-            at = f"pair {b} of {B}, frame {t}" if B > 1 else f"frame {t}"
-            raise MethodFailedError(f"{who} returned {what} that are not finite ({at})")
-    return got
+            raise MethodFailedError(f"{who} returned {what} that are not finite ({first_bad(ok)})")
+    norm = rot.norm(dim=-1)  # (B, T, J)
+    ok = ((norm - 1).abs() <= QUAT_NORM_TOLERANCE).all(-1) | ~valid
+    if not bool(ok.all()):
+        raise MethodFailedError(f"{who} returned rotations that are not unit quaternions ({first_bad(ok)}: norms "
+                                f"from {float(norm.min()):.3g} to {float(norm.max()):.3g})")
+    off = valid[..., None] & ((norm - 1).abs() > 1e-5)  # quaternions off unit norm by more than rounding
+    rot = torch.where(off[..., None], rot / norm.clamp_min(1e-12)[..., None], rot)
+    clips = ClipTensors(rot, trans, lengths, None, None)  # results need no FK
+    return replace(got, clips=clips, times=times) if isinstance(got, MethodOutput) else (clips, times)
 
 
 _REGISTRY: dict[str, Method] = {}
@@ -222,7 +259,7 @@ def register_method(method: Method, replace_existing: bool = False) -> Method:
     _ensure_loaded_builtins()  # the built-ins come first, whoever registers first
     if not isinstance(method, Method):
         raise TorchspliceError(f"register_method takes a torchsplice.splice.registry.Method, got {type(method).__name__}")
-    if not _NAME.match(method.name or ""):
+    if not isinstance(method.name, str) or not _NAME.fullmatch(method.name):
         raise TorchspliceError(f"method name {method.name!r} must be lower case letters, digits, '_' or '-', "
                                "starting with a letter")
     if not callable(method.run):
@@ -233,6 +270,9 @@ def register_method(method: Method, replace_existing: bool = False) -> Method:
     if old is not None and not replace_existing and (old.module, getattr(old.run, "__qualname__", None)) != (
             method.module, getattr(method.run, "__qualname__", None)):
         raise TorchspliceError(f"method {method.name!r} is already registered (by {old.module}); choose another name")
+    if old is not None and replace_existing and old.run is not method.run:
+        warnings.warn(f"method {method.name!r} of {old.module or '?'} is replaced by {method.module or '?'}'s "
+                      "(replace_existing)", stacklevel=2)
     _REGISTRY[method.name] = method
     return method
 

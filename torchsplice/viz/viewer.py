@@ -46,9 +46,13 @@ from ..specs import DatasetSpec
 from .render import _canonical_axes, _check_up_axis, _head, figure_points
 from .sources import SourceClips, clip_spec, source_databases
 
-__all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS"]
+__all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS",
+           "MAX_PAGE_FRAMES"]
 
 DEFAULT_MAX_CLIPS = 100
+MAX_PAGE_FRAMES = 60_000
+"""The most frames one page holds, whatever the clips (about 14 MB of page; 33 minutes at 30
+fps): clips past it are left out, as past ``max_clips``."""
 """Clips in a viewer when none are named (``--max-clips``): about 8 MB for clips of 10 s."""
 
 _UNKNOWN_UNITS_HEIGHT = 1.7  # metres: a skeleton of unknown units is scaled to this size
@@ -207,15 +211,32 @@ def _choose(db: MotionDatabase, table: dict, clips, sources: SourceClips, max_cl
     seen: set[str] = set()
     missing: set[str] = set()
 
+    index = db._index_map()
+    frames = [0]
+
+    def length(n: str) -> int:
+        if n in index:
+            return int(table["length"][index[n]])
+        where = sources.where(n)
+        return int(where.table()["length"][where._index_map()[n]]) if where is not None else 0
+
     def add(n: str, force: bool = False) -> bool:
         if n in seen:
             return True
         if not force and len(chosen) >= max_clips:
             out.cut = True
             return False
-        if n not in db._index_map() and not sources.has(n):
+        if n not in index and not sources.has(n):
             missing.add(n)
             return True
+        f = length(n)
+        if frames[0] + f > MAX_PAGE_FRAMES:
+            if force:
+                raise TorchspliceError(f"the clips named hold more than {MAX_PAGE_FRAMES:,} frames, the most one page "
+                                       "plays smoothly; name fewer or shorter clips")
+            out.cut = True
+            return False
+        frames[0] += f
         seen.add(n)
         chosen.append(n)
         return True

@@ -1,0 +1,34 @@
+"""Names users give to clips and methods, and how they are shown.
+
+A clip's name (a BVH file's stem, a ``--split`` window's ``NAME#000``, a spliced clip's
+``loco__action__method``) and a plug-in method's name are printed to terminals, written into
+Markdown reports and HTML pages, and used as file names by exports. A name must therefore hold
+no *control character*: C0 (U+0000-U+001F, newline and tab included), DEL, C1 (U+0080-U+009F),
+lone surrogates, and the bidirectional overrides and isolates (U+202A-U+202E, U+2066-U+2069)
+that reorder what a reader sees. Printed raw, they move the cursor, clear the screen, set the
+window title or forge output lines. Every writer refuses them (:func:`control_character`);
+:func:`printable` escapes them where text from elsewhere is shown.
+"""
+
+from __future__ import annotations
+
+import re
+
+__all__ = ["CONTROL", "control_character", "printable"]
+
+CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+"""The characters a name must not hold (see the module docstring)."""
+
+
+def control_character(name: str) -> str | None:
+    """``"control character U+001B"`` for the first control character in ``name``, else ``None``."""
+    bad = CONTROL.search(str(name))
+    return None if bad is None else f"control character U+{ord(bad.group()):04X}"
+
+
+def printable(text: str, limit: int | None = None) -> str:
+    """``text`` with every control character written as a Python escape (``\\x1b``, ``\\n``,
+    ``\\u202e``), cut to ``limit`` characters with ``...`` when given: safe to print."""
+    out = CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii")
+                      if ord(m.group()) < 0xD800 or ord(m.group()) > 0xDFFF else f"\\u{ord(m.group()):04x}", str(text))
+    return out if limit is None or len(out) <= limit else out[:max(0, limit - 3)] + "..."
