@@ -211,3 +211,31 @@ def test_a_page_holds_a_bounded_number_of_frames(tmp_path, capsys):
     code, _, err = run(capsys, "view", db, "long0", "long1", "long2", "-o", tmp_path / "v.html")
     assert code == 2 and "more than" in err and not (tmp_path / "v.html").exists()
     one_clean_line(err)
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]  # closed once the socket is: nobody listens there
+
+
+@pytest.mark.parametrize("how", ["RAY_ADDRESS", "auto"])
+def test_a_stale_ray_cluster_record_is_one_line_at_once(sample_db, tmp_path, monkeypatch, capsys, how):
+    """A ``RAY_ADDRESS`` left in the environment, or ``auto`` when Ray's record on this machine
+    names a cluster that is gone: one line within seconds, not a wait on Ray."""
+    pytest.importorskip("ray", reason="Ray is not installed (scripts/test.sh installs it)")
+    address = f"127.0.0.1:{_closed_port()}"
+    extra = []
+    if how == "RAY_ADDRESS":
+        monkeypatch.setenv("RAY_ADDRESS", address)
+    else:
+        (tmp_path / "ray").mkdir()
+        (tmp_path / "ray" / "ray_current_cluster").write_text(address + "\n")
+        monkeypatch.setenv("RAY_TMPDIR", str(tmp_path))
+        extra = ["--ray-address", "auto"]
+    t0 = time.perf_counter()
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "out.h5", "--engine", "ray", *extra)
+    assert code == 2 and time.perf_counter() - t0 < 15, err
+    one_clean_line(err)
+    assert f"cannot reach the Ray cluster at {address}" in err, err
+    assert not (tmp_path / "out.h5").exists()
