@@ -131,6 +131,16 @@ def main() -> None:
         p.wait()
         result["driver_killed"] = {"cut": cut, "finished": finished(outdir / "driver.h5")}
         result["driver"] = finish(job(db, outdir / "driver.h5", quiet=False))
+
+        # 5. SIGTERM and SIGINT mid-job: the job stops soon, with the exit code of its signal
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            out = outdir / f"signal-{sig.name}.h5"
+            p = job(db, out)
+            began = wait_for(lambda: finished(out) >= 1)
+            t0 = time.monotonic()
+            p.send_signal(sig)
+            done = finish(p, timeout=60)
+            result[f"signal_{sig.name}"] = {**done, "began": began, "seconds": time.monotonic() - t0}
     except BaseException as exc:  # recorded for the test to show
         result["error"] = repr(exc)
     finally:

@@ -101,3 +101,15 @@ def test_a_killed_driver_resumes_from_the_finished_tasks(scenarios):
     assert res["driver"]["code"] == 0, res["driver"]["stderr"]
     assert "from an earlier run" in res["driver"]["stdout"]
     assert_same(tmp / "driver.h5", want, "resumed run")
+
+
+@pytest.mark.parametrize("sig, code, word", [("SIGTERM", 143, "terminated"), ("SIGINT", 130, "interrupted")])
+def test_a_signal_stops_a_ray_job_soon_with_its_exit_code(scenarios, sig, code, word):
+    """Ray re-raises a signal met in its calls as a plain KeyboardInterrupt and installs its own
+    SIGTERM handler (exit 15): the job still stops as the signal says, in seconds, its finished
+    tasks kept."""
+    res, _, _ = scenarios
+    r = res[f"signal_{sig}"]
+    assert r["began"], "the job finished no task before the signal"
+    assert r["code"] == code and word in r["stderr"] and "finished tasks are kept" in r["stderr"], r
+    assert r["seconds"] < 10, r  # it took 29 s before; about 1 to 3 s on 2 busy cores

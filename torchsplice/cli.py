@@ -902,16 +902,24 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM (a scheduler or ``kill`` stopping the process): handled like Ctrl-C."""
 
 
+_SIGTERM_SEEN = [False]  # a SIGTERM arrived (libraries such as Ray re-raise it as a plain KeyboardInterrupt)
+
+
 def _on_sigterm(signum, frame):
+    _SIGTERM_SEEN[0] = True
     raise Terminated()
 
 
+def _terminated(exc: BaseException) -> bool:
+    return isinstance(exc, Terminated) or _SIGTERM_SEEN[0]
+
+
 def _stopped(exc: BaseException) -> str:
-    return "terminated" if isinstance(exc, Terminated) else "interrupted"
+    return "terminated" if _terminated(exc) else "interrupted"
 
 
 def _stop_code(exc: BaseException) -> int:
-    return 143 if isinstance(exc, Terminated) else 130
+    return 143 if _terminated(exc) else 130
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -942,6 +950,7 @@ def main(argv: list[str] | None = None) -> int:
         _prestart_workers(args)
     previous = None
     if threading.current_thread() is threading.main_thread():
+        _SIGTERM_SEEN[0] = False
         previous = signal.signal(signal.SIGTERM, _on_sigterm)  # stop as Ctrl-C does: outputs discarded, work kept
     try:
         with warnings.catch_warnings():
