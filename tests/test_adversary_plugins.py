@@ -1,68 +1,19 @@
-"""Plug-in methods that misbehave: a method whose function raises, returns values that are not
-finite or arrays of the wrong shape, and a module that registers a built-in's name. The job
-skips such pairs with the reason (nothing non-finite lands in the output) and a single splice
-is refused in one line."""
+"""Plug-in methods that misbehave (``adversary_corpus.HOSTILE_METHODS``: raising, exiting, values
+that are not finite, arrays of the wrong shape, dtype or device, quaternions that are not
+rotations) and a module that registers a built-in's name. The job skips such pairs with the
+reason (nothing non-finite lands in the output), a single splice is refused in one line, and a
+result that needs only detaching and normalising lands."""
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import h5py
 import numpy as np
 import pytest
-import torch
 
+from adversary_corpus import HOSTILE_METHODS as HOSTILE, rotations_through as _rotations
 from torchsplice.cli import main
-from torchsplice.core.errors import TorchspliceError
 from torchsplice.job import splice_all
-from torchsplice.splice.registry import Method, MethodOutput, register_method
-
-
-def _nan_run(inp):
-    """The locomotion, with frame 3 of every pair's rotations NaN."""
-    rot = inp.loco.rotations.clone()
-    rot[:, 3] = float("nan")
-    return MethodOutput(replace(inp.loco, rotations=rot), inp.loco.rotations.new_zeros(rot.shape[:2]).double())
-
-
-def _raising_run(inp):
-    raise RuntimeError("boom inside the plug-in")
-
-
-def _short_times(inp):
-    """Times of the wrong shape: (B, 3) instead of (B, T)."""
-    return MethodOutput(inp.loco, inp.loco.rotations.new_zeros(inp.loco.rotations.shape[0], 3).double())
-
-
-def _rotations(fn):
-    """A method returning the locomotion with its rotations passed through ``fn``."""
-    def run(inp):
-        return MethodOutput(replace(inp.loco, rotations=fn(inp.loco.rotations)),
-                            inp.loco.rotations.new_zeros(inp.loco.rotations.shape[:2]).double())
-    return run
-
-
-def _exits(inp):
-    raise SystemExit(3)
-
-
-def _shouts(inp):
-    raise ValueError("\x1b[2J\x1b]0;owned\x07" + "spam " * 20000)
-
-
-HOSTILE = {  # method -> (its function, what the skip reason says)
-    "adv_nan": (_nan_run, "not finite"),
-    "adv_raises": (_raising_run, "boom inside the plug-in"),
-    "adv_times": (_short_times, "times"),
-    "adv_zero": (_rotations(lambda r: r * 0), "not unit quaternions"),
-    "adv_huge": (_rotations(lambda r: r * 1e30), "not unit quaternions"),
-    "adv_int": (_rotations(lambda r: r.round().int()), "rotations of type torch.int32, not floating point"),
-    "adv_bool": (_rotations(lambda r: r > 0), "rotations of type torch.bool, not floating point"),
-    "adv_complex": (_rotations(lambda r: r.to(torch.complex64)), "not floating point"),
-    "adv_meta": (_rotations(lambda r: r.to("meta")), "meta device"),
-    "adv_exits": (_exits, "called sys.exit(3)"),
-    "adv_shouts": (_shouts, "ValueError: \\x1b[2J"),
-}
+from torchsplice.splice.registry import Method, register_method
 
 
 @pytest.fixture(scope="module")
