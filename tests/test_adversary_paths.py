@@ -137,7 +137,7 @@ def test_split_windows_shorter_than_a_second_are_refused(tmp_path, capsys, split
                                           ("127.0.0.1:0", "port from 1 to 65535"), ("nohost", "HOST:PORT")])
 def test_ray_addresses_that_cannot_be_ports_get_one_line(address, why):
     from torchsplice.core.errors import TorchspliceError
-    from torchsplice.job.executors import _check_reachable
+    from torchsplice.job.engines.ray_cluster import _check_reachable
 
     with pytest.raises(TorchspliceError, match=why):
         _check_reachable(address, timeout=2)
@@ -150,7 +150,7 @@ def test_a_ray_address_that_answers_but_is_not_ray_is_refused_at_once():
     import threading
 
     from torchsplice.core.errors import TorchspliceError
-    from torchsplice.job.executors import _check_reachable
+    from torchsplice.job.engines.ray_cluster import _check_reachable
 
     server = http.server.HTTPServer(("127.0.0.1", 0), http.server.BaseHTTPRequestHandler)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
@@ -167,7 +167,7 @@ def test_a_ray_address_that_answers_but_is_not_ray_is_refused_at_once():
 
 def test_a_stale_ray_address_in_the_environment_is_checked_and_no_address_starts_a_local_instance(monkeypatch):
     from torchsplice.core.errors import TorchspliceError
-    from torchsplice.job.executors import _ray_address
+    from torchsplice.job.engines.ray_cluster import _ray_address
 
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     assert _ray_address(None) == ("local", "")

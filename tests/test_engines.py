@@ -175,7 +175,8 @@ def test_a_pool_that_breaks_while_tasks_are_handed_out_is_a_break_not_a_crash(mo
     from concurrent.futures.process import BrokenProcessPool
     from types import SimpleNamespace
 
-    from torchsplice.job import executors
+    from torchsplice.job.engines import EngineContext
+    from torchsplice.job.engines.local import LocalEngine
 
     tasks = [SimpleNamespace(id=f"t{k}") for k in range(4)]
     starts = []
@@ -196,7 +197,9 @@ def test_a_pool_that_breaks_while_tasks_are_handed_out_is_a_break_not_a_crash(mo
         def shutdown(self, wait=True, cancel_futures=False):
             pass
 
-    engine = executors.LocalEngine(None, SimpleNamespace(tasks=tasks), Path("plan.json"), Path("."), 2, False)
+    config = SimpleNamespace(worker_count=lambda: 2)
+    engine = LocalEngine(EngineContext(config, SimpleNamespace(tasks=tasks), Path("plan.json"), None, None, Path("."),
+                                       False))
 
     def start():  # the first pool breaks after two tasks were handed out, the next one works
         starts.append(1)
@@ -266,6 +269,80 @@ def test_an_unguarded_script_gets_a_clear_error(sample_db, tmp_path):
                       f"SpliceJob(JobConfig(database={str(sample_db)!r}, output={str(out)!r}, workers=2), progress=False).run()\n")
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert done.returncode != 0 and 'if __name__ == "__main__":' in done.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# an engine of one's own
+# --------------------------------------------------------------------------------------------
+TOY_ENGINE = '''
+from concurrent.futures import ThreadPoolExecutor, as_completed
+
+from torchsplice.job.engines import Engine, register_engine
+from torchsplice.job.task import run_task
+
+
+class ThreadsEngine(Engine):
+    """The tasks on two threads of this process (a concurrent.futures executor)."""
+
+    name = "threads"
+
+    def describe(self):
+        return "two threads of this process"
+
+    def run(self, tasks, done):
+        ctx = self.ctx
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            futures = {pool.submit(run_task, ctx.plan, t, ctx.sources, ctx.config): t for t in tasks}
+            for f in as_completed(futures):  # done() one call at a time, in order of completion
+                task = futures[f]
+                part = f.result()
+                ctx.write_shard(task, part)
+                done(task, part)
+
+
+register_engine("threads", ThreadsEngine)
+'''
+
+
+def test_an_engine_of_ones_own_is_one_module_and_a_registration(sample_db, reference, tmp_path, monkeypatch, capsys):
+    """An engine over a concurrent.futures executor, registered by a plug-in module, runs the job
+    through the command line and the Python API, with the same bits as the built-in engines."""
+    import torchsplice.job.engines as engines
+
+    monkeypatch.setattr(engines, "_ENGINES", dict(engines._ENGINES))  # the registration ends with the test
+    (tmp_path / "toy_threads.py").write_text(TOY_ENGINE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    out = tmp_path / "cli.h5"
+    code, text, err = run(capsys, "--plugin", "toy_threads", "splice-all", sample_db, "-o", out, *JOB[:-1],
+                          "--engine", "threads")
+    assert code == 0, err
+    assert "with two threads of this process" in text
+    assert frames_and_table(out) == frames_and_table(reference)
+    from torchsplice.job import splice_all
+    from torchsplice.job.engines import available_engines
+
+    assert available_engines()[:2] == ("local", "ray") and "threads" in available_engines()
+    summary = splice_all(sample_db, tmp_path / "api.h5", engine="threads", methods="splice,naive,cpmc", batch_pairs=4,
+                         copy_sources=True, progress=False)
+    assert summary.engine == "two threads of this process"
+    assert frames_and_table(tmp_path / "api.h5") == frames_and_table(reference)
+
+
+def test_an_unknown_engine_names_the_registered_ones(sample_db, tmp_path, capsys):
+    from torchsplice.core.errors import TorchspliceError
+    from torchsplice.job import splice_all
+    from torchsplice.job.engines import register_engine
+
+    with pytest.raises(SystemExit) as exit_:  # a usage mistake, said by the argument parser
+        run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--engine", "nothing")
+    assert exit_.value.code == 2 and "invalid choice: 'nothing'" in capsys.readouterr().err
+    with pytest.raises(TorchspliceError, match="unknown engine 'nothing'; choose one of local, ray"):
+        splice_all(sample_db, tmp_path / "x.h5", engine="nothing")
+    for bad in ("Bad", "a b", "", "x\n"):
+        with pytest.raises(TorchspliceError, match="must be lower case letters"):
+            register_engine(bad, lambda ctx: None)
+    with pytest.raises(TorchspliceError, match="'local' is already registered"):
+        register_engine("local", lambda ctx: None)
 
 
 # --------------------------------------------------------------------------------------------

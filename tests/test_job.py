@@ -455,7 +455,7 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
 # 5. interrupted in-process, resumed by a new SpliceJob
 # --------------------------------------------------------------------------------------------
 def test_interrupt_then_resume_in_process(sample_db, batch2_out, tmp_path, monkeypatch):
-    import torchsplice.job.executors as executors
+    import torchsplice.job.engines.inline as executors  # the engine of this process (workers=1)
 
     out = tmp_path / "out.h5"
     config = JobConfig(database=sample_db, output=out, batch_pairs=2, workers=1)
@@ -495,7 +495,7 @@ def test_interrupt_then_resume_in_process(sample_db, batch2_out, tmp_path, monke
 # 6. other arguments while an unfinished work folder exists
 # --------------------------------------------------------------------------------------------
 def test_other_arguments_refuse_to_mix_until_restart(sample_db, tmp_path, capsys, monkeypatch):
-    import torchsplice.job.executors as executors
+    import torchsplice.job.engines.inline as executors  # the engine of this process (workers=1)
 
     out = tmp_path / "out.h5"
     work = work_folder(out)

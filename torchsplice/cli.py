@@ -634,24 +634,6 @@ def cmd_splice_all(args) -> int:
     return 0
 
 
-def _prestart_workers(args) -> None:
-    """Start the local engine's fork server before this process imports torch: it loads torch and
-    the kernels for the workers while this process plans."""
-    import os
-
-    workers = args.workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-    if args.engine == "local" and workers > 1 and (args.device or "cpu") == "cpu" and sys.platform != "win32" \
-            and not getattr(args, "dry_run", False):
-        import multiprocessing as mp
-        from multiprocessing import forkserver
-
-        mp.get_context("forkserver").set_forkserver_preload(["torchsplice.job.worker"])
-        try:
-            forkserver.ensure_running()
-        except Exception:  # the engine starts it later, or reports why it cannot
-            pass
-
-
 def cmd_merge(args) -> int:
     from .job import merge_job
 
@@ -693,13 +675,15 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .job.engines import available_engines
+
     p = _Parser(
         prog="torchsplice",
         description="Splice upper-body actions onto locomotion for every pair of clips in a motion database.",
     )
     p.add_argument("--version", action="version", version=f"torchsplice {__version__}")
     p.add_argument("--plugin", action="append", metavar="MODULE", default=[],
-                   help="import this module first: a plug-in that registers splicing methods (repeatable; "
+                   help="import this module first: a plug-in that registers splicing methods or engines (repeatable; "
                         "also TORCHSPLICE_PLUGINS=MODULE[,MODULE...] and the torchsplice.methods entry point group)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
@@ -862,8 +846,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-length-ratio", type=_positive_float, default=None, metavar="R",
                    help="skip pairs whose longer clip lasts more than R times the shorter (e.g. 3); long takes are "
                         "better cut with import --split")
-    s.add_argument("--engine", default="local", choices=["local", "ray"],
-                   help="local: worker processes on this machine (default); ray: Ray tasks on a cluster")
+    s.add_argument("--engine", default="local", choices=list(available_engines()),
+                   help="local: worker processes on this machine (default); ray: Ray tasks on a cluster; or an engine "
+                        "a --plugin module registers")
     s.add_argument("--workers", type=_positive_int, default=None, metavar="N",
                    help="local worker processes, one compute thread each (default: one per core); results do not depend on it")
     s.add_argument("--ray-address", default=None, metavar="HOST:PORT",
@@ -946,8 +931,10 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "output", None) == "":  # an empty name would mean the current folder
         print("torchsplice: error: the output name is empty; name a file or folder", file=sys.stderr)
         return 2
-    if args.func is cmd_splice_all:
-        _prestart_workers(args)
+    if args.func is cmd_splice_all and not args.dry_run:  # the workers load torch while this process plans
+        from .job.engines.forkserver import prestart
+
+        prestart(args.engine, args.workers, args.device)
     previous = None
     if threading.current_thread() is threading.main_thread():
         _SIGTERM_SEEN[0] = False

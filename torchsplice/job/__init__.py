@@ -2,7 +2,7 @@
 
 Rooms: :mod:`.config` (what to splice and how to run it), :mod:`.plan` (pairs, tasks, skips),
 :mod:`.sources` (clips read and prepared once), :mod:`.task` (one task's splice),
-:mod:`.executors` (engines: this process, local workers, Ray), :mod:`.sink` (shards and the
+:mod:`.engines` (what runs the tasks: this process, local workers, Ray, or a registered engine), :mod:`.sink` (shards and the
 merged output), :mod:`.run` (the job that drives them).
 
 From Python, :func:`splice_all` runs the whole job with the command line's selections and
@@ -12,9 +12,20 @@ options (:class:`JobConfig` fields) and returns the :class:`JobSummary`::
     summary = splice_all("bandai.h5", "spliced.h5", locomotions="role:locomotion", methods="splice,naive")
 """
 
-from .config import JobConfig, job_config
-from .run import JobSummary, SpliceJob, merge_job, splice_all
-from .select import parse_selector, select_clips
+import importlib
 
 __all__ = ["splice_all", "JobConfig", "job_config", "JobSummary", "SpliceJob", "merge_job", "select_clips",
            "parse_selector"]
+
+_WHERE = {"JobConfig": ".config", "job_config": ".config", "JobSummary": ".run", "SpliceJob": ".run",
+          "merge_job": ".run", "splice_all": ".run", "parse_selector": ".select", "select_clips": ".select"}
+
+
+def __getattr__(name: str):
+    """The job's names, imported when first used: the command line reads the engine registry
+    (:mod:`.engines`) without importing torch."""
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

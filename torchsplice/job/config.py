@@ -23,12 +23,12 @@ from ..io.database import COMPRESSIONS
 from ..splice.heck import AlignOptions
 from ..splice.api import SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules
+from .engines import available_engines
 
-__all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "ENGINES", "LAYOUTS", "parse_shard"]
+__all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "parse_shard"]
 
 DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
 DEFAULT_ACTIONS = ("role:action,role:both",)
-ENGINES = ("local", "ray")
 LAYOUTS = ("copy", "virtual")
 
 
@@ -63,7 +63,8 @@ class JobConfig:
         batch_pairs: pairs per task; ``None`` derives it from the budget.
 
     How to run it (free to change between a run and its resume):
-        engine: ``"local"`` (worker processes on this machine) or ``"ray"`` (Ray tasks).
+        engine: ``"local"`` (worker processes on this machine), ``"ray"`` (Ray tasks) or a
+            registered engine (see :mod:`torchsplice.job.engines`).
         workers: local worker processes (``None``: one per core); each computes with one thread.
         ray_address: the Ray cluster to use (``None``: start a local Ray instance).
         device: ``None``/``"cpu"`` for the compiled CPU splicer, or a torch device such as
@@ -105,8 +106,8 @@ class JobConfig:
             raise TorchspliceError(f"no method given; choose from {', '.join(available_methods())}")
         for m in c.methods:
             get_method(m)  # a clear error naming the available methods
-        if c.engine not in ENGINES:
-            raise TorchspliceError(f"unknown engine {c.engine!r}; choose {' or '.join(ENGINES)}")
+        if c.engine not in available_engines():
+            raise TorchspliceError(f"unknown engine {c.engine!r}; choose one of {', '.join(available_engines())}")
         if c.layout not in LAYOUTS:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
         if c.layout == "virtual" and c.copy_sources:

@@ -10,7 +10,7 @@ How it runs:
    with their reasons, cut into tasks with stable ids; saved as ``plan.json`` in the work
    folder ``.OUT.h5.parts/``. A rerun whose plan differs (other arguments or inputs) refuses
    to mix with the unfinished one; ``--restart`` discards it.
-2. **Tasks** (:mod:`.task`, :mod:`.executors`). Each task splices its pairs. Tasks run in
+2. **Tasks** (:mod:`.task`, :mod:`.engines`). Each task splices its pairs. Tasks run in
    this process, on local worker processes (``--workers``) or on Ray (``--engine ray``); a
    task gives the same bits wherever it runs. A task's results reach the driver as a raw part
    file, ``part-<task id>.part`` (local workers), or as an object (Ray); ``--shard`` runs and
@@ -54,10 +54,11 @@ from pathlib import Path
 import torch
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
-from ..io.lock import FileLock, check_name_length, pid_alive, remove_stale_temporaries
+from ..io.lock import FileLock, check_name_length, remove_stale_temporaries
 from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
-from .executors import make_engine
+from .engines import EngineContext, make_engine
+from .engines.forkserver import prestart
 from .plan import SKELETONS_DIFFER, Plan, make_plan
 from .sink import HDF5Sink
 from .sources import Sources
@@ -214,7 +215,7 @@ class SpliceJob:
             raise OutputExistsError(f"{c.output}: already exists")
         if self.dry_run:
             return self._dry_run(t0)
-        _prestart_workers(c)
+        prestart(c.engine, c.worker_count(), c.device)
         if self.shard is not None and self.restart:
             raise TorchspliceError("{restart} discards the whole job, every slice's work too: run it once without {shard}",
                                    options=("restart", "shard"))
@@ -311,8 +312,8 @@ class SpliceJob:
             sources.release_clips(keep=[g.clips[0] for g in plan.groups])
             _return_freed_memory()
         try:
-            engine = make_engine(c, plan, plan_path, sources, self.sink, shard_dir,
-                                 keep_shards=self.shard is not None or c.layout == "virtual")
+            engine = make_engine(EngineContext(c, plan, plan_path, sources, self.sink, shard_dir,
+                                               keep_shards=self.shard is not None or c.layout == "virtual"))
         except BaseException:
             if new_plan and not any(shard_dir.glob("part-*")):  # nothing was done: leave no plan that would tie
                 plan_path.unlink(missing_ok=True)                # the next run to these arguments
@@ -882,19 +883,6 @@ def _clear_work(work: Path, keep: Path) -> None:
     for f in work.iterdir():
         if f != keep:
             shutil.rmtree(f, ignore_errors=True) if f.is_dir() else f.unlink(missing_ok=True)
-
-
-def _prestart_workers(config: JobConfig) -> None:
-    """Start the local engine's fork server now, so that it imports torch and the kernels while
-    this process plans (its workers then start at once)."""
-    if config.engine == "local" and config.worker_count() > 1 and config.device in (None, "cpu") and sys.platform != "win32":
-        import multiprocessing as mp
-
-        ctx = mp.get_context("forkserver")
-        ctx.set_forkserver_preload(["torchsplice.job.worker"])
-        from multiprocessing import forkserver
-
-        forkserver.ensure_running()
 
 
 class _compute_threads:

@@ -1,5 +1,5 @@
 """What a local worker process starts with: the job's modules and the compiled kernels, loaded
-once in the fork server (:class:`~torchsplice.job.executors.LocalEngine`), so that every worker
+once in the fork server (:class:`~torchsplice.job.engines.local.LocalEngine`), so that every worker
 forked from it starts splicing at once.
 
 Workers compute with one thread each; their kernels use numba's ``workqueue`` threading layer,

@@ -1,0 +1,29 @@
+"""The local engine's fork server, started early: it imports torch and the compiled kernels for
+the workers (:mod:`torchsplice.job.worker`) while the driver plans, so that workers start
+splicing at once. Light to import (no torch): the command line calls it before it imports torch.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+__all__ = ["prestart"]
+
+
+def prestart(engine: str, workers: int | None, device: str | None) -> None:
+    """Start the fork server if the ``local`` engine will use worker processes (more than one
+    worker, on the CPU); ``workers`` ``None``: one per core. Quietly does nothing where it
+    cannot: the engine starts it later, or says why it cannot."""
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    if engine != "local" or workers <= 1 or (device or "cpu") != "cpu" or sys.platform == "win32":
+        return
+    import multiprocessing as mp
+    from multiprocessing import forkserver
+
+    mp.get_context("forkserver").set_forkserver_preload(["torchsplice.job.worker"])
+    try:
+        forkserver.ensure_running()
+    except Exception:
+        pass
