@@ -79,6 +79,27 @@ def workers_of(driver: int) -> list[int]:
     return [w for server in children(driver) for w in children(server)]
 
 
+def kill_one_worker(proc, when) -> str:
+    """SIGKILL the first worker of the job ``proc`` seen once ``when()`` holds, let the job end,
+    and return its stderr (asserting that a worker was killed)."""
+    killed = None
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline and killed is None:
+            ws = workers_of(proc.pid) if when() else []
+            if ws:
+                os.kill(ws[0], signal.SIGKILL)
+                killed = ws[0]
+            time.sleep(0.005)
+        _, stderr = proc.communicate(timeout=180)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert killed is not None, "no worker was found to kill"
+    return stderr
+
+
 def start_job(db, out, *extra):
     env = dict(os.environ, PYTHONUNBUFFERED="1", TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task
     return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), *JOB, *extra],
@@ -93,22 +114,8 @@ def start_job(db, out, *extra):
 def test_a_killed_worker_is_replaced_and_the_output_is_unchanged(sample_db, reference, tmp_path):
     out = tmp_path / "out.h5"
     proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
-    killed = None
-    try:
-        deadline = time.monotonic() + 120
-        while proc.poll() is None and time.monotonic() < deadline and killed is None:
-            if (MotionDatabase.checkpoint_note(tmp_path / ".out.h5.parts" / "output.h5") or {}).get("tasks"):  # one merged
-                ws = workers_of(proc.pid)
-                if ws:
-                    os.kill(ws[0], signal.SIGKILL)
-                    killed = ws[0]
-            time.sleep(0.01)
-        stdout, stderr = proc.communicate(timeout=180)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert killed is not None, "no worker was found to kill"
+    merged = lambda: (MotionDatabase.checkpoint_note(tmp_path / ".out.h5.parts" / "output.h5") or {}).get("tasks")  # noqa: E731
+    stderr = kill_one_worker(proc, when=merged)  # once a task is merged
     assert proc.returncode == 0, stderr
     assert frames_and_table(out) == frames_and_table(reference)
 
@@ -126,21 +133,7 @@ def test_a_worker_killed_before_any_task_finishes_is_retried_under_a_console_scr
     proc = subprocess.Popen([sys.executable, str(script), "splice-all", str(sample_db), "-o", str(out), *JOB,
                              "--workers", "2", "--batch-size", "1"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    killed = None
-    try:
-        deadline = time.monotonic() + 120
-        while proc.poll() is None and time.monotonic() < deadline and killed is None:
-            ws = workers_of(proc.pid)
-            if ws:  # at once: no task has finished yet
-                os.kill(ws[0], signal.SIGKILL)
-                killed = ws[0]
-            time.sleep(0.005)
-        stdout, stderr = proc.communicate(timeout=180)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert killed is not None, "no worker was found to kill"
+    stderr = kill_one_worker(proc, when=lambda: True)  # at once: no task has finished yet
     assert proc.returncode == 0 and "__main__" not in stderr, stderr
     assert frames_and_table(out) == frames_and_table(reference)
 
