@@ -45,8 +45,8 @@ from ..specs import SkeletonRoles
 from ..kinematics.heading import heading_frame, lateral_axis, to_heading_frame
 from .clips import ClipTensors, shift_frames, with_fk, without_fk
 
-__all__ = ["AlignOptions", "TimeAlignment", "time_align", "phase_crop", "splice_tensors", "SplicedTensors",
-           "shoulder_yaw", "twist_target"]
+__all__ = ["AlignOptions", "TimeAlignment", "time_align", "alignment_grid", "phase_crop", "splice_tensors",
+           "SplicedTensors", "shoulder_yaw", "twist_target"]
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,10 @@ def _clouds_and_headings(c: ClipTensors, roles: SkeletonRoles, options: AlignOpt
     return cloud, heading
 
 
-def _grid(a: ClipTensors, b: ClipTensors, roles: SkeletonRoles, options: AlignOptions) -> torch.Tensor:
+def alignment_grid(a: ClipTensors, b: ClipTensors, roles: SkeletonRoles, options: AlignOptions) -> torch.Tensor:
+    """``(B, Ta, Tb)`` the frame distances the alignment of clips ``a`` to clips ``b`` uses: the
+    lower-body landmark clouds compared under the best rotation about the up axis, matches
+    restricted to turns within ``options.heading_window_deg`` of the clips' relative heading."""
     ca, ha = _clouds_and_headings(a, roles, options)
     cb, hb = _clouds_and_headings(b, roles, options)
     window = math.radians(options.heading_window_deg) if options.heading_window_deg is not None else math.pi
@@ -165,7 +168,7 @@ class TimeAlignment:
 def time_align(base: ClipTensors, other: ClipTensors, roles: SkeletonRoles, options: AlignOptions, fps: float) -> TimeAlignment:
     """Align ``other`` in time to ``base`` (both at ``fps``): grid, phase crop, DP, curve."""
     B = base.lengths.shape[0]
-    grid = _grid(base, other, roles, options)
+    grid = alignment_grid(base, other, roles, options)
     crop = torch.zeros(B, dtype=torch.long, device=grid.device)
     if options.crop:
         crop = phase_crop(grid, base.lengths, other.lengths, int(round(options.crop_context_s * fps)),

@@ -18,7 +18,7 @@ from ..io.atomic import atomic_path
 from ..specs import DatasetSpec
 from ..splice import SpliceOptions, splice
 from ..splice.clips import clips_to_tensors, resample_motion
-from ..splice.heck import _grid
+from ..splice.heck import alignment_grid
 
 __all__ = ["alignment_data", "plot_alignment"]
 
@@ -37,7 +37,7 @@ def alignment_data(locomotion: Motion, action: Motion, spec: DatasetSpec, option
     act = resample_motion(action, locomotion.fps)
     L = clips_to_tensors([locomotion], locomotion.skeleton, dtype=torch.float64)
     A = clips_to_tensors([act], locomotion.skeleton, dtype=torch.float64)
-    grid = _grid(L, A, roles, options.align)[0]
+    grid = alignment_grid(L, A, roles, options.align)[0]
     scale = locomotion.fps / action.fps  # result.curve is in the action's own frames
     crop_l = int(round(result.crop * scale))
     path = result.path.clone()
