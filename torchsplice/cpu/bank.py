@@ -22,7 +22,7 @@ from numba import njit, prange
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
-from ..splice.heck import landmark_indices
+from ..specs.roles import landmark_indices
 from .fk import fk_clips, joint_closure
 from .grid import clip_features
 from .splice import METHOD_CODES, STATUS, compact, splice_batch

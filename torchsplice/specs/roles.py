@@ -17,7 +17,7 @@ from ..core.skeleton import Skeleton
 if TYPE_CHECKING:  # pragma: no cover
     from .spec import DatasetSpec
 
-__all__ = ["SkeletonRoles", "bind_roles"]
+__all__ = ["SkeletonRoles", "bind_roles", "landmark_indices"]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
 _PAIRS = ("hips", "knees", "feet", "shoulders")
@@ -60,6 +60,17 @@ class SkeletonRoles:
 # --------------------------------------------------------------------------------------------
 # binding
 # --------------------------------------------------------------------------------------------
+def landmark_indices(roles: SkeletonRoles, landmarks) -> list[int]:
+    """Joint indices of the named roles (e.g. ``("root", "knees")``), pairs expanded (left, right)."""
+    out = []
+    for name in landmarks:
+        v = getattr(roles, name, None)
+        if v is None or name in ("upper_body", "lower_body", "up_axis", "units"):
+            raise ValueError(f"unknown or absent landmark role {name!r}")
+        out += list(v) if isinstance(v, tuple) else [v]
+    return out
+
+
 def bind_roles(spec: "DatasetSpec", sk: Skeleton) -> SkeletonRoles:
     """Indices of the spec's joints in ``sk``, with the hierarchy checks of :meth:`DatasetSpec.bind`."""
     def idx(key, name):

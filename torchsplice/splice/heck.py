@@ -42,6 +42,7 @@ from ..align.timewarp import timewarp
 from ..core.rotations import quat_apply, quat_conj, quat_mul
 from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
+from ..specs.roles import landmark_indices
 from ..kinematics.heading import heading_frame, lateral_axis, to_heading_frame
 from .clips import ClipTensors, shift_frames, with_fk, without_fk
 
@@ -79,17 +80,6 @@ class AlignOptions:
     crop_window_s: float = 0.2
     knot_spacing_s: float = 0.25
     dp_backend: str = "auto"
-
-
-def landmark_indices(roles: SkeletonRoles, landmarks) -> list[int]:
-    """Joint indices of the named roles, pairs expanded (left, right)."""
-    out = []
-    for name in landmarks:
-        v = getattr(roles, name, None)
-        if v is None or name in ("upper_body", "lower_body", "up_axis", "units"):
-            raise ValueError(f"unknown or absent landmark role {name!r}")
-        out += list(v) if isinstance(v, tuple) else [v]
-    return out
 
 
 def _clouds_and_headings(c: ClipTensors, roles: SkeletonRoles, options: AlignOptions):
