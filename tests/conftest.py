@@ -57,3 +57,14 @@ def bvh_params():
         marks = [pytest.mark.slow] if seen[f.parent] > QUICK_FILES_PER_FOLDER else []
         params.append(pytest.param(f, id=f"{f.parent.name[:6]}/{f.stem}", marks=marks))
     return params
+
+
+@pytest.fixture(scope="session")
+def sample_db(tmp_path_factory):
+    """The built-in sample as a database (``torchsplice sample``), made once per session; a test
+    module may define its own."""
+    from torchsplice.cli import main
+
+    db = tmp_path_factory.mktemp("sample") / "sample.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    return db

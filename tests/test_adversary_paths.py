@@ -14,28 +14,17 @@ from pathlib import Path
 
 import pytest
 
-from torchsplice.cli import main
+from cli_helpers import error_line, run as cli_run
 from torchsplice.io.lock import MAX_NAME_BYTES, temp_path
 
 
 def run(capsys, *argv):
+    """:func:`cli_helpers.run`, with a usage mistake (said by the argument parser) as its exit code."""
     try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:  # a usage mistake, said by the argument parser
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-@pytest.fixture(scope="module")
-def sample_db(tmp_path_factory):
-    db = tmp_path_factory.mktemp("paths") / "s.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
-    return db
-
-
-def one_clean_line(err: str) -> None:
-    assert err.count("\n") == 1 and err.startswith("torchsplice: error: ") and "Traceback" not in err, err
+        return cli_run(capsys, *argv)
+    except SystemExit as exc:
+        out, err = capsys.readouterr()
+        return exc.code, out, err
 
 
 def test_export_into_the_current_folder_by_dot(sample_db, tmp_path, monkeypatch, capsys):
@@ -53,7 +42,7 @@ def test_outputs_without_a_name_get_one_line(sample_db, tmp_path, monkeypatch, c
     root_before = set(os.listdir("/"))
     code, _, err = run(capsys, *[str(sample_db) if a == "{db}" else a for a in argv])
     assert code == 2
-    one_clean_line(err)
+    error_line(err)
     assert set(os.listdir("/")) == root_before and not list(tmp_path.iterdir())
 
 
@@ -65,7 +54,7 @@ def test_a_plan_that_is_not_an_object_is_one_line(sample_db, tmp_path, capsys):
         (work / "plan.json").write_text(text)
         code, _, err = run(capsys, "merge", out)
         assert code == 2
-        one_clean_line(err)
+        error_line(err)
         assert "not a readable job plan" in err or "version" in err, err
 
 
@@ -74,7 +63,7 @@ def test_slices_are_bounded_and_an_empty_one_is_a_mistake(sample_db, tmp_path, c
     t0 = time.perf_counter()
     code, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "out.h5", "--shard", shard)
     assert code == 2 and time.perf_counter() - t0 < 10
-    one_clean_line(err)
+    error_line(err)
     assert "--shard" in err and len(err) < 300, err
     assert not list(tmp_path.iterdir())
 
@@ -84,7 +73,7 @@ def test_missing_slices_are_said_as_ranges(sample_db, tmp_path, capsys):
     assert run(capsys, "splice-all", sample_db, "-o", out, "--shard", "1/100000", "-q")[0] == 0
     code, _, err = run(capsys, "merge", out)
     assert code == 2
-    one_clean_line(err)
+    error_line(err)
     assert "slices of 100000 done: 1; missing: 2-100000" in err and len(err) < 400, err
 
 
@@ -96,7 +85,7 @@ def test_long_output_names_are_refused_before_any_work_and_temporaries_stay_shor
             t0 = time.perf_counter()
             code, _, err = run(capsys, *argv)
             assert code == 2 and time.perf_counter() - t0 < 10, argv
-            one_clean_line(err)
+            error_line(err)
             assert f"file name is {n} bytes long" in err, err
         assert not list(tmp_path.iterdir())
     name = "é" * ((MAX_NAME_BYTES - 3) // 2) + ".h5"  # as long as allowed, in two-byte characters
@@ -210,7 +199,7 @@ def test_a_page_holds_a_bounded_number_of_frames(tmp_path, capsys):
     assert len(html) < 40e6
     code, _, err = run(capsys, "view", db, "long0", "long1", "long2", "-o", tmp_path / "v.html")
     assert code == 2 and "more than" in err and not (tmp_path / "v.html").exists()
-    one_clean_line(err)
+    error_line(err)
 
 
 def _closed_port() -> int:
@@ -236,6 +225,6 @@ def test_a_stale_ray_cluster_record_is_one_line_at_once(sample_db, tmp_path, mon
     t0 = time.perf_counter()
     code, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "out.h5", "--engine", "ray", *extra)
     assert code == 2 and time.perf_counter() - t0 < 15, err
-    one_clean_line(err)
+    error_line(err)
     assert f"cannot reach the Ray cluster at {address}" in err, err
     assert not (tmp_path / "out.h5").exists()

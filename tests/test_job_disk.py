@@ -13,12 +13,12 @@ import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
+from cli_helpers import run
 from torchsplice.cli import main
 from torchsplice.io.database import MotionDatabase
 from torchsplice.job import splice_all
@@ -28,19 +28,6 @@ from torchsplice.job.size import TABLE_BYTES_PER_CLIP, frame_bytes
 REPO = Path(__file__).resolve().parents[1]
 BANDAI = "bandai_namco_research_motiondataset"
 JOB = ["--locomotions", "label:style=normal", "--actions", "role:action,role:both"]
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-@pytest.fixture(scope="module")
-def sample_db(tmp_path_factory):
-    db = tmp_path_factory.mktemp("sample") / "sample.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
-    return db
 
 
 @pytest.fixture(scope="module")
