@@ -472,10 +472,10 @@ def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None
             "compute": float(compute.group(1)) if compute else float("nan")}
 
 
-def _task_rates(db: Path, actions: str) -> tuple[float, float, int]:
+def _task_rates(db: Path, actions: str):
     """The job's own tasks of normal-style locomotions x ``actions``, run in this process as its
     workers run them (:func:`torchsplice.job.task.run_task`, compiled splicer on every thread),
-    the clips and banks ready: (output frames/s, pairs/s, pairs), best of 2 runs."""
+    the clips and banks ready: (output frames/s, pairs/s, pairs, the plan), best of 2 runs."""
     from torchsplice.job.config import job_config
     from torchsplice.job.plan import make_plan
     from torchsplice.job.sources import Sources
@@ -491,18 +491,13 @@ def _task_rates(db: Path, actions: str) -> tuple[float, float, int]:
         frames = sum(int(run_task(plan, t, sources, config).lengths.sum()) for t in plan.tasks)
         dt = time.perf_counter() - t0
         best = dt if best is None or _ == 0 else min(best, dt)
-    return frames / best, len(plan.pairs) / best, len(plan.pairs)
+    return frames / best, len(plan.pairs) / best, len(plan.pairs), plan
 
 
-def _clips_mb(db: Path) -> float:
-    """MB of the clips the real mix selects, as float32 rotations and translations."""
-    from torchsplice.job.config import job_config
-    from torchsplice.job.plan import make_plan
-    from torchsplice.job.sources import Sources
+def _clips_mb(db: Path, plan) -> float:
+    """MB of the clips ``plan`` selects, as float32 rotations and translations."""
     from torchsplice.io.database import MotionDatabase
 
-    config = job_config(db, db.with_name("unused.h5"), locomotions=(MIX_LOCOMOTIONS,), actions=("role:action",))
-    plan = make_plan(config, Sources(config.database))
     with MotionDatabase.open(db) as d:
         lengths = d.table()["length"]
         frames = sum(int(lengths[int(c.split(":")[1])]) for g in plan.groups for c in g.clips)
@@ -574,7 +569,7 @@ def bench_mix(files: list[Path], device: str, mix_db: Path | None) -> None:
         # 1. standing actions against time-aligned ones, onto the same locomotions: the job's tasks
         rates = {label: _task_rates(db, actions) for label, actions in
                  (("standing (role:action)", "role:action"), ("time-aligned (role:both)", "role:both"))}
-        for label, (fps_, pps, n) in rates.items():
+        for label, (fps_, pps, n, _) in rates.items():
             print(f"mix     {label}: {n:,} pairs, {fps_:,.0f} output frames/s, {pps:,.0f} pairs/s (the job's tasks, "
                   "in one process)")
         a, b = rates["standing (role:action)"][0], rates["time-aligned (role:both)"][0]
@@ -590,7 +585,7 @@ def bench_mix(files: list[Path], device: str, mix_db: Path | None) -> None:
               f"a fixed cost); peak memory of the job and its workers "
               f"{r['peak_mb']:,.0f} MB, of the largest process {r['peak_one']:,.0f} MB [<= --memory-budget 1,024 MB + the "
               f"selected clips as the splicer holds them, the bank, {r['peak_bank'] / 2**20:,.0f} MB, mapped by every "
-              f"process; the clips' raw frames are {_clips_mb(db):,.0f} MB]")
+              f"process; the clips' raw frames are {_clips_mb(db, rates['standing (role:action)'][3]):,.0f} MB]")
         if device != "cpu":
             return
         # 3. killed three times, then resumed: the same output, and the time it costs
