@@ -52,7 +52,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
 
-from torchsplice.io.bvh import format_bvh, read_bvh  # noqa: E402
+from torchsplice.formats.bvh import format_bvh, read_bvh  # noqa: E402
 
 
 def best_of(fn, repeats: int = 5) -> float:
@@ -124,8 +124,8 @@ def bench_stages(files: list[Path], device: str) -> None:
     from torchsplice.cpu.grid import distance_row_block
     from torchsplice.cpu.horn import horn_batch
     from torchsplice.cpu.timewarp import dp_pair
-    from torchsplice.io.database import MotionDatabase
-    from torchsplice.kinematics.fk import forward_kinematics
+    from torchsplice.store.database import MotionDatabase
+    from torchsplice.core.fk import forward_kinematics
 
     clips, spec, roles, bank = _bank(walks_and_turns(files, 16))
     n = len(clips)
@@ -434,7 +434,7 @@ def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None
     left out), peak memory of the process and its workers (MB), peak bytes of the output folder
     (the input database left out) and of the clip banks in it, sampled every 20 ms; killed once the output holds
     ``kill_at`` of the plan's tasks (then ``killed`` is true)."""
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions", MIX_LOCOMOTIONS,
            "--actions", actions, *extra]
@@ -496,7 +496,7 @@ def _task_rates(db: Path, actions: str):
 
 def _clips_mb(db: Path, plan) -> float:
     """MB of the clips ``plan`` selects, as float32 rotations and translations."""
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     with MotionDatabase.open(db) as d:
         lengths = d.table()["length"]
@@ -546,7 +546,7 @@ def bench_mix(files: list[Path], device: str, mix_db: Path | None) -> None:
     """The real workload: normal-style Bandai Namco locomotions x every action clip (nearly all of
     them standing actions), as a user runs it (see README, "Speed")."""
     from torchsplice.cli import main as cli
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
     from torchsplice.job.size import format_bytes
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -48,6 +48,6 @@ fi
 # compile the CPU splicer's kernels once per version of their sources (numba caches them)
 _kernels="$(cat "$_root"/torchsplice/cpu/*.py | cksum)"
 if [ ! -f "$_root/.venv/.torchsplice-kernels" ] || [ "$(cat "$_root/.venv/.torchsplice-kernels")" != "$_kernels" ]; then
-  python -m torchsplice.cpu.warmup
+  python -m torchsplice.warmup
   echo "$_kernels" > "$_root/.venv/.torchsplice-kernels"
 fi

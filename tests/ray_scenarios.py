@@ -56,7 +56,7 @@ def job(db: str, out: Path, *extra, quiet: bool = True) -> subprocess.Popen:
 
 def finished(out: Path) -> int:
     """Tasks the job has finished: those its staged output holds, and the shards waiting to join it."""
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     work = out.parent / f".{out.name}.parts"
     held = (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)

@@ -11,10 +11,10 @@ import pytest
 
 from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
-from torchsplice.io.bvh import write_bvh
-from torchsplice.io.database import MotionDatabase
-from torchsplice.io.importer import import_bvh
-from torchsplice.io.units import convert_units
+from torchsplice.formats.bvh import write_bvh
+from torchsplice.store.database import MotionDatabase
+from torchsplice.formats.importer import import_bvh
+from torchsplice.ops.units import convert_units
 from torchsplice.job import splice_all
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec

@@ -14,8 +14,8 @@ from adversary_corpus import CONTROL_NAMES, MARKUP_NAMES
 from torchsplice.cli import main
 from torchsplice.core.errors import DatabaseError, TorchspliceError
 from torchsplice.core.names import control_character, printable
-from torchsplice.io.bvh import write_bvh
-from torchsplice.io.database import MotionDatabase
+from torchsplice.formats.bvh import write_bvh
+from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 
@@ -140,7 +140,7 @@ def test_report_escaping_known_answers():
 
 def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tmp_path, capsys):
     from adversary_corpus import FILE_NAMES
-    from torchsplice.io.bvh import read_bvh
+    from torchsplice.formats.bvh import read_bvh
 
     spec = load_spec("sample")
     clips = sample_motions()
@@ -155,7 +155,7 @@ def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tm
         stem = f[:-4]
         assert not re.search(r'[<>:"/\\|?*\x00-\x1f]', f) and not stem.endswith((".", " ")), f
         assert stem.split(".")[0].upper() not in {"CON", "PRN", "AUX", "NUL"}, f
-    from torchsplice.io.npz import clip_filenames
+    from torchsplice.formats.npz import clip_filenames
 
     for k, (name, f) in enumerate(zip(FILE_NAMES, clip_filenames(FILE_NAMES, ".bvh"))):
         got = read_bvh(tmp_path / "bvh" / f)

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from cli_helpers import error_line, run as cli_run
-from torchsplice.io.lock import MAX_NAME_BYTES, temp_path
+from torchsplice.store.lock import MAX_NAME_BYTES, temp_path
 
 
 def run(capsys, *argv):
@@ -111,7 +111,7 @@ def test_temporary_names_carry_host_and_pid_and_fit(tmp_path):
 
 @pytest.mark.parametrize("split", ["1e-300", "0", "-5", "nan", "inf", "0.5"])
 def test_split_windows_shorter_than_a_second_are_refused(tmp_path, capsys, split):
-    from torchsplice.io.bvh import write_bvh
+    from torchsplice.formats.bvh import write_bvh
     from torchsplice.sample import sample_motions
 
     write_bvh(sample_motions()[0], tmp_path / "walk.bvh")
@@ -182,7 +182,7 @@ def test_a_rerun_of_merge_removes_what_a_killed_merge_left(sample_db, tmp_path, 
 def test_a_page_holds_a_bounded_number_of_frames(tmp_path, capsys):
     from dataclasses import replace
 
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
     from torchsplice.sample import sample_motions
     from torchsplice.specs import load_spec
     from torchsplice.viz.viewer import MAX_PAGE_FRAMES, build_viewer

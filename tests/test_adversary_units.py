@@ -9,9 +9,9 @@ import json
 import pytest
 
 from torchsplice.cli import main
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
-from torchsplice.io.units import convert_units, implausible_size
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
+from torchsplice.ops.units import convert_units, implausible_size
 from torchsplice.specs import detect_spec
 
 BANDAI = "bandai_namco_research_motiondataset"

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from torchsplice.cli import main
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.viz.viewer import build_viewer
@@ -170,8 +170,8 @@ def test_an_export_of_several_clips_is_all_or_nothing(tmp_path, capsys, monkeypa
     rc = main(["export", str(db), "--all", "--format", fmt, "-o", str(out)])
     err = capsys.readouterr().err
     assert rc == 2 and "'nanclip'" in err and not out.exists(), err
-    import torchsplice.io.bvh as bvh
-    import torchsplice.io.npz as npz
+    import torchsplice.formats.bvh as bvh
+    import torchsplice.formats.npz as npz
 
     calls = []
     real = bvh.write_bvh if fmt == "bvh" else npz.write_npz
@@ -193,7 +193,7 @@ def test_an_export_of_several_clips_is_all_or_nothing(tmp_path, capsys, monkeypa
 
 def test_read_npz_of_files_that_are_not_exports_is_one_line(tmp_path):
     from torchsplice.core.errors import TorchspliceError
-    from torchsplice.io.npz import read_npz
+    from torchsplice.formats.npz import read_npz
 
     np.savez(tmp_path / "pickled.npz", a=np.array([{"x": 1}], dtype=object))
     np.save(tmp_path / "array.npy", np.zeros(3))

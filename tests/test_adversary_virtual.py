@@ -10,7 +10,7 @@ import pytest
 
 import torchsplice.job.run as run_module
 from torchsplice.cli import main
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 
 LOCOS, ACTIONS = "walk_curve,jog,turn_sharp", "carry_box,wave"
 

@@ -21,7 +21,7 @@ from conftest import bvh_params
 from torchsplice.core.errors import BVHError, MotionError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.bvh import BVHWarning, format_bvh, parse_bvh, read_bvh, write_bvh
+from torchsplice.formats.bvh import BVHWarning, format_bvh, parse_bvh, read_bvh, write_bvh
 
 # --------------------------------------------------------------------------------------------
 # helpers
@@ -615,7 +615,7 @@ def test_cli_import_single_bad_file_no_traceback(tmp_path, capsys):
 
 def test_cli_import_one_good_one_bad(tmp_path, capsys, mocap_dir):
     from torchsplice.cli import main
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     good = mocap_dir / "bandai_namco_research_motiondataset" / "dataset-1_dash_normal_001.bvh"
     bad = write(tmp_path, base_with({LINE["f2"]: "2 4 6 20 40 sixty 10 12 14"}), "bad.bvh")
@@ -823,7 +823,7 @@ def test_frames_line_tolerates_whitespace(tmp_path, line):
 
 
 def test_bvh_warning_is_exported():
-    import torchsplice.io.bvh as bvh
+    import torchsplice.formats.bvh as bvh
 
     assert "BVHWarning" in bvh.__all__ and issubclass(BVHWarning, UserWarning)
     assert "BVHWarning" in (bvh.__doc__ or "")
@@ -935,7 +935,7 @@ def test_deep_chain_is_read_and_written(tmp_path):
 
 
 def test_error_more_than_10000_joints(tmp_path):
-    from torchsplice.io.bvh import MAX_JOINTS
+    from torchsplice.formats.bvh import MAX_JOINTS
 
     assert MAX_JOINTS == 10_000
     text, _ = _chain_text(MAX_JOINTS + 1)

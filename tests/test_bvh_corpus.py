@@ -20,7 +20,7 @@ import torch
 from bvh_corpus import Variant, build_corpus
 from conftest import MOCAP, _require_mocap
 from torchsplice.core.errors import TorchspliceError
-from torchsplice.io.bvh import BVHWarning, parse_bvh, read_bvh
+from torchsplice.formats.bvh import BVHWarning, parse_bvh, read_bvh
 
 pytestmark = pytest.mark.realdata
 MAX_MESSAGE = 300
@@ -148,7 +148,7 @@ def _cli_subset(corpus) -> list[Variant]:
 @pytest.mark.slow
 def test_cli_import_of_the_corpus_skips_bad_files_one_line_each(corpus, tmp_path, capsys):
     from torchsplice.cli import main
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     subset = _cli_subset(corpus)
     assert len(subset) >= 300

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from torchsplice.cli import build_parser, main
-from torchsplice.io.bvh import read_bvh
+from torchsplice.formats.bvh import read_bvh
 
 BANDAI = "bandai_namco_research_motiondataset"
 SOME = ["dataset-2_walk_normal_008", "dataset-2_walk-turn-left_elderly_003", "dataset-2_wave-left-hand_normal_001",

@@ -26,10 +26,10 @@ from torchsplice.cpu.fk import fk_clip, fk_clips, joint_closure
 from torchsplice.cpu.grid import clip_features, distance_row_block, phase_crop_pair
 from torchsplice.cpu.horn import horn_batch, horn_cloud, horn_from_h
 from torchsplice.cpu.timewarp import timewarp_batch
-from torchsplice.io.bvh import read_bvh
+from torchsplice.formats.bvh import read_bvh
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
-from torchsplice.kinematics.fk import forward_kinematics
+from torchsplice.core.fk import forward_kinematics
 from torchsplice.splice import SpliceOptions, splice_pairs
 from torchsplice.splice.heck import landmark_indices, phase_crop
 

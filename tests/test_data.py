@@ -14,9 +14,9 @@ from torchsplice.core.errors import DatabaseError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.data import DatasetError, MotionDataset, collate_motion
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
-from torchsplice.kinematics.fk import forward_kinematics
+from torchsplice.core.fk import forward_kinematics
 
 ALL_FEATURES = ("rotations", "root_translation", "translations", "positions", "global_rotations", "velocities")
 SPLICED_COLUMNS = {"locomotion": "str", "action": "str", "method": "str", "cost": "float", "crop": "int"}

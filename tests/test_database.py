@@ -19,7 +19,7 @@ import torch
 from torchsplice.core.errors import DatabaseError, MotionError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.database import SCHEMA_VERSION, ClipBatch, MotionDatabase
+from torchsplice.store.database import SCHEMA_VERSION, ClipBatch, MotionDatabase
 
 # --------------------------------------------------------------------------------------------
 # synthetic clips
@@ -307,7 +307,7 @@ REAL = {
 
 @pytest.mark.realdata
 def test_real_clips_round_trip(mocap_dir, tmp_path):
-    from torchsplice.io.bvh import read_bvh
+    from torchsplice.formats.bvh import read_bvh
 
     clips = []
     for folder, names in REAL.items():
@@ -335,7 +335,7 @@ def test_real_clips_round_trip(mocap_dir, tmp_path):
 
 @pytest.mark.realdata
 def test_bandai_datasets_share_one_skeleton(mocap_dir, tmp_path):
-    from torchsplice.io.bvh import read_bvh
+    from torchsplice.formats.bvh import read_bvh
 
     folder = mocap_dir / "bandai_namco_research_motiondataset"
     m1 = read_bvh(folder / "dataset-1_walk_normal_001.bvh", dtype=torch.float64)
@@ -594,7 +594,7 @@ WRITER = """
 import sys, time, torch
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 
 target, mode = sys.argv[1], sys.argv[2]
 sk = Skeleton(["A", "B", "C"], [-1, 0, 1], [[0, 0, 0], [0, 1, 0], [0, 1, 0]],

@@ -14,7 +14,7 @@ import pytest
 
 from torchsplice.cli import main
 from torchsplice.core.errors import DatabaseError
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 
 LOCO, ACTION = "walk_straight", "wave"
 _STR = h5py.string_dtype()

@@ -243,7 +243,7 @@ def test_mirror_pitfall_synthetic():
 
 
 def test_mirror_pitfall_real_walk(mocap_dir):
-    from torchsplice.io.bvh import read_bvh
+    from torchsplice.formats.bvh import read_bvh
 
     path = mocap_dir / "bandai_namco_research_motiondataset" / "dataset-2_walk_normal_008.bvh"
     if not path.exists():

@@ -13,8 +13,8 @@ import torch
 
 from torchsplice.cli import main
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
 
 WALK = "cmu_12_01_walk.bvh"
 _END_SITE = re.compile(r"(End Site\s*\{\s*OFFSET)([^\n}]*)")

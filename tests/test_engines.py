@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from torchsplice.cli import main
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -14,7 +14,7 @@ import torch
 from torchsplice.cli import cli_message, main
 from torchsplice.core.errors import (HINTS, DatabaseError, MotionError, NotLocomotingError, OutputExistsError,
                                      TorchspliceError, UnfinishedJobError)
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.job.config import JobConfig, parse_shard
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec

@@ -24,10 +24,10 @@ from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.core.rotations import quat_to_6d, quat_to_rotmat, random_quat, rotation_6d_to_rotmat
 from torchsplice.data import MotionDataset, collate_motion
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
-from torchsplice.io.npz import NpzExport, clip_of_packed, read_npz, write_npz
-from torchsplice.kinematics.fk import forward_kinematics
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
+from torchsplice.formats.npz import NpzExport, clip_of_packed, read_npz, write_npz
+from torchsplice.core.fk import forward_kinematics
 from cli_helpers import run, error_line
 
 F64 = torch.float64

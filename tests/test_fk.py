@@ -8,8 +8,8 @@ import torch
 from conftest import bvh_params
 from torchsplice.core.rotations import axis_angle_to_quat, quat_to_rotmat, random_quat
 from torchsplice.core.skeleton import Skeleton
-from torchsplice.io.bvh import read_bvh
-from torchsplice.kinematics.fk import end_site_positions, forward_kinematics
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.core.fk import end_site_positions, forward_kinematics
 
 
 def reference_fk(rotations, root_translation, offsets, parents, translations=None):

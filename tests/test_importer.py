@@ -1,4 +1,4 @@
-"""The import pipeline as a library function (:func:`torchsplice.io.importer.import_bvh`), on
+"""The import pipeline as a library function (:func:`torchsplice.formats.importer.import_bvh`), on
 real clips: the report (imported clips, skipped files and why, guessed roles), appending, the
 same database as ``torchsplice import``, and nothing written when nothing can be imported."""
 
@@ -10,8 +10,8 @@ import pytest
 
 from torchsplice.cli import main
 from torchsplice.core.errors import OutputExistsError, TorchspliceError
-from torchsplice.io.database import MotionDatabase
-from torchsplice.io.importer import NothingImportedError, import_bvh
+from torchsplice.store.database import MotionDatabase
+from torchsplice.formats.importer import NothingImportedError, import_bvh
 
 BANDAI = "bandai_namco_research_motiondataset"
 WALKS = ["dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025"]

@@ -24,7 +24,7 @@ import torch
 from torchsplice import __version__
 from torchsplice.cli import main
 from torchsplice.core.motion import Motion
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.core.rotations import quat_angle

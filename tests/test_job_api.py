@@ -9,7 +9,7 @@ import pytest
 
 from torchsplice.cli import main
 from torchsplice.core.errors import OutputExistsError, TorchspliceError
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.job import JobConfig, job_config, merge_job, splice_all
 
 

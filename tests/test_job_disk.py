@@ -20,7 +20,7 @@ import pytest
 
 from cli_helpers import run
 from torchsplice.cli import main
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.job import splice_all
 from torchsplice.job.run import REASONS_SHOWN, _reason_lines
 from torchsplice.job.size import TABLE_BYTES_PER_CLIP, frame_bytes

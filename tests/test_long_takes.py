@@ -15,8 +15,8 @@ import pytest
 import torch
 
 from torchsplice.cli import main
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
 from cli_helpers import run
 
 

@@ -21,7 +21,7 @@ from torchsplice.evaluation.metrics import (
     ArmLegPhase, FootSkate, arm_leg_phase, arm_leg_phase_stats, foot_skate, foot_skate_stats, gait_period,
     leg_length, phase_range, posture_kept, posture_offset,
 )
-from torchsplice.io.bvh import read_bvh
+from torchsplice.formats.bvh import read_bvh
 from torchsplice.sample import sample_motions
 from torchsplice.specs import SkeletonRoles, load_spec
 from torchsplice.splice import SpliceOptions, splice

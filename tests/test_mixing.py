@@ -14,8 +14,8 @@ import re
 import pytest
 
 from torchsplice.cli import main
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from cli_helpers import run

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from torchsplice.cli import main
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 
 REPO = Path(__file__).resolve().parents[1]
 

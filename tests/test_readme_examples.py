@@ -86,7 +86,7 @@ def test_the_h5py_snippet_runs_and_names_the_trajectory_joint(spliced, monkeypat
 
 
 def test_a_single_splice_keeps_its_sources_labels_too(spliced):
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
     from torchsplice.specs import DatasetSpec
     from torchsplice.splice import splice
 
@@ -128,7 +128,7 @@ def test_the_pipeline_snippet_imports_and_splices_like_the_commands(spliced, tmp
 
 def test_the_plugin_snippet_registers_a_method_every_command_takes(spliced):
     """The "Plug-in methods" snippet: the locomotion unchanged, spliced through the registry."""
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
     from torchsplice.splice import splice
     from torchsplice.splice.registry import available_methods, get_method
     from torchsplice.specs import DatasetSpec

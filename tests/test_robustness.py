@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from torchsplice.cli import main
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from cli_helpers import run, error_line
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,7 +38,7 @@ def cli(*argv, env: dict | None = None) -> subprocess.Popen:
 @contextlib.contextmanager
 def held_elsewhere(out: Path):
     """Another process holding the output's lock (as a running command does); yields its PID."""
-    code = ("import sys, time; from torchsplice.io.lock import output_lock; "
+    code = ("import sys, time; from torchsplice.store.lock import output_lock; "
             "output_lock(sys.argv[1], 'holder').acquire(); print('held', flush=True); time.sleep(120)")
     p = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE, text=True,
                          env=dict(os.environ, PYTHONPATH=str(REPO)))
@@ -204,7 +204,7 @@ def test_render_frames_are_bounded(sample_db, tmp_path, capsys):
 # one bad file among good ones
 # --------------------------------------------------------------------------------------------
 def test_an_unexpected_failure_on_one_file_skips_only_that_file(bandai, tmp_path, capsys, monkeypatch):
-    import torchsplice.io.bvh as bvh
+    import torchsplice.formats.bvh as bvh
 
     real = bvh.read_bvh
 
@@ -270,7 +270,7 @@ def test_full_disk_gives_one_line_removes_the_partial_file_and_a_rerun_resumes(s
     # splice-all: some tasks land, then the disk is full; after freeing space the rerun resumes
     reference = small_disk.parent / "reference.h5"
     assert main(["splice-all", str(sample_db), "-o", str(reference), "-q", "--workers", "1", "--batch-size", "4"]) == 0
-    from torchsplice.io.database import _SPACE_MARGIN
+    from torchsplice.store.database import _SPACE_MARGIN
 
     ballast = fill(small_disk, _SPACE_MARGIN / 1e6 + 0.8)  # room for some tasks of the job, not all
     out = small_disk / "out.h5"
@@ -293,7 +293,7 @@ def test_full_disk_gives_one_line_removes_the_partial_file_and_a_rerun_resumes(s
 
 def test_full_disk_simulated(sample_db, tmp_path, capsys, monkeypatch):
     """Where no tmpfs can be mounted: the free space the database sees is made small."""
-    import torchsplice.io.database as database
+    import torchsplice.store.database as database
 
     real = shutil.disk_usage
     monkeypatch.setattr(database.shutil, "disk_usage", lambda p: real(p)._replace(free=1 << 20))

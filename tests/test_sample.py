@@ -18,7 +18,7 @@ import torch
 from torchsplice.core.motion import Motion
 from torchsplice.core.rotations import quat_to_euler
 from torchsplice.sample import SAMPLE_CLIPS, SAMPLE_FPS, sample_motion, sample_motions, sample_skeleton
-from torchsplice.kinematics.fk import end_site_positions, forward_kinematics
+from torchsplice.core.fk import end_site_positions, forward_kinematics
 
 SPEC = Path(__file__).resolve().parents[1] / "datasets_spec" / "sample.toml"
 LOCOMOTION = ("walk_straight", "walk_curve", "turn_sharp", "sidestep", "jog")

@@ -24,7 +24,7 @@ ROLE_KEYS = ("root", "pelvis", "hips", "knees", "feet", "shoulders")
 # --------------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=None)
 def real_skeleton(path: Path) -> Skeleton:
-    from torchsplice.io.bvh import read_bvh
+    from torchsplice.formats.bvh import read_bvh
 
     return read_bvh(path).skeleton
 

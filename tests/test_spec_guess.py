@@ -15,7 +15,7 @@ import pytest
 
 from conftest import real_bvh_files
 from torchsplice.core.errors import SpecError
-from torchsplice.io.bvh import parse_bvh
+from torchsplice.formats.bvh import parse_bvh
 from torchsplice.specs import DatasetSpec, detect_spec, guess_spec, load_spec
 
 # --------------------------------------------------------------------------------------------

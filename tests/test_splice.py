@@ -20,7 +20,7 @@ from torchsplice.core.errors import MotionError, TorchspliceError
 from torchsplice.core.motion import Motion
 from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply, quat_mul
 from torchsplice.evaluation.ground_truth import bandai_namco_triples, upper_body_error
-from torchsplice.io.bvh import read_bvh
+from torchsplice.formats.bvh import read_bvh
 from torchsplice.sample import sample_motions
 from torchsplice.specs import detect_spec, load_spec
 from torchsplice.kinematics.heading import heading_frame, to_heading_frame

@@ -9,8 +9,8 @@ import torch
 
 from torchsplice.cli import build_parser, main
 from torchsplice.core.rotations import quat_angle
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
 from torchsplice.specs import load_spec
 from torchsplice.splice import AlignOptions, SpliceOptions, splice
 
@@ -137,7 +137,7 @@ def test_in_place_action_stands_and_in_place_locomotion_is_refused_without_force
     code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WALK, "--action", WAVE, "-o", out)
     assert code == 0, err
     assert "standing action (loop; acting limbs: left_arm)" in stdout
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     with MotionDatabase.open(bandai_db) as db:
         assert read_bvh(out).num_frames == db.read(WALK).num_frames  # as long as the locomotion

@@ -16,9 +16,9 @@ import torch
 
 from torchsplice.cli import main
 from torchsplice.core.rotations import quat_apply, quat_conj
-from torchsplice.io.bvh import read_bvh
+from torchsplice.formats.bvh import read_bvh
 from torchsplice.specs import load_spec
-from torchsplice.kinematics.fk import forward_kinematics
+from torchsplice.core.fk import forward_kinematics
 from torchsplice.splice import SpliceOptions, splice
 from torchsplice.splice.standing import (ACTING_THRESHOLD, LOOP_BLEND_SECONDS, action_times, arm_chains,
                                          parse_limbs)
@@ -191,7 +191,7 @@ def test_the_default_job_on_bandai_skips_no_standing_action(mocap_dir, tmp_path,
                "--actions", "role:action", "--method", "splice,naive,cpmc"])
     text = capsys.readouterr().out
     assert rc == 0
-    from torchsplice.io.database import MotionDatabase
+    from torchsplice.store.database import MotionDatabase
 
     with MotionDatabase.open(db) as src:
         t = src.table()

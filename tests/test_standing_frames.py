@@ -18,7 +18,7 @@ import torch
 
 from torchsplice.cpu import get_threads, set_threads
 from torchsplice.cpu.bank import ClipBank, standing_bank
-from torchsplice.io.bvh import read_bvh
+from torchsplice.formats.bvh import read_bvh
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.splice import SpliceOptions, splice_standing

@@ -256,7 +256,7 @@ def test_bad_input_is_refused():
 
 
 def test_recovers_a_known_warp_of_a_real_clip(mocap_dir):
-    from torchsplice.io.bvh import read_bvh
+    from torchsplice.formats.bvh import read_bvh
 
     path = mocap_dir / "bandai_namco_research_motiondataset" / "dataset-2_walk_normal_008.bvh"
     if not path.is_file():

@@ -1,4 +1,4 @@
-"""Length units: converting clips between units (``torchsplice.io.units``) and ``import --units``.
+"""Length units: converting clips between units (``torchsplice.ops.units``) and ``import --units``.
 
 Known answers: a CMU clip (spec units ``cmu``, 1/0.45 inch) converted to centimetres has legs
 2.54 / 0.45 times as long, forward-kinematics positions scaled by exactly that factor,
@@ -14,10 +14,10 @@ import pytest
 import torch
 
 from torchsplice.core.errors import TorchspliceError
-from torchsplice.io.bvh import read_bvh
-from torchsplice.io.database import MotionDatabase
+from torchsplice.formats.bvh import read_bvh
+from torchsplice.store.database import MotionDatabase
 from torchsplice.specs import UNITS, detect_spec, load_spec
-from torchsplice.io.units import convert_units, scale_motion, unit_factor
+from torchsplice.ops.units import convert_units, scale_motion, unit_factor
 from torchsplice.job.plan import leg_length
 from cli_helpers import run
 

@@ -22,7 +22,7 @@ from test_render import axes_cycled, ten_seconds
 
 from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
-from torchsplice.io.database import MotionDatabase
+from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motion
 from torchsplice.specs import load_spec
 from torchsplice.viz.viewer import build_viewer, clip_payload, dequantize, quantize, write_viewer

@@ -11,7 +11,7 @@ line) starts without loading torch until it is needed.
 
 import os as _os
 
-__version__ = "0.1.0"
+from .core.version import __version__
 
 # Bit-identical results whatever the machine is doing: MKL (torch's BLAS on x86) may pick
 # another code path for the same matrix product depending on how its inputs happen to be
@@ -26,7 +26,7 @@ __all__ = [
 ]
 
 _LAZY = {
-    "Motion": "core.motion", "Skeleton": "core.skeleton", "forward_kinematics": "kinematics.fk",
+    "Motion": "core.motion", "Skeleton": "core.skeleton", "forward_kinematics": "core.fk",
     "TorchspliceError": "core.errors", "BVHError": "core.errors", "DatabaseError": "core.errors",
     "SpecError": "core.errors", "MotionError": "core.errors",
 }

@@ -16,7 +16,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from . import __version__
+from .core.version import __version__
 from .core.errors import OutputExistsError, TorchspliceError
 
 __all__ = ["main", "build_parser"]
@@ -69,7 +69,7 @@ _OUTPUTS = {  # kind of output: (suffixes, what it is)
 def _output(args, kind: str, inputs=()) -> Path:
     """``args.output`` checked before any work: the right suffix for ``kind``, not a folder,
     not one of ``inputs``, and not an existing file unless ``--force``."""
-    from .io.atomic import check_output
+    from .store.atomic import check_output
 
     suffixes, what = _OUTPUTS[kind]
     return check_output(args.output, suffixes, what, inputs=inputs, overwrite=getattr(args, "force", False))
@@ -78,7 +78,7 @@ def _output(args, kind: str, inputs=()) -> Path:
 @contextlib.contextmanager
 def _locked(out: Path, args):
     """Hold the output's lock while the command writes it: a second writer is refused at once."""
-    from .io.lock import output_lock
+    from .store.lock import output_lock
 
     with output_lock(out, "torchsplice " + shlex.join(getattr(args, "argv", []))):
         if out.exists() and not getattr(args, "force", False):  # written meanwhile by another process
@@ -106,7 +106,7 @@ def _n(count: int, word: str) -> str:
 # sample
 # --------------------------------------------------------------------------------------------
 def cmd_sample(args) -> int:
-    from .io.database import MotionDatabase
+    from .store.database import MotionDatabase
     from .sample import sample_motions
     from .specs import load_spec
 
@@ -130,7 +130,7 @@ def cmd_sample(args) -> int:
 # import
 # --------------------------------------------------------------------------------------------
 def cmd_import(args) -> int:
-    from .io.importer import NothingImportedError, import_bvh
+    from .formats.importer import NothingImportedError, import_bvh
 
     def skipped_lines(skipped):
         for f, why in skipped:
@@ -173,7 +173,7 @@ def _at(path, why: str) -> str:
 
 def _one_line(message, path=None, limit: int = 300) -> str:
     """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
-    from .io.importer import one_line
+    from .formats.importer import one_line
 
     return one_line(message, path, limit)
 
@@ -186,7 +186,7 @@ def _labels_text(labels: dict) -> str:
 
 
 def cmd_info(args) -> int:
-    from .io.database import MotionDatabase
+    from .store.database import MotionDatabase
 
     with MotionDatabase.open(args.database) as db:
         s = db.summary()
@@ -217,8 +217,8 @@ def cmd_info(args) -> int:
 def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> tuple[list[Path], Path | None]:
     """The files ``export`` writes (one per clip, or one), checked before any work, and the folder
     to create (``None`` if none): ``-o`` is a file for one clip or a packed file, else a folder."""
-    from .io.atomic import check_output
-    from .io.npz import clip_filenames
+    from .store.atomic import check_output
+    from .formats.npz import clip_filenames
 
     kind = "npz" if suffix == ".npz" else "bvh"
     out = Path(args.output)
@@ -242,7 +242,7 @@ def _export_targets(args, names: list[str], suffix: str, single_file: bool) -> t
 
 def _make_folder(folder: Path) -> None:
     """Create the output folder of an export; an OS error (permission, full disk) is one line."""
-    from .io.atomic import os_error_message
+    from .store.atomic import os_error_message
 
     try:
         folder.mkdir(exist_ok=True)
@@ -263,8 +263,8 @@ def _all_or_nothing(args, folder: Path | None):
     export to it is refused at once."""
     import os
 
-    from .io.atomic import os_error_message
-    from .io.lock import output_lock, remove_stale_temporaries, temp_path
+    from .store.atomic import os_error_message
+    from .store.lock import output_lock, remove_stale_temporaries, temp_path
 
     staged: dict[Path, Path] = {}
 
@@ -300,9 +300,9 @@ def _all_or_nothing(args, folder: Path | None):
 def cmd_export(args) -> int:
     import torch
 
-    from .io.bvh import write_bvh
-    from .io.database import MotionDatabase
-    from .io.npz import select_rows
+    from .formats.bvh import write_bvh
+    from .store.database import MotionDatabase
+    from .formats.npz import select_rows
 
     if args.all == bool(args.clips):
         raise TorchspliceError("name the clips to export, or pass --all (not both)" if args.all else
@@ -317,7 +317,7 @@ def cmd_export(args) -> int:
         except ValueError:
             raise TorchspliceError(f"--skeleton: expected skeleton ids such as 0 or 0,1, got {args.skeleton!r}") from None
     if fmt == "npz":
-        from .io.npz import NpzExport, write_npz
+        from .formats.npz import NpzExport, write_npz
 
         export = NpzExport(args.database, None if args.all else args.clips, features=args.features, skeletons=skeletons)
         names = export.names
@@ -436,8 +436,8 @@ def _acting_limbs(args):
 def cmd_splice(args) -> int:
     import json as _json
 
-    from .io.bvh import write_bvh
-    from .io.database import MotionDatabase
+    from .formats.bvh import write_bvh
+    from .store.database import MotionDatabase
     from .splice import splice
     from .splice.references import find_reference
     from .splice.registry import get_method
@@ -533,7 +533,7 @@ def _add_standing_options(s) -> None:
 
 
 def cmd_plot_alignment(args) -> int:
-    from .io.database import MotionDatabase
+    from .store.database import MotionDatabase
     from .viz.alignment import plot_alignment
 
     out = _output(args, "plot", inputs=[args.database])
@@ -586,7 +586,7 @@ def cmd_evaluate(args) -> int:
         agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
                                 max_rows=args.max_rows)
     if not args.quiet:
-        from .io.database import MotionDatabase
+        from .store.database import MotionDatabase
 
         with MotionDatabase.open(args.database) as db:
             u = db.attrs.get("units") or "units"
@@ -730,7 +730,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Write clips (by name, as `info` lists them, or --all) as BVH files with the "
                                    "skeleton's original channel layout, or as .npz: local rotations (WXYZ), root "
                                    "translation, trajectory, local translations, world positions, fps, joints, parents, "
-                                   "offsets and labels (layout: torchsplice/io/npz.py). -o is a file for one clip (or "
+                                   "offsets and labels (layout: torchsplice/formats/npz.py). -o is a file for one clip (or "
                                    "--packed), else a folder, one file per clip.")
     s.add_argument("database", help="motion database (.h5)")
     s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names")

@@ -154,7 +154,7 @@ class Motion:
 
     def global_positions(self) -> torch.Tensor:
         """``(T, J, 3)`` world positions of the joints, by forward kinematics."""
-        from ..kinematics.fk import forward_kinematics
+        from ..core.fk import forward_kinematics
 
         pos, _ = forward_kinematics(
             self.rotations, self.root_translation, self.skeleton.offsets.to(self.rotations),

@@ -19,7 +19,9 @@ bits on the same grid; the whole splice agrees to float32 rounding).
 
 Modules: :mod:`.quat` (quaternion algebra on tuples), :mod:`.fk`, :mod:`.grid` (distance
 grids, phase crop), :mod:`.timewarp` (the DP), :mod:`.curve` (B-spline fit, resampling),
-:mod:`.horn`, :mod:`.splice` (whole pairs, in parallel), :mod:`.bank` (the Python side).
+:mod:`.horn`, :mod:`.splice` (whole pairs, in parallel), :mod:`.standing` (standing actions),
+:mod:`.bank` (the Python side), :mod:`.preload` (loading them before a fork). This package imports
+nothing above the skeleton roles: the splicer calls it through :mod:`torchsplice.splice.backends`.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import os
 import shutil
 from pathlib import Path
 
-__all__ = ["available", "set_threads", "get_threads", "cache_dir"]
+__all__ = ["available", "set_threads", "get_threads", "cache_dir", "warm"]
 
 
 def _kernel_hash() -> str:
@@ -78,6 +80,11 @@ def cache_dir() -> Path:
 
 
 _CACHE = _set_cache_dir()
+
+
+def warm() -> bool:
+    """Whether this version's kernels are already compiled and cached."""
+    return any(cache_dir().rglob("*.nbi"))
 
 _AVAILABLE: bool | None = None
 

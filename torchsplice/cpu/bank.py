@@ -218,7 +218,7 @@ def _note_first_compile() -> None:
         _NOTED = True
         import sys
 
-        from .warmup import warm
+        from . import warm
 
         if not warm() and sys.stderr.isatty():
             print("torchsplice: compiling the CPU splicer for this machine (once; about a minute)", file=sys.stderr, flush=True)

@@ -92,8 +92,8 @@ from torch.utils.data import Dataset
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.rotations import quat_to_6d
 from ..core.skeleton import Skeleton
-from ..io.database import MotionDatabase
-from ..kinematics.fk import forward_kinematics
+from ..store.database import MotionDatabase
+from ..core.fk import forward_kinematics
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "FeatureStatistics", "BUILTIN_FEATURES", "ITEM_KEYS"]
 
@@ -670,7 +670,7 @@ class MotionDataset(Dataset):
         units = sorted({self.units.get(k, "") for k in ks})
         if len(units) > 1:
             raise DatasetError(f"{self.path}: statistics need clips of one unit; the selected clips are in {units} "
-                               "(convert them on import, see torchsplice.io.units, or filter with where={'skeleton': k})")
+                               "(convert them on import, see torchsplice.ops.units, or filter with where={'skeleton': k})")
         same = set(names) <= set(self.features) and self.dtype == torch.float64
         ds = self if same else MotionDataset(self.path, clips=self.indices.tolist(), features=names, dtype=torch.float64)
         order = np.argsort(ds._skel, kind="stable")  # batches of one skeleton: one FK each

@@ -32,9 +32,9 @@ import torch
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
 from ..core.names import printable
-from ..io.atomic import atomic_path
-from ..io.database import MotionDatabase
-from ..io.npz import clip_filenames
+from ..store.atomic import atomic_path
+from ..store.database import MotionDatabase
+from ..formats.npz import clip_filenames
 from ..specs import DatasetSpec, detect_spec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import best_posture_error, upper_body_error

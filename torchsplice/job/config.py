@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import TorchspliceError
-from ..io.atomic import same_file
-from ..io.database import COMPRESSIONS
+from ..store.atomic import same_file
+from ..store.database import COMPRESSIONS
 from ..splice.heck import AlignOptions
 from ..splice.api import SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules

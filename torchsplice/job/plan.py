@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from ..core.version import __version__
 from ..core.errors import TorchspliceError, UnfinishedJobError
-from ..io.lock import temp_path
+from ..store.lock import temp_path
 from ..specs import DatasetSpec, SkeletonRoles, detect_spec
 from ..splice import SpliceOptions
 from ..splice.clips import ClipTensors, clips_to_tensors

@@ -54,7 +54,7 @@ from pathlib import Path
 import torch
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
-from ..io.lock import FileLock, check_name_length, remove_stale_temporaries
+from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from ..splice.registry import get_method
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .engines import EngineContext, make_engine
@@ -670,7 +670,7 @@ def _open_output(sink, config: JobConfig, plan: Plan, work: Path, run: dict, ove
 
 def _checkpointed_tasks(work: Path, plan: Plan) -> int:
     """How many tasks the staged output's last checkpoint holds (0 when none or another plan's)."""
-    from ..io.database import MotionDatabase
+    from ..store.database import MotionDatabase
 
     note = MotionDatabase.checkpoint_note(work / STAGING) or {}
     tasks = note.get("tasks")
@@ -729,7 +729,7 @@ def _source_skeleton(plan: Plan, g: int, sources: Sources):
 
 def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
     """A locomotion group's skeleton and spec, from the first of its shards that holds clips."""
-    from ..io.database import MotionDatabase
+    from ..store.database import MotionDatabase
     from ..specs import DatasetSpec
 
     for t in plan.tasks:

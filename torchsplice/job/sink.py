@@ -10,7 +10,7 @@ call the methods of :class:`Sink`, so another output format plugs in here withou
 them.
 
 :class:`HDF5Sink` writes torchsplice motion databases (resumable ones, see
-:meth:`~torchsplice.io.database.MotionDatabase.checkpoint`). Shards are written without
+:meth:`~torchsplice.store.database.MotionDatabase.checkpoint`). Shards are written without
 compression (they live until the merge reads them, seconds later) unless the output is
 *virtual*: then they are compressed like the output and stay beside it in ``OUT.shards/``,
 and the output's frame datasets are HDF5 virtual datasets over them, so nothing is copied.
@@ -22,7 +22,7 @@ import json
 from pathlib import Path
 
 from ..core.errors import DatabaseError
-from ..io.database import MotionDatabase
+from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.motion import Motion
-from ..io.database import MotionDatabase
+from ..store.database import MotionDatabase
 from ..splice.clips import resample_motion
 
 __all__ = ["Sources", "clip_key", "split_key"]

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
-from ..io.lock import temp_path
+from ..store.lock import temp_path
 from ..splice import splice_pairs, splice_standing
 from ..splice.api import bank_kwargs, spliced_labels
 from ..splice.registry import MethodFailedError, get_method, load_plugins
@@ -132,7 +132,7 @@ class Part:
 
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
     """Splice the pairs of ``task`` (see the module docstring)."""
-    from .. import __version__
+    from ..core.version import __version__
 
     if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != config.backend():
         raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {config.backend()} splicer, but the job "

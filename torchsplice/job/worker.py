@@ -16,7 +16,7 @@ try:
     from ..cpu import available
 
     if available():
-        from ..cpu.warmup import preload
+        from ..cpu.preload import preload
 
         preload()
 except Exception:  # a worker then loads the kernels itself, on first use

@@ -1,5 +1,5 @@
 """Kinematics: batched forward kinematics and quantities derived from joint positions."""
 
-from .fk import end_site_positions, forward_kinematics
+from ..core.fk import end_site_positions, forward_kinematics
 
 __all__ = ["forward_kinematics", "end_site_positions"]

@@ -17,7 +17,7 @@ from ..align.curve import interpolate_frames, resample_times, slerp_frames
 from ..core.errors import MotionError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
-from ..kinematics.fk import forward_kinematics
+from ..core.fk import forward_kinematics
 
 __all__ = ["ClipTensors", "clips_to_tensors", "resample_motion", "check_pair", "check_clip", "shift_frames", "with_fk", "without_fk"]
 

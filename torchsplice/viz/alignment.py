@@ -14,7 +14,7 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
-from ..io.atomic import atomic_path
+from ..store.atomic import atomic_path
 from ..specs import DatasetSpec
 from ..splice import SpliceOptions, splice
 from ..splice.clips import clips_to_tensors, resample_motion

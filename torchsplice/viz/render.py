@@ -33,7 +33,7 @@ column shows another frame of it. Left and right are named in a legend above the
 GIFs default to :data:`GIF_FPS` and :data:`GIF_DPI` and draw the grid's crossings as dots
 (lines sliding under a followed figure would make most of the file). Figures are made with :class:`matplotlib.figure.Figure` on the Agg canvas
 directly (no pyplot, no display, no global backend switch) and are released when done. Every
-output is written atomically (:func:`~torchsplice.io.atomic.atomic_path`).
+output is written atomically (:func:`~torchsplice.store.atomic.atomic_path`).
 """
 
 from __future__ import annotations
@@ -52,8 +52,8 @@ from matplotlib.animation import FFMpegWriter, PillowWriter
 
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
-from ..io.atomic import atomic_path
-from ..kinematics.fk import end_site_positions, forward_kinematics
+from ..store.atomic import atomic_path
+from ..core.fk import end_site_positions, forward_kinematics
 
 __all__ = ["render", "project", "view_rotation", "SUPPORTED_SUFFIXES"]
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.motion import Motion
-from ..io.database import MotionDatabase
+from ..store.database import MotionDatabase
 from ..specs import DatasetSpec, detect_spec
 
 __all__ = ["source_databases", "recorded_sources", "SourceClips", "clip_spec", "read_clips"]

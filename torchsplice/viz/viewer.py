@@ -40,8 +40,8 @@ import numpy as np
 
 from ..core.errors import MotionError, TorchspliceError
 from ..core.motion import Motion
-from ..io.atomic import atomic_path
-from ..io.database import MotionDatabase
+from ..store.atomic import atomic_path
+from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .render import _canonical_axes, _check_up_axis, _head, figure_points
 from .sources import SourceClips, clip_spec, source_databases

@@ -82,7 +82,7 @@ def _exit_with(driver: int) -> None:
     import threading
     import time
 
-    from ...io.lock import pid_alive
+    from ...store.lock import pid_alive
 
     def watch():
         while pid_alive(driver):

@@ -1,7 +1,7 @@
 """Importing BVH files into a motion database: the whole ``torchsplice import`` pipeline as one
 function, :func:`import_bvh`, returning an :class:`ImportReport`.
 
-    from torchsplice.io.importer import import_bvh
+    from torchsplice.formats.importer import import_bvh
     report = import_bvh(["path/to/bandai_namco/"], "bandai.h5", spec="bandai_namco")
     report.imported          # [ImportedClip(name, path, frames, windows), ...]
     report.skipped           # [(path, why), ...]: files that could not be used, the others landed
@@ -153,7 +153,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
         split: cut takes longer than 1.25 x ``split`` seconds into windows of ``split`` seconds
             overlapping by ``split_overlap`` (named ``NAME#000``, ...).
         units: convert every clip's lengths from its spec's units to these (``"cm"``, ``"m"``,
-            ... see :mod:`torchsplice.io.units`), so that datasets share one database;
+            ... see :mod:`torchsplice.ops.units`), so that datasets share one database;
             ``None`` keeps the files' own units.
         progress: ``progress(iterable, total, desc) -> iterable`` to show progress (e.g. tqdm).
 
@@ -165,10 +165,10 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     import torch
 
     from ..specs import DatasetSpec, detect_spec, load_spec
-    from .atomic import check_output
+    from ..store.atomic import check_output
     from .bvh import read_bvh
-    from .database import MotionDatabase
-    from .units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
+    from ..store.database import MotionDatabase
+    from ..ops.units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
     if units is not None and units not in CONVERTIBLE_UNITS:  # a known unit, checked before any work
         why = f"unknown length unit {units!r}" if units not in UNITS else f"cannot convert to {units!r} units"

@@ -49,7 +49,7 @@ from ..core.motion import Motion
 from ..core.names import CONTROL
 from ..core.rotations import euler_to_quat, quat_to_rotmat, rotmat_to_euler
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
-from .atomic import atomic_path
+from ..store.atomic import atomic_path
 
 __all__ = ["read_bvh", "parse_bvh", "write_bvh", "format_bvh", "BVHWarning"]
 

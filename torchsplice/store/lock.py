@@ -112,7 +112,7 @@ class FileLock:
 
     Re-entrant within a process: a second :class:`FileLock` on a path this process already
     holds shares the hold (a job that locks its output, then writes it through
-    :class:`~torchsplice.io.database.MotionDatabase`, which locks it too).
+    :class:`~torchsplice.store.database.MotionDatabase`, which locks it too).
     """
 
     def __init__(self, path: Path, what: str, command: str = ""):

@@ -94,8 +94,8 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
-from .atomic import atomic_path
-from .database import MotionDatabase
+from ..store.atomic import atomic_path
+from ..store.database import MotionDatabase
 
 __all__ = ["NPZ_FORMAT", "NPZ_VERSION", "FRAME_ARRAYS", "FEATURE_SETS", "NpzExport", "write_npz", "read_npz",
            "clip_of_packed", "clip_filename", "clip_filenames", "select_rows"]

@@ -13,8 +13,8 @@ from typing import Sequence
 
 import torch
 
-from ..core.rotations import quat_apply
-from ..core.skeleton import hierarchy_levels
+from .rotations import quat_apply
+from .skeleton import hierarchy_levels
 
 __all__ = ["forward_kinematics", "end_site_positions"]
 

@@ -1,6 +1,6 @@
 """HDF5 files written across runs: what lets a killed writer's file be reopened where it stood.
 
-A resumable database (:meth:`~torchsplice.io.database.MotionDatabase.create` with a
+A resumable database (:meth:`~torchsplice.store.database.MotionDatabase.create` with a
 ``staging`` path) is written in HDF5's single-writer/multiple-reader (SWMR) mode, whose
 writes are ordered so that the file on disk is always consistent: a process killed at any
 moment leaves a file that opens, holding at least everything written before its last flush.

@@ -37,7 +37,7 @@ original only when closed cleanly. An interrupted write never leaves a file that
 complete at the target path.
 
 A *resumable* database (``create(..., staging=PATH)``) is written at a path of the caller's
-that outlives the process, in HDF5's SWMR mode (see :mod:`torchsplice.io.resumable`):
+that outlives the process, in HDF5's SWMR mode (see :mod:`torchsplice.store.resumable`):
 :meth:`MotionDatabase.checkpoint` makes everything appended so far survive a killed process,
 and :meth:`MotionDatabase.resume` reopens the file at its last checkpoint, so that a long
 write killed at any moment carries on where it stood instead of starting again.
@@ -62,7 +62,7 @@ import h5py
 import numpy as np
 import torch
 
-from .. import __version__
+from ..core.version import __version__
 from ..core.errors import DatabaseError, OutputExistsError
 from ..core.motion import Motion
 from ..core.names import CONTROL, control_character, printable

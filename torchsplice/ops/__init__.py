@@ -1,0 +1,1 @@
+"""Transforms on clips: unit conversion (:mod:`.units`)."""

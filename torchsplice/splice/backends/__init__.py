@@ -1,0 +1,1 @@
+"""Splicing backends: one interface for a batch of pairs (filled in below)."""
