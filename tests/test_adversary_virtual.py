@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import torchsplice.job.run as run_module
+import torchsplice.job.shards as run_module
 from torchsplice.cli import main
 from torchsplice.store.database import MotionDatabase
 
@@ -47,7 +47,7 @@ def references(sample_db, tmp_path_factory):
 
 
 def interrupt_after(monkeypatch, name: str, first: int | None = None):
-    """Make ``torchsplice.job.run.<name>`` stop the process (as Ctrl-C) once it has run (on
+    """Make ``torchsplice.job.shards.<name>`` stop the process (as Ctrl-C) once it has run (on
     the ``first`` shards only, when given)."""
     original = getattr(run_module, name)
 
@@ -66,7 +66,7 @@ def test_a_virtual_job_killed_while_replacing_an_output_leaves_one_readable_then
     want_splice, want_naive = references
     out = tmp_path / "v.h5"
     assert job(sample_db, out, "splice") == 0
-    interrupt_after(monkeypatch, "_install_shards", first=1 if kill == "mid-install" else None)
+    interrupt_after(monkeypatch, "install_shards", first=1 if kill == "mid-install" else None)
     assert job(sample_db, out, "naive", "--force") == 130
     assert same(frames(out), want_splice)  # the old output, whole and its own
     monkeypatch.undo()
@@ -83,7 +83,7 @@ def test_a_merge_killed_while_replacing_an_output_leaves_one_readable_then_finis
     out = tmp_path / "bv.h5"
     assert job(sample_db, out, "splice") == 0
     assert job(sample_db, out, "naive", "--shard", "1/1") == 0
-    interrupt_after(monkeypatch, "_install_shards")
+    interrupt_after(monkeypatch, "install_shards")
     assert main(["merge", str(out), "-f"]) == 130
     assert same(frames(out), want_splice)
     monkeypatch.undo()

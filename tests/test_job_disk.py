@@ -22,7 +22,7 @@ from cli_helpers import run
 from torchsplice.cli import main
 from torchsplice.store.database import MotionDatabase
 from torchsplice.job import splice_all
-from torchsplice.job.run import REASONS_SHOWN, _reason_lines
+from torchsplice.job.summary import REASONS_SHOWN, reason_lines
 from torchsplice.job.size import TABLE_BYTES_PER_CLIP, frame_bytes
 
 REPO = Path(__file__).resolve().parents[1]
@@ -104,7 +104,7 @@ def test_many_clips_of_one_kind_are_summed_up_in_the_summary():
     skipped = {f"clip{k:02d} does not locomote (no alternating steps; {{force_locomotion}} splices it)": 10 + k
                for k in range(REASONS_SHOWN + 4)}
     skipped["a clip is not spliced onto itself"] = 3
-    lines = _reason_lines(skipped, lambda why: why.replace("{force_locomotion}", "--force-locomotion"))
+    lines = reason_lines(skipped, lambda why: why.replace("{force_locomotion}", "--force-locomotion"))
     assert len(lines) == REASONS_SHOWN + 2
     assert lines[0].startswith(f"  {10 + REASONS_SHOWN + 3} x clip{REASONS_SHOWN + 3:02d} does not locomote")
     rest = sum(10 + k for k in range(4))  # the four least frequent

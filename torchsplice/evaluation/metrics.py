@@ -34,7 +34,7 @@ import torch
 
 from ..core.motion import Motion
 from ..specs import SkeletonRoles
-from ..kinematics.contacts import _floor_speed, foot_contacts
+from ..kinematics.contacts import floor_speed, foot_contacts
 from ..kinematics.heading import heading_frame, lateral_axis, to_heading_frame
 from ..splice.clips import ClipTensors, clips_to_tensors
 
@@ -180,7 +180,7 @@ def foot_skate_stats(clips: Clips, roles: SkeletonRoles, fps=None, height_ratio:
     pts = b.positions[:, :, list(joints)]
     leg = leg_length(b.positions, roles)
     contact = foot_contacts(pts, b.lengths, b.fps, leg, roles.up_axis, height_ratio, speed_ratio)
-    speed = _floor_speed(pts, b.fps, roles.up_axis, b.lengths)
+    speed = floor_speed(pts, b.fps, roles.up_axis, b.lengths)
     n = contact.sum((1, 2))
     total = (speed * contact).sum((1, 2)) / n.clamp_min(1)
     frac = n.to(pts.dtype) / (b.lengths.to(pts.dtype) * len(joints))

@@ -21,7 +21,7 @@ from ..core.errors import TorchspliceError
 from ..store.atomic import same_file
 from ..store.database import COMPRESSIONS
 from ..splice.heck import AlignOptions
-from ..splice.api import SpliceOptions
+from ..splice.options import SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules
 from .engines import available_engines
 
@@ -178,9 +178,16 @@ class JobConfig:
 
     def backend(self) -> str:
         """``"compiled"`` (the CPU splicer) or ``"torch"`` (CUDA, or no numba)."""
-        from ..splice.api import resolve_backend
+        from ..splice.backends import resolve_backend
 
-        return resolve_backend(SpliceOptions(device=self.device))
+        return resolve_backend("auto", self.device)
+
+    def splice_backend(self, method: str | None = None):
+        """The :class:`~torchsplice.splice.backends.Backend` that splices ``method`` in this job
+        (``None``: the job's own, :meth:`backend`)."""
+        from ..splice.backends import backend_for, get_backend
+
+        return get_backend(self.backend()) if method is None else backend_for(get_method(method), self.backend())
 
     def plan_key(self) -> dict:
         """The settings a resumed run must share with the run it resumes (the backend too: the

@@ -280,16 +280,16 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
     """Clip key -> :class:`LocomotionCheck`, each clip at its own frame rate (from its group's bank
     when the rates agree and the compiled splicer runs, else by torch FK)."""
     out: dict = {}
-    landmarks = config.align_options().landmarks
+    options, backend = config.splice_options(), config.splice_backend()
     for n, g in enumerate(groups):
         roles = g.roles(sk_l[g.skeleton])
         # clips in order of length, so that each padded batch holds clips of about one length
         native = sorted((k for k in g.clips if clips[k]["fps"] == g.fps and k not in out), key=lambda k: clips[k]["frames"])
-        if config.backend() == "compiled":
-            bank, index = sources.bank(n, g.clips, g.fps, roles, landmarks)
+        if backend.prepares_once:
+            bank, index = sources.bank(n, g.clips, g.fps, roles, options, backend)
             for b in range(0, len(native), 256):
                 chunk = native[b:b + 256]
-                pos, lengths = bank.padded_positions([index[k] for k in chunk])
+                pos, lengths = backend.positions(bank, [index[k] for k in chunk])
                 for k, chk in zip(chunk, check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, g.fps)):
                     out[k] = chk
         rest: dict[float, list[str]] = {}
@@ -467,7 +467,7 @@ def _task_size(c: JobConfig, pairs, clips, groups, same, tl, ta) -> int:
     fps = max(g.fps for g in groups)
     t_a = max(int(ta["length"][p.action] * fps / float(ta["fps"][p.action])) + 1 for p in pairs)
     J = 64  # a generous joint count: the budget is a bound, not an estimate
-    if c.backend() == "compiled":
+    if c.splice_backend().prepares_once:  # the compiled splicer: one pair's tables per thread, float64
         left = c.memory_budget_mb * 2**20 - 11 * t_l * t_a
         per_pair = 2 * t_l * (J * 28 + 16) + 16 * (t_l + t_a)
         return int(min(256, max(1, left // per_pair)))

@@ -2,7 +2,8 @@
 
 Clips are keyed ``"L:ROW"`` (the locomotion database) and ``"A:ROW"`` (the action database;
 ``"L:ROW"`` as well when both are one file). A *group* is a locomotion skeleton and frame rate;
-its bank (:class:`~torchsplice.cpu.bank.ClipBank`) holds the group's locomotions and every
+its bank (the clips as a backend prepares them, :meth:`~torchsplice.splice.backends.Backend.prepare`:
+for the compiled splicer a :class:`~torchsplice.cpu.bank.ClipBank`) holds the group's locomotions and every
 action and reference of the same topology, resampled to the group's rate, with forward
 kinematics and grid features computed once per clip. Groups of one topology, spec and rate
 share one bank, holding all their clips (:meth:`Sources.share_banks`): a clip's arrays do not
@@ -48,6 +49,7 @@ class Sources:
         self.dbs: dict = dict(dbs or {})
         self.motions: dict[str, Motion] = {}
         self.banks: dict = {}
+        self.backends: dict = {}  # bank -> the backend that prepared it
         self.shared: dict[int, tuple[int, list[str]]] = {}  # group -> (its bank, the bank's clips)
         self.bank_dir = bank_dir  # where the driver's banks are, as files (None: built here)
         self.bank_tag = bank_tag  # what the banks there must have been made for (the plan's digest)
@@ -102,22 +104,20 @@ class Sources:
             for n in ns:
                 self.shared[n] = (ns[0], keys)
 
-    def bank(self, group_id: int, keys: list[str], fps: float, roles, landmarks) -> tuple:
-        """``(bank, index)`` of a group, built (or mapped from :attr:`bank_dir`) on first use:
-        ``index`` maps a clip key to its bank row."""
+    def bank(self, group_id: int, keys: list[str], fps: float, roles, options, backend) -> tuple:
+        """``(bank, index)`` of a group: its clips as ``backend`` prepares them (with ``options``),
+        built (or mapped from :attr:`bank_dir`) on first use; ``index`` maps a clip key to its row."""
         bank_id, keys = self.shared.get(group_id, (group_id, keys))
         if bank_id not in self.banks:
-            from ..cpu.bank import ClipBank
-
             folder = self._bank_folder(bank_id)
             if folder is not None and self._bank_made_here(folder):
-                bank = ClipBank.load(folder)
+                bank = backend.load(folder)
             else:
                 self.load(keys)
                 motions = [self.motions[k] for k in keys]
-                bank = ClipBank.from_motions([resample_motion(m, fps) for m in motions], motions[0].skeleton, roles,
-                                             landmarks)
+                bank = backend.prepare([resample_motion(m, fps) for m in motions], motions[0].skeleton, roles, options)
             self.banks[bank_id] = (bank, {k: i for i, k in enumerate(keys)})
+            self.backends[bank_id] = backend
         return self.banks[bank_id]
 
     def _bank_folder(self, bank_id: int) -> Path | None:
@@ -135,8 +135,6 @@ class Sources:
         this process holds them once too."""
         import shutil
 
-        from ..cpu.bank import ClipBank
-
         self.bank_dir, self.bank_tag = Path(folder), tag
         for bank_id, (bank, index) in list(self.banks.items()):
             if not isinstance(bank_id, int):
@@ -144,13 +142,13 @@ class Sources:
             target = self._bank_folder(bank_id)
             if not self._bank_made_here(target):
                 shutil.rmtree(target, ignore_errors=True)  # another plan's
-                bank.save(target)
+                self.backends[bank_id].save(bank, target)
                 (target / "made_for").write_text(tag)
-            self.banks[bank_id] = (ClipBank.load(target), index)
+            self.banks[bank_id] = (self.backends[bank_id].load(target), index)
 
     def unsaved_bank_bytes(self, folder: Path) -> int:
         """Bytes :meth:`save_banks` would write into ``folder`` now (banks not there yet)."""
-        return sum(sum(a.nbytes for a in (b.rot, b.trans, b.pos, b.grot, *b.feat)) for k, (b, _) in self.banks.items()
+        return sum(self.backends[k].prepared_bytes(b) for k, (b, _) in self.banks.items()
                    if isinstance(k, int) and not (Path(folder) / f"bank-{k}" / "made_for").exists())
 
     def release_clips(self, keep=()) -> None:

@@ -22,9 +22,9 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..store.lock import temp_path
-from ..splice import splice_pairs, splice_standing
-from ..splice.api import bank_kwargs, spliced_labels
-from ..splice.registry import MethodFailedError, get_method, load_plugins
+from ..splice.api import spliced_labels
+from ..splice.clips import resample_motion
+from ..splice.registry import get_method, load_plugins
 from .config import JobConfig
 from .plan import Plan, Task
 from .sources import Sources
@@ -144,62 +144,31 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     keys = [plan.pair_keys(p, plan.same_db) for p in pairs]
     skeleton = sources.motion(group.clips[0]).skeleton
     roles = group.roles(skeleton)
-    align = config.align_options()
     fps = group.fps
     method = task.method
     spec_m = get_method(method)
-    failed: dict[int, str] = {}
     standing = getattr(task, "mode", "timewarp") == "standing"
-    if config.backend() == "compiled" and spec_m.compiled:
-        from ..cpu.bank import splice_bank, standing_bank
-        from ..cpu.splice import STATUS
-
-        bank, index = sources.bank(task.group, group.clips, fps, roles, align.landmarks)
-        lo, ac = [index[k[0]] for k in keys], [index[k[1]] for k in keys]
-        if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
-            from ..splice.standing import LIMBS
-
-            acting = [[n in plan.clips[k[1]].get("acting", ()) for n in LIMBS] for k in keys]
-            out = standing_bank(bank, lo, ac, acting, sources.standing_tables(task.group, roles, skeleton, fps),
-                                method, config.timing, buffers=buffers)
-        else:
-            out = splice_bank(bank, lo, ac, method, ref=[index[k[2]] for k in keys] if spec_m.needs_reference else None,
-                              buffers=buffers, on_error="keep", **bank_kwargs(config.splice_options(), fps))
-        failed = {b: f"the alignment failed ({STATUS[int(s)]})" for b, s in enumerate(out.status) if s != 0}
-        ok = out.status == 0
-        frames, rot, trans = out.frames[ok], out.rotations, out.translations
-        curve, corr, crop = out.curve, out.correction, out.crop[ok].astype(np.float64)
-        cost, posture = out.cost[ok], out.posture[ok]
+    options = config.splice_options()
+    backend = config.splice_backend(method)
+    if backend.prepares_once:  # the group's clips, prepared once per job (see Sources.bank)
+        prepared, index = sources.bank(task.group, group.clips, fps, roles, options, backend)
+    else:  # this task's clips
+        wanted = list(dict.fromkeys(c for k in keys for c in k if c))
+        prepared = backend.prepare([resample_motion(sources.motion(c), fps) for c in wanted], skeleton, roles, options)
+        index = {c: i for i, c in enumerate(wanted)}
+    lo, ac = [index[k[0]] for k in keys], [index[k[1]] for k in keys]
+    if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
+        acting = [tuple(plan.clips[k[1]].get("acting", ())) for k in keys]
+        batch = backend.standing(prepared, lo, ac, acting, sources.standing_tables(task.group, roles, skeleton, fps),
+                                 spec_m, options, fps, buffers=buffers)
     else:
-        motions = [(sources.motion(k[0]), sources.motion(k[1])) for k in keys]
-        refs = [sources.motion(k[2]) for k in keys] if spec_m.needs_reference and not standing else None
-        opts = config.splice_options()
-        results = []
-        if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
-            acting = [tuple(plan.clips[k[1]].get("acting", ())) for k in keys]
-            splice_some = lambda sl: splice_standing(motions[sl], roles, method=method, options=opts,  # noqa: E731
-                                                     acting=acting[sl])
-        else:
-            splice_some = lambda sl: splice_pairs(motions[sl], roles, method=method,  # noqa: E731
-                                                  references=refs[sl] if refs else None, options=opts)
-        try:
-            results = splice_some(slice(0, len(motions)))
-        except (ValueError, TorchspliceError):  # one pair cannot be aligned: the others still are
-            for b in range(len(motions)):
-                try:
-                    results += splice_some(slice(b, b + 1))
-                except (ValueError, TorchspliceError) as exc:
-                    failed[b] = str(exc) if isinstance(exc, MethodFailedError) else f"the alignment failed ({exc})"
-        kept = [b for b in range(len(pairs)) if b not in failed]
-        back = np.array([fps / motions[b][1].fps for b in kept])
-        frames = np.array([r.motion.num_frames for r in results], dtype=np.int64)
-        rot = torch.cat([r.motion.rotations for r in results]).float().cpu().numpy() if results else np.zeros((0, skeleton.num_joints, 4), np.float32)
-        trans = torch.cat([r.motion.local_translations() for r in results]).float().cpu().numpy() if results else np.zeros((0, skeleton.num_joints, 3), np.float32)
-        curve = np.concatenate([r.curve.numpy() for r in results] or [np.zeros(0)]) * np.repeat(back, frames)
-        corr = np.radians(np.concatenate([r.pelvis_correction.numpy() for r in results] or [np.zeros(0)]))
-        crop = np.array([r.crop for r in results], dtype=np.float64) * back
-        cost = np.array([r.cost for r in results], dtype=np.float64)
-        posture = np.radians(np.array([r.posture_deg for r in results], dtype=np.float64))
+        ref = [index[k[2]] for k in keys] if spec_m.needs_reference else None
+        batch = backend.splice(prepared, lo, ac, ref, spec_m, options, fps, buffers=buffers, keep_going=True)
+    failed = batch.failed
+    ok = np.array([b not in failed for b in range(len(keys))], dtype=bool)
+    frames, rot, trans = batch.frames[ok], _float32(batch.rotations), _float32(batch.translations)
+    curve, corr, crop = batch.curve, batch.correction, np.asarray(batch.crop, dtype=np.float64)[ok]
+    cost, posture = np.asarray(batch.cost, dtype=np.float64)[ok], np.asarray(batch.posture, dtype=np.float64)[ok]
     skipped: dict[str, int] = {}
     for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
@@ -212,16 +181,22 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     return part
 
 
+def _float32(x) -> np.ndarray:
+    """Packed result frames as float32 numpy (a torch backend's tensors come from any device)."""
+    return x if isinstance(x, np.ndarray) and x.dtype == np.float32 else np.asarray(
+        x.detach().float().cpu().numpy() if isinstance(x, torch.Tensor) else x, dtype=np.float32)
+
+
 def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleton, frames, rot, trans, curve, corr,
           crop, cost, posture) -> Part:
-    """A task's output columns, computed at once (``curve`` and ``crop`` at the locomotion's rate)."""
+    """A task's output columns, computed at once (``curve`` and ``crop`` at the locomotion's rate,
+    ``corr`` and ``posture`` in degrees)."""
     method, fps = task.method, group.fps
     lnames = [plan.clips[k[0]]["name"] for k in keys]
     anames = [plan.clips[k[1]]["name"] for k in keys]
     scale = np.array([plan.clips[k[1]]["fps"] / fps for k in keys])  # to the action's own frames
     starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
-    corr_deg = np.degrees(corr)
-    mean_corr = np.add.reduceat(corr_deg, starts) / frames if len(corr_deg) else np.zeros(len(keys))
+    mean_corr = np.add.reduceat(corr, starts) / frames if len(corr) else np.zeros(len(keys))
     loco_frames = np.array([plan.clips[k[0]]["frames"] for k in keys])
     flags = []
     standing = getattr(task, "mode", "timewarp") == "standing"
@@ -238,7 +213,7 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         "reference": [plan.clips[k[2]]["name"] if k[2] else "" for k in keys], "method": [method] * len(keys),
         "params": [config.params()] * len(keys), "flags": flags,
         "locomotion_id": [p.loco for p in pairs], "action_id": [p.action for p in pairs],
-        "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": np.degrees(posture),
+        "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": posture,
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
         "timing": [config.timing if standing else "timewarp"] * len(keys),
         "acting": [",".join(plan.clips[k[1]].get("acting", ())) if standing else "" for k in keys],

@@ -13,11 +13,10 @@ numba.config.THREADING_LAYER = "workqueue"
 from .task import run_task  # noqa: E402,F401 (imports torch, numba's kernels and the splicer)
 
 try:
-    from ..cpu import available
+    from ..splice.backends import available_backends, get_backend
 
-    if available():
-        from ..cpu.preload import preload
-
-        preload()
+    for _name in available_backends():
+        if get_backend(_name).available():
+            get_backend(_name).preload()
 except Exception:  # a worker then loads the kernels itself, on first use
     pass

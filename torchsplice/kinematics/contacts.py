@@ -14,7 +14,7 @@ import torch
 __all__ = ["foot_contacts", "count_runs", "GaitSummary", "gait_summary"]
 
 
-def _floor_speed(p: torch.Tensor, fps: torch.Tensor, up_axis: int, lengths: torch.Tensor) -> torch.Tensor:
+def floor_speed(p: torch.Tensor, fps: torch.Tensor, up_axis: int, lengths: torch.Tensor) -> torch.Tensor:
     """Horizontal speed ``(B, T, ...)`` of points ``(B, T, ..., 3)``: central differences, one-sided
     at each clip's first and last real frame (so padding never changes a clip's values)."""
     v = torch.zeros_like(p)
@@ -50,7 +50,7 @@ def foot_contacts(
     low = torch.where(valid[..., None], h, torch.full_like(h, float("inf"))).min(dim=1, keepdim=True).values
     leg = leg_length.reshape(B, 1, 1).to(feet.dtype)
     near_floor = (h - low) < height_ratio * leg
-    slow = _floor_speed(feet, fps, up_axis, lengths) < speed_ratio * leg
+    slow = floor_speed(feet, fps, up_axis, lengths) < speed_ratio * leg
     return near_floor & slow & valid[..., None]
 
 

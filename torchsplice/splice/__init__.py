@@ -11,7 +11,7 @@ __all__ = ["TIMINGS", "AlignOptions", "SpliceOptions", "SpliceResult", "NotLocom
            "get_method", "available_methods", "load_plugins"]
 
 _LAZY = {
-    "TIMINGS": "api", "SpliceOptions": "api", "SpliceResult": "api", "NotLocomotingError": "api", "splice": "api",
+    "TIMINGS": "standing", "SpliceOptions": "options", "SpliceResult": "api", "NotLocomotingError": "api", "splice": "api",
     "splice_pairs": "api", "splice_standing": "api", "AlignOptions": "heck",
     "Method": "registry", "MethodInput": "registry", "MethodOutput": "registry", "register_method": "registry",
     "get_method": "registry", "available_methods": "registry", "load_plugins": "registry",

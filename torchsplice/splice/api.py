@@ -21,8 +21,7 @@ keep the locomotion's skeleton, frame rate, root and lower body.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -31,16 +30,20 @@ import torch
 from ..core.errors import MotionError, NotLocomotingError, TorchspliceError
 from ..core.motion import Motion
 from ..specs import DatasetSpec, SkeletonRoles
-from .clips import ClipTensors, check_clip, check_pair, clips_to_tensors, resample_motion
-from .heck import AlignOptions
+from . import backends
+from .backends import SplicedBatch, backend_for
+from .clips import check_clip, check_pair, clips_to_tensors, resample_motion
 from .locomotion import LocomotionCheck, check_locomotion
-from .registry import Method, MethodInput, MethodOutput, get_method, run_checked
-from .standing import TIMINGS, acting_limbs
+from .options import SpliceOptions, align_kwargs, bank_kwargs
+from .registry import Method, get_method
+from .standing import TIMINGS, acting_limbs, standing_tables
 
 __all__ = ["BACKENDS", "TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
-           "splice_pairs", "splice_standing", "resolve_backend"]
+           "splice_pairs", "splice_standing", "resolve_backend", "bank_kwargs", "align_kwargs"]
 
 BACKENDS = ("auto", "compiled", "torch")
+"""The built-in choices of ``SpliceOptions.backend`` (:func:`~torchsplice.splice.backends.backend_choices`
+adds registered ones)."""
 
 
 def spliced_labels(method: str, locomotion: str, locomotion_labels: dict, action: str, action_labels: dict) -> dict:
@@ -53,57 +56,10 @@ def spliced_labels(method: str, locomotion: str, locomotion_labels: dict, action
     return out
 
 
-@dataclass(frozen=True)
-class SpliceOptions:
-    """Options for every method.
-
-    Attributes:
-        align: time-alignment parameters (:class:`~torchsplice.splice.heck.AlignOptions`).
-        posture: apply posture transfer (``splice`` only).
-        twist: the share (0 to 1) of the locomotion's torso twist that posture transfer adds to
-            the action's posture (``splice`` only; 0, the default, is the paper's transfer; see
-            :func:`~torchsplice.splice.heck.twist_target`). On the Bandai Namco ground truth
-            0.5 lowers side walks' error by 3% and the median by 4%, and runs' rises by 0.2%.
-        force: splice clips that do not locomote instead of refusing them.
-        check_locomotion: run the locomotion check at all (a caller that has checked its
-            clips already, such as the n x m job, turns it off).
-        min_seconds: shortest clip accepted.
-        dtype, device: where the tensor work runs (float32 on the CPU by default); the
-            compiled backend computes in float64 and returns ``dtype``.
-        backend: ``"auto"`` (the compiled splicer on the CPU, torch on other devices),
-            ``"compiled"`` or ``"torch"``.
-        timing: how an action that does not locomote (a standing action) fills the
-            locomotion: ``"loop"`` (default), ``"hold"`` or ``"fit"`` (see
-            :mod:`torchsplice.splice.standing`).
-        acting_limbs: the arms standing actions act with (``None``: found per clip from the
-            data; ``()``: none, only the spine and head come from the action).
-    """
-
-    align: AlignOptions = field(default_factory=AlignOptions)
-    posture: bool = True
-    twist: float = 0.0
-    force: bool = False
-    check_locomotion: bool = True
-    min_seconds: float = 0.5
-    dtype: torch.dtype = torch.float32
-    device: str | None = None
-    backend: str = "auto"
-    timing: str = "loop"
-    acting_limbs: tuple[str, ...] | None = None
-
-
 def resolve_backend(options: SpliceOptions) -> str:
-    """``"compiled"`` or ``"torch"``: what ``options.backend`` means for ``options.device``."""
-    if options.backend not in BACKENDS:
-        raise TorchspliceError(f"unknown backend {options.backend!r}; choose one of {', '.join(BACKENDS)}")
-    on_cpu = options.device is None or torch.device(options.device).type == "cpu"
-    if options.backend == "compiled" and not on_cpu:
-        raise TorchspliceError(f"the compiled backend runs on the CPU; device {options.device!r} needs backend 'torch' or 'auto'")
-    if options.backend == "auto":
-        from ..cpu import available
-
-        return "compiled" if on_cpu and available() else "torch"
-    return options.backend
+    """The backend's name ``options.backend`` means for ``options.device`` (see
+    :func:`torchsplice.splice.backends.resolve_backend`)."""
+    return backends.resolve_backend(options.backend, options.device)
 
 
 @dataclass
@@ -260,147 +216,51 @@ def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | 
     return results  # type: ignore[return-value]
 
 
-def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float,
-                     acting: list | None = None) -> list[SpliceResult]:
-    """Pairs whose action does not locomote (see :mod:`torchsplice.splice.standing`): the compiled
-    splicer on the CPU for the built-in methods, else the method's torch function."""
-    skeleton = pairs[0][0].skeleton
+@dataclass
+class _Prepared:
+    """A batch of pairs made ready for a backend: the backend, its prepared clips (the pairs'
+    distinct locomotions, then their distinct actions and references, at one frame rate) and,
+    per pair, the rows of its locomotion, action and reference among them."""
+
+    backend: object
+    clips: object
+    loco: list
+    action: list
+    reference: list | None
+    locos: int
+    acts: list
+
+
+def _prepare(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> _Prepared:
+    backend = backend_for(method, resolve_backend(options))
     locos, li = _unique([p[0] for p in pairs])
-    acts, ai = _unique([p[1] for p in pairs])
+    acts, ai = _unique([p[1] for p in pairs] + list(refs or []))
     acts = [resample_motion(a, fps) for a in acts]
-    compiled = method.compiled and resolve_backend(options) == "compiled"
-    kw = dict(dtype=options.dtype, device=options.device)
-    A = None if compiled and (acting is not None or options.acting_limbs is not None) else clips_to_tensors(acts, skeleton, **kw)
-    if compiled:
-        from ..cpu.bank import ClipBank, standing_bank
-
-        bank = ClipBank.from_motions(locos + acts, skeleton, roles, options.align.landmarks)
-        checks = None
-        if options.check_locomotion:
-            positions, lengths = bank.padded_positions()
-            checks = check_locomotion(ClipTensors(None, None, lengths, positions, None), roles, fps)
-        checks_l, checks_a = (checks[:len(locos)], checks[len(locos):]) if checks is not None else (None, None)
-    else:
-        L = clips_to_tensors(locos, skeleton, **kw)
-        checks_l = check_locomotion(L, roles, fps) if options.check_locomotion else None
-        checks_a = check_locomotion(A, roles, fps) if options.check_locomotion else None
-    notes: list[list[str]] = [[] for _ in pairs]
-    for b, (lo, _) in enumerate(pairs):
-        check = checks_l[int(li[b])] if checks_l is not None else None
-        if check is not None and not check.finite:
-            raise NotLocomotingError(f"clip {lo.name!r} {check.reason}")
-        if check is not None and not check.locomoting:
-            if not options.force:
-                raise NotLocomotingError(f"clip {lo.name!r} does not locomote: {check.reason}")
-            notes[b].append(f"{lo.name} does not locomote: {check.reason}; spliced anyway (forced)")
-    if acting is None:
-        found = acting_limbs(A, roles, skeleton) if options.acting_limbs is None else None
-        acting = [tuple(options.acting_limbs) if found is None else found[int(ai[b])][0] for b in range(len(pairs))]
-    acting = [tuple(a) for a in acting]
-    if compiled:
-        from .standing import LIMBS, standing_tables
-
-        out = standing_bank(bank, li.numpy(), len(locos) + ai.numpy(), [[n in a for n in LIMBS] for a in acting],
-                            standing_tables(roles, skeleton, fps), method.name, options.timing,
-                            dtype=np.float64 if options.dtype == torch.float64 else np.float32)
-        frames = [(torch.from_numpy(out.rotations[s:s + n]).to(options.dtype),
-                   torch.from_numpy(out.translations[s:s + n]).to(options.dtype), torch.from_numpy(out.curve[s:s + n]))
-                  for s, n in zip(out.start.tolist(), out.frames.tolist())]
-    else:
-        clips, times = run_checked(method, method.standing, MethodInput(L.take(li), A.take(ai), None, roles, skeleton,
-                                                                        options, fps), options.timing, acting)
-        n_ = clips.lengths.tolist()
-        frames = [(clips.rotations[b, :n], clips.translations[b, :n], times[b, :n]) for b, n in enumerate(n_)]
-    results = []
-    for b, (lo, ac) in enumerate(pairs):
-        rot, trans, times_b = frames[b]
-        n = rot.shape[0]
-        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method.name == "splice" else ""
-        notes[b].append(f"{ac.name} does not locomote: spliced as a standing action ({options.timing}{limbs})")
-        motion = Motion(
-            skeleton=lo.skeleton, rotations=rot, root_translation=trans[:, 0].clone(),
-            translations=trans if lo.skeleton.has_joint_translations else None, fps=fps,
-            name=method.clip_name(lo.name, ac.name), source=f"splice:{method.name}", role="spliced",
-            labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
-        )
-        results.append(SpliceResult(
-            motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
-            reference=None, cost=float("nan"), curve=(times_b.to(torch.float64) * (ac.fps / fps)).cpu(), crop=0,
-            path=torch.zeros(0, 2, dtype=torch.long), pelvis_correction=torch.zeros(n, dtype=torch.float64),
-            posture_deg=0.0, checks=(checks_l[int(li[b])], checks_a[int(ai[b])]) if checks_l is not None else None,
-            notes=tuple(notes[b]), timing=options.timing, acting=acting[b],
-        ))
-    return results
-
-
-def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> list[SpliceResult]:
-    """Pairs whose locomotions share a frame rate ``fps``."""
-    if method.compiled and resolve_backend(options) == "compiled":
-        return _splice_group_compiled(pairs, refs, roles, method, options, fps)
-    if options.backend == "torch":  # every step in torch, the DP too
-        options = replace(options, align=replace(options.align, dp_backend="torch"))
-    skeleton = pairs[0][0].skeleton
-    locos, li = _unique([p[0] for p in pairs])
-    acts, ai = _unique([p[1] for p in pairs] + (refs or []))
-    kw = dict(dtype=options.dtype, device=options.device)
-    L = clips_to_tensors(locos, skeleton, **kw)
-    A = clips_to_tensors([resample_motion(a, fps) for a in acts], skeleton, **kw)
-    ok = LocomotionCheck(True, "", (0, 0), float("nan"), float("nan"))  # not checked
-    checks_l = check_locomotion(L, roles, fps) if options.check_locomotion else [ok] * len(locos)
-    checks_a = check_locomotion(A, roles, fps) if options.check_locomotion else [ok] * len(acts)
-    dev = L.rotations.device
-    li, ai = li.to(dev), ai.to(dev)
+    clips = backend.prepare(locos + acts, pairs[0][0].skeleton, roles, options)
+    rows = [len(locos) + a for a in ai.tolist()]
     B = len(pairs)
-    notes: list[list[str]] = [[] for _ in range(B)]
-    for b in range(B):
-        for clip, check in ((pairs[b][0], checks_l[int(li[b])]), (pairs[b][1], checks_a[int(ai[b])])):
-            if not check.finite:
-                raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
-            if not check.locomoting:
-                if not options.force:
-                    raise NotLocomotingError(f"clip {clip.name!r} does not locomote: {check.reason}")
-                notes[b].append(f"{clip.name} does not locomote: {check.reason}; spliced anyway (forced)")
-    loco, act = L.take(li), A.take(ai[:B])
-    out: MethodOutput = run_checked(method, method.run,
-                                    MethodInput(loco, act, A.take(ai[B:]) if refs else None, roles, skeleton, options, fps))
-    clips, times = out.clips, out.times
-    empty = torch.zeros(0, 2, dtype=torch.long)
-    corr = out.pelvis_correction if out.pelvis_correction is not None else torch.zeros(times.shape, dtype=torch.float64)
-    posture = out.posture_deg if out.posture_deg is not None else torch.zeros(B)
-    cost = out.cost if out.cost is not None else torch.full((B,), float("nan"))
-    crop = out.crop if out.crop is not None else torch.zeros(B, dtype=torch.long)
-    paths = out.paths if out.paths is not None else [empty] * B
-    results = []
-    for b, (lo, ac) in enumerate(pairs):
-        n = int(clips.lengths[b])
-        scale = ac.fps / fps  # action frames at its own rate per frame at the locomotion's rate
-        motion = Motion(
-            skeleton=lo.skeleton,
-            rotations=clips.rotations[b, :n],
-            root_translation=clips.translations[b, :n, 0],
-            translations=clips.translations[b, :n] if lo.skeleton.has_joint_translations else None,
-            fps=fps,
-            name=method.clip_name(lo.name, ac.name),
-            source=f"splice:{method.name}",
-            role="spliced",
-            labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
-        )
-        results.append(SpliceResult(
-            motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
-            reference=refs[b].name if refs else None, cost=float(cost[b]),
-            curve=(times[b, :n].to(torch.float64) * scale).cpu(), crop=int(round(float(crop[b]) * scale)),
-            path=paths[b].cpu(), pelvis_correction=corr[b, :n].cpu(), posture_deg=float(posture[b]),
-            checks=(checks_l[int(li[b])], checks_a[int(ai[b])]) if options.check_locomotion else None,
-            notes=tuple(notes[b]),
-        ))
-    return results
+    return _Prepared(backend, clips, li.tolist(), rows[:B], rows[B:] if refs else None, len(locos), acts)
 
 
-def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str]]:
-    """Per pair, the notes on clips that do not locomote; raises unless ``options.force``."""
+def _checks(prep: _Prepared, roles: SkeletonRoles, options: SpliceOptions, fps: float):
+    """The locomotion checks of the batch's locomotions and actions (``None``: not checked)."""
+    if not options.check_locomotion:
+        return None, None
+    return prep.backend.locomotion_checks(prep.clips, list(range(prep.locos)), list(range(prep.locos, prep.locos + len(prep.acts))),
+                                          roles, fps, options)
+
+
+def _notes_or_raise(pairs, prep: _Prepared, checks_l, checks_a, options: SpliceOptions) -> list[list[str]]:
+    """Per pair, the notes on clips that do not locomote (the locomotion, and the action unless
+    ``checks_a`` is ``None``); raises unless ``options.force``."""
     notes: list[list[str]] = [[] for _ in pairs]
+    if checks_l is None:
+        return notes
     for b, (lo, ac) in enumerate(pairs):
-        for clip, check in ((lo, checks_l[li[b]]), (ac, checks_a[ai[b]])):
+        todo = [(lo, checks_l[prep.loco[b]])]
+        if checks_a is not None:
+            todo.append((ac, checks_a[prep.action[b] - prep.locos]))
+        for clip, check in todo:
             if not check.finite:
                 raise NotLocomotingError(f"clip {clip.name!r} {check.reason}")
             if not check.locomoting:
@@ -410,65 +270,71 @@ def _notes_or_raise(pairs, li, ai, checks_l, checks_a, options) -> list[list[str
     return notes
 
 
-def _splice_group_compiled(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> list[SpliceResult]:
-    """:func:`_splice_group` through the compiled splicer (:mod:`torchsplice.cpu`)."""
-    from ..cpu.bank import ClipBank, CompiledSpliceError, splice_bank
-
+def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float,
+                     acting: list | None = None) -> list[SpliceResult]:
+    """Pairs whose action does not locomote (see :mod:`torchsplice.splice.standing`)."""
     skeleton = pairs[0][0].skeleton
-    locos, li = _unique([p[0] for p in pairs])
-    acts, ai = _unique([p[1] for p in pairs] + (refs or []))
-    bank = ClipBank.from_motions(locos + [resample_motion(a, fps) for a in acts], skeleton, roles, options.align.landmarks)
-    ok = LocomotionCheck(True, "", (0, 0), float("nan"), float("nan"))  # not checked
-    checks = [ok] * len(bank)
-    if options.check_locomotion:
-        positions, lengths = bank.padded_positions()
-        checks = check_locomotion(ClipTensors(None, None, lengths, positions, None), roles, fps)
-    B = len(pairs)
-    li, ai = li.tolist(), ai.tolist()
-    notes = _notes_or_raise(pairs, li, ai, checks[:len(locos)], checks[len(locos):], options)
-    act_idx = [len(locos) + a for a in ai]
+    prep = _prepare(pairs, None, roles, method, options, fps)
+    checks_l, checks_a = _checks(prep, roles, options, fps)
+    notes = _notes_or_raise(pairs, prep, checks_l, None, options)
+    if acting is None:
+        if options.acting_limbs is None:
+            found = acting_limbs(clips_to_tensors(prep.acts, skeleton, dtype=options.dtype, device=options.device),
+                                 roles, skeleton)
+            acting = [found[a - prep.locos][0] for a in prep.action]
+        else:
+            acting = [tuple(options.acting_limbs)] * len(pairs)
+    acting = [tuple(a) for a in acting]
+    batch = prep.backend.standing(prep.clips, prep.loco, prep.action, acting, standing_tables(roles, skeleton, fps),
+                                  method, options, fps)
+    for b, (lo, ac) in enumerate(pairs):
+        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method.name == "splice" else ""
+        notes[b].append(f"{ac.name} does not locomote: spliced as a standing action ({options.timing}{limbs})")
+    return _results(pairs, None, prep, batch, method, options, fps, checks_l, checks_a, notes, options.timing, acting)
+
+
+def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> list[SpliceResult]:
+    """Pairs whose locomotions share a frame rate ``fps``, time-aligned."""
+    from .backends.compiled import CompiledPairError
+
+    prep = _prepare(pairs, refs, roles, method, options, fps)
+    checks_l, checks_a = _checks(prep, roles, options, fps)
+    notes = _notes_or_raise(pairs, prep, checks_l, checks_a, options)
     try:
-        out = splice_bank(bank, li, act_idx[:B], method.name, ref=act_idx[B:] if method.needs_reference else None,
-                          dtype=np.float64 if options.dtype == torch.float64 else np.float32,
-                          **bank_kwargs(options, fps))
-    except CompiledSpliceError as exc:
+        batch = prep.backend.splice(prep.clips, prep.loco, prep.action, prep.reference, method, options, fps)
+    except CompiledPairError as exc:
         lo, ac = pairs[exc.pair]
         raise MotionError(f"clips {lo.name!r} and {ac.name!r} cannot be aligned: {exc.reason}") from None
+    return _results(pairs, refs, prep, batch, method, options, fps, checks_l, checks_a, notes)
+
+
+def _tensor(x, dtype) -> torch.Tensor:
+    return torch.from_numpy(x).to(dtype) if isinstance(x, np.ndarray) else x
+
+
+def _results(pairs, refs, prep: _Prepared, batch: SplicedBatch, method: Method, options: SpliceOptions, fps: float,
+             checks_l, checks_a, notes, timing: str = "timewarp", acting=None) -> list[SpliceResult]:
+    """Each pair's :class:`SpliceResult` from a backend's packed batch (the one place results are made)."""
     results = []
-    deg = 180.0 / math.pi
     for b, (lo, ac) in enumerate(pairs):
-        s, n = int(out.start[b]), int(out.frames[b])
-        scale = ac.fps / fps
-        rot = torch.from_numpy(out.rotations[s:s + n]).to(options.dtype)
-        trans = torch.from_numpy(out.translations[s:s + n]).to(options.dtype)
+        rows = batch.rows(b)
+        scale = ac.fps / fps  # action frames at its own rate per frame at the locomotion's rate
+        rot = _tensor(batch.rotations[rows], options.dtype)
+        trans = _tensor(batch.translations[rows], options.dtype)
         motion = Motion(
-            skeleton=lo.skeleton, rotations=rot, root_translation=trans[:, 0].clone(),
+            skeleton=lo.skeleton, rotations=rot,
+            root_translation=trans[:, 0].clone() if isinstance(batch.translations, np.ndarray) else trans[:, 0],
             translations=trans if lo.skeleton.has_joint_translations else None, fps=fps,
             name=method.clip_name(lo.name, ac.name), source=f"splice:{method.name}", role="spliced",
             labels=spliced_labels(method.name, lo.name, lo.labels, ac.name, ac.labels),
         )
         results.append(SpliceResult(
             motion=motion, method=method.name, locomotion=lo.name, action=ac.name,
-            reference=refs[b].name if refs else None, cost=float(out.cost[b]),
-            curve=torch.from_numpy(out.curve[s:s + n] * scale), crop=int(round(float(out.crop[b]) * scale)),
-            path=torch.from_numpy(out.cells[b, : int(out.path_length[b])].copy()),
-            pelvis_correction=torch.from_numpy(out.correction[s:s + n] * deg), posture_deg=float(out.posture[b]) * deg,
-            checks=(checks[li[b]], checks[act_idx[b]]) if options.check_locomotion else None,
-            notes=tuple(notes[b]),
+            reference=refs[b].name if refs else None, cost=float(batch.cost[b]),
+            curve=torch.from_numpy(batch.curve[rows] * scale), crop=int(round(float(batch.crop[b]) * scale)),
+            path=torch.from_numpy(np.array(batch.paths[b], dtype=np.int64).reshape(-1, 2)),
+            pelvis_correction=torch.from_numpy(batch.correction[rows]), posture_deg=float(batch.posture[b]),
+            checks=(checks_l[prep.loco[b]], checks_a[prep.action[b] - prep.locos]) if checks_l is not None else None,
+            notes=tuple(notes[b]), timing=timing, acting=acting[b] if acting is not None else (),
         ))
     return results
-
-
-def bank_kwargs(options: SpliceOptions, fps: float) -> dict:
-    """The compiled splicer's (:func:`~torchsplice.cpu.bank.splice_bank`) method arguments for
-    ``options``: posture, twist and the alignment's (:func:`align_kwargs`). The one place that
-    maps options to the kernels, for :func:`splice_pairs` and the n x m job alike, so that an
-    option cannot reach one and miss the other."""
-    return dict(posture=options.posture, twist=options.twist, **align_kwargs(options.align, fps))
-
-
-def align_kwargs(align: AlignOptions, fps: float) -> dict:
-    """The compiled splicer's alignment arguments (frame counts at ``fps``) for ``align``."""
-    return dict(max_run=align.max_run, heading_window_deg=align.heading_window_deg, crop=align.crop,
-                crop_context=int(round(align.crop_context_s * fps)), crop_window=max(1, int(round(align.crop_window_s * fps))),
-                knot_spacing=align.knot_spacing_s * fps)

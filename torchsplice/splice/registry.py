@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import torch
 
     from ..specs.roles import SkeletonRoles
-    from .api import SpliceOptions
+    from .options import SpliceOptions
     from .clips import ClipTensors
 
 __all__ = ["Method", "MethodInput", "MethodOutput", "MethodFailedError", "run_checked", "register_method", "get_method", "available_methods",

@@ -18,19 +18,17 @@ class InlineEngine(Engine):
     name = "inline"
 
     def describe(self) -> str:
-        from ...cpu import get_threads
-
-        if self.config.backend() == "compiled":
-            n = get_threads()
+        backend = self.config.splice_backend()
+        if backend.prepares_once:
+            n = backend.threads()
             return f"this process ({n} compute thread{'s' if n != 1 else ''})"
         return f"this process (torch on {self.config.device or 'cpu'})"
 
     def run(self, tasks, done) -> None:
+        backend = self.config.splice_backend()
         buffers = None
-        if self.config.backend() == "compiled":
-            from ...cpu.bank import Buffers
-
-            buffers = (Buffers(), Buffers())  # the writer reads one while the next task fills the other
+        if backend.new_buffers() is not None:  # the writer reads one while the next task fills the other
+            buffers = (backend.new_buffers(), backend.new_buffers())
         pending: Future | None = None
 
         def write(task, part):  # in the writer thread, while the next task computes

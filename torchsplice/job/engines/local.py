@@ -42,7 +42,7 @@ def _shard_compression(config: JobConfig):
 def make_local_engine(ctx: EngineContext) -> Engine:
     """The ``local`` engine: worker processes, or this process for one worker or a torch device."""
     workers = ctx.config.worker_count()
-    if workers == 1 or ctx.config.backend() != "compiled":
+    if workers == 1 or not ctx.config.splice_backend().prepares_once:
         from .inline import InlineEngine
 
         return InlineEngine(ctx)
@@ -60,10 +60,7 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int,
     import torch
 
     torch.set_num_threads(1)
-    if config.backend() == "compiled":
-        from ...cpu import set_threads
-
-        set_threads(1)
+    config.splice_backend().set_threads(1)
     from ..sink import HDF5Sink
 
     plan = Plan.load(Path(plan_path))

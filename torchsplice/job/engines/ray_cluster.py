@@ -38,10 +38,7 @@ def _ray_run(config: JobConfig, digest: str, plan_box: list, index: int, group_b
         import torch
 
         torch.set_num_threads(1)
-        if config.backend() == "compiled":
-            from ...cpu import set_threads
-
-            set_threads(1)
+        config.splice_backend().set_threads(1)
         _RAY_CACHE.clear()
         _RAY_CACHE.update(plan=digest, obj=Plan.from_json(ray.get(plan_box[0])), sources=Sources.from_motions({}), groups=set())
     plan, sources = _RAY_CACHE["obj"], _RAY_CACHE["sources"]

@@ -1,1 +1,225 @@
-"""Splicing backends: one interface for a batch of pairs (filled in below)."""
+"""Splicing backends: one interface for splicing a batch of pairs, whatever computes it.
+
+A backend takes clips of one skeleton at one frame rate, *prepared* once (:meth:`Backend.prepare`),
+and splices batches of pairs of them, given as indices into the prepared clips. Everything above
+(:func:`torchsplice.splice.splice_pairs` and the n x m job) calls only this interface; which
+backend runs is decided once, by :func:`resolve_backend`.
+
+Built in:
+
+- ``"compiled"`` (:mod:`.compiled`): the numba kernels of :mod:`torchsplice.cpu` on the CPU, one
+  pair per thread, float64; the built-in methods only.
+- ``"torch"`` (:mod:`.torch_backend`): each method's torch function on padded pair tensors, on
+  any device; every method, plug-ins too. It is the reference the compiled kernels are tested
+  against.
+
+A new backend is one module: a :class:`Backend` subclass and a :func:`register_backend` call
+(from a plug-in module, see :func:`torchsplice.splice.registry.load_plugins`).
+
+Conventions of :class:`SplicedBatch` (the one result type of every backend): pair ``b``'s frames
+are rows ``start[b] : start[b] + frames[b]`` of the packed arrays; rotations are local WXYZ
+quaternions, translations local (row 0 the root's position), in the skeleton's units; ``curve``
+and ``crop`` count action frames *at the locomotion's frame rate*; angles are in degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from ...core.errors import TorchspliceError
+
+__all__ = ["Backend", "SplicedBatch", "register_backend", "get_backend", "available_backends", "backend_choices",
+           "resolve_backend", "backend_for"]
+
+
+@dataclass
+class SplicedBatch:
+    """Spliced pairs, packed along frames (see the module docstring for the conventions).
+
+    Attributes:
+        start, frames: ``(B,)`` int64: where each pair's frames start, and how many (0 for a
+            pair that failed).
+        rotations ``(N, J, 4)``, translations ``(N, J, 3)``: the result frames (float32 or
+            float64 numpy arrays, or torch tensors from a torch backend).
+        curve ``(N,)`` float64: for each frame, the action frame it carries (at the locomotion's
+            rate, from the action's first frame).
+        correction ``(N,)`` float64: per-frame pelvis correction, degrees.
+        crop ``(B,)``: action frames skipped at the start (at the locomotion's rate).
+        cost ``(B,)``: mean lower-body frame distance along the path (NaN: not aligned).
+        posture ``(B,)``: posture-transfer angle, degrees.
+        paths: per pair, the ``(P, 2)`` int64 DP path (locomotion frame, cropped action frame).
+        failed: pair index -> why it could not be spliced (those pairs have no frames).
+    """
+
+    start: np.ndarray
+    frames: np.ndarray
+    rotations: Any
+    translations: Any
+    curve: np.ndarray
+    correction: np.ndarray
+    crop: np.ndarray
+    cost: np.ndarray
+    posture: np.ndarray
+    paths: list
+    failed: dict
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def rows(self, b: int) -> slice:
+        """The packed rows of pair ``b``."""
+        s = int(self.start[b])
+        return slice(s, s + int(self.frames[b]))
+
+
+class Backend:
+    """One way to compute splices (see the module docstring). Subclasses set :attr:`name` and
+    implement :meth:`prepare`, :meth:`positions`, :meth:`splice` and :meth:`standing`.
+
+    Attributes:
+        name: the name ``SpliceOptions.backend`` and the job's options select it by.
+        prepares_once: whether prepared clips are worth building once per job and sharing with
+            its workers (saved with :meth:`save` and mapped with :meth:`load`).
+        runs_plugins: whether it runs any method (else only methods marked ``compiled``; the
+            others fall back to ``"torch"``).
+    """
+
+    name = ""
+    prepares_once = False
+    runs_plugins = True
+
+    def available(self) -> bool:
+        """Whether it can run in this installation."""
+        return True
+
+    def runs_on(self, device: str | None) -> bool:
+        """Whether it computes on ``device`` (``None``: the CPU)."""
+        return True
+
+    def prepare(self, motions: list, skeleton, roles, options) -> Any:
+        """Clips ``motions`` (one skeleton, one frame rate) made ready to splice; pairs then name
+        clips by their index in ``motions``."""
+        raise NotImplementedError
+
+    def positions(self, prepared, rows=None) -> tuple:
+        """``(positions (B, T, J, 3) float32, lengths (B,))`` of prepared clips ``rows`` (all by
+        default), padded: what the locomotion check reads."""
+        raise NotImplementedError
+
+    def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps: float, options) -> tuple[list, list]:
+        """The locomotion checks (:func:`~torchsplice.splice.locomotion.check_locomotion`) of
+        prepared clips ``loco_rows`` and ``action_rows``; by default one padded batch of both."""
+        from ..clips import ClipTensors
+        from ..locomotion import check_locomotion
+
+        rows = [*loco_rows, *action_rows]
+        pos, lengths = self.positions(prepared, rows)
+        checks = check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, fps)
+        return checks[:len(loco_rows)], checks[len(loco_rows):]
+
+    def splice(self, prepared, loco, action, reference, method, options, fps: float, *, buffers=None,
+               keep_going: bool = False) -> SplicedBatch:
+        """Splice pairs ``(loco[b], action[b])`` of prepared clips (``reference[b]`` too, for a
+        method that needs one) with ``method`` (a :class:`~torchsplice.splice.registry.Method`).
+        A pair that cannot be spliced raises, or with ``keep_going`` is listed in ``failed``."""
+        raise NotImplementedError
+
+    def standing(self, prepared, loco, action, acting, tables, method, options, fps: float, *,
+                 buffers=None) -> SplicedBatch:
+        """Splice standing actions (see :mod:`torchsplice.splice.standing`): ``acting[b]`` the
+        arms pair ``b`` takes from its action (names of :data:`~torchsplice.splice.standing.LIMBS`),
+        ``tables`` from :func:`~torchsplice.splice.standing.standing_tables`."""
+        raise NotImplementedError
+
+    # Resources. A backend that computes in threads of its own says how many here.
+    def threads(self) -> int | None:
+        return None
+
+    def set_threads(self, n: int | None) -> None:
+        return None
+
+    def new_buffers(self):
+        """Output room reused from batch to batch by one caller (``None``: none)."""
+        return None
+
+    def preload(self) -> None:
+        """Load what a forked worker would otherwise load itself (before a fork)."""
+        return None
+
+    def save(self, prepared, folder) -> None:
+        raise NotImplementedError
+
+    def load(self, folder):
+        raise NotImplementedError
+
+    def prepared_bytes(self, prepared) -> int:
+        """Bytes :meth:`save` writes for ``prepared``."""
+        return 0
+
+
+_REGISTRY: dict[str, Callable[[], Backend]] = {}
+_INSTANCES: dict[str, Backend] = {}
+_BUILTIN = {"compiled": ".compiled", "torch": ".torch_backend"}
+
+
+def register_backend(name: str, factory: Callable[[], Backend], replace_existing: bool = False) -> None:
+    """Make backend ``name`` available to ``SpliceOptions(backend=name)`` and the job: ``factory()``
+    gives the :class:`Backend` (made once per process, on first use)."""
+    if not isinstance(name, str) or not name or name == "auto":
+        raise TorchspliceError(f"a backend needs a name other than 'auto', got {name!r}")
+    if (name in _REGISTRY or name in _BUILTIN) and not replace_existing:
+        raise TorchspliceError(f"a backend named {name!r} is registered already")
+    _REGISTRY[name] = factory
+    _INSTANCES.pop(name, None)
+
+
+def available_backends() -> list[str]:
+    """Names of the registered backends (the built-in ones first)."""
+    return list(dict.fromkeys([*_BUILTIN, *_REGISTRY]))
+
+
+def backend_choices() -> tuple[str, ...]:
+    """What ``SpliceOptions.backend`` accepts: ``"auto"`` and every registered backend."""
+    return ("auto", *available_backends())
+
+
+def get_backend(name: str) -> Backend:
+    """The backend registered as ``name``."""
+    if name not in _INSTANCES:
+        if name in _REGISTRY:
+            made = _REGISTRY[name]()
+        elif name in _BUILTIN:
+            import importlib
+
+            made = importlib.import_module(_BUILTIN[name], __name__).BACKEND
+        else:
+            raise TorchspliceError(f"unknown backend {name!r}; choose one of {', '.join(backend_choices())}")
+        if not isinstance(made, Backend):
+            raise TorchspliceError(f"backend {name!r} is not a torchsplice Backend (got {type(made).__name__})")
+        _INSTANCES[name] = made
+    return _INSTANCES[name]
+
+
+def resolve_backend(backend: str, device: str | None) -> str:
+    """The backend's name that ``backend`` (a name, or ``"auto"``) means on ``device``:
+    ``"auto"`` is the compiled splicer on the CPU when numba is installed, else torch."""
+    if backend not in backend_choices():
+        raise TorchspliceError(f"unknown backend {backend!r}; choose one of {', '.join(backend_choices())}")
+    if backend == "auto":
+        compiled = get_backend("compiled")
+        return "compiled" if compiled.available() and compiled.runs_on(device) else "torch"
+    if not get_backend(backend).runs_on(device):
+        raise TorchspliceError(f"the {backend} backend runs on the CPU; device {device!r} needs backend 'torch' or 'auto'")
+    return backend
+
+
+def backend_for(method, backend: str) -> Backend:
+    """The backend that splices ``method`` when ``backend`` (resolved) is chosen: a backend that
+    runs only the built-in methods hands the others to ``"torch"``."""
+    chosen = get_backend(backend)
+    if chosen.runs_plugins or getattr(method, "compiled", False):
+        return chosen
+    return get_backend("torch")

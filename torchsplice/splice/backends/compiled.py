@@ -1,4 +1,9 @@
-"""The compiled CPU backend (numba kernels of :mod:`torchsplice.cpu`)."""
+"""The compiled CPU backend: the numba kernels of :mod:`torchsplice.cpu`, one pair per thread.
+
+Prepared clips are a :class:`~torchsplice.cpu.bank.ClipBank` (forward kinematics and grid
+features computed once per clip, float64), which the n x m job builds once and maps into its
+workers. Only the built-in methods run here; :func:`warm_up` compiles the kernels ahead of use.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,9 @@ import time
 
 import numpy as np
 
-__all__ = ["warm_up"]
+from . import Backend, SplicedBatch
+
+__all__ = ["CompiledBackend", "CompiledPairError", "BACKEND", "warm_up"]
 
 
 def warm_up(quiet: bool = False) -> float:
@@ -39,3 +46,104 @@ def warm_up(quiet: bool = False) -> float:
 
     timewarp(torch.rand(2, 8, 9), max_run=3)
     return time.perf_counter() - t0
+
+
+class CompiledBackend(Backend):
+    """The compiled CPU splicer (see the module docstring)."""
+
+    name = "compiled"
+    prepares_once = True
+    runs_plugins = False
+
+    def available(self) -> bool:
+        from ...cpu import available
+
+        return available()
+
+    def runs_on(self, device) -> bool:
+        import torch
+
+        return device is None or torch.device(device).type == "cpu"
+
+    def prepare(self, motions, skeleton, roles, options):
+        from ...cpu.bank import ClipBank
+
+        return ClipBank.from_motions(list(motions), skeleton, roles, options.align.landmarks)
+
+    def positions(self, prepared, rows=None):
+        return prepared.padded_positions(rows)
+
+    def splice(self, prepared, loco, action, reference, method, options, fps, *, buffers=None, keep_going=False):
+        from ...cpu.bank import splice_bank
+        from ...cpu.splice import STATUS
+        from ..options import bank_kwargs
+
+        out = splice_bank(prepared, loco, action, method.name, ref=reference if method.needs_reference else None,
+                          dtype=_dtype(options), buffers=buffers, on_error="keep", **bank_kwargs(options, fps))
+        failed = {b: f"the alignment failed ({STATUS[int(s)]})" for b, s in enumerate(out.status) if s != 0}
+        if failed and not keep_going:
+            b = min(failed)
+            raise CompiledPairError(b, STATUS[int(out.status[b])])
+        paths = [out.cells[b, :int(out.path_length[b])] for b in range(len(out.frames))]
+        return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, np.degrees(out.correction),
+                            out.crop, out.cost, np.degrees(out.posture), paths, failed)
+
+    def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None):
+        from ...cpu.bank import standing_bank
+        from ..standing import LIMBS
+
+        masks = [[n in a for n in LIMBS] for a in acting]
+        out = standing_bank(prepared, loco, action, masks, tables, method.name, options.timing, dtype=_dtype(options),
+                            buffers=buffers)
+        B = len(out.frames)
+        return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, out.correction, out.crop,
+                            out.cost, out.posture, [np.zeros((0, 2), np.int64)] * B, {})
+
+    def threads(self):
+        from ...cpu import get_threads
+
+        return get_threads()
+
+    def set_threads(self, n):
+        from ...cpu import set_threads
+
+        set_threads(n)
+
+    def new_buffers(self):
+        from ...cpu.bank import Buffers
+
+        return Buffers()
+
+    def preload(self):
+        from ...cpu.preload import preload
+
+        preload()
+
+    def save(self, prepared, folder):
+        prepared.save(folder)
+
+    def load(self, folder):
+        from ...cpu.bank import ClipBank
+
+        return ClipBank.load(folder)
+
+    def prepared_bytes(self, prepared):
+        b = prepared
+        return sum(a.nbytes for a in (b.rot, b.trans, b.pos, b.grot, *b.feat))
+
+
+class CompiledPairError(ValueError):
+    """A pair the compiled splicer could not align: ``pair`` (its index in the call) and ``reason``."""
+
+    def __init__(self, pair: int, reason: str):
+        super().__init__(f"pair {pair}: {reason}")
+        self.pair, self.reason = pair, reason
+
+
+def _dtype(options):
+    import torch
+
+    return np.float64 if options.dtype == torch.float64 else np.float32
+
+
+BACKEND = CompiledBackend()

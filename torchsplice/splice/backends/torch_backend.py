@@ -1,0 +1,162 @@
+"""The torch backend: each method's torch function on padded pair tensors, on any device.
+
+Prepared clips are the clips themselves; each call pads the batch's distinct locomotions and
+distinct actions (and references) into :class:`~torchsplice.splice.clips.ClipTensors` and runs
+the method's function (checked by :func:`~torchsplice.splice.registry.run_checked`). It runs
+every method, plug-ins too, on CPU or CUDA, in the options' dtype. With
+``SpliceOptions(backend="torch")`` the time alignment's DP runs in torch as well.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+from ...core.errors import TorchspliceError
+from ..clips import clips_to_tensors
+from ..locomotion import check_locomotion
+from ..registry import MethodInput, run_checked
+from . import Backend, SplicedBatch
+
+__all__ = ["TorchBackend", "TorchClips", "BACKEND"]
+
+
+@dataclass
+class TorchClips:
+    """Prepared clips of the torch backend: the clips (one skeleton, one frame rate) and their roles."""
+
+    motions: list
+    skeleton: object
+    roles: object
+
+
+def _distinct(rows) -> tuple[list[int], torch.Tensor]:
+    """Distinct clip rows in order of first use, and per input its index among them."""
+    seen: dict[int, int] = {}
+    for r in rows:
+        seen.setdefault(int(r), len(seen))
+    return list(seen), torch.tensor([seen[int(r)] for r in rows], dtype=torch.long)
+
+
+class TorchBackend(Backend):
+    """The torch implementation (see the module docstring)."""
+
+    name = "torch"
+
+    def prepare(self, motions, skeleton, roles, options):
+        return TorchClips(list(motions), skeleton, roles)
+
+    def _tensors(self, prepared: TorchClips, rows, options):
+        return clips_to_tensors([prepared.motions[r] for r in rows], prepared.skeleton, dtype=options.dtype,
+                                device=options.device)
+
+    def positions(self, prepared, rows=None):
+        from ..options import SpliceOptions
+
+        rows = range(len(prepared.motions)) if rows is None else rows
+        t = self._tensors(prepared, list(rows), SpliceOptions(dtype=torch.float32))
+        return t.positions, t.lengths
+
+    def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps, options):
+        L = self._tensors(prepared, loco_rows, options)
+        A = self._tensors(prepared, action_rows, options)
+        return check_locomotion(L, roles, fps), check_locomotion(A, roles, fps)
+
+    def splice(self, prepared, loco, action, reference, method, options, fps, *, buffers=None, keep_going=False):
+        B = len(loco)
+        try:
+            return self._splice(prepared, loco, action, reference, method, options, fps)
+        except (ValueError, TorchspliceError) as exc:
+            if not keep_going:
+                raise
+            if B == 1:  # this pair cannot be spliced: no frames, and why
+                from ..registry import MethodFailedError
+
+                why = str(exc) if isinstance(exc, MethodFailedError) else f"the alignment failed ({exc})"
+                return _failed(prepared, why, options)
+        parts = [self.splice(prepared, loco[b:b + 1], action[b:b + 1],
+                             reference[b:b + 1] if reference is not None else None, method, options, fps, keep_going=True)
+                 for b in range(B)]
+        return _concat(parts)
+
+    def _splice(self, prepared, loco, action, reference, method, options, fps) -> SplicedBatch:
+        if options.backend == "torch":  # every step in torch, the DP too
+            options = replace(options, align=replace(options.align, dp_backend="torch"))
+        B = len(loco)
+        refs = list(reference) if method.needs_reference and reference is not None else []
+        lu, li = _distinct(loco)
+        au, ai = _distinct(list(action) + refs)
+        L = self._tensors(prepared, lu, options)
+        A = self._tensors(prepared, au, options)
+        li, ai = li.to(L.rotations.device), ai.to(L.rotations.device)
+        out = run_checked(method, method.run, MethodInput(L.take(li), A.take(ai[:B]), A.take(ai[B:]) if refs else None,
+                                                          prepared.roles, prepared.skeleton, options, fps))
+        lengths = out.clips.lengths.tolist()
+        zeros = lambda t: np.zeros(t)  # noqa: E731
+        corr = out.pelvis_correction
+        return _pack(out.clips.rotations, out.clips.translations, out.times, lengths,
+                     correction=[corr[b, :n].detach().cpu().double().numpy() if corr is not None else zeros(n)
+                                 for b, n in enumerate(lengths)],
+                     crop=out.crop.detach().cpu().double().numpy() if out.crop is not None else np.zeros(B),
+                     cost=out.cost.detach().cpu().double().numpy() if out.cost is not None else np.full(B, np.nan),
+                     posture=out.posture_deg.detach().cpu().double().numpy() if out.posture_deg is not None else np.zeros(B),
+                     paths=[p.detach().cpu().numpy() for p in out.paths] if out.paths is not None
+                     else [np.zeros((0, 2), np.int64)] * B)
+
+    def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None):
+        lu, li = _distinct(loco)
+        au, ai = _distinct(action)
+        L = self._tensors(prepared, lu, options)
+        A = self._tensors(prepared, au, options)
+        clips, times = run_checked(method, method.standing, MethodInput(L.take(li), A.take(ai), None, prepared.roles,
+                                                                        prepared.skeleton, options, fps),
+                                   options.timing, [tuple(a) for a in acting])
+        lengths = clips.lengths.tolist()
+        B = len(lengths)
+        return _pack(clips.rotations, clips.translations, times, lengths,
+                     correction=[np.zeros(n) for n in lengths], crop=np.zeros(B), cost=np.full(B, np.nan),
+                     posture=np.zeros(B), paths=[np.zeros((0, 2), np.int64)] * B)
+
+    def threads(self):
+        return torch.get_num_threads()
+
+    def set_threads(self, n):
+        if n is not None:
+            torch.set_num_threads(max(1, int(n)))
+
+
+def _pack(rotations, translations, times, lengths, correction, crop, cost, posture, paths) -> SplicedBatch:
+    """A :class:`SplicedBatch` from padded ``(B, T, ...)`` method outputs."""
+    frames = np.array(lengths, dtype=np.int64)
+    start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    rot = torch.cat([rotations[b, :n] for b, n in enumerate(lengths)]) if lengths else rotations[:0, 0]
+    trans = torch.cat([translations[b, :n] for b, n in enumerate(lengths)]) if lengths else translations[:0, 0]
+    curve = np.concatenate([times[b, :n].detach().to(torch.float64).cpu().numpy() for b, n in enumerate(lengths)]
+                           or [np.zeros(0)])
+    return SplicedBatch(start, frames, rot, trans, curve, np.concatenate(correction or [np.zeros(0)]), crop, cost,
+                        posture, list(paths), {})
+
+
+def _failed(prepared: TorchClips, why: str, options) -> SplicedBatch:
+    """One pair that could not be spliced: no frames."""
+    J = prepared.skeleton.num_joints
+    kw = dict(dtype=options.dtype, device=options.device)
+    return SplicedBatch(np.zeros(1, np.int64), np.zeros(1, np.int64), torch.zeros(0, J, 4, **kw), torch.zeros(0, J, 3, **kw),
+                        np.zeros(0), np.zeros(0), np.zeros(1), np.full(1, np.nan), np.zeros(1),
+                        [np.zeros((0, 2), np.int64)], {0: why})
+
+
+def _concat(parts: list[SplicedBatch]) -> SplicedBatch:
+    """Batches of one pair each, as one batch."""
+    frames = np.concatenate([p.frames for p in parts])
+    start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    failed = {b: why for b, p in enumerate(parts) for why in p.failed.values()}
+    cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+    return SplicedBatch(start, frames, torch.cat([p.rotations for p in parts]), torch.cat([p.translations for p in parts]),
+                        cat("curve"), cat("correction"), cat("crop"), cat("cost"), cat("posture"),
+                        [q for p in parts for q in p.paths], failed)
+
+
+BACKEND = TorchBackend()
