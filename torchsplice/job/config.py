@@ -69,6 +69,9 @@ class JobConfig:
         ray_address: the Ray cluster to use (``None``: start a local Ray instance).
         device: ``None``/``"cpu"`` for the compiled CPU splicer, or a torch device such as
             ``"cuda"`` (then the torch splicer runs in this process).
+        backend: the splicing backend: ``"auto"`` (the compiled splicer on the CPU, torch on
+            CUDA), ``"compiled"``, ``"torch"`` or a registered one (see
+            :mod:`torchsplice.splice.backends`). A resumed run must resolve to the same one.
     """
 
     database: Path
@@ -93,6 +96,7 @@ class JobConfig:
     workers: int | None = None
     ray_address: str | None = None
     device: str | None = None
+    backend: str = "auto"
 
     def checked(self) -> "JobConfig":
         """The configuration with paths and names normalised; a clear error for a bad value."""
@@ -124,6 +128,9 @@ class JobConfig:
         if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
             raise TorchspliceError(f"{{max_length_ratio}} must be at least 1, got {c.max_length_ratio}",
                                    options=("max_length_ratio",))
+        from ..splice.backends import resolve_backend
+
+        resolve_backend(c.backend, c.device)  # a clear error for an unknown one, or one that cannot run there
         if c.workers is not None and c.workers < 1:
             raise TorchspliceError(f"{{workers}} must be at least 1, got {c.workers}", options=("workers",))
         dup = sorted({m for m in c.methods if c.methods.count(m) > 1})
@@ -167,7 +174,8 @@ class JobConfig:
     def splice_options(self) -> SpliceOptions:
         """Options for :func:`~torchsplice.splice.splice_pairs` (the plan has checked every clip)."""
         return SpliceOptions(align=self.align_options(), posture=self.posture, force=True, check_locomotion=False,
-                             device=self.device, timing=self.timing, acting_limbs=self.acting_limbs, twist=self.twist)
+                             device=self.device, timing=self.timing, acting_limbs=self.acting_limbs, twist=self.twist,
+                             backend=self.backend)
 
     def params(self) -> str:
         """The ``params`` column of every spliced clip (JSON)."""
@@ -176,23 +184,25 @@ class JobConfig:
                            "force_locomotion": self.force_locomotion, "timing": self.timing,
                            "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs)})
 
-    def backend(self) -> str:
-        """``"compiled"`` (the CPU splicer) or ``"torch"`` (CUDA, or no numba)."""
+    def resolved_backend(self) -> str:
+        """The backend's name :attr:`backend` means on :attr:`device`: ``"compiled"`` (the CPU
+        splicer), ``"torch"`` (CUDA, or no numba) or a registered one."""
         from ..splice.backends import resolve_backend
 
-        return resolve_backend("auto", self.device)
+        return resolve_backend(self.backend, self.device)
 
     def splice_backend(self, method: str | None = None):
         """The :class:`~torchsplice.splice.backends.Backend` that splices ``method`` in this job
-        (``None``: the job's own, :meth:`backend`)."""
+        (``None``: the job's own, :meth:`resolved_backend`)."""
         from ..splice.backends import backend_for, get_backend
 
-        return get_backend(self.backend()) if method is None else backend_for(get_method(method), self.backend())
+        name = self.resolved_backend()
+        return get_backend(name) if method is None else backend_for(get_method(method), name)
 
     def plan_key(self) -> dict:
         """The settings a resumed run must share with the run it resumes (the backend too: the
         compiled splicer computes in float64, torch in float32)."""
-        return {"backend": self.backend(),
+        return {"backend": self.resolved_backend(),
             "locomotions": list(self.locomotions), "actions": list(self.actions), "methods": list(self.methods),
             "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
@@ -239,7 +249,7 @@ def _check_types(c: JobConfig) -> None:
     if c.acting_limbs is not None and (not isinstance(c.acting_limbs, tuple)
                                        or not all(isinstance(x, str) for x in c.acting_limbs)):
         raise bad("acting_limbs", "None, 'auto', 'none', 'both' or arm names", c.acting_limbs)
-    for name in ("ray_address", "device", "compression"):
+    for name in ("ray_address", "device", "compression", "backend"):
         v = getattr(c, name)
         if v is not None and not isinstance(v, str):
             raise bad(name, "a string or None", v)

@@ -134,8 +134,8 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     """Splice the pairs of ``task`` (see the module docstring)."""
     from ..core.version import __version__
 
-    if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != config.backend():
-        raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {config.backend()} splicer, but the job "
+    if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != config.resolved_backend():
+        raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {config.resolved_backend()} splicer, but the job "
                                f"was planned by {plan.key['tool']} with the {plan.key['backend']} splicer: install the same "
                                "version (and numba) everywhere")
     load_plugins(plan.key.get("plugins", ()))  # plug-in methods register themselves in this process too
@@ -160,7 +160,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
         acting = [tuple(plan.clips[k[1]].get("acting", ())) for k in keys]
         batch = backend.standing(prepared, lo, ac, acting, sources.standing_tables(task.group, roles, skeleton, fps),
-                                 spec_m, options, fps, buffers=buffers)
+                                 spec_m, options, fps, buffers=buffers, keep_going=True)
     else:
         ref = [index[k[2]] for k in keys] if spec_m.needs_reference else None
         batch = backend.splice(prepared, lo, ac, ref, spec_m, options, fps, buffers=buffers, keep_going=True)

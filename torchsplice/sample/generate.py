@@ -5,6 +5,9 @@ generated from a handful of gait and path parameters, deterministically (fixed s
 output on every call), and vectorised over frames with numpy (the only Python loops run over
 joints, feet and clips).
 
+Longer than 600 lines because the skeleton, the gait, the arm swing and each of the sample's
+actions are written out here, one after another, and read best as one procedure.
+
 Conventions:
 
 - **Y up, centimetres**, the floor is ``y = 0``; the character faces **+Z** at frame 0 and its

@@ -4,6 +4,9 @@ Each clip gets a panel: its bones as line segments from parent to child (end sit
 head top, hands, toes), left limbs blue and right limbs red (by joint name), a head circle, a
 ground grid on the floor plane and a short trail of the root's recent path on the floor.
 
+Longer than 600 lines because it is one renderer: the camera, the panels' layout, the drawing
+and the three writers share their state (the figure, the artists, the per-clip trajectories).
+
 Camera and projection (:func:`view_rotation`, :func:`project`):
 
 - The up axis comes from the dataset spec (``up_axis``: 0, 1 or 2 for X, Y or Z; 1 for every

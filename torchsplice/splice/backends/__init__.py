@@ -74,6 +74,27 @@ class SplicedBatch:
         s = int(self.start[b])
         return slice(s, s + int(self.frames[b]))
 
+    @classmethod
+    def concat(cls, parts: list["SplicedBatch"]) -> "SplicedBatch":
+        """The batches ``parts``, one after another, as one batch (pairs renumbered in order)."""
+        frames = np.concatenate([p.frames for p in parts]).astype(np.int64)
+        start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+        failed, at = {}, 0
+        for p in parts:
+            failed.update({at + b: why for b, why in p.failed.items()})
+            at += len(p)
+
+        def cat(name):
+            arrays = [getattr(p, name) for p in parts]
+            if isinstance(arrays[0], np.ndarray):
+                return np.concatenate(arrays)
+            import torch
+
+            return torch.cat(arrays)
+
+        return cls(start, frames, cat("rotations"), cat("translations"), cat("curve"), cat("correction"), cat("crop"),
+                   cat("cost"), cat("posture"), [q for p in parts for q in p.paths], failed)
+
 
 class Backend:
     """One way to compute splices (see the module docstring). Subclasses set :attr:`name` and
@@ -128,10 +149,11 @@ class Backend:
         raise NotImplementedError
 
     def standing(self, prepared, loco, action, acting, tables, method, options, fps: float, *,
-                 buffers=None) -> SplicedBatch:
+                 buffers=None, keep_going: bool = False) -> SplicedBatch:
         """Splice standing actions (see :mod:`torchsplice.splice.standing`): ``acting[b]`` the
         arms pair ``b`` takes from its action (names of :data:`~torchsplice.splice.standing.LIMBS`),
-        ``tables`` from :func:`~torchsplice.splice.standing.standing_tables`."""
+        ``tables`` from :func:`~torchsplice.splice.standing.standing_tables`; ``keep_going`` as
+        for :meth:`splice`."""
         raise NotImplementedError
 
     # Resources. A backend that computes in threads of its own says how many here.

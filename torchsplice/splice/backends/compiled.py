@@ -88,7 +88,7 @@ class CompiledBackend(Backend):
         return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, np.degrees(out.correction),
                             out.crop, out.cost, np.degrees(out.posture), paths, failed)
 
-    def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None):
+    def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None, keep_going=False):
         from ...cpu.bank import standing_bank
         from ..standing import LIMBS
 

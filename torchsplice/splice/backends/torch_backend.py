@@ -79,7 +79,7 @@ class TorchBackend(Backend):
         parts = [self.splice(prepared, loco[b:b + 1], action[b:b + 1],
                              reference[b:b + 1] if reference is not None else None, method, options, fps, keep_going=True)
                  for b in range(B)]
-        return _concat(parts)
+        return SplicedBatch.concat(parts)
 
     def _splice(self, prepared, loco, action, reference, method, options, fps) -> SplicedBatch:
         if options.backend == "torch":  # every step in torch, the DP too
@@ -105,7 +105,21 @@ class TorchBackend(Backend):
                      paths=[p.detach().cpu().numpy() for p in out.paths] if out.paths is not None
                      else [np.zeros((0, 2), np.int64)] * B)
 
-    def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None):
+    def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None, keep_going=False):
+        try:
+            return self._standing(prepared, loco, action, acting, method, options, fps)
+        except (ValueError, TorchspliceError) as exc:
+            if not keep_going:
+                raise
+            if len(loco) == 1:
+                from ..registry import MethodFailedError
+
+                return _failed(prepared, str(exc) if isinstance(exc, MethodFailedError) else f"the alignment failed ({exc})",
+                               options)
+        return SplicedBatch.concat([self.standing(prepared, loco[b:b + 1], action[b:b + 1], acting[b:b + 1], tables, method,
+                                                  options, fps, keep_going=True) for b in range(len(loco))])
+
+    def _standing(self, prepared, loco, action, acting, method, options, fps) -> SplicedBatch:
         lu, li = _distinct(loco)
         au, ai = _distinct(action)
         L = self._tensors(prepared, lu, options)
@@ -146,17 +160,6 @@ def _failed(prepared: TorchClips, why: str, options) -> SplicedBatch:
     return SplicedBatch(np.zeros(1, np.int64), np.zeros(1, np.int64), torch.zeros(0, J, 4, **kw), torch.zeros(0, J, 3, **kw),
                         np.zeros(0), np.zeros(0), np.zeros(1), np.full(1, np.nan), np.zeros(1),
                         [np.zeros((0, 2), np.int64)], {0: why})
-
-
-def _concat(parts: list[SplicedBatch]) -> SplicedBatch:
-    """Batches of one pair each, as one batch."""
-    frames = np.concatenate([p.frames for p in parts])
-    start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
-    failed = {b: why for b, p in enumerate(parts) for why in p.failed.values()}
-    cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-    return SplicedBatch(start, frames, torch.cat([p.rotations for p in parts]), torch.cat([p.translations for p in parts]),
-                        cat("curve"), cat("correction"), cat("crop"), cat("cost"), cat("posture"),
-                        [q for p in parts for q in p.paths], failed)
 
 
 BACKEND = TorchBackend()
