@@ -19,7 +19,7 @@ from . import shards
 from .config import JobConfig
 from .plan import Plan
 from .shards import gaps, output_lock_path, ranges, refuse_live_slices, remove_shard_files, run_shards
-from .sink import HDF5Sink
+from .sink import make_sink
 from .sources import Sources
 from .summary import JobSummary, progress_bar
 from .task import Part
@@ -58,7 +58,7 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
             raise UnfinishedJobError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
                                      "source clips")
     t0 = time.perf_counter()
-    sink = HDF5Sink()
+    sink = make_sink(config)
     shard_dir = work
     merged = checkpointed_tasks(work, plan)
     missing = [t for t in plan.tasks[merged:] if not (shard_dir / sink.shard_name(t.id)).exists()]

@@ -33,7 +33,7 @@ from .config import JobConfig
 from .select import select_clips
 from .sources import Sources, clip_key
 
-__all__ = ["Pair", "Task", "Group", "Plan", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
+__all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
 PLAN_VERSION = 3
 MIN_SECONDS = SpliceOptions().min_seconds
@@ -86,16 +86,34 @@ class Group:
 
 
 @dataclass
+class PlanClip:
+    """A source clip of the plan, as the tasks need it without reading it: its name, frames,
+    frame rate, labels and, for a standing action, the arms it acts with (``None``: not found)."""
+
+    name: str
+    frames: int
+    fps: float
+    labels: dict = field(default_factory=dict)
+    acting: list[str] | None = None
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "frames": self.frames, "fps": self.fps, "labels": self.labels}
+        if self.acting is not None:
+            out["acting"] = list(self.acting)
+        return out
+
+
+@dataclass
 class Plan:
-    """What a job does (see the module docstring). ``clips`` maps a clip key to its name,
-    frames and fps; ``flags`` a key to why the clip does not locomote (for forced clips)."""
+    """What a job does (see the module docstring). ``clips`` maps a clip key (:func:`clip_key`)
+    to its :class:`PlanClip`; ``flags`` a key to why the clip does not locomote (for forced clips)."""
 
     key: dict
     pairs: list[Pair]
     tasks: list[Task]
     groups: list[Group]
     skipped: dict[str, int]
-    clips: dict[str, dict]
+    clips: dict[str, PlanClip]
     flags: dict[str, str] = field(default_factory=dict)
     sizing: dict = field(default_factory=dict)  # what set the tasks' size: batch_pairs, memory_budget_mb
     version: int = PLAN_VERSION
@@ -118,7 +136,8 @@ class Plan:
     def to_json(self) -> str:
         return json.dumps({"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
                            "sizing": self.sizing,
-                           "groups": [asdict(g) for g in self.groups], "clips": self.clips,
+                           "groups": [asdict(g) for g in self.groups],
+                           "clips": {k: c.to_dict() for k, c in self.clips.items()},
                            "tasks": [asdict(t) for t in self.tasks],
                            "pairs": [[p.method, p.loco, p.action, p.reference, p.mode] for p in self.pairs]},
                           sort_keys=True, separators=(",", ":"))
@@ -132,7 +151,8 @@ class Plan:
             raise UnfinishedJobError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
                                      f"{PLAN_VERSION}: finish it with the torchsplice that started it")
         return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
-                   groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"], clips=d["clips"], flags=d["flags"],
+                   groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"],
+                   clips={k: PlanClip(**c) for k, c in d["clips"].items()}, flags=d["flags"],
                    sizing=d["sizing"], version=d["version"])
 
     def made_for(self, config: JobConfig) -> bool:
@@ -235,8 +255,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         for key in g.clips:
             tag, row = key.split(":")
             t = tables[tag]
-            clips[key] = {"name": str(t["name"][int(row)]), "frames": int(t["length"][int(row)]), "fps": float(t["fps"][int(row)]),
-                          "labels": json.loads(t["labels"][int(row)] or "{}")}
+            clips[key] = PlanClip(str(t["name"][int(row)]), int(t["length"][int(row)]), float(t["fps"][int(row)]),
+                                  json.loads(t["labels"][int(row)] or "{}"))
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
     pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, sk_l, sk_a, checks, refs, described)
@@ -284,7 +304,7 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
     for n, g in enumerate(groups):
         roles = g.roles(sk_l[g.skeleton])
         # clips in order of length, so that each padded batch holds clips of about one length
-        native = sorted((k for k in g.clips if clips[k]["fps"] == g.fps and k not in out), key=lambda k: clips[k]["frames"])
+        native = sorted((k for k in g.clips if clips[k].fps == g.fps and k not in out), key=lambda k: clips[k].frames)
         if backend.prepares_once:
             bank, index = sources.bank(n, g.clips, g.fps, roles, options, backend)
             for b in range(0, len(native), 256):
@@ -293,9 +313,9 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
                 for k, chk in zip(chunk, check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, g.fps)):
                     out[k] = chk
         rest: dict[float, list[str]] = {}
-        for k in sorted(g.clips, key=lambda k: clips[k]["frames"]):
+        for k in sorted(g.clips, key=lambda k: clips[k].frames):
             if k not in out:
-                rest.setdefault(clips[k]["fps"], []).append(k)
+                rest.setdefault(clips[k].fps, []).append(k)
         for rate, keys in rest.items():
             for b in range(0, len(keys), 64):
                 chunk = keys[b:b + 64]
@@ -314,15 +334,15 @@ def _mode(c: JobConfig, checks: dict, action_key: str, method: str) -> str:
 
 
 def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l, keys: set[str]) -> None:
-    """Record in ``clips[key]["acting"]`` the arms each standing action acts with (found once per
+    """Record in ``clips[key].acting`` the arms each standing action acts with (found once per
     clip from its own frames, or ``config.acting_limbs``)."""
     from ..splice.standing import acting_limbs
 
     for n, g in enumerate(groups):
-        todo = sorted((k for k in g.clips if k in keys and "acting" not in clips[k]), key=lambda k: clips[k]["frames"])
+        todo = sorted((k for k in g.clips if k in keys and clips[k].acting is None), key=lambda k: clips[k].frames)
         if config.acting_limbs is not None:
             for k in todo:
-                clips[k]["acting"] = list(config.acting_limbs)
+                clips[k].acting = list(config.acting_limbs)
             continue
         roles = g.roles(sk_l[g.skeleton])
         for b in range(0, len(todo), 64):
@@ -335,7 +355,7 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
                 found = acting_limbs(clips_to_tensors([motions[i] for i in idx], motions[idx[0]].skeleton), roles,
                                      motions[idx[0]].skeleton)
                 for i, (limbs, measure) in zip(idx, found):
-                    clips[chunk[i]]["acting"] = list(limbs)
+                    clips[chunk[i]].acting = list(limbs)
 
 
 def _skeleton_units(db) -> dict[int, tuple[str, str]]:

@@ -57,7 +57,7 @@ from .merge import (STAGING, OutputMerge, copy_source_clips, merge_job, open_out
                     source_skeleton, summarise_output, task_finished)
 from .plan import Plan, make_plan
 from .shards import clear_work, output_lock_path, refuse_live_slices, slice_tasks
-from .sink import HDF5Sink
+from .sink import make_sink
 from .sources import Sources
 from .size import OutputSize, estimate_output, format_bytes
 from .summary import JobSummary, progress_bar
@@ -79,7 +79,7 @@ class SpliceJob:
         self.dry_run = dry_run
         self.command = command or "torchsplice.job.SpliceJob (Python API)"
         self.work = self.config.work
-        self.sink = HDF5Sink()
+        self.sink = make_sink(config)
 
     # -- the run ------------------------------------------------------------------------------
     def run(self) -> JobSummary:

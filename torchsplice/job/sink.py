@@ -26,7 +26,7 @@ from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
 
-__all__ = ["Sink", "HDF5Sink", "OutputWriter"]
+__all__ = ["Sink", "HDF5Sink", "OutputWriter", "make_sink"]
 
 
 class Sink:
@@ -198,3 +198,9 @@ class HDF5Sink(Sink):
         out = OutputWriter(resumed[0])
         out.restore(resumed[1])
         return out, resumed[1]
+
+
+def make_sink(config) -> Sink:
+    """The sink of a job of ``config`` (the one place the job, its workers and the merge get it):
+    an :class:`HDF5Sink` for every job today."""
+    return HDF5Sink()

@@ -65,7 +65,7 @@ def estimate_output(plan, skeleton_of, compression, copied: list | None = None) 
     as its locomotion; a time-aligned one at most as long as the shorter clip of the pair."""
     frames = clips = 0
     total = 0.0
-    info = {k: (c["frames"], c["fps"]) for k, c in plan.clips.items()}
+    info = {k: (c.frames, c.fps) for k, c in plan.clips.items()}
     for g in {t.group for t in plan.tasks}:  # the last, partly filled chunk of each skeleton's frames
         sk = skeleton_of(g)
         total += CHUNK_FRAMES * frame_bytes(sk.num_joints, sk.has_joint_translations, None)

@@ -158,7 +158,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         index = {c: i for i, c in enumerate(wanted)}
     lo, ac = [index[k[0]] for k in keys], [index[k[1]] for k in keys]
     if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
-        acting = [tuple(plan.clips[k[1]].get("acting", ())) for k in keys]
+        acting = [tuple((plan.clips[k[1]].acting or ())) for k in keys]
         batch = backend.standing(prepared, lo, ac, acting, sources.standing_tables(task.group, roles, skeleton, fps),
                                  spec_m, options, fps, buffers=buffers, keep_going=True)
     else:
@@ -172,7 +172,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     skipped: dict[str, int] = {}
     for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
-        log.warning("%s + %s: %s", plan.clips[keys[b][0]]["name"], plan.clips[keys[b][1]]["name"], why)
+        log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
     kept = [b for b in range(len(pairs)) if b not in failed]
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture)
@@ -192,12 +192,12 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     """A task's output columns, computed at once (``curve`` and ``crop`` at the locomotion's rate,
     ``corr`` and ``posture`` in degrees)."""
     method, fps = task.method, group.fps
-    lnames = [plan.clips[k[0]]["name"] for k in keys]
-    anames = [plan.clips[k[1]]["name"] for k in keys]
-    scale = np.array([plan.clips[k[1]]["fps"] / fps for k in keys])  # to the action's own frames
+    lnames = [plan.clips[k[0]].name for k in keys]
+    anames = [plan.clips[k[1]].name for k in keys]
+    scale = np.array([plan.clips[k[1]].fps / fps for k in keys])  # to the action's own frames
     starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
     mean_corr = np.add.reduceat(corr, starts) / frames if len(corr) else np.zeros(len(keys))
-    loco_frames = np.array([plan.clips[k[0]]["frames"] for k in keys])
+    loco_frames = np.array([plan.clips[k[0]].frames for k in keys])
     flags = []
     standing = getattr(task, "mode", "timewarp") == "standing"
     for b, k in enumerate(keys):
@@ -210,20 +210,20 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     named = get_method(method).clip_name
     extra = {
         "locomotion": lnames, "action": anames,
-        "reference": [plan.clips[k[2]]["name"] if k[2] else "" for k in keys], "method": [method] * len(keys),
+        "reference": [plan.clips[k[2]].name if k[2] else "" for k in keys], "method": [method] * len(keys),
         "params": [config.params()] * len(keys), "flags": flags,
         "locomotion_id": [p.loco for p in pairs], "action_id": [p.action for p in pairs],
         "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": posture,
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
         "timing": [config.timing if standing else "timewarp"] * len(keys),
-        "acting": [",".join(plan.clips[k[1]].get("acting", ())) if standing else "" for k in keys],
+        "acting": [",".join((plan.clips[k[1]].acting or ())) if standing else "" for k in keys],
     }
     return Part(
         task=task.id, skeleton=skeleton, spec=group.spec,
         names=[named(lo, ac) for lo, ac in zip(lnames, anames)], lengths=frames, fps=np.full(len(keys), fps),
         rotations=rot, translations=trans,
-        labels=[json.dumps(spliced_labels(method, plan.clips[k[0]]["name"], plan.clips[k[0]].get("labels", {}),
-                                          plan.clips[k[1]]["name"], plan.clips[k[1]].get("labels", {})), sort_keys=True)
+        labels=[json.dumps(spliced_labels(method, plan.clips[k[0]].name, plan.clips[k[0]].labels,
+                                          plan.clips[k[1]].name, plan.clips[k[1]].labels), sort_keys=True)
                 for k in keys],
         extra=extra, action_frame=(curve * np.repeat(scale, frames)).astype(np.float32),
     )

@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from ..sink import Sink
     from ..sources import Sources
 
-__all__ = ["Engine", "EngineContext", "register_engine", "available_engines", "make_engine", "MAX_ATTEMPTS"]
+__all__ = ["one_thread_worker", "Engine", "EngineContext", "register_engine", "available_engines", "make_engine", "MAX_ATTEMPTS"]
 
 MAX_ATTEMPTS = 3
 """Tries of a task whose worker dies (local workers: pool breaks in a row; Ray: retries)."""
@@ -133,3 +133,12 @@ def make_engine(ctx: EngineContext) -> Engine:
     if not isinstance(engine, Engine):
         raise TorchspliceError(f"engine {name!r} made a {type(engine).__name__}, not a torchsplice Engine")
     return engine
+
+
+def one_thread_worker(config) -> None:
+    """What every engine's worker process starts with: one compute thread, for torch and for the
+    job's splicing backend (workers run in parallel with each other, not within themselves)."""
+    import torch
+
+    torch.set_num_threads(1)
+    config.splice_backend().set_threads(1)

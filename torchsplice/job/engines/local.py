@@ -25,7 +25,7 @@ from ..config import JobConfig
 from ..plan import Plan, Task
 from ..sources import Sources
 from ..task import run_task
-from . import MAX_ATTEMPTS, Engine, EngineContext
+from . import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker
 
 __all__ = ["LocalEngine", "make_local_engine", "IN_FLIGHT_PER_WORKER"]
 
@@ -57,16 +57,13 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int,
     exits when the driver is gone (a killed job leaves no worker behind)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with(driver)
-    import torch
-
-    torch.set_num_threads(1)
-    config.splice_backend().set_threads(1)
-    from ..sink import HDF5Sink
+    one_thread_worker(config)
+    from ..sink import make_sink
 
     plan = Plan.load(Path(plan_path))
     sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir), bank_tag=plan.digest())  # mapped
     sources.share_banks(plan.groups)
-    _WORKER.update(config=config, plan=plan, sources=sources, sink=HDF5Sink(), shard_dir=Path(shard_dir),
+    _WORKER.update(config=config, plan=plan, sources=sources, sink=make_sink(config), shard_dir=Path(shard_dir),
                    keep_shards=keep_shards)
 
 

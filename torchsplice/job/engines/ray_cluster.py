@@ -20,7 +20,7 @@ from ..config import JobConfig
 from ..plan import Plan, Task
 from ..sources import Sources
 from ..task import run_task
-from . import MAX_ATTEMPTS, Engine, EngineContext
+from . import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker
 
 __all__ = ["RayEngine"]
 
@@ -35,10 +35,7 @@ def _ray_run(config: JobConfig, digest: str, plan_box: list, index: int, group_b
     import ray
 
     if _RAY_CACHE.get("plan") != digest:
-        import torch
-
-        torch.set_num_threads(1)
-        config.splice_backend().set_threads(1)
+        one_thread_worker(config)
         _RAY_CACHE.clear()
         _RAY_CACHE.update(plan=digest, obj=Plan.from_json(ray.get(plan_box[0])), sources=Sources.from_motions({}), groups=set())
     plan, sources = _RAY_CACHE["obj"], _RAY_CACHE["sources"]
