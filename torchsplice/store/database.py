@@ -179,7 +179,6 @@ class MotionDatabase(Reading, Writing):
         with open(commit_path(self._tmp), "a") as f:
             f.write(json.dumps(record) + "\n")  # one write: a killed process leaves whole lines
 
-
     @staticmethod
     def checkpoint_note(staging) -> dict | None:
         """The ``note`` of the last checkpoint of the database staged at ``staging`` (``None``
@@ -295,7 +294,6 @@ class MotionDatabase(Reading, Writing):
         db._lock, db._target = lock, real
         return db
 
-
     def close(self) -> None:
         """Commit (for a write) and close. Safe to call twice."""
         if self._h5 is None:
@@ -407,7 +405,6 @@ class MotionDatabase(Reading, Writing):
     def spec_json(self, skeleton: int) -> str:
         """The dataset spec (JSON) stored with skeleton ``k``, or ``""``."""
         return str(self.h5[skeleton_path(skeleton)].attrs.get("spec", ""))
-
 
     def __repr__(self) -> str:
         state = "closed" if self._h5 is None else self.mode

@@ -296,7 +296,6 @@ class Reading:
         if i >= self._flushed:
             self.flush()
 
-
     @reads
     def packed(self, skeleton: int = 0) -> dict[str, np.ndarray]:
         """Every frame of skeleton ``k`` as whole arrays: ``rotations``, ``root_translation``,
@@ -305,7 +304,6 @@ class Reading:
         g = self.h5[skeleton_path(skeleton)]
         with self._frames(skeleton):
             return {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
-
 
     @reads
     def read_many(self, clips: Sequence[str | int], dtype: torch.dtype = torch.float32) -> list[Motion]:
