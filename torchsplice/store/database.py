@@ -36,7 +36,7 @@ from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .checks import check_header
 from .lock import check_name_length, output_lock, temp_path
-from .reading import ClipBatch, Reading
+from .reading import ClipBatch, Reading, virtual_files
 from .resumable import RowLog, clear_status_flags, commit_path, detach, last_checkpoint, rows_path
 from .schema import (CLIPS, COLUMNS, COMPRESSIONS, FORMAT, KINDS, SCHEMA_VERSION, SKELETONS, extra_columns,
                      skeleton_from_group, skeleton_path)
@@ -242,6 +242,13 @@ class MotionDatabase(Reading, Writing):
         db._names, db._flushed = names, len(names)
         db._virtual = {int(k): [tuple(p) for p in parts] for k, parts in record["virtual"].items()}
         return db, record["note"]
+
+    @staticmethod
+    def virtual_files(path) -> set[Path]:
+        """The files whose frames the database at ``path`` reads through virtual datasets (empty
+        for a database holding its own frames, or a file that is missing or not readable),
+        found without checking or locking the file."""
+        return virtual_files(Path(path))
 
     @classmethod
     def open(cls, path, mode: str = "r") -> "MotionDatabase":

@@ -15,6 +15,7 @@ import inspect
 import json
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator, Sequence
 
 import h5py
@@ -25,10 +26,10 @@ from ..core.errors import DatabaseError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import DatasetSpec, detect_spec
-from .schema import CLIPS, COLUMNS, cap, short, skeleton_path
+from .schema import CLIPS, COLUMNS, SKELETONS, cap, short, skeleton_path
 from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
 
-__all__ = ["Reading", "ClipBatch", "FrameArray", "reads"]
+__all__ = ["Reading", "ClipBatch", "FrameArray", "reads", "virtual_files"]
 
 
 @dataclass
@@ -142,6 +143,25 @@ class FrameArray:
         ds = self._ds
         return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
                              f"({str(exc).splitlines()[0][:120]})")
+
+
+def virtual_files(path: Path) -> set[Path]:
+    """The files whose frames the database at ``path`` reads through virtual datasets (see
+    :meth:`~torchsplice.store.writing.Writing.append_virtual`); empty for a database holding
+    its own frames, and for a file that is not there or not readable."""
+    if not path.is_file():
+        return set()
+    files: set[Path] = set()
+    try:
+        with h5py.File(path, "r") as f:
+            for g in f[SKELETONS].values():
+                for ds in g.values():
+                    if isinstance(ds, h5py.Dataset) and ds.is_virtual:
+                        files |= {(path.parent / vs.file_name).resolve() for vs in ds.virtual_sources()
+                                  if vs.file_name != "."}
+    except (OSError, KeyError, ValueError):
+        return set()
+    return files
 
 
 class Reading:
@@ -264,12 +284,17 @@ class Reading:
             frame_arrays=tuple(n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g),
             dtype=np.dtype(g["rotations"].dtype))
 
+    def stored_spec(self, skeleton: int) -> DatasetSpec | None:
+        """The dataset spec stored with skeleton ``k``, or ``None`` where none was stored."""
+        text = self.spec_json(skeleton)
+        return DatasetSpec.from_json(text) if text else None
+
     def spec(self, skeleton: int) -> DatasetSpec:
         """The dataset spec of skeleton ``k``: the one stored with it, else one detected for it
         (:func:`~torchsplice.specs.detect_spec`, which guesses one where no shipped spec fits;
         a :class:`~torchsplice.core.errors.SpecError` when nothing fits)."""
-        text = self.spec_json(skeleton)
-        return DatasetSpec.from_json(text) if text else detect_spec(self._skeletons[skeleton])
+        spec = self.stored_spec(skeleton)
+        return spec if spec is not None else detect_spec(self._skeletons[skeleton])
 
     def frame_array(self, skeleton: int, name: str) -> FrameArray:
         """The per-frame array ``name`` of skeleton ``k`` (one of :attr:`SkeletonInfo.frame_arrays`),

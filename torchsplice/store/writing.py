@@ -140,6 +140,15 @@ class Writing:
         size = self._dtype.itemsize
         return sum(m.num_frames * (7 * m.skeleton.num_joints + 3 + len(self.frame_columns)) * size for m, *_ in self._staged)
     # -- writing ------------------------------------------------------------------------------
+    def update_run_record(self, fields: dict) -> None:
+        """Update the run record (the root attribute ``run``, JSON written by ``splice-all``)
+        with ``fields``; a file without one is left as it is."""
+        self._writable()
+        run = json.loads(str(self.h5.attrs.get("run", "")) or "{}")
+        if run:
+            run.update(fields)
+            self.h5.attrs["run"] = json.dumps(run)
+
     def _writable(self) -> None:
         if self.mode == "r":
             raise DatabaseError(f"{self.path}: opened read-only")
