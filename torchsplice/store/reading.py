@@ -271,6 +271,11 @@ class Reading:
         """Whether the database holds a clip named ``clip``."""
         return isinstance(clip, str) and clip in self._index_map()
 
+    def run_record(self) -> dict | str | None:
+        """The run record (the root attribute ``run``, JSON written by ``splice-all``) as a dict;
+        ``None`` when the file has none, the raw text when it is not a JSON object."""
+        return run_record(self.attrs.get("run"))
+
     @reads
     def skeleton_info(self, skeleton: int) -> SkeletonInfo:
         """What the file records with skeleton ``k``: units, up axis, spec, stored frame arrays."""

@@ -9,7 +9,6 @@ where the files still exist), and in the output itself when the job ran with
 
 from __future__ import annotations
 
-import json
 import warnings
 from pathlib import Path
 
@@ -23,10 +22,7 @@ __all__ = ["source_databases", "recorded_sources", "SourceClips", "clip_spec", "
 
 def recorded_sources(db: MotionDatabase) -> list[Path]:
     """The input databases named by ``db``'s ``run`` record that still exist (none without one)."""
-    try:
-        run = json.loads(str(db.attrs.get("run", "")) or "{}")
-    except ValueError:
-        return []
+    run = db.run_record()
     paths = []
     for key in ("database", "actions_db"):
         rec = run.get(key) if isinstance(run, dict) else None
