@@ -79,7 +79,6 @@ compression, or ``preload=True``, is several times faster to sample at random.
 from __future__ import annotations
 
 import fnmatch
-import json
 import operator
 import os
 from pathlib import Path
@@ -92,7 +91,7 @@ from torch.utils.data import Dataset
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.rotations import quat_to_6d
 from ..core.skeleton import Skeleton
-from ..store.database import MotionDatabase
+from ..store import ClipTable, MotionDatabase
 from ..core.fk import forward_kinematics
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "FeatureStatistics", "BUILTIN_FEATURES", "ITEM_KEYS"]
@@ -177,29 +176,22 @@ def _matcher(key: str, want) -> Callable[[Any], bool]:
     return lambda v: v == want
 
 
-def _where_mask(where: Mapping[str, Any], table: dict[str, np.ndarray], columns: dict[str, str],
+def _where_mask(where: Mapping[str, Any], table: ClipTable, columns: dict[str, str],
                 frame_columns: Sequence[str], path: Path) -> np.ndarray:
     """Boolean mask ``(C,)`` of the rows whose metadata satisfy every entry of ``where``."""
-    C = len(table["name"])
+    C = len(table)
     keep = np.ones(C, dtype=bool)
-    labels_cache: dict[str, dict] = {}
-
-    def labels(s: str) -> dict:
-        if s not in labels_cache:
-            labels_cache[s] = json.loads(s or "{}")
-        return labels_cache[s]
-
     known = [*_BASE_COLUMNS, *columns]
     for key, want in where.items():
         if not isinstance(key, str):
             raise TypeError(f"where keys must be column names, got {key!r}")
         if key.startswith("labels."):
             label = key[len("labels."):]
-            values = [labels(s).get(label) for s in table["labels"]]
+            values = [lab.get(label) for lab in table.labels]
         elif key == "labels":
-            values = [labels(s) for s in table["labels"]]
+            values = list(table.labels)
         elif key in known:
-            values = table[key].tolist()
+            values = table.column(key).tolist()
         else:
             extra = f"; {key!r} is a per-frame column (a feature, not a filter)" if key in frame_columns else ""
             raise DatasetError(
@@ -239,12 +231,8 @@ def _velocities(pos: torch.Tensor, fps: torch.Tensor, clip_first: torch.Tensor, 
 def _trajectory_joint(db: MotionDatabase, k: int, skeleton: Skeleton) -> int:
     """Index of the joint carrying skeleton ``k``'s world trajectory: its spec's ``root`` role
     (Bandai Namco: ``Hips``, under a ``joint_Root`` that stands still), else joint 0."""
-    from ..specs import DatasetSpec, detect_spec
-
-    text = db.spec_json(k)
     try:
-        spec = DatasetSpec.from_json(text) if text else detect_spec(skeleton)
-        return int(spec.bind(skeleton).root)
+        return int(db.spec(k).bind(skeleton).root)
     except TorchspliceError:  # no spec fits: the BVH root
         return 0
 
@@ -295,38 +283,6 @@ def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Ske
         else:  # a per-frame column
             out[f] = raw[f]
     return out
-
-
-def _read_rows(ds, lo: int, hi: int) -> np.ndarray:
-    """Rows ``lo:hi`` of an h5py dataset (a damaged chunk: one clear error)."""
-    try:
-        return ds[lo:hi]
-    except OSError as exc:
-        raise _damaged(ds, lo, hi, exc) from None
-
-
-def _damaged(ds, lo: int, hi: int, exc: OSError) -> DatabaseError:
-    return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
-                         f"({str(exc).splitlines()[0][:120]})")
-
-
-def _gather_rows(ds, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-    """Rows ``start:start+length`` of an h5py dataset for several clips, concatenated.
-
-    One read of the covering span when the clips lie close together, else one read per clip.
-    """
-    if len(starts) == 0:
-        return ds[0:0]
-    lo, hi = int(starts.min()), int((starts + lengths).max())
-    total = int(lengths.sum())
-    try:
-        if hi - lo <= 2 * total:
-            block = ds[lo:hi]
-            rel = np.repeat(starts - lo - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
-            return block[rel]
-        return np.concatenate([ds[int(s):int(s + n)] for s, n in zip(starts, lengths)])
-    except OSError as exc:  # a damaged chunk: one clear line, not HDF5's traceback
-        raise _damaged(ds, lo, hi, exc) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -406,27 +362,30 @@ class MotionDataset(Dataset):
         self._db_pid: int | None = None
         self._datasets: dict = {}
         with MotionDatabase.open(self.path) as db:
-            table = db.table()
+            clip_table = db.clip_table()
             self.skeletons: list[Skeleton] = db.skeletons
             self.frame_columns: tuple[str, ...] = tuple(db.frame_columns)
             self.columns: dict[str, str] = dict(db.columns)
-            stored = {k: set(db.h5[f"skeletons/{k}"].keys()) for k in range(len(self.skeletons))}
+            info = [db.skeleton_info(k) for k in range(len(self.skeletons))]
+            stored = {k: set(i.frame_arrays) for k, i in enumerate(info)}
             self.trajectory_joints: dict[int, int] = (
                 {k: _trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)}
                 if {"trajectory", "trajectory_velocity"} & set(self.features) else {})
-            self.units: dict[int, str] = {k: str(db.h5[f"skeletons/{k}"].attrs.get("units", "")) for k in range(len(self.skeletons))}
+            self.units: dict[int, str] = {k: i.units for k, i in enumerate(info)}
             self._check_features()
-            keep = np.ones(len(table["name"]), dtype=bool)
+            keep = np.ones(len(clip_table), dtype=bool)
             if clips is not None:
-                keep &= _select_clips(clips, table["name"], self.path)
+                keep &= _select_clips(clips, clip_table.name, self.path)
             if where:
-                keep &= _where_mask(where, table, self.columns, self.frame_columns, self.path)
+                keep &= _where_mask(where, clip_table, self.columns, self.frame_columns, self.path)
             if not keep.any():
                 raise DatasetError(
                     f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}")
             sel = np.flatnonzero(keep)
             self.indices = sel.astype(np.int64)
-            self.table = {k: v[sel] for k, v in table.items()}
+            chosen = clip_table.take(sel)
+            self.table = chosen.to_dict()
+            self._labels = chosen.labels
             self.names = [str(n) for n in self.table["name"]]
             self._skel = self.table["skeleton"].astype(np.int64)
             self._row0 = self.table["start"].astype(np.int64)
@@ -492,7 +451,7 @@ class MotionDataset(Dataset):
     def _dataset(self, k: int, name: str):
         key = (k, name)
         if key not in self._datasets:
-            self._datasets[key] = self._database().h5[f"skeletons/{k}/{name}"]
+            self._datasets[key] = self._database().frame_array(k, name)
         return self._datasets[key]
 
     def close(self) -> None:
@@ -503,7 +462,7 @@ class MotionDataset(Dataset):
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
-        state.update(_db=None, _db_pid=None, _datasets={})  # h5py handles never travel
+        state.update(_db=None, _db_pid=None, _datasets={})  # open files never travel
         return state
 
     def __del__(self):
@@ -520,8 +479,7 @@ class MotionDataset(Dataset):
         for k, need in self._raw.items():
             clips = np.flatnonzero(self._skel == k)
             starts, lengths = self._row0[clips], self._len[clips]
-            g = db.h5[f"skeletons/{k}"]
-            raw = {n: torch.from_numpy(_gather_rows(g[n], starts, lengths)).to(self.dtype) for n in need}
+            raw = {n: torch.from_numpy(db.frame_array(k, n).gather(starts, lengths)).to(self.dtype) for n in need}
             offs = np.cumsum(lengths) - lengths
             self._pre_offset[clips] = offs
             N = int(lengths.sum())
@@ -577,7 +535,7 @@ class MotionDataset(Dataset):
                 ctx = 1 if (vel and start > 0) else 0  # the frame before, for velocities
                 lo = int(self._row0[c]) + start - ctx
                 for name in raw:
-                    raw[name].append(torch.from_numpy(_read_rows(self._dataset(k, name), lo, lo + n + ctx)))
+                    raw[name].append(torch.from_numpy(self._dataset(k, name)[lo:lo + n + ctx]))
                 ctxs.append(ctx)
                 sizes.append(n + ctx)
                 fps.append(float(self._fps[c]))
@@ -601,7 +559,7 @@ class MotionDataset(Dataset):
         item.update(name=str(self._names_arr[c]), length=n, fps=float(self._fps[c]), index=int(self.indices[c]),
                     start=start, skeleton=int(self._skel[c]))
         if "labels" in self.features:
-            item["labels"] = json.loads(self.table["labels"][c] or "{}")
+            item["labels"] = dict(self._labels[c])
         return item
 
     def __getitem__(self, i: int) -> dict:

@@ -35,7 +35,7 @@ from ..core.names import printable
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from ..formats.npz import clip_filenames
-from ..specs import DatasetSpec, detect_spec
+from ..specs import DatasetSpec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
@@ -183,7 +183,7 @@ def _method_order(names) -> list[str]:
 def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, examples) -> dict:
     k = int(t["skeleton"][rows[0]])
     sk = db.skeletons[k]
-    spec = DatasetSpec.from_json(db.spec_json(k)) if db.spec_json(k) else detect_spec(sk)
+    spec = db.spec(k)
     roles = spec.bind(sk)
     units = spec.units if spec.units != "unknown" else "units"
     candidates = sources.captures()

@@ -221,7 +221,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
                 pieces = m.windows(split, split_overlap) if split else [m]
-                taken = [p.name for p in pieces if p.name in db._index_map()]
+                taken = [p.name for p in pieces if p.name in db]
                 if taken:  # appending: this file is skipped, the others land
                     raise TorchspliceError(f"clip name {taken[0]!r} is already in the database")
                 known = len(db.skeletons)

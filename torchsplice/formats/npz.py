@@ -118,8 +118,8 @@ def select_rows(db: MotionDatabase, clips: Sequence[str] | None, skeletons: Sequ
         if unknown:
             raise TorchspliceError(f"{db.path}: no skeleton {unknown[0]} (it has {len(db.skeletons)}, numbered from 0; "
                                    "see torchsplice info)")
-        t = db.table()
-        rows = [r for r in rows if int(t["skeleton"][r]) in set(skeletons)]
+        skeleton = db.clip_table().skeleton
+        rows = [r for r in rows if int(skeleton[r]) in set(skeletons)]
     if not rows:
         raise TorchspliceError(f"{db.path}: no clip to export" + (" on the skeletons asked for" if skeletons is not None else ""))
     return rows
@@ -201,11 +201,8 @@ class NpzExport:
             rows = select_rows(db, self.clips, self.skeletons)
             self._attrs = {}
             for k in range(len(db.skeletons)):
-                g = db.h5[f"skeletons/{k}"]
-                spec = json.loads(db.spec_json(k) or "{}")
-                self._attrs[k] = {"units": str(g.attrs.get("units", "")), "up_axis": str(g.attrs.get("up_axis", "")),
-                                  "spec": spec.get("name", "") if isinstance(spec, dict) else "",
-                                  "dtype": np.dtype(g["rotations"].dtype)}
+                info = db.skeleton_info(k)
+                self._attrs[k] = {"units": info.units, "up_axis": info.up_axis, "spec": info.spec_name, "dtype": info.dtype}
         names = (*FRAME_ARRAYS, *FEATURE_SETS.get(self.features, ()))
         self.frame_arrays: tuple[str, ...] = names
         self._ds = MotionDataset(self.database, clips=rows, features=(*names, "labels"), dtype=torch.float64)

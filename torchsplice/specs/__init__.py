@@ -3,8 +3,13 @@
 - :mod:`.roles`: :class:`SkeletonRoles`, a spec bound to one skeleton (integer joint indices),
   the domain type the splicer, kinematics and evaluation read;
 - :mod:`.spec`: :class:`DatasetSpec` (roles by joint name, axes, units, clip rules);
-- :mod:`.loading`: :func:`load_spec` and :func:`list_specs` (shipped specs, TOML files, JSON);
-- :mod:`.guess`: :func:`guess_spec` (the ``generic`` spec) and :func:`detect_spec`.
+- :mod:`.loading`: :func:`load_spec` and :func:`list_specs` (shipped specs, TOML files),
+  :func:`guess_spec` (the ``generic`` spec) and :func:`detect_spec`.
+
+Underneath, from the bottom up (each module imports only those before it):
+:mod:`.vocabulary` (roles, units, axes, keys), :mod:`.roles`, :mod:`.clips` (:class:`RoleRule`),
+:mod:`.parsing` (TOML and JSON tables into a spec's fields), :mod:`.guess` (the joint-guessing
+heuristics), :mod:`.spec`, :mod:`.loading`.
 
 Example::
 
@@ -15,10 +20,11 @@ Example::
     # ("both", {"dataset": "1", "content": "walk", "style": "proud", "take": "001"})
 """
 
-from .guess import detect_spec, guess_spec
-from .loading import list_specs, load_spec
+from .clips import RoleRule
+from .loading import detect_spec, guess_spec, list_specs, load_spec
 from .roles import SkeletonRoles, bind_roles
-from .spec import GENERIC, ROLES, UNITS, DatasetSpec, RoleRule
+from .spec import DatasetSpec
+from .vocabulary import GENERIC, ROLES, UNITS
 
 __all__ = ["DatasetSpec", "RoleRule", "SkeletonRoles", "ROLES", "UNITS", "GENERIC", "load_spec", "list_specs",
            "guess_spec", "detect_spec", "bind_roles"]

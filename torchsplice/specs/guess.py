@@ -1,5 +1,8 @@
-"""Guessing a spec for a skeleton no dataset spec fits (the ``generic`` spec), from common joint
-names, the hierarchy and the rest pose; and detecting which spec fits a file.
+"""Guessing the joint roles of a skeleton no dataset spec fits (what the ``generic`` spec
+does), from common joint names, the hierarchy and the rest pose: :func:`guess_joints` gives
+the joint fields of the guessed spec; :meth:`DatasetSpec.guess_for
+<torchsplice.specs.DatasetSpec.guess_for>` makes the spec and :func:`~torchsplice.specs.guess_spec`
+describes the guess.
 """
 
 from __future__ import annotations
@@ -10,15 +13,14 @@ import re
 from ..core.errors import SpecError
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
-from .loading import list_specs, load_spec
-from .roles import _AXES, _is_ancestor
-from .spec import GENERIC, DatasetSpec
+from .roles import is_ancestor
+from .vocabulary import AXES
 
-__all__ = ["guess_spec", "detect_spec"]
+__all__ = ["guess_joints", "cannot_guess"]
 
 
 # --------------------------------------------------------------------------------------------
-# guessing and detection
+# guessing
 # --------------------------------------------------------------------------------------------
 _KNEE = {"knee", "leg", "lowerleg", "lowleg", "loleg", "calf", "shin"}
 _THIGH = {"upleg", "upperleg", "uleg", "thigh", "hip"}
@@ -92,9 +94,7 @@ class _Guesser:
 
     def fail(self, problem: str, joints: bool = True) -> SpecError:
         """A SpecError saying what could not be guessed, listing the joints unless told not to."""
-        listed = f"; its joints: {', '.join(self.sk.names)}" if joints else ""
-        return SpecError(f"cannot guess the joint roles of this skeleton: {problem}; write a dataset "
-                         f"spec (see datasets_spec/README.md){listed}")
+        return cannot_guess(self.sk, problem, joints)
 
     def named(self, side: str | None, parts: set[str]) -> list[int]:
         """Joints whose side is ``side`` and whose core is one of ``parts``, in index order."""
@@ -209,48 +209,23 @@ class _Guesser:
         return path[path.index(top) - 1]
 
 
-def guess_spec(skeleton: Skeleton, base: DatasetSpec | None = None) -> DatasetSpec:
-    """Guess a spec for ``skeleton`` from common joint names and the hierarchy.
+def cannot_guess(skeleton: Skeleton, problem: str, joints: bool = True) -> SpecError:
+    """The :class:`SpecError` saying that the joint roles of ``skeleton`` cannot be guessed and
+    why (``problem``), listing its joints unless ``joints`` is false."""
+    listed = f"; its joints: {', '.join(skeleton.names)}" if joints else ""
+    return SpecError(f"cannot guess the joint roles of this skeleton: {problem}; write a dataset "
+                     f"spec (see datasets_spec/README.md){listed}")
 
-    Knees (``knee``, ``leg``, ``lowerleg``, ``calf``, ``shin``...) and elbows (``elbow``,
-    ``forearm``, ``lowerarm``...) are found by name and side (``Left``/``L``/``l_``/``_L``...);
-    failing that, below a thigh (``upleg``, ``thigh``, ``hip``...) or upper arm, or above a
-    foot or hand. Hips and shoulders are the joints above them (so the shoulder is the
-    glenohumeral joint, never a clavicle), feet and hands the joints below them (named like
-    ``foot``/``hand``, else the only child), toes the joint below the foot.
 
-    Twist, roll and helper bones never take a role: each role goes to the joint that *starts*
-    the next segment. A twist bone is one named so (``twist``, ``roll``, ``helper``), or a
-    numbered continuation of its parent that carries on in the parent's direction in the rest
-    pose (MakeHuman's ``upperleg01.L > upperleg02.L > lowerleg01.L > lowerleg02.L > foot.L``:
-    thigh ``upperleg01.L``, knee ``lowerleg01.L``, foot ``foot.L``; Rigify's ``DEF-thigh.L >
-    DEF-thigh.L.001``). Climbing from a knee or elbow, twist bones in line are passed (from
-    ``LeftForeArm`` up past ``LeftArmRoll``: shoulder ``LeftArm``); going down, a twist bone in
-    line is passed (``LeftForeArm > LeftForeArmRoll > LeftHand``) and one on a side branch
-    (Unreal's ``calf_twist_01_l`` beside ``foot_l``) is not a candidate. Knee or elbow
-    candidates that are twist bones come last. The bones passed over are recorded.
+def guess_joints(skeleton: Skeleton, up_axis: str) -> dict:
+    """The joint fields of a spec guessed for ``skeleton`` whose up axis is ``up_axis``: the
+    keyword arguments ``root``, ``pelvis``, ``spine``, ``hips``, ``knees``, ``feet``,
+    ``shoulders``, ``toes``, ``hands``, ``head``, ``notes`` and ``guessed`` of a
+    :class:`~torchsplice.specs.DatasetSpec` (how: see :func:`~torchsplice.specs.guess_spec`).
 
-    The root is the lowest common ancestor of legs and arms (or its nearest ancestor with
-    position channels), the pelvis its child toward the shoulders, the spine the chain from the
-    pelvis to the head (``head``). Up axis, units and clip rules come from ``base`` (the
-    shipped ``generic`` spec by default).
-
-    Only humanoids are guessed. Where the rest pose shows the legs hanging down along the up
-    axis (each foot below its hip by half the leg's length or more), a skeleton whose four
-    limbs all reach the ground (the arms end within a quarter of the hip height of the feet's
-    level) or whose spine, pelvis to chest, lies more than 60 degrees from the up axis is
-    refused: a quadruped (the Truebones elephant, whose front legs are named like arms) or a
-    creature with a level spine. A rest pose that does not show the legs hanging down (LAFAN1,
-    Bandai Namco: every bone along +X) leaves the check out, as the notes say.
-
-    What was guessed is recorded in :attr:`DatasetSpec.guessed` (see
-    :meth:`DatasetSpec.guessed_roles` and :meth:`DatasetSpec.guess_summary`) and how, one line
-    each, in ``notes``.
-
-    Raises :class:`SpecError` saying what could not be found, or why the skeleton does not look
-    like a humanoid.
+    Raises :class:`SpecError` (:func:`cannot_guess`) saying what could not be found, or why the
+    skeleton does not look like a humanoid.
     """
-    base = base or load_spec(GENERIC)
     g = _Guesser(skeleton)
     hips, knees, feet = g.limb(_KNEE, _THIGH, _FOOT, _FOOT, "knee")
     shoulders, elbows, hands = g.limb(_ELBOW, _UPPERARM, _HAND, _HAND, "elbow", end_required=False)
@@ -264,10 +239,10 @@ def guess_spec(skeleton: Skeleton, base: DatasetSpec | None = None) -> DatasetSp
                      "joint can be the pelvis")
     pelvis = g.toward(top, chest)
     root = _trajectory_joint(skeleton, top)
-    heads = [j for j, (_, core) in enumerate(g.parsed) if core in _HEAD and _is_ancestor(skeleton.parents, pelvis, j)]
+    heads = [j for j, (_, core) in enumerate(g.parsed) if core in _HEAD and is_ancestor(skeleton.parents, pelvis, j)]
     head = heads[0] if heads else None
     spine = _chain(skeleton, pelvis, skeleton.parents[head] if head is not None else chest)
-    problem, posture = _posture(skeleton, _AXES[base.up_axis], pelvis, chest, head, hips, feet, shoulders)
+    problem, posture = _posture(skeleton, AXES[up_axis], pelvis, chest, head, hips, feet, shoulders)
     if problem is not None:
         raise g.fail(problem, joints=False)
     n = skeleton.names
@@ -280,23 +255,16 @@ def guess_spec(skeleton: Skeleton, base: DatasetSpec | None = None) -> DatasetSp
                ("head", (n[head],) if head is not None else ()), ("left_leg", names(legs[0])),
                ("right_leg", names(legs[1])), ("left_arm", names(arms[0])), ("right_arm", names(arms[1])),
                ("skipped", names(skipped)))
-    spec = DatasetSpec(
-        name=base.name, description=base.description, up_axis=base.up_axis, units=base.units,
-        files=base.files, root=n[root], pelvis=n[pelvis], spine=tuple(n[j] for j in spine),
+    return dict(
+        root=n[root], pelvis=n[pelvis], spine=tuple(n[j] for j in spine),
         hips=pair(hips), knees=pair(knees), feet=pair(feet), shoulders=pair(shoulders),
         toes=pair(toes) if None not in toes else None, hands=pair(hands) if hands else None,
-        head=n[head] if head is not None else None, pattern=base.pattern,
-        default_role=base.default_role, rules=base.rules, path=None,
+        head=n[head] if head is not None else None,
         notes=tuple(_guess_notes(skeleton, g.notes, root, top, pelvis, head, toes, dict(
             hips=hips, knees=knees, feet=feet, shoulders=shoulders, elbows=elbows, hands=hands or (None, None)),
             skipped, posture)),
         guessed=guessed,
     )
-    try:
-        spec.bind(skeleton)
-    except SpecError as exc:
-        raise g.fail(f"the guess does not fit ({exc})") from None
-    return spec
 
 
 def _trajectory_joint(sk: Skeleton, top: int) -> int:
@@ -318,7 +286,7 @@ def _chain(sk: Skeleton, start: int, end: int) -> list[int]:
 
 
 def _guess_notes(sk, notes, root, top, pelvis, head, toes, limbs, skipped, posture) -> list[str]:
-    """What :func:`guess_spec` guessed and how, one line each."""
+    """What :func:`guess_joints` guessed and how, one line each."""
     n = sk.names
     out = ["guessed from joint names and the hierarchy: " + "; ".join(
         f"{key} {n[a]}/{n[b]}" for key, (a, b) in limbs.items() if (a, b) != (None, None))]
@@ -342,7 +310,7 @@ def _guess_notes(sk, notes, root, top, pelvis, head, toes, limbs, skipped, postu
 def _posture(sk: Skeleton, up: int, pelvis: int, chest: int, head: int | None, hips, feet,
              shoulders) -> tuple[str | None, str]:
     """Whether the rest pose is a humanoid's, standing upright: ``(problem, note)``, ``problem``
-    ``None`` when it is (or when the rest pose cannot tell), else why not (see :func:`guess_spec`)."""
+    ``None`` when it is (or when the rest pose cannot tell), else why not (see :func:`~torchsplice.specs.guess_spec`)."""
     axis = "xyz"[up]
     pos, ends = sk.rest_positions()
     height = pos[:, up]
@@ -376,21 +344,3 @@ def _posture(sk: Skeleton, up: int, pelvis: int, chest: int, head: int | None, h
         return f"{what}: {'; '.join(reasons)}", ""
     return None, (f"rest pose upright: {spine[1] if spine else 'legs hanging down'}; the arms end "
                   f"{min(gaps) / stand:.0%} of the hip height above the feet")
-
-
-def detect_spec(skeleton: Skeleton, filename=None) -> DatasetSpec:
-    """The spec for a file: the first shipped spec whose ``files`` globs match ``filename``
-    and that binds to ``skeleton``, else the first shipped spec that binds, else
-    :func:`guess_spec` (the generic spec is never tried as a shipped spec)."""
-    specs = [load_spec(n) for n in list_specs() if n != GENERIC]
-    specs = [s for s in specs if not s.guess]
-    if filename is not None:
-        for spec in specs:
-            if spec.matches_file(filename) and spec.binds(skeleton):
-                return spec
-    for spec in specs:
-        if spec.binds(skeleton):
-            return spec
-    return guess_spec(skeleton)
-
-

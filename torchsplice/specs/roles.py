@@ -9,19 +9,12 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from ..core.errors import SpecError
 from ..core.skeleton import Skeleton
+from .vocabulary import AXES, OPTIONAL_PAIRS, PAIRS
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .spec import DatasetSpec
-
-__all__ = ["SkeletonRoles", "bind_roles", "landmark_indices"]
-
-_AXES = {"x": 0, "y": 1, "z": 2}
-_PAIRS = ("hips", "knees", "feet", "shoulders")
-_OPTIONAL_PAIRS = ("toes", "hands")
+__all__ = ["SkeletonRoles", "bind_roles", "landmark_indices", "is_ancestor"]
 
 
 @dataclass(frozen=True)
@@ -71,8 +64,10 @@ def landmark_indices(roles: SkeletonRoles, landmarks) -> list[int]:
     return out
 
 
-def bind_roles(spec: "DatasetSpec", sk: Skeleton) -> SkeletonRoles:
-    """Indices of the spec's joints in ``sk``, with the hierarchy checks of :meth:`DatasetSpec.bind`."""
+def bind_roles(spec, sk: Skeleton) -> SkeletonRoles:
+    """Indices of the joints a :class:`~torchsplice.specs.DatasetSpec` ``spec`` names in ``sk``,
+    with the hierarchy checks of :meth:`DatasetSpec.bind` (whose joint names and ``where`` it
+    reads; this module does not import the spec)."""
     def idx(key, name):
         if name not in sk.names:
             raise SpecError(f"{spec.where}: [joints] {key} names joint {name!r}, which the skeleton "
@@ -86,14 +81,14 @@ def bind_roles(spec: "DatasetSpec", sk: Skeleton) -> SkeletonRoles:
     roles = dict(root=idx("root", spec.root), pelvis=idx("pelvis", spec.pelvis),
                  spine=tuple(idx("spine", n) for n in spec.spine),
                  head=None if spec.head is None else idx("head", spec.head),
-                 **{k: pair(k) for k in (*_PAIRS, *_OPTIONAL_PAIRS)})
+                 **{k: pair(k) for k in (*PAIRS, *OPTIONAL_PAIRS)})
     _check_hierarchy(spec, sk, roles)
     upper, lower = _body_split(spec, sk, roles["pelvis"], idx)
     return SkeletonRoles(**roles, upper_body=upper, lower_body=lower,
-                         up_axis=_AXES[spec.up_axis], units=spec.units)
+                         up_axis=AXES[spec.up_axis], units=spec.units)
 
 
-def _is_ancestor(parents: tuple[int, ...], a: int, b: int) -> bool:
+def is_ancestor(parents: tuple[int, ...], a: int, b: int) -> bool:
     """Whether joint ``a`` is ``b`` or one of its ancestors."""
     while b >= 0:
         if b == a:
@@ -102,9 +97,9 @@ def _is_ancestor(parents: tuple[int, ...], a: int, b: int) -> bool:
     return False
 
 
-def _check_hierarchy(spec: DatasetSpec, sk: Skeleton, r: dict) -> None:
+def _check_hierarchy(spec, sk: Skeleton, r: dict) -> None:
     """Refuse roles the hierarchy contradicts (each problem named with its joints)."""
-    anc = functools.partial(_is_ancestor, sk.parents)
+    anc = functools.partial(is_ancestor, sk.parents)
     name = sk.names
 
     def fail(problem):
@@ -132,7 +127,7 @@ def _check_hierarchy(spec: DatasetSpec, sk: Skeleton, r: dict) -> None:
             fail(f"spine: {name[b]!r} must lie below {name[a]!r} (list the spine from the pelvis upward)")
 
 
-def _body_split(spec: DatasetSpec, sk: Skeleton, pelvis: int, idx) -> tuple[tuple[int, ...], tuple[int, ...]]:
+def _body_split(spec, sk: Skeleton, pelvis: int, idx) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """Upper- and lower-body joint sets: explicit lists, or the pelvis's subtree and the rest."""
     every = set(range(sk.num_joints))
     upper = set(idx("upper_body", n) for n in spec.upper_body) if spec.upper_body is not None else None

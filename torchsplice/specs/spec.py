@@ -1,5 +1,4 @@
-"""The dataset spec: :class:`DatasetSpec` (joint roles by name, axes, units, clip-naming rules)
-and its clip rules.
+"""The dataset spec: :class:`DatasetSpec` (joint roles by name, axes, units, clip-naming rules).
 
 Dataset specs: which joints of a dataset's skeleton play which role, and what its clips are.
 
@@ -16,13 +15,13 @@ Example::
     role, labels = spec.clip_metadata("dataset-1_walk_proud_001")
     # ("both", {"dataset": "1", "content": "walk", "style": "proud", "take": "001"})
 
-Where no spec fits, :func:`guess_spec` guesses one from common joint names and the hierarchy,
+Where no spec fits, :meth:`DatasetSpec.guess_for` (and :func:`guess_spec`, from the shipped
+``generic`` spec) guesses one from common joint names and the hierarchy (:mod:`.guess`),
 and :func:`detect_spec` picks a shipped spec for a file (or falls back on the guess). A guessed
 spec says what it guessed: :meth:`DatasetSpec.guess_summary` (lines to print) and
 :meth:`DatasetSpec.guessed_roles` (a JSON-able dict), kept through :meth:`DatasetSpec.to_json`.
 Every problem is a one-line :class:`~torchsplice.core.errors.SpecError` naming the spec file.
 """
-
 
 from __future__ import annotations
 
@@ -34,61 +33,13 @@ from pathlib import Path, PurePath
 
 from ..core.errors import SpecError
 from ..core.skeleton import Skeleton
+from .clips import RoleRule, clip_stem
+from .guess import cannot_guess, guess_joints
+from .parsing import spec_fields
+from .roles import SkeletonRoles, bind_roles
+from .vocabulary import GUESS_SINGLE, OPTIONAL_PAIRS, PAIRS, UNITS, one_line
 
-from .roles import _OPTIONAL_PAIRS, _PAIRS, SkeletonRoles, bind_roles
-
-__all__ = ["DatasetSpec", "RoleRule", "ROLES", "UNITS", "GENERIC"]
-
-ROLES = ("locomotion", "action", "both")
-"""Clip roles: lower-body source, upper-body source, or either."""
-
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048,
-         "cmu": 0.0254 / 0.45, "unknown": None}
-"""Length units a spec may name, with metres per unit (``None`` for ``"unknown"``).
-
-``"cmu"`` is the CMU Graphics Lab unit (the ASF ``length 0.45``: 1 unit = 1/0.45 inch).
-"""
-
-_SECTION_KEYS = {
-    "dataset": {"name", "description", "up_axis", "units", "files"},
-    "joints": {"root", "pelvis", "spine", "head", "upper_body", "lower_body", "guess",
-               *_PAIRS, *_OPTIONAL_PAIRS},
-    "clips": {"pattern", "default_role", "role", "reference", "ground_truth"},
-}
-_PACKAGE = "torchsplice.datasets_spec"
-GENERIC = "generic"
-_GUESS_KEYS = ("root", "pelvis", "spine", "head", "left_leg", "right_leg", "left_arm", "right_arm", "skipped")
-"""Keys of a guessed spec's record (:meth:`DatasetSpec.guessed_roles`), in order."""
-_GUESS_SINGLE = ("root", "pelvis", "head")
-
-
-
-
-# --------------------------------------------------------------------------------------------
-# data classes
-# --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class RoleRule:
-    """One ``[[clips.role]]`` rule: clips it matches get ``role``.
-
-    Attributes:
-        role: ``"locomotion"``, ``"action"`` or ``"both"``.
-        names: shell globs on the clip name (case-insensitive); empty matches every name.
-        labels: ``((key, (value, ...)), ...)`` sorted by key: every key's label must be one of
-            its values.
-    """
-
-    role: str
-    names: tuple[str, ...] = ()
-    labels: tuple[tuple[str, tuple[str, ...]], ...] = ()
-
-    def matches(self, clip_name: str, labels: dict[str, str]) -> bool:
-        """Whether a clip with this name and these labels falls under the rule."""
-        lower = clip_name.lower()
-        if self.names and not any(fnmatch.fnmatchcase(lower, g.lower()) for g in self.names):
-            return False
-        return all(labels.get(key) in values for key, values in self.labels)
-
+__all__ = ["DatasetSpec"]
 
 
 @dataclass(frozen=True)
@@ -169,17 +120,30 @@ class DatasetSpec:
         joints) or a hierarchy that contradicts the roles.
         """
         if self.guess:
-            from .guess import guess_spec
-
-            return guess_spec(skeleton, base=self).bind(skeleton)
+            return self.guess_for(skeleton).bind(skeleton)
         return bind_roles(self, skeleton)
 
     def resolve(self, skeleton: Skeleton) -> "DatasetSpec":
         """The spec with concrete joint names for ``skeleton``: itself, or for a ``guess``
         spec the guessed one (store this one, so that the guess is recorded)."""
-        from .guess import guess_spec
+        return self.guess_for(skeleton) if self.guess else self
 
-        return guess_spec(skeleton, base=self) if self.guess else self
+    def guess_for(self, skeleton: Skeleton) -> "DatasetSpec":
+        """A spec whose joints are guessed for ``skeleton`` (see :func:`~torchsplice.specs.guess_spec`),
+        with this spec's name, description, up axis, units, files and clip rules; what was
+        guessed is in its :attr:`guessed` record and ``notes``.
+
+        Raises :class:`SpecError` saying what could not be guessed.
+        """
+        spec = DatasetSpec(
+            name=self.name, description=self.description, up_axis=self.up_axis, units=self.units,
+            files=self.files, pattern=self.pattern, default_role=self.default_role, rules=self.rules, path=None,
+            **guess_joints(skeleton, self.up_axis))
+        try:
+            spec.bind(skeleton)
+        except SpecError as exc:
+            raise cannot_guess(skeleton, f"the guess does not fit ({exc})") from None
+        return spec
 
     def binds(self, skeleton: Skeleton) -> bool:
         """Whether :meth:`bind` succeeds on ``skeleton``."""
@@ -213,7 +177,7 @@ class DatasetSpec:
         """
         out: dict = {}
         for key, names in self.guessed:
-            out[key] = (names[0] if names else None) if key in _GUESS_SINGLE else list(names)
+            out[key] = (names[0] if names else None) if key in GUESS_SINGLE else list(names)
         return out
 
     def guess_summary(self) -> list[str]:
@@ -248,7 +212,7 @@ class DatasetSpec:
         Labels are the named groups of ``pattern`` that matched (``re.search``); the role is
         the first matching rule's, else ``default_role``.
         """
-        name = _clip_stem(clip_name)
+        name = clip_stem(clip_name)
         labels: dict[str, str] = {}
         if self.pattern is not None:
             m = re.search(self.pattern, name)
@@ -294,7 +258,7 @@ class DatasetSpec:
     def matches_file(self, filename) -> bool:
         """Whether a file name (or its stem) matches one of the ``files`` globs."""
         base = PurePath(str(filename)).name
-        return any(fnmatch.fnmatchcase(n, g) for g in self.files for n in (base, _clip_stem(base)))
+        return any(fnmatch.fnmatchcase(n, g) for g in self.files for n in (base, clip_stem(base)))
 
     # -- serialisation -------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -310,18 +274,15 @@ class DatasetSpec:
     @classmethod
     def from_json(cls, text: str) -> "DatasetSpec":
         """Read :meth:`to_json` 's output (e.g. an HDF5 attribute)."""
-        from .loading import _one_line, _parse
-
         try:
             data = json.loads(text)
         except (TypeError, ValueError) as exc:
-            raise SpecError(f"spec JSON: not valid JSON ({_one_line(exc)})") from None
+            raise SpecError(f"spec JSON: not valid JSON ({one_line(exc)})") from None
         if not isinstance(data, dict):
             raise SpecError("spec JSON: expected an object")
         path = data.get("path")
         where = f"spec JSON ({path})" if isinstance(path, str) else "spec JSON"
-        return _parse(data, where, from_json=True)
-
+        return cls(**spec_fields(data, where, from_json=True))
 
 
 def _to_dict(spec: DatasetSpec) -> dict:
@@ -331,7 +292,7 @@ def _to_dict(spec: DatasetSpec) -> dict:
     if spec.guess:
         joints = {"guess": True}
     else:
-        keys = ("root", "pelvis", "spine", "head", "upper_body", "lower_body", *_PAIRS, *_OPTIONAL_PAIRS)
+        keys = ("root", "pelvis", "spine", "head", "upper_body", "lower_body", *PAIRS, *OPTIONAL_PAIRS)
         joints = {k: getattr(spec, k) for k in keys if getattr(spec, k) is not None}
         joints = {k: list(v) if isinstance(v, tuple) else v for k, v in joints.items()}
     rules = [{"role": r.role, **({"names": list(r.names)} if r.names else {}),
@@ -350,12 +311,3 @@ def _to_dict(spec: DatasetSpec) -> dict:
     if spec.guessed:
         out["guessed"] = spec.guessed_roles()
     return out
-
-
-
-def _clip_stem(name: str) -> str:
-    """A clip name from a stem, file name or path (``.bvh`` dropped)."""
-    base = PurePath(str(name)).name
-    return base[:-4] if base.lower().endswith(".bvh") else base
-
-

@@ -6,8 +6,12 @@ writes are ordered so that the file on disk is always consistent: a process kill
 moment leaves a file that opens, holding at least everything written before its last flush.
 Such a file is marked "open for writing" in its superblock, and HDF5 refuses to open it for
 writing again until the mark is cleared (what HDF5's ``h5clear --status --increment`` tool
-does); :func:`clear_status_flags` clears it in place. Nothing here reads or writes clips: the
+does); :func:`clear_status_flags` clears it in place. Nothing here reads or writes frames: the
 database returns to its last checkpoint itself.
+
+Beside the staging file ``STAGING`` lie two records of the writer's: ``STAGING.rows``, the
+clip-table rows appended so far (:class:`RowLog`), and ``STAGING.commit``, one JSON line per
+checkpoint (:func:`last_checkpoint` reads the last complete one).
 
 :func:`detach` closes an open file while discarding every write HDF5 still holds, as a killed
 process would: after a write has failed (a full disk), closing normally would try to flush
@@ -16,11 +20,13 @@ HDF5's caches and could crash the process; detached, the file stays as the failu
 
 from __future__ import annotations
 
+import json
 import os
+import pickle
 import struct
 from pathlib import Path
 
-__all__ = ["lookup3", "clear_status_flags", "detach"]
+__all__ = ["lookup3", "clear_status_flags", "detach", "RowLog", "commit_path", "rows_path", "last_checkpoint"]
 
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _M = 0xFFFFFFFF
@@ -99,3 +105,68 @@ def detach(h5) -> None:
         h5.close()
     except Exception:
         pass
+
+
+# --------------------------------------------------------------------------------------------
+# the records beside a staging file
+# --------------------------------------------------------------------------------------------
+class RowLog:
+    """The clip-table rows of a resumable database, appended to a file beside its staging file
+    (``STAGING.rows``): one length-prefixed pickle per append (column -> array). Appends only;
+    :meth:`truncate` returns it to a checkpoint's size."""
+
+    def __init__(self, path: Path, fresh: bool):
+        self.path = path
+        self.file = open(path, "wb" if fresh else "r+b")
+        self.file.seek(0, os.SEEK_END)
+
+    def append(self, rows: dict) -> None:
+        data = pickle.dumps(rows, protocol=pickle.HIGHEST_PROTOCOL)
+        self.file.write(len(data).to_bytes(8, "little") + data)
+
+    def size(self) -> int:
+        self.file.flush()
+        return self.file.tell()
+
+    def truncate(self, size: int) -> None:
+        self.file.flush()
+        if os.fstat(self.file.fileno()).st_size < size:
+            raise ValueError(f"{self.path} holds fewer rows than its checkpoint")
+        self.file.truncate(size)
+        self.file.seek(size)
+
+    def records(self):
+        """Every append, in order."""
+        self.file.flush()
+        with open(self.path, "rb") as f:
+            while head := f.read(8):
+                yield pickle.loads(f.read(int.from_bytes(head, "little")))
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def commit_path(staging: Path) -> Path:
+    """Where a resumable database staged at ``staging`` records its last checkpoint."""
+    return staging.with_name(f"{staging.name}.commit")
+
+
+def rows_path(staging: Path) -> Path:
+    """Where a resumable database staged at ``staging`` logs its clip-table rows."""
+    return staging.with_name(f"{staging.name}.rows")
+
+
+def last_checkpoint(staging: Path) -> dict | None:
+    """The last complete record of ``STAGING.commit`` (``None`` when it has none)."""
+    try:
+        lines = commit_path(Path(staging)).read_text().splitlines()
+    except OSError:
+        return None
+    for line in reversed(lines):
+        try:
+            record = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(record, dict) and isinstance(record.get("note"), dict):
+            return record
+    return None

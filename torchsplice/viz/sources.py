@@ -9,24 +9,20 @@ where the files still exist), and in the output itself when the job ran with
 
 from __future__ import annotations
 
-import json
 import warnings
 from pathlib import Path
 
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.motion import Motion
 from ..store.database import MotionDatabase
-from ..specs import DatasetSpec, detect_spec
+from ..specs import DatasetSpec
 
 __all__ = ["source_databases", "recorded_sources", "SourceClips", "clip_spec", "read_clips"]
 
 
 def recorded_sources(db: MotionDatabase) -> list[Path]:
     """The input databases named by ``db``'s ``run`` record that still exist (none without one)."""
-    try:
-        run = json.loads(str(db.attrs.get("run", "")) or "{}")
-    except ValueError:
-        return []
+    run = db.run_record()
     paths = []
     for key in ("database", "actions_db"):
         rec = run.get(key) if isinstance(run, dict) else None
@@ -71,7 +67,7 @@ class SourceClips:
 
     def where(self, name: str) -> MotionDatabase | None:
         """The first database holding a clip named ``name``, or ``None``."""
-        return next((d for d in self.dbs if name in d._index_map()), None)
+        return next((d for d in self.dbs if name in d), None)
 
     def has(self, name: str) -> bool:
         return self.where(name) is not None
@@ -90,15 +86,14 @@ class SourceClips:
         """``(name, role, labels)`` of every clip in the source databases (the output's without any)."""
         out = []
         for db in self.dbs[:-1] or self.dbs:
-            t = db.table()
-            out += [(str(n), str(r), json.loads(lab or "{}")) for n, r, lab in zip(t["name"], t["role"], t["labels"])]
+            out += db.clip_table().captures()
         return out
 
 
-def clip_spec(db: MotionDatabase, name: str, skeleton) -> DatasetSpec:
-    """The spec stored with clip ``name``'s skeleton in ``db``, or one detected for ``skeleton``."""
-    text = db.spec_json(db.clip_info(name)["skeleton"])
-    return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
+def clip_spec(db: MotionDatabase, name: str) -> DatasetSpec:
+    """The spec of clip ``name``'s skeleton in ``db``: the one stored with it, else one detected
+    (:meth:`MotionDatabase.spec <torchsplice.store.database.MotionDatabase.spec>`)."""
+    return db.spec(db.clip_info(name)["skeleton"])
 
 
 def read_clips(database, names, sources=None) -> tuple[list[Motion], DatasetSpec]:
@@ -114,12 +109,12 @@ def read_clips(database, names, sources=None) -> tuple[list[Motion], DatasetSpec
             lookup = SourceClips(srcs, db)
             clips = []
             for name in names:
-                home = db if name in db._index_map() else lookup.where(name)
+                home = db if name in db else lookup.where(name)
                 if home is None:
                     db.index(name)  # the database's own error, with similar names
                 clips.append(home.read(name))
-            first = db if names[0] in db._index_map() else lookup.where(names[0])
-            return clips, clip_spec(first, names[0], clips[0].skeleton)
+            first = db if names[0] in db else lookup.where(names[0])
+            return clips, clip_spec(first, names[0])
         finally:
             for s in srcs:
                 s.close()

@@ -44,7 +44,7 @@ from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .render import _canonical_axes, _check_up_axis, _head, figure_points
-from .sources import SourceClips, clip_spec, source_databases
+from .sources import SourceClips, source_databases
 
 __all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS",
            "MAX_PAGE_FRAMES"]
@@ -211,14 +211,13 @@ def _choose(db: MotionDatabase, table: dict, clips, sources: SourceClips, max_cl
     seen: set[str] = set()
     missing: set[str] = set()
 
-    index = db._index_map()
     frames = [0]
 
     def length(n: str) -> int:
-        if n in index:
-            return int(table["length"][index[n]])
+        if n in db:
+            return int(table["length"][db.index(n)])
         where = sources.where(n)
-        return int(where.table()["length"][where._index_map()[n]]) if where is not None else 0
+        return where.clip_info(n)["length"] if where is not None else 0
 
     def add(n: str, force: bool = False) -> bool:
         if n in seen:
@@ -226,7 +225,7 @@ def _choose(db: MotionDatabase, table: dict, clips, sources: SourceClips, max_cl
         if not force and len(chosen) >= max_clips:
             out.cut = True
             return False
-        if n not in index and not sources.has(n):
+        if n not in db and not sources.has(n):
             missing.add(n)
             return True
         f = length(n)
@@ -323,7 +322,7 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
             specs: dict[tuple[int, int], DatasetSpec] = {}
             payload = []
             for name in contents.names:
-                home = db if name in db._index_map() else lookup.where(name)
+                home = db if name in db else lookup.where(name)
                 info = home.clip_info(name)
                 motion = home.read(name)
                 try:
@@ -333,7 +332,7 @@ def build_viewer(database, clips=None, sources=None, max_clips: int = DEFAULT_MA
                                       "(name the others to view them)") from None
                 key = (id(home), info["skeleton"])
                 if key not in specs:
-                    specs[key] = clip_spec(home, name, motion.skeleton)
+                    specs[key] = home.spec(info["skeleton"])
                 where = "" if home is db else Path(home.path).name
                 payload.append(clip_payload(motion, specs[key], info, where))
         finally:

@@ -1,0 +1,504 @@
+"""Writing clips into a motion database: the write half of
+:class:`~torchsplice.store.database.MotionDatabase` (:class:`Writing`).
+
+Clips are appended one at a time (buffered, written by :meth:`Writing.flush`), packed many at
+a time (:meth:`Writing.append_packed`) or by reference to other files' frames
+(:meth:`Writing.append_virtual`). Every write method either completes or leaves the file as it
+was; HDF5 failing to write (a full disk, an I/O error) discards the whole write in progress
+and is one :class:`~torchsplice.core.errors.DatabaseError` line (:func:`guarded`). The room on
+the disk is checked before each write (:data:`SPACE_MARGIN`).
+"""
+
+from __future__ import annotations
+
+import errno
+import functools
+import json
+import os
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+
+from ..core.errors import DatabaseError
+from ..core.motion import Motion
+from ..core.skeleton import Skeleton
+from .atomic import os_error_message
+from .checks import control_name
+from .schema import CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, STR, skeleton_path, skeleton_to_group
+
+__all__ = ["Writing", "guarded", "io_failure", "SPACE_MARGIN", "FLUSH_FRAMES"]
+
+FLUSH_FRAMES = 1 << 16
+"""Buffered frames that make :meth:`Writing.append` write its buffer."""
+SPACE_MARGIN = 4 << 20
+"""Bytes kept free beyond each write, for HDF5's caches and metadata."""
+
+
+def io_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` is HDF5 failing to write the file (a full disk, an I/O error), not a bug."""
+    if isinstance(exc, OSError):
+        return True
+    text = str(exc)
+    return isinstance(exc, RuntimeError) and ("write failed" in text or "errno" in text or "flush" in text)
+
+
+def no_space(exc: BaseException) -> bool:
+    text = str(exc)
+    return getattr(exc, "errno", None) == errno.ENOSPC or "No space left" in text or "errno = 28" in text
+
+
+def mb(n: float) -> str:
+    return f"{n / 1e6:,.1f} MB" if n < 1e9 else f"{n / 1e9:,.2f} GB"
+
+
+def guarded(method):
+    """Make a write method of :class:`MotionDatabase` fail cleanly when the file cannot be written.
+
+    HDF5 cannot carry on after a failed write (a full disk leaves its metadata cache dirty, and
+    closing the file later crashes the process), so the write in progress is discarded at once
+    (:meth:`MotionDatabase.abort`) and one :class:`DatabaseError` line says what happened.
+    """
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except (OSError, RuntimeError) as exc:
+            if not io_failure(exc) or self._tmp is None:
+                raise
+            raise DatabaseError(self._write_failed(exc)) from None
+    return wrapper
+
+
+def column_array(columns: dict, name: str, values) -> np.ndarray:
+    """Values of clip-table column ``name`` (built-in or one of ``columns``) as the array its dataset stores."""
+    dt = COLUMNS.get(name) or KINDS[columns[name]][0]
+    return np.array(values, dtype=object if dt is STR else dt)
+
+
+def dataset_compression(policy: str | None, dataset: str) -> str | None:
+    """The filter of one frame dataset under a file's compression policy (see :meth:`MotionDatabase.create`)."""
+    if policy == "auto":
+        return None if dataset == "rotations" else "lzf"
+    return policy
+
+
+def frame_values(values, T: int, column: str, clip: str) -> np.ndarray:
+    """A per-frame column's ``(T,)`` float32 values for one clip (NaN when not given)."""
+    if values is None:
+        return np.full(T, np.nan, dtype=np.float32)
+    a = (values.detach().cpu().numpy() if isinstance(values, torch.Tensor) else np.asarray(values)).astype(np.float32)
+    if a.shape != (T,):
+        raise DatabaseError(f"clip {clip!r}: column {column!r} needs {T} values, got shape {a.shape}")
+    return a
+
+
+class Writing:
+    """The write methods of :class:`~torchsplice.store.database.MotionDatabase` (a mixin: the
+    database's state, file and opening live there)."""
+
+    def _reserve(self, nbytes: int) -> None:
+        """Refuse to write ``nbytes`` (uncompressed) where the disk has no room for them.
+
+        HDF5 reports a full disk only while it frees its objects, where the error cannot be
+        caught and the process later crashes; so the room is checked before every write, with
+        a margin for the data HDF5 still holds in its caches (``SPACE_MARGIN``).
+        """
+        if self._tmp is None:
+            return
+        try:
+            free = shutil.disk_usage(self._tmp.parent).free
+        except OSError:
+            return
+        if free < nbytes + SPACE_MARGIN:
+            # nothing failed yet: a resumable database stays open, so that its writer can
+            # checkpoint what it holds (within the margin) before it stops
+            raise DatabaseError(self._write_failed(OSError(errno.ENOSPC, "No space left on device"), nbytes,
+                                                   discard=not self._resumable))
+
+    def _write_failed(self, exc: BaseException, pending: int = 0, discard: bool = True) -> str:
+        """Discard the write after ``exc`` (unless not ``discard``) and return the line that says so."""
+        try:
+            written = self._tmp.stat().st_size if self._tmp is not None else 0
+        except OSError:
+            written = 0
+        pending = pending or self._staged_bytes()
+        kept = "what was written is kept" if self._resumable else "nothing was written"
+        if discard:
+            self.abort(failed=True)
+        if not no_space(exc):
+            return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({str(exc).splitlines()[0][:120]})"
+        folder = self.path.parent.resolve()
+        free = shutil.disk_usage(folder).free
+        return (f"{self.path}: no space left on the device; the database needs more than {mb(written + pending)} "
+                f"and {folder} has {mb(free)} free ({kept}; free some space and run the command again)")
+
+    def _staged_bytes(self) -> int:
+        """Uncompressed bytes of the clips waiting in the buffer (an upper bound of their size)."""
+        size = self._dtype.itemsize
+        return sum(m.num_frames * (7 * m.skeleton.num_joints + 3 + len(self.frame_columns)) * size for m, *_ in self._staged)
+    # -- writing ------------------------------------------------------------------------------
+    def update_run_record(self, fields: dict) -> None:
+        """Update the run record (the root attribute ``run``, JSON written by ``splice-all``)
+        with ``fields``; a file without one is left as it is."""
+        self._writable()
+        run = json.loads(str(self.h5.attrs.get("run", "")) or "{}")
+        if run:
+            run.update(fields)
+            self.h5.attrs["run"] = json.dumps(run)
+
+    def _writable(self) -> None:
+        if self.mode == "r":
+            raise DatabaseError(f"{self.path}: opened read-only")
+
+    @guarded
+    def add_skeleton(self, skeleton: Skeleton, spec=None) -> int:
+        """Index of a stored skeleton that matches ``skeleton``, storing it if none does.
+
+        ``spec`` (a :class:`~torchsplice.specs.DatasetSpec` or ``None``) is stored with a new
+        skeleton, with its units and up axis (each skeleton keeps its own: datasets of different
+        units share one file; the file's ``units`` and ``up_axis`` attributes then say ``"mixed"``).
+        """
+        known = self._skeleton_ids.get(id(skeleton))
+        if known is not None and known[0] is skeleton:
+            return known[1]  # matched once per skeleton object, not per appended clip
+        for k, sk in enumerate(self._skeletons):
+            if sk.matches(skeleton):
+                self._skeleton_ids[id(skeleton)] = (skeleton, k)
+                return k
+        self._writable()
+        units = getattr(spec, "units", "") or ""
+        up = getattr(spec, "up_axis", "") or ""
+        for key, value in (("units", units), ("up_axis", up)):  # each skeleton keeps its own; the file's is their common one
+            have = str(self.h5.attrs.get(key, ""))
+            if value and have and have != value:
+                self.h5.attrs[key] = MIXED
+            if value and not have:
+                self.h5.attrs[key] = value
+        k = len(self._skeletons)
+        g = self.h5[SKELETONS].create_group(str(k))
+        skeleton_to_group(g, skeleton)
+        g.attrs.update({"spec": spec.to_json() if spec is not None else "", "units": units, "up_axis": up})
+        chunk = int(self.h5.attrs["chunk_frames"])
+        policy = str(self.h5.attrs["compression"]) or None
+        J = skeleton.num_joints
+        shapes = {"rotations": (J, 4), "root_translation": (3,)}
+        if skeleton.has_joint_translations:
+            shapes["translations"] = (J, 3)
+        for name, shape in shapes.items():
+            comp = dataset_compression(policy, name)
+            g.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=self._dtype,
+                             chunks=(chunk,) + shape, compression=comp, shuffle=comp is not None)
+        for name in self.frame_columns:
+            comp = dataset_compression(policy, name)
+            g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float32, chunks=(chunk,),
+                             compression=comp, shuffle=comp is not None)
+        self._skeletons.append(skeleton)
+        self._skeleton_ids[id(skeleton)] = (skeleton, k)
+        return k
+
+    def append(self, motion: Motion, spec=None, extra: dict | None = None, frame_extra: dict | None = None) -> int:
+        """Add a clip (buffered; written by :meth:`flush` or on close). Returns its row number.
+
+        The clip name must be new to the database; non-finite values are refused. ``extra``
+        gives values of the declared extra columns (missing ones: ``""``, NaN or -1) and
+        ``frame_extra`` per-frame arrays ``(T,)`` of the declared frame columns (missing: NaN).
+        """
+        extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
+        unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
+        if unknown:
+            raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
+        self._writable()
+        motion.check_finite()
+        if not motion.name:
+            raise DatabaseError(f"{self.path}: a clip needs a name")
+        if (bad := control_name([motion.name])) is not None:
+            raise DatabaseError(f"{self.path}: {bad}")
+        index = self._index_map()
+        if motion.name in index:
+            raise DatabaseError(f"{self.path}: a clip named {motion.name!r} is already in the database")
+        k = self.add_skeleton(motion.skeleton, spec)
+        index[motion.name] = len(self)
+        self._staged.append((motion, k, extra, frame_extra))
+        self._staged_frames += motion.num_frames
+        if self._staged_frames >= FLUSH_FRAMES:
+            self.flush()
+        return len(self) - 1
+
+    @guarded
+    def append_packed(self, skeleton: Skeleton, rotations, root_translation, translations, lengths, names, fps,
+                      spec=None, sources="", roles="", labels=None, extra: dict | None = None,
+                      frame_extra: dict | None = None, check: bool = True) -> None:
+        """Add many clips of one skeleton at once, from arrays packed along frames.
+
+        Args:
+            skeleton: the clips' :class:`Skeleton` (matched against the stored ones once).
+            rotations: ``(N, J, 4)`` local rotations (WXYZ) of every frame of every clip, clip
+                after clip; root_translation: ``(N, 3)``; translations: ``(N, J, 3)`` local
+                translations (row 0 is ignored) or ``None`` (the skeleton's offsets).
+            lengths: ``(C,)`` frames per clip, summing to ``N``; names: ``C`` new clip names.
+            fps: one rate for all clips or ``(C,)``; sources, roles: one string or ``C``;
+                labels: ``C`` dicts or JSON strings (``None``: no labels).
+            extra: declared per-clip columns, ``C`` values each; frame_extra: declared
+                per-frame columns, ``(N,)`` values each (missing ones: ``""``, NaN or -1).
+
+        Numpy arrays or tensors. The clips are written at once, after any clips appended
+        before, so row order is call order. Non-finite values are refused (``check=False``
+        skips that scan, for arrays read back from a database that was checked when written).
+        """
+        self._writable()
+        self.flush()
+        arr = lambda x: x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)  # noqa: E731
+        rot, root = arr(rotations), arr(root_translation)
+        lengths = arr(lengths).astype(np.int64).reshape(-1)
+        names = [str(n) for n in names]
+        C, N, J = len(names), int(lengths.sum()), skeleton.num_joints
+        if lengths.shape != (C,) or rot.shape != (N, J, 4) or root.shape != (N, 3) or (lengths < 1).any():
+            raise DatabaseError(f"{self.path}: packed clips do not fit: {C} names, lengths summing to {N}, "
+                                f"rotations {rot.shape}, root translation {root.shape} for {J} joints")
+        trans = None if translations is None else arr(translations)
+        if trans is not None and trans.shape != (N, J, 3):
+            raise DatabaseError(f"{self.path}: translations must be {(N, J, 3)}, got {trans.shape}")
+        index = self._index_map()
+        clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
+        if clash:
+            raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
+        if (bad := control_name(names)) is not None:
+            raise DatabaseError(f"{self.path}: {bad}")
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        for name, a in (("rotations", rot), ("root translation", root), ("translations", trans)) if check else ():
+            if a is not None and not np.isfinite(a).all():
+                row = int(np.nonzero(~np.isfinite(a.reshape(N, -1)).all(1))[0][0])
+                c = int(np.searchsorted(starts, row, side="right") - 1)
+                raise DatabaseError(f"{self.path}: clip {names[c]!r} has non-finite {name} at frame {row - starts[c]}")
+        extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
+        unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
+        if unknown:
+            raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
+        if C == 0:
+            return
+        frames = {}
+        for name in self.frame_columns:
+            v = frame_extra.get(name)
+            frames[name] = np.full(N, np.nan, np.float32) if v is None else arr(v).astype(np.float32).reshape(-1)
+            if frames[name].shape != (N,):
+                raise DatabaseError(f"{self.path}: column {name!r} needs {N} values, got {frames[name].shape}")
+
+        def each(v, what):
+            """One value for every clip, or ``C`` values."""
+            out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(arr(v) if isinstance(v, torch.Tensor) else v)
+            if len(out) != C:
+                raise DatabaseError(f"{self.path}: {what} needs {C} values, got {len(out)}")
+            return out
+
+        rows = {
+            "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
+            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
+            "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
+        }
+        for n, kind in self.columns.items():
+            rows[n] = each(extra[n], f"column {n!r}") if n in extra else [KINDS[kind][1]] * C
+        k = self.add_skeleton(skeleton, spec)
+        self._no_virtual(k)
+        g = self.h5[skeleton_path(k)]
+        arrays = {"rotations": rot, "root_translation": root, **frames}
+        if "translations" in g:
+            if trans is not None and np.array_equal(trans[:, 0], root):
+                arrays["translations"] = trans  # row 0 already holds the root
+            else:
+                t = trans.copy() if trans is not None else np.broadcast_to(skeleton.offsets.numpy(), (N, J, 3)).copy()
+                t[:, 0] = root
+                arrays["translations"] = t
+        self._reserve(sum(a.nbytes for a in arrays.values()) + 200 * C)
+        n0 = g["rotations"].shape[0]
+        rows["skeleton"], rows["start"] = [k] * C, n0 + starts
+        try:
+            for name, a in arrays.items():
+                ds = g[name]
+                ds.resize(n0 + N, axis=0)
+                ds[n0:] = a.astype(ds.dtype, copy=False)
+            self._store_rows(rows)
+        except BaseException as exc:
+            if io_failure(exc):
+                raise  # the whole write is discarded (see guarded)
+            try:  # leave the file as it was before the call: no half-written rows
+                for name in arrays:
+                    g[name].resize(n0, axis=0)
+            except Exception:
+                pass
+            if isinstance(exc, OSError):
+                raise DatabaseError(os_error_message(self.path, exc)) from None
+            if isinstance(exc, (TypeError, ValueError)):
+                raise DatabaseError(f"{self.path}: cannot store these clips: {exc}") from None
+            raise
+        for n in names:
+            index[n] = len(index)
+        if self._names is not None:
+            self._names += names
+        self._flushed += C
+
+    @guarded
+    def append_virtual(self, source: Path, skeleton: Skeleton, lengths, names, fps, spec=None, sources="", roles="",
+                       labels=None, extra: dict | None = None, refer_as: Path | None = None) -> None:
+        """Add the clips of skeleton 0 of the database file ``source`` without copying their frames.
+
+        The clips' rows go into this file's table; their frames stay in ``source``. When this
+        file is closed, each frame dataset of the skeleton becomes an HDF5 *virtual dataset*
+        over the sources, in call order, which plain h5py reads like any dataset. The sources
+        are referred to by their path relative to this file's folder, so the two must stay
+        side by side; ``refer_as`` names where the source will be when this file is read, if it
+        is elsewhere now. Arguments as :meth:`append_packed` (without the frames). A skeleton
+        holds either virtual or real frames, not both.
+        """
+        self._writable()
+        self.flush()
+        lengths = np.asarray(lengths, dtype=np.int64).reshape(-1)
+        names = [str(n) for n in names]
+        C, N = len(names), int(lengths.sum())
+        if C == 0:
+            return
+        k = self.add_skeleton(skeleton, spec)
+        if self.h5[f"{skeleton_path(k)}/rotations"].shape[0]:
+            raise DatabaseError(f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones")
+        parts = self._virtual.setdefault(k, [])
+        n0 = sum(n for _, n in parts)
+        rel = os.path.relpath(Path(refer_as or source).resolve(), Path(self._target).resolve().parent)
+        self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
+        parts.append((rel, N))
+
+    def _append_rows(self, k: int, n0: int, lengths, names, fps, sources, roles, labels, extra: dict) -> None:
+        """Table rows of ``C`` clips of skeleton ``k`` whose frames start at row ``n0``."""
+        C = len(names)
+        index = self._index_map()
+        clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
+        if clash:
+            raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
+        if (bad := control_name(names)) is not None:
+            raise DatabaseError(f"{self.path}: {bad}")
+
+        def each(v, what):
+            out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(v)
+            if len(out) != C:
+                raise DatabaseError(f"{self.path}: {what} needs {C} values, got {len(out)}")
+            return out
+
+        rows = {
+            "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
+            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
+            "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
+            "skeleton": [k] * C, "start": n0 + np.concatenate(([0], np.cumsum(lengths)[:-1])),
+        }
+        for n, kind in self.columns.items():
+            rows[n] = each(extra[n], f"column {n!r}") if n in extra else [KINDS[kind][1]] * C
+        self._store_rows(rows)
+        for n in names:
+            index[n] = len(index)
+        if self._names is not None:
+            self._names += names
+        self._flushed += C
+
+    def _build_virtual(self) -> None:
+        """Replace the empty frame datasets of virtual skeletons by virtual datasets over their sources."""
+        for k, parts in self._virtual.items():
+            g = self.h5[skeleton_path(k)]
+            total = sum(n for _, n in parts)
+            for name in [n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g]:
+                ds = g[name]
+                shape, dtype = (total,) + ds.shape[1:], ds.dtype
+                layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
+                at = 0
+                for rel, n in parts:
+                    layout[at:at + n] = h5py.VirtualSource(rel, f"{skeleton_path(0)}/{name}", shape=(n,) + ds.shape[1:])
+                    at += n
+                del g[name]
+                g.create_virtual_dataset(name, layout, fillvalue=np.nan)
+        self._virtual = {}
+
+    @guarded
+    def flush(self) -> None:
+        """Write buffered clips to the file."""
+        if not self._staged:
+            return
+        self._write_staged()
+        if self._names is not None:
+            self._names += [m.name for m, *_ in self._staged]
+        self._flushed += len(self._staged)
+        self._staged, self._staged_frames = [], 0
+
+    def _no_virtual(self, k: int) -> None:
+        if k in self._virtual:
+            raise DatabaseError(f"{self.path}: skeleton {k} holds virtual frames; real frames cannot be added to it")
+
+    def _write_staged(self) -> None:
+        h5 = self.h5
+        self._reserve(self._staged_bytes() + 200 * len(self._staged))
+        starts = {}
+        for k in sorted({k for _, k, *_ in self._staged}):
+            self._no_virtual(k)
+            g = h5[skeleton_path(k)]
+            staged = [(m, fx) for m, kk, _, fx in self._staged if kk == k]
+            n0 = g["rotations"].shape[0]
+            starts[k] = n0
+            arrays = {
+                "rotations": torch.cat([m.rotations.detach().cpu() for m, _ in staged]).numpy(),
+                "root_translation": torch.cat([m.root_translation.detach().cpu() for m, _ in staged]).numpy(),
+            }
+            if "translations" in g:
+                arrays["translations"] = torch.cat([m.local_translations().detach().cpu() for m, _ in staged]).numpy()
+            for name in self.frame_columns:
+                arrays[name] = np.concatenate([frame_values(fx.get(name), m.num_frames, name, m.name) for m, fx in staged])
+            for name, a in arrays.items():
+                ds = g[name]
+                ds.resize(n0 + a.shape[0], axis=0)
+                ds[n0:] = a.astype(ds.dtype)
+        rows = {c: [] for c in [*COLUMNS, *self.columns]}
+        for m, k, extra, _ in self._staged:
+            rows["name"].append(m.name)
+            rows["source"].append(m.source)
+            rows["role"].append(m.role)
+            rows["labels"].append(json.dumps(m.labels, sort_keys=True))
+            rows["skeleton"].append(k)
+            rows["start"].append(starts[k])
+            rows["length"].append(m.num_frames)
+            rows["fps"].append(m.fps)
+            for n, kind in self.columns.items():
+                rows[n].append(extra.get(n, KINDS[kind][1]))
+            starts[k] += m.num_frames
+        self._store_rows(rows)
+
+    def _store_rows(self, rows: dict) -> None:
+        """Write clip-table rows (column -> ``C`` values) after the stored ones: into the clips
+        datasets, or, for a resumable database, into its row log (:class:`_RowLog`), which
+        :meth:`close` writes to the datasets at once (HDF5's heap of variable-length strings is
+        not covered by SWMR's ordered writes, so a killed process could leave it torn)."""
+        if self._resumable:
+            self._row_log.append({name: column_array(self.columns, name, values) for name, values in rows.items()})
+            return
+        c = self.h5[CLIPS]
+        m0 = c["name"].shape[0]
+        try:
+            for name, values in rows.items():
+                c[name].resize(m0 + len(values), axis=0)
+                c[name][m0:] = column_array(self.columns, name, values)
+        except BaseException as exc:
+            if io_failure(exc):
+                raise  # the whole write is discarded (see guarded)
+            try:  # no half-written rows
+                for name in rows:
+                    c[name].resize(m0, axis=0)
+            except Exception:
+                pass
+            raise
+
+    def _write_logged_rows(self) -> None:
+        """A resumable database's logged rows into its clips datasets (at :meth:`close`), a
+        column at a time."""
+        c = self.h5[CLIPS]
+        records = list(self._row_log.records())
+        for name in c:
+            values = [r[name] for r in records]
+            column = np.concatenate(values) if values else column_array(self.columns, name, [])
+            c[name].resize(len(column), axis=0)
+            c[name][:] = column
