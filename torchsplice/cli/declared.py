@@ -26,14 +26,17 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-__all__ = ["declared", "static_value"]
+__all__ = ["declared", "static_value", "live_value", "ASKED"]
 
 _PACKAGE = Path(__file__).resolve().parents[1]  # torchsplice/
 _MISSING = object()
+ASKED: set[tuple[str, str]] = set()
+"""Every ``(module, name)`` asked for so far (tests check the source reading of each)."""
 
 
 def declared(module: str, name: str) -> Any:
     """The value ``name`` of library module ``module`` (see the module docstring)."""
+    ASKED.add((module, name))
     if module not in sys.modules:
         value = static_value(module, name)
         if value is not _MISSING:
