@@ -77,15 +77,15 @@ such as a fixed joint's translation, has ``std == 0``) and undo it with ``x * st
 Features need one skeleton topology and one unit too.
 
 Files are written atomically (beside the target, then renamed), and a file with a value that
-is not finite is refused, naming the clip and the array.
+is not finite is refused, naming the clip and the array. An export (the ``npz`` format of
+:func:`torchsplice.formats.exporters.export_clips`, :mod:`.npz_exporter`) writes all of its files
+or none.
 """
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -96,76 +96,16 @@ import torch
 from ..core.errors import TorchspliceError
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
+from .exporters import MAX_FILE_BYTES, clip_filename, clip_filenames, select_rows  # noqa: F401 (their old home)
+from .npz_exporter import FEATURE_SETS
 
 __all__ = ["NPZ_FORMAT", "NPZ_VERSION", "FRAME_ARRAYS", "FEATURE_SETS", "NpzExport", "write_npz", "read_npz",
-           "clip_of_packed", "clip_filename", "clip_filenames", "select_rows"]
+           "clip_of_packed", "clip_filename", "clip_filenames", "select_rows", "MAX_FILE_BYTES"]
 
 NPZ_FORMAT = "torchsplice.npz"
 NPZ_VERSION = 1
 FRAME_ARRAYS = ("rotations", "root_translation", "trajectory", "translations", "positions")
 """The per-frame arrays of every exported clip."""
-FEATURE_SETS = {"6d": ("rotations_6d", "velocities", "trajectory_velocity", "root_velocity")}
-"""``--features`` choices: the extra per-frame arrays they add (with statistics)."""
-
-
-def select_rows(db: MotionDatabase, clips: Sequence[str] | None, skeletons: Sequence[int] | None = None) -> list[int]:
-    """Database rows of ``clips`` (names, in the order given, repeats dropped; ``None``: every clip
-    in row order), kept only on ``skeletons`` (ids; ``None``: any). One-line errors for an
-    unknown clip or skeleton and for an empty result."""
-    rows = list(range(len(db))) if clips is None else list(dict.fromkeys(db.index(c) for c in clips))
-    if skeletons is not None:
-        unknown = [k for k in skeletons if k not in range(len(db.skeletons))]
-        if unknown:
-            raise TorchspliceError(f"{db.path}: no skeleton {unknown[0]} (it has {len(db.skeletons)}, numbered from 0; "
-                                   "see torchsplice info)")
-        skeleton = db.clip_table().skeleton
-        rows = [r for r in rows if int(skeleton[r]) in set(skeletons)]
-    if not rows:
-        raise TorchspliceError(f"{db.path}: no clip to export" + (" on the skeletons asked for" if skeletons is not None else ""))
-    return rows
-
-
-_UNSAFE = re.compile(r'[\x00-\x1f\x7f<>:"/\\|?*]')
-_RESERVED = re.compile(r"(con|prn|aux|nul|com[0-9¹²³]|lpt[0-9¹²³])(\..*)?", re.IGNORECASE)
-MAX_FILE_BYTES = 200
-"""Longest file name (UTF-8 bytes, suffix included) an export writes: file systems allow 255,
-and the hidden name an export writes first adds a few dozen."""
-
-
-def clip_filename(name: str, suffix: str) -> str:
-    """A file name for clip ``name`` that is safe on Linux, macOS and Windows: characters that are
-    not allowed there (``< > : " / \\ | ? *``, control characters) and a leading dot become
-    ``_``, trailing dots and spaces go, Windows' device names (``CON``, ``nul.txt``, ``COM1``)
-    get a ``_`` in front, and a name longer than :data:`MAX_FILE_BYTES` is cut and ends with a
-    hash of the whole name. See :func:`clip_filenames` for names that are unique without regard
-    to case."""
-    safe = _UNSAFE.sub("_", name).rstrip(". ")
-    if safe.startswith("."):
-        safe = "_" + safe[1:]
-    if _RESERVED.fullmatch(safe):
-        safe = "_" + safe
-    safe = safe or "_"
-    room = MAX_FILE_BYTES - len(suffix.encode())
-    if len(safe.encode()) > room:
-        digest = hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:12]
-        safe = safe.encode()[:room - 13].decode(errors="ignore") + "~" + digest
-    return safe + suffix
-
-
-def clip_filenames(names, suffix: str) -> list[str]:
-    """:func:`clip_filename` of each name, made unique without regard to case (``dup`` and ``DUP``
-    are one file on macOS and Windows): a name whose file is taken gets ``~2``, ``~3``, ... in
-    the order given, so the same clips always get the same files."""
-    taken, out = set(), []
-    for name in names:
-        f = clip_filename(name, suffix)
-        stem, k = f[:len(f) - len(suffix)], 1
-        while f.casefold() in taken:
-            k += 1
-            f = clip_filename(f"{stem}~{k}", suffix)
-        taken.add(f.casefold())
-        out.append(f)
-    return out
 
 
 @dataclass

@@ -1,0 +1,219 @@
+"""What the commands share: errors said with flags, output checks and locks, printing, and the
+argument types and flag groups used by several commands.
+
+Errors never name flags in the library (:mod:`torchsplice.core.errors`): an error names its
+options (``{max_length_ratio}``) and a hint key, and :func:`cli_message` says them as this
+command line's flags. Defaults and allowed values come from the library (:func:`declared`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import shlex
+import sys
+from pathlib import Path
+
+from ..core.errors import OutputExistsError, TorchspliceError
+from .declared import declared
+
+__all__ = ["cli_message", "flag", "output", "locked", "say", "n", "at", "one_line", "progress", "command_line",
+           "positive_int", "positive_float", "share", "bounded_int", "add_output_flags", "db_spec", "device",
+           "Terminated", "on_sigterm", "stopped", "stop_code", "JOB", "SPLICE", "ALIGN", "STANDING"]
+
+JOB = "torchsplice.job.config"  # JobConfig: the options of splice-all and torchsplice.job.splice_all
+SPLICE = "torchsplice.splice.api"  # SpliceOptions: the options of splice and torchsplice.splice.splice
+ALIGN = "torchsplice.splice.heck"  # AlignOptions
+STANDING = "torchsplice.splice.standing"  # TIMINGS, LIMBS
+
+_CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS) are on the command line
+    "overwrite": "use --force to overwrite",
+    "force_locomotion": "--force-locomotion splices it anyway",
+    "restart": "pass --restart to discard it",
+}
+_FLAGS = {"overwrite": "--force", "output": "-o"}  # library option -> flag, where it is not --the-same-name
+
+
+def flag(option: str) -> str:
+    """A library option's command-line flag (``max_length_ratio`` -> ``--max-length-ratio``)."""
+    return _FLAGS.get(option, "--" + option.replace("_", "-"))
+
+
+def cli_message(exc: BaseException) -> str:
+    """An error's message as the command line says it: the options it names as flags
+    (``{max_length_ratio}`` -> ``--max-length-ratio``) and its hint in flag terms."""
+    from ..core.errors import HINTS, render_message
+
+    if not isinstance(exc, TorchspliceError) or not hasattr(exc, "message"):
+        return str(exc)
+    text = render_message(exc.message, exc.options, flag)
+    hint = _CLI_HINTS.get(exc.hint) or HINTS.get(exc.hint) if exc.hint else None
+    return f"{text} ({hint})" if hint else text
+
+
+def progress(iterable, total: int, desc: str, quiet: bool):
+    """A tqdm progress bar on stderr (hidden with --quiet or when stderr is not a terminal)."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=desc, unit="file", disable=True if quiet else None,
+                file=sys.stderr, dynamic_ncols=True)
+
+
+def _outputs(kind: str) -> tuple[tuple[str, ...], str]:
+    """A kind of output: (suffixes, what it is)."""
+    if kind == "bvh":
+        from ..formats.exporters import get_exporter
+
+        bvh = get_exporter("bvh")
+        return (bvh.suffix,), bvh.what
+    return {
+        "database": ((".h5", ".hdf5"), "a database"),
+        "report": ((".md",), "a Markdown report"),
+        "plot": ((".png", ".pdf", ".svg"), "a picture"),
+        "render": (tuple(declared("torchsplice.viz.render", "SUPPORTED_SUFFIXES")), "a GIF, MP4 or PNG filmstrip"),
+        "viewer": ((".html", ".htm"), "an HTML page"),
+    }[kind]
+
+
+def output(args, kind: str, inputs=()) -> Path:
+    """``args.output`` checked before any work: the right suffix for ``kind``, not a folder,
+    not one of ``inputs``, and not an existing file unless ``--force``."""
+    from ..store.atomic import check_output
+
+    suffixes, what = _outputs(kind)
+    return check_output(args.output, suffixes, what, inputs=inputs, overwrite=getattr(args, "force", False))
+
+
+def command_line(args) -> str:
+    """The command as typed (what locks and run records say)."""
+    return "torchsplice " + shlex.join(getattr(args, "argv", []))
+
+
+@contextlib.contextmanager
+def locked(out: Path, args):
+    """Hold the output's lock while the command writes it: a second writer is refused at once."""
+    from ..store.lock import output_lock
+
+    with output_lock(out, command_line(args)):
+        if out.exists() and not getattr(args, "force", False):  # written meanwhile by another process
+            raise OutputExistsError(f"{out}: already exists")
+        yield out
+
+
+def say(args, msg: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(msg)
+
+
+def n(count: int, word: str) -> str:
+    """``"1 clip"``, ``"2 clips"``: a count with its noun, plural unless one."""
+    return f"{count} {word}{'' if count == 1 else 's'}"
+
+
+def at(path, why: str) -> str:
+    """``PATH: why``, or ``PATH:LINE: rest`` when ``why`` starts with a line number."""
+    from ..core.names import printable
+
+    head, sep, _ = why.partition(":")
+    path = printable(path)  # a file's name may hold control characters
+    return f"{path}:{why}" if sep and head.isdigit() else f"{path}: {why}"
+
+
+def one_line(message, path=None, limit: int = 300) -> str:
+    """``message`` as one line of at most ``limit`` characters, without a leading ``PATH:``."""
+    from ..formats.importer import one_line as _one_line
+
+    return _one_line(message, path, limit)
+
+
+def db_spec(db, skeleton_id: int, skeleton):
+    """The spec stored with a skeleton of the database, or one detected for it."""
+    from ..specs import DatasetSpec, detect_spec
+
+    text = db.spec_json(skeleton_id)
+    return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
+
+
+def device(name: str | None):
+    """A torch device name checked up front: one clear line instead of a traceback later."""
+    from ..job.config import check_device
+
+    return check_device(name)
+
+
+# --------------------------------------------------------------------------------------------
+# argument types
+# --------------------------------------------------------------------------------------------
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def bounded_int(lo: int, hi: int):
+    """An argparse type: a whole number from ``lo`` to ``hi``."""
+    def parse(text: str) -> int:
+        value = positive_int(text) if lo >= 1 else int(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be from {lo} to {hi}, got {value}")
+        return value
+    return parse
+
+
+def share(text: str) -> float:
+    """argparse type: a number from 0 to 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a number from 0 to 1, got {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def add_output_flags(s, force_help: str = "overwrite an existing file", quiet_help: str = "print nothing on success") -> None:
+    s.add_argument("-f", "--force", action="store_true", help=force_help)
+    s.add_argument("-q", "--quiet", action="store_true", help=quiet_help)
+
+
+# --------------------------------------------------------------------------------------------
+# interrupts
+# --------------------------------------------------------------------------------------------
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a scheduler or ``kill`` stopping the process): handled like Ctrl-C."""
+
+
+SIGTERM_SEEN = [False]  # a SIGTERM arrived (libraries such as Ray re-raise it as a plain KeyboardInterrupt)
+
+
+def on_sigterm(signum, frame):
+    SIGTERM_SEEN[0] = True
+    raise Terminated()
+
+
+def _terminated(exc: BaseException) -> bool:
+    return isinstance(exc, Terminated) or SIGTERM_SEEN[0]
+
+
+def stopped(exc: BaseException) -> str:
+    """``"terminated"`` (SIGTERM) or ``"interrupted"`` (Ctrl-C)."""
+    return "terminated" if _terminated(exc) else "interrupted"
+
+
+def stop_code(exc: BaseException) -> int:
+    """The exit code of a stopped command: 143 for SIGTERM, 130 for Ctrl-C."""
+    return 143 if _terminated(exc) else 130

@@ -1,0 +1,154 @@
+"""Commands that make and describe databases: ``sample``, ``import`` and ``info``."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from .base import Command, register_command
+from .common import add_output_flags, at, declared, n, output, positive_float, progress, say
+
+IMPORTER = "torchsplice.formats.importer"
+
+
+class Sample(Command):
+    name = "sample"
+    help = "write the built-in synthetic sample database (no data needed)"
+    description = ("Write the built-in sample: procedurally generated locomotions (straight walk, curve, sharp turn, "
+                   "side-step, jog) and actions performed while walking (carry a box, carry a cup, wave, punch, arms "
+                   "out) on a standard 22-joint skeleton.")
+
+    def add_arguments(self, s) -> None:
+        s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
+        add_output_flags(s)
+
+    def run(self, args) -> int:
+        from ..sample import sample_motions
+        from ..specs import load_spec
+        from ..store.database import MotionDatabase
+
+        out = output(args, "database")
+        spec = load_spec("sample")
+        motions = sample_motions()
+        db = MotionDatabase.create(out, overwrite=args.force)
+        with db:
+            for m in motions:
+                db.append(m, spec=spec)
+        frames = sum(m.num_frames for m in motions)
+        roles = {}
+        for m in motions:
+            roles[m.role] = roles.get(m.role, 0) + 1
+        say(args, f"wrote {args.output}: {len(motions)} synthetic clips ({frames} frames at 30 fps), "
+                  + ", ".join(f"{k} {r}" for r, k in sorted(roles.items())))
+        return 0
+
+
+class Import(Command):
+    name = "import"
+    help = "import BVH files or folders into a motion database"
+    description = ("Import BVH files (folders are searched recursively) into one HDF5 motion database. A file that "
+                   "cannot be read is skipped with a one-line reason and the good files still land; the exit code "
+                   "is then 1.")
+
+    def add_arguments(self, s) -> None:
+        spec = declared(IMPORTER, "import_bvh.spec")
+        s.add_argument("paths", nargs="+", metavar="PATH", help="BVH files or folders")
+        s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
+        s.add_argument("--spec", default=spec,
+                       help="dataset spec: a shipped name (bandai_namco, cmu, cmu_max, lafan1, sample, generic) or a "
+                            f".toml path; {spec!r} (default) picks per file")
+        s.add_argument("--append", action="store_true", help="add to an existing database")
+        s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
+        s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
+        s.add_argument("--units", default=declared(IMPORTER, "import_bvh.units"), metavar="UNIT",  # checked by import_bvh
+                       help="convert every clip from its spec's units to these (m, cm, mm, in, ft; CMU's own unit is "
+                            "'cmu'), so that datasets in different units share one database; default: keep each "
+                            "file's units")
+        s.add_argument("--split", type=positive_float, default=declared(IMPORTER, "import_bvh.split"), metavar="SECONDS",
+                       help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, "
+                            "...; labels split_from and split_frame say where each came from), so that long takes "
+                            "splice in reasonable time and memory")
+        overlap = declared(IMPORTER, "import_bvh.split_overlap")
+        s.add_argument("--split-overlap", type=float, default=overlap, metavar="SECONDS",
+                       help=f"overlap of consecutive windows (default {overlap:g} s)")
+        s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+
+    def run(self, args) -> int:
+        from ..formats.importer import NothingImportedError, import_bvh
+
+        def skipped_lines(skipped):
+            for f, why in skipped:
+                print(f"skipped {at(f, why)}", file=sys.stderr)
+
+        try:
+            report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
+                                float64=args.float64, split=args.split, split_overlap=args.split_overlap,
+                                units=args.units, progress=lambda it, total, desc: progress(it, total, desc, args.quiet))
+        except NothingImportedError as exc:
+            skipped_lines(exc.report.skipped)
+            raise
+        for g in report.guessed:
+            say(args, f"skeleton {g.skeleton} (first seen in {g.path}): joint roles guessed by the {g.spec!r} spec "
+                      "(check them; a dataset spec fixes them):\n" + "\n".join(f"  {ln}" for ln in g.summary))
+        cut = report.cut
+        # a cut take is one file but several clips: count the clips written, and the files when they differ
+        added = sum(c.windows for c in report.imported)
+        files = f" from {n(len(report.imported), 'file')}" if added != len(report.imported) else ""
+        say(args, f"imported {n(added, 'clip')}{files} ({report.frames} frames) into {args.output} "
+                  f"({n(report.clips, 'clip')} in all)"
+                  + (f"; {n(len(cut), 'long take')} cut into {sum(c.windows for c in cut)} windows of {args.split:g} s"
+                     if cut else ""))
+        for f, why in report.warnings:
+            print(f"warning: {at(f, why)}", file=sys.stderr)
+        skipped_lines(report.skipped)
+        if report.skipped:
+            print(f"{len(report.skipped)} input(s) skipped, {len(report.imported)} imported", file=sys.stderr)
+        return 1 if report.skipped else 0
+
+
+def _labels_text(labels: dict) -> str:
+    return " ".join(f"{k}={v}" for k, v in sorted(labels.items()))
+
+
+class Info(Command):
+    name = "info"
+    help = "list a database's clips, skeletons and roles"
+    description = ("Describe a motion database. With --json, print an object whose 'clips' list holds, per clip, "
+                   "name, frames, fps, duration_s, role, labels, skeleton, source.")
+
+    def add_arguments(self, s) -> None:
+        s.add_argument("database", help="motion database (.h5)")
+        s.add_argument("--json", action="store_true", help="machine-readable output")
+
+    def run(self, args) -> int:
+        from ..store.database import MotionDatabase
+
+        with MotionDatabase.open(args.database) as db:
+            s = db.summary()
+        if args.json:
+            print(json.dumps(s, indent=2))
+            return 0
+        minutes = s["duration_s"] / 60
+        print(f"{s['path']}: {n(s['num_clips'], 'clip')}, {s['num_frames']} frames ({minutes:.1f} min); "
+              f"schema {s['schema_version']}, units {s['units'] or '?'}, up axis {s['up_axis'] or '?'}, "
+              f"quaternions {s['quaternion_order']}")
+        for k in s["skeletons"]:
+            print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}"
+                  f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "
+                  f"up axis {k['up_axis'] or '?'}, {n(k['clips'], 'clip')}")
+        print("roles: " + ", ".join(f"{r} {k}" for r, k in sorted(s["roles"].items())))
+        run = s.get("run")
+        if isinstance(run, dict):
+            print(f"run: {run.get('command', '?')} ({run.get('tool', 'torchsplice')}, started {run.get('started', '?')})")
+        if s["clips"]:
+            w = max(4, max(len(c["name"]) for c in s["clips"]))
+            print(f"{'name':<{w}}  {'frames':>6}  {'fps':>5}  {'sec':>6}  {'role':<10}  labels")
+            for c in s["clips"]:
+                print(f"{c['name']:<{w}}  {c['frames']:>6}  {c['fps']:>5g}  {c['duration_s']:>6.2f}  "
+                      f"{c['role'] or '-':<10}  {_labels_text(c['labels'])}")
+        return 0
+
+
+register_command(Sample())
+register_command(Import())
+register_command(Info())

@@ -1,0 +1,164 @@
+"""The library's declared values (allowed values, defaults), read without importing torch.
+
+An option is declared once, in the library: ``--timing``'s choices are
+``torchsplice.splice.standing.TIMINGS``, ``--max-run``'s default is ``JobConfig.max_run``. The
+modules that declare them import torch, numpy or h5py, which the command line must not load for
+``--help`` (tests/test_cli_startup.py). So :func:`declared` reads such a value from the module's
+source when the module is not loaded yet: the literal it is assigned (a module constant, a
+dataclass field's default, a function parameter's default; a name of another constant of the
+same module is followed). Once the module is loaded (any command that does work loads it), the
+live value is read instead, and a value that is not a literal imports the module. So the value
+is always the library's; tests/test_cli_options.py checks every parser choice and default
+against the imported library, and this reader against the live values.
+
+Names: ``"CONST"``, ``"Class.field"`` (a dataclass field's default; ``"Class.field.sub"`` follows
+a field whose default is another dataclass, ``field(default_factory=Other)``), ``"function.param"``.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import importlib
+import inspect
+import sys
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+__all__ = ["declared", "static_value", "live_value", "ASKED"]
+
+_PACKAGE = Path(__file__).resolve().parents[1]  # torchsplice/
+_MISSING = object()
+ASKED: set[tuple[str, str]] = set()
+"""Every ``(module, name)`` asked for so far (tests check the source reading of each)."""
+
+
+def declared(module: str, name: str) -> Any:
+    """The value ``name`` of library module ``module`` (see the module docstring)."""
+    ASKED.add((module, name))
+    if module not in sys.modules:
+        value = static_value(module, name)
+        if value is not _MISSING:
+            return value
+    return live_value(importlib.import_module(module), name)
+
+
+def live_value(mod, name: str) -> Any:
+    """``name`` read from the imported module ``mod``."""
+    first, *rest = name.split(".")
+    obj = getattr(mod, first)
+    for part in rest:
+        if inspect.isfunction(obj):
+            obj = inspect.signature(obj).parameters[part].default
+        elif dataclasses.is_dataclass(obj) and isinstance(obj, type):
+            f = {f.name: f for f in dataclasses.fields(obj)}[part]
+            obj = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        else:
+            obj = getattr(obj, part)
+    return obj
+
+
+def static_value(module: str, name: str) -> Any:
+    """``name`` read from ``module``'s source, or ``_MISSING`` when it is not a literal there."""
+    tree = _tree(module)
+    if tree is None:
+        return _MISSING
+    first, *rest = name.split(".")
+    node = _top_level(tree, first)
+    value = _MISSING
+    if isinstance(node, ast.ClassDef) and rest:
+        node = _class_field(node, rest[0])
+        if node is None:
+            return _MISSING
+        if rest[1:]:  # a field whose default is another dataclass of the module (default_factory=Other)
+            factory = _factory(node)
+            return static_value(module, ".".join([factory, *rest[1:]])) if factory else _MISSING
+        value = _literal(tree, _default(node))
+    elif isinstance(node, ast.FunctionDef) and len(rest) == 1:
+        value = _literal(tree, _parameter_default(node, rest[0]))
+    elif node is not None and not rest and not isinstance(node, (ast.ClassDef, ast.FunctionDef)):
+        value = _literal(tree, node)
+    return value
+
+
+@lru_cache(maxsize=None)
+def _tree(module: str) -> ast.Module | None:
+    parts = module.split(".")
+    if parts[0] != "torchsplice":
+        return None
+    path = _PACKAGE.joinpath(*parts[1:])
+    path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+    try:
+        return ast.parse(path.read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, ValueError):
+        return None
+
+
+def _top_level(tree: ast.Module, name: str):
+    """The class, function, or value assigned to ``name`` at the module's top level (the last one)."""
+    found = None
+    for node in tree.body:
+        if isinstance(node, (ast.ClassDef, ast.FunctionDef)) and node.name == name:
+            found = node
+        elif isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
+            found = node.value
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.target.id == name:
+            found = node.value
+    return found
+
+
+def _class_field(cls: ast.ClassDef, name: str):
+    for node in cls.body:
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.target.id == name:
+            return node.value
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
+            return node.value
+    return None
+
+
+def _is_field_call(node) -> bool:
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "field"
+
+
+def _default(node):
+    """A field's default expression: ``x = 3`` -> ``3``; ``field(default=3)`` -> ``3``."""
+    if _is_field_call(node):
+        for kw in node.keywords:
+            if kw.arg == "default":
+                return kw.value
+        return None
+    return node
+
+
+def _factory(node) -> str | None:
+    if _is_field_call(node):
+        for kw in node.keywords:
+            if kw.arg == "default_factory" and isinstance(kw.value, ast.Name):
+                return kw.value.id
+    return None
+
+
+def _parameter_default(fn: ast.FunctionDef, name: str):
+    a = fn.args
+    positional = a.posonlyargs + a.args
+    for arg, default in zip(positional[len(positional) - len(a.defaults):], a.defaults):
+        if arg.arg == name:
+            return default
+    for arg, default in zip(a.kwonlyargs, a.kw_defaults):
+        if arg.arg == name:
+            return default
+    return None
+
+
+def _literal(tree: ast.Module, node, depth: int = 0):
+    """The value of a literal expression (a name of a module constant is followed); ``_MISSING``
+    for anything else."""
+    if node is None or depth > 8:
+        return _MISSING
+    if isinstance(node, ast.Name):
+        return _literal(tree, _top_level(tree, node.id), depth + 1)
+    try:
+        return ast.literal_eval(node)
+    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+        return _MISSING

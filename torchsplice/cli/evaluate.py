@@ -1,0 +1,51 @@
+"""``evaluate``: the Markdown report judging a spliced database, per clip and per method."""
+
+from __future__ import annotations
+
+from .base import Command, register_command
+from .common import add_output_flags, declared, locked, output, positive_int
+
+REPORT = "torchsplice.evaluation.report"
+
+
+class Evaluate(Command):
+    name = "evaluate"
+    help = "Markdown report judging a spliced database, per clip and per method"
+    description = ("Judge a database written by splice-all: foot skate, arm-leg phase coherence, posture kept, and "
+                   "error against captured ground truth where the spec declares it; per clip and per method, with "
+                   "pictures.")
+
+    def add_arguments(self, s) -> None:
+        max_rows = declared(REPORT, "evaluate_database.max_rows")
+        s.add_argument("database", help="database written by splice-all")
+        s.add_argument("-o", "--output", required=True, help="report to write (.md); pictures go to <stem>_files/")
+        s.add_argument("--sources", nargs="+", metavar="DB", help="databases holding the source clips (default: as recorded)")
+        s.add_argument("--no-pictures", action="store_true", default=not declared(REPORT, "evaluate_database.pictures"),
+                       help="tables only")
+        s.add_argument("--max-rows", type=positive_int, default=max_rows, metavar="N",
+                       help=f"per-clip rows per method (default {max_rows})")
+        add_output_flags(s, force_help="overwrite an existing report")
+
+    def run(self, args) -> int:
+        from ..evaluation.report import evaluate_database
+
+        out = output(args, "report", inputs=[args.database] + list(args.sources or []))
+        with locked(out, args):
+            agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
+                                    max_rows=args.max_rows)
+        if not args.quiet:
+            from ..store.database import MotionDatabase
+
+            with MotionDatabase.open(args.database) as db:
+                u = db.attrs.get("units") or "units"
+            u = "units" if u in ("mixed", "unknown") else u
+            for method, a in agg.items():
+                gt = (f", ground-truth error {a['gt_error']:.2f} {u} over {a['gt_pairs']} pairs"
+                      if a["gt_error"] is not None else "")
+                print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f} {u}/s, "
+                      f"posture kept {a['posture']:.2f} {u}{gt}")
+            print(f"wrote {out}")
+        return 0
+
+
+register_command(Evaluate())

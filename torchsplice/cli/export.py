@@ -1,0 +1,72 @@
+"""``export``: clips of a database as files of a registered format (BVH, .npz, or a plug-in's).
+
+The command parses its flags and calls :func:`torchsplice.formats.exporters.export_clips`, which
+does everything else (the format, the files, all or nothing), exactly as from Python. The
+formats (``--format``) are the registry's, so a ``--plugin`` module's format is a choice too;
+``--packed`` and ``--features`` are the ``npz`` format's options, with its default and choices.
+"""
+
+from __future__ import annotations
+
+from .base import Command, register_command
+from .common import add_output_flags, command_line, say
+from ..core.errors import TorchspliceError
+
+
+def _npz_option(name: str):
+    from ..formats.exporters import get_exporter
+
+    return get_exporter("npz").options[name]
+
+
+class Export(Command):
+    name = "export"
+    help = "write clips of a database as BVH or NumPy .npz (for training and other tools)"
+    description = ("Write clips (by name, as `info` lists them, or --all) as BVH files with the skeleton's original "
+                   "channel layout, or as .npz: local rotations (WXYZ), root translation, trajectory, local "
+                   "translations, world positions, fps, joints, parents, offsets and labels (layout: "
+                   "torchsplice/formats/npz.py). -o is a file for one clip (or --packed), else a folder, one file "
+                   "per clip.")
+
+    def add_arguments(self, s) -> None:
+        from ..formats.exporters import DEFAULT_FORMAT, available_exporters
+
+        formats = available_exporters()
+        s.add_argument("database", help="motion database (.h5)")
+        s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names")
+        s.add_argument("-o", "--output", required=True, help="file to write (one clip, --packed), or folder (several clips)")
+        s.add_argument("--all", action="store_true", help="export every clip (or every clip of --skeleton)")
+        s.add_argument("--format", choices=formats, default=None,
+                       help=f"{' or '.join(formats) if len(formats) < 3 else ', '.join(formats)} (default: from -o's "
+                            f"suffix; {DEFAULT_FORMAT} for a folder unless --packed or --features)")
+        packed, features = _npz_option("packed"), _npz_option("features")
+        s.add_argument("--packed", action="store_true", default=packed.default,
+                       help="npz: one file with every clip concatenated along frames and offsets[i]:offsets[i+1] "
+                            "slicing clip i (clips of one skeleton topology)")
+        s.add_argument("--features", choices=features.choices, default=features.default,
+                       help="npz: add 6D rotations (Zhou et al. 2019), joint, root and trajectory velocities, and per-"
+                            "dimension mean and std of every array over all exported clips, for normalisation")
+        s.add_argument("--skeleton", default=None, metavar="K[,K...]",
+                       help="only clips on these skeletons (ids as `info` lists them)")
+        add_output_flags(s)
+
+    def run(self, args) -> int:
+        from ..formats.exporters import export_clips
+
+        if args.all == bool(args.clips):
+            raise TorchspliceError("name the clips to export, or pass --all (not both)" if args.all else
+                                   "name the clips to export (as `torchsplice info` lists them), or pass --all")
+        skeletons = None
+        if args.skeleton is not None:
+            try:
+                skeletons = sorted({int(k) for k in args.skeleton.split(",") if k.strip()})
+            except ValueError:
+                raise TorchspliceError(f"--skeleton: expected skeleton ids such as 0 or 0,1, got {args.skeleton!r}") from None
+        result = export_clips(args.database, None if args.all else args.clips, out=args.output, format=args.format,
+                              overwrite=args.force, skeletons=skeletons, command=command_line(args),
+                              packed=args.packed, features=args.features)
+        say(args, f"wrote {result.summary}")
+        return 0
+
+
+register_command(Export())

@@ -1,0 +1,94 @@
+"""Commands that show clips: ``render`` (stick figures as GIF, MP4 or a PNG filmstrip) and
+``view`` (one self-contained HTML page playing them in 3D)."""
+
+from __future__ import annotations
+
+import sys
+
+from .base import Command, register_command
+from .common import add_output_flags, bounded_int, declared, locked, output, positive_float, positive_int, say
+
+RENDER = "torchsplice.viz.render"
+VIEWER = "torchsplice.viz.viewer"
+MAX_FILMSTRIP = 64  # columns of a PNG filmstrip: more would not fit a screen (and took minutes and GBs)
+
+
+class Render(Command):
+    name = "render"
+    help = "stick-figure preview of clips side by side (GIF, MP4 or PNG filmstrip)"
+    description = ("Draw clips as stick figures side by side (e.g. locomotion, action, naive, spliced) from a fixed "
+                   "camera that follows each root, with clip names as titles and a ground grid. .gif and .mp4 (needs "
+                   "ffmpeg) animate; .png is a filmstrip.")
+
+    def add_arguments(self, s) -> None:
+        frames = declared(RENDER, "render.frames")
+        s.add_argument("database", help="motion database (.h5)")
+        s.add_argument("clips", nargs="+", metavar="CLIP", help="clip names")
+        s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
+        s.add_argument("--frames", type=bounded_int(1, MAX_FILMSTRIP), default=frames, metavar="N",
+                       help=f"frames per clip in a PNG filmstrip (default {frames}, at most {MAX_FILMSTRIP})")
+        s.add_argument("--max-seconds", type=positive_float, default=declared(RENDER, "render.max_seconds"),
+                       metavar="SECONDS", help="show at most this many seconds")
+        s.add_argument("--sources", nargs="+", metavar="DB",
+                       help="databases holding clips not in DATABASE, e.g. a spliced clip's locomotion and action "
+                            "(default: the inputs its run record names)")
+        add_output_flags(s)
+
+    def run(self, args) -> int:
+        from ..viz.render import render
+        from ..viz.sources import read_clips
+
+        out = output(args, "render", inputs=[args.database] + list(args.sources or []))
+        clips, spec = read_clips(args.database, args.clips, sources=args.sources)
+        longest = max(c.num_frames for c in clips)
+        frames = args.frames
+        if out.suffix.lower() == ".png" and frames > longest:
+            print(f"note: --frames {frames} is more than the {longest} frames of the longest clip; drawing {longest}",
+                  file=sys.stderr)
+            frames = longest
+        with locked(out, args):
+            render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=frames,
+                   max_seconds=args.max_seconds)
+        say(args, f"wrote {out}: {len(clips)} clip{'s' if len(clips) != 1 else ''}")
+        return 0
+
+
+class View(Command):
+    name = "view"
+    help = "one self-contained HTML page that plays clips in 3D in a browser"
+    description = ("Write an HTML file (no server, no network: three.js is inlined) that plays the database's clips "
+                   "side by side in 3D, with an orbit camera, a timeline and a picker filtered by role, method and "
+                   "label; a spliced clip shows with its locomotion, its action and the other methods' results in one "
+                   "click.")
+
+    def add_arguments(self, s) -> None:
+        max_clips = declared(VIEWER, "write_viewer.max_clips")
+        s.add_argument("database", help="motion database (.h5)")
+        s.add_argument("clips", nargs="*", metavar="CLIP",
+                       help="clips to include (with the sources and other methods of spliced ones); default: all, "
+                            "up to --max-clips")
+        s.add_argument("-o", "--output", required=True, help="page to write (.html)")
+        s.add_argument("--sources", nargs="+", metavar="DB",
+                       help="databases holding the spliced clips' locomotions and actions (default: as recorded)")
+        s.add_argument("--max-clips", type=positive_int, default=max_clips, metavar="N",
+                       help=f"at most this many clips when none are named (default {max_clips}, about 8 MB for 10 s "
+                            "clips)")
+        add_output_flags(s)
+
+    def run(self, args) -> int:
+        from ..viz.viewer import viewer_notes, write_viewer
+        from .common import flag
+
+        out = output(args, "viewer", inputs=[args.database] + list(args.sources or []))
+        with locked(out, args):
+            got = write_viewer(args.database, out, clips=args.clips, sources=args.sources, max_clips=args.max_clips,
+                               quiet=True)
+        if not args.quiet:
+            for line in viewer_notes(got, args.database, args.max_clips, flag):
+                print(line, file=sys.stderr)
+        say(args, f"wrote {out}: {len(got.names)} clip{'s' if len(got.names) != 1 else ''}, {got.size / 1e6:.1f} MB")
+        return 0
+
+
+register_command(Render())
+register_command(View())

@@ -1,0 +1,449 @@
+"""Export formats as plug-ins: one :class:`Exporter` per format, in a registry, and one
+function, :func:`export_clips`, that writes clips of a database in any of them, all or nothing.
+
+An exporter is a format's name (what users type: ``torchsplice export --format NAME``,
+``export_clips(..., format=NAME)``), the suffix of its files, and a method that writes one
+clip (a :class:`~torchsplice.core.motion.Motion`, float64) to a path. What every export shares
+is done once, here, whatever the format: choosing the clips (names in the order given, or every
+clip, kept to some skeletons), naming their files (safe on every system and unique without
+regard to case, :func:`clip_filenames`), checking the output before any work (a file for one
+clip or a packed file, else a folder), and writing every file under a hidden name and
+installing them all or none (:mod:`.staging`). So a new format is one module::
+
+    from torchsplice.formats.exporters import Exporter, register_exporter
+
+    class RootCSV(Exporter):
+        name, suffix = "rootcsv", ".csv"
+        what, title = "a CSV file", "root CSV"       # in messages: "must end in .csv", "3 clips as root CSV"
+
+        def write(self, motion, path):             # motion: a Motion (float64); path: where to write it
+            rows = motion.root_translation.tolist()
+            path.write_text("".join(f"{x},{y},{z}\\n" for x, y, z in rows))
+
+    register_exporter(RootCSV)
+
+loaded as plug-in methods are (``--plugin MODULE``, ``TORCHSPLICE_PLUGINS``, or the
+``torchsplice.methods`` entry point group: see :mod:`torchsplice.splice.registry`). A format
+that needs more than one clip at a time (statistics over every clip, one packed file) overrides
+:meth:`Exporter.select`, :meth:`Exporter.check`, :meth:`Exporter.items` and
+:attr:`Exporter.single_file`, as the NumPy exporter does (:mod:`.npz_exporter`). Options a
+format takes (``packed``, ``features``) are declared in :attr:`Exporter.options`, with their
+default and allowed values: the command line reads its choices from there.
+
+The built-ins, ``bvh`` (:mod:`.bvh_exporter`) and ``npz`` (:mod:`.npz_exporter`), register
+themselves on first use of the registry. This module imports no torch, numpy or h5py: the
+command line lists the formats without loading them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar, Iterable, Iterator, Sequence
+
+from ..core.errors import TorchspliceError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..store.database import MotionDatabase
+
+__all__ = ["Exporter", "ExportOption", "ExportResult", "register_exporter", "get_exporter", "available_exporters",
+           "choose_exporter", "export_clips", "export_targets", "select_rows", "clip_filename", "clip_filenames",
+           "MAX_FILE_BYTES", "DEFAULT_FORMAT", "BUILTIN_EXPORTERS"]
+
+DEFAULT_FORMAT = "bvh"
+"""The format of an export that names none, whose output's suffix is no format's and whose
+options no format needs (a folder of BVH files)."""
+BUILTIN_EXPORTERS = ("bvh", "npz")
+_BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz_exporter")
+_NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
+_SUFFIX = re.compile(r"^\.[A-Za-z0-9][A-Za-z0-9_-]*$")
+READ_BATCH = 64
+"""Clips read from the database at a time by :meth:`Exporter.items`."""
+
+
+@dataclass(frozen=True)
+class ExportOption:
+    """An option a format takes (a keyword of :func:`export_clips`): its default, its allowed
+    values (``None``: any) and one line saying what it does."""
+
+    default: Any = None
+    choices: tuple | None = None
+    doc: str = ""
+
+
+@dataclass
+class ExportResult:
+    """What :func:`export_clips` wrote.
+
+    Attributes:
+        format: the format's name.
+        output: the output as given (a file, or the folder of the clips' files).
+        files: the files written, in export order (one for a packed file).
+        names: the exported clips, in export order.
+        frames: frames written in all.
+        fps: the frame rate of each clip written as a file of its own (empty for a packed file).
+        summary: one line saying what was written (``"OUT: 3 clips as BVH, 900 frames"``).
+    """
+
+    format: str
+    output: Any
+    files: list[Path]
+    names: list[str]
+    frames: int = 0
+    fps: list[float] = field(default_factory=list)
+    summary: str = ""
+
+
+class Exporter:
+    """One export format (see the module docstring); an instance is one export.
+
+    Class attributes:
+        name: what users type (``--format NAME``): lower case letters, digits, ``_`` and ``-``.
+        suffix: the suffix of its files (``".bvh"``).
+        what: a file of the format, in messages (``"BVH"``: "the output is BVH, so its name must end in .bvh").
+        title: the format in summaries (``"BVH"``: "3 clips as BVH").
+        description: one line for ``--help`` and the documentation.
+        options: the keyword options it takes, with their defaults and choices.
+        module: the module that defines it (set on registration).
+
+    An instance holds the export's ``database``, ``clips`` (names, or ``None`` for every clip),
+    ``skeletons`` (database skeleton ids to keep, or ``None``) and ``options`` (every declared
+    option, defaults filled in).
+    """
+
+    name: ClassVar[str] = ""
+    suffix: ClassVar[str] = ""
+    what: ClassVar[str] = ""
+    title: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    options: ClassVar[dict[str, ExportOption]] = {}
+    module: ClassVar[str] = ""
+
+    def __init__(self, database, clips: Sequence[str] | None = None, skeletons: Sequence[int] | None = None,
+                 **options):
+        self.database = Path(database)
+        self.clips = None if clips is None else list(clips)
+        self.skeletons = None if skeletons is None else list(skeletons)
+        declared = type(self).options
+        unknown = sorted(set(options) - set(declared))
+        if unknown:
+            raise TorchspliceError(f"format {self.name!r} takes no option {unknown[0]!r}"
+                                   + (f" (it takes {', '.join(declared)})" if declared else ""))
+        self.options = {k: o.default for k, o in declared.items()}
+        self.options.update(options)
+        for k, o in declared.items():
+            if o.choices is not None and self.options[k] != o.default and self.options[k] not in o.choices:
+                raise TorchspliceError(f"{{{k}}} must be one of {', '.join(map(str, o.choices))}, got {self.options[k]!r}",
+                                       options=(k,))
+        self._names: list[str] | None = None
+
+    # -- what a format may override -----------------------------------------------------------
+    @property
+    def names(self) -> list[str]:
+        """The exported clips' names, in export order (chosen on first use, by :meth:`select`)."""
+        if self._names is None:
+            self._names = list(self.select())
+        return self._names
+
+    def select(self) -> list[str]:
+        """The clips to export (one-line errors for an unknown clip or skeleton, or none left)."""
+        from ..store.database import MotionDatabase
+
+        with MotionDatabase.open(self.database) as db:
+            names = db.names
+            return [names[r] for r in select_rows(db, self.clips, self.skeletons)]
+
+    @property
+    def single_file(self) -> bool:
+        """Every clip goes to one file (a packed file), whatever their number."""
+        return False
+
+    def check(self) -> None:
+        """What must hold before any file is made (e.g. statistics over every clip); one-line errors."""
+
+    def items(self) -> Iterator[Any]:
+        """What :meth:`write` takes, one per file, in export order: by default each clip as a
+        :class:`~torchsplice.core.motion.Motion` (float64), read :data:`READ_BATCH` at a time."""
+        import torch
+
+        from ..store.database import MotionDatabase
+
+        names = self.names
+        with MotionDatabase.open(self.database) as db:
+            for b in range(0, len(names), READ_BATCH):
+                yield from db.read_many(names[b:b + READ_BATCH], dtype=torch.float64)
+
+    def measure(self, item) -> tuple[int, float | None]:
+        """``(frames, fps)`` of an item (``fps`` ``None`` for a packed file)."""
+        return int(item.num_frames), float(item.fps)
+
+    def write(self, item, path: Path) -> None:
+        """Write one item (a clip) as a file at ``path``."""
+        raise NotImplementedError
+
+    def summary(self, result: ExportResult) -> str:
+        """One line saying what ``result`` holds (the command line prints it after ``wrote``)."""
+        if len(result.names) == 1 and len(result.files) == 1 and result.fps:
+            return f"{result.files[0]}: {result.names[0]}, {result.frames} frames at {result.fps[0]:g} fps"
+        return f"{result.output}: {len(result.names)} clips as {self.title}, {result.frames} frames"
+
+
+# --------------------------------------------------------------------------------------------
+# the registry
+# --------------------------------------------------------------------------------------------
+_REGISTRY: dict[str, type[Exporter]] = {}
+_LOADED = [False]
+
+
+def register_exporter(exporter: type[Exporter], replace_existing: bool = False) -> type[Exporter]:
+    """Add the format ``exporter`` (an :class:`Exporter` subclass) to the registry and return it.
+
+    Raises :class:`~torchsplice.core.errors.TorchspliceError` for a malformed name or suffix, a
+    class that writes nothing, or a name already taken by another format (unless
+    ``replace_existing``). Registering the same class again (a module imported twice) is harmless.
+    """
+    _ensure_builtins()
+    if not (isinstance(exporter, type) and issubclass(exporter, Exporter)):
+        raise TorchspliceError("register_exporter takes a subclass of torchsplice.formats.exporters.Exporter, "
+                               f"got {type(exporter).__name__}")
+    name = exporter.name
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise TorchspliceError(f"format name {name!r} must be lower case letters, digits, '_' or '-', "
+                               "starting with a letter")
+    if not isinstance(exporter.suffix, str) or not _SUFFIX.fullmatch(exporter.suffix):
+        raise TorchspliceError(f"format {name!r}: suffix {exporter.suffix!r} must be a dot and letters or digits, "
+                               "such as '.csv'")
+    if exporter.write is Exporter.write:
+        raise TorchspliceError(f"format {name!r}: the exporter must define write(item, path)")
+    if not isinstance(exporter.options, dict) or not all(isinstance(o, ExportOption) for o in exporter.options.values()):
+        raise TorchspliceError(f"format {name!r}: options must map names to ExportOption")
+    exporter.module = exporter.__module__
+    exporter.what = exporter.what or f"a {exporter.suffix} file"
+    exporter.title = exporter.title or name
+    old = _REGISTRY.get(name)
+    if old is not None and old is not exporter and not replace_existing and (old.__module__, old.__qualname__) != (
+            exporter.__module__, exporter.__qualname__):
+        raise TorchspliceError(f"format {name!r} is already registered (by {old.module}); choose another name")
+    _REGISTRY[name] = exporter
+    return exporter
+
+
+def _ensure_builtins() -> None:
+    if not _LOADED[0]:
+        _LOADED[0] = True
+        for module in _BUILTIN_MODULES:
+            importlib.import_module(module)
+
+
+def get_exporter(name: str) -> type[Exporter]:
+    """The registered format called ``name``; a clear error naming the formats otherwise."""
+    _ensure_builtins()
+    exporter = _REGISTRY.get(name)
+    if exporter is None:
+        raise TorchspliceError(f"unknown export format {name!r}; choose one of {', '.join(available_exporters())}")
+    return exporter
+
+
+def available_exporters() -> tuple[str, ...]:
+    """The registered formats' names: the built-ins first, then plug-ins in the order they registered."""
+    _ensure_builtins()
+    return tuple(_REGISTRY)
+
+
+def choose_exporter(format: str | None, output, options: dict) -> type[Exporter]:
+    """The format of an export: ``format`` if given; else the first format that takes every
+    option given (not ``None`` or ``False``), else the one whose suffix ``output`` has, else
+    :data:`DEFAULT_FORMAT`. An option the format does not take is refused in one line."""
+    _ensure_builtins()
+    unknown = sorted(k for k in options if not any(k in e.options for e in _REGISTRY.values()))
+    if unknown:
+        taken = sorted({k for e in _REGISTRY.values() for k in e.options})
+        raise TorchspliceError(f"unknown export option {unknown[0]!r}; the formats take {', '.join(taken) or 'none'}")
+    given = [k for k, v in options.items() if v is not None and v is not False]
+    if format is None:
+        takers = [n for n, e in _REGISTRY.items() if all(k in e.options for k in given)] if given else []
+        suffix = Path(output).suffix.lower()
+        by_suffix = [n for n, e in _REGISTRY.items() if e.suffix.lower() == suffix]
+        format = takers[0] if takers else by_suffix[0] if by_suffix else DEFAULT_FORMAT
+    exporter = get_exporter(format)
+    for k in given:
+        if k not in exporter.options:
+            takers = [n for n, e in _REGISTRY.items() if k in e.options]
+            raise TorchspliceError(f"{{{k}}} needs {{format}} {' or '.join(takers)} ({exporter.title} holds one clip "
+                                   "per file)", options=(k, "format"))
+    return exporter
+
+
+# --------------------------------------------------------------------------------------------
+# the export
+# --------------------------------------------------------------------------------------------
+def export_clips(database, clips: Sequence[str] | None = None, *, out, format: str | None = None,
+                 overwrite: bool = False, skeletons: Iterable[int] | None = None, command: str = "",
+                 **options) -> ExportResult:
+    """Write clips of a database as files of a registered format, all or nothing.
+
+    Args:
+        database: the motion database.
+        clips: clip names, in the order wanted (repeats dropped); ``None`` for every clip.
+        out: a file for one named clip or a packed file, else a folder (made if missing) that
+            gets one file per clip, named after it (:func:`clip_filenames`).
+        format: a registered format (:func:`available_exporters`); ``None`` chooses it from the
+            options and ``out``'s suffix (:func:`choose_exporter`).
+        overwrite: replace existing files.
+        skeletons: keep only clips on these database skeletons (ids; ``None``: any).
+        command: what the output's lock records as its holder.
+        options: the format's options (``packed=True``, ``features="6d"`` for ``npz``).
+
+    Everything is checked before any file is made (one-line
+    :class:`~torchsplice.core.errors.TorchspliceError`: an unknown clip or format, an output of
+    the wrong kind, an existing file without ``overwrite``); then every file is written under a
+    hidden name and installed at the end (:mod:`.staging`): an error or an interrupt leaves no
+    file of the export, no temporary and no folder it made. Returns an :class:`ExportResult`.
+    """
+    cls = choose_exporter(format, out, options)
+    exporter = cls(database, clips, skeletons=skeletons, **{k: v for k, v in options.items() if k in cls.options})
+    names = exporter.names
+    single = exporter.single_file or (len(names) == 1 and clips is not None)
+    files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
+    exporter.check()
+    from .staging import staged_files
+
+    result = ExportResult(exporter.name, out, files, names)
+    with staged_files(out, folder, overwrite=overwrite, command=command) as stage:
+        items = exporter.items()
+        try:
+            count = 0
+            for item in items:
+                if count == len(files):
+                    raise TorchspliceError(f"format {exporter.name!r} ({exporter.module}) gave more files than the "
+                                           f"{len(files)} of this export")
+                _write(exporter, item, files[count], stage(files[count]), names)
+                frames, fps = exporter.measure(item)
+                result.frames += frames
+                if fps is not None:
+                    result.fps.append(fps)
+                count += 1
+        finally:
+            close = getattr(items, "close", None)
+            if close is not None:
+                close()
+        if count != len(files):
+            raise TorchspliceError(f"format {exporter.name!r} ({exporter.module}) gave {count} files of the "
+                                   f"{len(files)} of this export")
+    result.summary = exporter.summary(result)
+    return result
+
+
+def _write(exporter: Exporter, item, target: Path, path: Path, names: list[str]) -> None:
+    """``exporter.write(item, path)``: an OS error (a full disk) as one line naming ``target``;
+    a plug-in's failure as one line naming the format (built-ins are trusted)."""
+    from ..core.names import printable
+    from ..store.atomic import os_error_message
+
+    try:
+        exporter.write(item, path)
+    except TorchspliceError:
+        raise
+    except OSError as exc:
+        raise TorchspliceError(os_error_message(target, exc)) from None
+    except (Exception, SystemExit) as exc:
+        if exporter.module.startswith("torchsplice.") and exporter.name in BUILTIN_EXPORTERS:
+            raise
+        text = f"called sys.exit({exc.code!r})" if isinstance(exc, SystemExit) else \
+            f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        raise TorchspliceError(f"format {exporter.name!r} ({exporter.module}) failed writing {target}: "
+                               f"{printable(text, limit=300)}; nothing written") from None
+
+
+def export_targets(out, names: list[str], exporter: Exporter | type[Exporter], single_file: bool, inputs=(),
+                   overwrite: bool = False) -> tuple[list[Path], Path | None]:
+    """The files an export writes (one per clip, or one), checked before any work, and the folder
+    to create (``None`` if none): ``out`` is a file for one clip or a packed file, else a folder."""
+    from ..store.atomic import check_output
+
+    out = Path(out)
+    suffix, what = exporter.suffix, exporter.what
+    if single_file and (not out.is_dir() or exporter.single_file):  # a packed file is never a folder
+        return [check_output(out, (suffix,), what, inputs=inputs, overwrite=overwrite)], None
+    if out.suffix.lower() in {e.suffix.lower() for e in _REGISTRY.values()} and not out.is_dir():
+        packers = [e for e in _REGISTRY.values() if "packed" in e.options]
+        raise TorchspliceError(f"{out}: {len(names)} clips go to a folder, one file each: give {{output}} a folder"
+                               + (f" (or {{packed}} for one {packers[0].suffix})" if packers else ""),
+                               options=("output", "packed") if packers else ("output",))
+    if out.exists() and not out.is_dir():
+        raise TorchspliceError(f"{out}: is a file; several clips go to a folder, one file each")
+    if not out.parent.is_dir():
+        raise TorchspliceError(f"{out}: folder {out.parent} does not exist")
+    files = []
+    for name in clip_filenames(names, suffix):  # safe everywhere, unique without regard to case
+        f = out / name
+        if out.is_dir():
+            check_output(f, (suffix,), what, inputs=inputs, overwrite=overwrite)
+        files.append(f)
+    return files, None if out.is_dir() else out
+
+
+# --------------------------------------------------------------------------------------------
+# choosing clips and naming their files
+# --------------------------------------------------------------------------------------------
+def select_rows(db: "MotionDatabase", clips: Sequence[str] | None, skeletons: Sequence[int] | None = None) -> list[int]:
+    """Database rows of ``clips`` (names, in the order given, repeats dropped; ``None``: every clip
+    in row order), kept only on ``skeletons`` (ids; ``None``: any). One-line errors for an
+    unknown clip or skeleton and for an empty result."""
+    rows = list(range(len(db))) if clips is None else list(dict.fromkeys(db.index(c) for c in clips))
+    if skeletons is not None:
+        unknown = [k for k in skeletons if k not in range(len(db.skeletons))]
+        if unknown:
+            raise TorchspliceError(f"{db.path}: no skeleton {unknown[0]} (it has {len(db.skeletons)}, numbered from 0; "
+                                   "see torchsplice info)")
+        skeleton = db.clip_table().skeleton
+        rows = [r for r in rows if int(skeleton[r]) in set(skeletons)]
+    if not rows:
+        raise TorchspliceError(f"{db.path}: no clip to export" + (" on the skeletons asked for" if skeletons is not None else ""))
+    return rows
+
+
+_UNSAFE = re.compile(r'[\x00-\x1f\x7f<>:"/\\|?*]')
+_RESERVED = re.compile(r"(con|prn|aux|nul|com[0-9¹²³]|lpt[0-9¹²³])(\..*)?", re.IGNORECASE)
+MAX_FILE_BYTES = 200
+"""Longest file name (UTF-8 bytes, suffix included) an export writes: file systems allow 255,
+and the hidden name an export writes first adds a few dozen."""
+
+
+def clip_filename(name: str, suffix: str) -> str:
+    """A file name for clip ``name`` that is safe on Linux, macOS and Windows: characters that are
+    not allowed there (``< > : " / \\ | ? *``, control characters) and a leading dot become
+    ``_``, trailing dots and spaces go, Windows' device names (``CON``, ``nul.txt``, ``COM1``)
+    get a ``_`` in front, and a name longer than :data:`MAX_FILE_BYTES` is cut and ends with a
+    hash of the whole name. See :func:`clip_filenames` for names that are unique without regard
+    to case."""
+    safe = _UNSAFE.sub("_", name).rstrip(". ")
+    if safe.startswith("."):
+        safe = "_" + safe[1:]
+    if _RESERVED.fullmatch(safe):
+        safe = "_" + safe
+    safe = safe or "_"
+    room = MAX_FILE_BYTES - len(suffix.encode())
+    if len(safe.encode()) > room:
+        digest = hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:12]
+        safe = safe.encode()[:room - 13].decode(errors="ignore") + "~" + digest
+    return safe + suffix
+
+
+def clip_filenames(names, suffix: str) -> list[str]:
+    """:func:`clip_filename` of each name, made unique without regard to case (``dup`` and ``DUP``
+    are one file on macOS and Windows): a name whose file is taken gets ``~2``, ``~3``, ... in
+    the order given, so the same clips always get the same files."""
+    taken, out = set(), []
+    for name in names:
+        f = clip_filename(name, suffix)
+        stem, k = f[:len(f) - len(suffix)], 1
+        while f.casefold() in taken:
+            k += 1
+            f = clip_filename(f"{stem}~{k}", suffix)
+        taken.add(f.casefold())
+        out.append(f)
+    return out

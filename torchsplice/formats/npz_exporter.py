@@ -1,0 +1,78 @@
+"""The ``npz`` export format: clips as NumPy ``.npz`` files, one per clip, or every clip in one
+packed file (``packed=True``), with training features and their statistics (``features="6d"``).
+The layout is :mod:`torchsplice.formats.npz`'s. Registered on import; imports no torch until
+it exports."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .exporters import Exporter, ExportOption, ExportResult, register_exporter
+
+__all__ = ["NpzExporter", "FEATURE_SETS"]
+
+FEATURE_SETS = {"6d": ("rotations_6d", "velocities", "trajectory_velocity", "root_velocity")}
+"""``features`` choices: the extra per-frame arrays they add (with statistics)."""
+
+
+class NpzExporter(Exporter):
+    """Clips as ``.npz`` (see :mod:`torchsplice.formats.npz` for the layout)."""
+
+    name = "npz"
+    suffix = ".npz"
+    what = "a NumPy .npz file"
+    title = ".npz"
+    description = "NumPy .npz: rotations, translations, positions, skeleton and labels per clip, or packed"
+    options = {
+        "packed": ExportOption(False, doc="one file with every clip concatenated along frames (one skeleton topology)"),
+        "features": ExportOption(None, choices=tuple(FEATURE_SETS),
+                                 doc="add training features and their per-dimension statistics over every clip"),
+    }
+
+    def select(self) -> list[str]:
+        from .npz import NpzExport
+
+        self._export = NpzExport(self.database, self.clips, features=self.options["features"], skeletons=self.skeletons)
+        return self._export.names
+
+    @property
+    def single_file(self) -> bool:
+        return bool(self.options["packed"])
+
+    def check(self) -> None:
+        """Clips of one skeleton topology when packed; the statistics computed (and checked
+        finite) before any file is made."""
+        self.names  # noqa: B018 -- the selection first
+        if self.single_file:
+            self._export.check_one_skeleton("pack")
+        self._export.statistics  # noqa: B018
+
+    def items(self):
+        self.names  # noqa: B018
+        if self.single_file:
+            yield None, self._export.packed()
+        else:
+            yield from self._export.per_clip()
+
+    def measure(self, item) -> tuple[int, float | None]:
+        name, arrays = item
+        return int(arrays["rotations"].shape[0]), None if name is None else float(arrays["fps"])
+
+    def write(self, item, path: Path) -> None:
+        from . import npz
+
+        name, arrays = item
+        npz.write_npz(path, arrays, what=f"clip {name!r}" if name is not None else "")
+
+    def summary(self, result: ExportResult) -> str:
+        features = self.options["features"]
+        n = len(result.names)
+        if self.single_file:
+            return (f"{result.files[0]}: {n} clips packed, {result.frames} frames"
+                    + (f", features {features} with statistics" if features else ""))
+        where = result.files[0] if len(result.files) == 1 else Path(result.output)
+        return (f"{where}: {n} clip{'s' if n != 1 else ''} as .npz, {result.frames} frames"
+                + (f", features {features} with statistics over all of them" if features else ""))
+
+
+register_exporter(NpzExporter)
