@@ -27,6 +27,7 @@ from torchsplice.splice import SpliceOptions, TIMINGS, splice
 from torchsplice.splice.registry import available_methods
 from torchsplice.splice.standing import parse_limbs
 from torchsplice.store.database import COMPRESSIONS
+from torchsplice.splice.backends import backend_choices
 from torchsplice.viz.render import render
 from torchsplice.viz.viewer import write_viewer
 
@@ -43,7 +44,8 @@ def _splice_flags(o, force) -> dict:
     """The splice's flags' defaults as the library states them (``o``: JobConfig fields or SpliceOptions)."""
     get = o.get if isinstance(o, dict) else lambda k: getattr(o, k)
     return {"max_run": get("max_run") if isinstance(o, dict) else o.align.max_run, "no_posture": not get("posture"),
-            "twist": get("twist"), "timing": get("timing"), "force_locomotion": force, "device": get("device")}
+            "twist": get("twist"), "timing": get("timing"), "force_locomotion": force, "device": get("device"),
+            "backend": get("backend")}
 
 
 def expected() -> dict:
@@ -76,10 +78,10 @@ def expected() -> dict:
         ("splice-all", "actions_db"): (JOB["actions_db"], None),
         ("splice-all", "layout"): (JOB["layout"], LAYOUTS),
         ("splice-all", "compression"): (JOB["compression"] or "none", None),  # choices: see below
-        **{(c, k): (v, TIMINGS if k == "timing" else None)
+        **{(c, k): (v, TIMINGS if k == "timing" else backend_choices() if k == "backend" else None)
            for c, o, force in (("splice", ONE, ONE.force), ("splice-all", JOB, JOB["force_locomotion"]))
            for k, v in _splice_flags(o, force).items()},
-        **{("plot-alignment", k): (v, None) for k, v in _splice_flags(ONE, True).items()
+        **{("plot-alignment", k): (v, backend_choices() if k == "backend" else None) for k, v in _splice_flags(ONE, True).items()
            if k not in ("timing", "force_locomotion")},  # plot-alignment always time-aligns: set, not flags
     }
 

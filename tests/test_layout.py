@@ -30,7 +30,8 @@ LAYERS = [
     ["splice", "formats"],              # methods and backends; file formats in and out
     ["viz"],                            # pictures and the viewer
     ["evaluation", "job"],              # metrics and reports; the n x m job
-    ["cli", "io", ""],                  # the command line, the old names, the top-level modules
+    ["cli", "io"],                      # the command line; the names torchsplice.io gave before
+    [""],                               # the top-level modules: the package, __main__, warmup
 ]
 LAYER = {pkg: n for n, pkgs in enumerate(LAYERS) for pkg in pkgs}
 

@@ -18,11 +18,11 @@ from ..core.errors import OutputExistsError, TorchspliceError
 from .declared import declared
 
 __all__ = ["cli_message", "flag", "output", "locked", "say", "n", "at", "one_line", "progress", "command_line",
-           "positive_int", "positive_float", "share", "bounded_int", "add_output_flags", "db_spec", "device",
+           "positive_int", "positive_float", "share", "bounded_int", "add_output_flags", "device",
            "Terminated", "on_sigterm", "stopped", "stop_code", "JOB", "SPLICE", "ALIGN", "STANDING"]
 
 JOB = "torchsplice.job.config"  # JobConfig: the options of splice-all and torchsplice.job.splice_all
-SPLICE = "torchsplice.splice.api"  # SpliceOptions: the options of splice and torchsplice.splice.splice
+SPLICE = "torchsplice.splice.options"  # SpliceOptions: the options of splice and torchsplice.splice.splice
 ALIGN = "torchsplice.splice.heck"  # AlignOptions
 STANDING = "torchsplice.splice.standing"  # TIMINGS, LIMBS
 
@@ -124,14 +124,6 @@ def one_line(message, path=None, limit: int = 300) -> str:
     from ..formats.importer import one_line as _one_line
 
     return _one_line(message, path, limit)
-
-
-def db_spec(db, skeleton_id: int, skeleton):
-    """The spec stored with a skeleton of the database, or one detected for it."""
-    from ..specs import DatasetSpec, detect_spec
-
-    text = db.spec_json(skeleton_id)
-    return DatasetSpec.from_json(text) if text else detect_spec(skeleton)
 
 
 def device(name: str | None):

@@ -20,7 +20,7 @@ LOG_LEVELS = ("debug", "info", "warning", "error")  # --log-level: the logging l
 def compressions() -> tuple[str, ...]:
     """``--compression`` choices: the database's compressions (``None`` spelt ``none``), the job's default first."""
     default = declared(JOB, "JobConfig.compression")
-    names = ["none" if c is None else c for c in declared("torchsplice.store.database", "COMPRESSIONS")]
+    names = ["none" if c is None else c for c in declared("torchsplice.store.schema", "COMPRESSIONS")]
     return tuple(sorted(names, key=lambda c: c != ("none" if default is None else default)))
 
 
@@ -113,7 +113,7 @@ class SpliceAll(Command):
             max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing,
             acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, device=device(args.device),
             compression=args.compression, layout=args.layout, engine=args.engine, workers=args.workers,
-            ray_address=args.ray_address,
+            ray_address=args.ray_address, backend=args.backend,
         )
         if args.ray_address and args.engine != "ray":
             raise TorchspliceError("--ray-address needs --engine ray")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 
 from .base import Command, register_command
-from .common import (ALIGN, JOB, SPLICE, STANDING, add_output_flags, db_spec, declared, device, locked, output,
+from .common import (ALIGN, JOB, SPLICE, STANDING, add_output_flags, declared, device, locked, output,
                      positive_int, say, share)
 from ..core.errors import TorchspliceError
 
@@ -27,6 +27,13 @@ def methods() -> tuple[str, ...]:
     return available_methods()
 
 
+def backend_choices() -> tuple[str, ...]:
+    """``--backend``'s choices: ``auto`` and the registered backends (plug-ins included)."""
+    from ..splice.backends import backend_choices as choices
+
+    return choices()
+
+
 def splice_defaults(source: str) -> dict:
     """The splice's defaults as flags see them, from ``source``: ``"job"`` (``JobConfig``, for
     splice-all) or ``"splice"`` (``SpliceOptions`` and ``AlignOptions``, for one pair)."""
@@ -40,7 +47,7 @@ def splice_defaults(source: str) -> dict:
         force_locomotion = get("force")
     limbs = get("acting_limbs")
     return {"max_run": max_run, "no_posture": not get("posture"), "twist": get("twist"), "timing": get("timing"),
-            "force_locomotion": force_locomotion, "device": get("device"),
+            "force_locomotion": force_locomotion, "device": get("device"), "backend": get("backend"),
             "acting_limbs": ACTING_LIMBS_AUTO if limbs is None else ",".join(limbs)}
 
 
@@ -69,6 +76,9 @@ def add_splice_options(s, source: str = "splice", standing: bool = True) -> None
         _add_standing_options(s, d)
     s.add_argument("--device", default=d["device"],
                    help="where the work runs: cpu (default: the compiled splicer) or a torch device such as cuda")
+    s.add_argument("--backend", default=d["backend"], choices=list(backend_choices()),
+                   help="what computes the splices: auto (default: the compiled splicer on the CPU, torch on CUDA), "
+                        "compiled, torch, or a backend a --plugin module registers")
 
 
 def _add_standing_options(s, d: dict) -> None:
@@ -94,7 +104,7 @@ def splice_options(args):
 
     return SpliceOptions(align=AlignOptions(max_run=args.max_run), posture=not args.no_posture,
                          force=args.force_locomotion, device=device(args.device), timing=args.timing,
-                         acting_limbs=_acting_limbs(args), twist=args.twist)
+                         acting_limbs=_acting_limbs(args), twist=args.twist, backend=args.backend)
 
 
 def _acting_limbs(args):
@@ -109,7 +119,7 @@ def _acting_limbs(args):
 def _read_pair(db, args):
     """The ``--locomotion`` and ``--action`` clips of an open database, and the spec that fits them."""
     loco, act = db.read(args.locomotion), db.read(args.action)
-    return loco, act, db_spec(db, db.clip_info(args.locomotion)["skeleton"], loco.skeleton)
+    return loco, act, db.spec(db.clip_info(args.locomotion)["skeleton"])
 
 
 class Splice(Command):
@@ -122,7 +132,7 @@ class Splice(Command):
                    "chosen by the spec's [clips.reference] rule or named with --reference).")
 
     def add_arguments(self, s) -> None:
-        method = declared(SPLICE, "splice.method")
+        method = declared("torchsplice.splice.api", "splice.method")
         add_pair_args(s)
         s.add_argument("-o", "--output", required=True, help="BVH file to write")
         s.add_argument("--method", default=method, choices=methods(),
@@ -132,8 +142,6 @@ class Splice(Command):
         add_output_flags(s)
 
     def run(self, args) -> int:
-        import json as _json
-
         from ..formats.bvh import write_bvh
         from ..splice import splice
         from ..splice.references import find_reference
@@ -148,9 +156,7 @@ class Splice(Command):
             if method.needs_reference:
                 name = args.reference
                 if name is None:
-                    t = db.table()
-                    cands = [(str(k), str(r), _json.loads(lab or "{}")) for k, r, lab in zip(t["name"], t["role"], t["labels"])]
-                    name = find_reference(act.name, act.labels, cands, spec)
+                    name = find_reference(act.name, act.labels, db.clip_table().captures(), spec)
                 ref = db.read(name) if name is not None else None  # a standing action needs none
             elif args.reference is not None:
                 raise TorchspliceError(f"--reference is only used by methods that need a reference clip (cpmc), not {method.name}")

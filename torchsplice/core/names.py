@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["CONTROL", "control_character", "printable"]
+__all__ = ["CONTROL", "control_character", "printable", "quoted"]
 
 CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
 """The characters a name must not hold (see the module docstring)."""
@@ -32,3 +32,9 @@ def printable(text: str, limit: int | None = None) -> str:
     out = CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii")
                       if ord(m.group()) < 0xD800 or ord(m.group()) > 0xDFFF else f"\\u{ord(m.group()):04x}", str(text))
     return out if limit is None or len(out) <= limit else out[:max(0, limit - 3)] + "..."
+
+
+def quoted(text: str, limit: int = 60) -> str:
+    """``repr(text)``, cut to about ``limit`` characters with an ellipsis (for error messages)."""
+    r = repr(text)
+    return r if len(r) <= limit else r[: limit - 4] + "..." + r[-1]

@@ -14,7 +14,7 @@ import torch
 
 from .errors import MotionError
 
-__all__ = ["Skeleton", "ROTATION_CHANNELS", "POSITION_CHANNELS", "SCALE_RTOL", "hierarchy_levels"]
+__all__ = ["Skeleton", "ROTATION_CHANNELS", "POSITION_CHANNELS", "SCALE_RTOL", "hierarchy_levels", "channel_columns"]
 
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
@@ -297,3 +297,13 @@ class Skeleton:
 
     def __repr__(self) -> str:
         return f"Skeleton({self.num_joints} joints, root {self.names[0]!r}, {len(self.end_site_parents)} end sites)"
+
+
+def channel_columns(channels: list[list[str]]) -> tuple[list[dict[str, int]], int]:
+    """The column of every (joint, channel) pair of BVH-style per-joint ``channels``, and the
+    number of columns."""
+    cols, c = [], 0
+    for ch in channels:
+        cols.append({name: c + k for k, name in enumerate(ch)})
+        c += len(ch)
+    return cols, c

@@ -78,35 +78,26 @@ compression, or ``preload=True``, is several times faster to sample at random.
 
 from __future__ import annotations
 
-import fnmatch
 import operator
 import os
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, NamedTuple, Sequence
+from typing import Any, Iterable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from ..core.errors import DatabaseError, TorchspliceError
-from ..core.rotations import quat_to_6d
 from ..core.skeleton import Skeleton
-from ..store import ClipTable, MotionDatabase
-from ..core.fk import forward_kinematics
+from ..store import MotionDatabase
+from .errors import DatasetError
+from .features import BUILTIN_FEATURES, NEEDS_FK, NOT_PER_FRAME, VELOCITY, derive_features, trajectory_joint
+from .where import clip_mask, where_mask
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "FeatureStatistics", "BUILTIN_FEATURES", "ITEM_KEYS"]
-
-BUILTIN_FEATURES = ("rotations", "root_translation", "trajectory", "translations", "positions", "global_rotations",
-                    "velocities", "rotations_6d", "trajectory_velocity", "root_velocity", "labels")
-"""The features every database offers (its per-frame columns come on top)."""
 
 ITEM_KEYS = ("name", "length", "fps", "index", "start", "skeleton")
 """The metadata keys of every item, besides its features."""
 
-_BASE_COLUMNS = ("name", "source", "role", "labels", "skeleton", "start", "length", "fps")
-_NEEDS_FK = {"positions", "global_rotations", "velocities", "trajectory", "trajectory_velocity"}
-_VELOCITY = {"velocities", "trajectory_velocity", "root_velocity"}  # need the frame before a window
-_NOT_PER_FRAME = {"labels"}  # features that are clip metadata, not tensors
 
 
 class FeatureStatistics(NamedTuple):
@@ -124,170 +115,8 @@ class FeatureStatistics(NamedTuple):
     frames: int
 
 
-class DatasetError(DatabaseError, ValueError):
-    """A dataset asked for something the database does not have (a column, a clip, a feature).
-
-    Both a :class:`~torchsplice.core.errors.DatabaseError` and a ``ValueError``.
-    """
 
 
-# --------------------------------------------------------------------------------------------
-# selection
-# --------------------------------------------------------------------------------------------
-def _is_glob(s: str) -> bool:
-    return any(ch in s for ch in "*?[")
-
-
-def _select_clips(clips: Iterable[str | int], names: np.ndarray, path: Path) -> np.ndarray:
-    """Boolean mask ``(C,)`` of the rows named by ``clips`` (names, shell globs or row numbers)."""
-    C = len(names)
-    keep = np.zeros(C, dtype=bool)
-    index = None
-    for c in ([clips] if isinstance(clips, str) else clips):
-        if isinstance(c, (int, np.integer)):
-            if not -C <= int(c) < C:
-                raise DatasetError(f"{path}: no clip number {int(c)} (the database has {C})")
-            keep[int(c)] = True
-        elif isinstance(c, str) and _is_glob(c):
-            hit = np.fromiter((fnmatch.fnmatchcase(n, c) for n in names), dtype=bool, count=C)
-            if not hit.any():
-                raise DatasetError(f"{path}: no clip name matches the pattern {c!r}")
-            keep |= hit
-        elif isinstance(c, str):
-            if index is None:
-                index = {n: i for i, n in enumerate(names)}
-            if c not in index:
-                close = [n for n in names if c.lower() in n.lower()][:5]
-                hint = f"; similar: {', '.join(close)}" if close else ""
-                raise DatasetError(f"{path}: no clip named {c!r}{hint}")
-            keep[index[c]] = True
-        else:
-            raise TypeError(f"clips must hold clip names, shell patterns or row numbers, got {c!r}")
-    return keep
-
-
-def _matcher(key: str, want) -> Callable[[Any], bool]:
-    """A predicate on one clip's value from a ``where`` entry (a callable, a collection or a value)."""
-    if callable(want):
-        return lambda v: bool(want(v))
-    if isinstance(want, (list, tuple, set, frozenset, np.ndarray)):
-        accepted = list(want)
-        return lambda v: any(v == a for a in accepted)
-    return lambda v: v == want
-
-
-def _where_mask(where: Mapping[str, Any], table: ClipTable, columns: dict[str, str],
-                frame_columns: Sequence[str], path: Path) -> np.ndarray:
-    """Boolean mask ``(C,)`` of the rows whose metadata satisfy every entry of ``where``."""
-    C = len(table)
-    keep = np.ones(C, dtype=bool)
-    known = [*_BASE_COLUMNS, *columns]
-    for key, want in where.items():
-        if not isinstance(key, str):
-            raise TypeError(f"where keys must be column names, got {key!r}")
-        if key.startswith("labels."):
-            label = key[len("labels."):]
-            values = [lab.get(label) for lab in table.labels]
-        elif key == "labels":
-            values = list(table.labels)
-        elif key in known:
-            values = table.column(key).tolist()
-        else:
-            extra = f"; {key!r} is a per-frame column (a feature, not a filter)" if key in frame_columns else ""
-            raise DatasetError(
-                f"{path}: no column {key!r} to filter on{extra}; columns: {', '.join(known)}, "
-                f"and labels.KEY for any label")
-        match = _matcher(key, want)
-        keep &= np.fromiter((match(v) for v in values), dtype=bool, count=C)
-    return keep
-
-
-# --------------------------------------------------------------------------------------------
-# features from raw frames
-# --------------------------------------------------------------------------------------------
-def _velocities(pos: torch.Tensor, fps: torch.Tensor, clip_first: torch.Tensor, seg_first: torch.Tensor) -> torch.Tensor:
-    """``(N, J, 3)`` finite-difference velocities of ``pos`` ``(N, J, 3)``: segments of frames, concatenated.
-
-    ``fps`` ``(N,)`` per frame. ``seg_first`` ``(N,)`` bool marks the first row of each segment
-    (an item, or a preloaded clip); ``clip_first`` marks rows that are a clip's first frame:
-    those copy the next row of their segment (zero when the segment has no next row). Any
-    other row uses the row before it; a segment's first row that is not a clip's first frame
-    is a context frame whose own value is meaningless (the caller drops it).
-    """
-    vel = torch.zeros_like(pos)
-    if pos.shape[0] > 1:
-        vel[1:] = (pos[1:] - pos[:-1]) * fps[1:, None, None]
-    f = clip_first.nonzero().flatten()
-    if f.numel():
-        nxt = f + 1
-        ok = nxt < pos.shape[0]
-        inside = ok.nonzero().flatten()
-        ok[inside] = ~seg_first[nxt[inside]]  # a one-frame segment's next row belongs to another
-        vel[f[ok]] = vel[nxt[ok]]
-        vel[f[~ok]] = 0
-    return vel
-
-
-def _trajectory_joint(db: MotionDatabase, k: int, skeleton: Skeleton) -> int:
-    """Index of the joint carrying skeleton ``k``'s world trajectory: its spec's ``root`` role
-    (Bandai Namco: ``Hips``, under a ``joint_Root`` that stands still), else joint 0."""
-    try:
-        return int(db.spec(k).bind(skeleton).root)
-    except TorchspliceError:  # no spec fits: the BVH root
-        return 0
-
-
-def _derive(raw: dict[str, torch.Tensor], features: Sequence[str], skeleton: Skeleton,
-            fps: torch.Tensor, clip_first: torch.Tensor, seg_first: torch.Tensor,
-            trajectory_joint: int = 0) -> dict[str, torch.Tensor]:
-    """The asked ``features`` of ``N`` frames from the raw stored arrays ``raw`` (see the module table).
-
-    ``raw`` holds ``rotations`` (N, J, 4), ``root_translation`` (N, 3) and, where stored,
-    ``translations`` (N, J, 3) and per-frame columns (N,); ``fps``, ``clip_first`` and
-    ``seg_first`` are as in :func:`_velocities`. Every feature is computed frame by frame
-    (velocities from the row before), so rows of several items can go through in one call.
-    """
-    out: dict[str, torch.Tensor] = {}
-    fk = None
-    if _NEEDS_FK & set(features):
-        offsets = skeleton.offsets.to(raw["rotations"])
-        fk = forward_kinematics(raw["rotations"], raw["root_translation"], offsets, skeleton.parents,
-                                raw.get("translations"))
-    for f in features:
-        if f in ("rotations", "root_translation"):
-            out[f] = raw[f]
-        elif f == "translations":
-            if "translations" in raw:
-                t = raw["translations"].clone()
-            else:
-                rot = raw["rotations"]
-                t = skeleton.offsets.to(rot).expand(rot.shape[0], -1, -1).clone()
-            t[:, 0] = raw["root_translation"]
-            out[f] = t
-        elif f == "positions":
-            out[f] = fk[0]
-        elif f == "global_rotations":
-            out[f] = fk[1]
-        elif f == "trajectory":
-            out[f] = fk[0][:, trajectory_joint]
-        elif f == "velocities":
-            out[f] = _velocities(fk[0], fps, clip_first, seg_first)
-        elif f == "rotations_6d":
-            out[f] = quat_to_6d(raw["rotations"])
-        elif f == "trajectory_velocity":
-            out[f] = _velocities(fk[0][:, trajectory_joint:trajectory_joint + 1], fps, clip_first, seg_first)[:, 0]
-        elif f == "root_velocity":
-            out[f] = _velocities(raw["root_translation"][:, None], fps, clip_first, seg_first)[:, 0]
-        elif f in _NOT_PER_FRAME:
-            continue
-        else:  # a per-frame column
-            out[f] = raw[f]
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# the dataset
-# --------------------------------------------------------------------------------------------
 class MotionDataset(Dataset):
     """Clips (or fixed-length windows of clips) of a motion database as dicts of tensors.
 
@@ -369,15 +198,15 @@ class MotionDataset(Dataset):
             info = [db.skeleton_info(k) for k in range(len(self.skeletons))]
             stored = {k: set(i.frame_arrays) for k, i in enumerate(info)}
             self.trajectory_joints: dict[int, int] = (
-                {k: _trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)}
+                {k: trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)}
                 if {"trajectory", "trajectory_velocity"} & set(self.features) else {})
             self.units: dict[int, str] = {k: i.units for k, i in enumerate(info)}
             self._check_features()
             keep = np.ones(len(clip_table), dtype=bool)
             if clips is not None:
-                keep &= _select_clips(clips, clip_table.name, self.path)
+                keep &= clip_mask(clips, clip_table.name, self.path)
             if where:
-                keep &= _where_mask(where, clip_table, self.columns, self.frame_columns, self.path)
+                keep &= where_mask(where, clip_table, self.columns, self.frame_columns, self.path)
             if not keep.any():
                 raise DatasetError(
                     f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}")
@@ -396,11 +225,11 @@ class MotionDataset(Dataset):
             self._raw: dict[int, tuple[str, ...]] = {}
             for k in sorted(set(self._skel.tolist())):
                 need = []
-                if set(self.features) & ({"rotations", "rotations_6d", "translations"} | _NEEDS_FK):
+                if set(self.features) & ({"rotations", "rotations_6d", "translations"} | NEEDS_FK):
                     need.append("rotations")
-                if set(self.features) & ({"root_translation", "root_velocity", "translations"} | _NEEDS_FK):
+                if set(self.features) & ({"root_translation", "root_velocity", "translations"} | NEEDS_FK):
                     need.append("root_translation")
-                if "translations" in stored[k] and set(self.features) & ({"translations"} | _NEEDS_FK):
+                if "translations" in stored[k] and set(self.features) & ({"translations"} | NEEDS_FK):
                     need.append("translations")
                 need += [f for f in self.features if f in self.frame_columns]
                 self._raw[k] = tuple(need)
@@ -486,7 +315,7 @@ class MotionDataset(Dataset):
             fps = torch.from_numpy(np.repeat(self._fps[clips], lengths)).to(self.dtype)
             first = torch.zeros(N, dtype=torch.bool)
             first[torch.from_numpy(offs[lengths > 0])] = True
-            self._pre[k] = _derive(raw, self.features, self.skeletons[k], fps, first, first,
+            self._pre[k] = derive_features(raw, self.features, self.skeletons[k], fps, first, first,
                                    self.trajectory_joints.get(k, 0))
 
     # -- items ------------------------------------------------------------------------------------
@@ -526,7 +355,7 @@ class MotionDataset(Dataset):
         by_skeleton: dict[int, list[int]] = {}
         for p, (c, _, _) in enumerate(parts):
             by_skeleton.setdefault(int(self._skel[c]), []).append(p)
-        vel = bool(_VELOCITY & set(self.features))
+        vel = bool(VELOCITY & set(self.features))
         for k, members in by_skeleton.items():
             raw: dict[str, list[torch.Tensor]] = {name: [] for name in self._raw[k]}
             ctxs, sizes, fps, clip_first = [], [], [], []
@@ -548,7 +377,7 @@ class MotionDataset(Dataset):
             clip_first_rows[offsets[(sizes_t > 0) & ~torch.tensor(clip_first)]] = False
             frames = {name: (torch.cat(v) if len(v) > 1 else v[0]).to(self.dtype) for name, v in raw.items()}
             fps_rows = torch.repeat_interleave(torch.tensor(fps, dtype=self.dtype), sizes_t)
-            derived = _derive(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first,
+            derived = derive_features(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first,
                               self.trajectory_joints.get(k, 0))
             for p, o, size, ctx in zip(members, offsets.tolist(), sizes, ctxs):
                 results[p] = {f: t[o + ctx:o + size] for f, t in derived.items()}
@@ -611,7 +440,7 @@ class MotionDataset(Dataset):
         otherwise :class:`DatasetError` names the skeletons or the clip, and says how to filter.
         """
         names = [f for f in (self.features if features is None else ([features] if isinstance(features, str) else features))
-                 if f not in _NOT_PER_FRAME]
+                 if f not in NOT_PER_FRAME]
         names = list(dict.fromkeys(names))
         if not names:
             raise ValueError("statistics need at least one per-frame feature (labels have none)")

@@ -34,7 +34,6 @@ first bad frame) and anything the reader would refuse, and write nothing then.
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import re
@@ -44,21 +43,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..core.errors import BVHError, MotionError
+from ..core.errors import BVHError
 from ..core.motion import Motion
-from ..core.names import CONTROL
-from ..core.rotations import euler_to_quat, quat_to_rotmat, rotmat_to_euler
-from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton
-from ..store.atomic import atomic_path
+from ..core.names import CONTROL, quoted
+from ..core.rotations import euler_to_quat
+from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton, channel_columns
+from .bvh_limits import MAX_ABS_VALUE, MAX_FRAME_TIME, MAX_JOINTS, MIN_FRAME_TIME
 
 __all__ = ["read_bvh", "parse_bvh", "write_bvh", "format_bvh", "BVHWarning"]
 
 _SCALE_CHANNELS = ("Xscale", "Yscale", "Zscale")
 _CHANNEL_NAMES = {c.lower(): c for c in ROTATION_CHANNELS + POSITION_CHANNELS + _SCALE_CHANNELS}
 
-MAX_JOINTS = 10_000  # more joints than any real skeleton: a file past it is refused
-MIN_FRAME_TIME, MAX_FRAME_TIME = 0.001, 1.0  # seconds: 1,000 fps to 1 fps
-MAX_ABS_VALUE = 1e12  # an OFFSET or channel value beyond this is refused as absurd
 _MAX_PROBLEM = 200  # characters of a message after "FILE:LINE: "
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
 _NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)\Z", re.IGNORECASE)
@@ -78,16 +74,10 @@ class BVHWarning(UserWarning):
         self.path, self.line, self.problem = path, line, problem
 
 
-def _q(text: str, limit: int = 60) -> str:
-    """``repr(text)``, cut to about ``limit`` characters with an ellipsis."""
-    r = repr(text)
-    return r if len(r) <= limit else r[: limit - 4] + "..." + r[-1]
-
-
 def _name_list(names, shown: int = 4) -> str:
     """At most ``shown`` quoted names, then ``and N more``."""
     names = list(names)
-    text = ", ".join(_q(n, 40) for n in names[:shown])
+    text = ", ".join(quoted(n, 40) for n in names[:shown])
     return text if len(names) <= shown else f"{text} and {len(names) - shown} more"
 
 
@@ -104,13 +94,13 @@ def _number(tok: str, what: str, path, line: int) -> float:
     if _NUMBER.match(tok):
         v = float(tok)
         if not math.isfinite(v):
-            raise _error(path, f"{what} value {_q(tok)} is too large (not finite)", line)
+            raise _error(path, f"{what} value {quoted(tok)} is too large (not finite)", line)
         if abs(v) > MAX_ABS_VALUE:
-            raise _error(path, f"absurd {what} value {_q(tok)} (beyond {MAX_ABS_VALUE:g})", line)
+            raise _error(path, f"absurd {what} value {quoted(tok)} (beyond {MAX_ABS_VALUE:g})", line)
         return v
     if _NON_FINITE.match(tok):
-        raise _error(path, f"non-finite {what} value {_q(tok)}", line)
-    raise _error(path, f"non-numeric {what} value {_q(tok)}", line)
+        raise _error(path, f"non-finite {what} value {quoted(tok)}", line)
+    raise _error(path, f"non-numeric {what} value {quoted(tok)}", line)
 
 
 def _decode(raw: bytes) -> str:
@@ -194,7 +184,7 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
             raise err(f"unexpected end of hierarchy{f', expected {expected!r}' if expected else ''}")
         tok, line = toks[pos]
         if expected is not None and tok.upper() != expected.upper():
-            raise err(f"expected {expected!r}, found {_q(tok)}", line)
+            raise err(f"expected {expected!r}, found {quoted(tok)}", line)
         pos += 1
         return tok, line
 
@@ -211,9 +201,9 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
         jname = " ".join(parts)
         bad = CONTROL.search(jname)
         if bad:
-            raise err(f"joint name {_q(jname)} contains control character U+{ord(bad.group()):04X}", kw_line)
+            raise err(f"joint name {quoted(jname)} contains control character U+{ord(bad.group()):04X}", kw_line)
         if jname in seen:
-            raise err(f"joint name {_q(jname)} appears twice", kw_line)
+            raise err(f"joint name {quoted(jname)} appears twice", kw_line)
         if len(h.names) >= MAX_JOINTS:
             raise err(f"more than {MAX_JOINTS:,} joints; this is not a skeleton torchsplice can use", kw_line)
         idx = len(h.names)
@@ -228,26 +218,26 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
             take()
             tok, cline = take()
             if not _COUNT.match(tok):
-                raise err(f"channel count must be a whole number (ASCII digits), found {_q(tok)}", cline)
+                raise err(f"channel count must be a whole number (ASCII digits), found {quoted(tok)}", cline)
             count = int(tok) if len(tok) <= 6 else 10**6
             if count > len(_CHANNEL_NAMES):
-                raise err(f"joint {_q(jname)} declares {_q(tok)} channels; at most {len(_CHANNEL_NAMES)} exist", cline)
+                raise err(f"joint {quoted(jname)} declares {quoted(tok)} channels; at most {len(_CHANNEL_NAMES)} exist", cline)
             for _ in range(count):
                 ctok, cl = take()
                 c = _CHANNEL_NAMES.get(ctok.lower())
                 if c is None:
                     hint = " (CHANNELS count too large?)" if ctok.upper() in ("JOINT", "END", "}") else ""
-                    raise err(f"bad channel name {_q(ctok)} for joint {_q(jname)}{hint}", cl)
+                    raise err(f"bad channel name {quoted(ctok)} for joint {quoted(jname)}{hint}", cl)
                 if c in h.channels[idx]:
-                    raise err(f"channel {c} repeated for joint {_q(jname)}", cl)
+                    raise err(f"channel {c} repeated for joint {quoted(jname)}", cl)
                 h.channels[idx].append(c)
             rot = [c for c in h.channels[idx] if c in ROTATION_CHANNELS]
             if len(rot) not in (0, 3):
-                raise err(f"joint {_q(jname)} has {len(rot)} rotation channels; 0 or 3 are supported", cline)
+                raise err(f"joint {quoted(jname)} has {len(rot)} rotation channels; 0 or 3 are supported", cline)
         return idx
 
     if not toks or toks[0][0].upper() != "HIERARCHY":
-        found = f", found {_q(toks[0][0])}" if toks else ""
+        found = f", found {quoted(toks[0][0])}" if toks else ""
         raise _error(path, f"missing HIERARCHY at the start of the file{found}", toks[0][1] if toks else 1)
     take("HIERARCHY")
     _, root_line = take("ROOT")
@@ -268,12 +258,12 @@ def _parse_hierarchy(lines: list[str], stop: int, path) -> _Header:
             take("}")
         else:
             hint = " (CHANNELS count too small?)" if tok.lower() in _CHANNEL_NAMES else ""
-            raise err(f"unexpected {_q(tok)} in joint {_q(h.names[stack[-1]])}{hint}", tline)
+            raise err(f"unexpected {quoted(tok)} in joint {quoted(h.names[stack[-1]])}{hint}", tline)
     if pos < len(toks):
         tok, line = toks[pos]
         if tok.upper() == "ROOT":
             raise err("more than one ROOT; only single-root skeletons are supported", line)
-        raise err(f"unexpected {_q(tok)} after the hierarchy (one '}}' too many?)", line)
+        raise err(f"unexpected {quoted(tok)} after the hierarchy (one '}}' too many?)", line)
     return h
 
 
@@ -294,23 +284,23 @@ def _find_motion(lines: list[str], path) -> tuple[int, int, float, int]:
         text = lines[i].strip()
         k, sep, v = text.partition(":")
         if not sep or " ".join(k.split()).lower() != key.lower():
-            raise _error(path, f"expected '{key}:', found {_q(text, 50)}", i + 1)
+            raise _error(path, f"expected '{key}:', found {quoted(text, 50)}", i + 1)
         return i, v.strip()
 
     i, frames = field(i, "Frames")
     if not _COUNT.match(frames):
-        raise _error(path, f"frame count must be a whole number (ASCII digits), found {_q(frames)}", i + 1)
+        raise _error(path, f"frame count must be a whole number (ASCII digits), found {quoted(frames)}", i + 1)
     if len(frames.lstrip("0")) > 12:
-        raise _error(path, f"absurd frame count {_q(frames)}", i + 1)
+        raise _error(path, f"absurd frame count {quoted(frames)}", i + 1)
     n = int(frames)
     if n <= 0:
         raise _error(path, f"zero frames (Frames: {n})", i + 1)
     i, ft = field(i + 1, "Frame Time")
     if not _NUMBER.match(ft):
-        raise _error(path, f"frame time is not a number: {_q(ft)}", i + 1)
+        raise _error(path, f"frame time is not a number: {quoted(ft)}", i + 1)
     dt = float(ft)
     if not MIN_FRAME_TIME <= dt <= MAX_FRAME_TIME:
-        raise _error(path, f"frame time {_q(ft)} s is outside [{MIN_FRAME_TIME:g}, {MAX_FRAME_TIME:g}] s "
+        raise _error(path, f"frame time {quoted(ft)} s is outside [{MIN_FRAME_TIME:g}, {MAX_FRAME_TIME:g}] s "
                            "(1 to 1,000 fps)", i + 1)
     return motion, n, dt, i + 1
 
@@ -323,7 +313,7 @@ def _parse_rows_slowly(lines: list[str], rows: list[int], n_channels: int, path)
         parts = lines[i].split()
         for p in parts:
             if not (_NUMBER.match(p) or _NON_FINITE.match(p)):
-                raise _error(path, f"non-numeric value {_q(p)} in frame {r}", i + 1)
+                raise _error(path, f"non-numeric value {quoted(p)} in frame {r}", i + 1)
         if len(parts) != n_channels:
             cut = i == last_row and len(parts) < n_channels and not any(l.strip() for l in lines[i + 1:])
             hint = " (truncated file?)" if cut else ""
@@ -367,20 +357,11 @@ def _parse_frames(lines: list[str], first: int, n_frames: int, labels: list[str]
         r, c = (int(v) for v in np.argwhere(bad)[0])
         parts = lines[rows[r]].split()
         token = parts[c] if c < len(parts) else str(data[r, c])
-        what = f"non-finite value {_q(token)}" if not finite[r, c] else \
-            f"absurd value {_q(token)} (beyond {MAX_ABS_VALUE:g})"
-        raise _error(path, f"{what} in frame {r} (channel {c}: {_q(labels[c], 50)})", rows[r] + 1)
+        what = f"non-finite value {quoted(token)}" if not finite[r, c] else \
+            f"absurd value {quoted(token)} (beyond {MAX_ABS_VALUE:g})"
+        raise _error(path, f"{what} in frame {r} (channel {c}: {quoted(labels[c], 50)})", rows[r] + 1)
     extra = [j for j in range(i, L) if lines[j].strip()]
     return data, len(extra), (extra[0] + 1 if extra else None)
-
-
-def _columns(channels: list[list[str]]):
-    """Column index of every (joint, channel) pair."""
-    cols, c = [], 0
-    for ch in channels:
-        cols.append({name: c + k for k, name in enumerate(ch)})
-        c += len(ch)
-    return cols, c
 
 
 def parse_bvh(text: str, path="<string>", dtype: torch.dtype = torch.float32, name: str = "") -> Motion:
@@ -401,7 +382,7 @@ def parse_bvh(text: str, path="<string>", dtype: torch.dtype = torch.float32, na
     lines = _split_lines(text)
     motion_line, n_frames, dt, first = _find_motion(lines, path)
     h = _parse_hierarchy(lines, motion_line, path)
-    cols, n_channels = _columns(h.channels)
+    cols, n_channels = channel_columns(h.channels)
     labels = [f"{jn} {c}" for jn, ch in zip(h.names, h.channels) for c in ch]
     data, n_extra, extra_line = _parse_frames(lines, first, n_frames, labels, path)
 
@@ -430,7 +411,7 @@ def parse_bvh(text: str, path="<string>", dtype: torch.dtype = torch.float32, na
         bad = ~np.isclose(data[:, [c for _, _, c in scale_cols]], 1.0, atol=1e-6).all(axis=0)
         if bad.any():
             j, a, _ = scale_cols[int(np.argmax(bad))]
-            raise _error(path, f"joint {_q(h.names[j])} has non-unit {a}scale values; scaling is not supported")
+            raise _error(path, f"joint {quoted(h.names[j])} has non-unit {a}scale values; scaling is not supported")
 
     channels = [[c for c in ch if c not in _SCALE_CHANNELS] for ch in h.channels]
     try:
@@ -454,161 +435,4 @@ def parse_bvh(text: str, path="<string>", dtype: torch.dtype = torch.float32, na
     )
 
 
-# --------------------------------------------------------------------------------------------
-# writing
-# --------------------------------------------------------------------------------------------
-def _fmt(v: float) -> str:
-    return f"{v:.6f}"
-
-
-def _hierarchy_text(sk: Skeleton) -> str:
-    """The HIERARCHY block; End Sites and child joints keep the order they were read in."""
-    J = len(sk.names)
-    ends = [[] for _ in range(J)]
-    for e, p in enumerate(sk.end_site_parents):
-        ends[p].append(e)
-    first_end = [min(ends[j], default=len(sk.end_site_parents)) for j in range(J)]  # per subtree
-    for j in range(J - 1, 0, -1):
-        first_end[sk.parents[j]] = min(first_end[sk.parents[j]], first_end[j])
-    items = [[] for _ in range(J)]  # per joint: (sort key, kind, index)
-    for j, p in enumerate(sk.parents):
-        if p >= 0:
-            items[p].append((first_end[j], 1, j))
-    for j in range(J):
-        items[j] += [(e, 0, e) for e in ends[j]]
-        items[j].sort()
-    out = ["HIERARCHY"]
-    offsets, end_offsets = sk.offsets.tolist(), sk.end_site_offsets.tolist()
-    # iterative depth-first walk (a chain of thousands of joints must not hit the recursion limit):
-    # ("open", joint, depth) writes a joint's head and queues its items, then ("close", ...) its '}'
-    todo = [("open", 0, 0)]
-    while todo:
-        what, j, depth = todo.pop()
-        ind = "\t" * depth
-        if what == "close":
-            out.append(f"{ind}}}")
-            continue
-        if what == "end":
-            out.extend([f"{ind}End Site", f"{ind}{{",
-                        f"{ind}\tOFFSET " + " ".join(_fmt(v) for v in end_offsets[j]), f"{ind}}}"])
-            continue
-        out.append(f"{ind}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
-        out.append(f"{ind}{{")
-        out.append(f"{ind}\tOFFSET " + " ".join(_fmt(v) for v in offsets[j]))
-        if sk.channels[j]:
-            out.append(f"{ind}\tCHANNELS {len(sk.channels[j])} " + " ".join(sk.channels[j]))
-        todo.append(("close", j, depth))
-        todo.extend(("open" if kind == 1 else "end", k, depth + 1) for _, kind, k in reversed(items[j]))
-    return "\n".join(out)
-
-
-def _unwrap_degrees(a: np.ndarray) -> np.ndarray:
-    """Remove 360-degree jumps between consecutive frames (axis 0), keeping the first frame."""
-    if a.shape[0] < 2:
-        return a
-    jumps = np.round(np.diff(a, axis=0) / 360.0)
-    return a - 360.0 * np.concatenate([np.zeros_like(a[:1]), np.cumsum(jumps, axis=0)])
-
-
-def _frame_columns(motion: Motion) -> np.ndarray:
-    """The motion block as a ``(T, C)`` float64 array in the skeleton's channel layout."""
-    sk = motion.skeleton
-    T = motion.num_frames
-    rot = motion.rotations.detach().to("cpu", torch.float64)
-    trans = motion.local_translations().detach().to("cpu", torch.float64)
-    cols, n = _columns([list(c) for c in sk.channels])
-    out = np.zeros((T, n))
-    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=torch.float64)
-    for j, ch in enumerate(sk.channels):
-        order = sk.rotation_order(j)
-        if order:
-            eul = rotmat_to_euler(quat_to_rotmat(rot[:, j]), order).numpy()
-            eul = _unwrap_degrees(eul)
-            for k, a in enumerate(order):
-                out[:, cols[j][f"{a}rotation"]] = eul[:, k]
-        elif (rot[:, j] @ identity).abs().min() < 1 - 1e-6:
-            raise MotionError(f"clip {_q(motion.name)}: joint {_q(sk.names[j])} rotates but has no rotation channels")
-        for axis, a in enumerate("XYZ"):
-            c = cols[j].get(f"{a}position")
-            if c is not None:
-                out[:, c] = trans[:, j, axis].numpy()
-            elif (trans[:, j, axis] - sk.offsets[j, axis]).abs().max() > 1e-5 * max(sk.size(), 1.0):
-                raise MotionError(
-                    f"clip {_q(motion.name)}: joint {_q(sk.names[j])} translates along {a} but has no "
-                    f"{a}position channel"
-                )
-    return out
-
-
-def format_bvh(motion: Motion) -> str:
-    """The clip as BVH text (channel layout and Euler orders from its skeleton).
-
-    The skeleton must be in depth-first order (every skeleton read from BVH is), since BVH
-    nesting cannot express any other joint order. Raises :class:`MotionError` (one line naming
-    the clip) for what :func:`read_bvh` would refuse: non-finite values (naming the first bad
-    frame), values beyond 1e12, fps outside 1 to 1,000, joint names that would not read back.
-    """
-    if not isinstance(motion, Motion):
-        raise TypeError(f"format_bvh: motion must be a Motion, got {type(motion).__name__}")
-    _check_writable(motion)
-    if not motion.skeleton.is_depth_first:
-        raise MotionError(f"clip {_q(motion.name)}: skeleton joints are not in depth-first order, "
-                          "which BVH cannot keep")
-    data = _frame_columns(motion)
-    bad = ~np.isfinite(data) | (np.abs(np.nan_to_num(data)) > MAX_ABS_VALUE)
-    if bad.any():
-        f = int(np.argwhere(bad)[0][0])
-        raise MotionError(f"clip {_q(motion.name)}: frame {f} gives a non-finite or absurd (beyond "
-                          f"{MAX_ABS_VALUE:g}) channel value; nothing written")
-    buf = io.StringIO()
-    buf.write(_hierarchy_text(motion.skeleton))
-    buf.write(f"\nMOTION\nFrames: {motion.num_frames}\nFrame Time: {1.0 / motion.fps:.7f}\n")
-    np.savetxt(buf, data, fmt="%.6f", delimiter=" ")
-    return buf.getvalue()
-
-
-def _check_writable(motion: Motion) -> None:
-    """Refuse (:class:`MotionError`) a clip whose BVH text :func:`read_bvh` would refuse."""
-    clip = f"clip {_q(motion.name)}"
-    if motion.num_frames == 0:
-        raise MotionError(f"{clip}: no frames; BVH needs at least one")
-    fps = motion.fps
-    if not (math.isfinite(fps) and MIN_FRAME_TIME <= float(f"{1.0 / fps:.7f}") <= MAX_FRAME_TIME):
-        raise MotionError(f"{clip}: fps {fps:g} is outside 1 to 1,000, which BVH readers refuse; nothing written")
-    for what, t in (("rotation", motion.rotations), ("root translation", motion.root_translation),
-                    ("translation", motion.translations)):
-        if t is None:
-            continue
-        bad = ~torch.isfinite(t.detach().reshape(t.shape[0], -1)).all(dim=1)
-        if bool(bad.any()):
-            raise MotionError(f"{clip}: non-finite {what} value at frame {int(bad.nonzero()[0])}; nothing written")
-    sk = motion.skeleton
-    for what, t, owners in (("OFFSET", sk.offsets, sk.names),
-                            ("End Site OFFSET", sk.end_site_offsets, [sk.names[p] for p in sk.end_site_parents])):
-        bad = ~torch.isfinite(t).all(dim=1) | (t.abs() > MAX_ABS_VALUE).any(dim=1)
-        if bool(bad.any()):
-            j = int(bad.nonzero()[0])
-            raise MotionError(f"{clip}: {what} of joint {_q(owners[j])} is non-finite or absurd; nothing written")
-    for jname in sk.names:
-        toks = jname.split()
-        if not toks or " ".join(toks) != jname or "{" in toks or CONTROL.search(jname):
-            raise MotionError(f"{clip}: joint name {_q(jname)} would not read back from BVH (empty, control "
-                              "characters, a '{' word or stray whitespace); nothing written")
-
-
-def write_bvh(motion: Motion, path) -> None:
-    """Write the clip to ``path`` atomically (a partial file never replaces a good one).
-
-    Raises ``TypeError`` for arguments of the wrong type (e.g. ``write_bvh(path, motion)``)
-    and :class:`MotionError` for a clip BVH cannot hold (see :func:`format_bvh`); nothing is
-    written then.
-    """
-    if not isinstance(motion, Motion):
-        swapped = isinstance(path, Motion) and isinstance(motion, (str, os.PathLike))
-        raise TypeError("write_bvh(motion, path): the arguments are swapped; pass the Motion first" if swapped
-                        else f"write_bvh(motion, path): motion must be a Motion, got {type(motion).__name__}")
-    if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"write_bvh(motion, path): path must be a str or os.PathLike, got {type(path).__name__}")
-    text = format_bvh(motion)
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(text)
+from .bvh_write import format_bvh, write_bvh  # noqa: E402 (users read and write BVH from this module)

@@ -97,7 +97,7 @@ from ..core.errors import TorchspliceError
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from .exporters import MAX_FILE_BYTES, clip_filename, clip_filenames, select_rows  # noqa: F401 (their old home)
-from .npz_exporter import FEATURE_SETS
+from .npz_features import FEATURE_SETS
 
 __all__ = ["NPZ_FORMAT", "NPZ_VERSION", "FRAME_ARRAYS", "FEATURE_SETS", "NpzExport", "write_npz", "read_npz",
            "clip_of_packed", "clip_filename", "clip_filenames", "select_rows", "MAX_FILE_BYTES"]

@@ -8,11 +8,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from .exporters import Exporter, ExportOption, ExportResult, register_exporter
+from .npz_features import FEATURE_SETS
 
 __all__ = ["NpzExporter", "FEATURE_SETS"]
-
-FEATURE_SETS = {"6d": ("rotations_6d", "velocities", "trajectory_velocity", "root_velocity")}
-"""``features`` choices: the extra per-frame arrays they add (with statistics)."""
 
 
 class NpzExporter(Exporter):

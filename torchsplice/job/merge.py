@@ -14,7 +14,7 @@ from pathlib import Path
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
 from ..splice.registry import get_method
 from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
-from ..store.virtual import virtual_source_files
+from ..store.database import MotionDatabase
 from . import shards
 from .config import JobConfig
 from .plan import Plan
@@ -232,7 +232,7 @@ class OutputMerge:
         if c.copy_sources:
             copy_sources(self.out, self.plan, sources)
         self.out.set_spliced(self.out.clips)
-        replaced = virtual_source_files(c.output)  # the frames of the output this one replaces (a virtual one's)
+        replaced = MotionDatabase.virtual_files(c.output)  # the frames of the output this one replaces (a virtual one's)
         mine = run_shards(c, self.plan)
         if c.layout == "virtual":
             shards.install_shards(self.shard_dir, mine, [self.sink.shard_name(t.id) for t in self.tasks])
@@ -292,8 +292,6 @@ def _output_skeletons(plan: Plan, group_skeleton, sources: Sources | None) -> li
     """``(Skeleton, spec)`` of every skeleton the output will hold, in the order its clips
     arrive: each locomotion group's (``group_skeleton(g)``, ``(None, None)`` when unknown), in
     task order, then (``sources``: the source clips are copied) those of the source clips."""
-    from ..specs import DatasetSpec
-
     out, seen = [], set()
     for t in plan.tasks:
         if t.group not in seen:
@@ -303,11 +301,10 @@ def _output_skeletons(plan: Plan, group_skeleton, sources: Sources | None) -> li
                 out.append((sk, spec))
     if sources is not None:
         for db, rows in source_rows(plan, sources):
-            ks = db.table()["skeleton"]
+            ks = db.clip_table().skeleton
             for r in rows:
                 k = int(ks[r])
-                text = db.spec_json(k)
-                out.append((db.skeletons[k], DatasetSpec.from_json(text) if text else None))
+                out.append((db.skeletons[k], db.stored_spec(k)))
     return out
 
 

@@ -23,7 +23,7 @@ import numpy as np
 from ..core.version import __version__
 from ..core.errors import TorchspliceError, UnfinishedJobError
 from ..store.lock import temp_path
-from ..specs import DatasetSpec, SkeletonRoles, detect_spec
+from ..specs import DatasetSpec, SkeletonRoles
 from ..splice import SpliceOptions
 from ..splice.clips import ClipTensors, clips_to_tensors
 from ..splice.locomotion import check_locomotion
@@ -207,15 +207,15 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     c = config
     loco_db, act_db = sources.db("L"), sources.db("A")
     same = act_db is loco_db or c.actions_db is None
-    tl = loco_db.table()
-    ta = tl if same else act_db.table()
+    tl = loco_db.clip_table()
+    ta = tl if same else act_db.clip_table()
     locos = select_clips(tl, c.locomotions, "{locomotions}", str(c.database))
     acts = select_clips(ta, c.actions, "{actions}", str(c.actions_db or c.database))
     sk_l, sk_a = loco_db.skeletons, act_db.skeletons
     described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db),
                  _skeleton_units(loco_db), _skeleton_units(act_db))
-    if not any(sk_l[int(tl["skeleton"][i])].same_topology(sk_a[int(ta["skeleton"][j])]) for i in locos for j in acts):
-        a, b = sk_l[int(tl["skeleton"][locos[0]])], sk_a[int(ta["skeleton"][acts[0]])]
+    if not any(sk_l[int(tl.skeleton[i])].same_topology(sk_a[int(ta.skeleton[j])]) for i in locos for j in acts):
+        a, b = sk_l[int(tl.skeleton[locos[0]])], sk_a[int(ta.skeleton[acts[0]])]
         raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
                                f"have no skeleton in common: {a.mismatch(b)}")
     if not same:
@@ -225,9 +225,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
                 raise TorchspliceError(f"{c.actions_db}: {k} {b!r} differs from {c.database}'s {a!r}; "
                                        "splice clips of one unit and up axis")
     specs = {}
-    for k in sorted({int(tl["skeleton"][i]) for i in locos}):
-        text = loco_db.spec_json(k)
-        specs[k] = DatasetSpec.from_json(text) if text else detect_spec(sk_l[k])
+    for k in sorted({int(tl.skeleton[i]) for i in locos}):
+        specs[k] = loco_db.spec(k)  # the stored spec, else one detected
     needs_ref = any(get_method(m).needs_reference for m in c.methods)
     refs = _references(ta, acts, next(iter(specs.values()))) if needs_ref else {}
 
@@ -237,12 +236,12 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
     by_group: dict[tuple[int, float], list[str]] = {}
     for i in locos:
-        by_group.setdefault((int(tl["skeleton"][i]), float(tl["fps"][i])), []).append(clip_key("L", i, same))
+        by_group.setdefault((int(tl.skeleton[i]), float(tl.fps[i])), []).append(clip_key("L", i, same))
     groups: list[Group] = []
     for (k, fps), keys in by_group.items():
         for j in others:
             key = clip_key("A", j, same)
-            ka = int(ta["skeleton"][j])
+            ka = int(ta.skeleton[j])
             if key not in keys and sk_l[k].same_topology(sk_a[ka]) and not _units_clash(units_l[k], units_a[ka]):
                 keys.append(key)
         roles = specs[k].bind(sk_l[k])
@@ -255,8 +254,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         for key in g.clips:
             tag, row = key.split(":")
             t = tables[tag]
-            clips[key] = PlanClip(str(t["name"][int(row)]), int(t["length"][int(row)]), float(t["fps"][int(row)]),
-                                  json.loads(t["labels"][int(row)] or "{}"))
+            clips[key] = PlanClip(str(t.name[int(row)]), int(t.length[int(row)]), float(t.fps[int(row)]),
+                                  dict(t.labels[int(row)]))
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
     pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, sk_l, sk_a, checks, refs, described)
@@ -269,11 +268,11 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     start = 0
     for n in range(1, len(pairs) + 1):
         p0 = pairs[start]
-        g0 = group_of[(int(tl["skeleton"][p0.loco]), float(tl["fps"][p0.loco]))]
+        g0 = group_of[(int(tl.skeleton[p0.loco]), float(tl.fps[p0.loco]))]
         end = n == len(pairs)
         if not end:
             p = pairs[n]
-            g = group_of[(int(tl["skeleton"][p.loco]), float(tl["fps"][p.loco]))]
+            g = group_of[(int(tl.skeleton[p.loco]), float(tl.fps[p.loco]))]
         if end or n - start >= size or p.method != p0.method or g != g0 or p.mode != p0.mode:
             tasks.append(Task(f"{len(tasks):06d}", p0.method, g0, start, n, p0.mode))
             start = n
@@ -286,12 +285,12 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
 
 def _references(ta, acts, spec: DatasetSpec) -> dict[int, int | None]:
     """Action row -> reference row (in the action database) for ``cpmc``."""
-    names = [str(n) for n in ta["name"]]
-    cands = [(names[i], str(ta["role"][i]), json.loads(ta["labels"][i] or "{}")) for i in range(len(names))]
+    names = [str(n) for n in ta.name]
+    cands = ta.captures()
     index = {n: i for i, n in enumerate(names)}
     out = {}
     for j in acts:
-        ref = find_reference(names[j], json.loads(ta["labels"][j] or "{}"), cands, spec)
+        ref = find_reference(names[j], dict(ta.labels[j]), cands, spec)
         out[int(j)] = index[ref] if ref is not None else None
     return out
 
@@ -360,8 +359,8 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
 
 def _skeleton_units(db) -> dict[int, tuple[str, str]]:
     """Skeleton id -> its ``(units, up_axis)`` as stored (``""`` where not recorded)."""
-    return {k: (str(db.h5[f"skeletons/{k}"].attrs.get("units", "") or ""),
-                str(db.h5[f"skeletons/{k}"].attrs.get("up_axis", "") or "")) for k in range(len(db.skeletons))}
+    return {k: (str(info.units or ""), str(info.up_axis or ""))
+            for k, info in ((k, db.skeleton_info(k)) for k in range(len(db.skeletons)))}
 
 
 def _units_clash(a: tuple[str, str], b: tuple[str, str]) -> bool:
@@ -373,10 +372,7 @@ def _describe_skeletons(db, path) -> dict[int, str]:
     """Skeleton id -> ``skeleton K (spec, J joints)`` (``of FILE`` added when ``path`` is given)."""
     out = {}
     for k, sk in enumerate(db.skeletons):
-        try:
-            spec = json.loads(db.spec_json(k) or "{}").get("name", "") or "no spec"
-        except (ValueError, AttributeError):
-            spec = "no spec"
+        spec = db.skeleton_info(k).spec_name or "no spec"
         out[k] = f"skeleton {k}{f' of {Path(path).name}' if path else ''} ({spec}, {sk.num_joints} joints)"
     return out
 
@@ -412,7 +408,7 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
 
     if same:
         put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
-    kl, ka = np.asarray(tl["skeleton"], dtype=np.int64)[L], np.asarray(ta["skeleton"], dtype=np.int64)[A]
+    kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
     for stage in ("topology", "units"):
         by_pair = np.zeros((len(sk_l), len(sk_a)), dtype=np.int64)
         for x in np.unique(kl).tolist():
@@ -427,16 +423,16 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
 
     def too_short(table):
         def why(r):
-            need = max(4, int(MIN_SECONDS * float(table["fps"][r])))
-            n = int(table["length"][r])
-            return f"{table['name'][r]} is too short to splice ({n} frames, at least {need})" if n < need else None
+            need = max(4, int(MIN_SECONDS * float(table.fps[r])))
+            n = int(table.length[r])
+            return f"{table.name[r]} is too short to splice ({n} frames, at least {need})" if n < need else None
         return why
 
     put(per_clip(L, too_short(tl))[:, None])
     put(per_clip(A, too_short(ta))[None, :])
     if c.max_length_ratio is not None:
-        dl = np.asarray(tl["length"], dtype=np.float64)[L] / np.asarray(tl["fps"], dtype=np.float64)[L]
-        da = np.asarray(ta["length"], dtype=np.float64)[A] / np.asarray(ta["fps"], dtype=np.float64)[A]
+        dl = np.asarray(tl.length, dtype=np.float64)[L] / np.asarray(tl.fps, dtype=np.float64)[L]
+        da = np.asarray(ta.length, dtype=np.float64)[A] / np.asarray(ta.fps, dtype=np.float64)[A]
         apart = np.maximum(dl[:, None], da[None, :]) > c.max_length_ratio * np.minimum(dl[:, None], da[None, :])
         put(np.where(apart, code(f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"), 0))
     key_l = {int(i): clip_key("L", i, same) for i in L}
@@ -445,7 +441,7 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
     def damaged(table, keys):
         def why(r):
             check = checks.get(keys[r])
-            return f"{table['name'][r]} {check.reason}" if check is not None and not check.finite else None
+            return f"{table.name[r]} {check.reason}" if check is not None and not check.finite else None
         return why
 
     put(per_clip(L, damaged(tl, key_l))[:, None])
@@ -453,7 +449,7 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
     if not c.force_locomotion:
         def still(r):
             check = checks.get(key_l[r])
-            return (f"{tl['name'][r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
+            return (f"{tl.name[r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
                     if check is not None and not check.locomoting else None)
         put(per_clip(L, still)[:, None])
     base = grid.copy()
@@ -466,7 +462,7 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
             noref = np.zeros(na, dtype=np.int64)
             for n, j in enumerate(A.tolist()):
                 if refs.get(j) is None and not standing[n]:
-                    noref[n] = code(f"no plain-locomotion reference for {ta['name'][j]} ({method})")
+                    noref[n] = code(f"no plain-locomotion reference for {ta.name[j]} ({method})")
             put(noref[None, :])
         per = np.bincount(grid.reshape(-1), minlength=len(reasons) + 1)
         for r in np.nonzero(per[1:])[0].tolist():
@@ -483,9 +479,9 @@ def _task_size(c: JobConfig, pairs, clips, groups, same, tl, ta) -> int:
     tables for the longest pair, and a task's results)."""
     if c.batch_pairs is not None:
         return max(1, int(c.batch_pairs))
-    t_l = max(int(tl["length"][p.loco]) for p in pairs)
+    t_l = max(int(tl.length[p.loco]) for p in pairs)
     fps = max(g.fps for g in groups)
-    t_a = max(int(ta["length"][p.action] * fps / float(ta["fps"][p.action])) + 1 for p in pairs)
+    t_a = max(int(ta.length[p.action] * fps / float(ta.fps[p.action])) + 1 for p in pairs)
     J = 64  # a generous joint count: the budget is a bound, not an estimate
     if c.splice_backend().prepares_once:  # the compiled splicer: one pair's tables per thread, float64
         left = c.memory_budget_mb * 2**20 - 11 * t_l * t_a

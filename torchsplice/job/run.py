@@ -140,8 +140,8 @@ class SpliceJob:
         if self.config.copy_sources:
             copied = []
             for db, rows in source_rows(plan, sources):
-                t = db.table()
-                copied += [(int(t["length"][r]), db.skeletons[int(t["skeleton"][r])]) for r in rows]
+                t = db.clip_table()
+                copied += [(int(t.length[r]), db.skeletons[int(t.skeleton[r])]) for r in rows]
         return estimate_output(plan, lambda g: source_skeleton(plan, g, sources)[0], self.config.compression, copied)
 
     def _check_room(self, plan: Plan, sources: Sources) -> tuple[OutputSize, int | None]:

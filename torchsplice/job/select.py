@@ -74,7 +74,7 @@ def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict])
     return "its clips: " + (", ".join(names[:6]) + (", ..." if len(names) > 6 else "") or "none")
 
 
-def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) -> list[int]:
+def select_clips(table, selectors: Sequence[str], what: str, source: str) -> list[int]:
     """Rows of a database ``table`` (:meth:`MotionDatabase.table`) that every selector selects.
 
     ``what`` (e.g. ``"{locomotions}"``, an option placeholder of
@@ -82,9 +82,11 @@ def select_clips(table: dict, selectors: Sequence[str], what: str, source: str) 
     database path) only serve error messages: a selector that selects nothing is an error
     naming it.
     """
-    names = [str(n) for n in table["name"]]
-    roles = [str(r) for r in table["role"]]
-    labels = [json.loads(lab or "{}") for lab in table["labels"]]
+    if isinstance(table, dict):  # MotionDatabase.table(): labels as stored
+        names, roles = [str(n) for n in table["name"]], [str(r) for r in table["role"]]
+        labels = [json.loads(lab or "{}") for lab in table["labels"]]
+    else:  # a ClipTable (MotionDatabase.clip_table()): labels decoded
+        names, roles, labels = table.names, [str(r) for r in table.role], table.labels
     rows = list(range(len(names)))
     for text in selectors:
         alts = parse_selector(text)

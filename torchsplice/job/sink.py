@@ -84,10 +84,7 @@ class OutputWriter:
 
     def set_spliced(self, n: int) -> None:
         """Record the clips actually spliced in the run record (pairs can fail to align)."""
-        run = json.loads(str(self.db.h5.attrs.get("run", "")) or "{}")
-        if run:
-            run["pairs_spliced"] = int(n)
-            self.db.h5.attrs["run"] = json.dumps(run)
+        self.db.update_run_record({"pairs_spliced": int(n)})
 
     def _count(self, flags, skipped: dict, timings=()) -> None:
         for t in timings:
@@ -123,7 +120,7 @@ class OutputWriter:
             if len(shard) == 0:
                 self._count([], skipped)
                 return
-            spec = DatasetSpec.from_json(shard.spec_json(0)) if shard.spec_json(0) else None
+            spec = shard.stored_spec(0)
             t = shard.table()
             self._count(t["flags"], skipped, t["timing"])
             extra = {col: t[col] for col in OUTPUT_COLUMNS}
@@ -143,10 +140,9 @@ class OutputWriter:
         for db, rows in dbs:
             for r in rows:
                 m = db.read(r)
-                if m.name in self.db._index_map():
+                if m.name in self.db:
                     continue
-                spec_text = db.spec_json(db.clip_info(r)["skeleton"])
-                self.db.append(m, spec=DatasetSpec.from_json(spec_text) if spec_text else None)
+                self.db.append(m, spec=db.stored_spec(db.clip_info(r)["skeleton"]))
                 self.copied += 1
 
     def close(self) -> None:

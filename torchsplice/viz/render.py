@@ -80,7 +80,7 @@ _TRAIL_SECONDS = 2.0
 # ---------------------------------------------------------------------------------------------
 
 
-def _check_up_axis(up_axis) -> int:
+def check_up_axis(up_axis) -> int:
     """0, 1 or 2 from an index or a name (``"x"``, ``"y"``, ``"z"``, as dataset specs spell it)."""
     if isinstance(up_axis, str) and up_axis.lower() in ("x", "y", "z"):
         return "xyz".index(up_axis.lower())
@@ -89,7 +89,7 @@ def _check_up_axis(up_axis) -> int:
     return int(up_axis)
 
 
-def _canonical_axes(up_axis: int) -> list[int]:
+def canonical_axes(up_axis: int) -> list[int]:
     """Indices ``[e1, e2, up]`` of a right-handed frame with ``up`` last."""
     return [(up_axis + 1) % 3, (up_axis + 2) % 3, up_axis]
 
@@ -103,7 +103,7 @@ def view_rotation(up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation:
     ``(e1, e2, up)`` of the module docstring; with ``elevation = 0`` the up axis is exactly the
     screen's up, and for ``0 < elevation < 90`` it still projects straight up the screen.
     """
-    up = _check_up_axis(up_axis)
+    up = check_up_axis(up_axis)
     az, el = math.radians(azimuth), math.radians(elevation)
     ca, sa, ce, se = math.cos(az), math.sin(az), math.cos(el), math.sin(el)
     canon = np.array([
@@ -112,7 +112,7 @@ def view_rotation(up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation:
         [ce * ca, ce * sa, se],     # towards the camera
     ])
     rot = np.zeros((3, 3))
-    rot[:, _canonical_axes(up)] = canon  # columns back in the file's axis order
+    rot[:, canonical_axes(up)] = canon  # columns back in the file's axis order
     return rot
 
 
@@ -199,7 +199,7 @@ class _Clip:
         return self.screen.shape[0]
 
 
-def _head(sk, pts: np.ndarray, up: int) -> tuple[np.ndarray | None, float]:
+def head_joint(sk, pts: np.ndarray, up: int) -> tuple[np.ndarray | None, float]:
     """The head circle: centres ``(T, 3)`` (world) and diameter, or ``(None, 0)``.
 
     The head is the first centre joint named like ``head`` (else the joint under the end
@@ -287,7 +287,7 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
     fig3 = figure_points(motion)
     pts, lines, follow, drawn = fig3.points, fig3.lines, fig3.follow, fig3.drawn
     T = pts.shape[0]
-    axes = _canonical_axes(up)
+    axes = canonical_axes(up)
 
     height = pts[:, drawn, up]
     finite = np.isfinite(height)
@@ -305,7 +305,7 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
     scr = (pts - cam3[:, None]) @ view[:2].T  # (T, P, 2), relative to the camera centre
     screen = np.concatenate([scr, np.full((T, 1, 2), np.nan)], axis=1)
 
-    head, head_size = _head(sk, pts, up)
+    head, head_size = head_joint(sk, pts, up)
     if head is not None:
         head = (head - cam3) @ view[:2].T
     return _Clip(
@@ -396,7 +396,7 @@ def _grid_lines(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple[np.
         out.append(seg.reshape(-1, 3))
     canon = np.concatenate(out)
     world = np.zeros_like(canon)
-    world[:, _canonical_axes(scene.up)] = canon
+    world[:, canonical_axes(scene.up)] = canon
     xy = world @ scene.view[:2].T
     return xy[:, 0], xy[:, 1]
 
@@ -411,7 +411,7 @@ def _grid_crossings(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple
     A, B = np.meshgrid(a[0], a[1], indexing="ij")
     canon = np.stack([A.ravel(), B.ravel(), np.zeros(A.size)], axis=-1)
     world = np.zeros_like(canon)
-    world[:, _canonical_axes(scene.up)] = canon
+    world[:, canonical_axes(scene.up)] = canon
     xy = world @ scene.view[:2].T
     return xy[:, 0], xy[:, 1]
 
@@ -773,7 +773,7 @@ def render(
     titles = [m.name for m in motions] if titles is None else [str(t) for t in titles]
     if len(titles) != len(motions):
         raise TorchspliceError(f"{len(titles)} titles for {len(motions)} clips; give one title per clip")
-    up = _check_up_axis(up_axis)
+    up = check_up_axis(up_axis)
     if fps is not None and not fps > 0:
         raise TorchspliceError(f"fps must be positive, got {fps}")
     if int(frames) < 1:

@@ -43,7 +43,7 @@ from ..core.motion import Motion
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
-from .render import _canonical_axes, _check_up_axis, _head, figure_points
+from .render import canonical_axes, check_up_axis, head_joint, figure_points
 from .sources import SourceClips, source_databases
 
 __all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS",
@@ -124,11 +124,11 @@ def clip_payload(motion: Motion, spec: DatasetSpec | None, info: dict | None = N
     pairs; ``head``: the head centre's point or -1, ``headRadius`` in metres; ``follow``:
     the point whose floor path the camera follows.
     """
-    up = _check_up_axis(spec.up_axis if spec is not None else 1)
+    up = check_up_axis(spec.up_axis if spec is not None else 1)
     sk = motion.skeleton
     fig = figure_points(motion)
     pts = fig.points  # (T, P, 3) file units and axes
-    head, head_size = _head(sk, pts, up)
+    head, head_size = head_joint(sk, pts, up)
     keep = sorted(set(int(i) for i in fig.drawn) | {int(fig.follow)})
     remap = {old: new for new, old in enumerate(keep)}
     sel = pts[:, keep]
@@ -136,7 +136,7 @@ def clip_payload(motion: Motion, spec: DatasetSpec | None, info: dict | None = N
     if head is not None:
         sel = np.concatenate([sel, head[:, None]], axis=1)
         head_index = sel.shape[1] - 1
-    e1, e2, _ = _canonical_axes(up)
+    e1, e2, _ = canonical_axes(up)
     mpu = _metres_per_unit(spec, motion)
     world = sel[..., [e2, up, e1]] * mpu  # right-handed (e2, up, e1) is three.js's (x, y, z)
     heights = world[:, [remap[int(i)] for i in fig.drawn], 1]

@@ -25,14 +25,17 @@ and ``crop`` count action frames *at the locomotion's frame rate*; angles are in
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Callable
 
 from ...core.errors import TorchspliceError
 
+if TYPE_CHECKING:
+    import numpy as np
+
 __all__ = ["Backend", "SplicedBatch", "register_backend", "get_backend", "available_backends", "backend_choices",
            "resolve_backend", "backend_for"]
+
+# numpy and torch are imported where used: the command line lists the backends without them.
 
 
 @dataclass
@@ -77,6 +80,8 @@ class SplicedBatch:
     @classmethod
     def concat(cls, parts: list["SplicedBatch"]) -> "SplicedBatch":
         """The batches ``parts``, one after another, as one batch (pairs renumbered in order)."""
+        import numpy as np
+
         frames = np.concatenate([p.frames for p in parts]).astype(np.int64)
         start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
         failed, at = {}, 0
