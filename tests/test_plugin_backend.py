@@ -124,7 +124,7 @@ def test_a_registered_backend_runs_the_job_from_python_and_the_command_line(toy,
     for a, b in zip(rotations, ref_rotations):  # torch (float32) against the compiled splicer (float64)
         torch.testing.assert_close(a.abs(), b.abs(), atol=2e-3, rtol=0)
     code, out, err = run(capsys, "--plugin", "toy_pairs", "splice-all", sample_db, "-o", tmp_path / "cli.h5",
-                         "--methods", "splice,naive", "--workers", "1", "--backend", "pair-by-pair")
+                         "--method", "splice,naive", "--workers", "1", "--backend", "pair-by-pair")
     assert code == 0, err
     cli_names, cli_rotations = _frames(tmp_path / "cli.h5")
     assert cli_names == names and all(torch.equal(a, b) for a, b in zip(cli_rotations, rotations))
