@@ -1,6 +1,6 @@
 """The job's output: tasks merged as they finish into a staged output with checkpoints, and
 :func:`merge_job`, which writes an output from the shards of ``--shard`` runs. The run and the
-merge end alike: :meth:`OutputMerge.finish` then :func:`summarise_output`."""
+merge end alike, in :meth:`OutputMerge.finish`."""
 
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
                 for t in plan.tasks[merged:]:
                     merge.flush(limit=1)
                     bar.update(t.size)
-                merge.finish(sources, copy_source_clips)
+                merge.finish(sources, summary)
             except BaseException:
                 merge.save_progress()
                 raise
@@ -111,7 +111,6 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         finally:
             sources.close()
         shutil.rmtree(work, ignore_errors=True)
-    summarise_output(summary, out, merge)
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0
     return summary
 
@@ -220,9 +219,11 @@ class OutputMerge:
             self.remover.shutdown(wait=True)
             self.remover = None
 
-    def finish(self, sources: Sources, copy_sources) -> None:
+    def finish(self, sources: Sources, summary: JobSummary) -> None:
         """After the last task: the source clips (``copy_sources``), the run record, the shards
-        of a virtual output moved into place, and the output renamed into place."""
+        of a virtual output moved into place, the output renamed into place, and what it holds
+        in ``summary``. The run (:class:`~torchsplice.job.run.SpliceJob`) and :func:`merge_job`
+        end here alike."""
         c = self.config
         self.flush()
         if self.next != len(self.tasks):
@@ -230,7 +231,7 @@ class OutputMerge:
         self.checkpoint()
         self.close()
         if c.copy_sources:
-            copy_sources(self.out, self.plan, sources)
+            copy_source_clips(self.out, self.plan, sources)
         self.out.set_spliced(self.out.clips)
         replaced = MotionDatabase.virtual_files(c.output)  # the frames of the output this one replaces (a virtual one's)
         mine = run_shards(c, self.plan)
@@ -238,6 +239,7 @@ class OutputMerge:
             shards.install_shards(self.shard_dir, mine, [self.sink.shard_name(t.id) for t in self.tasks])
         self.out.close()  # the new output is in place: the old one's shards are its no more
         remove_shard_files([f for f in replaced if f.parent != mine], c.shards_folder)
+        summarise_output(summary, self.out, self)
 
 
 def open_output(sink, config: JobConfig, plan: Plan, work: Path, run: dict, overwrite: bool, group_skeleton,

@@ -53,8 +53,8 @@ from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .engines import EngineContext, make_engine
 from .engines.forkserver import prestart
-from .merge import (STAGING, OutputMerge, copy_source_clips, merge_job, open_output, remove_merged_shards, source_rows,
-                    source_skeleton, summarise_output, task_finished)
+from .merge import (STAGING, OutputMerge, merge_job, open_output, remove_merged_shards, source_rows, source_skeleton,
+                    task_finished)
 from .plan import Plan, make_plan
 from .shards import clear_work, output_lock_path, refuse_live_slices, slice_tasks
 from .sink import make_sink
@@ -241,8 +241,7 @@ class SpliceJob:
             summary.compute_seconds = time.perf_counter() - t1
             summary.tasks_done = len(have) + len(pending)
             if merge is not None:
-                merge.finish(sources, copy_source_clips)
-                summarise_output(summary, out, merge)
+                merge.finish(sources, summary)
         except BaseException:
             if merge is not None:
                 merge.save_progress()
