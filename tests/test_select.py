@@ -125,3 +125,67 @@ def test_empty_alternative_is_an_error(table, bad):
     with pytest.raises(TorchspliceError) as e:
         select_clips(table, [bad], "--locomotions", "db.h5")
     assert repr(bad) in str(e.value) and "empty" in str(e.value)
+
+
+# --------------------------------------------------------------------------------------------
+# the same language on a real database's clip table, for the job, the dataset and the exports
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def spliced_db(sample_db, tmp_path_factory):
+    """A spliced database of the sample with two methods (method, flags, timing columns)."""
+    from torchsplice.job import splice_all
+
+    out = tmp_path_factory.mktemp("select") / "spliced.h5"
+    splice_all(sample_db, out, methods="splice,naive", workers=1, copy_sources=True, progress=False)
+    return out
+
+
+def _brute(table, keep):
+    return [n for i, n in enumerate(table.names) if keep(i)]
+
+
+def test_column_and_skeleton_selectors_on_a_spliced_database(spliced_db):
+    from torchsplice.store import MotionDatabase
+
+    with MotionDatabase.open(spliced_db) as db:
+        t = db.clip_table()
+    method, timing = t.extra["method"], t.extra["timing"]
+    pick = lambda *s: [t.names[i] for i in select_clips(t, list(s), "select", "db")]  # noqa: E731
+    assert pick("method:naive") == _brute(t, lambda i: method[i] == "naive") != []
+    assert pick("method:s*", "role:spliced") == _brute(t, lambda i: method[i] == "splice")
+    assert pick("timing:timewarp,timing:loop") == _brute(t, lambda i: timing[i] in ("timewarp", "loop")) != []
+    assert pick("skeleton:0") == t.names  # the sample has one skeleton
+    assert pick("role:locomotion,role:both", "skeleton:0") == _brute(t, lambda i: t.role[i] in ("locomotion", "both"))
+    with pytest.raises(TorchspliceError) as e:
+        pick("method:cpmc")
+    assert str(e.value).endswith("(its method values: '', 'naive', 'splice')")
+    with pytest.raises(TorchspliceError) as e:
+        pick("skeleton:3")
+    assert str(e.value).endswith("(its skeletons: 0)")
+    with pytest.raises(TorchspliceError, match="must read skeleton:K"):
+        pick("skeleton:x")
+    with pytest.raises(TorchspliceError, match=r"unknown prefix 'mthod'.*method:VALUE"):
+        pick("mthod:naive")
+
+
+def test_the_job_the_dataset_and_the_exports_select_the_same_clips(spliced_db, tmp_path):
+    from torchsplice.data import MotionDataset
+    from torchsplice.formats.exporters import export_clips
+    from torchsplice.store import MotionDatabase
+
+    selectors = ["role:spliced", "method:naive", "label:action.content=carry_*,label:action.content=wave"]
+    with MotionDatabase.open(spliced_db) as db:
+        t = db.clip_table()
+    want = _brute(t, lambda i: t.role[i] == "spliced" and t.extra["method"][i] == "naive"
+                  and t.labels[i].get("action.content") in ("carry_box", "carry_cup", "wave"))
+    assert want and [t.names[i] for i in select_clips(t, selectors, "{actions}", "db")] == want
+    assert MotionDataset(spliced_db, select=selectors).names == want
+    result = export_clips(spliced_db, out=tmp_path / "bvh", format="bvh", select=selectors)
+    assert result.names == want and len(result.files) == len(want)
+    one = export_clips(spliced_db, [want[0], "no-such-clip-is-selected"][:1], out=tmp_path / "one.bvh", format="bvh",
+                       select="method:naive")
+    assert one.names == [want[0]] and (tmp_path / "one.bvh").is_file()
+    from torchsplice.data import DatasetError
+
+    with pytest.raises(DatasetError, match="'method:cpmc' selects no clip"):
+        MotionDataset(spliced_db, select="method:cpmc")

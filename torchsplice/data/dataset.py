@@ -88,7 +88,9 @@ import torch
 from torch.utils.data import Dataset
 
 from ..core.skeleton import Skeleton
+from ..core.errors import TorchspliceError
 from ..store import MotionDatabase
+from ..store.select import select_clips
 from .errors import DatasetError
 from .features import BUILTIN_FEATURES, NEEDS_FK, NOT_PER_FRAME, VELOCITY, derive_features, trajectory_joint
 from .where import clip_mask, where_mask
@@ -146,6 +148,9 @@ class MotionDataset(Dataset):
         dtype: floating dtype of every feature tensor.
         preload: read every selected clip and compute its features once, here; items are then
             slices of memory (fast for datasets that fit in RAM; no file access afterwards).
+        select: selectors of the job's and the exports' selection language (one string or a
+            list, all of which a clip must pass; see :mod:`torchsplice.store.select`), e.g.
+            ``["role:spliced", "method:splice", "label:action.style=elderly"]``.
 
     Items (``ds[i]``): a dict with each feature as a ``(T, ...)`` tensor and ``name`` (str),
     ``length`` (int, ``T``), ``fps`` (float), ``index`` (the clip's row in the database),
@@ -168,7 +173,7 @@ class MotionDataset(Dataset):
     def __init__(self, path, clips: Iterable[str | int] | None = None, where: Mapping[str, Any] | None = None,
                  window: int | None = None, stride: int | None = None,
                  features: Sequence[str] = ("rotations", "root_translation"),
-                 dtype: torch.dtype = torch.float32, preload: bool = False):
+                 dtype: torch.dtype = torch.float32, preload: bool = False, select: str | Sequence[str] | None = None):
         self.path = Path(path)
         if isinstance(features, str):
             features = (features,)
@@ -207,9 +212,18 @@ class MotionDataset(Dataset):
                 keep &= clip_mask(clips, clip_table.name, self.path)
             if where:
                 keep &= where_mask(where, clip_table, self.columns, self.frame_columns, self.path)
+            if select is not None:  # the selection language of the job and the exports
+                try:
+                    rows = select_clips(clip_table, select, "select", str(self.path))
+                except TorchspliceError as exc:
+                    raise DatasetError(str(exc)) from None
+                chosen = np.zeros(len(keep), dtype=bool)
+                chosen[rows] = True
+                keep &= chosen
             if not keep.any():
                 raise DatasetError(
-                    f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}")
+                    f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}"
+                    + (f", select={select!r}" if select is not None else ""))
             sel = np.flatnonzero(keep)
             self.indices = sel.astype(np.int64)
             chosen = clip_table.take(sel)

@@ -49,7 +49,7 @@ from ..core.errors import TorchspliceError
 if TYPE_CHECKING:  # pragma: no cover
     from ..store.database import MotionDatabase
 
-__all__ = ["Exporter", "ExportOption", "ExportResult", "register_exporter", "get_exporter", "available_exporters",
+__all__ = ["Exporter", "selected_names", "ExportOption", "ExportResult", "register_exporter", "get_exporter", "available_exporters",
            "choose_exporter", "export_clips", "export_targets", "select_rows", "clip_filename", "clip_filenames",
            "MAX_FILE_BYTES", "DEFAULT_FORMAT", "BUILTIN_EXPORTERS"]
 
@@ -282,7 +282,7 @@ def choose_exporter(format: str | None, output, options: dict) -> type[Exporter]
 # --------------------------------------------------------------------------------------------
 def export_clips(database, clips: Sequence[str] | None = None, *, out, format: str | None = None,
                  overwrite: bool = False, skeletons: Iterable[int] | None = None, command: str = "",
-                 **options) -> ExportResult:
+                 select: str | Sequence[str] | None = None, **options) -> ExportResult:
     """Write clips of a database as files of a registered format, all or nothing.
 
     Args:
@@ -295,6 +295,10 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         overwrite: replace existing files.
         skeletons: keep only clips on these database skeletons (ids; ``None``: any).
         command: what the output's lock records as its holder.
+        select: selectors of the job's and the dataset's selection language (one string or a
+            list, all of which a clip must pass; :mod:`torchsplice.store.select`), e.g.
+            ``"role:spliced"`` or ``["method:naive", "label:action.style=elderly"]``; with
+            ``clips``, the named clips it selects.
         options: the format's options (``packed=True``, ``features="6d"`` for ``npz``).
 
     Everything is checked before any file is made (one-line
@@ -303,10 +307,13 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
     hidden name and installed at the end (:mod:`.staging`): an error or an interrupt leaves no
     file of the export, no temporary and no folder it made. Returns an :class:`ExportResult`.
     """
+    named = clips is not None
+    if select is not None:
+        clips = selected_names(database, select, clips)
     cls = choose_exporter(format, out, options)
     exporter = cls(database, clips, skeletons=skeletons, **{k: v for k, v in options.items() if k in cls.options})
     names = exporter.names
-    single = exporter.single_file or (len(names) == 1 and clips is not None)
+    single = exporter.single_file or (len(names) == 1 and named)
     files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
     exporter.check()
     from .staging import staged_files
@@ -447,3 +454,21 @@ def clip_filenames(names, suffix: str) -> list[str]:
         taken.add(f.casefold())
         out.append(f)
     return out
+
+
+def selected_names(database, select: str | Sequence[str], clips: Sequence[str] | None = None) -> list[str]:
+    """The names of the clips of ``database`` that ``select`` selects (in row order), or of
+    ``clips`` (in their order) when given; a one-line error when none is."""
+    from ..store.database import MotionDatabase
+    from ..store.select import select_clips
+
+    with MotionDatabase.open(database) as db:
+        table = db.clip_table()
+        chosen = [table.names[r] for r in select_clips(table, select, "select", str(database))]
+    if clips is None:
+        return chosen
+    keep = set(chosen)
+    names = [c for c in clips if c in keep]
+    if not names:
+        raise TorchspliceError(f"{database}: none of the clips named is selected by {select!r}")
+    return names

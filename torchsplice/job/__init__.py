@@ -18,7 +18,7 @@ __all__ = ["splice_all", "JobConfig", "job_config", "JobSummary", "SpliceJob", "
            "parse_selector"]
 
 _WHERE = {"JobConfig": ".config", "job_config": ".config", "JobSummary": ".run", "SpliceJob": ".run",
-          "merge_job": ".run", "splice_all": ".run", "parse_selector": ".select", "select_clips": ".select"}
+          "merge_job": ".run", "splice_all": ".run", "parse_selector": "..store.select", "select_clips": "..store.select"}
 
 
 def __getattr__(name: str):

@@ -30,7 +30,7 @@ from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
-from .select import select_clips
+from ..store.select import select_clips
 from .sources import Sources, clip_key
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]

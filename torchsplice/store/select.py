@@ -1,0 +1,143 @@
+"""The one selection language for clips of a database: the job's ``--locomotions`` and
+``--actions``, the dataset's ``select=`` and the exports' ``select=`` all read it.
+
+A selector is a comma-separated list of alternatives, any of which selects a clip:
+
+- ``role:NAME``: the clip's role (``locomotion``, ``action``, ``both``, ``spliced``);
+- ``label:KEY=VALUE``: the clip's label ``KEY``, ``VALUE`` being a shell-style glob;
+- ``skeleton:K``: the clips on skeleton ``K`` of the database;
+- ``COLUMN:VALUE``: a text column the database declares (a spliced database's ``method``,
+  ``flags``, ``timing``, ``locomotion``, ``action``...), ``VALUE`` a shell-style glob
+  (``method:naive``, ``flags:*poor alignment*``, ``flags:`` for the clips without a flag);
+- anything else: a shell-style glob on the clip name (``'*walk*'``), case-sensitive.
+
+Several selectors (a repeated command-line flag, or a list) must all select a clip:
+``--locomotions role:locomotion --locomotions 'label:style=normal'`` takes the normal-style
+locomotions, ``--locomotions '*walk*,*run*'`` takes walks and runs.
+
+Tables are a :class:`~torchsplice.store.table.ClipTable` (``MotionDatabase.clip_table()``) or
+the dict :meth:`~torchsplice.store.database.MotionDatabase.table` gives (names, roles and labels
+only).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import re
+from typing import Sequence
+
+from ..core.errors import TorchspliceError
+
+__all__ = ["select_clips", "parse_selector"]
+
+
+def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, str, str]]:
+    """The alternatives of one selector as ``(kind, key, pattern)``: kind ``role``, ``label``,
+    ``skeleton``, ``column`` (one of ``columns``, the table's text columns) or ``name``."""
+    alts = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            raise TorchspliceError(f"empty alternative in selector {text!r}")
+        prefix = part.split(":", 1)[0] if ":" in part else ""
+        if part.startswith("role:"):
+            alts.append(("role", "", part[5:]))
+        elif part.startswith("skeleton:"):
+            if not part[9:].strip().isdigit():
+                raise TorchspliceError(f"selector {part!r} must read skeleton:K, K a skeleton number")
+            alts.append(("skeleton", "", str(int(part[9:]))))
+        elif prefix and prefix in columns:
+            alts.append(("column", prefix, part[len(prefix) + 1:]))
+        elif part.startswith("label:"):
+            key, eq, value = part[6:].partition("=")
+            if not eq or not key:
+                raise TorchspliceError(f"selector {part!r} must read label:KEY=VALUE")
+            alts.append(("label", key, value))
+        elif re.match(r"^[A-Za-z]+:", part):
+            known = "".join(f", {c}:VALUE" for c in columns)
+            raise TorchspliceError(f"selector {part!r}: unknown prefix {part.split(':')[0]!r} (use role:NAME, "
+                                   f"label:KEY=VALUE, skeleton:K{known}, or a glob on clip names)")
+        else:
+            alts.append(("name", "", part))
+    return alts
+
+
+def _matches(alts, name: str, role: str, labels: dict, skeleton, values: dict) -> bool:
+    for kind, key, pattern in alts:
+        if kind == "role" and role == pattern:
+            return True
+        if kind == "skeleton" and skeleton is not None and str(int(skeleton)) == pattern:
+            return True
+        if kind == "column" and fnmatch.fnmatchcase(str(values[key]), pattern):
+            return True
+        if kind == "label" and key in labels and fnmatch.fnmatchcase(str(labels[key]), pattern):
+            return True
+        if kind == "name" and fnmatch.fnmatchcase(name, pattern):
+            return True
+    return False
+
+
+def _option(what: str) -> tuple[str, ...]:
+    """``("locomotions",)`` for the placeholder ``"{locomotions}"``; ``()`` for plain text."""
+    return (what[1:-1],) if what.startswith("{") and what.endswith("}") else ()
+
+
+def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict], skeletons=None,
+                   columns: dict | None = None) -> str:
+    """For an error: the database's roles, label keys, skeletons, column values or first clip
+    names, as the selector asked."""
+    kinds = {kind for kind, _, _ in alts}
+    if kinds == {"skeleton"} and skeletons is not None:
+        return "its skeletons: " + (", ".join(str(k) for k in sorted({int(k) for k in skeletons})) or "none")
+    if kinds == {"column"} and columns and len({key for _, key, _ in alts}) == 1:
+        key = alts[0][1]
+        values = sorted({str(v) for v in columns[key]})
+        return f"its {key} values: " + (", ".join(repr(v) for v in values[:8]) + (", ..." if len(values) > 8 else "")
+                                        or "none")
+    if kinds == {"role"}:
+        return "its roles: " + (", ".join(sorted({r for r in roles if r})) or "none")
+    if kinds == {"label"}:
+        keys = {key for _, key, _ in alts}
+        values = sorted({str(lab[k]) for lab in labels for k in keys if k in lab})
+        if len(keys) == 1 and values:
+            return f"its {next(iter(keys))} labels: " + ", ".join(values[:8]) + (", ..." if len(values) > 8 else "")
+        return "its label keys: " + (", ".join(sorted({k for lab in labels for k in lab})) or "none")
+    return "its clips: " + (", ".join(names[:6]) + (", ..." if len(names) > 6 else "") or "none")
+
+
+def _columns(table):
+    """``(names, roles, labels, skeletons or None, text columns)`` of a table (see the module docstring)."""
+    if isinstance(table, dict):  # MotionDatabase.table(): labels as stored
+        names, roles = [str(n) for n in table["name"]], [str(r) for r in table["role"]]
+        labels = [json.loads(lab or "{}") for lab in table["labels"]]
+        skeletons = table.get("skeleton")
+        return names, roles, labels, skeletons, {}
+    text = {k: v for k, v in table.extra.items() if table.kinds.get(k) == "str"}
+    return table.names, [str(r) for r in table.role], table.labels, table.skeleton, text
+
+
+def select_clips(table, selectors: str | Sequence[str], what: str, source: str) -> list[int]:
+    """Rows of a database ``table`` (a :class:`~torchsplice.store.table.ClipTable`, or the dict
+    :meth:`MotionDatabase.table` gives) that every selector selects, in row order.
+
+    ``what`` (e.g. ``"{locomotions}"``, an option placeholder of
+    :class:`~torchsplice.core.errors.TorchspliceError`, or plain text) and ``source`` (the
+    database path) only serve error messages: a selector that selects nothing is an error
+    naming it.
+    """
+    names, roles, labels, skeletons, columns = _columns(table)
+    rows = list(range(len(names)))
+    for text in ([selectors] if isinstance(selectors, str) else selectors):
+        alts = parse_selector(text, tuple(columns))
+        hit = [i for i in range(len(names))
+               if _matches(alts, names[i], roles[i], labels[i], skeletons[i] if skeletons is not None else None,
+                           {k: v[i] for k, v in columns.items()})]
+        if not hit:
+            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} ({_what_there_is(alts, names, roles, labels, skeletons, columns)})",
+                                   options=_option(what))
+        keep = set(hit)
+        rows = [i for i in rows if i in keep]
+    if not rows:
+        raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
+                               options=_option(what))
+    return rows
