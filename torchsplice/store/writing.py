@@ -95,6 +95,17 @@ def frame_values(values, T: int, column: str, clip: str) -> np.ndarray:
     return a
 
 
+def per_clip(v, C: int, what: str, path) -> list:
+    """One value for every one of ``C`` clips (``v`` repeated), or ``C`` values (a sequence or a
+    tensor); one clear error naming ``what`` otherwise."""
+    if isinstance(v, (str, bytes, int, float, np.generic)):
+        return [v] * C
+    out = list(v.detach().cpu().numpy() if isinstance(v, torch.Tensor) else v)
+    if len(out) != C:
+        raise DatabaseError(f"{path}: {what} needs {C} values, got {len(out)}")
+    return out
+
+
 class Writing:
     """The write methods of :class:`~torchsplice.store.database.MotionDatabase` (a mixin: the
     database's state, file and opening live there)."""
@@ -286,13 +297,7 @@ class Writing:
             if frames[name].shape != (N,):
                 raise DatabaseError(f"{self.path}: column {name!r} needs {N} values, got {frames[name].shape}")
 
-        def each(v, what):
-            """One value for every clip, or ``C`` values."""
-            out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(arr(v) if isinstance(v, torch.Tensor) else v)
-            if len(out) != C:
-                raise DatabaseError(f"{self.path}: {what} needs {C} values, got {len(out)}")
-            return out
-
+        each = lambda v, what: per_clip(v, C, what, self.path)  # noqa: E731
         rows = {
             "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
             "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
@@ -378,12 +383,7 @@ class Writing:
         if (bad := control_name(names)) is not None:
             raise DatabaseError(f"{self.path}: {bad}")
 
-        def each(v, what):
-            out = [v] * C if isinstance(v, (str, bytes, int, float, np.generic)) else list(v)
-            if len(out) != C:
-                raise DatabaseError(f"{self.path}: {what} needs {C} values, got {len(out)}")
-            return out
-
+        each = lambda v, what: per_clip(v, C, what, self.path)  # noqa: E731
         rows = {
             "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
             "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
