@@ -1,1 +1,1 @@
-"""Transforms on clips: unit conversion (:mod:`.units`)."""
+"""Transforms on clips: unit conversion (:mod:`.units`), retargeting onto another humanoid skeleton (:mod:`.retarget`)."""

@@ -1,0 +1,247 @@
+"""Retargeting: a clip of one humanoid skeleton played on another, analytically.
+
+Conventions: quaternions unit WXYZ, local to the parent; lengths in each skeleton's own units;
+the up axis of the source's spec (Y for every shipped one). Both skeletons' rest poses are their
+BVH zero poses (every local rotation the identity), whatever shape that is (T-pose, A-pose, or
+Bandai Namco's and LAFAN1's poses).
+
+The method, with global rotations ``G`` and the joint map ``m`` (target joint -> source joint):
+
+- **Rest alignment per bone.** For each mapped joint, ``A`` is the world rotation taking the
+  source's rest bone (from the joint to the next joint of the canonical map, see
+  :func:`~torchsplice.specs.canonical.canonical_bones`) onto the target's: the smallest rotation
+  between the two directions (a swing, so that twist is carried as it is); the pelvis and the
+  chest are aligned by two directions (across the hips or shoulders, and up), so their turn
+  about the spine is kept. A mapped joint with no bone of its own takes its parent's ``A``.
+- **Globals.** ``G_t(j) = G_s(m(j)) A(j)^-1``: with both rest poses at identity globals this
+  is ``G_s(t) G_s(ref)^-1 G_t(rest)``, ``ref`` being the source posed into the target's rest
+  shape, so each mapped target bone points where its source bone points. An unmapped target
+  joint (an extra spine or neck joint, a finger) holds its rest pose: its local rotation is
+  the identity, and its mapped children absorb the difference (stated per joint in
+  :attr:`RetargetMap.held`). Source joints without a target (CMU's fingers, a second neck
+  joint) are folded into their mapped ancestors (:attr:`RetargetMap.folded`).
+- **Trajectory.** The pelvis's world position is scaled by the ratio of leg lengths (hip to
+  knee to ankle, averaged over both legs), about the floor below the first frame's pelvis.
+
+Joints are mapped by canonical name (:mod:`torchsplice.specs.canonical`) and, beyond those, by
+equal names with equal parents' names, so that a skeleton retargeted onto itself is the
+identity (twist bones and fingers included). Everything is batched over frames (no loop over
+frames; the loops run over joints).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+
+from ..core.errors import MotionError
+from ..core.fk import forward_kinematics
+from ..core.motion import Motion
+from ..core.rotations import quat_apply, quat_conj, quat_mul, quat_normalize, rotmat_to_quat
+from ..core.skeleton import Skeleton
+from ..specs.canonical import canonical_bones, canonical_joints
+from ..specs.roles import SkeletonRoles
+
+__all__ = ["RetargetMap", "retarget_map", "retarget_motion", "leg_length", "character_height", "quat_between"]
+
+
+@dataclass(frozen=True)
+class RetargetMap:
+    """How one skeleton's joints drive another's (see the module docstring).
+
+    Attributes:
+        source, target: the skeletons.
+        joints: target joint -> source joint, for every mapped target joint.
+        align: ``(Jt, 4)`` float64, ``A`` of each target joint (identity where unmapped).
+        held: target joints held at their rest pose (no source joint).
+        folded: source joints with no target joint (their motion goes to their mapped ancestors).
+        pelvis: ``(target, source)`` pelvis joints; scale: target leg length / source leg length.
+        up_axis: 0, 1 or 2.
+    """
+
+    source: Skeleton
+    target: Skeleton
+    joints: dict[int, int]
+    align: torch.Tensor
+    held: tuple[int, ...]
+    folded: tuple[int, ...]
+    pelvis: tuple[int, int]
+    scale: float
+    up_axis: int
+    notes: tuple[str, ...] = field(default=())
+
+
+def quat_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """``(..., 4)`` the smallest rotation taking directions ``u`` onto ``v`` (``(..., 3)``, any
+    length); for opposite directions, a half turn about an axis perpendicular to ``u``."""
+    u = u / u.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    w = 1.0 + (u * v).sum(-1, keepdim=True)
+    axis = torch.cross(u, v, dim=-1)
+    opposite = (w < 1e-9).squeeze(-1)
+    if opposite.any():
+        other = torch.where(u[..., :1].abs() < 0.9, torch.tensor([1.0, 0.0, 0.0], dtype=u.dtype),
+                            torch.tensor([0.0, 1.0, 0.0], dtype=u.dtype))
+        perp = torch.cross(u, other.expand_as(u), dim=-1)
+        axis = torch.where(opposite[..., None], perp / perp.norm(dim=-1, keepdim=True), axis)
+        w = torch.where(opposite[..., None], torch.zeros_like(w), w)
+    return quat_normalize(torch.cat([w, axis], dim=-1))
+
+
+def _frame(across: torch.Tensor, up: torch.Tensor) -> torch.Tensor:
+    """``(3, 3)`` orthonormal frame (columns): ``up``, then ``across`` made perpendicular to it."""
+    y = up / up.norm()
+    x = across - (across @ y) * y
+    x = x / x.norm().clamp_min(1e-12)
+    return torch.stack([x, y, torch.linalg.cross(x, y)], dim=1)
+
+
+def leg_length(skeleton: Skeleton, joints: dict) -> float:
+    """Hip to knee to ankle, averaged over both legs (the skeleton's units)."""
+    rest, _ = skeleton.rest_positions()
+    total = 0.0
+    for side in ("l", "r"):
+        h, k, a = (joints[f"{n}_{side}"] for n in ("hip", "knee", "ankle"))
+        total += float((rest[k] - rest[h]).norm() + (rest[a] - rest[k]).norm())
+    return total / 2
+
+
+def character_height(skeleton: Skeleton, joints: dict) -> float:
+    """The character's height along its bones: leg length plus pelvis to head (the skeleton's
+    units), whatever its rest pose (a rig lying along X at rest measures as standing)."""
+    rest, _ = skeleton.rest_positions()
+    chain = [joints["pelvis"], *joints["spine"]]
+    if "head" in joints and joints["head"] != chain[-1]:
+        chain.append(joints["head"])
+    return leg_length(skeleton, joints) + sum(float((rest[b] - rest[a]).norm()) for a, b in zip(chain, chain[1:]))
+
+
+def retarget_map(source: Skeleton, source_roles: SkeletonRoles, target: Skeleton, target_roles: SkeletonRoles,
+                 source_name: str = "the source skeleton", target_name: str = "the target skeleton") -> RetargetMap:
+    """The joint map and rest alignment from ``source`` to ``target`` (see the module docstring)."""
+    cs = canonical_joints(source_roles, source, source_name)
+    ct = canonical_joints(target_roles, target, target_name)
+    pairs: dict[int, int] = {}
+    for name, jt in ct.items():
+        if name == "spine" or name not in cs:
+            continue
+        pairs[int(jt)] = int(cs[name])
+    # the spine chains: ends to ends, the joints between by their place in the chain (by index:
+    # measured on the shipped rigs, it carries the spine's bend better than by length, since CMU's
+    # chains hold zero-length helpers)
+    st, ss = list(ct["spine"]), list(cs["spine"])
+    for k, jt in enumerate(st):
+        if jt not in pairs:
+            pairs[jt] = ss[round(k * (len(ss) - 1) / max(len(st) - 1, 1))]
+    # beyond the canonical joints, equal names under equal parent names (twist bones, fingers, the
+    # whole skeleton when it is the same one)
+    index = {n: j for j, n in enumerate(source.names)}
+    used = set(pairs.values())
+    for jt, name in enumerate(target.names):
+        js = index.get(name)
+        if jt in pairs or js is None or js in used:
+            continue
+        pt, ps = target.parents[jt], source.parents[js]
+        if (pt < 0) == (ps < 0) and (pt < 0 or target.names[pt] == source.names[ps]):
+            pairs[jt] = js
+            used.add(js)
+    rest_s, _ = source.rest_positions()
+    rest_t, _ = target.rest_positions()
+    inverse = {js: jt for jt, js in pairs.items()}
+    # The pelvis, and the joint the arms hang from (the chest), by two directions each: across
+    # (the hips, the shoulders) and up (to the head). Every other mapped bone by the smallest
+    # rotation left once its nearest aligned ancestor's alignment is applied, so that the way a
+    # rig faces at rest is carried down its chains (no stray twist about a bone).
+    frames: dict[int, torch.Tensor] = {}
+    head_t = ct.get("head", ct["spine"][-1])
+    head_s = pairs.get(head_t, cs.get("head", cs["spine"][-1]))
+    chest = target.parents[ct["shoulder_l"]] if "clavicle_l" not in ct else target.parents[ct["clavicle_l"]]
+    for top, left, right in ((ct["pelvis"], "hip_l", "hip_r"), (chest, "shoulder_l", "shoulder_r")):
+        if top not in pairs or top == head_t:
+            continue
+        f_t = _frame(rest_t[ct[right]] - rest_t[ct[left]], rest_t[head_t] - rest_t[top])
+        f_s = _frame(rest_s[cs[right]] - rest_s[cs[left]], rest_s[head_s] - rest_s[pairs[top]])
+        frames[top] = rotmat_to_quat(f_t @ f_s.T)
+    bone_of = {a: b for a, b in canonical_bones(ct)}
+    align = torch.zeros(target.num_joints, 4, dtype=torch.float64)
+    align[:, 0] = 1.0
+    for jt in range(target.num_joints):  # parents before children
+        p = target.parents[jt]
+        while p >= 0 and p not in pairs:
+            p = target.parents[p]
+        base = align[p] if p >= 0 else align[jt]
+        if jt not in pairs:
+            align[jt] = base
+            continue
+        if jt in frames:
+            align[jt] = frames[jt]
+            continue
+        child = bone_of.get(jt)
+        if child is None or child not in pairs:
+            kids = [c for c in target.children(jt) if c in pairs]
+            child = kids[0] if kids else None
+        if child is not None:
+            d_s, d_t = rest_s[pairs[child]] - rest_s[pairs[jt]], rest_t[child] - rest_t[jt]
+            if d_s.norm() > 1e-9 and d_t.norm() > 1e-9:
+                align[jt] = quat_mul(quat_between(quat_apply(base, d_s), d_t), base)
+                continue
+        align[jt] = base
+    held = tuple(j for j in range(target.num_joints) if j not in pairs)
+    folded = tuple(j for j in range(source.num_joints) if j not in inverse)
+    scale = leg_length(target, ct) / leg_length(source, cs)
+    return RetargetMap(source, target, pairs, align, held, folded, (int(ct["pelvis"]), int(cs["pelvis"])), scale,
+                       int(source_roles.up_axis))
+
+
+def retarget_motion(motion: Motion, rmap: RetargetMap) -> Motion:
+    """``motion`` (on ``rmap.source``) played on ``rmap.target`` (see the module docstring); the
+    result has the target skeleton, the source's frame rate and name, and its dtype."""
+    if motion.skeleton is not rmap.source and not motion.skeleton.same_topology(rmap.source):
+        raise MotionError(f"clip {motion.name!r} is not on the retargeting map's source skeleton")
+    src, tgt = rmap.source, rmap.target
+    dtype = motion.rotations.dtype
+    rot = motion.rotations.to(torch.float64)
+    trans = motion.translations.to(torch.float64) if motion.translations is not None else None
+    pos, glob = forward_kinematics(rot, motion.root_translation.to(torch.float64), src.offsets, src.parents, trans)
+    T, J = rot.shape[0], tgt.num_joints
+    g_t = torch.zeros(T, J, 4, dtype=torch.float64)
+    local = torch.zeros(T, J, 4, dtype=torch.float64)
+    inv_align = quat_conj(rmap.align)
+    for j in range(J):  # parents before children (the skeleton's order)
+        p = tgt.parents[j]
+        if j in rmap.joints:
+            g_t[:, j] = quat_mul(glob[:, rmap.joints[j]], inv_align[j].expand(T, 4))
+            local[:, j] = g_t[:, j] if p < 0 else quat_mul(quat_conj(g_t[:, p]), g_t[:, j])
+        else:  # held at rest
+            local[:, j] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=torch.float64)
+            g_t[:, j] = local[:, j] if p < 0 else g_t[:, p]
+    local = quat_normalize(local)
+    # the trajectory: the source pelvis's path, scaled about the floor below its first frame
+    pt, ps = rmap.pelvis
+    origin = pos[0, ps].clone()
+    origin[rmap.up_axis] = 0.0
+    pelvis = origin + (pos[:, ps] - origin) * rmap.scale
+    chain, j = [], pt
+    while j >= 0:
+        chain.append(j)
+        j = tgt.parents[j]
+    chain = chain[::-1]  # root ... pelvis
+    translations = tgt.offsets.to(torch.float64).expand(T, J, 3).clone() if tgt.has_joint_translations else None
+    if translations is not None and pt != 0 and tgt.translation_animated[pt]:
+        # the trajectory on the pelvis's own channels (Bandai Namco: the root stays put): the
+        # joints above it where the source's are (or at rest), the pelvis's translation placed
+        root = pos[:, rmap.joints[0]] if 0 in rmap.joints else torch.zeros(T, 3, dtype=torch.float64)
+        above = root
+        for j in chain[1:-1]:
+            above = above + quat_apply(g_t[:, tgt.parents[j]], tgt.offsets[j].expand(T, 3))
+        translations[:, pt] = quat_apply(quat_conj(g_t[:, tgt.parents[pt]]), pelvis - above)
+    else:  # the root's position that puts the pelvis there, from the new rotations
+        root = pelvis.clone()
+        for j in chain[:0:-1]:  # the pelvis up to, not including, the root
+            root = root - quat_apply(g_t[:, tgt.parents[j]], tgt.offsets[j].expand(T, 3))
+    if translations is not None:
+        translations[:, 0] = root
+    return Motion(skeleton=tgt, rotations=local.to(dtype), root_translation=root.to(dtype),
+                  translations=None if translations is None else translations.to(dtype), fps=motion.fps,
+                  name=motion.name, source=motion.source, role=motion.role, labels=dict(motion.labels))

@@ -1,0 +1,117 @@
+"""The canonical humanoid map: which joint of a skeleton is the pelvis, a shoulder, an elbow...
+
+Retargeting (clips of one skeleton played on another) pairs joints by these names, whatever each
+dataset calls them. A skeleton's map comes from its dataset spec's roles
+(:class:`~torchsplice.specs.roles.SkeletonRoles`: named in a shipped spec, guessed by
+``generic``) and its hierarchy:
+
+- ``pelvis``: the root role (the joint carrying the trajectory); ``spine``: the spine chain
+  from the pelvis role up, ``neck`` its last joint below the head, ``head``;
+- ``clavicle_l/r``: a shoulder's parent when it is not on the spine (absent otherwise);
+- ``shoulder_l/r``, ``wrist_l/r`` (the hands role), ``elbow_l/r``: the joint between shoulder
+  and wrist with the longest bone to the wrist (CMU's zero-length helpers are skipped);
+- ``hip_l/r``, ``knee_l/r``, ``ankle_l/r`` (the feet role), ``toe_l/r`` (optional).
+
+Fingers, twist bones and helper joints have no canonical name: retargeting folds them into
+their mapped ancestor or holds them at rest. A skeleton without a joint the splice needs (hips,
+knees, ankles, shoulders, elbows, wrists, a spine) is refused in one line naming what is
+missing.
+"""
+
+from __future__ import annotations
+
+from .roles import SkeletonRoles
+
+__all__ = ["CANONICAL", "REQUIRED", "canonical_joints", "canonical_bones"]
+
+CANONICAL = ("pelvis", "spine", "neck", "head", "clavicle_l", "clavicle_r", "shoulder_l", "shoulder_r", "elbow_l",
+             "elbow_r", "wrist_l", "wrist_r", "hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r", "toe_l",
+             "toe_r")
+"""Canonical joint names (``spine`` names the chain; the others one joint each)."""
+
+REQUIRED = ("pelvis", "spine", "shoulder_l", "shoulder_r", "elbow_l", "elbow_r", "wrist_l", "wrist_r", "hip_l",
+            "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r")
+"""What a skeleton must have to be retargeted (and spliced across skeletons)."""
+
+
+def _chain(skeleton, top: int, bottom: int) -> list[int]:
+    """Joints from ``top`` down to ``bottom`` (both included), or ``[]`` if ``bottom`` does not
+    hang below ``top``."""
+    out, j = [], bottom
+    while j >= 0:
+        out.append(j)
+        if j == top:
+            return out[::-1]
+        j = skeleton.parents[j]
+    return []
+
+
+def _elbow(skeleton, shoulder: int, wrist: int) -> int | None:
+    """The joint strictly between shoulder and wrist whose position splits the arm best: the one
+    furthest from both ends (a zero-length helper is never chosen over a real joint)."""
+    chain = _chain(skeleton, shoulder, wrist)
+    if len(chain) < 3:
+        return None
+    rest, _ = skeleton.rest_positions()
+    a, b = rest[shoulder], rest[wrist]
+    best = max(chain[1:-1], key=lambda j: min(float((rest[j] - a).norm()), float((rest[j] - b).norm())))
+    return best if float((rest[best] - a).norm()) > 0 and float((rest[best] - b).norm()) > 0 else None
+
+
+def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton") -> dict[str, int | tuple[int, ...]]:
+    """The canonical map of ``skeleton`` (bound ``roles``): canonical name -> joint index
+    (``spine``: the chain, pelvis role first). Raises :class:`~torchsplice.core.errors.SpecError`
+    naming ``what`` and every required joint it lacks."""
+    from ..core.errors import SpecError
+
+    out: dict[str, int | tuple[int, ...]] = {"pelvis": roles.root, "spine": tuple(roles.spine)}
+    spine = list(roles.spine)
+    if roles.head is not None:
+        out["head"] = roles.head
+        below = [j for j in spine if j != roles.head and roles.head in skeleton.descendants(j)]
+        if below:
+            out["neck"] = below[-1]
+    elif len(spine) > 1:
+        out["neck"] = spine[-1]
+    missing = []
+    for side, k in (("l", 0), ("r", 1)):
+        shoulder, hip, knee, ankle = roles.shoulders[k], roles.hips[k], roles.knees[k], roles.feet[k]
+        out.update({f"shoulder_{side}": shoulder, f"hip_{side}": hip, f"knee_{side}": knee, f"ankle_{side}": ankle})
+        parent = skeleton.parents[shoulder]
+        if parent >= 0 and parent not in spine:
+            out[f"clavicle_{side}"] = parent
+        if roles.toes is not None:
+            out[f"toe_{side}"] = roles.toes[k]
+        if roles.hands is None:
+            missing += [f"wrist_{side}", f"elbow_{side}"]
+            continue
+        wrist = roles.hands[k]
+        out[f"wrist_{side}"] = wrist
+        elbow = _elbow(skeleton, shoulder, wrist)
+        if elbow is None:
+            missing.append(f"elbow_{side}")
+        else:
+            out[f"elbow_{side}"] = elbow
+    missing += [n for n in REQUIRED if n not in out and n not in missing]
+    if missing:
+        raise SpecError(f"{what} cannot be retargeted: no {', '.join(missing)} (a humanoid needs hips, knees, ankles, "
+                        "a spine, shoulders, elbows and wrists)")
+    return out
+
+
+def canonical_bones(joints: dict) -> list[tuple[int, int]]:
+    """``(joint, the canonical joint its bone points to)`` of a canonical map: the spine chain to
+    the neck and head, each clavicle to its shoulder, shoulder to elbow, elbow to wrist, hip to
+    knee, knee to ankle, ankle to toe (where the map has them)."""
+    chain = [*joints["spine"]]
+    for name in ("neck", "head"):
+        if name in joints and joints[name] not in chain:
+            chain.append(joints[name])
+    bones = [(a, b) for a, b in zip(chain, chain[1:])]
+    for side in ("l", "r"):
+        limb = [f"clavicle_{side}", f"shoulder_{side}", f"elbow_{side}", f"wrist_{side}"]
+        leg = [f"hip_{side}", f"knee_{side}", f"ankle_{side}", f"toe_{side}"]
+        for names in (limb, leg):
+            have = [joints[n] for n in names if n in joints]
+            bones += list(zip(have, have[1:]))
+    return bones
