@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .base import Command, register_command
 from .common import (JOB, add_output_flags, command_line, declared, device, flag, positive_float, positive_int,
-                     stop_code, stopped)
+                     SIGTERM_SEEN, stop_code, stopped)
 from .splice import add_splice_options, methods
 from ..core.errors import TorchspliceError
 
@@ -126,6 +126,10 @@ class SpliceAll(Command):
             print(f"torchsplice: {stopped(exc)}; finished tasks are kept in {job.work}; "
                   "run the same command again to resume", file=sys.stderr)
             return stop_code(exc)
+        if SIGTERM_SEEN[0]:  # a SIGTERM a library swallowed (one met in a finalizer is only printed)
+            print(f"torchsplice: terminated as the job ended; finished tasks are kept ({args.output} is complete)",
+                  file=sys.stderr)
+            return 143
         if not args.quiet:
             print("\n".join(summary.lines(flag)))
         return 0
