@@ -155,7 +155,7 @@ def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tm
         stem = f[:-4]
         assert not re.search(r'[<>:"/\\|?*\x00-\x1f]', f) and not stem.endswith((".", " ")), f
         assert stem.split(".")[0].upper() not in {"CON", "PRN", "AUX", "NUL"}, f
-    from torchsplice.formats.npz import clip_filenames
+    from torchsplice.formats.exporters import clip_filenames
 
     for k, (name, f) in enumerate(zip(FILE_NAMES, clip_filenames(FILE_NAMES, ".bvh"))):
         got = read_bvh(tmp_path / "bvh" / f)

@@ -113,7 +113,6 @@ def test_every_choice_and_default_is_the_librarys():
 
 ALLOWED_CLI_ONLY = {  # options that are the command line's own (no library option behind them)
     ("splice-all", "log_level"),  # logging levels: checked below
-    ("splice-all", "compression"),  # choices: checked below (None spelt "none")
     ("splice-all", "acting_limbs"), ("splice", "acting_limbs"),  # spelt "auto": checked below
 }
 

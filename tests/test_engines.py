@@ -20,16 +20,11 @@ import h5py
 import numpy as np
 import pytest
 
+from cli_helpers import run
 from torchsplice.cli import main
 from torchsplice.store.database import MotionDatabase
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def frames_and_table(path) -> dict:
@@ -41,13 +36,6 @@ def frames_and_table(path) -> dict:
             for name, a in db.packed(k).items():
                 out[f"{k}/{name}"] = a.tobytes()
     return out
-
-
-@pytest.fixture(scope="module")
-def sample_db(tmp_path_factory):
-    db = tmp_path_factory.mktemp("sample") / "sample.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
-    return db
 
 
 @pytest.fixture(scope="module")

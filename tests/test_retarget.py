@@ -18,13 +18,13 @@ import torch
 
 from conftest import MOCAP
 from torchsplice.core.errors import SpecError
-from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply
+from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply, quat_between
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.formats.bvh import read_bvh
-from torchsplice.ops.retarget import character_height, quat_between, retarget_map, retarget_motion
+from torchsplice.ops.retarget import character_height, retarget_map, retarget_motion
 from torchsplice.sample import sample_motions
 from torchsplice.specs import detect_spec, load_spec
-from torchsplice.specs.canonical import REQUIRED, canonical_bones, canonical_joints
+from torchsplice.specs.canonical import CANONICAL, REQUIRED, canonical_bones, canonical_joints
 
 FRAMES = 240  # of each real clip: enough motion, quick
 
@@ -62,7 +62,7 @@ def test_every_shipped_rig_has_a_complete_canonical_map():
     for name, m in {**real_clips(), "sample": sample_motions()[0]}.items():
         sk = m.skeleton
         joints = canonical_joints(roles_of(sk), sk)
-        assert set(REQUIRED) <= set(joints), (name, set(REQUIRED) - set(joints))
+        assert set(REQUIRED) <= set(joints) and list(joints) == [n for n in CANONICAL if n in joints], name
         for side in ("l", "r"):  # each elbow lies on its arm's chain, strictly between shoulder and wrist
             chain, j = [], joints[f"wrist_{side}"]
             while j != joints[f"shoulder_{side}"]:
@@ -93,9 +93,9 @@ def test_a_skeleton_without_arms_or_legs_is_refused_in_one_line_naming_what_is_m
 def test_quat_between_takes_one_direction_onto_the_other():
     g = torch.Generator().manual_seed(0)
     u, v = torch.randn(500, 3, generator=g, dtype=torch.float64), torch.randn(500, 3, generator=g, dtype=torch.float64)
-    v[:3] = -u[:3] * 2.0  # opposite directions too
-    got = quat_apply(quat_between(u, v), u / u.norm(dim=-1, keepdim=True))
-    assert torch.allclose(got, v / v.norm(dim=-1, keepdim=True), atol=1e-12)
+    u, v = u / u.norm(dim=-1, keepdim=True), v / v.norm(dim=-1, keepdim=True)
+    v[:3] = -u[:3]  # opposite directions too
+    assert torch.allclose(quat_apply(quat_between(u, v), u), v, atol=1e-12)
 
 
 @pytest.mark.parametrize("rig", ["sample", "bandai_namco", "cmu", "cmu_max", "lafan1"])
@@ -185,3 +185,20 @@ def test_limb_bones_point_where_the_sources_do(source, target):
         cos = (da * db).sum(-1) / (da.norm(dim=-1) * db.norm(dim=-1))
         angle = torch.rad2deg(torch.acos(cos.clamp(-1, 1))).mean()
         assert float(angle) <= 3.0, (b.skeleton.names[x], b.skeleton.names[y], float(angle))
+
+
+def test_the_trajectory_scales_with_the_legs():
+    """A rig twice the size walks twice as far and its pelvis rides twice as high, about the
+    floor below the first frame; its pose is the source's."""
+    m = sample_motions()[0].to(torch.float64)
+    roles = load_spec("sample").bind(m.skeleton)
+    big = replace(m.skeleton, offsets=m.skeleton.offsets * 2, end_site_offsets=m.skeleton.end_site_offsets * 2)
+    rmap = retarget_map(m.skeleton, roles, big, load_spec("sample").bind(big))
+    out = retarget_motion(m, rmap)
+    assert rmap.scale == pytest.approx(2.0)
+    pelvis = canonical_joints(roles, m.skeleton)["pelvis"]
+    src, got = m.global_positions()[:, pelvis], out.global_positions()[:, pelvis]
+    origin = src[0].clone()
+    origin[roles.up_axis] = 0.0
+    assert torch.allclose(got, origin + 2 * (src - origin), atol=1e-9)
+    assert float(quat_angle(out.rotations, m.rotations).max()) < 1e-6

@@ -270,9 +270,9 @@ def test_full_disk_gives_one_line_removes_the_partial_file_and_a_rerun_resumes(s
     # splice-all: some tasks land, then the disk is full; after freeing space the rerun resumes
     reference = small_disk.parent / "reference.h5"
     assert main(["splice-all", str(sample_db), "-o", str(reference), "-q", "--workers", "1", "--batch-size", "4"]) == 0
-    from torchsplice.store.database import _SPACE_MARGIN
+    from torchsplice.store.writing import SPACE_MARGIN
 
-    ballast = fill(small_disk, _SPACE_MARGIN / 1e6 + 0.8)  # room for some tasks of the job, not all
+    ballast = fill(small_disk, SPACE_MARGIN / 1e6 + 0.8)  # room for some tasks of the job, not all
     out = small_disk / "out.h5"
     rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q", "--workers", "1", "--batch-size", "4")
     assert rc == 2 and "no space left" in error_line(err)

@@ -1,13 +1,16 @@
-"""The clip selector grammar of ``splice-all`` (:mod:`torchsplice.job.select`) on a hand-made table."""
+"""The clip selection language (:mod:`torchsplice.store.select`) on a hand-made clip table, then
+on a real spliced database for the job, the dataset and the exports alike."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.job import parse_selector, select_clips
+from torchsplice.store import ClipTable
 
 ROWS = [  # name, role, labels
     ("walk_normal", "locomotion", {"content": "walk", "style": "normal", "dataset": "2"}),
@@ -22,16 +25,16 @@ ROWS = [  # name, role, labels
 
 @pytest.fixture
 def table():
-    return {
-        "name": [r[0] for r in ROWS],
-        "role": [r[1] for r in ROWS],
-        # as MotionDatabase.table() gives them: JSON strings; an empty string means no labels
-        "labels": [json.dumps(r[2]) if r[2] else "" for r in ROWS],
-    }
+    C = len(ROWS)
+    return ClipTable.from_columns({  # as a database stores them: labels as JSON, "" for none
+        "name": np.array([r[0] for r in ROWS]), "source": np.array([""] * C), "role": np.array([r[1] for r in ROWS]),
+        "labels": np.array([json.dumps(r[2]) if r[2] else "" for r in ROWS]), "skeleton": np.zeros(C, np.int32),
+        "start": np.arange(C, dtype=np.int64) * 10, "length": np.full(C, 10, np.int64), "fps": np.full(C, 30.0),
+    }, {}, "db.h5")
 
 
 def names(table, *selectors):
-    return [table["name"][i] for i in select_clips(table, list(selectors), "--locomotions", "db.h5")]
+    return [table.names[i] for i in select_clips(table, list(selectors), "--locomotions", "db.h5")]
 
 
 def test_name_globs_are_case_sensitive_and_whole_name(table):
@@ -182,9 +185,11 @@ def test_the_job_the_dataset_and_the_exports_select_the_same_clips(spliced_db, t
     assert MotionDataset(spliced_db, select=selectors).names == want
     result = export_clips(spliced_db, out=tmp_path / "bvh", format="bvh", select=selectors)
     assert result.names == want and len(result.files) == len(want)
-    one = export_clips(spliced_db, [want[0], "no-such-clip-is-selected"][:1], out=tmp_path / "one.bvh", format="bvh",
-                       select="method:naive")
-    assert one.names == [want[0]] and (tmp_path / "one.bvh").is_file()
+    unselected = next(n for i, n in enumerate(t.names) if t.extra["method"][i] == "splice")
+    one = export_clips(spliced_db, [unselected, want[0]], out=tmp_path / "one.bvh", format="bvh", select="method:naive")
+    assert one.names == [want[0]] and (tmp_path / "one.bvh").is_file()  # the named clips that select picks
+    with pytest.raises(TorchspliceError, match="none of the clips named is selected"):
+        export_clips(spliced_db, [unselected], out=tmp_path / "none.bvh", format="bvh", select="method:naive")
     from torchsplice.data import DatasetError
 
     with pytest.raises(DatasetError, match="'method:cpmc' selects no clip"):

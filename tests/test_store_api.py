@@ -1,6 +1,6 @@
 """The storage package's public reading API (issue: storage behind one package): the typed clip
 table, a skeleton's stored spec or a detected one, what is recorded with each skeleton, rows of
-a stored frame array, and the import graph that keeps HDF5 inside ``torchsplice.store``."""
+a stored frame array. (``tests/test_layout.py`` keeps HDF5 inside ``torchsplice.store``.)"""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from torchsplice.core.errors import DatabaseError
-from torchsplice.specs import DatasetSpec, detect_spec, load_spec
+from torchsplice.specs import load_spec
 from torchsplice.store import ClipTable, FrameArray, MotionDatabase, SkeletonInfo
 
 from test_database import branching_skeleton, chain_skeleton, random_clip
@@ -31,10 +31,14 @@ def db_path(tmp_path) -> Path:
     return p
 
 
-def test_the_clip_table_is_typed_with_labels_decoded_once(db_path):
+def test_the_clip_table_is_typed_with_labels_decoded_and_read_once(db_path):
     with MotionDatabase.open(db_path) as db:
         t = db.clip_table()
         raw = db.table()
+        assert db.clip_table() is t and not t.length.flags.writeable  # kept, shared, read-only
+    with h5py.File(db_path, "r") as f:  # what the file holds
+        stored = {k: f["clips"][k].asstr()[()] if h5py.check_string_dtype(f["clips"][k].dtype) else f["clips"][k][()]
+                  for k in f["clips"]}
     assert isinstance(t, ClipTable) and len(t) == 3
     assert t.names == ["walk", "wave", "run"] and t.role.tolist() == ["locomotion", "action", ""]
     assert t.labels == [{"style": "proud"}, {"style": "proud"}, {}]
@@ -42,9 +46,10 @@ def test_the_clip_table_is_typed_with_labels_decoded_once(db_path):
     assert t.skeleton.tolist() == [0, 1, 0] and t.start.tolist() == [0, 0, 10] and t.length.tolist() == [10, 7, 5]
     assert t.extra["cost"][0] == 1.5 and np.isnan(t.extra["cost"][1]) and t.kinds == {"cost": "float"}
     assert t.captures() == [("walk", "locomotion", {"style": "proud"}), ("wave", "action", {"style": "proud"}), ("run", "", {})]
-    # table() is the same columns, labels as stored
+    # table() is the stored columns, labels as stored
     assert list(raw) == ["name", "source", "role", "labels", "skeleton", "start", "length", "fps", "cost"]
-    assert all(np.array_equal(raw[k], t.to_dict()[k], equal_nan=raw[k].dtype.kind == "f") for k in raw)
+    assert set(raw) == set(stored)
+    assert all(np.array_equal(raw[k], stored[k], equal_nan=raw[k].dtype.kind == "f") for k in raw)
     assert [json.loads(s) for s in raw["labels"]] == t.labels
     part = t.take([2, 0])
     assert part.names == ["run", "walk"] and part.labels == [{}, {"style": "proud"}] and part.extra["cost"][1] == 1.5
@@ -65,12 +70,12 @@ def test_spec_is_the_stored_one_else_a_detected_one(tmp_path, mocap_dir):
     with MotionDatabase.create(p) as db:
         db.append(m, spec=load_spec("bandai_namco"))
     with MotionDatabase.open(p) as db:
-        assert db.stored_spec(0) == DatasetSpec.from_json(db.spec_json(0)) and db.spec(0).name == "bandai_namco"
+        assert db.stored_spec(0) == load_spec("bandai_namco") and db.spec(0) == load_spec("bandai_namco")
     q = tmp_path / "nospec.h5"
     with MotionDatabase.create(q) as db:
         db.append(m)
     with MotionDatabase.open(q) as db:
-        assert db.stored_spec(0) is None and db.spec(0) == detect_spec(db.skeletons[0])
+        assert db.stored_spec(0) is None and db.spec(0).name == "bandai_namco"  # detected from the joint names
 
 
 def test_skeleton_info_and_frame_arrays(db_path):
@@ -89,3 +94,26 @@ def test_skeleton_info_and_frame_arrays(db_path):
         with pytest.raises(DatabaseError, match="stores no per-frame array 'translations'"):
             db.frame_array(0, "translations")
         assert "walk" in db and "nope" not in db and 0 not in db
+
+
+def test_a_clip_table_kept_is_read_again_once_clips_are_added(tmp_path):
+    a = chain_skeleton(3)
+    with MotionDatabase.create(tmp_path / "grow.h5") as db:
+        db.append(random_clip(a, 10, "walk", 1))
+        first = db.clip_table()
+        db.append(random_clip(a, 5, "run", 2))
+        assert db.clip_table().names == ["walk", "run"] and first.names == ["walk"]
+    assert ClipTable.take(first, []).names == []  # an empty selection
+
+
+def test_virtual_clips_are_checked_like_packed_ones(tmp_path):
+    a = chain_skeleton(3)
+    with MotionDatabase.create(tmp_path / "src.h5") as db:
+        db.append(random_clip(a, 10, "walk", 1))
+    out = tmp_path / "virtual.h5"
+    with pytest.raises(DatabaseError, match="2 clip names need 2 lengths of at least one frame, got 3"):
+        with MotionDatabase.create(out) as db:
+            db.append_virtual(tmp_path / "src.h5", a, [4, 3, 3], ["x", "y"], 30.0)
+    with pytest.raises(DatabaseError, match="no extra column 'nope' was declared"):
+        with MotionDatabase.create(out, overwrite=True) as db:
+            db.append_virtual(tmp_path / "src.h5", a, [10], ["x"], 30.0, extra={"nope": [1]})

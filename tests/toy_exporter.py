@@ -14,7 +14,6 @@ class ToyExporter(Exporter):
     suffix = ".csv"
     what = "a CSV file"
     title = "root CSV"
-    description = "the root's position per frame, one CSV per clip"
 
     def write(self, motion, path):
         rows = motion.root_translation.tolist()

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import torch
 
-from ..core.rotations import quat_canonical, quat_normalize, quat_to_rotmat, rotmat_to_quat
+from ..core.rotations import quat_between, quat_canonical, quat_normalize, quat_to_rotmat, rotmat_to_quat
 
 __all__ = ["cross_covariance", "horn_rotation_matrix", "horn_rotation", "horn_rotation_eig"]
 
@@ -55,23 +55,6 @@ def cross_covariance(source: torch.Tensor, target: torch.Tensor, weights: torch.
     return (source * weights[..., None]).transpose(-1, -2) @ target
 
 
-def _min_rotation(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """``(..., 3, 3)`` smallest rotation taking unit ``(..., 3)`` vectors ``u`` onto ``v``.
-
-    For antipodal ``u = -v`` it is the half turn about a fixed axis perpendicular to ``u``.
-    """
-    d = (u * v).sum(-1, keepdim=True)
-    c = torch.linalg.cross(u, v, dim=-1)
-    # a perpendicular to u: cross with the basis axis least aligned with u
-    basis = torch.eye(3, dtype=u.dtype, device=u.device)
-    e = basis[u.abs().argmin(dim=-1)]
-    perp = torch.linalg.cross(u, e, dim=-1)
-    q = torch.cat((1.0 + d, c), dim=-1)
-    anti = (1.0 + d) < 1e-6
-    q = torch.where(anti, torch.cat((torch.zeros_like(d), perp), dim=-1), q)
-    return quat_to_rotmat(quat_normalize(q))
-
-
 def horn_rotation_matrix(source: torch.Tensor, target: torch.Tensor, weights: torch.Tensor | None = None) -> torch.Tensor:
     """``(..., 3, 3)`` proper rotation ``R`` minimising ``sum_k w_k |target_k - R source_k|^2``.
 
@@ -94,7 +77,7 @@ def horn_rotation_matrix(source: torch.Tensor, target: torch.Tensor, weights: to
     s0 = S[..., 0]
     rank0 = s0 <= torch.finfo(H.dtype).tiny ** 0.5
     rank1 = S[..., 1] <= tol * s0
-    R = torch.where(rank1[..., None, None], _min_rotation(U[..., :, 0], V[..., :, 0]), R)
+    R = torch.where(rank1[..., None, None], quat_to_rotmat(quat_between(U[..., :, 0], V[..., :, 0])), R)
     eye = torch.eye(3, dtype=H.dtype, device=H.device)
     return torch.where(rank0[..., None, None], eye, R)
 

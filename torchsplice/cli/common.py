@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from ..core.errors import OutputExistsError, TorchspliceError
+from ..core.stop import Terminated, ask_stop, stop_asked
 from .declared import declared
 
 __all__ = ["cli_message", "flag", "output", "locked", "say", "n", "at", "one_line", "progress", "command_line",
@@ -61,13 +62,15 @@ def progress(iterable, total: int, desc: str, quiet: bool):
 
 def _outputs(kind: str) -> tuple[tuple[str, ...], str]:
     """A kind of output: (suffixes, what it is)."""
+    from ..formats.importer import DATABASE_SUFFIXES
+
     if kind == "bvh":
         from ..formats.exporters import get_exporter
 
         bvh = get_exporter("bvh")
         return (bvh.suffix,), bvh.what
     return {
-        "database": ((".h5", ".hdf5"), "a database"),
+        "database": (DATABASE_SUFFIXES, "a database"),
         "report": ((".md",), "a Markdown report"),
         "plot": ((".png", ".pdf", ".svg"), "a picture"),
         "render": (tuple(declared("torchsplice.viz.render", "SUPPORTED_SUFFIXES")), "a GIF, MP4 or PNG filmstrip"),
@@ -75,12 +78,14 @@ def _outputs(kind: str) -> tuple[tuple[str, ...], str]:
     }[kind]
 
 
-def output(args, kind: str, inputs=()) -> Path:
+def output(args, kind: str) -> Path:
     """``args.output`` checked before any work: the right suffix for ``kind``, not a folder,
-    not one of ``inputs``, and not an existing file unless ``--force``."""
+    not one of the command's inputs (its database and ``--sources``), and not an existing file
+    unless ``--force``."""
     from ..store.atomic import check_output
 
     suffixes, what = _outputs(kind)
+    inputs = [args.database, *(getattr(args, "sources", None) or [])] if getattr(args, "database", None) else []
     return check_output(args.output, suffixes, what, inputs=inputs, overwrite=getattr(args, "force", False))
 
 
@@ -185,20 +190,13 @@ def add_output_flags(s, force_help: str = "overwrite an existing file", quiet_he
 # --------------------------------------------------------------------------------------------
 # interrupts
 # --------------------------------------------------------------------------------------------
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (a scheduler or ``kill`` stopping the process): handled like Ctrl-C."""
-
-
-SIGTERM_SEEN = [False]  # a SIGTERM arrived (libraries such as Ray re-raise it as a plain KeyboardInterrupt)
-
-
 def on_sigterm(signum, frame):
-    SIGTERM_SEEN[0] = True
+    ask_stop()  # seen by the job between tasks even if a library swallows the exception below
     raise Terminated()
 
 
 def _terminated(exc: BaseException) -> bool:
-    return isinstance(exc, Terminated) or SIGTERM_SEEN[0]
+    return isinstance(exc, Terminated) or stop_asked()
 
 
 def stopped(exc: BaseException) -> str:

@@ -58,7 +58,6 @@ class Import(Command):
                        help="dataset spec: a shipped name (bandai_namco, cmu, cmu_max, lafan1, sample, generic) or a "
                             f".toml path; {spec!r} (default) picks per file")
         s.add_argument("--append", action="store_true", help="add to an existing database")
-        s.add_argument("-f", "--force", action="store_true", help="overwrite an existing file")
         s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
         s.add_argument("--units", default=declared(IMPORTER, "import_bvh.units"), metavar="UNIT",  # checked by import_bvh
                        help="convert every clip from its spec's units to these (m, cm, mm, in, ft; CMU's own unit is "
@@ -71,7 +70,7 @@ class Import(Command):
         overlap = declared(IMPORTER, "import_bvh.split_overlap")
         s.add_argument("--split-overlap", type=float, default=overlap, metavar="SECONDS",
                        help=f"overlap of consecutive windows (default {overlap:g} s)")
-        s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+        add_output_flags(s, quiet_help="no progress bar or summary")
 
     def run(self, args) -> int:
         from ..formats.importer import NothingImportedError, import_bvh

@@ -11,8 +11,7 @@ live value is read instead, and a value that is not a literal imports the module
 is always the library's; tests/test_cli_options.py checks every parser choice and default
 against the imported library, and this reader against the live values.
 
-Names: ``"CONST"``, ``"Class.field"`` (a dataclass field's default; ``"Class.field.sub"`` follows
-a field whose default is another dataclass, ``field(default_factory=Other)``), ``"function.param"``.
+Names: ``"CONST"``, ``"Class.field"`` (a dataclass field's plain default), ``"function.param"``.
 """
 
 from __future__ import annotations
@@ -53,7 +52,9 @@ def live_value(mod, name: str) -> Any:
             obj = inspect.signature(obj).parameters[part].default
         elif dataclasses.is_dataclass(obj) and isinstance(obj, type):
             f = {f.name: f for f in dataclasses.fields(obj)}[part]
-            obj = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            if f.default is dataclasses.MISSING:
+                raise KeyError(f"{name}: the field has no plain default")
+            obj = f.default
         else:
             obj = getattr(obj, part)
     return obj
@@ -68,12 +69,9 @@ def static_value(module: str, name: str) -> Any:
     node = _top_level(tree, first)
     value = _MISSING
     if isinstance(node, ast.ClassDef) and rest:
-        node = _class_field(node, rest[0])
+        node = _binding(node.body, rest[0]) if len(rest) == 1 else None
         if node is None:
             return _MISSING
-        if rest[1:]:  # a field whose default is another dataclass of the module (default_factory=Other)
-            factory = _factory(node)
-            return static_value(module, ".".join([factory, *rest[1:]])) if factory else _MISSING
         value = _literal(tree, _default(node))
     elif isinstance(node, ast.FunctionDef) and len(rest) == 1:
         value = _literal(tree, _parameter_default(node, rest[0]))
@@ -96,25 +94,29 @@ def _tree(module: str) -> ast.Module | None:
 
 
 def _top_level(tree: ast.Module, name: str):
-    """The class, function, or value assigned to ``name`` at the module's top level (the last one)."""
+    """The class, function, or value bound to ``name`` at the module's top level."""
+    return _binding(tree.body, name)
+
+
+def _binding(body: list, name: str):
+    """What the statements ``body`` bind ``name`` to last (a class, a function or an assigned
+    expression); ``None`` when the name is not bound there, or is also bound in a way this
+    reader does not follow (``+=``, inside ``if``/``try``, an import): then the module is imported."""
     found = None
-    for node in tree.body:
+    for node in body:
         if isinstance(node, (ast.ClassDef, ast.FunctionDef)) and node.name == name:
             found = node
         elif isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
             found = node.value
         elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.target.id == name:
             found = node.value
+        elif isinstance(node, ast.AugAssign) and isinstance(node.target, ast.Name) and node.target.id == name:
+            return None
+        elif isinstance(node, (ast.If, ast.Try, ast.Import, ast.ImportFrom)) and any(
+                isinstance(n, ast.Name) and n.id == name and isinstance(n.ctx, ast.Store) or
+                isinstance(n, ast.alias) and (n.asname or n.name).split(".")[0] == name for n in ast.walk(node)):
+            return None
     return found
-
-
-def _class_field(cls: ast.ClassDef, name: str):
-    for node in cls.body:
-        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and node.target.id == name:
-            return node.value
-        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
-            return node.value
-    return None
 
 
 def _is_field_call(node) -> bool:
@@ -129,14 +131,6 @@ def _default(node):
                 return kw.value
         return None
     return node
-
-
-def _factory(node) -> str | None:
-    if _is_field_call(node):
-        for kw in node.keywords:
-            if kw.arg == "default_factory" and isinstance(kw.value, ast.Name):
-                return kw.value.id
-    return None
 
 
 def _parameter_default(fn: ast.FunctionDef, name: str):

@@ -29,7 +29,7 @@ class Evaluate(Command):
     def run(self, args) -> int:
         from ..evaluation.report import evaluate_database
 
-        out = output(args, "report", inputs=[args.database] + list(args.sources or []))
+        out = output(args, "report")
         with locked(out, args):
             agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
                                     max_rows=args.max_rows)

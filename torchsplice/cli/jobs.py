@@ -10,8 +10,8 @@ from pathlib import Path
 
 from .base import Command, register_command
 from .common import (JOB, add_output_flags, command_line, declared, device, flag, positive_float, positive_int,
-                     SIGTERM_SEEN, stop_code, stopped)
-from .splice import add_splice_options, methods
+                     stop_code, stopped)
+from .splice import add_splice_options, job_default, methods
 from ..core.errors import TorchspliceError
 
 LOG_LEVELS = ("debug", "info", "warning", "error")  # --log-level: the logging levels worth choosing
@@ -22,10 +22,6 @@ def compressions() -> tuple[str, ...]:
     default = declared(JOB, "JobConfig.compression")
     names = ["none" if c is None else c for c in declared("torchsplice.store.schema", "COMPRESSIONS")]
     return tuple(sorted(names, key=lambda c: c != ("none" if default is None else default)))
-
-
-def job_default(name: str):
-    return declared(JOB, f"JobConfig.{name}")
 
 
 class SpliceAll(Command):
@@ -83,12 +79,11 @@ class SpliceAll(Command):
                             "rotations raw; fast, read by h5py), lzf (everything), gzip (smallest, read by every "
                             "HDF5 tool, several times slower to write) or none")
         add_splice_options(s, "job")
-        s.add_argument("-f", "--force", action="store_true", help="overwrite an existing output file")
         s.add_argument("--restart", action="store_true", help="discard an unfinished earlier run instead of resuming it")
         s.add_argument("--dry-run", action="store_true",
                        help="plan only: say how many pairs would be spliced and skipped, the output's expected size and "
                             "the free space, and write nothing")
-        s.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+        add_output_flags(s, force_help="overwrite an existing output file", quiet_help="no progress bar or summary")
         s.add_argument("--log-level", default="warning", choices=list(LOG_LEVELS),
                        help="detail of log messages on stderr (default warning)")
 
@@ -96,7 +91,7 @@ class SpliceAll(Command):
         if not args.dry_run:  # the workers load torch while this process plans
             from ..job.engines.forkserver import prestart
 
-            prestart(args.engine, args.workers, args.device)
+            prestart(args.engine, args.workers, args.device, args.backend)
 
     def run(self, args) -> int:
         import logging
@@ -126,10 +121,6 @@ class SpliceAll(Command):
             print(f"torchsplice: {stopped(exc)}; finished tasks are kept in {job.work}; "
                   "run the same command again to resume", file=sys.stderr)
             return stop_code(exc)
-        if SIGTERM_SEEN[0]:  # a SIGTERM a library swallowed (one met in a finalizer is only printed)
-            print(f"torchsplice: terminated as the job ended; finished tasks are kept ({args.output} is complete)",
-                  file=sys.stderr)
-            return 143
         if not args.quiet:
             print("\n".join(summary.lines(flag)))
         return 0

@@ -16,7 +16,8 @@ import warnings
 from ..core.errors import TorchspliceError
 from ..core.version import __version__
 from .base import CliParser, registered_commands
-from .common import SIGTERM_SEEN, cli_message, on_sigterm, one_line, stop_code, stopped
+from ..core.stop import clear_stop
+from .common import cli_message, on_sigterm, one_line, stop_code, stopped
 
 __all__ = ["main", "build_parser", "COMMAND_MODULES"]
 
@@ -65,6 +66,12 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"torchsplice: warning: {one_line(message, limit=1000)}", file=file or sys.stderr)
 
 
+def _fail(exc: TorchspliceError) -> int:
+    """A user's mistake: its one line, exit code 2."""
+    print(f"torchsplice: error: {one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
+    return 2
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     import signal
@@ -77,8 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         load_plugins(_plugins_in(argv))
         parser = build_parser()
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
-        return 2
+        return _fail(exc)
     args = parser.parse_args(argv)
     args.argv = argv
     if getattr(args, "output", None) == "":  # an empty name would mean the current folder
@@ -87,19 +93,20 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args.cli_command.prepare(args)
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
-        return 2
+        return _fail(exc)
+    except KeyboardInterrupt as exc:
+        print(f"torchsplice: {stopped(exc)}", file=sys.stderr)
+        return stop_code(exc)
     previous = None
     if threading.current_thread() is threading.main_thread():
-        SIGTERM_SEEN[0] = False
+        clear_stop()
         previous = signal.signal(signal.SIGTERM, on_sigterm)  # stop as Ctrl-C does: outputs discarded, work kept
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # the library's warnings as one line each
             return args.func(args)
     except TorchspliceError as exc:
-        print(f"torchsplice: error: {one_line(cli_message(exc), limit=1000)}", file=sys.stderr)
-        return 2
+        return _fail(exc)
     except KeyboardInterrupt as exc:
         print(f"torchsplice: {stopped(exc)}", file=sys.stderr)
         return stop_code(exc)
@@ -108,3 +115,4 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+            clear_stop()  # this command's stop: not the next in-process caller's

@@ -34,11 +34,16 @@ def backend_choices() -> tuple[str, ...]:
     return choices()
 
 
+def job_default(name: str):
+    """A field's default of :class:`~torchsplice.job.config.JobConfig` (splice-all's flags)."""
+    return declared(JOB, f"JobConfig.{name}")
+
+
 def splice_defaults(source: str) -> dict:
     """The splice's defaults as flags see them, from ``source``: ``"job"`` (``JobConfig``, for
     splice-all) or ``"splice"`` (``SpliceOptions`` and ``AlignOptions``, for one pair)."""
     if source == "job":
-        get = lambda name: declared(JOB, f"JobConfig.{name}")  # noqa: E731
+        get = job_default
         max_run = get("max_run")
         force_locomotion = get("force_locomotion")
     else:
@@ -149,7 +154,7 @@ class Splice(Command):
         from ..store.database import MotionDatabase
 
         method = get_method(args.method)
-        out = output(args, "bvh", inputs=[args.database])
+        out = output(args, "bvh")
         with MotionDatabase.open(args.database) as db:
             loco, act, spec = _read_pair(db, args)
             ref = None
@@ -212,7 +217,7 @@ class PlotAlignment(Command):
         from ..store.database import MotionDatabase
         from ..viz.alignment import plot_alignment
 
-        out = output(args, "plot", inputs=[args.database])
+        out = output(args, "plot")
         with MotionDatabase.open(args.database) as db:
             loco, act, spec = _read_pair(db, args)
         with locked(out, args):

@@ -38,7 +38,7 @@ class Render(Command):
         from ..viz.render import render
         from ..viz.sources import read_clips
 
-        out = output(args, "render", inputs=[args.database] + list(args.sources or []))
+        out = output(args, "render")
         clips, spec = read_clips(args.database, args.clips, sources=args.sources)
         longest = max(c.num_frames for c in clips)
         frames = args.frames
@@ -79,7 +79,7 @@ class View(Command):
         from ..viz.viewer import viewer_notes, write_viewer
         from .common import flag
 
-        out = output(args, "viewer", inputs=[args.database] + list(args.sources or []))
+        out = output(args, "viewer")
         with locked(out, args):
             got = write_viewer(args.database, out, clips=args.clips, sources=args.sources, max_clips=args.max_clips,
                                quiet=True)

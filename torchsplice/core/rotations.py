@@ -22,6 +22,7 @@ import torch
 
 __all__ = [
     "EULER_ORDERS",
+    "quat_between",
     "quat_identity",
     "quat_normalize",
     "quat_canonical",
@@ -181,6 +182,21 @@ def quat_to_axis_angle(q: torch.Tensor) -> torch.Tensor:
     angle = 2.0 * torch.atan2(s, q[..., :1])
     scale = torch.where(s > 1e-8, angle / s.clamp_min(1e-8), 2.0 + s**2 / 3)
     return xyz * scale
+
+
+def quat_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """``(..., 4)`` the smallest rotation taking unit vectors ``u`` onto ``v`` (``(..., 3)``);
+    for antipodal ``u = -v``, the half turn about a fixed axis perpendicular to ``u``."""
+    _check_last(u, 3, "u")
+    _check_last(v, 3, "v")
+    d = (u * v).sum(-1, keepdim=True)
+    c = torch.linalg.cross(u, v, dim=-1)
+    # a perpendicular to u: cross with the basis axis least aligned with u
+    basis = torch.eye(3, dtype=u.dtype, device=u.device)
+    perp = torch.linalg.cross(u, basis[u.abs().argmin(dim=-1)], dim=-1)
+    q = torch.cat((1.0 + d, c), dim=-1)
+    q = torch.where((1.0 + d) < 1e-6, torch.cat((torch.zeros_like(d), perp), dim=-1), q)
+    return quat_normalize(q)
 
 
 def quat_angle(p: torch.Tensor, q: torch.Tensor) -> torch.Tensor:

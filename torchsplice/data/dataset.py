@@ -101,7 +101,6 @@ ITEM_KEYS = ("name", "length", "fps", "index", "start", "skeleton")
 """The metadata keys of every item, besides its features."""
 
 
-
 class FeatureStatistics(NamedTuple):
     """Normalisation statistics of one feature (float64 tensors of the feature's per-frame shape).
 
@@ -115,8 +114,6 @@ class FeatureStatistics(NamedTuple):
     mean: torch.Tensor
     std: torch.Tensor
     frames: int
-
-
 
 
 class MotionDataset(Dataset):
@@ -211,7 +208,7 @@ class MotionDataset(Dataset):
             if clips is not None:
                 keep &= clip_mask(clips, clip_table.name, self.path)
             if where:
-                keep &= where_mask(where, clip_table, self.columns, self.frame_columns, self.path)
+                keep &= where_mask(where, clip_table, self.frame_columns, self.path)
             if select is not None:  # the selection language of the job and the exports
                 try:
                     rows = select_clips(clip_table, select, "select", str(self.path))

@@ -104,8 +104,3 @@ def derive_features(raw: dict[str, torch.Tensor], features: Sequence[str], skele
         else:  # a per-frame column
             out[f] = raw[f]
     return out
-
-
-# --------------------------------------------------------------------------------------------
-# the dataset
-# --------------------------------------------------------------------------------------------

@@ -11,14 +11,13 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from ..store import ClipTable
+from ..store.schema import COLUMNS
 from .errors import DatasetError
 
-__all__ = ["BASE_COLUMNS", "is_glob", "clip_mask", "matcher", "where_mask"]
-
-BASE_COLUMNS = ("name", "source", "role", "labels", "skeleton", "start", "length", "fps")
+__all__ = ["clip_mask", "where_mask"]
 
 
-def is_glob(s: str) -> bool:
+def _is_glob(s: str) -> bool:
     return any(ch in s for ch in "*?[")
 
 
@@ -32,7 +31,7 @@ def clip_mask(clips: Iterable[str | int], names: np.ndarray, path: Path) -> np.n
             if not -C <= int(c) < C:
                 raise DatasetError(f"{path}: no clip number {int(c)} (the database has {C})")
             keep[int(c)] = True
-        elif isinstance(c, str) and is_glob(c):
+        elif isinstance(c, str) and _is_glob(c):
             hit = np.fromiter((fnmatch.fnmatchcase(n, c) for n in names), dtype=bool, count=C)
             if not hit.any():
                 raise DatasetError(f"{path}: no clip name matches the pattern {c!r}")
@@ -50,7 +49,7 @@ def clip_mask(clips: Iterable[str | int], names: np.ndarray, path: Path) -> np.n
     return keep
 
 
-def matcher(key: str, want) -> Callable[[Any], bool]:
+def _matcher(want) -> Callable[[Any], bool]:
     """A predicate on one clip's value from a ``where`` entry (a callable, a collection or a value)."""
     if callable(want):
         return lambda v: bool(want(v))
@@ -60,12 +59,11 @@ def matcher(key: str, want) -> Callable[[Any], bool]:
     return lambda v: v == want
 
 
-def where_mask(where: Mapping[str, Any], table: ClipTable, columns: dict[str, str],
-                frame_columns: Sequence[str], path: Path) -> np.ndarray:
+def where_mask(where: Mapping[str, Any], table: ClipTable, frame_columns: Sequence[str], path: Path) -> np.ndarray:
     """Boolean mask ``(C,)`` of the rows whose metadata satisfy every entry of ``where``."""
     C = len(table)
     keep = np.ones(C, dtype=bool)
-    known = [*BASE_COLUMNS, *columns]
+    known = [*COLUMNS, *table.kinds]
     for key, want in where.items():
         if not isinstance(key, str):
             raise TypeError(f"where keys must be column names, got {key!r}")
@@ -81,11 +79,6 @@ def where_mask(where: Mapping[str, Any], table: ClipTable, columns: dict[str, st
             raise DatasetError(
                 f"{path}: no column {key!r} to filter on{extra}; columns: {', '.join(known)}, "
                 f"and labels.KEY for any label")
-        match = matcher(key, want)
+        match = _matcher(want)
         keep &= np.fromiter((match(v) for v in values), dtype=bool, count=C)
     return keep
-
-
-# --------------------------------------------------------------------------------------------
-# features from raw frames
-# --------------------------------------------------------------------------------------------

@@ -34,7 +34,7 @@ from ..core.motion import Motion
 from ..core.names import printable
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
-from ..formats.npz import clip_filenames
+from ..formats.exporters import clip_filenames
 from ..specs import DatasetSpec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import best_posture_error, upper_body_error

@@ -18,12 +18,11 @@ class BVHExporter(Exporter):
     suffix = ".bvh"
     what = "BVH"
     title = "BVH"
-    description = "BVH files with the skeleton's original channel layout, one per clip"
 
     def write(self, motion, path: Path) -> None:
         from . import bvh
 
-        bvh.write_bvh(motion, path)
+        Path(path).write_text(bvh.format_bvh(motion))  # the export stages its files already
 
 
 register_exporter(BVHExporter)

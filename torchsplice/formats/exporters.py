@@ -28,7 +28,8 @@ that needs more than one clip at a time (statistics over every clip, one packed 
 :meth:`Exporter.select`, :meth:`Exporter.check`, :meth:`Exporter.items` and
 :attr:`Exporter.single_file`, as the NumPy exporter does (:mod:`.npz_exporter`). Options a
 format takes (``packed``, ``features``) are declared in :attr:`Exporter.options`, with their
-default and allowed values: the command line reads its choices from there.
+default and allowed values (keywords of :func:`export_clips`; the command line exposes the npz
+format's two, ``--packed`` and ``--features``, with their defaults and choices read from there).
 
 The built-ins, ``bvh`` (:mod:`.bvh_exporter`) and ``npz`` (:mod:`.npz_exporter`), register
 themselves on first use of the registry. This module imports no torch, numpy or h5py: the
@@ -51,12 +52,11 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["Exporter", "selected_names", "ExportOption", "ExportResult", "register_exporter", "get_exporter", "available_exporters",
            "choose_exporter", "export_clips", "export_targets", "select_rows", "clip_filename", "clip_filenames",
-           "MAX_FILE_BYTES", "DEFAULT_FORMAT", "BUILTIN_EXPORTERS"]
+           "MAX_FILE_BYTES", "DEFAULT_FORMAT"]
 
 DEFAULT_FORMAT = "bvh"
 """The format of an export that names none, whose output's suffix is no format's and whose
 options no format needs (a folder of BVH files)."""
-BUILTIN_EXPORTERS = ("bvh", "npz")
 _BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz_exporter")
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 _SUFFIX = re.compile(r"^\.[A-Za-z0-9][A-Za-z0-9_-]*$")
@@ -66,12 +66,11 @@ READ_BATCH = 64
 
 @dataclass(frozen=True)
 class ExportOption:
-    """An option a format takes (a keyword of :func:`export_clips`): its default, its allowed
-    values (``None``: any) and one line saying what it does."""
+    """An option a format takes (a keyword of :func:`export_clips`): its default and its allowed
+    values (``None``: any)."""
 
     default: Any = None
     choices: tuple | None = None
-    doc: str = ""
 
 
 @dataclass
@@ -105,9 +104,7 @@ class Exporter:
         suffix: the suffix of its files (``".bvh"``).
         what: a file of the format, in messages (``"BVH"``: "the output is BVH, so its name must end in .bvh").
         title: the format in summaries (``"BVH"``: "3 clips as BVH").
-        description: one line for ``--help`` and the documentation.
         options: the keyword options it takes, with their defaults and choices.
-        module: the module that defines it (set on registration).
 
     An instance holds the export's ``database``, ``clips`` (names, or ``None`` for every clip),
     ``skeletons`` (database skeleton ids to keep, or ``None``) and ``options`` (every declared
@@ -118,9 +115,7 @@ class Exporter:
     suffix: ClassVar[str] = ""
     what: ClassVar[str] = ""
     title: ClassVar[str] = ""
-    description: ClassVar[str] = ""
     options: ClassVar[dict[str, ExportOption]] = {}
-    module: ClassVar[str] = ""
 
     def __init__(self, database, clips: Sequence[str] | None = None, skeletons: Sequence[int] | None = None,
                  **options):
@@ -220,13 +215,12 @@ def register_exporter(exporter: type[Exporter], replace_existing: bool = False) 
         raise TorchspliceError(f"format {name!r}: the exporter must define write(item, path)")
     if not isinstance(exporter.options, dict) or not all(isinstance(o, ExportOption) for o in exporter.options.values()):
         raise TorchspliceError(f"format {name!r}: options must map names to ExportOption")
-    exporter.module = exporter.__module__
     exporter.what = exporter.what or f"a {exporter.suffix} file"
     exporter.title = exporter.title or name
     old = _REGISTRY.get(name)
     if old is not None and old is not exporter and not replace_existing and (old.__module__, old.__qualname__) != (
             exporter.__module__, exporter.__qualname__):
-        raise TorchspliceError(f"format {name!r} is already registered (by {old.module}); choose another name")
+        raise TorchspliceError(f"format {name!r} is already registered (by {old.__module__}); choose another name")
     _REGISTRY[name] = exporter
     return exporter
 
@@ -325,7 +319,7 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             count = 0
             for item in items:
                 if count == len(files):
-                    raise TorchspliceError(f"format {exporter.name!r} ({exporter.module}) gave more files than the "
+                    raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave more files than the "
                                            f"{len(files)} of this export")
                 _write(exporter, item, files[count], stage(files[count]), names)
                 frames, fps = exporter.measure(item)
@@ -338,7 +332,7 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             if close is not None:
                 close()
         if count != len(files):
-            raise TorchspliceError(f"format {exporter.name!r} ({exporter.module}) gave {count} files of the "
+            raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave {count} files of the "
                                    f"{len(files)} of this export")
     result.summary = exporter.summary(result)
     return result
@@ -357,11 +351,11 @@ def _write(exporter: Exporter, item, target: Path, path: Path, names: list[str])
     except OSError as exc:
         raise TorchspliceError(os_error_message(target, exc)) from None
     except (Exception, SystemExit) as exc:
-        if exporter.module.startswith("torchsplice.") and exporter.name in BUILTIN_EXPORTERS:
+        if type(exporter).__module__ in _BUILTIN_MODULES:  # a bug of ours: its traceback
             raise
         text = f"called sys.exit({exc.code!r})" if isinstance(exc, SystemExit) else \
             f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-        raise TorchspliceError(f"format {exporter.name!r} ({exporter.module}) failed writing {target}: "
+        raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) failed writing {target}: "
                                f"{printable(text, limit=300)}; nothing written") from None
 
 

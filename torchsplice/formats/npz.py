@@ -96,11 +96,11 @@ import torch
 from ..core.errors import TorchspliceError
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
-from .exporters import MAX_FILE_BYTES, clip_filename, clip_filenames, select_rows  # noqa: F401 (their old home)
+from .exporters import select_rows
 from .npz_features import FEATURE_SETS
 
 __all__ = ["NPZ_FORMAT", "NPZ_VERSION", "FRAME_ARRAYS", "FEATURE_SETS", "NpzExport", "write_npz", "read_npz",
-           "clip_of_packed", "clip_filename", "clip_filenames", "select_rows", "MAX_FILE_BYTES"]
+           "clip_of_packed"]
 
 NPZ_FORMAT = "torchsplice.npz"
 NPZ_VERSION = 1
@@ -156,10 +156,6 @@ class NpzExport:
     def names(self) -> list[str]:
         """The exported clips' names, in export order."""
         return [self._ds.names[c] for c in self._order]
-
-    @property
-    def num_frames(self) -> int:
-        return int(sum(int(self._ds._len[c]) for c in self._order))
 
     def skeleton_ids(self) -> list[int]:
         """The database skeletons of the exported clips, sorted."""
@@ -285,8 +281,9 @@ class NpzExport:
         return out
 
 
-def write_npz(path, arrays: dict[str, np.ndarray], what: str = "") -> None:
-    """Write ``arrays`` as an uncompressed ``.npz`` at ``path``, atomically.
+def write_npz(path, arrays: dict[str, np.ndarray], what: str = "", atomic: bool = True) -> None:
+    """Write ``arrays`` as an uncompressed ``.npz`` at ``path``, atomically (``atomic=False``:
+    straight to ``path``, for a caller that stages its files already, like the exports).
 
     Every floating array must be finite: otherwise a one-line :class:`TorchspliceError` names
     ``what`` (e.g. the clip), the array and the first bad row, and nothing is written.
@@ -299,6 +296,9 @@ def write_npz(path, arrays: dict[str, np.ndarray], what: str = "") -> None:
                                    f"(row {row}); nothing written")
     buf = io.BytesIO()
     np.savez(buf, **arrays)
+    if not atomic:
+        Path(path).write_bytes(buf.getbuffer())
+        return
     with atomic_path(path) as tmp:
         Path(tmp).write_bytes(buf.getbuffer())
 

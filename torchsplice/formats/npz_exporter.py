@@ -5,6 +5,7 @@ it exports."""
 
 from __future__ import annotations
 
+from functools import cached_property
 from pathlib import Path
 
 from .exporters import Exporter, ExportOption, ExportResult, register_exporter
@@ -20,17 +21,18 @@ class NpzExporter(Exporter):
     suffix = ".npz"
     what = "a NumPy .npz file"
     title = ".npz"
-    description = "NumPy .npz: rotations, translations, positions, skeleton and labels per clip, or packed"
     options = {
-        "packed": ExportOption(False, doc="one file with every clip concatenated along frames (one skeleton topology)"),
-        "features": ExportOption(None, choices=tuple(FEATURE_SETS),
-                                 doc="add training features and their per-dimension statistics over every clip"),
+        "packed": ExportOption(False),
+        "features": ExportOption(None, choices=tuple(FEATURE_SETS)),
     }
 
-    def select(self) -> list[str]:
+    @cached_property
+    def _export(self):
         from .npz import NpzExport
 
-        self._export = NpzExport(self.database, self.clips, features=self.options["features"], skeletons=self.skeletons)
+        return NpzExport(self.database, self.clips, features=self.options["features"], skeletons=self.skeletons)
+
+    def select(self) -> list[str]:
         return self._export.names
 
     @property
@@ -40,13 +42,11 @@ class NpzExporter(Exporter):
     def check(self) -> None:
         """Clips of one skeleton topology when packed; the statistics computed (and checked
         finite) before any file is made."""
-        self.names  # noqa: B018 -- the selection first
         if self.single_file:
             self._export.check_one_skeleton("pack")
         self._export.statistics  # noqa: B018
 
     def items(self):
-        self.names  # noqa: B018
         if self.single_file:
             yield None, self._export.packed()
         else:
@@ -60,7 +60,7 @@ class NpzExporter(Exporter):
         from . import npz
 
         name, arrays = item
-        npz.write_npz(path, arrays, what=f"clip {name!r}" if name is not None else "")
+        npz.write_npz(path, arrays, what=f"clip {name!r}" if name is not None else "", atomic=False)  # staged already
 
     def summary(self, result: ExportResult) -> str:
         features = self.options["features"]

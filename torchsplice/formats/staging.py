@@ -57,11 +57,13 @@ def staged_files(output, folder: Path | None = None, overwrite: bool = False,
     from ..store.lock import output_lock, remove_stale_temporaries, temp_path
 
     staged: dict[Path, Path] = {}
+    cleaned: set[Path] = set()
 
     def stage(f) -> Path:
         f = Path(f)
-        if f.parent not in {g.parent for g in staged}:  # what a killed export left there goes first
+        if f.parent not in cleaned:  # what a killed export left there goes first
             remove_stale_temporaries(f.parent, "staged")
+            cleaned.add(f.parent)
         staged[f] = temp_path(f, "staged")
         return staged[f]
 
@@ -105,7 +107,7 @@ def _install(staged: dict[Path, Path]) -> None:
             with contextlib.suppress(OSError):
                 if aside is not None:
                     os.replace(aside, f)
-                elif f not in staged or not staged[f].exists():  # installed by this export: taken back
+                elif not staged[f].exists():  # installed by this export: taken back
                     f.unlink()
         if isinstance(exc, OSError):
             raise TorchspliceError(os_error_message(target, exc)) from None

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
+from ..core.stop import check_stop
 from ..splice.registry import get_method
 from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from ..store.database import MotionDatabase
@@ -24,7 +25,7 @@ from .sources import Sources
 from .summary import JobSummary, progress_bar
 from .task import Part
 
-__all__ = ["merge_job", "OutputMerge", "source_rows", "open_output", "STAGING", "CHECKPOINT_SECONDS", "copy_source_clips",
+__all__ = ["merge_job", "OutputMerge", "source_rows", "open_output", "STAGING", "CHECKPOINT_SECONDS",
            "source_skeleton", "summarise_output", "checkpointed_tasks", "discard_staging", "task_finished",
            "remove_merged_shards"]
 
@@ -97,6 +98,7 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
                 for t in plan.tasks[merged:]:
                     merge.flush(limit=1)
                     bar.update(t.size)
+                    check_stop()
                 merge.finish(sources, summary)
             except BaseException:
                 merge.save_progress()
@@ -231,7 +233,7 @@ class OutputMerge:
         self.checkpoint()
         self.close()
         if c.copy_sources:
-            copy_source_clips(self.out, self.plan, sources)
+            self.out.copy_sources(source_rows(self.plan, sources))
         self.out.set_spliced(self.out.clips)
         replaced = MotionDatabase.virtual_files(c.output)  # the frames of the output this one replaces (a virtual one's)
         mine = run_shards(c, self.plan)
@@ -264,8 +266,6 @@ def open_output(sink, config: JobConfig, plan: Plan, work: Path, run: dict, over
 
 def checkpointed_tasks(work: Path, plan: Plan) -> int:
     """How many tasks the staged output's last checkpoint holds (0 when none or another plan's)."""
-    from ..store.database import MotionDatabase
-
     note = MotionDatabase.checkpoint_note(work / STAGING) or {}
     tasks = note.get("tasks")
     return tasks if note.get("plan") == plan.digest() and isinstance(tasks, int) and 0 <= tasks <= len(plan.tasks) else 0
@@ -320,7 +320,6 @@ def source_skeleton(plan: Plan, g: int, sources: Sources):
 
 def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
     """A locomotion group's skeleton and spec, from the first of its shards that holds clips."""
-    from ..store.database import MotionDatabase
     from ..specs import DatasetSpec
 
     for t in plan.tasks:
@@ -335,9 +334,9 @@ def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
 def summarise_output(summary: JobSummary, out, merge: OutputMerge) -> None:
     summary.merged_shards = merge.appended
     c = merge.config
-    shards = run_shards(c, merge.plan)
-    summary.written = c.output.stat().st_size + (sum(f.stat().st_size for f in shards.iterdir())
-                                                 if c.layout == "virtual" and shards.is_dir() else 0)
+    folder = run_shards(c, merge.plan)
+    summary.written = c.output.stat().st_size + (sum(f.stat().st_size for f in folder.iterdir())
+                                                 if c.layout == "virtual" and folder.is_dir() else 0)
     summary.spliced, summary.flagged, summary.flagged_clips, summary.copied, summary.timings = (
         out.clips, out.flagged, out.flagged_clips, out.copied, out.timings)
     for why, n in out.skipped.items():
@@ -351,7 +350,3 @@ def source_rows(plan: Plan, sources: Sources) -> list:
             (sources.db("A"), sorted({p.action for p in plan.pairs}
                                      | {p.reference for p in plan.pairs if p.reference is not None
                                         and get_method(p.method).needs_reference}))]
-
-
-def copy_source_clips(out, plan: Plan, sources: Sources) -> None:
-    out.copy_sources(source_rows(plan, sources))

@@ -25,7 +25,7 @@ from ..core.errors import TorchspliceError, UnfinishedJobError
 from ..store.lock import temp_path
 from ..specs import DatasetSpec, SkeletonRoles
 from ..splice import SpliceOptions
-from ..splice.clips import ClipTensors, clips_to_tensors
+from ..splice.clips import clips_to_tensors
 from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
 from ..splice.registry import get_method
@@ -308,9 +308,8 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
             bank, index = sources.bank(n, g.clips, g.fps, roles, options, backend)
             for b in range(0, len(native), 256):
                 chunk = native[b:b + 256]
-                pos, lengths = backend.positions(bank, [index[k] for k in chunk])
-                for k, chk in zip(chunk, check_locomotion(ClipTensors(None, None, lengths, pos, None), roles, g.fps)):
-                    out[k] = chk
+                out.update(zip(chunk, backend.locomotion_checks(bank, [index[k] for k in chunk], [], roles, g.fps,
+                                                                options)[0]))
         rest: dict[float, list[str]] = {}
         for k in sorted(g.clips, key=lambda k: clips[k].frames):
             if k not in out:

@@ -49,6 +49,7 @@ from pathlib import Path
 import torch
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
+from ..core.stop import check_stop
 from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
 from .engines import EngineContext, make_engine
@@ -94,7 +95,7 @@ class SpliceJob:
             raise OutputExistsError(f"{c.output}: already exists")
         if self.dry_run:
             return self._dry_run(t0)
-        prestart(c.engine, c.worker_count(), c.device)
+        prestart(c.engine, c.worker_count(), c.device, c.backend)
         if self.shard is not None and self.restart:
             raise TorchspliceError("{restart} discards the whole job, every slice's work too: run it once without {shard}",
                                    options=("restart", "shard"))
@@ -232,6 +233,7 @@ class SpliceJob:
                 merge.add(task, part)
             bar.update(task.size)
             bar.set_postfix_str(f"workers {engine.alive()}", refresh=False)
+            check_stop()  # a SIGTERM that a library swallowed still stops the job here, its tasks kept
 
         t1 = time.perf_counter()
         try:

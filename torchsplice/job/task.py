@@ -133,9 +133,11 @@ class Part:
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
     """Splice the pairs of ``task`` (see the module docstring)."""
     from ..core.version import __version__
+    from ..splice.backends import backend_for
 
-    if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != config.resolved_backend():
-        raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {config.resolved_backend()} splicer, but the job "
+    resolved = config.resolved_backend()
+    if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != resolved:
+        raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {resolved} splicer, but the job "
                                f"was planned by {plan.key['tool']} with the {plan.key['backend']} splicer: install the same "
                                "version (and numba) everywhere")
     load_plugins(plan.key.get("plugins", ()))  # plug-in methods register themselves in this process too
@@ -149,7 +151,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     spec_m = get_method(method)
     standing = getattr(task, "mode", "timewarp") == "standing"
     options = config.splice_options()
-    backend = config.splice_backend(method)
+    backend = backend_for(spec_m, resolved)
     if backend.prepares_once:  # the group's clips, prepared once per job (see Sources.bank)
         prepared, index = sources.bank(task.group, group.clips, fps, roles, options, backend)
     else:  # this task's clips
@@ -166,6 +168,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         batch = backend.splice(prepared, lo, ac, ref, spec_m, options, fps, buffers=buffers, keep_going=True)
     failed = batch.failed
     ok = np.array([b not in failed for b in range(len(keys))], dtype=bool)
+    kept = np.flatnonzero(ok).tolist()
     frames, rot, trans = batch.frames[ok], _float32(batch.rotations), _float32(batch.translations)
     curve, corr, crop = batch.curve, batch.correction, np.asarray(batch.crop, dtype=np.float64)[ok]
     cost, posture = np.asarray(batch.cost, dtype=np.float64)[ok], np.asarray(batch.posture, dtype=np.float64)[ok]
@@ -173,7 +176,6 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
         log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
-    kept = [b for b in range(len(pairs)) if b not in failed]
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture)
     part.skipped = skipped

@@ -1,16 +1,10 @@
-"""What a local worker process starts with: the job's modules and the compiled kernels, loaded
-once in the fork server (:class:`~torchsplice.job.engines.local.LocalEngine`), so that every worker
-forked from it starts splicing at once.
-
-Workers compute with one thread each; their kernels use numba's ``workqueue`` threading layer,
-which survives a fork (GNU OpenMP, numba's usual layer, does not).
+"""What a local worker process starts with: the job's modules and each backend's preload (the
+compiled kernels, with a threading layer that survives a fork), loaded once in the fork server
+(:class:`~torchsplice.job.engines.local.LocalEngine`), so that every worker forked from it starts
+splicing at once. Workers compute with one thread each.
 """
 
-import numba
-
-numba.config.THREADING_LAYER = "workqueue"
-
-from .task import run_task  # noqa: E402,F401 (imports torch, numba's kernels and the splicer)
+from .task import run_task  # noqa: F401 (imports torch and the splicer)
 
 try:
     from ..splice.backends import available_backends, get_backend

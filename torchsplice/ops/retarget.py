@@ -31,19 +31,19 @@ frames; the loops run over joints).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 
 from ..core.errors import MotionError
 from ..core.fk import forward_kinematics
 from ..core.motion import Motion
-from ..core.rotations import quat_apply, quat_conj, quat_mul, quat_normalize, rotmat_to_quat
+from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize, rotmat_to_quat
 from ..core.skeleton import Skeleton
 from ..specs.canonical import canonical_bones, canonical_joints
 from ..specs.roles import SkeletonRoles
 
-__all__ = ["RetargetMap", "retarget_map", "retarget_motion", "leg_length", "character_height", "quat_between"]
+__all__ = ["RetargetMap", "retarget_map", "retarget_motion", "leg_length", "character_height"]
 
 
 @dataclass(frozen=True)
@@ -69,24 +69,10 @@ class RetargetMap:
     pelvis: tuple[int, int]
     scale: float
     up_axis: int
-    notes: tuple[str, ...] = field(default=())
 
 
-def quat_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-    """``(..., 4)`` the smallest rotation taking directions ``u`` onto ``v`` (``(..., 3)``, any
-    length); for opposite directions, a half turn about an axis perpendicular to ``u``."""
-    u = u / u.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    w = 1.0 + (u * v).sum(-1, keepdim=True)
-    axis = torch.cross(u, v, dim=-1)
-    opposite = (w < 1e-9).squeeze(-1)
-    if opposite.any():
-        other = torch.where(u[..., :1].abs() < 0.9, torch.tensor([1.0, 0.0, 0.0], dtype=u.dtype),
-                            torch.tensor([0.0, 1.0, 0.0], dtype=u.dtype))
-        perp = torch.cross(u, other.expand_as(u), dim=-1)
-        axis = torch.where(opposite[..., None], perp / perp.norm(dim=-1, keepdim=True), axis)
-        w = torch.where(opposite[..., None], torch.zeros_like(w), w)
-    return quat_normalize(torch.cat([w, axis], dim=-1))
+def _unit(v: torch.Tensor) -> torch.Tensor:
+    return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
 
 def _frame(across: torch.Tensor, up: torch.Tensor) -> torch.Tensor:
@@ -184,7 +170,7 @@ def retarget_map(source: Skeleton, source_roles: SkeletonRoles, target: Skeleton
         if child is not None:
             d_s, d_t = rest_s[pairs[child]] - rest_s[pairs[jt]], rest_t[child] - rest_t[jt]
             if d_s.norm() > 1e-9 and d_t.norm() > 1e-9:
-                align[jt] = quat_mul(quat_between(quat_apply(base, d_s), d_t), base)
+                align[jt] = quat_mul(quat_between(_unit(quat_apply(base, d_s)), _unit(d_t)), base)
                 continue
         align[jt] = base
     held = tuple(j for j in range(target.num_joints) if j not in pairs)

@@ -20,7 +20,7 @@ missing.
 
 from __future__ import annotations
 
-from .roles import SkeletonRoles
+from .roles import SkeletonRoles, chain
 
 __all__ = ["CANONICAL", "REQUIRED", "canonical_joints", "canonical_bones"]
 
@@ -34,27 +34,15 @@ REQUIRED = ("pelvis", "spine", "shoulder_l", "shoulder_r", "elbow_l", "elbow_r",
 """What a skeleton must have to be retargeted (and spliced across skeletons)."""
 
 
-def _chain(skeleton, top: int, bottom: int) -> list[int]:
-    """Joints from ``top`` down to ``bottom`` (both included), or ``[]`` if ``bottom`` does not
-    hang below ``top``."""
-    out, j = [], bottom
-    while j >= 0:
-        out.append(j)
-        if j == top:
-            return out[::-1]
-        j = skeleton.parents[j]
-    return []
-
-
 def _elbow(skeleton, shoulder: int, wrist: int) -> int | None:
     """The joint strictly between shoulder and wrist whose position splits the arm best: the one
     furthest from both ends (a zero-length helper is never chosen over a real joint)."""
-    chain = _chain(skeleton, shoulder, wrist)
-    if len(chain) < 3:
+    arm = chain(skeleton.parents, shoulder, wrist)
+    if len(arm) < 3:
         return None
     rest, _ = skeleton.rest_positions()
     a, b = rest[shoulder], rest[wrist]
-    best = max(chain[1:-1], key=lambda j: min(float((rest[j] - a).norm()), float((rest[j] - b).norm())))
+    best = max(arm[1:-1], key=lambda j: min(float((rest[j] - a).norm()), float((rest[j] - b).norm())))
     return best if float((rest[best] - a).norm()) > 0 and float((rest[best] - b).norm()) > 0 else None
 
 
@@ -96,18 +84,18 @@ def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton")
     if missing:
         raise SpecError(f"{what} cannot be retargeted: no {', '.join(missing)} (a humanoid needs hips, knees, ankles, "
                         "a spine, shoulders, elbows and wrists)")
-    return out
+    return {name: out[name] for name in CANONICAL if name in out}  # in canonical order
 
 
 def canonical_bones(joints: dict) -> list[tuple[int, int]]:
     """``(joint, the canonical joint its bone points to)`` of a canonical map: the spine chain to
     the neck and head, each clavicle to its shoulder, shoulder to elbow, elbow to wrist, hip to
     knee, knee to ankle, ankle to toe (where the map has them)."""
-    chain = [*joints["spine"]]
+    spine = [*joints["spine"]]
     for name in ("neck", "head"):
-        if name in joints and joints[name] not in chain:
-            chain.append(joints[name])
-    bones = [(a, b) for a, b in zip(chain, chain[1:])]
+        if name in joints and joints[name] not in spine:
+            spine.append(joints[name])
+    bones = list(zip(spine, spine[1:]))
     for side in ("l", "r"):
         limb = [f"clavicle_{side}", f"shoulder_{side}", f"elbow_{side}", f"wrist_{side}"]
         leg = [f"hip_{side}", f"knee_{side}", f"ankle_{side}", f"toe_{side}"]

@@ -13,7 +13,7 @@ import re
 from ..core.errors import SpecError
 from ..core.skeleton import POSITION_CHANNELS, Skeleton
 
-from .roles import is_ancestor
+from .roles import chain, is_ancestor
 from .vocabulary import AXES
 
 __all__ = ["guess_joints", "cannot_guess"]
@@ -241,7 +241,7 @@ def guess_joints(skeleton: Skeleton, up_axis: str) -> dict:
     root = _trajectory_joint(skeleton, top)
     heads = [j for j, (_, core) in enumerate(g.parsed) if core in _HEAD and is_ancestor(skeleton.parents, pelvis, j)]
     head = heads[0] if heads else None
-    spine = _chain(skeleton, pelvis, skeleton.parents[head] if head is not None else chest)
+    spine = chain(skeleton.parents, pelvis, skeleton.parents[head] if head is not None else chest)
     problem, posture = _posture(skeleton, AXES[up_axis], pelvis, chest, head, hips, feet, shoulders)
     if problem is not None:
         raise g.fail(problem, joints=False)
@@ -250,7 +250,7 @@ def guess_joints(skeleton: Skeleton, up_axis: str) -> dict:
     names = lambda js: tuple(n[j] for j in js)  # noqa: E731
     legs = [(hips[s], knees[s], feet[s]) + ((toes[s],) if None not in toes else ()) for s in (0, 1)]
     arms = [(shoulders[s], elbows[s]) + ((hands[s],) if hands else ()) for s in (0, 1)]
-    skipped = [j for limb in legs + arms for a, b in zip(limb, limb[1:]) for j in _chain(skeleton, a, b)[1:-1]]
+    skipped = [j for limb in legs + arms for a, b in zip(limb, limb[1:]) for j in chain(skeleton.parents, a, b)[1:-1]]
     guessed = (("root", (n[root],)), ("pelvis", (n[pelvis],)), ("spine", names(spine)),
                ("head", (n[head],) if head is not None else ()), ("left_leg", names(legs[0])),
                ("right_leg", names(legs[1])), ("left_arm", names(arms[0])), ("right_arm", names(arms[1])),
@@ -275,14 +275,6 @@ def _trajectory_joint(sk: Skeleton, top: int) -> int:
             return j
         j = sk.parents[j]
     return 0
-
-
-def _chain(sk: Skeleton, start: int, end: int) -> list[int]:
-    """Joints from ``start`` down to ``end`` (``start`` must be an ancestor-or-self of ``end``)."""
-    path = [end]
-    while path[-1] != start:
-        path.append(sk.parents[path[-1]])
-    return path[::-1]
 
 
 def _guess_notes(sk, notes, root, top, pelvis, head, toes, limbs, skipped, posture) -> list[str]:
@@ -314,7 +306,7 @@ def _posture(sk: Skeleton, up: int, pelvis: int, chest: int, head: int | None, h
     axis = "xyz"[up]
     pos, ends = sk.rest_positions()
     height = pos[:, up]
-    leg = [sum(float(sk.offsets[k].norm()) for k in _chain(sk, h, f)[1:]) for h, f in zip(hips, feet)]
+    leg = [sum(float(sk.offsets[k].norm()) for k in chain(sk.parents, h, f)[1:]) for h, f in zip(hips, feet)]
     drop = [float(height[h] - height[f]) for h, f in zip(hips, feet)]
     if min(leg) <= 0 or any(d < _LEGS_HANG * length for d, length in zip(drop, leg)):
         return None, f"the rest pose does not show the legs hanging down along {axis}: quadruped check skipped"

@@ -14,7 +14,7 @@ from ..core.errors import SpecError
 from ..core.skeleton import Skeleton
 from .vocabulary import AXES, OPTIONAL_PAIRS, PAIRS
 
-__all__ = ["SkeletonRoles", "bind_roles", "landmark_indices", "is_ancestor"]
+__all__ = ["chain", "SkeletonRoles", "bind_roles", "landmark_indices", "is_ancestor"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,18 @@ def bind_roles(spec, sk: Skeleton) -> SkeletonRoles:
     upper, lower = _body_split(spec, sk, roles["pelvis"], idx)
     return SkeletonRoles(**roles, upper_body=upper, lower_body=lower,
                          up_axis=AXES[spec.up_axis], units=spec.units)
+
+
+def chain(parents: tuple[int, ...], top: int, bottom: int) -> list[int]:
+    """Joints from ``top`` down to ``bottom`` (both included), or ``[]`` when ``bottom`` does
+    not hang below ``top``."""
+    out, j = [], bottom
+    while j >= 0:
+        out.append(j)
+        if j == top:
+            return out[::-1]
+        j = parents[j]
+    return []
 
 
 def is_ancestor(parents: tuple[int, ...], a: int, b: int) -> bool:

@@ -31,19 +31,16 @@ from ..core.errors import MotionError, NotLocomotingError, TorchspliceError
 from ..core.motion import Motion
 from ..specs import DatasetSpec, SkeletonRoles
 from . import backends
-from .backends import SplicedBatch, backend_for
+from .backends import PairFailedError, SplicedBatch, backend_for
 from .clips import check_clip, check_pair, clips_to_tensors, resample_motion
 from .locomotion import LocomotionCheck, check_locomotion
-from .options import SpliceOptions, align_kwargs, bank_kwargs
+from .options import SpliceOptions
 from .registry import Method, get_method
 from .standing import TIMINGS, acting_limbs, standing_tables
 
-__all__ = ["BACKENDS", "TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
-           "splice_pairs", "splice_standing", "resolve_backend", "bank_kwargs", "align_kwargs"]
+__all__ = ["TIMINGS", "SpliceOptions", "SpliceResult", "NotLocomotingError", "splice",
+           "splice_pairs", "splice_standing", "resolve_backend"]
 
-BACKENDS = ("auto", "compiled", "torch")
-"""The built-in choices of ``SpliceOptions.backend`` (:func:`~torchsplice.splice.backends.backend_choices`
-adds registered ones)."""
 
 
 def spliced_labels(method: str, locomotion: str, locomotion_labels: dict, action: str, action_labels: dict) -> dict:
@@ -295,14 +292,12 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options:
 
 def _splice_group(pairs, refs, roles: SkeletonRoles, method: Method, options: SpliceOptions, fps: float) -> list[SpliceResult]:
     """Pairs whose locomotions share a frame rate ``fps``, time-aligned."""
-    from .backends.compiled import CompiledPairError
-
     prep = _prepare(pairs, refs, roles, method, options, fps)
     checks_l, checks_a = _checks(prep, roles, options, fps)
     notes = _notes_or_raise(pairs, prep, checks_l, checks_a, options)
     try:
         batch = prep.backend.splice(prep.clips, prep.loco, prep.action, prep.reference, method, options, fps)
-    except CompiledPairError as exc:
+    except PairFailedError as exc:
         lo, ac = pairs[exc.pair]
         raise MotionError(f"clips {lo.name!r} and {ac.name!r} cannot be aligned: {exc.reason}") from None
     return _results(pairs, refs, prep, batch, method, options, fps, checks_l, checks_a, notes)

@@ -38,10 +38,10 @@ from .checks import check_header
 from .lock import check_name_length, output_lock, temp_path
 from .reading import ClipBatch, Reading, virtual_files
 from .resumable import RowLog, clear_status_flags, commit_path, detach, last_checkpoint, rows_path
-from .schema import (CLIPS, COLUMNS, COMPRESSIONS, FORMAT, KINDS, SCHEMA_VERSION, SKELETONS, extra_columns,
+from .schema import (FRAME_ARRAYS, CLIPS, COLUMNS, COMPRESSIONS, FORMAT, KINDS, SCHEMA_VERSION, SKELETONS, extra_columns,
                      skeleton_from_group, skeleton_path)
 from .table import ClipTable, SkeletonInfo
-from .writing import SPACE_MARGIN as _SPACE_MARGIN, Writing, guarded, io_failure, mb
+from .writing import SPACE_MARGIN, Writing, guarded, io_failure, mb
 
 __all__ = ["MotionDatabase", "ClipBatch", "ClipTable", "SkeletonInfo", "SCHEMA_VERSION", "FORMAT", "COMPRESSIONS"]
 
@@ -104,7 +104,7 @@ class MotionDatabase(Reading, Writing):
         """
         columns = dict(columns or {})
         bad = [c for c in list(columns) + list(frame_columns)
-               if c in COLUMNS or c in ("rotations", "root_translation", "translations") or not c.isidentifier()]
+               if c in COLUMNS or c in FRAME_ARRAYS or not c.isidentifier()]
         if bad or any(k not in KINDS for k in columns.values()):
             raise ValueError(f"bad extra columns {bad or columns}")
         if compression not in COMPRESSIONS:
@@ -274,7 +274,7 @@ class MotionDatabase(Reading, Writing):
             if mode == "a":
                 tmp = temp_path(real)
                 free = shutil.disk_usage(real.parent).free
-                if free < path.stat().st_size + _SPACE_MARGIN:
+                if free < path.stat().st_size + SPACE_MARGIN:
                     raise DatabaseError(f"{path}: no space left on the device to append: appending works on a copy "
                                         f"of {mb(path.stat().st_size)} and {real.parent} has {mb(free)} free")
                 shutil.copyfile(path, tmp)

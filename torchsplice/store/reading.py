@@ -26,7 +26,7 @@ from ..core.errors import DatabaseError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import DatasetSpec, detect_spec
-from .schema import CLIPS, COLUMNS, SKELETONS, cap, short, skeleton_path
+from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, SKELETONS, cap, short, skeleton_path
 from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
 
 __all__ = ["Reading", "ClipBatch", "FrameArray", "reads", "virtual_files"]
@@ -142,7 +142,7 @@ class FrameArray:
     def _damaged(self, lo, hi, exc: OSError) -> DatabaseError:
         ds = self._ds
         return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
-                             f"({str(exc).splitlines()[0][:120]})")
+                             f"({short(exc)})")
 
 
 def virtual_files(path: Path) -> set[Path]:
@@ -180,7 +180,7 @@ class Reading:
             if rows is None:
                 rows = np.flatnonzero(c["skeleton"][()] == k)
             g = self.h5[skeleton_path(k)]
-            sets = [n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g]
+            sets = [n for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g]
             for i in sorted((int(i) for i in rows), key=lambda i: int(start[i])):
                 s, n = int(start[i]), int(length[i])
                 for name in sets:
@@ -260,12 +260,17 @@ class Reading:
     @reads
     def clip_table(self) -> ClipTable:
         """The clip table, typed: every column an array in row order, labels decoded (a row
-        whose labels are not a JSON object: one :class:`DatabaseError` naming the clip)."""
+        whose labels are not a JSON object: one :class:`DatabaseError` naming the clip). Read
+        once per open database and kept until clips are added; its arrays are read-only."""
         self.flush()
         self._table_written()
         c = self.h5[CLIPS]
+        cached = getattr(self, "_clip_table", None)
+        if cached is not None and len(cached) == c["name"].shape[0]:  # rows are only ever added
+            return cached
         columns = {k: (c[k].asstr()[()] if h5py.check_string_dtype(c[k].dtype) else c[k][()]) for k in [*COLUMNS, *self.columns]}
-        return ClipTable.from_columns(columns, self.columns, self.path)
+        self._clip_table = ClipTable.from_columns(columns, self.columns, self.path)
+        return self._clip_table
 
     def __contains__(self, clip) -> bool:
         """Whether the database holds a clip named ``clip``."""
@@ -286,7 +291,7 @@ class Reading:
         return SkeletonInfo(
             id=skeleton, skeleton=sk, units=str(g.attrs.get("units", "")), up_axis=str(g.attrs.get("up_axis", "")),
             spec_json=text, spec_name=spec.get("name", "") if isinstance(spec, dict) else "",
-            frame_arrays=tuple(n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g),
+            frame_arrays=tuple(n for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g),
             dtype=np.dtype(g["rotations"].dtype))
 
     def stored_spec(self, skeleton: int) -> DatasetSpec | None:
@@ -305,7 +310,7 @@ class Reading:
         """The per-frame array ``name`` of skeleton ``k`` (one of :attr:`SkeletonInfo.frame_arrays`),
         for readers that take rows of many clips (see :class:`FrameArray`)."""
         g = self.h5[skeleton_path(skeleton)]
-        if name not in ("rotations", "root_translation", "translations", *self.frame_columns) or name not in g:
+        if name not in (*FRAME_ARRAYS, *self.frame_columns) or name not in g:
             raise DatabaseError(f"{self.path}: skeleton {skeleton} stores no per-frame array {name!r}")
         return FrameArray(g[name])
 
@@ -333,7 +338,7 @@ class Reading:
         once: meant for a splice job's parts and other small files)."""
         g = self.h5[skeleton_path(skeleton)]
         with self._frames(skeleton):
-            return {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
+            return {n: g[n][()] for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g}
 
     @reads
     def read_many(self, clips: Sequence[str | int], dtype: torch.dtype = torch.float32) -> list[Motion]:
@@ -353,7 +358,7 @@ class Reading:
             if hi - lo <= 2 * sum(int(t["length"][i]) for i in mine):  # one read, each chunk decompressed once
                 g = self.h5[skeleton_path(k)]
                 with self._frames(k, mine):
-                    blocks[k] = (lo, {n: g[n][lo:hi] for n in ("rotations", "root_translation", "translations") if n in g})
+                    blocks[k] = (lo, {n: g[n][lo:hi] for n in FRAME_ARRAYS if n in g})
         out = []
         for i in idx:
             k, s, n = int(t["skeleton"][i]), int(t["start"][i]), int(t["length"][i])
@@ -453,7 +458,7 @@ class Reading:
             if k not in frames:
                 g = self.h5[skeleton_path(k)]
                 with self._frames(k):
-                    frames[k] = {n: g[n][()] for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g}
+                    frames[k] = {n: g[n][()] for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g}
             f, s, n = frames[k], int(t["start"][i]), int(t["length"][i])
 
             def get(name):

@@ -166,7 +166,7 @@ def extra_columns(attrs) -> tuple[dict[str, str], tuple[str, ...]]:
     frame = extra.get("frame", []) if isinstance(extra, dict) else None
     if not isinstance(clip, dict) or not isinstance(frame, list):
         raise Damage(f"extra_columns is not an object of clip columns and frame columns ({cap(text)})")
-    reserved = (*COLUMNS, "rotations", "root_translation", "translations")
+    reserved = (*COLUMNS, *FRAME_ARRAYS)
     for name, kind in clip.items():
         if kind not in KINDS or name in reserved or not name.isidentifier():
             raise Damage(f"extra_columns declares clip column {cap(name)} of kind {cap(kind)} "

@@ -15,19 +15,20 @@ Several selectors (a repeated command-line flag, or a list) must all select a cl
 ``--locomotions role:locomotion --locomotions 'label:style=normal'`` takes the normal-style
 locomotions, ``--locomotions '*walk*,*run*'`` takes walks and runs.
 
-Tables are a :class:`~torchsplice.store.table.ClipTable` (``MotionDatabase.clip_table()``) or
-the dict :meth:`~torchsplice.store.database.MotionDatabase.table` gives (names, roles and labels
-only).
+Selection reads a database's :class:`~torchsplice.store.table.ClipTable`
+(``MotionDatabase.clip_table()``), one pass over the clips per alternative.
 """
 
 from __future__ import annotations
 
 import fnmatch
-import json
 import re
 from typing import Sequence
 
+import numpy as np
+
 from ..core.errors import TorchspliceError
+from .table import ClipTable
 
 __all__ = ["select_clips", "parse_selector"]
 
@@ -62,19 +63,19 @@ def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, st
     return alts
 
 
-def _matches(alts, name: str, role: str, labels: dict, skeleton, values: dict) -> bool:
-    for kind, key, pattern in alts:
-        if kind == "role" and role == pattern:
-            return True
-        if kind == "skeleton" and skeleton is not None and str(int(skeleton)) == pattern:
-            return True
-        if kind == "column" and fnmatch.fnmatchcase(str(values[key]), pattern):
-            return True
-        if kind == "label" and key in labels and fnmatch.fnmatchcase(str(labels[key]), pattern):
-            return True
-        if kind == "name" and fnmatch.fnmatchcase(name, pattern):
-            return True
-    return False
+def _mask(alt, names, roles: np.ndarray, labels: list[dict], skeletons: np.ndarray, columns: dict) -> np.ndarray:
+    """``(C,)`` bool: the clips one alternative ``(kind, key, pattern)`` selects."""
+    kind, key, pattern = alt
+    if kind == "role":
+        return roles == pattern
+    if kind == "skeleton":
+        return skeletons == int(pattern)
+    match = re.compile(fnmatch.translate(pattern)).match  # fnmatchcase: case-sensitive, whole value
+    if kind == "label":
+        values = (str(lab[key]) if key in lab else None for lab in labels)
+        return np.fromiter((v is not None and match(v) is not None for v in values), bool, len(labels))
+    values = columns[key] if kind == "column" else names
+    return np.fromiter((match(str(v)) is not None for v in values), bool, len(values))
 
 
 def _option(what: str) -> tuple[str, ...]:
@@ -105,39 +106,30 @@ def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict],
     return "its clips: " + (", ".join(names[:6]) + (", ..." if len(names) > 6 else "") or "none")
 
 
-def _columns(table):
-    """``(names, roles, labels, skeletons or None, text columns)`` of a table (see the module docstring)."""
-    if isinstance(table, dict):  # MotionDatabase.table(): labels as stored
-        names, roles = [str(n) for n in table["name"]], [str(r) for r in table["role"]]
-        labels = [json.loads(lab or "{}") for lab in table["labels"]]
-        skeletons = table.get("skeleton")
-        return names, roles, labels, skeletons, {}
-    text = {k: v for k, v in table.extra.items() if table.kinds.get(k) == "str"}
-    return table.names, [str(r) for r in table.role], table.labels, table.skeleton, text
-
-
-def select_clips(table, selectors: str | Sequence[str], what: str, source: str) -> list[int]:
-    """Rows of a database ``table`` (a :class:`~torchsplice.store.table.ClipTable`, or the dict
-    :meth:`MotionDatabase.table` gives) that every selector selects, in row order.
+def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, source: str) -> list[int]:
+    """Rows of a database's clip ``table`` that every selector selects, in row order.
 
     ``what`` (e.g. ``"{locomotions}"``, an option placeholder of
     :class:`~torchsplice.core.errors.TorchspliceError`, or plain text) and ``source`` (the
     database path) only serve error messages: a selector that selects nothing is an error
     naming it.
     """
-    names, roles, labels, skeletons, columns = _columns(table)
-    rows = list(range(len(names)))
-    for text in ([selectors] if isinstance(selectors, str) else selectors):
+    selectors = [selectors] if isinstance(selectors, str) else list(selectors)
+    names, labels = table.names, table.labels
+    roles, skeletons = np.asarray(table.role, dtype=str), np.asarray(table.skeleton)
+    columns = {k: v for k, v in table.extra.items() if table.kinds.get(k) == "str"}
+    keep = np.ones(len(names), dtype=bool)
+    for text in selectors:
         alts = parse_selector(text, tuple(columns))
-        hit = [i for i in range(len(names))
-               if _matches(alts, names[i], roles[i], labels[i], skeletons[i] if skeletons is not None else None,
-                           {k: v[i] for k, v in columns.items()})]
-        if not hit:
-            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} ({_what_there_is(alts, names, roles, labels, skeletons, columns)})",
+        hit = np.zeros(len(names), dtype=bool)
+        for alt in alts:
+            hit |= _mask(alt, names, roles, labels, skeletons, columns)
+        if not hit.any():
+            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} "
+                                   f"({_what_there_is(alts, names, roles, labels, skeletons, columns)})",
                                    options=_option(what))
-        keep = set(hit)
-        rows = [i for i in rows if i in keep]
-    if not rows:
+        keep &= hit
+    if not keep.any():
         raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
                                options=_option(what))
-    return rows
+    return np.flatnonzero(keep).tolist()

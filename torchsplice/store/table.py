@@ -1,16 +1,18 @@
 """The clip table as typed values: :class:`ClipTable` (every clip's metadata, labels decoded)
 and :class:`SkeletonInfo` (what a database records with each skeleton).
 
-A database's clip table is read once (:meth:`MotionDatabase.clip_table
-<torchsplice.store.database.MotionDatabase.clip_table>`): every column an array of ``C``
-rows in row order, labels decoded here, once, into dicts (a row whose labels are not a JSON
-object is one :class:`~torchsplice.core.errors.DatabaseError` naming the file and the clip).
+A database's clip table is read once per open database (:meth:`MotionDatabase.clip_table
+<torchsplice.store.database.MotionDatabase.clip_table>`, kept until clips are added): every
+column a read-only array of ``C`` rows in row order, each distinct labels text decoded here
+once (a row whose labels are not a JSON object is one
+:class:`~torchsplice.core.errors.DatabaseError` naming the file and the clip).
 """
 
 from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -76,6 +78,8 @@ class ClipTable:
                 labels.append(decoded[text])
             else:
                 labels.append(dict(decoded[text]))
+        for array in columns.values():  # shared by every caller of a database's table
+            array.setflags(write=False)
         return cls(name=columns["name"], source=columns["source"], role=columns["role"], labels=labels,
                    labels_json=columns["labels"], skeleton=columns["skeleton"], start=columns["start"],
                    length=columns["length"], fps=columns["fps"],
@@ -84,9 +88,9 @@ class ClipTable:
     def __len__(self) -> int:
         return len(self.name)
 
-    @property
+    @cached_property
     def names(self) -> list[str]:
-        """The clips' names as a list."""
+        """The clips' names as a list (made once)."""
         return [str(n) for n in self.name]
 
     def column(self, name: str) -> np.ndarray:
@@ -107,8 +111,7 @@ class ClipTable:
     def take(self, rows: Sequence[int] | np.ndarray) -> "ClipTable":
         """The table of ``rows`` only (row numbers, or a boolean mask), in that order."""
         rows = np.asarray(rows)
-        if rows.dtype == bool:
-            rows = np.flatnonzero(rows)
+        rows = np.flatnonzero(rows) if rows.dtype == bool else rows.astype(np.intp)
         return ClipTable(name=self.name[rows], source=self.source[rows], role=self.role[rows],
                          labels=[self.labels[int(i)] for i in rows], labels_json=self.labels_json[rows],
                          skeleton=self.skeleton[rows], start=self.start[rows], length=self.length[rows],

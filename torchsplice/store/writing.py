@@ -27,7 +27,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .checks import control_name
-from .schema import CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, STR, skeleton_path, skeleton_to_group
+from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, STR, short, skeleton_path, skeleton_to_group
 
 __all__ = ["Writing", "guarded", "io_failure", "SPACE_MARGIN", "FLUSH_FRAMES"]
 
@@ -140,7 +140,7 @@ class Writing:
         if discard:
             self.abort(failed=True)
         if not no_space(exc):
-            return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({str(exc).splitlines()[0][:120]})"
+            return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({short(exc)})"
         folder = self.path.parent.resolve()
         free = shutil.disk_usage(folder).free
         return (f"{self.path}: no space left on the device; the database needs more than {mb(written + pending)} "
@@ -272,12 +272,7 @@ class Writing:
         trans = None if translations is None else arr(translations)
         if trans is not None and trans.shape != (N, J, 3):
             raise DatabaseError(f"{self.path}: translations must be {(N, J, 3)}, got {trans.shape}")
-        index = self._index_map()
-        clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
-        if clash:
-            raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
-        if (bad := control_name(names)) is not None:
-            raise DatabaseError(f"{self.path}: {bad}")
+        index = self._new_names(names)
         starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
         for name, a in (("rotations", rot), ("root translation", root), ("translations", trans)) if check else ():
             if a is not None and not np.isfinite(a).all():
@@ -297,14 +292,7 @@ class Writing:
             if frames[name].shape != (N,):
                 raise DatabaseError(f"{self.path}: column {name!r} needs {N} values, got {frames[name].shape}")
 
-        each = lambda v, what: per_clip(v, C, what, self.path)  # noqa: E731
-        rows = {
-            "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
-            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
-            "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
-        }
-        for n, kind in self.columns.items():
-            rows[n] = each(extra[n], f"column {n!r}") if n in extra else [KINDS[kind][1]] * C
+        rows = self._rows(names, lengths, fps, sources, roles, labels, extra)
         k = self.add_skeleton(skeleton, spec)
         self._no_virtual(k)
         g = self.h5[skeleton_path(k)]
@@ -373,25 +361,45 @@ class Writing:
         self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
         parts.append((rel, N))
 
-    def _append_rows(self, k: int, n0: int, lengths, names, fps, sources, roles, labels, extra: dict) -> None:
-        """Table rows of ``C`` clips of skeleton ``k`` whose frames start at row ``n0``."""
-        C = len(names)
+    def _new_names(self, names: list[str]) -> dict:
+        """The name index, once ``names`` are checked as new, distinct and printable."""
         index = self._index_map()
-        clash = [n for n in names if n in index] or ([n for n in names if names.count(n) > 1][:1] if len(set(names)) < C else [])
+        clash = [n for n in names if n in index] or (
+            [n for n in names if names.count(n) > 1][:1] if len(set(names)) < len(names) else [])
         if clash:
             raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
         if (bad := control_name(names)) is not None:
             raise DatabaseError(f"{self.path}: {bad}")
+        return index
 
+    def _rows(self, names, lengths, fps, sources, roles, labels, extra: dict) -> dict:
+        """The table rows of new clips (every column but ``skeleton`` and ``start``): one length
+        of at least a frame per name, and only declared extra columns."""
+        C = len(names)
+        lengths = np.asarray(lengths, dtype=np.int64).reshape(-1)
+        if lengths.shape != (C,) or (lengths < 1).any():
+            raise DatabaseError(f"{self.path}: {C} clip names need {C} lengths of at least one frame, got "
+                                f"{len(lengths)} ({', '.join(map(str, lengths[:6].tolist()))}{', ...' if len(lengths) > 6 else ''})")
+        unknown = [n for n in extra if n not in self.columns]
+        if unknown:
+            raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         each = lambda v, what: per_clip(v, C, what, self.path)  # noqa: E731
         rows = {
             "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
-            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True) for v in each(labels if labels is not None else "{}", "labels")],
+            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+                       for v in each(labels if labels is not None else "{}", "labels")],
             "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
-            "skeleton": [k] * C, "start": n0 + np.concatenate(([0], np.cumsum(lengths)[:-1])),
         }
         for n, kind in self.columns.items():
             rows[n] = each(extra[n], f"column {n!r}") if n in extra else [KINDS[kind][1]] * C
+        return rows
+
+    def _append_rows(self, k: int, n0: int, lengths, names, fps, sources, roles, labels, extra: dict) -> None:
+        """Table rows of ``C`` clips of skeleton ``k`` whose frames start at row ``n0``."""
+        C = len(names)
+        index = self._new_names(names)
+        rows = self._rows(names, lengths, fps, sources, roles, labels, extra)
+        rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
         self._store_rows(rows)
         for n in names:
             index[n] = len(index)
@@ -404,7 +412,7 @@ class Writing:
         for k, parts in self._virtual.items():
             g = self.h5[skeleton_path(k)]
             total = sum(n for _, n in parts)
-            for name in [n for n in ("rotations", "root_translation", "translations", *self.frame_columns) if n in g]:
+            for name in [n for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g]:
                 ds = g[name]
                 shape, dtype = (total,) + ds.shape[1:], ds.dtype
                 layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
@@ -470,7 +478,7 @@ class Writing:
 
     def _store_rows(self, rows: dict) -> None:
         """Write clip-table rows (column -> ``C`` values) after the stored ones: into the clips
-        datasets, or, for a resumable database, into its row log (:class:`_RowLog`), which
+        datasets, or, for a resumable database, into its row log (:class:`~torchsplice.store.resumable.RowLog`), which
         :meth:`close` writes to the datasets at once (HDF5's heap of variable-length strings is
         not covered by SWMR's ordered writes, so a killed process could leave it torn)."""
         if self._resumable:

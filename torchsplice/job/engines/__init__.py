@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from ..sink import Sink
     from ..sources import Sources
 
-__all__ = ["one_thread_worker", "Engine", "EngineContext", "register_engine", "available_engines", "make_engine", "MAX_ATTEMPTS"]
+__all__ = ["shard_compression", "one_thread_worker", "Engine", "EngineContext", "register_engine", "available_engines", "make_engine", "MAX_ATTEMPTS"]
 
 MAX_ATTEMPTS = 3
 """Tries of a task whose worker dies (local workers: pool breaks in a row; Ray: retries)."""
@@ -64,8 +64,7 @@ class EngineContext:
     keep_shards: bool = True
 
     def shard_compression(self):
-        """Shards of a virtual output are the output's frames: compressed like it; otherwise raw."""
-        return self.config.compression if self.config.layout == "virtual" else None
+        return shard_compression(self.config)
 
     def write_shard(self, task: "Task", part) -> None:
         """Write ``task``'s shard from ``part`` (when shards are kept)."""
@@ -142,3 +141,8 @@ def one_thread_worker(config) -> None:
 
     torch.set_num_threads(1)
     config.splice_backend().set_threads(1)
+
+
+def shard_compression(config):
+    """Shards of a virtual output are the output's frames: compressed like it; otherwise raw."""
+    return config.compression if config.layout == "virtual" else None

@@ -11,13 +11,15 @@ import sys
 __all__ = ["prestart"]
 
 
-def prestart(engine: str, workers: int | None, device: str | None) -> None:
+def prestart(engine: str, workers: int | None, device: str | None, backend: str = "auto") -> None:
     """Start the fork server if the ``local`` engine will use worker processes (more than one
-    worker, on the CPU); ``workers`` ``None``: one per core. Quietly does nothing where it
-    cannot: the engine starts it later, or says why it cannot."""
+    worker, on the CPU, with the compiled splicer: another backend runs in this process);
+    ``workers`` ``None``: one per core. Quietly does nothing where it cannot: the engine starts
+    it later, or says why it cannot."""
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    if engine != "local" or workers <= 1 or (device or "cpu") != "cpu" or sys.platform == "win32":
+    if (engine != "local" or workers <= 1 or (device or "cpu") != "cpu" or backend not in ("auto", "compiled")
+            or sys.platform == "win32"):
         return
     import multiprocessing as mp
     from multiprocessing import forkserver

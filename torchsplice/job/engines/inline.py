@@ -26,9 +26,9 @@ class InlineEngine(Engine):
 
     def run(self, tasks, done) -> None:
         backend = self.config.splice_backend()
-        buffers = None
-        if backend.new_buffers() is not None:  # the writer reads one while the next task fills the other
-            buffers = (backend.new_buffers(), backend.new_buffers())
+        buffers = (backend.new_buffers(), backend.new_buffers())  # the writer reads one while the next task fills the other
+        if buffers[0] is None:
+            buffers = None
         pending: Future | None = None
 
         def write(task, part):  # in the writer thread, while the next task computes

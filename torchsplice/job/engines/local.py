@@ -25,18 +25,13 @@ from ..config import JobConfig
 from ..plan import Plan, Task
 from ..sources import Sources
 from ..task import run_task
-from . import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker
+from . import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker, shard_compression
 
 __all__ = ["LocalEngine", "make_local_engine", "IN_FLIGHT_PER_WORKER"]
 
 IN_FLIGHT_PER_WORKER = 2
 """Tasks a local worker has handed out at once (one computing, one waiting): finished tasks
 wait for the driver's merge on disk, so this bounds the disk they take."""
-
-
-def _shard_compression(config: JobConfig):
-    """As :meth:`EngineContext.shard_compression` (a worker has the config, not the context)."""
-    return config.compression if config.layout == "virtual" else None
 
 
 def make_local_engine(ctx: EngineContext) -> Engine:
@@ -94,7 +89,7 @@ def _worker_task(index: int) -> None:
     task = w["plan"].tasks[index]
     part = run_task(w["plan"], task, w["sources"], w["config"])
     if w["keep_shards"]:
-        w["sink"].write_shard(part, w["shard_dir"] / w["sink"].shard_name(task.id), _shard_compression(w["config"]))
+        w["sink"].write_shard(part, w["shard_dir"] / w["sink"].shard_name(task.id), shard_compression(w["config"]))
     else:
         part.save(w["shard_dir"] / w["sink"].part_name(task.id))
 

@@ -32,7 +32,7 @@ from ...core.errors import TorchspliceError
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["Backend", "SplicedBatch", "register_backend", "get_backend", "available_backends", "backend_choices",
+__all__ = ["Backend", "SplicedBatch", "PairFailedError", "register_backend", "get_backend", "available_backends", "backend_choices",
            "resolve_backend", "backend_for"]
 
 # numpy and torch are imported where used: the command line lists the backends without them.
@@ -53,7 +53,8 @@ class SplicedBatch:
         crop ``(B,)``: action frames skipped at the start (at the locomotion's rate).
         cost ``(B,)``: mean lower-body frame distance along the path (NaN: not aligned).
         posture ``(B,)``: posture-transfer angle, degrees.
-        paths: per pair, the ``(P, 2)`` int64 DP path (locomotion frame, cropped action frame).
+        paths: a sequence, per pair, of the ``(P, 2)`` int64 DP path (locomotion frame, cropped
+            action frame).
         failed: pair index -> why it could not be spliced (those pairs have no frames).
     """
 
@@ -66,7 +67,7 @@ class SplicedBatch:
     crop: np.ndarray
     cost: np.ndarray
     posture: np.ndarray
-    paths: list
+    paths: Any
     failed: dict
 
     def __len__(self) -> int:
@@ -99,6 +100,14 @@ class SplicedBatch:
 
         return cls(start, frames, cat("rotations"), cat("translations"), cat("curve"), cat("correction"), cat("crop"),
                    cat("cost"), cat("posture"), [q for p in parts for q in p.paths], failed)
+
+
+class PairFailedError(ValueError):
+    """A pair a backend could not splice: ``pair`` (its index in the call) and ``reason``."""
+
+    def __init__(self, pair: int, reason: str):
+        super().__init__(f"pair {pair}: {reason}")
+        self.pair, self.reason = pair, reason
 
 
 class Backend:
@@ -150,7 +159,8 @@ class Backend:
                keep_going: bool = False) -> SplicedBatch:
         """Splice pairs ``(loco[b], action[b])`` of prepared clips (``reference[b]`` too, for a
         method that needs one) with ``method`` (a :class:`~torchsplice.splice.registry.Method`).
-        A pair that cannot be spliced raises, or with ``keep_going`` is listed in ``failed``."""
+        A pair that cannot be spliced raises (:class:`PairFailedError`, or the method's own
+        error), or with ``keep_going`` is listed in ``failed``."""
         raise NotImplementedError
 
     def standing(self, prepared, loco, action, acting, tables, method, options, fps: float, *,

@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 
-from . import Backend, SplicedBatch
+from . import Backend, PairFailedError, SplicedBatch
 
-__all__ = ["CompiledBackend", "CompiledPairError", "BACKEND", "warm_up"]
+__all__ = ["CompiledBackend", "BACKEND", "warm_up"]
 
 
 def warm_up(quiet: bool = False) -> float:
@@ -83,10 +83,10 @@ class CompiledBackend(Backend):
         failed = {b: f"the alignment failed ({STATUS[int(s)]})" for b, s in enumerate(out.status) if s != 0}
         if failed and not keep_going:
             b = min(failed)
-            raise CompiledPairError(b, STATUS[int(out.status[b])])
-        paths = [out.cells[b, :int(out.path_length[b])] for b in range(len(out.frames))]
-        return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, np.degrees(out.correction),
-                            out.crop, out.cost, np.degrees(out.posture), paths, failed)
+            raise PairFailedError(b, STATUS[int(out.status[b])])
+        return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve,
+                            np.degrees(out.correction, out=out.correction), out.crop, out.cost, np.degrees(out.posture),
+                            _Paths(out.cells, out.path_length), failed)
 
     def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None, keep_going=False):
         from ...cpu.bank import standing_bank
@@ -115,6 +115,11 @@ class CompiledBackend(Backend):
         return Buffers()
 
     def preload(self):
+        """Before a fork: numba's ``workqueue`` threading layer (it survives a fork; GNU
+        OpenMP, numba's usual one, does not) and the job's kernels loaded from the cache."""
+        import numba
+
+        numba.config.THREADING_LAYER = "workqueue"
         from ...cpu.preload import preload
 
         preload()
@@ -132,12 +137,21 @@ class CompiledBackend(Backend):
         return sum(a.nbytes for a in (b.rot, b.trans, b.pos, b.grot, *b.feat))
 
 
-class CompiledPairError(ValueError):
-    """A pair the compiled splicer could not align: ``pair`` (its index in the call) and ``reason``."""
+class _Paths:
+    """Each pair's DP path ``(P, 2)``, cut from the kernel's padded cells when asked for (the
+    job never asks)."""
 
-    def __init__(self, pair: int, reason: str):
-        super().__init__(f"pair {pair}: {reason}")
-        self.pair, self.reason = pair, reason
+    def __init__(self, cells: np.ndarray, lengths: np.ndarray):
+        self.cells, self.lengths = cells, lengths
+
+    def __len__(self) -> int:
+        return len(self.lengths)
+
+    def __getitem__(self, b: int) -> np.ndarray:
+        return self.cells[b, :int(self.lengths[b])]
+
+    def __iter__(self):
+        return (self[b] for b in range(len(self)))
 
 
 def _dtype(options):

@@ -9,7 +9,7 @@ every method, plug-ins too, on CPU or CUDA, in the options' dtype. With
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
@@ -25,11 +25,14 @@ __all__ = ["TorchBackend", "TorchClips", "BACKEND"]
 
 @dataclass
 class TorchClips:
-    """Prepared clips of the torch backend: the clips (one skeleton, one frame rate) and their roles."""
+    """Prepared clips of the torch backend: the clips (one skeleton, one frame rate), their roles,
+    and the padded tensors made of them so far (the locomotion check and the splice of one call
+    pad the same rows: once)."""
 
     motions: list
     skeleton: object
     roles: object
+    padded: dict = field(default_factory=dict)
 
 
 def _distinct(rows) -> tuple[list[int], torch.Tensor]:
@@ -49,8 +52,11 @@ class TorchBackend(Backend):
         return TorchClips(list(motions), skeleton, roles)
 
     def _tensors(self, prepared: TorchClips, rows, options):
-        return clips_to_tensors([prepared.motions[r] for r in rows], prepared.skeleton, dtype=options.dtype,
-                                device=options.device)
+        key = (tuple(int(r) for r in rows), options.dtype, options.device)
+        if key not in prepared.padded:
+            prepared.padded[key] = clips_to_tensors([prepared.motions[r] for r in key[0]], prepared.skeleton,
+                                                    dtype=options.dtype, device=options.device)
+        return prepared.padded[key]
 
     def positions(self, prepared, rows=None):
         from ..options import SpliceOptions
@@ -93,12 +99,7 @@ class TorchBackend(Backend):
         li, ai = li.to(L.rotations.device), ai.to(L.rotations.device)
         out = run_checked(method, method.run, MethodInput(L.take(li), A.take(ai[:B]), A.take(ai[B:]) if refs else None,
                                                           prepared.roles, prepared.skeleton, options, fps))
-        lengths = out.clips.lengths.tolist()
-        zeros = lambda t: np.zeros(t)  # noqa: E731
-        corr = out.pelvis_correction
-        return _pack(out.clips.rotations, out.clips.translations, out.times, lengths,
-                     correction=[corr[b, :n].detach().cpu().double().numpy() if corr is not None else zeros(n)
-                                 for b, n in enumerate(lengths)],
+        return _pack(out.clips.rotations, out.clips.translations, out.times, out.clips.lengths, out.pelvis_correction,
                      crop=out.crop.detach().cpu().double().numpy() if out.crop is not None else np.zeros(B),
                      cost=out.cost.detach().cpu().double().numpy() if out.cost is not None else np.full(B, np.nan),
                      posture=out.posture_deg.detach().cpu().double().numpy() if out.posture_deg is not None else np.zeros(B),
@@ -127,11 +128,9 @@ class TorchBackend(Backend):
         clips, times = run_checked(method, method.standing, MethodInput(L.take(li), A.take(ai), None, prepared.roles,
                                                                         prepared.skeleton, options, fps),
                                    options.timing, [tuple(a) for a in acting])
-        lengths = clips.lengths.tolist()
-        B = len(lengths)
-        return _pack(clips.rotations, clips.translations, times, lengths,
-                     correction=[np.zeros(n) for n in lengths], crop=np.zeros(B), cost=np.full(B, np.nan),
-                     posture=np.zeros(B), paths=[np.zeros((0, 2), np.int64)] * B)
+        B = len(clips.lengths)
+        return _pack(clips.rotations, clips.translations, times, clips.lengths, None, crop=np.zeros(B),
+                     cost=np.full(B, np.nan), posture=np.zeros(B), paths=[np.zeros((0, 2), np.int64)] * B)
 
     def threads(self):
         return torch.get_num_threads()
@@ -142,15 +141,18 @@ class TorchBackend(Backend):
 
 
 def _pack(rotations, translations, times, lengths, correction, crop, cost, posture, paths) -> SplicedBatch:
-    """A :class:`SplicedBatch` from padded ``(B, T, ...)`` method outputs."""
-    frames = np.array(lengths, dtype=np.int64)
+    """A :class:`SplicedBatch` from padded ``(B, T, ...)`` method outputs (``lengths`` ``(B,)``,
+    ``correction`` ``(B, T)`` or ``None``): each array packed by one mask, pair after pair."""
+    def packed(x: torch.Tensor) -> torch.Tensor:
+        valid = torch.arange(x.shape[1], device=x.device)[None, :] < lengths.to(x.device)[:, None]
+        return x[valid]
+
+    frames = lengths.detach().cpu().numpy().astype(np.int64)
     start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
-    rot = torch.cat([rotations[b, :n] for b, n in enumerate(lengths)]) if lengths else rotations[:0, 0]
-    trans = torch.cat([translations[b, :n] for b, n in enumerate(lengths)]) if lengths else translations[:0, 0]
-    curve = np.concatenate([times[b, :n].detach().to(torch.float64).cpu().numpy() for b, n in enumerate(lengths)]
-                           or [np.zeros(0)])
-    return SplicedBatch(start, frames, rot, trans, curve, np.concatenate(correction or [np.zeros(0)]), crop, cost,
-                        posture, list(paths), {})
+    curve = packed(times.detach()).to(torch.float64).cpu().numpy()
+    corr = packed(correction.detach()).to(torch.float64).cpu().numpy() if correction is not None else np.zeros(len(curve))
+    return SplicedBatch(start, frames, packed(rotations), packed(translations), curve, corr, crop, cost, posture,
+                        list(paths), {})
 
 
 def _failed(prepared: TorchClips, why: str, options) -> SplicedBatch:
