@@ -160,13 +160,16 @@ def test_a_round_trip_between_real_rigs_comes_back_within_one_percent_of_the_hei
     clips = real_clips()
     a, b = clips[source], clips[target]
     ra, rb = roles_of(a.skeleton), roles_of(b.skeleton)
-    there = retarget_motion(a, retarget_map(a.skeleton, ra, b.skeleton, rb))
-    back = retarget_motion(there, retarget_map(b.skeleton, rb, a.skeleton, ra))
     joints = canonical_joints(ra, a.skeleton)
     mapped = [j for name, j in joints.items() if name != "spine"]
-    err = (back.global_positions()[:, mapped] - a.global_positions()[:, mapped]).norm(dim=-1)
     height = character_height(a.skeleton, joints)
-    assert float(err.mean()) / height <= 0.01, float(err.mean()) / height
+    # the analytic retargeting within 1%; with the feet fixed both ways (legs bent and the pelvis
+    # set to reach the floor, each rig its own way) within 2%
+    for fix, bound in ((False, 0.01), (True, 0.02)):
+        there = retarget_motion(a, retarget_map(a.skeleton, ra, b.skeleton, rb), fix_feet=fix)
+        back = retarget_motion(there, retarget_map(b.skeleton, rb, a.skeleton, ra), fix_feet=fix)
+        err = (back.global_positions()[:, mapped] - a.global_positions()[:, mapped]).norm(dim=-1)
+        assert float(err.mean()) / height <= bound, (fix, float(err.mean()) / height)
 
 
 @pytest.mark.parametrize("source,target", PAIRS)
@@ -175,7 +178,7 @@ def test_limb_bones_point_where_the_sources_do(source, target):
     a, b = clips[source], clips[target]
     ra, rb = roles_of(a.skeleton), roles_of(b.skeleton)
     rmap = retarget_map(a.skeleton, ra, b.skeleton, rb)
-    out = retarget_motion(a, rmap)
+    out = retarget_motion(a, rmap, fix_feet=False)  # the legs, once the feet are fixed: test_feet.py
     pa, pb = a.global_positions(), out.global_positions()
     ct = canonical_joints(rb, b.skeleton)
     for x, y in canonical_bones(ct):

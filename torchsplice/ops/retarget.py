@@ -22,6 +22,8 @@ The method, with global rotations ``G`` and the joint map ``m`` (target joint ->
   joint) are folded into their mapped ancestors (:attr:`RetargetMap.folded`).
 - **Trajectory.** The pelvis's world position is scaled by the ratio of leg lengths (hip to
   knee to ankle, averaged over both legs), about the floor below the first frame's pelvis.
+- **Feet** (on by default): held where the source's stand, at the source's height above the
+  floor, by two-bone IK of the legs and the pelvis's height (:mod:`torchsplice.ops.feet`).
 
 Joints are mapped by canonical name (:mod:`torchsplice.specs.canonical`) and, beyond those, by
 equal names with equal parents' names, so that a skeleton retargeted onto itself is the
@@ -42,6 +44,7 @@ from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat
 from ..core.skeleton import Skeleton
 from ..specs.canonical import canonical_bones, canonical_joints
 from ..specs.roles import SkeletonRoles
+from . import feet
 
 __all__ = ["RetargetMap", "retarget_map", "retarget_motion", "leg_length", "character_height"]
 
@@ -58,6 +61,8 @@ class RetargetMap:
         folded: source joints with no target joint (their motion goes to their mapped ancestors).
         pelvis: ``(target, source)`` pelvis joints; scale: target leg length / source leg length.
         up_axis: 0, 1 or 2.
+        legs: per leg (left, right) the target's ``(hip, knee, ankle, toe or None)``.
+        source_legs: per leg the source's ``(ankle, toe or None)``; source_leg: its leg length.
     """
 
     source: Skeleton
@@ -69,6 +74,9 @@ class RetargetMap:
     pelvis: tuple[int, int]
     scale: float
     up_axis: int
+    legs: tuple[tuple[int, int, int, int | None], ...] = ()
+    source_legs: tuple[tuple[int, int | None], ...] = ()
+    source_leg: float = 1.0
 
 
 def _unit(v: torch.Tensor) -> torch.Tensor:
@@ -176,13 +184,21 @@ def retarget_map(source: Skeleton, source_roles: SkeletonRoles, target: Skeleton
     held = tuple(j for j in range(target.num_joints) if j not in pairs)
     folded = tuple(j for j in range(source.num_joints) if j not in inverse)
     scale = leg_length(target, ct) / leg_length(source, cs)
+    legs = tuple((ct[f"hip_{s}"], ct[f"knee_{s}"], ct[f"ankle_{s}"], ct.get(f"toe_{s}") if f"toe_{s}" in cs else None)
+                 for s in ("l", "r"))
+    source_legs = tuple((cs[f"ankle_{s}"], cs.get(f"toe_{s}") if f"toe_{s}" in ct else None) for s in ("l", "r"))
     return RetargetMap(source, target, pairs, align, held, folded, (int(ct["pelvis"]), int(cs["pelvis"])), scale,
-                       int(source_roles.up_axis))
+                       int(source_roles.up_axis), legs, source_legs, leg_length(source, cs))
 
 
-def retarget_motion(motion: Motion, rmap: RetargetMap) -> Motion:
+def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
+                    target_heights: torch.Tensor | None = None) -> Motion:
     """``motion`` (on ``rmap.source``) played on ``rmap.target`` (see the module docstring); the
-    result has the target skeleton, the source's frame rate and name, and its dtype."""
+    result has the target skeleton, the source's frame rate and name, and its dtype.
+
+    With ``fix_feet``, the feet are then held where the source's stand and kept at the source's
+    height above the floor (:func:`torchsplice.ops.feet.fix_feet`; ``target_heights`` ``(2, 2)``
+    the target rig's contact heights of (ankle, toe) per leg, in its units, where known)."""
     if motion.skeleton is not rmap.source and not motion.skeleton.same_topology(rmap.source):
         raise MotionError(f"clip {motion.name!r} is not on the retargeting map's source skeleton")
     src, tgt = rmap.source, rmap.target
@@ -228,6 +244,10 @@ def retarget_motion(motion: Motion, rmap: RetargetMap) -> Motion:
             root = root - quat_apply(g_t[:, tgt.parents[j]], tgt.offsets[j].expand(T, 3))
     if translations is not None:
         translations[:, 0] = root
-    return Motion(skeleton=tgt, rotations=local.to(dtype), root_translation=root.to(dtype),
-                  translations=None if translations is None else translations.to(dtype), fps=motion.fps,
-                  name=motion.name, source=motion.source, role=motion.role, labels=dict(motion.labels))
+    out = Motion(skeleton=tgt, rotations=local.to(dtype), root_translation=root.to(dtype),
+                 translations=None if translations is None else translations.to(dtype), fps=motion.fps,
+                 name=motion.name, source=motion.source, role=motion.role, labels=dict(motion.labels))
+    if fix_feet and rmap.legs and T > 2:
+        out = feet.fix_feet(out, list(rmap.legs), pos, list(rmap.source_legs), rmap.scale, rmap.source_leg,
+                            target_heights, rmap.up_axis, pt, ps)
+    return out

