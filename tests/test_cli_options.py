@@ -21,6 +21,7 @@ from torchsplice.evaluation.report import evaluate_database
 from torchsplice.formats.exporters import DEFAULT_FORMAT, available_exporters, get_exporter
 from torchsplice.formats.importer import import_bvh
 from torchsplice.formats.npz import FEATURE_SETS
+from torchsplice.retarget import retarget_clips
 from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS, JobConfig, job_config
 from torchsplice.job.engines import available_engines
 from torchsplice.splice import SpliceOptions, TIMINGS, splice
@@ -58,6 +59,7 @@ def expected() -> dict:
         ("import", "split_overlap"): (param(import_bvh, "split_overlap"), None),
         ("import", "float64"): (param(import_bvh, "float64"), None),
         ("import", "append"): (param(import_bvh, "append"), None),
+        ("retarget", "fix_feet"): (param(retarget_clips, "fix_feet"), None),
         ("export", "format"): (None, available_exporters()),
         ("export", "packed"): (get_exporter("npz").options["packed"].default, None),
         ("export", "features"): (get_exporter("npz").options["features"].default, tuple(FEATURE_SETS)),

@@ -28,7 +28,7 @@ LAYERS = [
     ["cpu", "store", "ops"],            # compiled kernels; HDF5 storage; transforms on clips
     ["align", "data"],                  # time and space alignment; the training dataset
     ["splice", "formats"],              # methods and backends; file formats in and out
-    ["viz"],                            # pictures and the viewer
+    ["viz", "retarget"],                # pictures and the viewer; retargeting clips of a database
     ["evaluation", "job"],              # metrics and reports; the n x m job
     ["cli", "io"],                      # the command line; the names torchsplice.io gave before
     [""],                               # the top-level modules: the package, __main__, warmup

@@ -43,7 +43,7 @@ from ..core.motion import Motion
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize
 from ..kinematics.contacts import foot_contacts
 
-__all__ = ["two_bone_ik", "fix_feet", "contact_heights", "BLEND_SECONDS", "PIN_HEIGHT_RATIO", "PIN_SPEED_RATIO"]
+__all__ = ["two_bone_ik", "fix_feet", "contact_heights", "rig_heights", "BLEND_SECONDS", "PIN_HEIGHT_RATIO", "PIN_SPEED_RATIO"]
 
 BLEND_SECONDS = 4 / 30
 """Seconds over which a pinned foot blends in before its contact run and out after it (4 frames
@@ -129,6 +129,23 @@ def contact_heights(positions: torch.Tensor, points: list[int], leg: float, fps:
         if contact[:, p].any():
             out[p] = h[contact[:, p], p].median()
     return out
+
+
+def rig_heights(motions, legs: list[tuple[int, int, int, int | None]], up_axis: int = 1) -> torch.Tensor | None:
+    """``(legs, 2)`` how high a rig's (ankle, toe) stand when its foot rests on the floor (its
+    units): per clip :func:`contact_heights`, then the median over ``motions`` (clips of one
+    skeleton; NaN for a leg without a toe). ``None`` without a clip."""
+    per_clip = []
+    for m in motions:
+        pos = m.global_positions().to(torch.float64)
+        hip, knee, ankle, _ = legs[0]
+        leg = float((pos[0, knee] - pos[0, hip]).norm() + (pos[0, ankle] - pos[0, knee]).norm())
+        points = [j for leg_ in legs for j in leg_[2:] if j is not None]
+        h = dict(zip(points, contact_heights(pos, points, leg, float(m.fps), up_axis).tolist()))
+        per_clip.append([[h[a], h[t] if t is not None else float("nan")] for _, _, a, t in legs])
+    if not per_clip:
+        return None
+    return torch.tensor(per_clip, dtype=torch.float64).median(dim=0).values
 
 
 def _pins(pos: torch.Tensor, guide: torch.Tensor, ankle: int, toe: int | None, s_ankle: int, s_toe: int | None,

@@ -46,7 +46,7 @@ from ..specs.canonical import canonical_bones, canonical_joints
 from ..specs.roles import SkeletonRoles
 from . import feet
 
-__all__ = ["RetargetMap", "retarget_map", "retarget_motion", "leg_length", "character_height"]
+__all__ = ["RetargetMap", "retarget_map", "retarget_motion", "retarget_motions", "leg_length", "character_height"]
 
 
 @dataclass(frozen=True)
@@ -251,3 +251,9 @@ def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
         out = feet.fix_feet(out, list(rmap.legs), pos, list(rmap.source_legs), rmap.scale, rmap.source_leg,
                             target_heights, rmap.up_axis, pt, ps)
     return out
+
+
+def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
+                     target_heights: torch.Tensor | None = None) -> list[Motion]:
+    """:func:`retarget_motion` of each clip of ``motions`` (all on ``rmap.source``)."""
+    return [retarget_motion(m, rmap, fix_feet, target_heights) for m in motions]

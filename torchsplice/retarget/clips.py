@@ -1,0 +1,122 @@
+"""``retarget_clips``: clips of a database played on another skeleton, written as a new database.
+
+Each source skeleton's map to the target is built once (:func:`~torchsplice.ops.retarget.retarget_map`:
+a skeleton that is not a humanoid is refused in one line naming what it lacks, before anything
+is written); the clips are read and retargeted in chunks (:func:`~torchsplice.ops.retarget.retarget_motions`)
+and appended on the target skeleton, with its spec, units and up axis. Each result keeps its
+name, role, frame rate and labels, and gains two labels: ``retargeted_from`` (``DB:K (spec)``)
+and ``retargeted_to`` (the target's name). The output appears when complete (an error or an
+interrupt leaves no file), and its run record says what was done.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import torch
+
+from ..core.errors import SpecError, TorchspliceError
+from ..core.version import __version__
+from ..ops.retarget import RetargetMap, retarget_map, retarget_motions
+from .targets import resolve_target
+
+__all__ = ["retarget_clips", "RetargetReport", "CHUNK_CLIPS"]
+
+CHUNK_CLIPS = 64
+"""Clips read, retargeted and written together."""
+
+
+@dataclass
+class RetargetReport:
+    """What :func:`retarget_clips` did: the output, the target's name, the clips and frames
+    written, and per source skeleton (``DB:K (spec)``) its map's held and folded joints (names)."""
+
+    output: Path
+    target: str
+    clips: int = 0
+    frames: int = 0
+    maps: dict[str, dict[str, list[str]]] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        return (f"{self.output}: {self.clips} clip{'s' if self.clips != 1 else ''} ({self.frames} frames) retargeted onto "
+                f"{self.target}")
+
+
+def source_label(database, k: int, spec_name: str) -> str:
+    """How results name where they came from: ``DB:K (spec)``."""
+    return f"{Path(database).name}:{k} ({spec_name or 'no spec'})"
+
+
+def map_notes(rmap: RetargetMap) -> dict[str, list[str]]:
+    """A map's held target joints and folded source joints, by name."""
+    return {"held": [rmap.target.names[j] for j in rmap.held], "folded": [rmap.source.names[j] for j in rmap.folded]}
+
+
+def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, select=None, fix_feet: bool = True,
+                   overwrite: bool = False, command: str = "", progress: Callable | None = None) -> RetargetReport:
+    """Retarget clips of ``database`` onto ``to`` and write them to the database ``out``.
+
+    Args:
+        database: the motion database to read.
+        clips: clip names (repeats dropped); ``None`` for every clip (or every one ``select`` selects).
+        to: the target: ``"smpl22"``, ``"other.h5"``, ``"other.h5:K"``, ``"rig.bvh"`` or a
+            :class:`~torchsplice.retarget.RetargetTarget` (:func:`~torchsplice.retarget.resolve_target`).
+        out: the database to write (``.h5``).
+        select: selectors of the selection language (:mod:`torchsplice.store.select`).
+        fix_feet: hold the feet where the source's stand (:mod:`torchsplice.ops.feet`).
+        overwrite: replace an existing ``out``.
+        command: what the run record and the output's lock say made it.
+        progress: ``progress(iterable, total, description)`` wrapping the chunks, or ``None``.
+    """
+    from ..formats.exporters import selected_names
+    from ..formats.importer import DATABASE_SUFFIXES
+    from ..store.atomic import check_output
+    from ..store.database import MotionDatabase
+
+    out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=[database], overwrite=overwrite)
+    target = resolve_target(to)
+    if select is not None:
+        clips = selected_names(database, select, clips)
+    with MotionDatabase.open(database) as db:
+        table = db.clip_table()
+        if clips is None:
+            rows = list(range(len(table.names)))
+        else:
+            rows = list(dict.fromkeys(db.index(c) for c in clips))  # an unknown name: one line naming it
+        if not rows:
+            raise TorchspliceError(f"{database}: no clip to retarget")
+        by_skeleton: dict[int, list[int]] = {}
+        for r in rows:
+            by_skeleton.setdefault(int(table.skeleton[r]), []).append(r)
+        maps: dict[int, RetargetMap] = {}
+        report = RetargetReport(Path(out), target.name)
+        for k in sorted(by_skeleton):
+            try:
+                spec = db.spec(k)
+            except SpecError as exc:
+                raise SpecError(f"{database}: skeleton {k}: {exc}") from None
+            label = source_label(database, k, spec.name)
+            maps[k] = retarget_map(db.skeletons[k], spec.bind(db.skeletons[k]), target.skeleton,
+                                   target.spec.bind(target.skeleton), source_name=f"{database}: skeleton {k} ({spec.name})",
+                                   target_name=f"{target.name}")
+            report.maps[label] = map_notes(maps[k])
+        record = {"command": command or "retarget_clips", "tool": f"torchsplice {__version__}",
+                  "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+                  "retargeted_to": target.name, "source": str(database)}
+        chunks = [(k, rs[i:i + CHUNK_CLIPS]) for k, rs in sorted(by_skeleton.items()) for i in range(0, len(rs), CHUNK_CLIPS)]
+        with MotionDatabase.create(out, overwrite=overwrite, attrs={"run": json.dumps(record)}) as new:
+            for k, chunk in (progress(chunks, len(chunks), "retargeting") if progress else chunks):
+                spec_name = db.spec(k).name
+                motions = db.read_many([table.names[r] for r in chunk], dtype=torch.float64)
+                done = retarget_motions(motions, maps[k], fix_feet=fix_feet, target_heights=target.heights)
+                for m in done:
+                    m.labels.update({"retargeted_from": source_label(database, k, spec_name),
+                                     "retargeted_to": target.name})
+                    new.append(m, spec=target.spec)
+                    report.clips += 1
+                    report.frames += m.num_frames
+    return report

@@ -1,0 +1,126 @@
+"""What a clip is retargeted onto: :func:`resolve_target` turns ``--to``'s text into a
+:class:`RetargetTarget` (a skeleton, its spec, and how high its feet stand on the floor).
+
+Accepted: ``smpl22`` (the built-in SMPL body, :mod:`torchsplice.specs.smpl`); ``DB.h5`` (its
+only skeleton) or ``DB.h5:K`` (skeleton ``K`` as ``torchsplice info`` lists it); ``RIG.bvh``
+(the file's skeleton and spec, detected as on import). Anything else is one line saying what
+is accepted. A target that is not a humanoid (no hips, knees, shoulders...) is refused when
+the map is built (:func:`torchsplice.specs.canonical.canonical_joints`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from ..core.errors import SpecError, TorchspliceError
+from ..core.skeleton import Skeleton
+from ..formats.importer import DATABASE_SUFFIXES
+from ..ops.feet import rig_heights
+from ..specs import DatasetSpec, load_spec
+from ..specs.canonical import canonical_joints
+from ..specs.smpl import SMPL22, smpl22_skeleton
+
+__all__ = ["RetargetTarget", "resolve_target", "BUILTIN_TARGETS", "HEIGHT_CLIPS"]
+
+BUILTIN_TARGETS = (SMPL22,)
+"""The built-in targets, by name."""
+
+HEIGHT_CLIPS = 16
+"""How many of a database target's clips (its longest) say how high its feet stand."""
+
+
+@dataclass(frozen=True)
+class RetargetTarget:
+    """A retargeting target.
+
+    Attributes:
+        name: what the results' labels call it (``smpl22``, ``bandai.h5:0``, ``rig.bvh``).
+        skeleton: its skeleton; spec: its dataset spec (roles, units, up axis).
+        heights: ``(2, 2)`` how high its (ankle, toe) stand above the floor when a foot rests,
+            per leg (left, right), in its units, measured on its own clips; ``None`` where it
+            has none (the source's heights are scaled instead).
+    """
+
+    name: str
+    skeleton: Skeleton
+    spec: DatasetSpec
+    heights: torch.Tensor | None = None
+
+
+def _split_db(text: str) -> tuple[Path, int | None] | None:
+    """``(path, K)`` of ``DB.h5:K`` / ``(path, None)`` of ``DB.h5``; ``None`` for other text."""
+    head, sep, tail = text.rpartition(":")
+    if sep and Path(head).suffix.lower() in DATABASE_SUFFIXES and tail.strip().lstrip("-").isdigit():
+        return Path(head), int(tail)
+    if Path(text).suffix.lower() in DATABASE_SUFFIXES:
+        return Path(text), None
+    return None
+
+
+def _measured(motions, skeleton: Skeleton, spec: DatasetSpec) -> torch.Tensor | None:
+    roles = spec.bind(skeleton)
+    joints = canonical_joints(roles, skeleton)
+    legs = [(joints[f"hip_{s}"], joints[f"knee_{s}"], joints[f"ankle_{s}"], joints.get(f"toe_{s}")) for s in "lr"]
+    return rig_heights([m for m in motions if m.num_frames >= 3], legs, int(roles.up_axis))
+
+
+def resolve_target(to, what: str = "the target") -> RetargetTarget:
+    """The :class:`RetargetTarget` named by ``to`` (see the module docstring); a
+    :class:`RetargetTarget` is returned as it is. Errors are one line naming ``to``."""
+    if isinstance(to, RetargetTarget):
+        return to
+    text = str(to)
+    if text in BUILTIN_TARGETS:
+        return RetargetTarget(SMPL22, smpl22_skeleton(), load_spec(SMPL22))
+    db = _split_db(text)
+    if db is not None:
+        return _database_target(text, *db)
+    path = Path(text)
+    if path.suffix.lower() == ".bvh":
+        return _bvh_target(path)
+    raise TorchspliceError(f"{text}: not a retargeting target: give a database (.h5, or .h5:K for its skeleton K), a "
+                           f"BVH file, or a built-in skeleton ({', '.join(BUILTIN_TARGETS)})")
+
+
+def _database_target(text: str, path: Path, k: int | None) -> RetargetTarget:
+    from ..store.database import MotionDatabase
+
+    if not path.is_file():
+        raise TorchspliceError(f"{path}: no such database (the retargeting target)")
+    with MotionDatabase.open(path) as db:
+        n = len(db.skeletons)
+        if k is None and n != 1:
+            raise TorchspliceError(f"{path}: holds {n} skeletons; name one as {path}:K, K from 0 to {n - 1} "
+                                   "(`torchsplice info` lists them)")
+        k = 0 if k is None else k
+        if not 0 <= k < n:
+            raise TorchspliceError(f"{text}: {path} has no skeleton {k} (it has {n}: 0 to {n - 1})")
+        skeleton = db.skeletons[k]
+        try:
+            spec = db.spec(k)
+        except SpecError as exc:
+            raise SpecError(f"{text}: {exc}") from None
+        table = db.clip_table()
+        rows = [r for r in range(len(table.names)) if int(table.skeleton[r]) == k]
+        rows = sorted(rows, key=lambda r: -int(table.length[r]))[:HEIGHT_CLIPS]
+        motions = db.read_many([table.names[r] for r in rows], dtype=torch.float64) if rows else []
+    name = f"{path.name}:{k}"
+    return RetargetTarget(name, skeleton, spec, _measured(motions, skeleton, spec) if motions else None)
+
+
+def _bvh_target(path: Path) -> RetargetTarget:
+    from ..formats.bvh import read_bvh
+    from ..specs import detect_spec
+
+    if not path.is_file():
+        raise TorchspliceError(f"{path}: no such BVH file (the retargeting target)")
+    motion = read_bvh(path, dtype=torch.float64)  # a malformed file: one BVHError line naming it
+    try:
+        spec = detect_spec(motion.skeleton, path.name)
+        heights = _measured([motion], motion.skeleton, spec) if motion.num_frames >= 3 else None
+    except SpecError as exc:
+        raise SpecError(f"{path}: {exc}") from None
+    return RetargetTarget(path.name, motion.skeleton, spec, heights)
