@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
+import torch
 
 from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
@@ -54,9 +55,21 @@ def test_pairs_across_units_of_one_topology_are_not_spliced(tmp_path):
             out.append(by[n], spec=spec)
             m, s = convert_units(by[n], spec, "m")
             out.append(replace(m, name=n + "_m"), spec=s)
-    summary = splice_all(db, tmp_path / "out.h5", locomotions="walk_curve*", actions="carry_box*", workers=1)
+    summary = splice_all(db, tmp_path / "out.h5", locomotions="walk_curve*", actions="carry_box*", workers=1,
+                         retarget=False)
     assert summary.spliced == 2  # cm onto cm, m onto m
     differ = {w: n for w, n in summary.skipped.items() if "units differ" in w}
     assert sum(differ.values()) == 2, summary.skipped
     with MotionDatabase.open(tmp_path / "out.h5") as out:
         assert sorted(out.names) == ["walk_curve+carry_box", "walk_curve_m+carry_box_m"]
+    # retargeted (the default): the action in centimetres brought onto the skeleton in metres splices as
+    # the same action stored in metres does
+    summary = splice_all(db, tmp_path / "all.h5", locomotions="walk_curve*", actions="carry_box*", workers=1)
+    assert summary.spliced == 4 and summary.retargeted == 2 and not summary.skipped
+    with MotionDatabase.open(tmp_path / "all.h5") as out:
+        a = out.read("walk_curve_m+carry_box", dtype=torch.float64)
+        b = out.read("walk_curve_m+carry_box_m", dtype=torch.float64)
+        assert a.labels["action.retargeted_from"].endswith("(sample)") and "action.retargeted_from" not in b.labels
+        assert a.num_frames == b.num_frames
+        err = (a.global_positions() - b.global_positions()).norm(dim=-1)
+        assert float(err.mean()) < 0.01, float(err.mean())  # metres: within a centimetre on average

@@ -57,11 +57,23 @@ def test_clips_appended_in_other_units_are_not_spliced_with_the_others(mocap_dir
         units = {json.loads(d.spec_json(k))["dataset"]["units"] for k in range(len(d.skeletons))}
     assert units == {"m", "cm"}
     capsys.readouterr()
-    assert main(["splice-all", str(db), "-o", str(tmp_path / "out.h5"), "--locomotions", "*", "--actions", "*"]) == 0
+    assert main(["splice-all", str(db), "-o", str(tmp_path / "out.h5"), "--locomotions", "*", "--actions", "*",
+                 "--no-retarget"]) == 0
     text = capsys.readouterr().out
     assert "units differ" in text, text
     with MotionDatabase.open(tmp_path / "out.h5") as out:
         assert len(out) == 4  # m onto m, cm onto cm: 2 + 2
+    # retargeting (the default) brings each action onto the other units' skeleton: every pair is formed
+    assert main(["splice-all", str(db), "-o", str(tmp_path / "all.h5"), "--locomotions", "*", "--actions", "*"]) == 0
+    text = capsys.readouterr().out
+    assert "units differ" not in text and "8 had the action retargeted" in text, text
+    with MotionDatabase.open(tmp_path / "all.h5") as out:
+        assert len(out) == 12
+        for name in out.names:  # each result as tall as its locomotion's skeleton says (m or cm)
+            m = out.read(name)
+            size = float(m.global_positions()[0].max(0).values[1] - m.global_positions()[0].min(0).values[1])
+            unit = out.skeleton_info(out.clip_info(name)["skeleton"]).units
+            assert 1.2 < size * (100 if unit == "m" else 1) / 100 < 2.2, (name, size, unit)
 
 
 def test_a_metre_file_read_back_as_centimetres_is_warned_about(mocap_dir, tmp_path, capsys):

@@ -699,10 +699,21 @@ def test_actions_db_with_another_skeleton(bandai_db, mocap_dir, tmp_path, capsys
     assert run(capsys, "import", mocap_dir / "lafan1_via_pypi_bvhtools" / "test2.bvh", "-o", lafan, "-q")[0] == 0
     out_dir = tmp_path / "o"
     out_dir.mkdir()
-    code, _, err = run(capsys, "splice-all", bandai_db, "--actions-db", lafan, "--actions", "*", "-o", out_dir / "x.h5")
+    # without retargeting: refused in one line naming both databases
+    code, _, err = run(capsys, "splice-all", bandai_db, "--actions-db", lafan, "--actions", "*", "-o", out_dir / "x.h5",
+                       "--no-retarget")
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
-    assert str(bandai_db) in err and str(lafan) in err and "skeleton" in err
+    assert str(bandai_db) in err and str(lafan) in err and "skeleton" in err and "--retarget is off" in err
     assert_left_nothing(out_dir)
+    # by default the action is retargeted onto the locomotions' skeleton
+    code, out, err = run(capsys, "splice-all", bandai_db, "--actions-db", lafan, "--actions", "*", "-o", out_dir / "x.h5")
+    assert code == 0, err
+    with MotionDatabase.open(out_dir / "x.h5") as db:
+        spliced = [i for i, r in enumerate(db.clip_table().role) if r == "spliced"]
+        assert spliced and f"{len(spliced)} had the action retargeted" in out
+        for i in spliced:
+            m = db.read(i)
+            assert m.skeleton.num_joints == 22 and m.labels["action.retargeted_from"] == "lafan.h5:0 (lafan1)"
 
 
 def test_unknown_method(sample_db, tmp_path, capsys):

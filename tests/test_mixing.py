@@ -61,7 +61,7 @@ def test_which_shipped_datasets_share_a_topology(mocap_dir):
 
 def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(mixed_db, tmp_path, capsys):
     out = tmp_path / "out.h5"
-    rc, text, err = run(capsys, "splice-all", mixed_db, "-o", out, "--workers", "1",
+    rc, text, err = run(capsys, "splice-all", mixed_db, "-o", out, "--workers", "1", "--no-retarget",
                         "--locomotions", ",".join(LOCOS), "--actions", ",".join(ACTIONS))
     assert rc == 0, err
     with MotionDatabase.open(mixed_db) as db:
@@ -81,7 +81,7 @@ def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(
     assert formed == 8 and sum(want.values()) == 17
     got = {}
     pattern = re.compile(r"^  (\d+) x locomotions on skeleton (\d+) \((\w+), (\d+) joints\) x actions on skeleton (\d+) "
-                         r"\((\w+), (\d+) joints\)$")
+                         r"\((\w+), (\d+) joints\) \(--retarget is off\)$")
     for line in text.splitlines():
         hit = pattern.match(line)
         if hit:
@@ -103,3 +103,26 @@ def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(
     # Bandai Namco's two sessions splice together, and so do the sample and LAFAN1
     assert any(kind[lo] != kind[ac] and specs[kind[lo]] == specs[kind[ac]] == "bandai_namco" for lo, ac in pairs)
     assert any({specs[kind[lo]], specs[kind[ac]]} == {"sample", "lafan1"} for lo, ac in pairs), pairs
+
+
+def test_splice_all_on_a_mixed_database_retargets_the_pairs_across_skeletons(mixed_db, tmp_path, capsys):
+    """By default every humanoid pair is formed: the 17 pairs across topologies with the action
+    retargeted onto the locomotion's skeleton (once per action and skeleton), the others as they are."""
+    out = tmp_path / "out.h5"
+    rc, text, err = run(capsys, "splice-all", mixed_db, "-o", out, "--workers", "1",
+                        "--locomotions", ",".join(LOCOS), "--actions", ",".join(ACTIONS))
+    assert rc == 0, err
+    assert "not formed" not in text and "17 had the action retargeted onto the locomotion's skeleton" in text, text
+    with MotionDatabase.open(mixed_db) as db:
+        sk = db.skeletons
+        kind = {n: db.clip_info(n)["skeleton"] for n in LOCOS + ACTIONS}
+    with MotionDatabase.open(out) as res:
+        t = res.table()
+        section = re.search(r"^skipped (\d+) pairs:$", text, re.M)
+        assert len(t["locomotion"]) + (int(section.group(1)) if section else 0) == 25
+        for i, (lo, ac) in enumerate(zip(t["locomotion"], t["action"])):
+            m = res.read(i)
+            lo, ac = str(lo), str(ac)
+            assert m.skeleton.same_topology(sk[kind[lo]])  # on the locomotion's skeleton
+            moved = "action.retargeted_from" in m.labels
+            assert moved == (not sk[kind[lo]].same_topology(sk[kind[ac]])), (lo, ac, m.labels)

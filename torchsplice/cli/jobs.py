@@ -5,6 +5,8 @@ fields, with its defaults; the engines and layouts are the library's."""
 
 from __future__ import annotations
 
+import argparse
+
 import sys
 from pathlib import Path
 
@@ -46,7 +48,13 @@ class SpliceAll(Command):
         s.add_argument("--actions", action="append", metavar="SELECT",
                        help=f"clips giving the upper body (default: {' '.join(declared(JOB, 'DEFAULT_ACTIONS'))})")
         s.add_argument("--actions-db", metavar="DB", default=job_default("actions_db"),
-                       help="take the actions from this database (same skeleton)")
+                       help="take the actions from this database (any humanoid skeleton: see --retarget)")
+        s.add_argument("--retarget", action=argparse.BooleanOptionalAction, default=job_default("retarget"),
+                       help="form the pairs whose clips are on different skeletons (other joints or units) by "
+                            "retargeting the action onto the locomotion's skeleton, once per action and skeleton "
+                            "(default: on; --no-retarget skips those pairs)")
+        s.add_argument("--fix-feet", action=argparse.BooleanOptionalAction, default=job_default("fix_feet"),
+                       help="when retargeting, hold each foot where the source's stands (default: on)")
         s.add_argument("--method", default=method, metavar="M[,M...]",
                        help=f"{', '.join(methods())}, or several comma-separated (default {method}; plug-ins add "
                             "more, see --plugin)")
@@ -108,7 +116,7 @@ class SpliceAll(Command):
             max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing,
             acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, device=device(args.device),
             compression=args.compression, layout=args.layout, engine=args.engine, workers=args.workers,
-            ray_address=args.ray_address, backend=args.backend,
+            ray_address=args.ray_address, backend=args.backend, retarget=args.retarget, fix_feet=args.fix_feet,
         )
         if args.ray_address and args.engine != "ray":
             raise TorchspliceError("--ray-address needs --engine ray")

@@ -39,7 +39,7 @@ class JobConfig:
     What to splice (the plan):
         database: the motion database holding the locomotions (and the actions, by default).
         output: the database to write.
-        actions_db: another database holding the actions (same skeleton, units and up axis).
+        actions_db: another database holding the actions (any humanoid skeleton: see ``retarget``).
         locomotions, actions: selectors, all of which must select a clip.
         methods: one or several registered methods: ``splice``, ``naive``, ``cpmc`` or plug-ins
             (see :mod:`torchsplice.splice.registry`).
@@ -52,6 +52,10 @@ class JobConfig:
             :mod:`torchsplice.splice.standing`); unless ``force_locomotion`` makes the timewarp
             align it anyway.
         acting_limbs: the arms standing actions act with (``None``: found per clip).
+        retarget: form the pairs whose clips are on different skeletons (other joints, or other
+            units) by retargeting the action onto the locomotion's skeleton, once per action
+            and target skeleton (:mod:`torchsplice.ops.retarget`); ``False`` skips them.
+        fix_feet: when retargeting, hold the feet where the source's stand (:mod:`torchsplice.ops.feet`).
         copy_sources: copy the selected source clips into the output too.
         max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
@@ -84,6 +88,8 @@ class JobConfig:
     max_length_ratio: float | None = None
     timing: str = "loop"
     acting_limbs: tuple[str, ...] | None = None
+    retarget: bool = True
+    fix_feet: bool = True
     copy_sources: bool = False
     max_run: int = 3
     posture: bool = True
@@ -209,6 +215,7 @@ class JobConfig:
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
             **({"twist": self.twist} if self.twist else {}),  # plans of runs without it stay valid
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
+            "retarget": self.retarget, "fix_feet": self.fix_feet,
             **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }
 
@@ -231,7 +238,7 @@ def _check_types(c: JobConfig) -> None:
         v = getattr(c, name)
         if not isinstance(v, tuple) or not all(isinstance(x, str) for x in v):
             raise bad(name, "a string or a sequence of strings", v)
-    for name in ("force_locomotion", "copy_sources", "posture"):
+    for name in ("force_locomotion", "copy_sources", "posture", "retarget", "fix_feet"):
         if not isinstance(getattr(c, name), (bool, np.bool_)):
             raise bad(name, "True or False", getattr(c, name))
     for name, lo, optional in (("max_run", 1, False), ("memory_budget_mb", 1, False), ("batch_pairs", 1, True),

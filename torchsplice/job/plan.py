@@ -31,11 +31,11 @@ from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
 from ..store.select import select_clips
-from .sources import Sources, clip_key
+from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
-PLAN_VERSION = 3
+PLAN_VERSION = 4
 MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
@@ -45,13 +45,16 @@ such reason names the two skeletons (``skeletons differ: locomotions on skeleton
 
 @dataclass
 class Pair:
-    """One planned pair: rows in the locomotion and action databases, method, reference row."""
+    """One planned pair: rows in the locomotion and action databases, method, reference row;
+    ``target``: the locomotion skeleton the action (and reference) are retargeted onto, ``None``
+    when they are on it already."""
 
     method: str
     loco: int
     action: int
     reference: int | None = None
     mode: str = "timewarp"  # "timewarp" (time-aligned) or "standing" (an action that does not locomote)
+    target: int | None = None
 
 
 @dataclass
@@ -119,9 +122,12 @@ class Plan:
     version: int = PLAN_VERSION
 
     def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
-        return (clip_key("L", p.loco, same_db), clip_key("A", p.action, same_db),
-                clip_key("A", p.reference, same_db) if p.reference is not None and get_method(p.method).needs_reference
-                else None)
+        def act(row):
+            key = clip_key("A", row, same_db)
+            return key if p.target is None else retargeted_key(key, p.target)
+
+        return (clip_key("L", p.loco, same_db), act(p.action),
+                act(p.reference) if p.reference is not None and get_method(p.method).needs_reference else None)
 
     @property
     def same_db(self) -> bool:
@@ -139,7 +145,7 @@ class Plan:
                            "groups": [asdict(g) for g in self.groups],
                            "clips": {k: c.to_dict() for k, c in self.clips.items()},
                            "tasks": [asdict(t) for t in self.tasks],
-                           "pairs": [[p.method, p.loco, p.action, p.reference, p.mode] for p in self.pairs]},
+                           "pairs": [[p.method, p.loco, p.action, p.reference, p.mode, p.target] for p in self.pairs]},
                           sort_keys=True, separators=(",", ":"))
 
     @classmethod
@@ -214,12 +220,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     sk_l, sk_a = loco_db.skeletons, act_db.skeletons
     described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db),
                  _skeleton_units(loco_db), _skeleton_units(act_db))
-    if not any(sk_l[int(tl.skeleton[i])].same_topology(sk_a[int(ta.skeleton[j])]) for i in locos for j in acts):
-        a, b = sk_l[int(tl.skeleton[locos[0]])], sk_a[int(ta.skeleton[acts[0]])]
-        raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
-                               f"have no skeleton in common: {a.mismatch(b)}")
     if not same:
-        for k in ("units", "up_axis"):
+        for k in ("units", "up_axis") if not c.retarget else ("up_axis",):  # retargeting converts units
             a, b = str(loco_db.attrs.get(k) or ""), str(act_db.attrs.get(k) or "")
             if a and b and a != b and "mixed" not in (a, b):
                 raise TorchspliceError(f"{c.actions_db}: {k} {b!r} differs from {c.database}'s {a!r}; "
@@ -229,11 +231,16 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         specs[k] = loco_db.spec(k)  # the stored spec, else one detected
     needs_ref = any(get_method(m).needs_reference for m in c.methods)
     refs = _references(ta, acts, next(iter(specs.values()))) if needs_ref else {}
-
-    units_l, units_a = described[2], described[3]
-    # groups: a locomotion skeleton and rate, its locomotions, then every action and reference of its topology
-    # and units
     others = sorted({int(j) for j in acts} | {int(r) for r in refs.values() if r is not None})
+    # skeleton pairs: on one skeleton already (None), retargeted (the target's id), or why not formed (text)
+    kinds = _skeleton_pairs(c, sources, same, sorted(specs), sorted({int(ta.skeleton[j]) for j in others}), sk_l, sk_a,
+                            described)
+    if all(isinstance(kinds[int(tl.skeleton[i]), int(ta.skeleton[j])], str) for i in locos for j in acts):
+        x, y = int(tl.skeleton[locos[0]]), int(ta.skeleton[acts[0]])
+        raise TorchspliceError(f"the selected locomotions ({c.database}) and actions ({c.actions_db or c.database}) "
+                               f"have no skeleton in common and cannot be retargeted: {kinds[x, y]}", options=("retarget",))
+    # groups: a locomotion skeleton and rate, its locomotions, then every action and reference of its topology
+    # and units, and every other one retargeted onto it
     by_group: dict[tuple[int, float], list[str]] = {}
     for i in locos:
         by_group.setdefault((int(tl.skeleton[i]), float(tl.fps[i])), []).append(clip_key("L", i, same))
@@ -241,25 +248,33 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     for (k, fps), keys in by_group.items():
         for j in others:
             key = clip_key("A", j, same)
-            ka = int(ta.skeleton[j])
-            if key not in keys and sk_l[k].same_topology(sk_a[ka]) and not _units_clash(units_l[k], units_a[ka]):
+            kind = kinds[k, int(ta.skeleton[j])]
+            if kind is None and key not in keys:
                 keys.append(key)
+            elif isinstance(kind, int):
+                keys.append(retargeted_key(key, k))
+                ref = refs.get(j)
+                if ref is not None and kinds[k, int(ta.skeleton[ref])] is None:  # its reference, brought along
+                    keys.append(retargeted_key(clip_key("A", ref, same), k))
         roles = specs[k].bind(sk_l[k])
-        groups.append(Group(k, fps, keys, specs[k].to_json(), leg_length(sk_l[k], roles)))
+        groups.append(Group(k, fps, list(dict.fromkeys(keys)), specs[k].to_json(), leg_length(sk_l[k], roles)))
     sources.share_banks(groups)
     group_of = {(g.skeleton, g.fps): n for n, g in enumerate(groups)}
     tables = {"L": tl, "A": ta}
     clips = {}
     for g in groups:
         for key in g.clips:
-            tag, row = key.split(":")
+            moved = retargeted_parts(key)
+            tag, row = (moved[1] if moved else key).split(":")
             t = tables[tag]
-            clips[key] = PlanClip(str(t.name[int(row)]), int(t.length[int(row)]), float(t.fps[int(row)]),
-                                  dict(t.labels[int(row)]))
+            labels = dict(t.labels[int(row)])
+            if moved:
+                labels.update(sources.retargeting_for(tag, int(t.skeleton[int(row)]), moved[0])[2])
+            clips[key] = PlanClip(str(t.name[int(row)]), int(t.length[int(row)]), float(t.fps[int(row)]), labels)
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
-    pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, sk_l, sk_a, checks, refs, described)
-    _acting(c, sources, groups, clips, sk_l, {clip_key("A", p.action, same) for p in pairs if p.mode == "standing"})
+    pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
+    _acting(c, sources, groups, clips, sk_l, {plan_action_key(p, same) for p in pairs if p.mode == "standing"})
     if not pairs:
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
         raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
@@ -376,12 +391,51 @@ def _describe_skeletons(db, path) -> dict[int, str]:
     return out
 
 
-def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, checks, refs, described):
+def plan_action_key(p: Pair, same: bool) -> str:
+    """The key of a pair's action clip as its group holds it (retargeted onto ``p.target``, if set)."""
+    key = clip_key("A", p.action, same)
+    return key if p.target is None else retargeted_key(key, p.target)
+
+
+def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, sk_a, described) -> dict:
+    """``(locomotion skeleton, action skeleton) -> None`` (one skeleton: same joints, units and up
+    axis), the locomotion skeleton's id (the actions are retargeted onto it), or the reason its
+    pairs are not formed (text beginning :data:`SKELETONS_DIFFER` or ``units differ``). Each
+    retargeting map is built once here (a skeleton that is not a humanoid says what it lacks)."""
+    out: dict = {}
+    for x in kls:
+        for y in kas:
+            (ul, upl), (ua, upa) = described[2][x], described[3][y]
+            topology = sk_l[x].same_topology(sk_a[y])
+            units = bool(ul and ua and ul != ua)
+            if topology and not units and not (upl and upa and upl != upa):
+                out[x, y] = None
+                continue
+            if topology:  # one topology, two units
+                why = (f"units differ: locomotions on {described[0][x]} in {'/'.join(v or '?' for v in described[2][x])} "
+                       f"x actions on {described[1][y]} in {'/'.join(v or '?' for v in described[3][y])}")
+            else:
+                why = f"{SKELETONS_DIFFER}locomotions on {described[0][x]} x actions on {described[1][y]}"
+            if upl and upa and upl != upa:
+                out[x, y] = f"{why} (up axes {upl} and {upa})"
+            elif not c.retarget:
+                out[x, y] = f"{why} ({{retarget}} is off)"
+            else:
+                try:
+                    sources.retargeting_for("L" if same else "A", y, x)
+                    out[x, y] = x
+                except TorchspliceError as exc:
+                    out[x, y] = f"{why}, not retargeted: {exc}"
+    return out
+
+
+def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, refs):
     """Every (method, locomotion, action) of the selections: the pairs to splice, method by method,
     time-aligned ones first, each locomotion against each action; and, for the rest, the
     number of pairs per skip reason. Each reason is decided once per clip, per skeleton pair or
     per clip pair, and combined over the ``L x A`` grid by array operations; the first reason
-    wins, in this order: a clip onto itself, skeletons, units, too short, length ratio,
+    wins, in this order: a clip onto itself, skeletons (``kinds``, :func:`_skeleton_pairs`:
+    pairs on other skeletons are retargeted where they can be), too short, length ratio,
     damaged, not locomoting, no reference."""
     L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
     nl, na = len(L), len(A)
@@ -408,18 +462,18 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
     if same:
         put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
     kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
-    for stage in ("topology", "units"):
-        by_pair = np.zeros((len(sk_l), len(sk_a)), dtype=np.int64)
-        for x in np.unique(kl).tolist():
-            for y in np.unique(ka).tolist():
-                if stage == "topology" and not sk_l[x].same_topology(sk_a[y]):  # not formed: one joint hierarchy needed
-                    by_pair[x, y] = code(f"{SKELETONS_DIFFER}locomotions on {described[0][x]} x actions on {described[1][y]}")
-                elif stage == "units" and _units_clash(described[2][x], described[3][y]):  # one topology, two units
-                    by_pair[x, y] = code(f"units differ: locomotions on {described[0][x]} in "
-                                         f"{'/'.join(v or '?' for v in described[2][x])} x actions on {described[1][y]} in "
-                                         f"{'/'.join(v or '?' for v in described[3][y])} (import with one units setting)")
-        put(by_pair[kl[:, None], ka[None, :]])
-
+    xs, ys = np.unique(kl).tolist(), np.unique(ka).tolist()
+    by_pair = np.zeros((max(xs) + 1, max(ys) + 1), dtype=np.int64)
+    target = np.full(by_pair.shape, -1, dtype=np.int64)  # the skeleton an action is retargeted onto; -1: none
+    for x in xs:
+        for y in ys:
+            kind = kinds[x, y]
+            if isinstance(kind, str):
+                by_pair[x, y] = code(kind)
+            elif kind is not None:
+                target[x, y] = kind
+    put(by_pair[kl[:, None], ka[None, :]])
+    pair_target = target[kl[:, None], ka[None, :]]
     def too_short(table):
         def why(r):
             need = max(4, int(MIN_SECONDS * float(table.fps[r])))
@@ -435,7 +489,14 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
         apart = np.maximum(dl[:, None], da[None, :]) > c.max_length_ratio * np.minimum(dl[:, None], da[None, :])
         put(np.where(apart, code(f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"), 0))
     key_l = {int(i): clip_key("L", i, same) for i in L}
-    key_a = {int(j): clip_key("A", j, same) for j in A}
+    # an action's checks: of its own clip, else of it retargeted (the first group's)
+    moved: dict[str, str] = {}
+    for k in sorted(checks):
+        parts = retargeted_parts(k)
+        if parts is not None:
+            moved.setdefault(parts[1], k)
+    key_a = {j: key if key in checks else moved.get(key, key) for j, key in
+             ((j, clip_key("A", j, same)) for j in A.tolist())}
 
     def damaged(table, keys):
         def why(r):
@@ -468,8 +529,8 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, sk_l, sk_a, check
             skipped[reasons[r]] = skipped.get(reasons[r], 0) + int(per[r + 1])
         for mode, want in (("timewarp", ~standing), ("standing", standing)):
             rows, cols = np.nonzero((grid == 0) & want[None, :])
-            for i, j in zip(L[rows].tolist(), A[cols].tolist()):
-                pairs.append(Pair(method, i, j, refs.get(j) if mode == "timewarp" else None, mode))
+            for i, j, t in zip(L[rows].tolist(), A[cols].tolist(), pair_target[rows, cols].tolist()):
+                pairs.append(Pair(method, i, j, refs.get(j) if mode == "timewarp" else None, mode, None if t < 0 else t))
     return pairs, skipped
 
 

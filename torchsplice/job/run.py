@@ -111,7 +111,7 @@ class SpliceJob:
                 clear_work(self.work, keep=lock.path)
             for folder in (self.work, c.output.parent):
                 remove_stale_temporaries(folder)
-            sources = Sources(c.database, c.actions_db)
+            sources = Sources(c.database, c.actions_db, fix_feet=c.fix_feet)
             try:
                 summary = self._run(sources, t0)
             finally:
@@ -124,11 +124,12 @@ class SpliceJob:
     def _dry_run(self, t0: float) -> JobSummary:
         """Plan, and say what the job would do and how much disk it needs; writes nothing."""
         c = self.config
-        sources = Sources(c.database, c.actions_db)
+        sources = Sources(c.database, c.actions_db, fix_feet=c.fix_feet)
         try:
             plan = make_plan(c, sources)
             summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), tasks=len(plan.tasks),
-                                 dry_run=True, standing=sum(p.mode == "standing" for p in plan.pairs))
+                                 dry_run=True, standing=sum(p.mode == "standing" for p in plan.pairs),
+                                 retargeted=sum(p.target is not None for p in plan.pairs))
             summary.expected = self._expected(plan, sources)
             summary.free = _free_bytes(c.output.parent)
         finally:
@@ -205,7 +206,8 @@ class SpliceJob:
         out, merged, merge = None, 0, None
         try:
             summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), shard=self.shard,
-                                 tasks=len(tasks), engine=engine.describe(), expected=expected, free=free)
+                                 tasks=len(tasks), engine=engine.describe(), expected=expected, free=free,
+                                 retargeted=sum(p.target is not None for p in plan.pairs))
             if self.shard is None:  # the output, resumed at its last checkpoint if an earlier run left one
                 run = {**plan.key, "pairs": len(plan.pairs), "batch_pairs": plan.key["task_pairs"],
                        "plan_sha256": plan.digest(), "command": self.command, "started": self._started,

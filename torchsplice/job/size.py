@@ -76,7 +76,7 @@ def estimate_output(plan, skeleton_of, compression, copied: list | None = None) 
         if t.mode == "standing":
             n = lf
         else:
-            act = [info[clip_key("A", p.action, plan.same_db)] for p in pairs]
+            act = [info[plan.pair_keys(p, plan.same_db)[1]] for p in pairs]
             n = np.minimum(lf, np.array([f * g.fps / rate for f, rate in act]))
         count = int(n.sum())
         sk = skeleton_of(t.group)

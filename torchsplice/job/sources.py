@@ -1,7 +1,10 @@
 """The job's source clips: read once per process, prepared once per job.
 
 Clips are keyed ``"L:ROW"`` (the locomotion database) and ``"A:ROW"`` (the action database;
-``"L:ROW"`` as well when both are one file). A *group* is a locomotion skeleton and frame rate;
+``"L:ROW"`` as well when both are one file); ``"R{K}A:ROW"`` (or ``"R{K}L:ROW"``) is that action
+retargeted onto the locomotion database's skeleton ``K`` (:func:`retargeted_key`), made once
+per process from the stored clip (:mod:`torchsplice.ops.retarget`, the feet fixed unless
+``fix_feet`` is off) and kept like any other clip; its labels say what it was retargeted from. A *group* is a locomotion skeleton and frame rate;
 its bank (the clips as a backend prepares them, :meth:`~torchsplice.splice.backends.Backend.prepare`:
 for the compiled splicer a :class:`~torchsplice.cpu.bank.ClipBank`) holds the group's locomotions and every
 action and reference of the same topology, resampled to the group's rate, with forward
@@ -23,7 +26,7 @@ from ..core.motion import Motion
 from ..store.database import MotionDatabase
 from ..splice.clips import resample_motion
 
-__all__ = ["Sources", "clip_key", "split_key"]
+__all__ = ["Sources", "clip_key", "split_key", "retargeted_key", "retargeted_parts"]
 
 
 def clip_key(tag: str, row: int, same_db: bool) -> str:
@@ -36,6 +39,19 @@ def split_key(key: str) -> tuple[str, int]:
     return tag, int(row)
 
 
+def retargeted_key(key: str, skeleton: int) -> str:
+    """The key of clip ``key`` (``"A:ROW"``/``"L:ROW"``) retargeted onto locomotion skeleton ``skeleton``."""
+    return f"R{int(skeleton)}{key}"
+
+
+def retargeted_parts(key: str) -> tuple[int, str] | None:
+    """``(skeleton, source key)`` of a retargeted clip's key, ``None`` for any other key."""
+    if not key.startswith("R"):
+        return None
+    tag, row = split_key(key)
+    return int(tag[1:-1]), f"{tag[-1]}:{row}"
+
+
 class Sources:
     """Clips of one job, read on demand (a database at a time) and kept; banks per group.
 
@@ -44,7 +60,7 @@ class Sources:
     """
 
     def __init__(self, database: Path | None = None, actions_db: Path | None = None, dbs: dict | None = None,
-                 bank_dir: Path | None = None, bank_tag: str = ""):
+                 bank_dir: Path | None = None, bank_tag: str = "", fix_feet: bool = True):
         self.paths = {"L": database, "A": actions_db or database}
         self.dbs: dict = dict(dbs or {})
         self.motions: dict[str, Motion] = {}
@@ -53,6 +69,8 @@ class Sources:
         self.shared: dict[int, tuple[int, list[str]]] = {}  # group -> (its bank, the bank's clips)
         self.bank_dir = bank_dir  # where the driver's banks are, as files (None: built here)
         self.bank_tag = bank_tag  # what the banks there must have been made for (the plan's digest)
+        self.fix_feet = fix_feet
+        self.retargeting: dict = {}  # (source tag, source skeleton, target skeleton) -> (map, heights, labels)
 
     @classmethod
     def from_motions(cls, motions: dict[str, Motion]) -> "Sources":
@@ -73,12 +91,52 @@ class Sources:
         self.dbs.clear()
 
     def load(self, keys) -> None:
-        """Read the clips not read yet, a database at a time."""
+        """Read the clips not read yet, a database at a time (and retarget those asked for so)."""
+        keys = list(keys)
+        made = [k for k in keys if k not in self.motions and retargeted_parts(k) is not None]
+        wanted = set(keys) | {retargeted_parts(k)[1] for k in made}
         for tag in ("L", "A"):
-            rows = sorted({split_key(k)[1] for k in keys if split_key(k)[0] == tag and k not in self.motions})
+            rows = sorted({split_key(k)[1] for k in wanted if split_key(k)[0] == tag and k not in self.motions})
             if rows:
                 for row, m in zip(rows, self.db(tag).read_many(rows)):
                     self.motions[f"{tag}:{row}"] = m
+        for key in made:
+            self.motions[key] = self._retarget(key)
+
+    def retargeting_for(self, tag: str, skeleton: int, target: int):
+        """``(map, target heights, labels)`` of clips of database ``tag``'s skeleton ``skeleton``
+        onto the locomotion database's skeleton ``target``, made once (raises the map's one-line
+        error for a skeleton that is not a humanoid)."""
+        key = (tag, skeleton, target)
+        if key not in self.retargeting:
+            from ..ops.retarget import retarget_map
+            from ..retarget.clips import source_label
+            from ..retarget.targets import resolve_target
+
+            db, loco = self.db(tag), self.db("L")
+            spec = db.spec(skeleton)
+            to = resolve_target(f"{self.paths['L']}:{target}")
+            rmap = retarget_map(db.skeletons[skeleton], spec.bind(db.skeletons[skeleton]), loco.skeletons[target],
+                                to.spec.bind(loco.skeletons[target]),
+                                source_name=f"{self.paths[tag]}: skeleton {skeleton} ({spec.name})",
+                                target_name=f"{self.paths['L']}: skeleton {target}")
+            labels = {"retargeted_from": source_label(self.paths[tag], skeleton, spec.name), "retargeted_to": to.name}
+            self.retargeting[key] = (rmap, to.heights, labels)
+        return self.retargeting[key]
+
+    def _retarget(self, key: str) -> Motion:
+        import torch
+
+        from ..ops.retarget import retarget_motion
+
+        target, source = retargeted_parts(key)
+        tag, row = split_key(source)
+        m = self.motions[source]
+        skeleton = int(self.db(tag).clip_table().skeleton[row])
+        rmap, heights, labels = self.retargeting_for(tag, skeleton, target)
+        out = retarget_motion(m.to(torch.float64), rmap, self.fix_feet, heights).to(m.dtype)
+        out.labels.update(labels)
+        return out
 
     def motion(self, key: str) -> Motion:
         if key not in self.motions:

@@ -13,7 +13,7 @@ from .plan import SKELETONS_DIFFER
 __all__ = ["JobSummary", "REASON_OPTIONS", "REASONS_SHOWN", "reason_lines", "progress_bar"]
 
 
-REASON_OPTIONS = ("max_length_ratio", "force_locomotion")
+REASON_OPTIONS = ("max_length_ratio", "force_locomotion", "retarget")
 """Options that skip reasons may name, as ``{name}``."""
 
 
@@ -43,6 +43,7 @@ class JobSummary:
     merged_shards: int = 0  # shards this run appended to the output (an earlier run's are not merged again)
     dry_run: bool = False
     standing: int = 0  # pairs of standing actions among the pairs
+    retargeted: int = 0  # pairs whose action (and reference) were retargeted onto the locomotion's skeleton
     expected: OutputSize | None = None  # the output's expected size (see torchsplice.job.size)
     written: int | None = None  # bytes the output took
     free: int | None = None  # bytes free beside the output when the job started
@@ -75,6 +76,9 @@ class JobSummary:
         if standing:
             out.append(f"  {self.timings.get('timewarp', 0)} time-aligned (timewarp), "
                        + ", ".join(f"{n} standing actions ({t})" for t, n in sorted(standing.items())))
+        if self.retargeted:
+            out.append(f"  {self.retargeted} {'would have' if self.dry_run else 'had'} the action retargeted onto the "
+                       "locomotion's skeleton (labels retargeted_from, retargeted_to)")
         if self.written is not None and not self.dry_run:
             out.append(f"  {format_bytes(self.written)} on disk" + (f" (expected {format_bytes(self.expected.bytes)})"
                                                                     if self.expected is not None else ""))
@@ -86,9 +90,9 @@ class JobSummary:
                        f"would skip {sum(skipped.values())} pairs:")
             out += reason_lines(skipped, say)
         if apart:
-            out.append(f"not formed: {sum(apart.values())} pairs whose clips are on skeletons of different joints "
-                       "(splicing needs one joint hierarchy):")
-            out += [f"  {n} x {why}" for why, n in sorted(apart.items(), key=lambda kv: -kv[1])]
+            out.append(f"not formed: {sum(apart.values())} pairs whose clips are on skeletons of different joints that "
+                       "could not be retargeted onto one another:")
+            out += [f"  {n} x {say(why)}" for why, n in sorted(apart.items(), key=lambda kv: -kv[1])]
         if self.flagged:
             out.append(f"flagged {self.flagged_clips} clips (see the 'flags' column):")
             out += [f"  {n} x {why}" for why, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]

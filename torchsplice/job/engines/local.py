@@ -56,7 +56,8 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int,
     from ..sink import make_sink
 
     plan = Plan.load(Path(plan_path))
-    sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir), bank_tag=plan.digest())  # mapped
+    sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir), bank_tag=plan.digest(),
+                      fix_feet=config.fix_feet)  # mapped
     sources.share_banks(plan.groups)
     _WORKER.update(config=config, plan=plan, sources=sources, sink=make_sink(config), shard_dir=Path(shard_dir),
                    keep_shards=keep_shards)
