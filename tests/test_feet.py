@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import itertools
 
+import numpy as np
 import pytest
 import torch
 
 from test_retarget import real_clips, roles_of
 from torchsplice.core.rotations import quat_angle, quat_apply, quat_normalize
 from torchsplice.evaluation.metrics import foot_skate_stats
-from torchsplice.ops.feet import _blend_weight, two_bone_ik
+from torchsplice.ops.feet import _blend_weight, _pins, two_bone_ik
 from torchsplice.ops.retarget import retarget_map, retarget_motion
 from torchsplice.sample import sample_motions
 from torchsplice.specs import UNITS, detect_spec
@@ -71,12 +72,41 @@ def test_two_bone_ik_straightens_toward_a_target_out_of_reach_and_leaves_a_reach
 
 
 def test_a_pin_blends_in_and_out_linearly_over_its_frames():
-    held = torch.zeros(20, dtype=torch.bool)
+    held = np.zeros(20, dtype=bool)
     held[8:11] = True
-    w = _blend_weight(held, 3)
-    expected = torch.tensor([0, 0, 0, 0, 0, 0.25, 0.5, 0.75, 1, 1, 1, 0.75, 0.5, 0.25, 0, 0, 0, 0, 0, 0], dtype=torch.float64)
-    assert torch.allclose(w, expected)
-    assert float(_blend_weight(torch.zeros(5, dtype=torch.bool), 3).abs().max()) == 0.0
+    w = _blend_weight(held, np.zeros(20, dtype=np.int64), np.full(20, 3))
+    expected = [0, 0, 0, 0, 0, 0.25, 0.5, 0.75, 1, 1, 1, 0.75, 0.5, 0.25, 0, 0, 0, 0, 0, 0]
+    assert np.allclose(w, expected)
+    assert float(np.abs(_blend_weight(np.zeros(5, dtype=bool), np.zeros(5, dtype=np.int64), np.full(5, 3))).max()) == 0.0
+    # two clips back to back: a pin at the end of the first does not blend into the second
+    clip = np.repeat([0, 1], 10)
+    held = np.zeros(20, dtype=bool)
+    held[8:10] = True
+    w = _blend_weight(held, clip, np.full(20, 3))
+    assert np.allclose(w[:10], [0, 0, 0, 0, 0, 0.25, 0.5, 0.75, 1, 1]) and np.all(w[10:] == 0)
+
+
+def test_pins_hold_each_run_and_hand_over_from_heel_to_toe_without_a_jump():
+    """A known answer: an ankle run then a toe run; the ankle is held at its run's mean offset
+    from the source's path, and the toe then stays where the foot left it."""
+    N = 12
+    pos = np.zeros((N, 2, 3))
+    pos[:, 0, 0] = np.arange(N) * 0.1  # the target's ankle drifts along x
+    pos[:, 1] = pos[:, 0] + [0.0, 0.0, 0.2]  # its toe, 0.2 ahead
+    guide = np.zeros((N, 2, 3))  # the source's ankle and toe stand still at 0 and (0, 0, 0.2)
+    guide[:, 1, 2] = 0.2
+    ankle = np.zeros(N, dtype=bool)
+    ankle[2:6] = True
+    toe = np.zeros(N, dtype=bool)
+    toe[2:9] = True
+    first = np.zeros(N, dtype=bool)
+    first[0] = True
+    pinned, held = _pins(pos, guide, 0, 1, 0, 1, ankle, toe, first)
+    assert held.tolist() == [False] * 2 + [True] * 7 + [False] * 3
+    assert np.allclose(pinned[2:6, 0], 0.35)  # the ankle run's mean x: (0.2 + 0.3 + 0.4 + 0.5) / 4
+    toe_at = pinned[6:9] + (pos[6:9, 1] - pos[6:9, 0])
+    assert np.allclose(toe_at[:, 0], 0.35) and np.allclose(toe_at[:, 2], 0.2)  # where the foot left it
+    assert np.allclose(pinned[:2], pos[:2, 0]) and np.allclose(pinned[9:], pos[9:, 0])  # free frames as they are
 
 
 def _cm(skeleton) -> float:

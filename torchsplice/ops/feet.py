@@ -34,12 +34,10 @@ rotation (so the toes point as they did).
 
 from __future__ import annotations
 
-from dataclasses import replace
-
+import numpy as np
 import torch
 
 from ..core.fk import forward_kinematics
-from ..core.motion import Motion
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize
 from ..kinematics.contacts import foot_contacts
 
@@ -64,8 +62,12 @@ _REACH = 0.9995
 """The fraction of a leg's full length that IK stretches it to (a straight knee is singular)."""
 
 
+def _norm(v: torch.Tensor) -> torch.Tensor:
+    return (v * v).sum(-1).sqrt()
+
+
 def _unit(v: torch.Tensor) -> torch.Tensor:
-    return v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return v / (v * v).sum(-1, keepdim=True).sqrt().clamp_min(1e-12)
 
 
 def two_bone_ik(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target: torch.Tensor,
@@ -76,15 +78,15 @@ def two_bone_ik(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, targ
     approached along the same line (the leg straightens to :data:`_REACH`, or stays as
     straight as it is), one too close along
     it as far as the bones allow."""
-    a = (knee - hip).norm(dim=-1, keepdim=True)
-    b = (ankle - knee).norm(dim=-1, keepdim=True)
+    a = _norm(knee - hip)[:, None]
+    b = _norm(ankle - knee)[:, None]
     to = target - hip
-    reach = torch.maximum((a + b) * _REACH, (ankle - hip).norm(dim=-1, keepdim=True))  # no straighter than it is
-    d = torch.minimum(to.norm(dim=-1, keepdim=True).clamp_min((a - b).abs() + 1e-9 * (a + b)), reach)
+    reach = torch.maximum((a + b) * _REACH, _norm(ankle - hip)[:, None])  # no straighter than it is
+    d = torch.minimum(_norm(to)[:, None].clamp_min((a - b).abs() + 1e-9 * (a + b)), reach)
     u = _unit(to)
     pole = knee - hip
     pole = pole - (pole * u).sum(-1, keepdim=True) * u
-    straight = pole.norm(dim=-1, keepdim=True) <= 1e-9 * a
+    straight = _norm(pole)[:, None] <= 1e-9 * a
     # a straight leg bends toward where its knee points now (the thigh's turn from the line)
     fallback = torch.linalg.cross(u, torch.roll(u, 1, dims=-1), dim=-1)
     n = _unit(torch.where(straight, fallback, pole))
@@ -98,22 +100,87 @@ def two_bone_ik(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, targ
     return q_hip, q_knee
 
 
-def _runs(mask: torch.Tensor) -> list[tuple[int, int]]:
-    """``(start, stop)`` of each run of True in a ``(T,)`` bool mask."""
-    m = mask.to(torch.int8)
-    edges = torch.diff(torch.cat([m.new_zeros(1), m, m.new_zeros(1)]))
-    return list(zip(torch.nonzero(edges == 1).flatten().tolist(), torch.nonzero(edges == -1).flatten().tolist()))
+def _runs(mask: np.ndarray, first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(starts, stops)`` of the runs of True in a ``(N,)`` mask of concatenated clips, ``first``
+    marking each clip's first frame (a run never crosses from one clip into the next)."""
+    prev = np.concatenate(([False], mask[:-1])) & ~first
+    nxt = np.concatenate((mask[1:], [False])) & ~np.concatenate((first[1:], [True]))
+    return np.flatnonzero(mask & ~prev), np.flatnonzero(mask & ~nxt) + 1
 
 
-def _blend_weight(held: torch.Tensor, frames: int) -> torch.Tensor:
-    """``(T,)`` 1 on held frames, falling linearly to 0 over ``frames`` frames on each side."""
-    T = held.shape[0]
-    t = torch.arange(T, dtype=torch.float64)
-    far = torch.tensor(float(T + frames + 1), dtype=torch.float64)
-    before = torch.cummax(torch.where(held, t, -far), dim=0).values  # the last held frame so far
-    after = torch.cummax(torch.where(held, -t, -far).flip(0), dim=0).values.flip(0)  # minus the next one
-    dist = torch.minimum(t - before, -after - t)
-    return (1.0 - dist / (frames + 1)).clamp_min(0.0)
+def _blend_weight(held: np.ndarray, clip: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """``(N,)`` 1 on held frames, falling linearly to 0 over ``frames`` (per frame: its clip's)
+    frames on each side, within each clip (``clip``: each frame's clip index)."""
+    N = held.shape[0]
+    gap = int(frames.max(initial=0)) + 2
+    t = np.arange(N, dtype=np.float64) + clip * gap  # clips apart by more than a blend
+    far = float(t[-1] + 2 * gap + 1) if N else 0.0
+    before = np.maximum.accumulate(np.where(held, t, -far)) if N else t
+    after = -np.maximum.accumulate(np.where(held, -t, -far)[::-1])[::-1] if N else t
+    dist = np.minimum(t - before, after - t)
+    return np.clip(1.0 - dist / (frames + 1), 0.0, None)
+
+
+def _pins(pos: np.ndarray, guide: np.ndarray, ankle: int, toe: int | None, s_ankle: int, s_toe: int | None,
+          contact_ankle: np.ndarray, contact_toe: np.ndarray | None, first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ankle's pinned position ``(N, 3)`` (its up component unused) and held mask ``(N,)``
+    of one leg, over concatenated clips (``first`` marks each clip's first frame): over each
+    contact run, the source's own path of the standing point (``guide`` ``(N, Js, 3)``, the
+    source's positions scaled into the target's units) moved by one offset per run, the run's
+    mean distance from the target's point, or, for a run that starts as the other point's
+    ends, where that one left the foot (see the module docstring). Offsets along such a chain
+    of runs add up (a cumulative sum), so no loop runs over runs."""
+    N = pos.shape[0]
+    pinned = pos[:, ankle].copy()
+    held = contact_ankle.copy()
+    ga = guide[:, s_ankle]
+    sa, ea = _runs(contact_ankle, first)
+    kinds = [np.zeros(len(sa), dtype=bool)]  # True: a toe run
+    starts, stops = [sa], [ea]
+    if contact_toe is not None:
+        foot = pos[:, toe] - pos[:, ankle]  # the foot's world rotation is kept by the IK
+        gt = guide[:, s_toe]
+        st, et = _runs(contact_toe & ~contact_ankle, first)
+        kinds.append(np.ones(len(st), dtype=bool))
+        starts.append(st)
+        stops.append(et)
+        held |= contact_toe
+    s, e, toe_run = np.concatenate(starts), np.concatenate(stops), np.concatenate(kinds)
+    order = np.argsort(s, kind="stable")
+    s, e, toe_run = s[order], e[order], toe_run[order]
+    if not len(s):
+        return pinned, held
+    # each run's own offset: the mean of (target point - guide) over its frames (prefix sums)
+    da = np.concatenate((np.zeros((1, 3)), np.cumsum(pos[:, ankle] - ga, axis=0)))
+    own = (da[e] - da[s]) / (e - s)[:, None]
+    chained = np.zeros(len(s), dtype=bool)
+    chained[1:] = (s[1:] == e[:-1]) & ~first[s[1:]]
+    inc = np.zeros((len(s), 3))
+    if contact_toe is not None:
+        dt = np.concatenate((np.zeros((1, 3)), np.cumsum(pos[:, toe] - gt, axis=0)))
+        own[toe_run] = ((dt[e] - dt[s]) / (e - s)[:, None])[toe_run]
+        p = np.maximum(s - 1, 0)
+        # heel lifts (an ankle run, then a toe run): the toe stays where the foot left it
+        inc = np.where(toe_run[:, None], ga[p] + foot[p] - gt[p], gt[p] - foot[p] - ga[p])
+    inc[~chained] = 0.0
+    chain = np.cumsum(~chained) - 1  # each run's chain
+    heads = np.flatnonzero(~chained)
+    total = np.cumsum(inc, axis=0)
+    offset = own[heads][chain] + total - total[heads][chain]
+    # per frame: the run it is in
+    run_of = np.full(N, -1)
+    lengths = e - s
+    idx = np.repeat(np.arange(len(s)), lengths)
+    frames = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths) + np.repeat(s, lengths)
+    run_of[frames] = idx
+    inside = run_of >= 0
+    r = run_of[inside]
+    at = ga[inside] + offset[r]
+    if contact_toe is not None:
+        on_toe = toe_run[r]
+        at[on_toe] = (gt[inside] + offset[r] - foot[inside])[on_toe]
+    pinned[inside] = at
+    return pinned, held
 
 
 def contact_heights(positions: torch.Tensor, points: list[int], leg: float, fps: float, up_axis: int) -> torch.Tensor:
@@ -148,136 +215,151 @@ def rig_heights(motions, legs: list[tuple[int, int, int, int | None]], up_axis: 
     return torch.tensor(per_clip, dtype=torch.float64).median(dim=0).values
 
 
-def _pins(pos: torch.Tensor, guide: torch.Tensor, ankle: int, toe: int | None, s_ankle: int, s_toe: int | None,
-          contact_ankle: torch.Tensor, contact_toe: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-    """The ankle's pinned position ``(T, 3)`` (its up component unused) and held mask ``(T,)``
-    of one leg: over each contact run, the source's own path of the standing point (``guide``
-    ``(T, Js, 3)``, the source's positions scaled into the target's units) moved by one offset
-    per run, the run's mean distance from the target's point, or where the other point's pin
-    left the foot (see the module docstring)."""
-    pinned = pos[:, ankle].clone()
-    held = contact_ankle.clone()
-    foot = pos[:, toe] - pos[:, ankle] if toe is not None else None  # the foot's world rotation is kept
-    events = [(s, e, "ankle") for s, e in _runs(contact_ankle)]
-    if contact_toe is not None:
-        events += [(s, e, "toe") for s, e in _runs(contact_toe & ~contact_ankle)]
-        held = held | contact_toe
-    last_end, last_at = -10, None  # where the ankle was when the last pin ended
-    for s, e, kind in sorted(events):
-        if kind == "ankle":
-            path = guide[s:e, s_ankle]
-            at = last_at if s == last_end else None  # toe, then the heel down: stay where the foot is
-            offset = (at - guide[s - 1, s_ankle]) if at is not None else (pos[s:e, ankle] - path).mean(0)
-            pinned[s:e] = path + offset
-        else:
-            path = guide[s:e, s_toe]
-            at = last_at + foot[s - 1] if s == last_end else None  # the heel lifts: the toe stays
-            offset = (at - guide[s - 1, s_toe]) if at is not None else (pos[s:e, toe] - path).mean(0)
-            pinned[s:e] = path + offset - foot[s:e]
-        last_end, last_at = e, pinned[e - 1].clone()
-    return pinned, held
+def _slices(lengths: list[int]) -> list[slice]:
+    out, at = [], 0
+    for n in lengths:
+        out.append(slice(at, at + n))
+        at += n
+    return out
 
 
-def fix_feet(motion: Motion, legs: list[tuple[int, int, int, int | None]], source_positions: torch.Tensor,
-             source_legs: list[tuple[int, int | None]], scale: float, source_leg: float,
-             target_heights: torch.Tensor | None = None, up_axis: int = 1, pelvis: int = 0,
-             source_pelvis: int = 0) -> Motion:
-    """``motion`` (a retargeted clip) with its feet fixed (see the module docstring).
+def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations: torch.Tensor | None,
+             lengths: list[int], fps: list[float], legs: list[tuple[int, int, int, int | None]],
+             source_positions: torch.Tensor, source_legs: list[tuple[int, int | None]], scale: float,
+             source_leg: float, target_heights: torch.Tensor | None = None, up_axis: int = 1, pelvis: int = 0,
+             source_pelvis: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    """Retargeted clips with their feet fixed (see the module docstring), batched over clips
+    whose frames are concatenated (``N = sum(lengths)``).
 
     Args:
-        motion: the clip on its target skeleton.
+        skeleton: the target skeleton.
+        rotations, root, translations: ``(N, J, 4)``, ``(N, 3)``, ``(N, J, 3)`` or ``None``: the
+            retargeted clips' local rotations, root positions and joint translations.
+        lengths, fps: each clip's frames and frame rate.
         legs: per leg ``(hip, knee, ankle, toe or None)`` of the target (knee the hip's child,
             ankle the knee's).
-        source_positions: ``(T, Js, 3)`` the source clip's world positions (source units).
+        source_positions: ``(N, Js, 3)`` the source clips' world positions (source units).
         source_legs: per leg ``(ankle, toe or None)`` of the source.
-        scale: target units per source unit for this clip (the trajectory's scale).
+        scale: target units per source unit (the trajectory's scale).
         source_leg: the source's leg length (source units), for the contact thresholds.
         target_heights: ``(legs, 2)`` the target rig's contact heights of (ankle, toe), in its
             units; ``None`` takes the source's, scaled.
         up_axis: 0, 1 or 2; pelvis: the target joint whose translation or whose ancestors'
-            carry the trajectory (lowered where a leg cannot reach); source_pelvis: the
-            source's (the trajectory was scaled about the floor below its first frame).
+            carry the trajectory (raised or lowered); source_pelvis: the source's (the
+            trajectory was scaled about the floor below its first frame).
+
+    Returns ``(rotations, root, translations)`` float64, the same shapes.
     """
-    sk = motion.skeleton
+    sk = skeleton
     for hip, knee, ankle, _ in legs:
         if sk.parents[knee] != hip or sk.parents[ankle] != knee:
             raise ValueError(f"leg {sk.names[hip]}-{sk.names[knee]}-{sk.names[ankle]} is not one chain of three joints")
-    T = motion.num_frames
-    rot = motion.rotations.to(torch.float64)
-    root = motion.root_translation.to(torch.float64).clone()
-    trans = motion.translations.to(torch.float64).clone() if motion.translations is not None else None
+    rot = rotations.to(torch.float64)
+    root = root.to(torch.float64).clone()
+    trans = translations.to(torch.float64).clone() if translations is not None else None
     offsets, parents = sk.offsets.to(torch.float64), sk.parents
     src = source_positions.to(torch.float64)
+    N, B = rot.shape[0], len(lengths)
+    spans = _slices(lengths)
+    counts = torch.tensor(lengths)
     src_points = [j for a, t in source_legs for j in (a, t) if j is not None]
-    src_h = contact_heights(src, src_points, source_leg, motion.fps, up_axis)
-    heights_of = dict(zip(src_points, src_h.tolist()))
-    contacts = foot_contacts(src[:, src_points][None], torch.tensor([T]), motion.fps, torch.tensor([source_leg]),
-                             up_axis, PIN_HEIGHT_RATIO, PIN_SPEED_RATIO)[0]
+    # the source's contacts, clip by clip (padded), and each point's resting height per clip
+    padded = torch.nn.utils.rnn.pad_sequence([src[sl][:, src_points] for sl in spans], batch_first=True)
+    contacts = foot_contacts(padded, counts, torch.tensor(fps, dtype=torch.float64),
+                             torch.full((B,), float(source_leg), dtype=torch.float64), up_axis, PIN_HEIGHT_RATIO,
+                             PIN_SPEED_RATIO)
+    valid = torch.arange(padded.shape[1])[None, :] < counts[:, None]
+    contacts = contacts[valid]  # (N, P), the clips' frames in order
+    h = padded[..., up_axis]  # (B, T, P)
+    pad_c = torch.zeros(h.shape, dtype=torch.bool)
+    pad_c[valid] = contacts
+    rest_src = torch.where(pad_c, h, torch.full_like(h, float("nan"))).nanmedian(dim=1).values
+    lowest = torch.where(valid[..., None], h, torch.full_like(h, float("inf"))).min(dim=1).values
+    rest_src = torch.where(torch.isnan(rest_src), lowest, rest_src)  # a point that never stands: its lowest
+    per_frame = torch.repeat_interleave(torch.arange(B), counts)  # each frame's clip
     contact_of = {j: contacts[:, k] for k, j in enumerate(src_points)}
-    blend = max(1, round(BLEND_SECONDS * float(motion.fps)))
-    origin = src[0, source_pelvis].clone()
-    origin[up_axis] = 0.0
-    guide = origin + (src - origin) * scale  # the source in the target's units, scaled like the trajectory
+    origin = src[[sl.start for sl in spans], source_pelvis].clone()
+    origin[:, up_axis] = 0.0
+    origin = origin[per_frame]
+    guide = origin[:, None] + (src - origin[:, None]) * scale  # the source in the target's units, scaled like the trajectory
     pos, glob = forward_kinematics(rot, root, offsets, parents, trans)
     # where each ankle should be: pinned on the floor plane, at the source's height above floor
+    first = np.zeros(N, dtype=bool)
+    first[[sl.start for sl in spans]] = True
+    clip_of = per_frame.numpy()
+    blend = np.maximum(1, np.round(BLEND_SECONDS * np.asarray(fps, dtype=np.float64))).astype(np.int64)[clip_of]
+    pos_np, guide_np = pos.numpy(), guide.numpy()
     targets, helds = [], []
     for k, ((hip, knee, ankle, toe), (s_ankle, s_toe)) in enumerate(zip(legs, source_legs)):
         use_toe = toe if s_toe is not None else None
-        pinned, held = _pins(pos, guide, ankle, use_toe, s_ankle, s_toe, contact_of[s_ankle],
-                             contact_of[s_toe] if use_toe is not None else None)
-        w = _blend_weight(held, blend)[:, None]
-        target = pos[:, ankle] + w * (pinned - pos[:, ankle])
+        pinned, held = _pins(pos_np, guide_np, ankle, use_toe, s_ankle, s_toe, contact_of[s_ankle].numpy(),
+                             contact_of[s_toe].numpy() if use_toe is not None else None, first)
+        w = torch.from_numpy(_blend_weight(held, clip_of, blend))
+        pinned, held = torch.from_numpy(pinned), torch.from_numpy(held)
+        target = pos[:, ankle] + w[:, None] * (pinned - pos[:, ankle])
         # the height: the toe (else the ankle) at the source's lift above its contact height
         lead_s, lead_t, col = (s_toe, use_toe, 1) if use_toe is not None else (s_ankle, ankle, 0)
-        rest_h = float(target_heights[k, col]) if target_heights is not None else heights_of[lead_s] * scale
-        lead_h = rest_h + (src[:, lead_s, up_axis] - heights_of[lead_s]) * scale
+        rest_s = rest_src[:, src_points.index(lead_s)][per_frame]
+        rest_t = float(target_heights[k, col]) if target_heights is not None else rest_s * scale
+        lead_h = rest_t + (src[:, lead_s, up_axis] - rest_s) * scale
         below = pos[:, lead_t, up_axis] - pos[:, ankle, up_axis]  # the lead point's height over the ankle
         target[:, up_axis] = lead_h - below
         targets.append(target)
         helds.append(held)
-    # the pelvis's height: raised or lowered by one amount for the clip, the median of what the
-    # standing feet lack (a rig whose hips hang lower from its pelvis stands lower)
+    size = float(offsets[legs[0][1]].norm() + offsets[legs[0][2]].norm())
     up = torch.zeros(3, dtype=torch.float64)
     up[up_axis] = 1.0
-    lack = torch.cat([(t[:, up_axis] - pos[:, leg[2], up_axis])[h] for t, h, leg in zip(targets, helds, legs)])
-    lift = float(lack.median()) if lack.numel() else 0.0
-    size = float((pos[0, legs[0][1]] - pos[0, legs[0][0]]).norm() + (pos[0, legs[0][2]] - pos[0, legs[0][1]]).norm())
-    lift = lift if abs(lift) > _STILL * size else 0.0  # a clip on its own skeleton is left as it is
+    # the pelvis's height: raised or lowered by one amount per clip, the median of what the
+    # standing feet lack (a rig whose hips hang lower from its pelvis stands lower)
+    lack = torch.stack([t[:, up_axis] - pos[:, leg[2], up_axis] for t, leg in zip(targets, legs)], dim=1)
+    standing = torch.stack(helds, dim=1)
+    lift = torch.zeros(B, dtype=torch.float64)
+    for b, sl in enumerate(spans):
+        here = lack[sl][standing[sl]]
+        if here.numel():
+            lift[b] = here.median()
+    lift = torch.where(lift.abs() > _STILL * size, lift, torch.zeros_like(lift))  # a clip on its own skeleton: as it is
+    lift = lift[per_frame]
     # reach: lower it more where a leg is short of its target
-    drop = torch.zeros(T, dtype=torch.float64)
+    drop = torch.zeros(N, dtype=torch.float64)
     for (hip, knee, ankle, _), target in zip(legs, targets):
-        full = ((pos[0, knee] - pos[0, hip]).norm() + (pos[0, ankle] - pos[0, knee]).norm()) * _REACH * 0.999
-        full = torch.maximum(full, (pos[:, ankle] - pos[:, hip]).norm(dim=-1))
-        v = target - pos[:, hip] - lift * up
+        full = torch.clamp_min(_norm(pos[:, ankle] - pos[:, hip]),
+                               float(offsets[knee].norm() + offsets[ankle].norm()) * _REACH * 0.999)
+        v = target - pos[:, hip] - lift[:, None] * up
         vert = v[:, up_axis]
         horiz2 = (v * v).sum(-1) - vert * vert
         need = (-vert) - (full * full - horiz2).clamp_min(0).sqrt()  # the hip must come down by this
         drop = torch.maximum(drop, need.clamp_min(0))
-    if lift != 0.0 or bool((drop > 0).any()):
-        k = 2 * blend + 1
-        drop = torch.nn.functional.max_pool1d(drop[None, None], k, 1, blend)[0, 0]
-        kernel = torch.ones(1, 1, k, dtype=torch.float64) / k
-        drop = torch.nn.functional.conv1d(torch.nn.functional.pad(drop[None, None], (blend, blend),
-                                                                  mode="replicate"), kernel)[0, 0]
-        shift = (lift - drop)[:, None] * up
+    if bool((drop > 0).any()):
+        for b, sl in enumerate(spans):
+            if not bool((drop[sl] > 0).any()):
+                continue
+            blend = max(1, round(BLEND_SECONDS * float(fps[b])))
+            k = 2 * blend + 1
+            d = torch.nn.functional.max_pool1d(drop[sl][None, None], k, 1, blend)
+            kernel = torch.ones(1, 1, k, dtype=torch.float64) / k
+            drop[sl] = torch.nn.functional.conv1d(torch.nn.functional.pad(d, (blend, blend), mode="replicate"),
+                                                  kernel)[0, 0]
+    shift = (lift - drop)[:, None] * up
+    if bool((shift != 0).any()):
         if trans is not None and pelvis != 0 and sk.translation_animated[pelvis]:
             # the pelvis's own channels carry the trajectory: move it in its parent's frame
             trans[:, pelvis] = trans[:, pelvis] + quat_apply(quat_conj(glob[:, parents[pelvis]]), shift)
+            moved_joints = [pelvis, *sk.descendants(pelvis)]
         else:
             root = root + shift
             if trans is not None:
                 trans[:, 0] = root
-        pos, glob = forward_kinematics(rot, root, offsets, parents, trans)
+            moved_joints = list(range(sk.num_joints))
+        pos[:, moved_joints] += shift[:, None]  # rotations unchanged: the joints below move with it
     out = rot.clone()
     for (hip, knee, ankle, _), target in zip(legs, targets):
         q_hip, q_knee = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, glob[:, hip], glob[:, knee])
         parent = parents[hip]
-        moved = ((target - pos[:, ankle]).norm(dim=-1) > _STILL * size)[:, None]  # else exactly as it was
+        moved = (_norm(target - pos[:, ankle]) > _STILL * size)[:, None]  # else exactly as it was
         new = quat_mul(quat_conj(glob[:, parent]), q_hip) if parent >= 0 else q_hip
         out[:, hip] = torch.where(moved, new, rot[:, hip])
         out[:, knee] = torch.where(moved, quat_mul(quat_conj(q_hip), q_knee), rot[:, knee])
         # the foot keeps its world rotation
         out[:, ankle] = torch.where(moved, quat_mul(quat_conj(q_knee), glob[:, ankle]), rot[:, ankle])
-    dtype = motion.rotations.dtype
-    return replace(motion, rotations=quat_normalize(out).to(dtype), root_translation=root.to(dtype),
-                   translations=None if trans is None else trans.to(dtype))
+    return quat_normalize(out), root, trans

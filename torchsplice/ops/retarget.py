@@ -199,13 +199,35 @@ def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
     With ``fix_feet``, the feet are then held where the source's stand and kept at the source's
     height above the floor (:func:`torchsplice.ops.feet.fix_feet`; ``target_heights`` ``(2, 2)``
     the target rig's contact heights of (ankle, toe) per leg, in its units, where known)."""
-    if motion.skeleton is not rmap.source and not motion.skeleton.same_topology(rmap.source):
-        raise MotionError(f"clip {motion.name!r} is not on the retargeting map's source skeleton")
+    return retarget_motions([motion], rmap, fix_feet, target_heights)[0]
+
+
+def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
+                     target_heights: torch.Tensor | None = None) -> list[Motion]:
+    """:func:`retarget_motion` of each clip of ``motions`` (all on ``rmap.source``), computed
+    together: the clips' frames are concatenated, so the loops over joints run once per call."""
+    motions = list(motions)
+    if not motions:
+        return []
+    short = [m.num_frames < 3 for m in motions]
+    if fix_feet and any(short) and not all(short):  # too short for contacts: their feet left as they are
+        done = dict(zip([i for i, s in enumerate(short) if not s],
+                        retarget_motions([m for m, s in zip(motions, short) if not s], rmap, True, target_heights)))
+        done.update(zip([i for i, s in enumerate(short) if s],
+                        retarget_motions([m for m, s in zip(motions, short) if s], rmap, False)))
+        return [done[i] for i in range(len(motions))]
+    for m in motions:
+        if m.skeleton is not rmap.source and not m.skeleton.same_topology(rmap.source):
+            raise MotionError(f"clip {m.name!r} is not on the retargeting map's source skeleton")
     src, tgt = rmap.source, rmap.target
-    dtype = motion.rotations.dtype
-    rot = motion.rotations.to(torch.float64)
-    trans = motion.translations.to(torch.float64) if motion.translations is not None else None
-    pos, glob = forward_kinematics(rot, motion.root_translation.to(torch.float64), src.offsets, src.parents, trans)
+    lengths = [m.num_frames for m in motions]
+    cat = lambda xs: torch.cat([x.to(torch.float64) for x in xs])  # noqa: E731
+    rot = cat([m.rotations for m in motions])
+    has_trans = [m.translations is not None for m in motions]
+    if any(has_trans) and not all(has_trans):
+        raise MotionError("clips of one skeleton either all have joint translations or none do")
+    trans = cat([m.translations for m in motions]) if all(has_trans) else None
+    pos, glob = forward_kinematics(rot, cat([m.root_translation for m in motions]), src.offsets, src.parents, trans)
     T, J = rot.shape[0], tgt.num_joints
     g_t = torch.zeros(T, J, 4, dtype=torch.float64)
     local = torch.zeros(T, J, 4, dtype=torch.float64)
@@ -219,10 +241,12 @@ def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
             local[:, j] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=torch.float64)
             g_t[:, j] = local[:, j] if p < 0 else g_t[:, p]
     local = quat_normalize(local)
-    # the trajectory: the source pelvis's path, scaled about the floor below its first frame
+    # the trajectory: each clip's source pelvis path, scaled about the floor below its first frame
     pt, ps = rmap.pelvis
-    origin = pos[0, ps].clone()
-    origin[rmap.up_axis] = 0.0
+    starts = torch.tensor([0, *lengths[:-1]]).cumsum(0)
+    origin = pos[starts, ps].clone()
+    origin[:, rmap.up_axis] = 0.0
+    origin = torch.repeat_interleave(origin, torch.tensor(lengths), dim=0)
     pelvis = origin + (pos[:, ps] - origin) * rmap.scale
     chain, j = [], pt
     while j >= 0:
@@ -244,16 +268,16 @@ def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
             root = root - quat_apply(g_t[:, tgt.parents[j]], tgt.offsets[j].expand(T, 3))
     if translations is not None:
         translations[:, 0] = root
-    out = Motion(skeleton=tgt, rotations=local.to(dtype), root_translation=root.to(dtype),
-                 translations=None if translations is None else translations.to(dtype), fps=motion.fps,
-                 name=motion.name, source=motion.source, role=motion.role, labels=dict(motion.labels))
-    if fix_feet and rmap.legs and T > 2:
-        out = feet.fix_feet(out, list(rmap.legs), pos, list(rmap.source_legs), rmap.scale, rmap.source_leg,
-                            target_heights, rmap.up_axis, pt, ps)
+    if fix_feet and rmap.legs and min(lengths) >= 3:
+        local, root, translations = feet.fix_feet(tgt, local, root, translations, lengths, [float(m.fps) for m in motions],
+                                                  list(rmap.legs), pos, list(rmap.source_legs), rmap.scale,
+                                                  rmap.source_leg, target_heights, rmap.up_axis, pt, ps)
+    out, at = [], 0
+    for m, n in zip(motions, lengths):
+        sl = slice(at, at + n)
+        at += n
+        dtype = m.rotations.dtype
+        out.append(Motion(skeleton=tgt, rotations=local[sl].to(dtype), root_translation=root[sl].to(dtype),
+                          translations=None if translations is None else translations[sl].to(dtype), fps=m.fps,
+                          name=m.name, source=m.source, role=m.role, labels=dict(m.labels)))
     return out
-
-
-def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
-                     target_heights: torch.Tensor | None = None) -> list[Motion]:
-    """:func:`retarget_motion` of each clip of ``motions`` (all on ``rmap.source``)."""
-    return [retarget_motion(m, rmap, fix_feet, target_heights) for m in motions]
