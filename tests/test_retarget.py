@@ -163,9 +163,9 @@ def test_a_round_trip_between_real_rigs_comes_back_within_one_percent_of_the_hei
     joints = canonical_joints(ra, a.skeleton)
     mapped = [j for name, j in joints.items() if name != "spine"]
     height = character_height(a.skeleton, joints)
-    # the analytic retargeting within 1%; with the feet fixed both ways (legs bent and the pelvis
-    # set to reach the floor, each rig its own way) within 2%
-    for fix, bound in ((False, 0.01), (True, 0.02)):
+    # the analytic retargeting within 1%; with the feet fixed both ways (the legs solved twice and the
+    # pelvis set each time so that each rig's feet stand as that rig's stand) within 3%
+    for fix, bound in ((False, 0.01), (True, 0.03)):
         there = retarget_motion(a, retarget_map(a.skeleton, ra, b.skeleton, rb), fix_feet=fix)
         back = retarget_motion(there, retarget_map(b.skeleton, rb, a.skeleton, ra), fix_feet=fix)
         err = (back.global_positions()[:, mapped] - a.global_positions()[:, mapped]).norm(dim=-1)

@@ -18,11 +18,12 @@ floor than its rig needs. :func:`fix_feet` corrects both:
   foot's own rotation about it. A run that starts while the other point is held starts where
   that one left the foot, so the hand-over does not jump. The pin blends in and out over
   :data:`BLEND_SECONDS` beyond each run.
-- **How high.** Every frame, the target's toe (the ankle where a rig has no toe) is put at the
-  source's toe height above its own contact height, times the leg-length scale, above the
-  target's contact height (its own clips' where known, else the source's scaled): a foot that
-  rests on the floor in the source rests on it in the target, whatever the two rigs' ankle and
-  toe heights, and no foot goes lower than the source's does.
+- **How high.** Every frame, the target's ankle and toe are each put at least at the source's
+  height above that point's resting height (its height while the foot stands), times the
+  leg-length scale, above the target's resting height (its own clips' where known, else the
+  source's scaled); the foot keeps the source's pitch, so one of the two decides and the other
+  may stand a little higher. A foot that rests on the floor in the source rests on it in the
+  target, whatever the two rigs' ankle and toe heights, and sinks no lower than the source's.
 - **The pelvis's height.** The pelvis is raised or lowered by one amount for the clip, the
   median of what the standing feet lack (a rig whose hips hang lower below its pelvis stands
   lower), and lowered further where a leg still cannot reach its target (smoothly over
@@ -298,12 +299,19 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
         pinned, held = torch.from_numpy(pinned), torch.from_numpy(held)
         target = pos[:, ankle] + w[:, None] * (pinned - pos[:, ankle])
         # the height: the toe (else the ankle) at the source's lift above its contact height
-        lead_s, lead_t, col = (s_toe, use_toe, 1) if use_toe is not None else (s_ankle, ankle, 0)
-        rest_s = rest_src[:, src_points.index(lead_s)][per_frame]
-        rest_t = float(target_heights[k, col]) if target_heights is not None else rest_s * scale
-        lead_h = rest_t + (src[:, lead_s, up_axis] - rest_s) * scale
-        below = pos[:, lead_t, up_axis] - pos[:, ankle, up_axis]  # the lead point's height over the ankle
-        target[:, up_axis] = lead_h - below
+        # the height: the ankle and the toe each at least at the source's lift above its resting
+        # height (the foot keeps the source's pitch, so on a rig whose foot rests otherwise one
+        # of them decides, and the other stands a little higher)
+        height = None
+        for point_s, point_t, col in ((s_ankle, ankle, 0), (s_toe, use_toe, 1)):
+            if point_t is None:
+                continue
+            rest_s = rest_src[:, src_points.index(point_s)][per_frame]
+            rest_t = float(target_heights[k, col]) if target_heights is not None else rest_s * scale
+            lift_h = rest_t + (src[:, point_s, up_axis] - rest_s) * scale  # where the point should be
+            ankle_h = lift_h - (pos[:, point_t, up_axis] - pos[:, ankle, up_axis])  # the ankle that puts it there
+            height = ankle_h if height is None else torch.maximum(height, ankle_h)
+        target[:, up_axis] = height
         targets.append(target)
         helds.append(held)
     size = float(offsets[legs[0][1]].norm() + offsets[legs[0][2]].norm())
