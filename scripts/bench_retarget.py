@@ -78,7 +78,7 @@ def _map(a: Rig, b: Rig):
 
 
 def round_trips(rigs: dict[str, Rig]) -> None:
-    worst_all = (0.0, "")
+    worst_all, worst_fixed, worst_mean = (0.0, ""), (0.0, ""), 0.0
     for a in rigs.values():
         for b in rigs.values():
             if a is b or a.spec.name == b.spec.name:
@@ -90,8 +90,12 @@ def round_trips(rigs: dict[str, Rig]) -> None:
             print(f"retarget round trip {a.name} ({len(a.motions)} clips) -> {b.name} -> back: {mean(plain):.2f}% of "
                   f"height (worst clip {100 * max(plain):.2f}%); feet fixed {mean(fixed):.2f}% "
                   f"(worst {100 * max(fixed):.2f}%)")
-            worst_all = max(worst_all, (max(fixed + plain), f"{a.name} -> {b.name}"))
-    print(f"retarget round trips: worst clip {100 * worst_all[0]:.2f}% ({worst_all[1]})  [mean <= 1%, worst < 2%]")
+            worst_all = max(worst_all, (max(plain), f"{a.name} -> {b.name}"))
+            worst_fixed = max(worst_fixed, (max(fixed), f"{a.name} -> {b.name}"))
+            worst_mean = max(worst_mean, mean(plain))
+    print(f"retarget round trips: the worst pair of rigs {worst_mean:.2f}% on average, the worst clip "
+          f"{100 * worst_all[0]:.2f}% ({worst_all[1]})  [mean <= 1%, worst < 2%]; with the feet fixed both ways the "
+          f"worst clip {100 * worst_fixed[0]:.2f}% ({worst_fixed[1]})")
 
 
 def bones_and_feet(rigs: dict[str, Rig]) -> None:
@@ -173,7 +177,6 @@ def cross_dataset(mocap: Path, tmp: Path) -> None:
             am = d.read(action, dtype=torch.float64)
             aroles = d.spec(d.clip_info(action)["skeleton"]).bind(am.skeleton)
         side = max((0, 1), key=lambda s: wrist_spread(am, aroles, s))
-        want = wrist_spread(am, aroles, side)
         loco_skate = float(foot_skate_stats([lm], lroles).speed[0]) * lcm
         with MotionDatabase.open(out) as d:
             t = d.table()
@@ -181,6 +184,9 @@ def cross_dataset(mocap: Path, tmp: Path) -> None:
             for i, method in enumerate(t["method"]):
                 r = d.read(i, dtype=torch.float64)
                 got = wrist_spread(r, lroles, side)
+                # against the action over the frames the result plays (its action_frame column)
+                used = d.read_frame_column(i, "action_frame").round().clip(0, am.num_frames - 1).astype(int)
+                want = wrist_spread(am, aroles, side, used)
                 skate = float(foot_skate_stats([r], lroles).speed[0]) * lcm
                 parts.append(f"{method}: wrist range {got / want:.2f} of the action's, skate {skate:.2f} cm/s")
         print(f"retarget splice {what} (skate of the locomotion {loco_skate:.2f} cm/s): " + "; ".join(parts)

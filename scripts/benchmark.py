@@ -23,6 +23,10 @@ Sections:
           pairs/s, peak disk and memory, and a job killed three times and resumed (its total time
           and its output against the uninterrupted run's); --mix-db runs it on a whole dataset
           [>= 0.8, >= 1,300 pairs/s, <= 1.2x disk, <= 1.15x time when killed thrice]
+  retarget  between the shipped rigs on every real clip (scripts/bench_retarget.py): round trips,
+          bone directions, feet, cross-dataset splices, joint-frames/s, and splice-all with
+          actions on another skeleton against the same actions on the locomotions' own
+          [<= 1% (worst < 2%), <= 3 deg, skate <= +1 cm/s, >= 1M/s, >= 0.8]
 
 Without real data (no ../shared/mocap and no TORCHSPLICE_MOCAP), the built-in synthetic
 sample stands in and the figures say so. Timings are the best of several repeats; the machine
@@ -602,8 +606,8 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,stages,splice,job,engines,mix",
-                   help="comma-separated sections: parse, stages, splice, job, engines, mix")
+    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget",
+                   help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget")
     p.add_argument("--mix-db", type=Path, default=None,
                    help="the real mix on this database (e.g. the whole Bandai Namco dataset imported) instead of "
                         "the Bandai Namco clips of --mocap")
@@ -632,6 +636,10 @@ def main() -> int:
             bench_engines(files)
         if "mix" in sections:
             bench_mix(files, args.device, args.mix_db)
+        if "retarget" in sections:
+            from bench_retarget import bench_retarget
+
+            bench_retarget(files, args.mocap)
     return 0
 
 

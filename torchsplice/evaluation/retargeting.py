@@ -97,9 +97,10 @@ def feet_figures(motion, result, rmap: RetargetMap, source_roles, target_roles, 
     return {"skate_source": src, "skate": got, "lower": lower}
 
 
-def wrist_spread(motion, roles, side: int) -> float:
+def wrist_spread(motion, roles, side: int, frames=None) -> float:
     """The RMS distance of wrist ``side`` (0 left, 1 right) from its mean place in the chest's
-    frame (the shoulder's parent), over the arm's length (shoulder to elbow to wrist)."""
+    frame (the shoulder's parent), over the arm's length (shoulder to elbow to wrist); over the
+    clip's ``frames`` (indices) where given."""
     sk = motion.skeleton
     joints = canonical_joints(roles, sk)
     s = "lr"[side]
@@ -108,6 +109,8 @@ def wrist_spread(motion, roles, side: int) -> float:
     pos, glob = forward_kinematics(motion.rotations.double(), motion.root_translation.double(), sk.offsets, sk.parents,
                                    None if motion.translations is None else motion.translations.double())
     local = quat_apply(quat_conj(glob[:, chest]), pos[:, wrist] - pos[:, chest])
+    if frames is not None:
+        local = local[torch.as_tensor(frames, dtype=torch.long)]
     spread = float((local - local.mean(0)).norm(dim=-1).pow(2).mean().sqrt())
     rest, _ = sk.rest_positions()
     arm = float((rest[elbow] - rest[shoulder]).norm() + (rest[wrist] - rest[elbow]).norm())

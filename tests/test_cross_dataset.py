@@ -1,0 +1,94 @@
+"""Splicing across datasets: the actions of one dataset on the locomotions of another, through
+``splice-all`` with each of the three methods (the pairs formed by retargeting the action onto
+the locomotion's skeleton).
+
+Known answers for the measure first (:func:`~torchsplice.evaluation.retargeting.wrist_spread`
+does not change when the whole clip turns or the rig grows), then the real pairs of the issue:
+a Bandai Namco wave onto a CMU walk and onto a LAFAN1 locomotion, and a LAFAN1 action onto a
+Bandai Namco turn. The acting wrist's range of motion in the chest frame, over arm length, stays
+within 20% of the action's over the frames the result plays; the feet are the locomotion's
+(foot skate equal to it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+import torch
+
+from conftest import MOCAP
+from torchsplice.core.rotations import axis_angle_to_quat, quat_mul
+from torchsplice.evaluation.metrics import foot_skate_stats
+from torchsplice.evaluation.retargeting import centimetres, wrist_spread
+from torchsplice.formats.importer import import_bvh
+from torchsplice.job import splice_all
+from torchsplice.sample import sample_motions
+from torchsplice.specs import load_spec
+from torchsplice.store.database import MotionDatabase
+
+BANDAI = "bandai_namco_research_motiondataset"
+WAVE = "dataset-2_wave-right-hand_normal_001"
+
+
+def test_the_wrist_spread_does_not_change_when_the_clip_turns_or_the_rig_grows():
+    m = next(x for x in sample_motions() if x.name == "wave").to(torch.float64)
+    roles = load_spec("sample").bind(m.skeleton)
+    base = [wrist_spread(m, roles, s) for s in (0, 1)]
+    turn = axis_angle_to_quat(torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64) * 1.1)
+    turned = replace(m, rotations=m.rotations.clone(), root_translation=m.root_translation @ torch.tensor(
+        [[0.4536, 0, -0.8912], [0, 1, 0], [0.8912, 0, 0.4536]], dtype=torch.float64))
+    turned.rotations[:, 0] = quat_mul(turn.expand(m.num_frames, 4), m.rotations[:, 0])
+    big = replace(m, skeleton=replace(m.skeleton, offsets=m.skeleton.offsets * 2.5), root_translation=m.root_translation * 2.5)
+    for s in (0, 1):
+        assert wrist_spread(turned, roles, s) == pytest.approx(base[s], rel=1e-6)  # the sample is float32
+        assert wrist_spread(big, roles, s) == pytest.approx(base[s], rel=1e-6)  # the sample is float32
+    assert base[1] > 2 * base[0]  # the sample waves with its right hand
+
+
+@pytest.fixture(scope="module")
+def dbs(tmp_path_factory):
+    if not MOCAP.is_dir():
+        pytest.skip(f"no real motion capture at {MOCAP}")
+    root = tmp_path_factory.mktemp("cross")
+    bn, cmu, lafan = root / "bn.h5", root / "cmu.h5", root / "lafan.h5"
+    import_bvh([MOCAP / BANDAI / f"dataset-2_{n}.bvh" for n in ("wave-right-hand_normal_001", "walk_normal_008",
+                                                                 "walk-turn-left_normal_025")], bn)
+    import_bvh([MOCAP / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"], cmu)
+    import_bvh([MOCAP / "lafan1_via_pypi_bvhtools"], lafan)
+    return {"bn": bn, "cmu": cmu, "lafan": lafan, "root": root}
+
+
+CASES = [("cmu", "cmu_12_01_walk", "bn", WAVE, "splice,naive,cpmc"),
+         ("lafan", "test2", "bn", WAVE, "splice,naive,cpmc"),
+         ("bn", "dataset-2_walk-turn-left_normal_025", "lafan", "test", "splice,naive")]
+
+
+@pytest.mark.parametrize("loco_db,loco,action_db,action,methods", CASES, ids=["wave-on-cmu", "wave-on-lafan1",
+                                                                                "lafan1-on-turn"])
+def test_an_action_of_one_dataset_on_a_locomotion_of_another(dbs, loco_db, loco, action_db, action, methods):
+    out = dbs["root"] / f"{loco}+{action}.h5"
+    summary = splice_all(dbs[loco_db], out, actions_db=dbs[action_db], locomotions=loco, actions=action,
+                         methods=methods, workers=1)
+    assert summary.spliced == len(methods.split(",")) and summary.retargeted == summary.spliced
+    with MotionDatabase.open(dbs[loco_db]) as d:
+        lm = d.read(loco, dtype=torch.float64)
+        spec = d.spec(d.clip_info(loco)["skeleton"])
+        lroles = spec.bind(lm.skeleton)
+    with MotionDatabase.open(dbs[action_db]) as d:
+        am = d.read(action, dtype=torch.float64)
+        aroles = d.spec(d.clip_info(action)["skeleton"]).bind(am.skeleton)
+    side = max((0, 1), key=lambda s: wrist_spread(am, aroles, s))
+    cm = centimetres(spec)
+    loco_skate = float(foot_skate_stats([lm], lroles).speed[0]) * cm
+    with MotionDatabase.open(out) as d:
+        t = d.table()
+        assert sorted(map(str, t["method"])) == sorted(methods.split(","))
+        for i in range(len(t["method"])):
+            r = d.read(i, dtype=torch.float64)
+            assert r.skeleton.same_topology(lm.skeleton) and r.labels["action.retargeted_to"].startswith(dbs[loco_db].name)
+            used = d.read_frame_column(i, "action_frame").round().clip(0, am.num_frames - 1).astype(int)
+            ratio = wrist_spread(r, lroles, side) / wrist_spread(am, aroles, side, used)
+            assert 0.8 <= ratio <= 1.2, (t["method"][i], ratio)
+            skate = float(foot_skate_stats([r], lroles).speed[0]) * cm
+            assert abs(skate - loco_skate) <= 1.0, (t["method"][i], skate, loco_skate)
