@@ -92,3 +92,31 @@ def test_an_action_of_one_dataset_on_a_locomotion_of_another(dbs, loco_db, loco,
             assert 0.8 <= ratio <= 1.2, (t["method"][i], ratio)
             skate = float(foot_skate_stats([r], lroles).speed[0]) * cm
             assert abs(skate - loco_skate) <= 1.0, (t["method"][i], skate, loco_skate)
+
+
+def test_splice_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp_path):
+    """One database holding both datasets: ``splice`` and ``plot-alignment`` retarget the action
+    as ``splice-all`` does (the BVH is on the locomotion's skeleton, and its upper body is the
+    job's result's), and ``evaluate`` measures a retargeted output against the action as spliced."""
+    from torchsplice.cli import main
+    from torchsplice.formats.bvh import read_bvh
+
+    mixed = tmp_path / "mixed.h5"
+    import_bvh([MOCAP / BANDAI / "dataset-2_walk-turn-left_normal_025.bvh", MOCAP / "lafan1_via_pypi_bvhtools" / "test.bvh"],
+               mixed)
+    loco = "dataset-2_walk-turn-left_normal_025"
+    assert main(["splice", str(mixed), "--locomotion", loco, "--action", "test", "-o", str(tmp_path / "one.bvh"),
+                 "-q"]) == 0
+    assert main(["plot-alignment", str(mixed), "--locomotion", loco, "--action", "test", "-o",
+                 str(tmp_path / "a.png"), "-q"]) == 0
+    out = tmp_path / "job.h5"
+    assert main(["splice-all", str(mixed), "--locomotions", loco, "--actions", "test", "-o", str(out), "-q",
+                 "--workers", "1"]) == 0
+    one = read_bvh(tmp_path / "one.bvh", dtype=torch.float64)
+    with MotionDatabase.open(out) as d:
+        job = d.read(f"{loco}+test", dtype=torch.float64)
+    assert one.skeleton.same_topology(job.skeleton) and one.num_frames == job.num_frames
+    # BVH text holds 6 decimals of degrees: the same motion
+    assert float((one.global_positions() - job.global_positions()).abs().max()) < 0.05
+    assert main(["evaluate", str(out), "-o", str(tmp_path / "report.md"), "--no-pictures"]) == 0
+    assert "| splice |" in (tmp_path / "report.md").read_text()

@@ -121,6 +121,22 @@ def _acting_limbs(args):
         raise TorchspliceError(f"--acting-limbs: {exc}") from None
 
 
+def onto_locomotion(db, path, loco, clips):
+    """``clips`` (an action and its reference, of one skeleton of ``db``) retargeted onto the
+    locomotion's skeleton when theirs differs (other joints or units), as ``splice-all`` does;
+    ``None`` when they share it."""
+    k_loco, k_act = db.clip_info(loco.name)["skeleton"], db.clip_info(clips[0].name)["skeleton"]
+    units = (db.skeleton_info(k_loco).units, db.skeleton_info(k_act).units)
+    if loco.skeleton.same_topology(clips[0].skeleton) and (not all(units) or units[0] == units[1]):
+        return None
+    from ..retarget.clips import Retargeter, source_label
+    from ..retarget.targets import resolve_target
+
+    spec = db.spec(k_act)
+    return Retargeter(clips[0].skeleton, spec, source_label(path, k_act, spec.name), resolve_target(f"{path}:{k_loco}"),
+                      what=f"{path}: skeleton {k_act} ({spec.name})")(clips)
+
+
 def _read_pair(db, args):
     """The ``--locomotion`` and ``--action`` clips of an open database, and the spec that fits them."""
     loco, act = db.read(args.locomotion), db.read(args.action)
@@ -131,7 +147,8 @@ class Splice(Command):
     name = "splice"
     help = "splice one action onto one locomotion and write a BVH file"
     description = ("Splice the upper body of an action clip onto the lower body of a locomotion clip of the same "
-                   "database (clip names as `info` lists them). Methods: splice (Heck, Kovar & Gleicher 2006: "
+                   "database (clip names as `info` lists them); an action on another skeleton is retargeted onto the "
+                   "locomotion's first, as splice-all does. Methods: splice (Heck, Kovar & Gleicher 2006: "
                    "timewarp, spatial alignment, posture transfer), naive (per-bone upper-body replacement, no "
                    "timewarp) and cpmc (differencing against a plain-locomotion reference of the action's performer, "
                    "chosen by the spec's [clips.reference] rule or named with --reference).")
@@ -161,10 +178,14 @@ class Splice(Command):
             if method.needs_reference:
                 name = args.reference
                 if name is None:
-                    name = find_reference(act.name, act.labels, db.clip_table().captures(), spec)
+                    name = find_reference(act.name, act.labels, db.clip_table().captures(),
+                                          db.spec(db.clip_info(act.name)["skeleton"]))
                 ref = db.read(name) if name is not None else None  # a standing action needs none
             elif args.reference is not None:
                 raise TorchspliceError(f"--reference is only used by methods that need a reference clip (cpmc), not {method.name}")
+            moved = onto_locomotion(db, args.database, loco, [act] + ([ref] if ref is not None else []))
+            if moved is not None:  # the action on another skeleton: retargeted onto the locomotion's first
+                act, ref = moved[0], (moved[1] if ref is not None else None)
         try:
             result = splice(loco, act, spec, method=method, reference=ref, options=splice_options(args))
         except TorchspliceError as exc:
@@ -220,6 +241,7 @@ class PlotAlignment(Command):
         out = output(args, "plot")
         with MotionDatabase.open(args.database) as db:
             loco, act, spec = _read_pair(db, args)
+            act = (onto_locomotion(db, args.database, loco, [act]) or [act])[0]
         with locked(out, args):
             plot_alignment(loco, act, spec, out, options=splice_options(args))
         say(args, f"wrote {out}: alignment of {act.name} to {loco.name}")

@@ -190,13 +190,15 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
     methods = _method_order({str(t["method"][i]) for i in rows})
     per_clip: list[dict] = []
     captured_names = set()
+    moved: dict = {}  # action name -> the action retargeted onto the results' skeleton
     for method in methods:
         mrows = [i for i in rows if t["method"][i] == method]
         for b in range(0, len(mrows), 64):
             chunk = mrows[b:b + 64]
             results = [db.read(i) for i in chunk]
             locos = [sources.get(str(t["locomotion"][i])) for i in chunk]
-            acts = [sources.get(str(t["action"][i])) for i in chunk]
+            acts = [_action_as_spliced(sources, str(t["action"][i]), r, (path, k, spec), moved)
+                    for i, r in zip(chunk, results)]
             captured_names.update(m.name for m in locos + acts)
             fps = results[0].fps
             m = _metrics(results, locos, acts, roles, fps)
@@ -225,11 +227,30 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
         c["phase_ok"] = lo <= c["phase"] <= hi
         c["abs_phase"] = abs(c["phase"])
     aggregates = _aggregate(per_clip, methods)
-    figures = _pictures(db, sources, spec, per_clip, output, examples) if pictures else []
+    figures = _pictures(db, sources, spec, per_clip, output, examples, moved) if pictures else []
     text = _markdown(path, spec, units, methods, aggregates, per_clip, (lo, hi), figures, max_rows, len(captured))
     with atomic_path(output) as tmp:
         Path(tmp).write_text(text)
     return aggregates
+
+
+def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, moved: dict) -> Motion:
+    """The action clip ``name`` as the job spliced it into ``result``: retargeted onto the
+    results' skeleton (``on``: the output's path, skeleton id and spec) when the result's labels
+    say it was (``action.retargeted_from``), else as stored; made once per action."""
+    if "action.retargeted_from" not in result.labels:
+        return sources.get(name)
+    if name not in moved:
+        from ..retarget import RetargetTarget
+        from ..retarget.clips import Retargeter
+        from ..viz.sources import clip_spec
+
+        path, k, spec = on
+        act = sources.get(name)
+        target = RetargetTarget(f"{Path(path).name}:{k}", result.skeleton, spec)
+        moved[name] = Retargeter(act.skeleton, clip_spec(sources.where(name), name),
+                                 result.labels["action.retargeted_from"], target)([act])[0]
+    return moved[name]
 
 
 def _standing_rows(db, t, chunk, results, acts, roles) -> dict[int, dict]:
@@ -333,7 +354,7 @@ def _aggregate(per_clip: list[dict], methods: list[str]) -> dict:
     return out
 
 
-def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[tuple[str, str]]:
+def _pictures(db, sources, spec, per_clip, output: Path, examples: int, moved: dict | None = None) -> list[tuple[str, str]]:
     """A filmstrip (locomotion, action, each method) and an alignment plot for a few pairs."""
     from ..viz.alignment import plot_alignment
     from ..viz.render import render
@@ -370,7 +391,7 @@ def _pictures(db, sources, spec, per_clip, output: Path, examples: int) -> list[
                             str(strip.relative_to(output.parent))))
             continue
         align = folder / f"{stem}_alignment.png"
-        plot_alignment(loco, act, spec, align)
+        plot_alignment(loco, (moved or {}).get(c["action"], act), spec, align)  # the action as spliced
         figures.append((c["name"], str(strip.relative_to(output.parent))))
         figures.append((f"{c['name']}: time alignment", str(align.relative_to(output.parent))))
     return figures

@@ -269,7 +269,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
             t = tables[tag]
             labels = dict(t.labels[int(row)])
             if moved:
-                labels.update(sources.retargeting_for(tag, int(t.skeleton[int(row)]), moved[0])[2])
+                labels.update(sources.retargeting_for(tag, int(t.skeleton[int(row)]), moved[0]).labels)
             clips[key] = PlanClip(str(t.name[int(row)]), int(t.length[int(row)]), float(t.fps[int(row)]), labels)
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 

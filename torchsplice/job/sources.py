@@ -70,7 +70,7 @@ class Sources:
         self.bank_dir = bank_dir  # where the driver's banks are, as files (None: built here)
         self.bank_tag = bank_tag  # what the banks there must have been made for (the plan's digest)
         self.fix_feet = fix_feet
-        self.retargeting: dict = {}  # (source tag, source skeleton, target skeleton) -> (map, heights, labels)
+        self.retargeting: dict = {}  # (source tag, source skeleton, target skeleton) -> its Retargeter
 
     @classmethod
     def from_motions(cls, motions: dict[str, Motion]) -> "Sources":
@@ -100,43 +100,30 @@ class Sources:
             if rows:
                 for row, m in zip(rows, self.db(tag).read_many(rows)):
                     self.motions[f"{tag}:{row}"] = m
+        batches: dict[tuple, list[str]] = {}  # retargeted together: one batch per source skeleton and target
         for key in made:
-            self.motions[key] = self._retarget(key)
+            target, source = retargeted_parts(key)
+            tag, row = split_key(source)
+            batches.setdefault((tag, int(self.db(tag).clip_table().skeleton[row]), target), []).append(key)
+        for (tag, skeleton, target), keys_ in batches.items():
+            done = self.retargeting_for(tag, skeleton, target)([self.motions[retargeted_parts(k)[1]] for k in keys_])
+            self.motions.update(zip(keys_, done))
 
     def retargeting_for(self, tag: str, skeleton: int, target: int):
-        """``(map, target heights, labels)`` of clips of database ``tag``'s skeleton ``skeleton``
-        onto the locomotion database's skeleton ``target``, made once (raises the map's one-line
-        error for a skeleton that is not a humanoid)."""
+        """The :class:`~torchsplice.retarget.clips.Retargeter` of clips of database ``tag``'s
+        skeleton ``skeleton`` onto the locomotion database's skeleton ``target``, made once
+        (raises the map's one-line error for a skeleton that is not a humanoid)."""
         key = (tag, skeleton, target)
         if key not in self.retargeting:
-            from ..ops.retarget import retarget_map
-            from ..retarget.clips import source_label
+            from ..retarget.clips import Retargeter, source_label
             from ..retarget.targets import resolve_target
 
-            db, loco = self.db(tag), self.db("L")
+            db = self.db(tag)
             spec = db.spec(skeleton)
-            to = resolve_target(f"{self.paths['L']}:{target}")
-            rmap = retarget_map(db.skeletons[skeleton], spec.bind(db.skeletons[skeleton]), loco.skeletons[target],
-                                to.spec.bind(loco.skeletons[target]),
-                                source_name=f"{self.paths[tag]}: skeleton {skeleton} ({spec.name})",
-                                target_name=f"{self.paths['L']}: skeleton {target}")
-            labels = {"retargeted_from": source_label(self.paths[tag], skeleton, spec.name), "retargeted_to": to.name}
-            self.retargeting[key] = (rmap, to.heights, labels)
+            self.retargeting[key] = Retargeter(db.skeletons[skeleton], spec, source_label(self.paths[tag], skeleton, spec.name),
+                                               resolve_target(f"{self.paths['L']}:{target}"), self.fix_feet,
+                                               what=f"{self.paths[tag]}: skeleton {skeleton} ({spec.name})")
         return self.retargeting[key]
-
-    def _retarget(self, key: str) -> Motion:
-        import torch
-
-        from ..ops.retarget import retarget_motion
-
-        target, source = retargeted_parts(key)
-        tag, row = split_key(source)
-        m = self.motions[source]
-        skeleton = int(self.db(tag).clip_table().skeleton[row])
-        rmap, heights, labels = self.retargeting_for(tag, skeleton, target)
-        out = retarget_motion(m.to(torch.float64), rmap, self.fix_feet, heights).to(m.dtype)
-        out.labels.update(labels)
-        return out
 
     def motion(self, key: str) -> Motion:
         if key not in self.motions:

@@ -24,7 +24,7 @@ from ..core.version import __version__
 from ..ops.retarget import RetargetMap, retarget_map, retarget_motions
 from .targets import resolve_target
 
-__all__ = ["retarget_clips", "RetargetReport", "CHUNK_CLIPS"]
+__all__ = ["retarget_clips", "RetargetReport", "Retargeter", "CHUNK_CLIPS"]
 
 CHUNK_CLIPS = 64
 """Clips read, retargeted and written together."""
@@ -54,6 +54,39 @@ def source_label(database, k: int, spec_name: str) -> str:
 def map_notes(rmap: RetargetMap) -> dict[str, list[str]]:
     """A map's held target joints and folded source joints, by name."""
     return {"held": [rmap.target.names[j] for j in rmap.held], "folded": [rmap.source.names[j] for j in rmap.folded]}
+
+
+class Retargeter:
+    """Clips of one source skeleton played on one target: the map, the target's foot heights
+    and the results' labels made once; calling it retargets a list of clips (batched), each
+    result in its clip's dtype with ``retargeted_from`` and ``retargeted_to`` labels.
+
+    Args:
+        skeleton, spec: the source skeleton and its dataset spec.
+        source: what the labels call the source (:func:`source_label`: ``DB:K (spec)``).
+        target: a :class:`~torchsplice.retarget.RetargetTarget` (or what
+            :func:`~torchsplice.retarget.resolve_target` takes).
+        fix_feet: hold the feet where the source's stand.
+        what: what errors call the source skeleton (default ``source``).
+    """
+
+    def __init__(self, skeleton, spec, source: str, target, fix_feet: bool = True, what: str | None = None):
+        self.target = resolve_target(target)
+        self.map = retarget_map(skeleton, spec.bind(skeleton), self.target.skeleton,
+                                self.target.spec.bind(self.target.skeleton), source_name=what or source,
+                                target_name=self.target.name)
+        self.labels = {"retargeted_from": source, "retargeted_to": self.target.name}
+        self.fix_feet = fix_feet
+
+    def __call__(self, motions) -> list:
+        motions = list(motions)
+        done = retarget_motions([m.to(torch.float64) for m in motions], self.map, self.fix_feet, self.target.heights)
+        out = []
+        for m, r in zip(motions, done):
+            r = r.to(m.rotations.dtype)
+            r.labels.update(self.labels)
+            out.append(r)
+        return out
 
 
 def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, select=None, fix_feet: bool = True,
@@ -92,7 +125,7 @@ def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, sel
         by_skeleton: dict[int, list[int]] = {}
         for r in rows:
             by_skeleton.setdefault(int(table.skeleton[r]), []).append(r)
-        maps: dict[int, RetargetMap] = {}
+        movers: dict[int, Retargeter] = {}
         report = RetargetReport(Path(out), target.name)
         for k in sorted(by_skeleton):
             try:
@@ -100,22 +133,16 @@ def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, sel
             except SpecError as exc:
                 raise SpecError(f"{database}: skeleton {k}: {exc}") from None
             label = source_label(database, k, spec.name)
-            maps[k] = retarget_map(db.skeletons[k], spec.bind(db.skeletons[k]), target.skeleton,
-                                   target.spec.bind(target.skeleton), source_name=f"{database}: skeleton {k} ({spec.name})",
-                                   target_name=f"{target.name}")
-            report.maps[label] = map_notes(maps[k])
+            movers[k] = Retargeter(db.skeletons[k], spec, label, target, fix_feet,
+                                   what=f"{database}: skeleton {k} ({spec.name})")
+            report.maps[label] = map_notes(movers[k].map)
         record = {"command": command or "retarget_clips", "tool": f"torchsplice {__version__}",
                   "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                   "retargeted_to": target.name, "source": str(database)}
         chunks = [(k, rs[i:i + CHUNK_CLIPS]) for k, rs in sorted(by_skeleton.items()) for i in range(0, len(rs), CHUNK_CLIPS)]
         with MotionDatabase.create(out, overwrite=overwrite, attrs={"run": json.dumps(record)}) as new:
             for k, chunk in (progress(chunks, len(chunks), "retargeting") if progress else chunks):
-                spec_name = db.spec(k).name
-                motions = db.read_many([table.names[r] for r in chunk], dtype=torch.float64)
-                done = retarget_motions(motions, maps[k], fix_feet=fix_feet, target_heights=target.heights)
-                for m in done:
-                    m.labels.update({"retargeted_from": source_label(database, k, spec_name),
-                                     "retargeted_to": target.name})
+                for m in movers[k](db.read_many([table.names[r] for r in chunk], dtype=torch.float64)):
                     new.append(m, spec=target.spec)
                     report.clips += 1
                     report.frames += m.num_frames
