@@ -80,6 +80,7 @@ def expected() -> dict:
         ("splice-all", "actions_db"): (JOB["actions_db"], None),
         ("splice-all", "retarget"): (JOB["retarget"], None),
         ("splice-all", "fix_feet"): (JOB["fix_feet"], None),
+        ("splice-all", "target"): (JOB["target"], None),
         ("splice-all", "layout"): (JOB["layout"], LAYOUTS),
         ("splice-all", "compression"): (JOB["compression"] or "none", None),  # choices: see below
         **{(c, k): (v, TIMINGS if k == "timing" else backend_choices() if k == "backend" else None)

@@ -120,3 +120,26 @@ def test_splice_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp
     assert float((one.global_positions() - job.global_positions()).abs().max()) < 0.05
     assert main(["evaluate", str(out), "-o", str(tmp_path / "report.md"), "--no-pictures"]) == 0
     assert "| splice |" in (tmp_path / "report.md").read_text()
+
+
+def test_target_brings_every_clip_onto_one_skeleton_once(dbs, tmp_path):
+    """``--target smpl22``: the Bandai Namco locomotions and the LAFAN1 actions both on SMPL's
+    skeleton; the retargeted inputs sit beside the output and a rerun reuses them; a dry run
+    leaves nothing."""
+    from torchsplice.specs.smpl import SMPL22_NAMES
+
+    out = tmp_path / "o.h5"
+    kw = dict(actions_db=dbs["lafan"], locomotions="dataset-2_walk*", actions="test", workers=1, target="smpl22")
+    dry = splice_all(dbs["bn"], out, dry_run=True, **kw)
+    assert dry.pairs == 2 and "smpl22" in dry.target and sorted(p.name for p in tmp_path.iterdir()) == []
+    summary = splice_all(dbs["bn"], out, **kw)
+    assert summary.spliced == 2 and summary.retargeted == 0 and "smpl22" in summary.target
+    made = [tmp_path / "o.h5.target-locomotions.h5", tmp_path / "o.h5.target-actions.h5"]
+    assert all(p.exists() and p.with_name(p.name + ".json").exists() for p in made)
+    with MotionDatabase.open(out) as d:
+        assert [sk.names for sk in d.skeletons] == [SMPL22_NAMES]
+        m = d.read(0)
+        assert m.labels["action.retargeted_to"] == "smpl22" and m.labels["locomotion.retargeted_to"] == "smpl22"
+    stamps = [p.stat().st_mtime_ns for p in made]
+    again = splice_all(dbs["bn"], out, overwrite=True, **kw)
+    assert again.spliced == 2 and [p.stat().st_mtime_ns for p in made] == stamps  # reused, not made again

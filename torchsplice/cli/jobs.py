@@ -55,6 +55,10 @@ class SpliceAll(Command):
                             "(default: on; --no-retarget skips those pairs)")
         s.add_argument("--fix-feet", action=argparse.BooleanOptionalAction, default=job_default("fix_feet"),
                        help="when retargeting, hold each foot where the source's stands (default: on)")
+        s.add_argument("--target", default=job_default("target"), metavar="TARGET",
+                       help="bring every clip onto this skeleton first (other.h5, other.h5:K, a .bvh file, or smpl22), "
+                            "into OUT.target-locomotions.h5 (and OUT.target-actions.h5) beside the output, made once "
+                            "and reused by reruns")
         s.add_argument("--method", default=method, metavar="M[,M...]",
                        help=f"{', '.join(methods())}, or several comma-separated (default {method}; plug-ins add "
                             "more, see --plugin)")
@@ -117,6 +121,7 @@ class SpliceAll(Command):
             acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, device=device(args.device),
             compression=args.compression, layout=args.layout, engine=args.engine, workers=args.workers,
             ray_address=args.ray_address, backend=args.backend, retarget=args.retarget, fix_feet=args.fix_feet,
+            target=args.target,
         )
         if args.ray_address and args.engine != "ray":
             raise TorchspliceError("--ray-address needs --engine ray")

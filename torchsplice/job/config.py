@@ -56,6 +56,10 @@ class JobConfig:
             units) by retargeting the action onto the locomotion's skeleton, once per action
             and target skeleton (:mod:`torchsplice.ops.retarget`); ``False`` skips them.
         fix_feet: when retargeting, hold the feet where the source's stand (:mod:`torchsplice.ops.feet`).
+        target: bring every clip onto this skeleton first (``"other.h5"``, ``"other.h5:K"``, a BVH
+            file or ``"smpl22"``; :func:`torchsplice.retarget.resolve_target`), into databases
+            beside the output (:mod:`torchsplice.job.target`); ``None``: each pair on its
+            locomotion's skeleton.
         copy_sources: copy the selected source clips into the output too.
         max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
@@ -90,6 +94,7 @@ class JobConfig:
     acting_limbs: tuple[str, ...] | None = None
     retarget: bool = True
     fix_feet: bool = True
+    target: str | None = None
     copy_sources: bool = False
     max_run: int = 3
     posture: bool = True
@@ -137,6 +142,11 @@ class JobConfig:
         from ..splice.backends import resolve_backend
 
         resolve_backend(c.backend, c.device)  # a clear error for an unknown one, or one that cannot run there
+        if c.target is not None:
+            from ..retarget.targets import resolve_target
+
+            resolve_target(str(c.target))  # a clear error now for a target that is not one
+            c = replace(c, target=str(c.target))
         if c.workers is not None and c.workers < 1:
             raise TorchspliceError(f"{{workers}} must be at least 1, got {c.workers}", options=("workers",))
         dup = sorted({m for m in c.methods if c.methods.count(m) > 1})
@@ -215,7 +225,7 @@ class JobConfig:
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
             **({"twist": self.twist} if self.twist else {}),  # plans of runs without it stay valid
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
-            "retarget": self.retarget, "fix_feet": self.fix_feet,
+            "retarget": self.retarget, "fix_feet": self.fix_feet, "target": self.target,
             **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }
 

@@ -50,7 +50,8 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
     key = plan.key
     config = JobConfig(database=Path(key["database"]["path"]), output=output,
                        actions_db=Path(key["actions_db"]["path"]) if key["actions_db"] else None,
-                       copy_sources=key["copy_sources"], compression=key["compression"], layout=key["layout"]).checked()
+                       copy_sources=key["copy_sources"], compression=key["compression"], layout=key["layout"],
+                       fix_feet=key.get("fix_feet", True)).checked()
     if config.copy_sources and Path(key["database"]["path"]).exists():
         from .plan import plan_key as plan_key
 

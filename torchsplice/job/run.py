@@ -62,6 +62,7 @@ from .sink import make_sink
 from .sources import Sources
 from .size import OutputSize, estimate_output, format_bytes
 from .summary import JobSummary, progress_bar
+from .target import onto_target
 from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT
 
 __all__ = ["JobConfig", "JobSummary", "SpliceJob", "merge_job", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT",
@@ -111,6 +112,7 @@ class SpliceJob:
                 clear_work(self.work, keep=lock.path)
             for folder in (self.work, c.output.parent):
                 remove_stale_temporaries(folder)
+            c = self.config = onto_target(c)  # --target: the clips on one skeleton first (made once)
             sources = Sources(c.database, c.actions_db, fix_feet=c.fix_feet)
             try:
                 summary = self._run(sources, t0)
@@ -119,11 +121,22 @@ class SpliceJob:
             if self.shard is None:
                 shutil.rmtree(self.work, ignore_errors=True)
         summary.seconds = time.perf_counter() - t0
+        if c.target is not None:
+            summary.target = f"{c.target} ({', '.join(str(p) for p in (c.database, c.actions_db) if p is not None)})"
         return summary
 
     def _dry_run(self, t0: float) -> JobSummary:
         """Plan, and say what the job would do and how much disk it needs; writes nothing."""
-        c = self.config
+        import tempfile
+
+        with tempfile.TemporaryDirectory(dir=self.config.output.parent) as tmp:  # --target's databases, if any
+            c = onto_target(self.config, Path(tmp))
+            summary = self._dry_run_of(c, t0)
+        if self.config.target is not None:
+            summary.target = str(self.config.target)
+        return summary
+
+    def _dry_run_of(self, c: JobConfig, t0: float) -> JobSummary:
         sources = Sources(c.database, c.actions_db, fix_feet=c.fix_feet)
         try:
             plan = make_plan(c, sources)

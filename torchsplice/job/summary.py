@@ -44,6 +44,7 @@ class JobSummary:
     dry_run: bool = False
     standing: int = 0  # pairs of standing actions among the pairs
     retargeted: int = 0  # pairs whose action (and reference) were retargeted onto the locomotion's skeleton
+    target: str = ""  # --target: what every clip was brought onto first, and where those clips are
     expected: OutputSize | None = None  # the output's expected size (see torchsplice.job.size)
     written: int | None = None  # bytes the output took
     free: int | None = None  # bytes free beside the output when the job started
@@ -76,6 +77,8 @@ class JobSummary:
         if standing:
             out.append(f"  {self.timings.get('timewarp', 0)} time-aligned (timewarp), "
                        + ", ".join(f"{n} standing actions ({t})" for t, n in sorted(standing.items())))
+        if self.target:
+            out.append(f"  every clip {'would be' if self.dry_run else 'was'} retargeted onto {self.target} first")
         if self.retargeted:
             out.append(f"  {self.retargeted} {'would have' if self.dry_run else 'had'} the action retargeted onto the "
                        "locomotion's skeleton (labels retargeted_from, retargeted_to)")
