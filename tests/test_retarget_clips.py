@@ -227,3 +227,32 @@ def test_the_command_names_the_clips_or_all_and_says_what_it_wrote(tmp_path):
                            fix_feet=False)
     with MotionDatabase.open(tmp_path / "o.h5") as got:
         assert float((got.read("wave", dtype=torch.float64).global_positions() - want.global_positions()).abs().max()) < 1e-5
+
+
+def test_a_quadruped_or_a_file_that_is_not_a_skeleton_as_target_is_refused_in_one_line(tmp_path):
+    """A four-legged rig (no arms: its front legs are not shoulders, elbows and wrists) and a
+    Markdown file named .bvh: one line each, naming the file, and no output."""
+    from torchsplice.core.motion import Motion
+    from torchsplice.core.skeleton import Skeleton
+
+    names = ["Pelvis", "Spine", "Chest", "Neck", "Head"]
+    parents = [-1, 0, 1, 2, 3]
+    offsets = [[0, 60, 0], [0, 0, 20], [0, 0, 20], [0, 5, 15], [0, 0, 10]]
+    for end, at in (("Front", 2), ("Hind", 0)):
+        for side, x in (("Left", 8), ("Right", -8)):
+            base = len(names)
+            names += [f"{end}{side}UpperLeg", f"{end}{side}LowerLeg", f"{end}{side}Paw"]
+            parents += [at, base, base + 1]
+            offsets += [[x, -5, 0], [0, -25, 0], [0, -25, 0]]
+    sk = Skeleton(names=tuple(names), parents=tuple(parents), offsets=torch.tensor(offsets, dtype=torch.float64),
+                  channels=tuple(("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation") if p < 0
+                                 else ("Zrotation", "Yrotation", "Xrotation") for p in parents))
+    dog = Motion(skeleton=sk, rotations=torch.tensor([1.0, 0, 0, 0]).expand(10, len(names), 4).clone(),
+                 root_translation=torch.zeros(10, 3), fps=30.0, name="dog")
+    write_bvh(dog, tmp_path / "dog.bvh")
+    (tmp_path / "notes.bvh").write_text("# My notes\n\nnot a skeleton\n")
+    db = _sample_db(tmp_path)
+    for target in ("dog.bvh", "notes.bvh"):
+        r = _cli("retarget", db, "wave", "--to", tmp_path / target, "-o", tmp_path / "o.h5", cwd=tmp_path)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+        assert target in r.stderr and not (tmp_path / "o.h5").exists(), r.stderr
