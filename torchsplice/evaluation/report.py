@@ -211,6 +211,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                 for n, e, o in zip(have, err.tolist(), best.tolist()):
                     gt[n], bound[n] = e, o
             stand = _standing_rows(db, t, chunk, results, acts, roles)
+            moves = _retarget_rows(db, chunk, results, locos, acts, roles, fps)
             for n, i in enumerate(chunk):
                 per_clip.append({
                     "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
@@ -220,6 +221,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                     "gt_bound": bound[n],
                     "loco_type": locomotion_type(locos[n]),
                     **stand.get(n, {"timing": "timewarp"}),
+                    **moves.get(n, {}),
                 })
     captured = [sources.get(n) for n in sorted(captured_names)]
     lo, hi = _captured_phase_band(captured, roles)
@@ -251,6 +253,49 @@ def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, 
         moved[name] = Retargeter(act.skeleton, clip_spec(sources.where(name), name),
                                  result.labels["action.retargeted_from"], target)([act])[0]
     return moved[name]
+
+
+def _retarget_rows(db, chunk, results, locos, acts, roles, fps) -> dict[int, dict]:
+    """Per position in ``chunk`` of a result whose action was retargeted: where from, the acting
+    wrist's range of motion against the action's (as spliced, over the frames the result plays:
+    :func:`~torchsplice.evaluation.retargeting.wrist_spread`) and the locomotion's foot skate."""
+    from .retargeting import wrist_spread
+
+    out = {}
+    for n, (i, r, lo, ac) in enumerate(zip(chunk, results, locos, acts)):
+        if "action.retargeted_from" not in r.labels:
+            continue
+        side = max((0, 1), key=lambda s: wrist_spread(ac, roles, s))
+        frames = ac.num_frames
+        used = (db.read_frame_column(i, "action_frame").round().clip(0, frames - 1).astype(int)
+                if "action_frame" in db.frame_columns else None)
+        want = wrist_spread(ac, roles, side, used)
+        out[n] = {"retargeted_from": r.labels["action.retargeted_from"],
+                  "wrist_ratio": wrist_spread(r, roles, side) / want if want > 0 else float("nan"),
+                  "loco_skate": float(foot_skate(clips_to_tensors([resample_motion(lo, fps)], lo.skeleton), roles, fps)[0])}
+    return out
+
+
+def _retarget_section(per_clip, methods, units) -> list[str]:
+    moved = [c for c in per_clip if "retargeted_from" in c]
+    if not moved:
+        return []
+    lines = ["## Retargeted pairs", "",
+             f"{len(moved)} of {len(per_clip)} clips spliced an action retargeted onto the locomotion's skeleton "
+             f"(from {', '.join(sorted({md(c['retargeted_from']) for c in moved}))}). Wrist range: the acting wrist's "
+             "range of motion in the chest frame over arm length, against the action's as spliced over the frames "
+             "the result plays (1 is the action's; the target is 0.8 to 1.2). Foot skate against the locomotion's "
+             f"({units}/s).", "",
+             "| method | clips | wrist range, mean (min to max) | foot skate minus the locomotion's, mean |", "|---|---|---|---|"]
+    for m in methods:
+        cs = [c for c in moved if c["method"] == m]
+        if not cs:
+            continue
+        r = [c["wrist_ratio"] for c in cs]
+        d = [c["foot_skate"] - c["loco_skate"] for c in cs]
+        lines.append(f"| {md(m)} | {len(cs)} | {sum(r) / len(r):.2f} ({min(r):.2f} to {max(r):.2f}) | "
+                     f"{sum(d) / len(d):+.2f} |")
+    return lines + [""]
 
 
 def _standing_rows(db, t, chunk, results, acts, roles) -> dict[int, dict]:
@@ -435,6 +480,7 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
               "heading frame after time alignment. Lower is better everywhere.", ""]
     lines += _ground_truth_section(per_clip, methods, units)
     lines += _standing_section(per_clip, methods, units, phase_band)
+    lines += _retarget_section(per_clip, methods, units)
     if figures:
         lines += ["## Pictures", ""]
         lines += [f"**{md(title)}**\n\n![{md(title)}](<{file}>)\n" for title, file in figures]
