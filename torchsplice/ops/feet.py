@@ -122,6 +122,15 @@ def _blend_weight(held: np.ndarray, clip: np.ndarray, frames: np.ndarray) -> np.
     return np.clip(1.0 - dist / (frames + 1), 0.0, None)
 
 
+def _widened(mask: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """``mask`` ``(N,)`` with each run one frame longer on both sides, within each clip (``first``
+    marks each clip's first frame)."""
+    out = mask.copy()
+    out[1:] |= mask[:-1] & ~first[1:]
+    out[:-1] |= mask[1:] & ~first[1:]
+    return out
+
+
 def _pins(pos: np.ndarray, guide: np.ndarray, ankle: int, toe: int | None, s_ankle: int, s_toe: int | None,
           contact_ankle: np.ndarray, contact_toe: np.ndarray | None, first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The ankle's pinned position ``(N, 3)`` (its up component unused) and held mask ``(N,)``
@@ -132,6 +141,10 @@ def _pins(pos: np.ndarray, guide: np.ndarray, ankle: int, toe: int | None, s_ank
     ends, where that one left the foot (see the module docstring). Offsets along such a chain
     of runs add up (a cumulative sum), so no loop runs over runs."""
     N = pos.shape[0]
+    # each contact one frame wider on both sides (within its clip): a speed by central
+    # differences at a standing frame reads its neighbours, so they follow the source's path too
+    contact_ankle = _widened(contact_ankle, first)
+    contact_toe = _widened(contact_toe, first) if contact_toe is not None else None
     pinned = pos[:, ankle].copy()
     held = contact_ankle.copy()
     ga = guide[:, s_ankle]
