@@ -12,12 +12,14 @@ each frame, so a standing foot slides, and its foot joints sit at other heights 
 floor than its rig needs. :func:`fix_feet` corrects both:
 
 - **Where a foot stands.** The source's contacts (:func:`~torchsplice.kinematics.contacts.foot_contacts`
-  on its ankles and toes, :data:`PIN_HEIGHT_RATIO` and :data:`PIN_SPEED_RATIO`) are runs of
-  frames. Over a run of the ankle, the target's ankle holds one floor position (the run's mean);
-  over a run of the toe alone (the heel lifting), the toe holds one and the ankle follows the
-  foot's own rotation about it. A run that starts while the other point is held starts where
-  that one left the foot, so the hand-over does not jump. The pin blends in and out over
-  :data:`BLEND_SECONDS` beyond each run.
+  on its ankles and toes, :data:`PIN_HEIGHT_RATIO` and :data:`PIN_SPEED_RATIO`), each widened
+  by a frame on both sides (a speed by central differences reads them), are runs of frames.
+  Over a run of the ankle, the target's ankle follows the source's ankle's own path (scaled
+  like the trajectory), moved by one offset for the run (its mean distance from where the
+  retargeting put the ankle), so it slides exactly as the source's does; over a run of the toe
+  alone (the heel lifting), the toe does, and the ankle follows the foot's own rotation about
+  it. A run that starts as the other point's ends starts where that one left the foot, so the
+  hand-over does not jump. The pin blends in and out over :data:`BLEND_SECONDS` beyond each run.
 - **How high.** Every frame, the target's ankle and toe are each put at least at the source's
   height above that point's resting height (its height while the foot stands), times the
   leg-length scale, above the target's resting height (its own clips' where known, else the
