@@ -256,3 +256,24 @@ def test_a_quadruped_or_a_file_that_is_not_a_skeleton_as_target_is_refused_in_on
         r = _cli("retarget", db, "wave", "--to", tmp_path / target, "-o", tmp_path / "o.h5", cwd=tmp_path)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
         assert target in r.stderr and not (tmp_path / "o.h5").exists(), r.stderr
+
+
+def test_a_stored_spec_naming_joints_the_skeleton_lacks_is_refused_naming_the_database(tmp_path):
+    """A database whose spec's roles name absent joints (LeftPalm), as the source and as the
+    target: one line naming the database, its skeleton and the joint."""
+    import json
+
+    from torchsplice.specs import DatasetSpec
+
+    d = json.loads(load_spec("sample").to_json())
+    d["joints"]["hands"] = ["LeftPalm", "RightPalm"]
+    bad = tmp_path / "badmap.h5"
+    with MotionDatabase.create(bad) as w:
+        for m in sample_motions()[:2]:
+            w.append(m, spec=DatasetSpec.from_json(json.dumps(d)))
+    db = _sample_db(tmp_path)
+    for args in (("retarget", bad, "--all", "--to", "smpl22"), ("retarget", db, "wave", "--to", bad)):
+        r = _cli(*args, "-o", tmp_path / "o.h5", cwd=tmp_path)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+        assert "badmap.h5: skeleton 0" in r.stderr and "'LeftPalm'" in r.stderr, r.stderr
+        assert not (tmp_path / "o.h5").exists()

@@ -72,8 +72,13 @@ class Retargeter:
 
     def __init__(self, skeleton, spec, source: str, target, fix_feet: bool = True, what: str | None = None):
         self.target = resolve_target(target)
-        self.map = retarget_map(skeleton, spec.bind(skeleton), self.target.skeleton,
-                                self.target.spec.bind(self.target.skeleton), source_name=what or source,
+        roles = []
+        for sk, sp, name in ((skeleton, spec, what or source), (self.target.skeleton, self.target.spec, self.target.name)):
+            try:
+                roles.append(sp.bind(sk))
+            except SpecError as exc:  # a spec naming joints the skeleton lacks: say whose
+                raise SpecError(f"{name}: {exc}") from None
+        self.map = retarget_map(skeleton, roles[0], self.target.skeleton, roles[1], source_name=what or source,
                                 target_name=self.target.name)
         self.labels = {"retargeted_from": source, "retargeted_to": self.target.name}
         self.fix_feet = fix_feet

@@ -108,7 +108,10 @@ def _database_target(text: str, path: Path, k: int | None) -> RetargetTarget:
         rows = sorted(rows, key=lambda r: -int(table.length[r]))[:HEIGHT_CLIPS]
         motions = db.read_many([table.names[r] for r in rows], dtype=torch.float64) if rows else []
     name = f"{path.name}:{k}"
-    return RetargetTarget(name, skeleton, spec, _measured(motions, skeleton, spec) if motions else None)
+    try:
+        return RetargetTarget(name, skeleton, spec, _measured(motions, skeleton, spec) if motions else None)
+    except SpecError as exc:  # its stored spec names joints it lacks, or it is not a humanoid
+        raise SpecError(f"{text}: skeleton {k}: {exc}") from None
 
 
 def _bvh_target(path: Path) -> RetargetTarget:
