@@ -52,11 +52,11 @@ def cli_message(exc: BaseException) -> str:
     return f"{text} ({hint})" if hint else text
 
 
-def progress(iterable, total: int, desc: str, quiet: bool):
+def progress(iterable, total: int, desc: str, quiet: bool, unit: str = "file"):
     """A tqdm progress bar on stderr (hidden with --quiet or when stderr is not a terminal)."""
     from tqdm import tqdm
 
-    return tqdm(iterable, total=total, desc=desc, unit="file", disable=True if quiet else None,
+    return tqdm(iterable, total=total, desc=desc, unit=unit, disable=True if quiet else None,
                 file=sys.stderr, dynamic_ncols=True)
 
 

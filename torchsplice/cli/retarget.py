@@ -52,7 +52,7 @@ class Retarget(Command):
         output(args, "database")
         report = retarget_clips(args.database, args.clips or None, to=args.to, out=args.output, select=args.select,
                                 fix_feet=args.fix_feet, overwrite=args.force, command=command_line(args),
-                                progress=lambda it, total, desc: progress(it, total, desc, args.quiet))
+                                progress=lambda it, total, desc: progress(it, total, desc, args.quiet, unit="chunk"))
         say(args, f"wrote {report.summary()}")
         for source, notes in report.maps.items():
             parts = [f"{what} {', '.join(names)}" for what, names in (("held at rest:", notes["held"]),

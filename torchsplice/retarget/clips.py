@@ -108,7 +108,8 @@ def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, sel
         fix_feet: hold the feet where the source's stand (:mod:`torchsplice.ops.feet`).
         overwrite: replace an existing ``out``.
         command: what the run record and the output's lock say made it.
-        progress: ``progress(iterable, total, description)`` wrapping the chunks, or ``None``.
+        progress: ``progress(iterable, total, description)`` wrapping the chunks (of
+            :data:`CHUNK_CLIPS` clips), or ``None``.
     """
     from ..formats.exporters import selected_names
     from ..formats.importer import DATABASE_SUFFIXES
