@@ -1,0 +1,113 @@
+"""HumanML3D's 263 features (:mod:`torchsplice.formats.humanml3d_features`), first step of the
+HumanML3D export: known answers and properties on clips retargeted onto the SMPL body.
+
+- the positions recovered from the features are the normalized positions (to 1e-5 m);
+- the features do not change when the clip is moved or turned about the vertical;
+- normalization: on the floor, at the origin, facing +Z;
+- contacts: a foot that stands is in contact, one that moves is not;
+- the Gaussian smoothing against its closed form.
+
+(Checked in development against the format's own sample clip, ``HumanML3D/new_joints/012314.npy``
+and its ``new_joint_vecs``, which is not shipped: features from its positions agree to 4e-3 away
+from the last 20 frames and exactly at the first, contacts on every frame, and the positions
+recovered from its features equal its ``new_joints`` to 2e-7 m.)
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from torchsplice.core.rotations import axis_angle_to_quat, quat_apply
+from torchsplice.formats.humanml3d_features import (FEATURES, JOINTS, features_to_positions, gaussian_smooth,
+                                                    normalize_positions, positions_to_features)
+from torchsplice.ops.retarget import retarget_map, retarget_motions
+from torchsplice.sample import sample_motions
+from torchsplice.specs import load_spec
+from torchsplice.specs.smpl import smpl22_skeleton
+
+
+def _smpl_clips() -> list[torch.Tensor]:
+    """The sample's clips on the SMPL body, as (T, 22, 3) positions in metres."""
+    ms = [m.to(torch.float64) for m in sample_motions()]
+    sk = smpl22_skeleton()
+    rmap = retarget_map(ms[0].skeleton, load_spec("sample").bind(ms[0].skeleton), sk, load_spec("smpl22").bind(sk))
+    return [m.global_positions() for m in retarget_motions(ms, rmap)]
+
+
+CLIPS = _smpl_clips()
+
+
+@pytest.mark.parametrize("k", range(len(CLIPS)))
+def test_the_positions_recovered_from_the_features_are_the_normalized_positions(k):
+    p = CLIPS[k]
+    f = positions_to_features(p)
+    assert f.shape == (p.shape[0] - 1, FEATURES) and bool(torch.isfinite(f).all())
+    back = features_to_positions(f)
+    assert float((back - normalize_positions(p)[:-1]).abs().max()) < 1e-5
+
+
+def test_the_features_do_not_change_when_the_clip_is_moved_or_turned_about_the_vertical():
+    p = CLIPS[1]  # the curved walk
+    turn = axis_angle_to_quat(torch.tensor([0.0, 2.2, 0.0], dtype=torch.float64))
+    moved = quat_apply(turn.expand(p.shape[:-1] + (4,)), p) + torch.tensor([3.0, 0.4, -7.0], dtype=torch.float64)
+    assert float((positions_to_features(moved) - positions_to_features(p)).abs().max()) < 1e-9
+
+
+def test_normalization_puts_the_clip_on_the_floor_at_the_origin_facing_plus_z():
+    p = normalize_positions(CLIPS[2] + torch.tensor([1.0, 0.3, 2.0], dtype=torch.float64))
+    assert float(p[..., 1].min()) == pytest.approx(0.0, abs=1e-12)
+    assert float(p[0, 0, 0]) == pytest.approx(0.0, abs=1e-12) and float(p[0, 0, 2]) == pytest.approx(0.0, abs=1e-12)
+    across = (p[0, 2] - p[0, 1]) + (p[0, 17] - p[0, 16])  # right minus left, hips and shoulders
+    forward = torch.linalg.cross(torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64), across)
+    forward = forward / forward.norm()
+    assert float(forward[2]) > 1 - 1e-9  # +Z
+
+
+def test_contacts_are_on_for_a_standing_foot_and_off_for_a_moving_one():
+    p = CLIPS[0][:40].clone()
+    p[:] = p[0]  # everything still
+    f = positions_to_features(p)
+    assert bool((f[:, 259:263] == 1).all())
+    p[:, 7, 2] += torch.arange(40, dtype=torch.float64) * 0.1  # the left ankle slides 10 cm a frame
+    f = positions_to_features(p)
+    assert bool((f[:, 259] == 0).all()) and bool((f[:, 260:263] == 1).all())
+
+
+def test_the_root_height_and_the_yaw_velocity_of_a_known_turn():
+    """A figure standing still and turning about the vertical at a constant rate: the yaw feature
+    is the half-angle per frame where the heading's smoothing (80 frames each side) reaches no end."""
+    p0 = normalize_positions(CLIPS[0])[0]
+    T, rate = 300, 0.02  # radians a frame
+    turns = axis_angle_to_quat(torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)[None] * (rate * torch.arange(T))[:, None])
+    root = p0[0].clone()
+    p = quat_apply(turns[:, None].expand(T, JOINTS, 4), (p0 - root).expand(T, JOINTS, 3)) + root
+    f = positions_to_features(p)
+    assert torch.allclose(f[80:-81, 0], torch.full((T - 162,), -rate / 2, dtype=torch.float64), atol=1e-9)
+    assert torch.allclose(f[:, 3], p[:-1, 0, 1] - p[..., 1].min(), atol=1e-9)  # the root's height above the floor
+    # it turns past 180 degrees (6 radians in all): the positions still come back (the turn's short
+    # quaternion, not the one whose sign flips where the heading crosses 180 degrees)
+    assert float((features_to_positions(f) - normalize_positions(p)[:-1]).abs().max()) < 1e-5
+
+
+def test_gaussian_smoothing_against_its_closed_form():
+    x = torch.zeros(101, dtype=torch.float64)
+    x[50] = 1.0
+    y = gaussian_smooth(x, 3.0)
+    t = torch.arange(-12, 13, dtype=torch.float64)
+    k = torch.exp(-0.5 * (t / 3.0) ** 2)
+    assert torch.allclose(y[38:63], k / k.sum(), atol=1e-15) and float(y.sum()) == pytest.approx(1.0)
+    c = torch.full((30, 2), 4.5, dtype=torch.float64)
+    assert torch.allclose(gaussian_smooth(c, 20.0), c)  # the ends padded with their own values
+
+
+def test_shapes_are_checked():
+    with pytest.raises(ValueError, match=r"\(T, 22, 3\)"):
+        positions_to_features(torch.zeros(10, 21, 3))
+    with pytest.raises(ValueError, match="at least 2 frames"):
+        positions_to_features(torch.zeros(1, 22, 3))
+    with pytest.raises(ValueError, match="263 columns"):
+        features_to_positions(torch.zeros(5, 262))
+    assert math.isclose(FEATURES, 4 + 63 + 126 + 66 + 4)

@@ -1,0 +1,191 @@
+"""HumanML3D's motion representation: 263 features a frame from the SMPL body's 22 joint positions,
+and the positions back from the features.
+
+Written from the format's description (EricGuo5513/HumanML3D, ``motion_representation.ipynb``);
+no code of it is copied.
+
+Conventions (the format's): joint positions ``(T, 22, 3)`` in metres, Y up, in SMPL's and
+HumanML3D's joint order (:data:`torchsplice.specs.smpl.SMPL22_NAMES`), the character's left on
++X and facing +Z at its first frame once :func:`normalize_positions` has run; quaternions WXYZ.
+A clip of ``T`` frames gives ``T - 1`` feature rows:
+
+=========  ====  ============================================================================
+columns    size  what
+=========  ====  ============================================================================
+0          1     the root's yaw velocity: ``asin`` of the Y part of ``r[t+1] r[t]^-1`` (so the
+                 half-angle; the short quaternion of that turn), ``r`` the root's heading
+                 rotation (its facing onto +Z; the identity at the first frame)
+1:3        2     the root's X/Z velocity, in the heading frame of frame ``t+1``
+3          1     the root's height
+4:67       63    joints 1..21 relative to the root, X/Z about the root, in the heading frame
+67:193     126   joints 1..21's rotations (6D: the rotation matrix's first two columns), each
+                 the swing from the raw offset direction of its bone (:data:`RAW_OFFSETS`) in
+                 its parent's frame
+193:259    66    the 22 joints' velocities (``p[t+1] - p[t]``) in the heading frame of frame ``t``
+259:263    4     foot contacts: left ankle, left foot, right ankle, right foot (squared
+                 displacement to the next frame below :data:`FOOT_THRESHOLD` m^2)
+=========  ====  ============================================================================
+
+The heading: ``forward = up x across``, ``across`` the sum of two left-right vectors, smoothed
+by a Gaussian of 20 frames (``mode='nearest'``) for the features; the reference adds the hips'
+left-to-right vector to the shoulders' right-to-left one there (its joint indices read in the
+other order; the shoulders, wider, decide), and both left-to-right where it turns a clip to face
++Z. Both are kept as the format has them, so that features agree with the reference's.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_to_rotmat
+
+__all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "normalize_positions",
+           "positions_to_features", "features_to_positions", "gaussian_smooth"]
+
+JOINTS = 22
+FEATURES = 263
+FOOT_THRESHOLD = 0.002
+"""Squared per-frame displacement (m^2) below which a foot joint is in contact."""
+
+RAW_OFFSETS = ((0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, -1, 0), (0, 1, 0), (0, -1, 0), (0, -1, 0),
+               (0, 1, 0), (0, 0, 1), (0, 0, 1), (0, 1, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, -1, 0), (0, -1, 0),
+               (0, -1, 0), (0, -1, 0), (0, -1, 0), (0, -1, 0))
+"""Each joint's bone direction at rest, from its parent (the format's, for the rotation features)."""
+
+CHAINS = ((0, 2, 5, 8, 11), (0, 1, 4, 7, 10), (0, 3, 6, 9, 12, 15), (9, 14, 17, 19, 21), (9, 13, 16, 18, 20))
+"""The kinematic chains: right leg, left leg, spine to head, right arm, left arm."""
+
+_L_HIP, _R_HIP, _L_SHOULDER, _R_SHOULDER = 1, 2, 16, 17
+_FEET = (7, 10, 8, 11)  # left ankle, left foot, right ankle, right foot
+_UP = (0.0, 1.0, 0.0)
+
+
+def _check(positions: torch.Tensor) -> None:
+    if positions.dim() != 3 or positions.shape[1:] != (JOINTS, 3):
+        raise ValueError(f"positions must be (T, {JOINTS}, 3), got {tuple(positions.shape)}")
+    if positions.shape[0] < 2:
+        raise ValueError(f"a clip needs at least 2 frames, got {positions.shape[0]}")
+
+
+def gaussian_smooth(x: torch.Tensor, sigma: float, dim: int = 0) -> torch.Tensor:
+    """``x`` smoothed along ``dim`` by a Gaussian of ``sigma`` samples, cut at 4 sigma, the ends
+    padded with their own values (``mode='nearest'``)."""
+    radius = int(4.0 * sigma + 0.5)
+    t = torch.arange(-radius, radius + 1, dtype=x.dtype, device=x.device)
+    kernel = torch.exp(-0.5 * (t / sigma) ** 2)
+    kernel = kernel / kernel.sum()
+    moved = x.movedim(dim, -1)
+    shape = moved.shape
+    flat = moved.reshape(-1, 1, shape[-1])
+    idx = torch.arange(-radius, shape[-1] + radius, device=x.device).clamp(0, shape[-1] - 1)
+    out = torch.nn.functional.conv1d(flat[..., idx], kernel.flip(0)[None, None])
+    return out.reshape(shape).movedim(-1, dim)
+
+
+def _heading(positions: torch.Tensor, smooth: bool) -> torch.Tensor:
+    """``(T, 4)`` the root's heading rotation (taking its forward onto +Z), as the format's
+    features have it (see the module docstring)."""
+    across = (positions[:, _L_HIP] - positions[:, _R_HIP]) + (positions[:, _R_SHOULDER] - positions[:, _L_SHOULDER])
+    across = across / across.norm(dim=-1, keepdim=True)
+    forward = torch.linalg.cross(torch.tensor(_UP, dtype=positions.dtype).expand_as(across), across, dim=-1)
+    if smooth:
+        forward = gaussian_smooth(forward, 20.0, dim=0)
+    forward = forward / forward.norm(dim=-1, keepdim=True)
+    target = torch.tensor((0.0, 0.0, 1.0), dtype=positions.dtype).expand_as(forward)
+    return quat_between(forward, target)
+
+
+def normalize_positions(positions: torch.Tensor) -> torch.Tensor:
+    """``(T, 22, 3)`` the clip on the floor (its lowest joint at Y = 0), its first frame's root
+    above the origin, and turned about Y to face +Z at its first frame (the format's rules)."""
+    _check(positions)
+    p = positions.clone()
+    p[..., 1] -= p[..., 1].min()
+    start = p[0, 0].clone()
+    start[1] = 0.0
+    p = p - start
+    first = p[0]
+    across = (first[_R_HIP] - first[_L_HIP]) + (first[_R_SHOULDER] - first[_L_SHOULDER])
+    across = across / across.norm()
+    forward = torch.linalg.cross(torch.tensor(_UP, dtype=p.dtype), across, dim=-1)
+    forward = forward / forward.norm()
+    turn = quat_between(forward, torch.tensor((0.0, 0.0, 1.0), dtype=p.dtype))
+    return quat_apply(turn.expand(p.shape[:-1] + (4,)), p)
+
+
+def _joint_rotations(positions: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
+    """``(T, 22, 4)`` each joint's rotation in its parent's frame: the swing taking its raw
+    offset direction onto its bone (chain by chain, from the heading ``root``)."""
+    T = positions.shape[0]
+    out = torch.zeros(T, JOINTS, 4, dtype=positions.dtype)
+    out[..., 0] = 1.0
+    out[:, 0] = root
+    raw = torch.tensor(RAW_OFFSETS, dtype=positions.dtype)
+    for chain in CHAINS:
+        R = root
+        for a, b in zip(chain, chain[1:]):
+            v = positions[:, b] - positions[:, a]
+            v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+            swing = quat_between(raw[b].expand_as(v), v)
+            local = quat_mul(quat_conj(R), swing)
+            out[:, b] = local
+            R = quat_mul(R, local)
+    return out
+
+
+def positions_to_features(positions: torch.Tensor, normalize: bool = True) -> torch.Tensor:
+    """``(T - 1, 263)`` features of a clip's joint positions ``(T, 22, 3)`` (see the module
+    docstring); ``normalize`` first puts it on the floor, at the origin, facing +Z
+    (:func:`normalize_positions`), as the format's folders hold them."""
+    _check(positions)
+    p = normalize_positions(positions.to(torch.float64)) if normalize else positions.to(torch.float64)
+    T = p.shape[0]
+    # contacts
+    step = ((p[1:, list(_FEET)] - p[:-1, list(_FEET)]) ** 2).sum(-1)
+    feet = (step < FOOT_THRESHOLD).to(torch.float64)
+    # the heading, smoothed (the first frame's is the identity: the clip faces +Z there), and
+    # the rotations from it
+    r_rot = _heading(p, smooth=True)
+    r_rot[0] = torch.tensor((1.0, 0.0, 0.0, 0.0), dtype=p.dtype)
+    quats = _joint_rotations(p, r_rot)
+    root_vel = quat_apply(r_rot[1:], p[1:, 0] - p[:-1, 0])
+    r_vel = quat_mul(r_rot[1:], quat_conj(r_rot[:-1]))
+    # the turn's own (short) quaternion: where the heading crosses 180 degrees its quaternion changes
+    # cover, and the raw product's Y part would flip sign (the reference keeps that flip: one frame of
+    # a clip turning past 180 degrees then recovers turning the wrong way; here it recovers right)
+    r_vel = torch.where(r_vel[:, :1] < 0, -r_vel, r_vel)
+    yaw = torch.asin(r_vel[:, 2:3].clamp(-1.0, 1.0))
+    # joints relative to the root, in the heading frame
+    local = p.clone()
+    local[..., 0] -= p[:, 0:1, 0]
+    local[..., 2] -= p[:, 0:1, 2]
+    local = quat_apply(r_rot[:, None].expand(T, JOINTS, 4), local)
+    mats = quat_to_rotmat(quats[:, 1:])
+    six = torch.cat([mats[..., 0], mats[..., 1]], dim=-1).reshape(T, -1)
+    vel = quat_apply(r_rot[:-1, None].expand(T - 1, JOINTS, 4), p[1:] - p[:-1]).reshape(T - 1, -1)
+    return torch.cat([yaw, root_vel[:, [0, 2]], p[:-1, 0, 1:2], local[:-1, 1:].reshape(T - 1, -1), six[:-1], vel,
+                      feet[:, 0:2], feet[:, 2:4]], dim=-1)
+
+
+def features_to_positions(features: torch.Tensor) -> torch.Tensor:
+    """``(..., N, 22, 3)`` joint positions from features ``(..., N, 263)``, by the root's
+    integrated heading and velocity and the root-relative joints (the format's ``recover_from_ric``)."""
+    if features.shape[-1] != FEATURES:
+        raise ValueError(f"features must have {FEATURES} columns, got {features.shape[-1]}")
+    f = features
+    yaw = torch.zeros_like(f[..., 0])
+    yaw[..., 1:] = f[..., :-1, 0]
+    yaw = torch.cumsum(yaw, dim=-1)
+    r_rot = torch.zeros(f.shape[:-1] + (4,), dtype=f.dtype, device=f.device)
+    r_rot[..., 0] = torch.cos(yaw)
+    r_rot[..., 2] = torch.sin(yaw)
+    step = torch.zeros(f.shape[:-1] + (3,), dtype=f.dtype, device=f.device)
+    step[..., 1:, 0] = f[..., :-1, 1]
+    step[..., 1:, 2] = f[..., :-1, 2]
+    root = torch.cumsum(quat_apply(quat_conj(r_rot), step), dim=-2)
+    root[..., 1] = f[..., 3]
+    joints = f[..., 4:4 + (JOINTS - 1) * 3].reshape(f.shape[:-1] + (JOINTS - 1, 3))
+    joints = quat_apply(quat_conj(r_rot)[..., None, :].expand(joints.shape[:-1] + (4,)), joints)
+    joints[..., 0] += root[..., None, 0]
+    joints[..., 2] += root[..., None, 2]
+    return torch.cat([root[..., None, :], joints], dim=-2)
