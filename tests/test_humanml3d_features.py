@@ -21,8 +21,9 @@ import pytest
 import torch
 
 from torchsplice.core.rotations import axis_angle_to_quat, quat_apply
-from torchsplice.formats.humanml3d_features import (FEATURES, JOINTS, features_to_positions, gaussian_smooth,
-                                                    normalize_positions, positions_to_features)
+from torchsplice.formats.humanml3d_features import (FEATURES, GROUPS, JOINTS, FeatureStats, features_to_positions,
+                                                    gaussian_smooth, normalize_positions, positions_to_features,
+                                                    resample_positions)
 from torchsplice.ops.retarget import retarget_map, retarget_motions
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
@@ -111,3 +112,36 @@ def test_shapes_are_checked():
     with pytest.raises(ValueError, match="263 columns"):
         features_to_positions(torch.zeros(5, 262))
     assert math.isclose(FEATURES, 4 + 63 + 126 + 66 + 4)
+
+
+def test_resampling_to_20_fps_interpolates_in_time():
+    T = 31  # one second at 30 fps
+    t = torch.arange(T, dtype=torch.float64) / 30.0
+    p = torch.stack([t, t * t, torch.sin(t)], dim=-1)[:, None].expand(T, 2, 3).clone()
+    r = resample_positions(p, 30.0)
+    assert r.shape == (21, 2, 3)
+    assert torch.allclose(r[:, 0, 0], torch.arange(21, dtype=torch.float64) / 20.0, atol=1e-12)  # linear: exact
+    assert torch.allclose(r[::2], p[::3])  # every second 20 fps frame is a 30 fps frame
+    assert torch.equal(resample_positions(p, 20.0), p)
+    assert resample_positions(p[:4], 120.0).shape[0] == 1  # 3 frames at 120 fps: less than one 20 fps step
+
+
+def test_the_statistics_are_the_formats_and_do_not_depend_on_how_the_clips_are_cut():
+    g = torch.Generator().manual_seed(3)
+    clips = [torch.randn(n, FEATURES, generator=g, dtype=torch.float64) * torch.linspace(0.1, 3, FEATURES) + 2
+             for n in (7, 40, 13)]
+    stats = FeatureStats()
+    for c in clips:
+        stats.add(c)
+    mean, std = stats.result()
+    data = torch.cat(clips)
+    assert torch.allclose(mean, data.mean(0), atol=1e-12)
+    plain = data.std(0, unbiased=False)
+    for a, b in GROUPS:  # one value per kind: the mean of its columns' standard deviations
+        assert torch.allclose(std[a:b], plain[a:b].mean().expand(b - a), atol=1e-10)
+    whole = FeatureStats()
+    whole.add(data)
+    assert torch.allclose(whole.result()[1], std, atol=1e-12)
+    assert [b - a for a, b in GROUPS] == [1, 2, 1, 63, 126, 66, 4]
+    with pytest.raises(ValueError, match="no features"):
+        FeatureStats().result()

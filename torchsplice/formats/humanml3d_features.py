@@ -39,8 +39,15 @@ import torch
 
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_to_rotmat
 
-__all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "normalize_positions",
-           "positions_to_features", "features_to_positions", "gaussian_smooth"]
+__all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "FPS", "GROUPS", "normalize_positions",
+           "positions_to_features", "features_to_positions", "gaussian_smooth", "resample_positions", "FeatureStats"]
+
+FPS = 20.0
+"""The format's frame rate."""
+
+GROUPS = ((0, 1), (1, 3), (3, 4), (4, 67), (67, 193), (193, 259), (259, 263))
+"""The feature columns by kind (yaw velocity, root velocity, root height, joint positions, joint
+rotations, joint velocities, contacts): ``Std.npy`` holds one value per kind."""
 
 JOINTS = 22
 FEATURES = 263
@@ -189,3 +196,49 @@ def features_to_positions(features: torch.Tensor) -> torch.Tensor:
     joints[..., 0] += root[..., None, 0]
     joints[..., 2] += root[..., None, 2]
     return torch.cat([root[..., None, :], joints], dim=-2)
+
+
+def resample_positions(positions: torch.Tensor, fps: float, to: float = FPS) -> torch.Tensor:
+    """``(T', J, 3)`` positions ``(T, J, 3)`` at ``fps`` resampled to ``to`` frames a second by
+    linear interpolation in time, from the first frame to the last one the clip reaches
+    (``T' = floor((T - 1) * to / fps) + 1``); at the same rate, the clip as it is."""
+    if fps <= 0 or to <= 0:
+        raise ValueError(f"frame rates must be positive, got {fps} and {to}")
+    T = positions.shape[0]
+    if T < 2 or abs(fps - to) < 1e-9:
+        return positions.clone()
+    n = int((T - 1) * to / fps + 1e-9) + 1
+    t = torch.arange(n, dtype=torch.float64) * (fps / to)
+    lo = t.floor().long().clamp(max=T - 2)
+    w = (t - lo).to(positions.dtype).reshape(-1, *([1] * (positions.dim() - 1)))
+    return positions[lo] * (1 - w) + positions[lo + 1] * w
+
+
+class FeatureStats:
+    """``Mean.npy`` and ``Std.npy`` of feature arrays, as the format computes them: the mean and
+    the (population) standard deviation of every column over every row of every clip, then each
+    kind's standard deviations replaced by their mean (:data:`GROUPS`). Streamed: :meth:`add` one
+    clip's ``(N, 263)`` at a time, memory flat in the number of clips (sums in float64)."""
+
+    def __init__(self):
+        self.n = 0
+        self.total = torch.zeros(FEATURES, dtype=torch.float64)
+        self.squares = torch.zeros(FEATURES, dtype=torch.float64)
+
+    def add(self, features: torch.Tensor) -> None:
+        f = torch.as_tensor(features, dtype=torch.float64)
+        if f.dim() != 2 or f.shape[1] != FEATURES:
+            raise ValueError(f"features must be (N, {FEATURES}), got {tuple(f.shape)}")
+        self.n += f.shape[0]
+        self.total += f.sum(0)
+        self.squares += (f * f).sum(0)
+
+    def result(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(mean, std)``, each ``(263,)`` float64."""
+        if self.n == 0:
+            raise ValueError("no features were added")
+        mean = self.total / self.n
+        std = (self.squares / self.n - mean * mean).clamp_min(0).sqrt()
+        for a, b in GROUPS:
+            std[a:b] = std[a:b].mean()
+        return mean, std
