@@ -148,3 +148,33 @@ def test_target_brings_every_clip_onto_one_skeleton_once(dbs, tmp_path):
     stamps = [p.stat().st_mtime_ns for p in made]
     again = splice_all(dbs["bn"], out, overwrite=True, **kw)
     assert again.spliced == 2 and [p.stat().st_mtime_ns for p in made] == stamps  # reused, not made again
+
+
+def test_pairs_across_skeletons_give_the_same_bits_in_one_run_in_slices_and_in_one_process(dbs, tmp_path):
+    """The actions retargeted in the driver (banks saved for two worker processes), in each
+    slice's own process, or in this process with one worker: the same output, dataset for dataset."""
+    from torchsplice.job import merge_job
+
+    kw = dict(actions_db=dbs["lafan"], locomotions="dataset-2_walk*", actions="*", methods=("splice", "naive"),
+              batch_pairs=1)
+
+    def data(path):
+        import h5py
+
+        out = {}
+        with h5py.File(path, "r") as f:
+            f.visititems(lambda name, obj: out.__setitem__(name, obj[()].tobytes() if obj.dtype != object
+                                                           else obj[()].tolist()) if isinstance(obj, h5py.Dataset)
+                         else None)
+        return out
+
+    whole = tmp_path / "whole.h5"
+    s = splice_all(dbs["bn"], whole, workers=2, **kw)
+    assert s.spliced == 8 and s.retargeted == 8
+    inline = tmp_path / "inline.h5"
+    splice_all(dbs["bn"], inline, workers=1, **kw)  # one worker: this process runs the tasks
+    sliced = tmp_path / "sliced.h5"
+    for k in (1, 2):
+        splice_all(dbs["bn"], sliced, workers=1, shard=f"{k}/2", **kw)
+    assert merge_job(sliced, progress=False).spliced == 8
+    assert data(whole) == data(inline) == data(sliced)
