@@ -155,7 +155,7 @@ def test_the_parser_reads_the_declarations_from_the_source_as_the_library_has_th
         assert static == live and type(static) is type(live), (module, name, static, live)
 
 
-@pytest.mark.parametrize("command", ["splice", "splice-all", "export", "import", "render"])
+@pytest.mark.parametrize("command", ["splice", "splice-all", "export", "import", "render", "retarget"])
 def test_help_without_torch_shows_the_librarys_values(command):
     """In a fresh process (no torch loaded: values read from the source) the parser holds the
     same choices and defaults as here (library imported)."""

@@ -1,5 +1,5 @@
 """Splicing across datasets: the actions of one dataset on the locomotions of another, through
-``splice-all`` with each of the three methods (the pairs formed by retargeting the action onto
+``splice-all`` with every method that has what it needs (cpmc a reference) (the pairs formed by retargeting the action onto
 the locomotion's skeleton).
 
 Known answers for the measure first (:func:`~torchsplice.evaluation.retargeting.wrist_spread`
@@ -17,7 +17,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from conftest import MOCAP
+from conftest import MOCAP, _require_mocap
 from torchsplice.core.rotations import axis_angle_to_quat, quat_mul
 from torchsplice.evaluation.metrics import foot_skate_stats
 from torchsplice.evaluation.retargeting import centimetres, wrist_spread
@@ -48,8 +48,7 @@ def test_the_wrist_spread_does_not_change_when_the_clip_turns_or_the_rig_grows()
 
 @pytest.fixture(scope="module")
 def dbs(tmp_path_factory):
-    if not MOCAP.is_dir():
-        pytest.skip(f"no real motion capture at {MOCAP}")
+    _require_mocap()  # skips without the data, fails under CI
     root = tmp_path_factory.mktemp("cross")
     bn, cmu, lafan = root / "bn.h5", root / "cmu.h5", root / "lafan.h5"
     import_bvh([MOCAP / BANDAI / f"dataset-2_{n}.bvh" for n in ("wave-right-hand_normal_001", "walk_normal_008",
@@ -158,15 +157,7 @@ def test_pairs_across_skeletons_give_the_same_bits_in_one_run_in_slices_and_in_o
     kw = dict(actions_db=dbs["lafan"], locomotions="dataset-2_walk*", actions="*", methods=("splice", "naive"),
               batch_pairs=1)
 
-    def data(path):
-        import h5py
-
-        out = {}
-        with h5py.File(path, "r") as f:
-            f.visititems(lambda name, obj: out.__setitem__(name, obj[()].tobytes() if obj.dtype != object
-                                                           else obj[()].tolist()) if isinstance(obj, h5py.Dataset)
-                         else None)
-        return out
+    from test_job import datasets as data  # every dataset, raw; the run record left out
 
     whole = tmp_path / "whole.h5"
     s = splice_all(dbs["bn"], whole, workers=2, **kw)

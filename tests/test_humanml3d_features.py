@@ -123,7 +123,7 @@ def test_resampling_to_20_fps_interpolates_in_time():
     assert torch.allclose(r[:, 0, 0], torch.arange(21, dtype=torch.float64) / 20.0, atol=1e-12)  # linear: exact
     assert torch.allclose(r[::2], p[::3])  # every second 20 fps frame is a 30 fps frame
     assert torch.equal(resample_positions(p, 20.0), p)
-    assert resample_positions(p[:4], 120.0).shape[0] == 1  # 3 frames at 120 fps: less than one 20 fps step
+    assert resample_positions(p[:4], 120.0).shape[0] == 1  # 4 frames at 120 fps (25 ms): less than one 20 fps step
 
 
 def test_the_statistics_are_the_formats_and_do_not_depend_on_how_the_clips_are_cut():
@@ -141,7 +141,7 @@ def test_the_statistics_are_the_formats_and_do_not_depend_on_how_the_clips_are_c
         assert torch.allclose(std[a:b], plain[a:b].mean().expand(b - a), atol=1e-10)
     whole = FeatureStats()
     whole.add(data)
-    assert torch.allclose(whole.result()[1], std, atol=1e-12)
+    assert torch.allclose(whole.result()[0], mean, atol=1e-12) and torch.allclose(whole.result()[1], std, atol=1e-12)
     assert [b - a for a, b in GROUPS] == [1, 2, 1, 63, 126, 66, 4]
     with pytest.raises(ValueError, match="no features"):
         FeatureStats().result()

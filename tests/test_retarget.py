@@ -16,7 +16,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from conftest import MOCAP
+from conftest import MOCAP, _require_mocap
 from torchsplice.core.errors import SpecError
 from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply, quat_between
 from torchsplice.core.skeleton import Skeleton
@@ -35,8 +35,7 @@ def roles_of(skeleton):
 
 def real_clips() -> dict[str, object]:
     """One clip per rig of ../shared/mocap: Bandai Namco, CMU (both namings), LAFAN1."""
-    if not MOCAP.is_dir():
-        pytest.skip(f"no real motion capture at {MOCAP}")
+    _require_mocap()  # skips without the data, fails under CI
     return _real_clips()
 
 
@@ -66,6 +65,7 @@ def test_every_shipped_rig_has_a_complete_canonical_map():
         for side in ("l", "r"):  # each elbow lies on its arm's chain, strictly between shoulder and wrist
             chain, j = [], joints[f"wrist_{side}"]
             while j != joints[f"shoulder_{side}"]:
+                assert j >= 0, (name, side)  # the shoulder is above the wrist
                 chain.append(j)
                 j = sk.parents[j]
             assert joints[f"elbow_{side}"] in chain[1:], name
@@ -156,7 +156,7 @@ PAIRS = [(a, b) for a in ("bandai_namco", "cmu", "cmu_max", "lafan1") for b in (
 
 
 @pytest.mark.parametrize("source,target", PAIRS)
-def test_a_round_trip_between_real_rigs_comes_back_within_one_percent_of_the_height(source, target):
+def test_a_round_trip_between_real_rigs_comes_back_within_one_percent_of_the_height_or_three_with_feet_fixed(source, target):
     clips = real_clips()
     a, b = clips[source], clips[target]
     ra, rb = roles_of(a.skeleton), roles_of(b.skeleton)

@@ -121,22 +121,6 @@ def _acting_limbs(args):
         raise TorchspliceError(f"--acting-limbs: {exc}") from None
 
 
-def onto_locomotion(db, path, loco, clips):
-    """``clips`` (an action and its reference, of one skeleton of ``db``) retargeted onto the
-    locomotion's skeleton when theirs differs (other joints or units), as ``splice-all`` does;
-    ``None`` when they share it."""
-    k_loco, k_act = db.clip_info(loco.name)["skeleton"], db.clip_info(clips[0].name)["skeleton"]
-    units = (db.skeleton_info(k_loco).units, db.skeleton_info(k_act).units)
-    if loco.skeleton.same_topology(clips[0].skeleton) and (not all(units) or units[0] == units[1]):
-        return None
-    from ..retarget.clips import Retargeter, source_label
-    from ..retarget.targets import resolve_target
-
-    spec = db.spec(k_act)
-    return Retargeter(clips[0].skeleton, spec, source_label(path, k_act, spec.name), resolve_target(f"{path}:{k_loco}"),
-                      what=f"{path}: skeleton {k_act} ({spec.name})")(clips)
-
-
 def _read_pair(db, args):
     """The ``--locomotion`` and ``--action`` clips of an open database, and the spec that fits them."""
     loco, act = db.read(args.locomotion), db.read(args.action)
@@ -165,6 +149,7 @@ class Splice(Command):
 
     def run(self, args) -> int:
         from ..formats.bvh import write_bvh
+        from ..retarget.clips import onto_skeleton
         from ..splice import splice
         from ..splice.references import find_reference
         from ..splice.registry import get_method
@@ -183,7 +168,8 @@ class Splice(Command):
                 ref = db.read(name) if name is not None else None  # a standing action needs none
             elif args.reference is not None:
                 raise TorchspliceError(f"--reference is only used by methods that need a reference clip (cpmc), not {method.name}")
-            moved = onto_locomotion(db, args.database, loco, [act] + ([ref] if ref is not None else []))
+            moved = onto_skeleton(db, args.database, [act] + ([ref] if ref is not None else []),
+                                  db.clip_info(loco.name)["skeleton"])
             if moved is not None:  # the action on another skeleton: retargeted onto the locomotion's first
                 act, ref = moved[0], (moved[1] if ref is not None else None)
         try:
@@ -235,13 +221,14 @@ class PlotAlignment(Command):
         add_output_flags(s)
 
     def run(self, args) -> int:
+        from ..retarget.clips import onto_skeleton
         from ..store.database import MotionDatabase
         from ..viz.alignment import plot_alignment
 
         out = output(args, "plot")
         with MotionDatabase.open(args.database) as db:
             loco, act, spec = _read_pair(db, args)
-            act = (onto_locomotion(db, args.database, loco, [act]) or [act])[0]
+            act = (onto_skeleton(db, args.database, [act], db.clip_info(loco.name)["skeleton"]) or [act])[0]
         with locked(out, args):
             plot_alignment(loco, act, spec, out, options=splice_options(args))
         say(args, f"wrote {out}: alignment of {act.name} to {loco.name}")

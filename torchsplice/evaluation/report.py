@@ -186,6 +186,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
     spec = db.spec(k)
     roles = spec.bind(sk)
     units = spec.units if spec.units != "unknown" else "units"
+    units_k = db.skeleton_info(k).units or ""  # as stored, for the retargeting rule
     candidates = sources.captures()
     methods = _method_order({str(t["method"][i]) for i in rows})
     per_clip: list[dict] = []
@@ -197,7 +198,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
             chunk = mrows[b:b + 64]
             results = [db.read(i) for i in chunk]
             locos = [sources.get(str(t["locomotion"][i])) for i in chunk]
-            acts = [_action_as_spliced(sources, str(t["action"][i]), r, (path, k, spec), moved)
+            acts = [_action_as_spliced(sources, str(t["action"][i]), r, (path, k, spec, units_k), moved)
                     for i, r in zip(chunk, results)]
             captured_names.update(m.name for m in locos + acts)
             fps = results[0].fps
@@ -211,7 +212,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                 for n, e, o in zip(have, err.tolist(), best.tolist()):
                     gt[n], bound[n] = e, o
             stand = _standing_rows(db, t, chunk, results, acts, roles)
-            moves = _retarget_rows(db, chunk, results, locos, acts, roles, fps)
+            moves = _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved)
             for n, i in enumerate(chunk):
                 per_clip.append({
                     "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
@@ -238,24 +239,29 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
 
 def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, moved: dict) -> Motion:
     """The action clip ``name`` as the job spliced it into ``result``: retargeted onto the
-    results' skeleton (``on``: the output's path, skeleton id and spec) when the result's labels
-    say it was (``action.retargeted_from``), else as stored; made once per action."""
-    if "action.retargeted_from" not in result.labels:
-        return sources.get(name)
-    if name not in moved:
-        from ..retarget import RetargetTarget
-        from ..retarget.clips import Retargeter
-        from ..viz.sources import clip_spec
+    results' skeleton (``on``: the output's path, skeleton id, spec and units) when the job's
+    rule says it was (:func:`~torchsplice.retarget.clips.needs_retargeting`), else as stored;
+    made once per action (into ``moved``). Its feet rest at its own heights, scaled (the job used
+    the locomotion database's): the upper body the report measures is the same."""
+    if name in moved:
+        return moved[name]
+    from ..retarget import RetargetTarget
+    from ..retarget.clips import Retargeter, needs_retargeting, source_label
+    from ..viz.sources import clip_spec
 
-        path, k, spec = on
-        act = sources.get(name)
-        target = RetargetTarget(f"{Path(path).name}:{k}", result.skeleton, spec)
-        moved[name] = Retargeter(act.skeleton, clip_spec(sources.where(name), name),
-                                 result.labels["action.retargeted_from"], target)([act])[0]
+    path, k, spec, units = on
+    act = sources.get(name)
+    where = sources.where(name)
+    ka = where.clip_info(name)["skeleton"]
+    if not needs_retargeting(act.skeleton, where.skeleton_info(ka).units or "", result.skeleton, units):
+        return act
+    own = clip_spec(where, name)
+    target = RetargetTarget(f"{Path(path).name}:{k}", result.skeleton, spec)
+    moved[name] = Retargeter(act.skeleton, own, source_label(where.path, ka, own.name), target)([act])[0]
     return moved[name]
 
 
-def _retarget_rows(db, chunk, results, locos, acts, roles, fps) -> dict[int, dict]:
+def _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved: dict) -> dict[int, dict]:
     """Per position in ``chunk`` of a result whose action was retargeted: where from, the acting
     wrist's range of motion against the action's (as spliced, over the frames the result plays:
     :func:`~torchsplice.evaluation.retargeting.wrist_spread`) and the locomotion's foot skate."""
@@ -263,14 +269,14 @@ def _retarget_rows(db, chunk, results, locos, acts, roles, fps) -> dict[int, dic
 
     out = {}
     for n, (i, r, lo, ac) in enumerate(zip(chunk, results, locos, acts)):
-        if "action.retargeted_from" not in r.labels:
+        if ac.name not in moved or moved[ac.name] is not ac:  # spliced as stored
             continue
         side = max((0, 1), key=lambda s: wrist_spread(ac, roles, s))
         frames = ac.num_frames
         used = (db.read_frame_column(i, "action_frame").round().clip(0, frames - 1).astype(int)
                 if "action_frame" in db.frame_columns else None)
         want = wrist_spread(ac, roles, side, used)
-        out[n] = {"retargeted_from": r.labels["action.retargeted_from"],
+        out[n] = {"retargeted_from": ac.labels.get("retargeted_from", "?"),
                   "wrist_ratio": wrist_spread(r, roles, side) / want if want > 0 else float("nan"),
                   "loco_skate": float(foot_skate(clips_to_tensors([resample_motion(lo, fps)], lo.skeleton), roles, fps)[0])}
     return out

@@ -37,7 +37,8 @@ from __future__ import annotations
 
 import torch
 
-from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_to_rotmat
+from ..align.curve import interpolate_frames, resample_times
+from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_to_6d
 
 __all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "FPS", "GROUPS", "normalize_positions",
            "positions_to_features", "features_to_positions", "gaussian_smooth", "resample_positions", "FeatureStats"]
@@ -167,11 +168,10 @@ def positions_to_features(positions: torch.Tensor, normalize: bool = True) -> to
     local[..., 0] -= p[:, 0:1, 0]
     local[..., 2] -= p[:, 0:1, 2]
     local = quat_apply(r_rot[:, None].expand(T, JOINTS, 4), local)
-    mats = quat_to_rotmat(quats[:, 1:])
-    six = torch.cat([mats[..., 0], mats[..., 1]], dim=-1).reshape(T, -1)
+    six = quat_to_6d(quats[:, 1:]).reshape(T, -1)
     vel = quat_apply(r_rot[:-1, None].expand(T - 1, JOINTS, 4), p[1:] - p[:-1]).reshape(T - 1, -1)
     return torch.cat([yaw, root_vel[:, [0, 2]], p[:-1, 0, 1:2], local[:-1, 1:].reshape(T - 1, -1), six[:-1], vel,
-                      feet[:, 0:2], feet[:, 2:4]], dim=-1)
+                      feet], dim=-1)
 
 
 def features_to_positions(features: torch.Tensor) -> torch.Tensor:
@@ -204,14 +204,9 @@ def resample_positions(positions: torch.Tensor, fps: float, to: float = FPS) -> 
     (``T' = floor((T - 1) * to / fps) + 1``); at the same rate, the clip as it is."""
     if fps <= 0 or to <= 0:
         raise ValueError(f"frame rates must be positive, got {fps} and {to}")
-    T = positions.shape[0]
-    if T < 2 or abs(fps - to) < 1e-9:
+    if positions.shape[0] < 2 or abs(fps - to) < 1e-9:
         return positions.clone()
-    n = int((T - 1) * to / fps + 1e-9) + 1
-    t = torch.arange(n, dtype=torch.float64) * (fps / to)
-    lo = t.floor().long().clamp(max=T - 2)
-    w = (t - lo).to(positions.dtype).reshape(-1, *([1] * (positions.dim() - 1)))
-    return positions[lo] * (1 - w) + positions[lo + 1] * w
+    return interpolate_frames(positions[None], resample_times(positions.shape[0], fps, to)[None])[0]
 
 
 class FeatureStats:

@@ -79,7 +79,7 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         for folder in (work, output.parent):  # what a killed merge left
             remove_stale_temporaries(folder)
         summary = JobSummary(output=output, pairs=len(plan.pairs), skipped=dict(plan.skipped), engine="merge", merge=True,
-                             retargeted=sum(p.target is not None for p in plan.pairs))
+                             retargeted=plan.retargeted)
         run = {**key, "pairs": len(plan.pairs), "batch_pairs": key["task_pairs"], "plan_sha256": plan.digest(),
                "command": command or "torchsplice.job.merge_job (Python API)",
                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "engine": "merge", "pairs_spliced": len(plan.pairs)}

@@ -31,6 +31,7 @@ from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
 from ..store.select import select_clips
+from ..retarget.clips import needs_retargeting
 from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
@@ -128,6 +129,11 @@ class Plan:
 
         return (clip_key("L", p.loco, same_db), act(p.action),
                 act(p.reference) if p.reference is not None and get_method(p.method).needs_reference else None)
+
+    @property
+    def retargeted(self) -> int:
+        """Pairs whose action (and reference) are retargeted onto the locomotion's skeleton."""
+        return sum(p.target is not None for p in self.pairs)
 
     @property
     def same_db(self) -> bool:
@@ -254,7 +260,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
             elif isinstance(kind, int):
                 keys.append(retargeted_key(key, k))
                 ref = refs.get(j)
-                if ref is not None and kinds[k, int(ta.skeleton[ref])] is None:  # its reference, brought along
+                if ref is not None and not isinstance(kinds[k, int(ta.skeleton[ref])], str):  # its reference too
                     keys.append(retargeted_key(clip_key("A", ref, same), k))
         roles = specs[k].bind(sk_l[k])
         groups.append(Group(k, fps, list(dict.fromkeys(keys)), specs[k].to_json(), leg_length(sk_l[k], roles)))
@@ -377,11 +383,6 @@ def _skeleton_units(db) -> dict[int, tuple[str, str]]:
             for k, info in ((k, db.skeleton_info(k)) for k in range(len(db.skeletons)))}
 
 
-def _units_clash(a: tuple[str, str], b: tuple[str, str]) -> bool:
-    """Whether two skeletons' ``(units, up_axis)`` differ where both are recorded."""
-    return any(x and y and x != y for x, y in zip(a, b))
-
-
 def _describe_skeletons(db, path) -> dict[int, str]:
     """Skeleton id -> ``skeleton K (spec, J joints)`` (``of FILE`` added when ``path`` is given)."""
     out = {}
@@ -400,15 +401,15 @@ def plan_action_key(p: Pair, same: bool) -> str:
 def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, sk_a, described) -> dict:
     """``(locomotion skeleton, action skeleton) -> None`` (one skeleton: same joints, units and up
     axis), the locomotion skeleton's id (the actions are retargeted onto it), or the reason its
-    pairs are not formed (text beginning :data:`SKELETONS_DIFFER` or ``units differ``). Each
-    retargeting map is built once here (a skeleton that is not a humanoid says what it lacks)."""
+    pairs are not formed (text beginning :data:`SKELETONS_DIFFER` or ``units differ``), by
+    :func:`torchsplice.retarget.clips.needs_retargeting`. Each retargeting map is built here,
+    once per process (a skeleton that is not a humanoid says what it lacks)."""
     out: dict = {}
     for x in kls:
         for y in kas:
             (ul, upl), (ua, upa) = described[2][x], described[3][y]
             topology = sk_l[x].same_topology(sk_a[y])
-            units = bool(ul and ua and ul != ua)
-            if topology and not units and not (upl and upa and upl != upa):
+            if not needs_retargeting(sk_a[y], ua, sk_l[x], ul) and not (upl and upa and upl != upa):
                 out[x, y] = None
                 continue
             if topology:  # one topology, two units

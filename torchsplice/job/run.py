@@ -142,7 +142,7 @@ class SpliceJob:
             plan = make_plan(c, sources)
             summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), tasks=len(plan.tasks),
                                  dry_run=True, standing=sum(p.mode == "standing" for p in plan.pairs),
-                                 retargeted=sum(p.target is not None for p in plan.pairs))
+                                 retargeted=plan.retargeted)
             summary.expected = self._expected(plan, sources)
             summary.free = _free_bytes(c.output.parent)
         finally:
@@ -220,7 +220,7 @@ class SpliceJob:
         try:
             summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), shard=self.shard,
                                  tasks=len(tasks), engine=engine.describe(), expected=expected, free=free,
-                                 retargeted=sum(p.target is not None for p in plan.pairs))
+                                 retargeted=plan.retargeted)
             if self.shard is None:  # the output, resumed at its last checkpoint if an earlier run left one
                 run = {**plan.key, "pairs": len(plan.pairs), "batch_pairs": plan.key["task_pairs"],
                        "plan_sha256": plan.digest(), "command": self.command, "started": self._started,

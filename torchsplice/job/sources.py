@@ -71,6 +71,7 @@ class Sources:
         self.bank_tag = bank_tag  # what the banks there must have been made for (the plan's digest)
         self.fix_feet = fix_feet
         self.retargeting: dict = {}  # (source tag, source skeleton, target skeleton) -> its Retargeter
+        self.targets: dict = {}  # target skeleton -> its RetargetTarget
 
     @classmethod
     def from_motions(cls, motions: dict[str, Motion]) -> "Sources":
@@ -116,12 +117,14 @@ class Sources:
         key = (tag, skeleton, target)
         if key not in self.retargeting:
             from ..retarget.clips import Retargeter, source_label
-            from ..retarget.targets import resolve_target
+            from ..retarget.targets import database_target
 
+            if target not in self.targets:  # measured once per target skeleton, on the open database
+                self.targets[target] = database_target(self.db("L"), self.paths["L"], target)
             db = self.db(tag)
             spec = db.spec(skeleton)
             self.retargeting[key] = Retargeter(db.skeletons[skeleton], spec, source_label(self.paths[tag], skeleton, spec.name),
-                                               resolve_target(f"{self.paths['L']}:{target}"), self.fix_feet,
+                                               self.targets[target], self.fix_feet,
                                                what=f"{self.paths[tag]}: skeleton {skeleton} ({spec.name})")
         return self.retargeting[key]
 

@@ -6,14 +6,14 @@ a BVH rig or ``smpl22``: :func:`torchsplice.retarget.resolve_target`) with
 (``OUT.target-locomotions.h5``, and ``OUT.target-actions.h5`` for ``--actions-db``), and
 returns the configuration that reads them. They are the output's sources (its run record names
 them, and ``render``, ``view`` and ``evaluate`` find the source clips there), and they are made
-once: a rerun or a resumed job reuses them while their input, target and settings are the same
-(a ``.json`` beside each says what it was made from, written once the database is complete).
+once: a rerun or a resumed job reuses them while their input, target (its file too) and settings
+are the same (a ``.json`` beside each says what it was made from, written once the database is
+complete).
 """
 
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,10 +32,17 @@ def target_paths(config: JobConfig, folder: Path | None = None) -> tuple[Path, P
             base / f"{stem}.target-actions.h5" if config.actions_db is not None else None)
 
 
-def _made_for(source: Path, config: JobConfig) -> dict:
-    st = Path(source).stat()
-    return {"source": str(Path(source).resolve()), "size": st.st_size, "mtime_ns": st.st_mtime_ns,
-            "target": str(config.target), "fix_feet": config.fix_feet, "tool": f"torchsplice {__version__}"}
+def _stat(path) -> dict:
+    st = Path(path).stat()
+    return {"path": str(Path(path).resolve()), "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def _made_for(source: Path, target, config: JobConfig) -> dict:
+    """What a target database was made from: its source and target files (path, size, time),
+    the target's name and the settings."""
+    return {"source": _stat(source), "target": str(config.target),
+            "target_file": _stat(target.path) if target.path is not None else None,
+            "fix_feet": config.fix_feet, "tool": f"torchsplice {__version__}"}
 
 
 def onto_target(config: JobConfig, folder: Path | None = None, progress=None) -> JobConfig:
@@ -43,23 +50,24 @@ def onto_target(config: JobConfig, folder: Path | None = None, progress=None) ->
     ``config`` itself when it has no target."""
     if config.target is None:
         return config
-    from ..retarget import retarget_clips
+    from ..retarget import resolve_target, retarget_clips
+    from ..store.atomic import atomic_path
 
+    target = resolve_target(config.target)  # once, for both databases
     out_l, out_a = target_paths(config, folder)
     for source, out in ((config.database, out_l), (config.actions_db, out_a)):
         if source is None:
             continue
         record = Path(f"{out}.json")
-        want = _made_for(source, config)
+        want = _made_for(source, target, config)
         try:
             ready = out.exists() and json.loads(record.read_text()) == want
         except (OSError, ValueError):
             ready = False
         if not ready:
             record.unlink(missing_ok=True)
-            retarget_clips(source, to=config.target, out=out, fix_feet=config.fix_feet, overwrite=True,
+            retarget_clips(source, to=target, out=out, fix_feet=config.fix_feet, overwrite=True,
                            command=f"splice-all --target {config.target}", progress=progress)
-            tmp = record.with_name(f".{record.name}.partial-{os.getpid()}")
-            tmp.write_text(json.dumps(want))
-            os.replace(tmp, record)
+            with atomic_path(record) as tmp:
+                Path(tmp).write_text(json.dumps(want))
     return replace(config, database=out_l, actions_db=out_a)

@@ -3,8 +3,9 @@ by two-bone IK of the leg, and kept at the source's height above the floor.
 
 Conventions: quaternions unit WXYZ, local to the parent; positions in the skeleton's units; the
 up axis an index (Y = 1); the floor at height 0 of the up axis (every shipped dataset is captured
-so). Shapes: ``T`` frames, ``J`` joints. Batched over frames; the Python loops run over the two
-legs and over contact runs (a few a second), never over frames.
+so). Shapes: ``T`` frames, ``J`` joints. Batched over clips whose frames are concatenated; the
+Python loops run over the two legs, and over clips only to smooth a lowered pelvis, never over
+frames or contact runs.
 
 Why: retargeting carries rotations and scales the trajectory by leg length, but a target whose
 legs hang otherwise from its pelvis (or whose feet are longer) puts its feet a little elsewhere
@@ -43,6 +44,7 @@ import torch
 from ..core.fk import forward_kinematics
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize
 from ..kinematics.contacts import foot_contacts
+from ..specs.canonical import leg_length
 
 __all__ = ["two_bone_ik", "fix_feet", "contact_heights", "rig_heights", "BLEND_SECONDS", "PIN_HEIGHT_RATIO", "PIN_SPEED_RATIO"]
 
@@ -90,7 +92,7 @@ def two_bone_ik(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, targ
     pole = knee - hip
     pole = pole - (pole * u).sum(-1, keepdim=True) * u
     straight = _norm(pole)[:, None] <= 1e-9 * a
-    # a straight leg bends toward where its knee points now (the thigh's turn from the line)
+    # a straight leg: no side to keep, so it bends to a fixed side perpendicular to the line
     fallback = torch.linalg.cross(u, torch.roll(u, 1, dims=-1), dim=-1)
     n = _unit(torch.where(straight, fallback, pole))
     x = (a * a - b * b + d * d) / (2 * d)
@@ -219,11 +221,10 @@ def rig_heights(motions, legs: list[tuple[int, int, int, int | None]], up_axis: 
     units): per clip :func:`contact_heights`, then the median over ``motions`` (clips of one
     skeleton; NaN for a leg without a toe). ``None`` without a clip."""
     per_clip = []
+    points = [j for leg_ in legs for j in leg_[2:] if j is not None]
     for m in motions:
         pos = m.global_positions().to(torch.float64)
-        hip, knee, ankle, _ = legs[0]
-        leg = float((pos[0, knee] - pos[0, hip]).norm() + (pos[0, ankle] - pos[0, knee]).norm())
-        points = [j for leg_ in legs for j in leg_[2:] if j is not None]
+        leg = leg_length(m.skeleton, legs)
         h = dict(zip(points, contact_heights(pos, points, leg, float(m.fps), up_axis).tolist()))
         per_clip.append([[h[a], h[t] if t is not None else float("nan")] for _, _, a, t in legs])
     if not per_clip:
@@ -285,11 +286,9 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
                              torch.full((B,), float(source_leg), dtype=torch.float64), up_axis, PIN_HEIGHT_RATIO,
                              PIN_SPEED_RATIO)
     valid = torch.arange(padded.shape[1])[None, :] < counts[:, None]
-    contacts = contacts[valid]  # (N, P), the clips' frames in order
     h = padded[..., up_axis]  # (B, T, P)
-    pad_c = torch.zeros(h.shape, dtype=torch.bool)
-    pad_c[valid] = contacts
-    rest_src = torch.where(pad_c, h, torch.full_like(h, float("nan"))).nanmedian(dim=1).values
+    rest_src = torch.where(contacts, h, torch.full_like(h, float("nan"))).nanmedian(dim=1).values
+    contacts = contacts[valid]  # (N, P), the clips' frames in order
     lowest = torch.where(valid[..., None], h, torch.full_like(h, float("inf"))).min(dim=1).values
     rest_src = torch.where(torch.isnan(rest_src), lowest, rest_src)  # a point that never stands: its lowest
     per_frame = torch.repeat_interleave(torch.arange(B), counts)  # each frame's clip
@@ -313,7 +312,6 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
         w = torch.from_numpy(_blend_weight(held, clip_of, blend))
         pinned, held = torch.from_numpy(pinned), torch.from_numpy(held)
         target = pos[:, ankle] + w[:, None] * (pinned - pos[:, ankle])
-        # the height: the toe (else the ankle) at the source's lift above its contact height
         # the height: the ankle and the toe each at least at the source's lift above its resting
         # height (the foot keeps the source's pitch, so on a rig whose foot rests otherwise one
         # of them decides, and the other stands a little higher)
@@ -329,19 +327,17 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
         target[:, up_axis] = height
         targets.append(target)
         helds.append(held)
-    size = float(offsets[legs[0][1]].norm() + offsets[legs[0][2]].norm())
+    size = leg_length(sk, legs)
     up = torch.zeros(3, dtype=torch.float64)
     up[up_axis] = 1.0
     # the pelvis's height: raised or lowered by one amount per clip, the median of what the
     # standing feet lack (a rig whose hips hang lower from its pelvis stands lower)
     lack = torch.stack([t[:, up_axis] - pos[:, leg[2], up_axis] for t, leg in zip(targets, legs)], dim=1)
     standing = torch.stack(helds, dim=1)
-    lift = torch.zeros(B, dtype=torch.float64)
-    for b, sl in enumerate(spans):
-        here = lack[sl][standing[sl]]
-        if here.numel():
-            lift[b] = here.median()
-    lift = torch.where(lift.abs() > _STILL * size, lift, torch.zeros_like(lift))  # a clip on its own skeleton: as it is
+    nan = float("nan")
+    lift = torch.nn.utils.rnn.pad_sequence(list(torch.where(standing, lack, nan).split(lengths)), batch_first=True,
+                                           padding_value=nan).reshape(B, -1).nanmedian(dim=1).values
+    lift = torch.where(lift.abs() > _STILL * size, lift, torch.zeros_like(lift))  # NaN (never standing) too  # a clip on its own skeleton: as it is
     lift = lift[per_frame]
     # reach: lower it more where a leg is short of its target
     drop = torch.zeros(N, dtype=torch.float64)

@@ -9,10 +9,13 @@ The method, with global rotations ``G`` and the joint map ``m`` (target joint ->
 
 - **Rest alignment per bone.** For each mapped joint, ``A`` is the world rotation taking the
   source's rest bone (from the joint to the next joint of the canonical map, see
-  :func:`~torchsplice.specs.canonical.canonical_bones`) onto the target's: the smallest rotation
-  between the two directions (a swing, so that twist is carried as it is); the pelvis and the
-  chest are aligned by two directions (across the hips or shoulders, and up), so their turn
-  about the spine is kept. A mapped joint with no bone of its own takes its parent's ``A``.
+  :func:`~torchsplice.specs.canonical.canonical_bones`; a joint off the map, its first mapped
+  child) onto the target's: the nearest mapped ancestor's ``A`` composed with the smallest
+  rotation left between the two directions (a swing, so that twist is carried as it is, and
+  the way a rig faces at rest is carried down its chains); the pelvis and the chest are
+  aligned by two directions (across the hips or shoulders, and up), so their turn about the
+  spine is kept. A joint with no bone to align (or unmapped) takes its nearest mapped
+  ancestor's ``A``.
 - **Globals.** ``G_t(j) = G_s(m(j)) A(j)^-1``: with both rest poses at identity globals this
   is ``G_s(t) G_s(ref)^-1 G_t(rest)``, ``ref`` being the source posed into the target's rest
   shape, so each mapped target bone points where its source bone points. An unmapped target
@@ -42,7 +45,9 @@ from ..core.fk import forward_kinematics
 from ..core.motion import Motion
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize, rotmat_to_quat
 from ..core.skeleton import Skeleton
-from ..specs.canonical import canonical_bones, canonical_joints
+from ..specs.canonical import canonical_bones, canonical_joints, canonical_legs
+from ..specs.canonical import leg_length as canonical_leg_length
+from ..specs.roles import chain as joint_chain
 from ..specs.roles import SkeletonRoles
 from . import feet
 
@@ -56,7 +61,7 @@ class RetargetMap:
     Attributes:
         source, target: the skeletons.
         joints: target joint -> source joint, for every mapped target joint.
-        align: ``(Jt, 4)`` float64, ``A`` of each target joint (identity where unmapped).
+        align: ``(Jt, 4)`` float64, ``A`` of each target joint (its nearest mapped ancestor's where unmapped).
         held: target joints held at their rest pose (no source joint).
         folded: source joints with no target joint (their motion goes to their mapped ancestors).
         pelvis: ``(target, source)`` pelvis joints; scale: target leg length / source leg length.
@@ -74,9 +79,9 @@ class RetargetMap:
     pelvis: tuple[int, int]
     scale: float
     up_axis: int
-    legs: tuple[tuple[int, int, int, int | None], ...] = ()
-    source_legs: tuple[tuple[int, int | None], ...] = ()
-    source_leg: float = 1.0
+    legs: tuple[tuple[int, int, int, int | None], ...]
+    source_legs: tuple[tuple[int, int | None], ...]
+    source_leg: float
 
 
 def _unit(v: torch.Tensor) -> torch.Tensor:
@@ -92,13 +97,9 @@ def _frame(across: torch.Tensor, up: torch.Tensor) -> torch.Tensor:
 
 
 def leg_length(skeleton: Skeleton, joints: dict) -> float:
-    """Hip to knee to ankle, averaged over both legs (the skeleton's units)."""
-    rest, _ = skeleton.rest_positions()
-    total = 0.0
-    for side in ("l", "r"):
-        h, k, a = (joints[f"{n}_{side}"] for n in ("hip", "knee", "ankle"))
-        total += float((rest[k] - rest[h]).norm() + (rest[a] - rest[k]).norm())
-    return total / 2
+    """Hip to knee to ankle at rest, averaged over both legs of canonical map ``joints`` (the
+    skeleton's units)."""
+    return canonical_leg_length(skeleton, canonical_legs(joints))
 
 
 def character_height(skeleton: Skeleton, joints: dict) -> float:
@@ -183,12 +184,15 @@ def retarget_map(source: Skeleton, source_roles: SkeletonRoles, target: Skeleton
         align[jt] = base
     held = tuple(j for j in range(target.num_joints) if j not in pairs)
     folded = tuple(j for j in range(source.num_joints) if j not in inverse)
-    scale = leg_length(target, ct) / leg_length(source, cs)
-    legs = tuple((ct[f"hip_{s}"], ct[f"knee_{s}"], ct[f"ankle_{s}"], ct.get(f"toe_{s}") if f"toe_{s}" in cs else None)
-                 for s in ("l", "r"))
-    source_legs = tuple((cs[f"ankle_{s}"], cs.get(f"toe_{s}") if f"toe_{s}" in ct else None) for s in ("l", "r"))
+    source_leg = leg_length(source, cs)
+    scale = leg_length(target, ct) / source_leg
+    # toes where both skeletons have them
+    legs = tuple((h, k, a, t if s_t is not None else None)
+                 for (h, k, a, t), (_, _, _, s_t) in zip(canonical_legs(ct), canonical_legs(cs)))
+    source_legs = tuple((a, t if l_t is not None else None)
+                        for (_, _, a, t), (_, _, _, l_t) in zip(canonical_legs(cs), canonical_legs(ct)))
     return RetargetMap(source, target, pairs, align, held, folded, (int(ct["pelvis"]), int(cs["pelvis"])), scale,
-                       int(source_roles.up_axis), legs, source_legs, leg_length(source, cs))
+                       int(source_roles.up_axis), legs, source_legs, source_leg)
 
 
 def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
@@ -248,16 +252,13 @@ def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
     origin[:, rmap.up_axis] = 0.0
     origin = torch.repeat_interleave(origin, torch.tensor(lengths), dim=0)
     pelvis = origin + (pos[:, ps] - origin) * rmap.scale
-    chain, j = [], pt
-    while j >= 0:
-        chain.append(j)
-        j = tgt.parents[j]
-    chain = chain[::-1]  # root ... pelvis
+    chain = joint_chain(tgt.parents, 0, pt)  # root ... pelvis
     translations = tgt.offsets.to(torch.float64).expand(T, J, 3).clone() if tgt.has_joint_translations else None
     if translations is not None and pt != 0 and tgt.translation_animated[pt]:
         # the trajectory on the pelvis's own channels (Bandai Namco: the root stays put): the
         # joints above it where the source's are (or at rest), the pelvis's translation placed
-        root = pos[:, rmap.joints[0]] if 0 in rmap.joints else torch.zeros(T, 3, dtype=torch.float64)
+        root = (origin + (pos[:, rmap.joints[0]] - origin) * rmap.scale if 0 in rmap.joints  # scaled as the pelvis is
+                else torch.zeros(T, 3, dtype=torch.float64))
         above = root
         for j in chain[1:-1]:
             above = above + quat_apply(g_t[:, tgt.parents[j]], tgt.offsets[j].expand(T, 3))
@@ -268,16 +269,12 @@ def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
             root = root - quat_apply(g_t[:, tgt.parents[j]], tgt.offsets[j].expand(T, 3))
     if translations is not None:
         translations[:, 0] = root
-    if fix_feet and rmap.legs and min(lengths) >= 3:
+    if fix_feet and min(lengths) >= 3:
         local, root, translations = feet.fix_feet(tgt, local, root, translations, lengths, [float(m.fps) for m in motions],
                                                   list(rmap.legs), pos, list(rmap.source_legs), rmap.scale,
                                                   rmap.source_leg, target_heights, rmap.up_axis, pt, ps)
-    out, at = [], 0
-    for m, n in zip(motions, lengths):
-        sl = slice(at, at + n)
-        at += n
-        dtype = m.rotations.dtype
-        out.append(Motion(skeleton=tgt, rotations=local[sl].to(dtype), root_translation=root[sl].to(dtype),
-                          translations=None if translations is None else translations[sl].to(dtype), fps=m.fps,
-                          name=m.name, source=m.source, role=m.role, labels=dict(m.labels)))
-    return out
+    parts = zip(local.split(lengths), root.split(lengths),
+                translations.split(lengths) if translations is not None else [None] * len(lengths))
+    return [Motion(skeleton=tgt, rotations=r.to(m.rotations.dtype), root_translation=x.to(m.rotations.dtype),
+                   translations=None if t is None else t.to(m.rotations.dtype), fps=m.fps, name=m.name, source=m.source,
+                   role=m.role, labels=dict(m.labels)) for m, (r, x, t) in zip(motions, parts)]

@@ -22,9 +22,9 @@ import torch
 from ..core.errors import SpecError, TorchspliceError
 from ..core.version import __version__
 from ..ops.retarget import RetargetMap, retarget_map, retarget_motions
-from .targets import resolve_target
+from .targets import database_target, resolve_target
 
-__all__ = ["retarget_clips", "RetargetReport", "Retargeter", "CHUNK_CLIPS"]
+__all__ = ["retarget_clips", "RetargetReport", "Retargeter", "needs_retargeting", "onto_skeleton", "CHUNK_CLIPS"]
 
 CHUNK_CLIPS = 64
 """Clips read, retargeted and written together."""
@@ -54,6 +54,26 @@ def source_label(database, k: int, spec_name: str) -> str:
 def map_notes(rmap: RetargetMap) -> dict[str, list[str]]:
     """A map's held target joints and folded source joints, by name."""
     return {"held": [rmap.target.names[j] for j in rmap.held], "folded": [rmap.source.names[j] for j in rmap.folded]}
+
+
+def needs_retargeting(skeleton, units: str, onto, onto_units: str) -> bool:
+    """Whether clips on ``skeleton`` (stored in ``units``) must be retargeted to splice with
+    clips on ``onto``: other joints, or other units where both are recorded. The one rule of
+    ``splice-all``, ``splice``, ``plot-alignment`` and ``evaluate``."""
+    return not skeleton.same_topology(onto) or bool(units and onto_units and units != onto_units)
+
+
+def onto_skeleton(db, path, clips, skeleton: int, fix_feet: bool = True) -> list | None:
+    """``clips`` (of one skeleton of the open database ``db`` at ``path``) retargeted onto its
+    skeleton ``skeleton`` when :func:`needs_retargeting` says so, as ``splice-all`` does; ``None``
+    when they are on it already."""
+    k = db.clip_info(clips[0].name)["skeleton"]
+    if not needs_retargeting(db.skeletons[k], db.skeleton_info(k).units or "", db.skeletons[skeleton],
+                             db.skeleton_info(skeleton).units or ""):
+        return None
+    spec = db.spec(k)
+    return Retargeter(db.skeletons[k], spec, source_label(path, k, spec.name), database_target(db, path, skeleton),
+                      fix_feet, what=f"{path}: skeleton {k} ({spec.name})")(clips)
 
 
 class Retargeter:
@@ -107,7 +127,7 @@ def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, sel
         select: selectors of the selection language (:mod:`torchsplice.store.select`).
         fix_feet: hold the feet where the source's stand (:mod:`torchsplice.ops.feet`).
         overwrite: replace an existing ``out``.
-        command: what the run record and the output's lock say made it.
+        command: what the run record says made it.
         progress: ``progress(iterable, total, description)`` wrapping the chunks (of
             :data:`CHUNK_CLIPS` clips), or ``None``.
     """
@@ -116,8 +136,9 @@ def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, sel
     from ..store.atomic import check_output
     from ..store.database import MotionDatabase
 
-    out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=[database], overwrite=overwrite)
     target = resolve_target(to)
+    inputs = [database] + ([target.path] if target.path is not None else [])
+    out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=inputs, overwrite=overwrite)
     if select is not None:
         clips = selected_names(database, select, clips)
     with MotionDatabase.open(database) as db:

@@ -20,10 +20,10 @@ from ..core.skeleton import Skeleton
 from ..formats.importer import DATABASE_SUFFIXES
 from ..ops.feet import rig_heights
 from ..specs import DatasetSpec, load_spec
-from ..specs.canonical import canonical_joints
+from ..specs.canonical import canonical_joints, canonical_legs
 from ..specs.smpl import SMPL22, smpl22_skeleton
 
-__all__ = ["RetargetTarget", "resolve_target", "BUILTIN_TARGETS", "HEIGHT_CLIPS"]
+__all__ = ["RetargetTarget", "resolve_target", "database_target", "BUILTIN_TARGETS", "HEIGHT_CLIPS"]
 
 BUILTIN_TARGETS = (SMPL22,)
 """The built-in targets, by name."""
@@ -42,12 +42,14 @@ class RetargetTarget:
         heights: ``(2, 2)`` how high its (ankle, toe) stand above the floor when a foot rests,
             per leg (left, right), in its units, measured on its own clips; ``None`` where it
             has none (the source's heights are scaled instead).
+        path: the file it was read from (a database or a BVH file), ``None`` for a built-in.
     """
 
     name: str
     skeleton: Skeleton
     spec: DatasetSpec
     heights: torch.Tensor | None = None
+    path: Path | None = None
 
 
 def _split_db(text: str) -> tuple[Path, int | None] | None:
@@ -62,8 +64,7 @@ def _split_db(text: str) -> tuple[Path, int | None] | None:
 
 def _measured(motions, skeleton: Skeleton, spec: DatasetSpec) -> torch.Tensor | None:
     roles = spec.bind(skeleton)
-    joints = canonical_joints(roles, skeleton)
-    legs = [(joints[f"hip_{s}"], joints[f"knee_{s}"], joints[f"ankle_{s}"], joints.get(f"toe_{s}")) for s in "lr"]
+    legs = canonical_legs(canonical_joints(roles, skeleton))
     return rig_heights([m for m in motions if m.num_frames >= 3], legs, int(roles.up_axis))
 
 
@@ -98,20 +99,25 @@ def _database_target(text: str, path: Path, k: int | None) -> RetargetTarget:
         k = 0 if k is None else k
         if not 0 <= k < n:
             raise TorchspliceError(f"{text}: {path} has no skeleton {k} (it has {n}: 0 to {n - 1})")
-        skeleton = db.skeletons[k]
-        try:
-            spec = db.spec(k)
-        except SpecError as exc:
-            raise SpecError(f"{text}: {exc}") from None
-        table = db.clip_table()
-        rows = [r for r in range(len(table.names)) if int(table.skeleton[r]) == k]
-        rows = sorted(rows, key=lambda r: -int(table.length[r]))[:HEIGHT_CLIPS]
-        motions = db.read_many([table.names[r] for r in rows], dtype=torch.float64) if rows else []
-    name = f"{path.name}:{k}"
+        return database_target(db, path, k)
+
+
+def database_target(db, path, k: int) -> RetargetTarget:
+    """Skeleton ``k`` of the open database ``db`` (read from ``path``) as a target, its feet's
+    resting heights measured on its :data:`HEIGHT_CLIPS` longest clips."""
+    import numpy as np
+
+    path = Path(path)
     try:
-        return RetargetTarget(name, skeleton, spec, _measured(motions, skeleton, spec) if motions else None)
+        spec = db.spec(k)
+        table = db.clip_table()
+        rows = np.flatnonzero(np.asarray(table.skeleton) == k)
+        rows = rows[np.argsort(-np.asarray(table.length)[rows], kind="stable")][:HEIGHT_CLIPS].tolist()
+        motions = db.read_many(rows, dtype=torch.float64) if rows else []
+        heights = _measured(motions, db.skeletons[k], spec) if motions else None
     except SpecError as exc:  # its stored spec names joints it lacks, or it is not a humanoid
-        raise SpecError(f"{text}: skeleton {k}: {exc}") from None
+        raise SpecError(f"{path}: skeleton {k}: {exc}") from None
+    return RetargetTarget(f"{path.name}:{k}", db.skeletons[k], spec, heights, path)
 
 
 def _bvh_target(path: Path) -> RetargetTarget:
@@ -126,4 +132,4 @@ def _bvh_target(path: Path) -> RetargetTarget:
         heights = _measured([motion], motion.skeleton, spec) if motion.num_frames >= 3 else None
     except SpecError as exc:
         raise SpecError(f"{path}: {exc}") from None
-    return RetargetTarget(path.name, motion.skeleton, spec, heights)
+    return RetargetTarget(path.name, motion.skeleton, spec, heights, path)

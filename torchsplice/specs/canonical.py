@@ -9,7 +9,7 @@ dataset calls them. A skeleton's map comes from its dataset spec's roles
   from the pelvis role up, ``neck`` its last joint below the head, ``head``;
 - ``clavicle_l/r``: a shoulder's parent when it is not on the spine (absent otherwise);
 - ``shoulder_l/r``, ``wrist_l/r`` (the hands role), ``elbow_l/r``: the joint between shoulder
-  and wrist with the longest bone to the wrist (CMU's zero-length helpers are skipped);
+  and wrist furthest from both (CMU's zero-length helpers are never chosen);
 - ``hip_l/r``, ``knee_l/r``, ``ankle_l/r`` (the feet role), ``toe_l/r`` (optional).
 
 Fingers, twist bones and helper joints have no canonical name: retargeting folds them into
@@ -20,9 +20,10 @@ missing.
 
 from __future__ import annotations
 
+from ..core.errors import SpecError
 from .roles import SkeletonRoles, chain
 
-__all__ = ["CANONICAL", "REQUIRED", "canonical_joints", "canonical_bones"]
+__all__ = ["CANONICAL", "REQUIRED", "canonical_joints", "canonical_bones", "canonical_legs", "leg_length"]
 
 CANONICAL = ("pelvis", "spine", "neck", "head", "clavicle_l", "clavicle_r", "shoulder_l", "shoulder_r", "elbow_l",
              "elbow_r", "wrist_l", "wrist_r", "hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r", "toe_l",
@@ -50,8 +51,6 @@ def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton")
     """The canonical map of ``skeleton`` (bound ``roles``): canonical name -> joint index
     (``spine``: the chain, pelvis role first). Raises :class:`~torchsplice.core.errors.SpecError`
     naming ``what`` and every required joint it lacks."""
-    from ..core.errors import SpecError
-
     out: dict[str, int | tuple[int, ...]] = {"pelvis": roles.root, "spine": tuple(roles.spine)}
     spine = list(roles.spine)
     if roles.head is not None:
@@ -80,7 +79,8 @@ def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton")
             missing.append(f"elbow_{side}")
         else:
             out[f"elbow_{side}"] = elbow
-    missing += [n for n in REQUIRED if n not in out and n not in missing]
+    if not spine:
+        missing.append("spine")
     if missing:
         raise SpecError(f"{what} cannot be retargeted: no {', '.join(missing)} (a humanoid needs hips, knees, ankles, "
                         "a spine, shoulders, elbows and wrists)")
@@ -103,3 +103,15 @@ def canonical_bones(joints: dict) -> list[tuple[int, int]]:
             have = [joints[n] for n in names if n in joints]
             bones += list(zip(have, have[1:]))
     return bones
+
+
+def canonical_legs(joints: dict) -> tuple[tuple[int, int, int, int | None], ...]:
+    """Per leg (left, right) of a canonical map: ``(hip, knee, ankle, toe or None)``."""
+    return tuple((joints[f"hip_{s}"], joints[f"knee_{s}"], joints[f"ankle_{s}"], joints.get(f"toe_{s}")) for s in "lr")
+
+
+def leg_length(skeleton, legs) -> float:
+    """Hip to knee to ankle at rest, averaged over ``legs`` (:func:`canonical_legs`), in the
+    skeleton's units."""
+    rest, _ = skeleton.rest_positions()
+    return sum(float((rest[k] - rest[h]).norm() + (rest[a] - rest[k]).norm()) for h, k, a, _ in legs) / len(legs)
