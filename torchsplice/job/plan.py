@@ -31,7 +31,6 @@ from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
 from ..store.select import select_clips
-from ..retarget.clips import needs_retargeting
 from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
@@ -404,6 +403,8 @@ def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, 
     pairs are not formed (text beginning :data:`SKELETONS_DIFFER` or ``units differ``), by
     :func:`torchsplice.retarget.clips.needs_retargeting`. Each retargeting map is built here,
     once per process (a skeleton that is not a humanoid says what it lacks)."""
+    from ..retarget.clips import needs_retargeting  # loaded by jobs that may retarget, not by every worker
+
     out: dict = {}
     for x in kls:
         for y in kas:
