@@ -102,7 +102,7 @@ def test_a_folder_that_cannot_be_made_is_one_line(tmp_path, capsys, monkeypatch)
         return real(self, *a, **k)
 
     monkeypatch.setattr(Path, "mkdir", refuse)
-    for fmt in ("bvh", "npz"):
+    for fmt in ("bvh", "npz", "humanml3d"):
         rc = main(["export", str(db), "--all", "--format", fmt, "-o", str(tmp_path / "clips")])
         err = capsys.readouterr().err
         assert rc == 2 and err.count("\n") == 1 and "permission denied" in err and "clips" in err, err

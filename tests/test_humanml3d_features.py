@@ -22,8 +22,8 @@ import torch
 
 from torchsplice.core.rotations import axis_angle_to_quat, quat_apply
 from torchsplice.formats.humanml3d_features import (FEATURES, GROUPS, JOINTS, FeatureStats, features_to_positions,
-                                                    gaussian_smooth, normalize_positions, positions_to_features,
-                                                    resample_positions)
+                                                    gaussian_smooth, normalize_positions, pad_clips,
+                                                    positions_to_features, resample_positions)
 from torchsplice.ops.retarget import retarget_map, retarget_motions
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
@@ -105,7 +105,7 @@ def test_gaussian_smoothing_against_its_closed_form():
 
 
 def test_shapes_are_checked():
-    with pytest.raises(ValueError, match=r"\(T, 22, 3\)"):
+    with pytest.raises(ValueError, match=r"\(\.\.\., T, 22, 3\)"):
         positions_to_features(torch.zeros(10, 21, 3))
     with pytest.raises(ValueError, match="at least 2 frames"):
         positions_to_features(torch.zeros(1, 22, 3))
@@ -145,3 +145,25 @@ def test_the_statistics_are_the_formats_and_do_not_depend_on_how_the_clips_are_c
     assert [b - a for a, b in GROUPS] == [1, 2, 1, 63, 126, 66, 4]
     with pytest.raises(ValueError, match="no features"):
         FeatureStats().result()
+
+
+def test_clips_of_other_lengths_in_one_padded_batch_give_each_clip_its_own_features():
+    g = torch.Generator().manual_seed(3)
+    clips = []
+    for k, n in ((0, 7), (1, 40), (2, 133)):
+        clips.append(CLIPS[k][:n] + 0.01 * torch.randn(n, 22, 3, generator=g, dtype=torch.float64))
+    batch = positions_to_features(pad_clips(clips))
+    for i, c in enumerate(clips):
+        alone = positions_to_features(c)
+        assert torch.allclose(batch[i, :c.shape[0] - 1], alone, atol=1e-12), i
+
+
+def test_a_heading_along_minus_z_turns_about_the_vertical():
+    """Frames facing exactly away from the first frame's heading (a half turn: the smallest rotation
+    onto +Z has no unique axis there) still turn about Y, so the positions come back rigidly."""
+    p = normalize_positions(CLIPS[0])
+    half = axis_angle_to_quat(torch.tensor([0.0, math.pi, 0.0], dtype=torch.float64))
+    turned = quat_apply(half.expand(p.shape[:-1] + (4,)), p)
+    both = torch.cat([p, turned + (p[-1, 0] - turned[0, 0]) * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)])
+    back = features_to_positions(positions_to_features(both))
+    assert float((back - normalize_positions(both)[:-1]).abs().max()) < 1e-5

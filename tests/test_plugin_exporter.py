@@ -65,9 +65,9 @@ def test_the_toy_format_through_the_command_line(sample_db, tmp_path):
     assert sorted(f.name for f in out.iterdir()) == sorted(f"{n}.csv" for n in names)
     check_clips(sample_db, out, names)
     help_text = cli("--plugin", "toy_exporter", "export", "--help").stdout
-    assert "{bvh,npz,toy}" in help_text
+    assert "{bvh,npz,humanml3d,toy}" in help_text
     env["TORCHSPLICE_PLUGINS"] = "toy_exporter"  # or named in the environment
-    assert "{bvh,npz,toy}" in cli("export", "--help").stdout
+    assert "{bvh,npz,humanml3d,toy}" in cli("export", "--help").stdout
     del env["TORCHSPLICE_PLUGINS"]
     p = cli("export", sample_db, "--all", "--format", "toy", "-o", tmp_path / "other")  # no plug-in: no such format
     assert p.returncode == 2 and "invalid choice: 'toy'" in p.stderr and not (tmp_path / "other").exists()

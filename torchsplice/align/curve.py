@@ -18,7 +18,8 @@ import torch
 
 from ..core.rotations import quat_slerp
 
-__all__ = ["bspline_basis", "fit_alignment_curve", "interpolate_frames", "slerp_frames", "resample_times"]
+__all__ = ["bspline_basis", "fit_alignment_curve", "interpolate_frames", "slerp_frames", "resample_times",
+           "resample_motion"]
 
 _DEGREE = 3
 
@@ -212,3 +213,19 @@ def resample_times(num_frames: int, fps_from: float, fps_to: float) -> torch.Ten
     to play it at ``fps_to``: ``k * fps_from / fps_to`` for every ``k`` that stays inside the clip."""
     count = int((num_frames - 1) * fps_to / fps_from + 1e-9) + 1
     return torch.arange(count, dtype=torch.float64) * (fps_from / fps_to)
+
+
+def resample_motion(motion, fps: float):
+    """A :class:`~torchsplice.core.motion.Motion` played at ``fps``: rotations by slerp, the root
+    and translations by linear interpolation, at :func:`resample_times` (so bone lengths stay
+    exact); the clip itself if it is at ``fps`` already."""
+    from dataclasses import replace
+
+    if abs(motion.fps - fps) <= 1e-6 * fps:
+        return motion
+    times = resample_times(motion.num_frames, motion.fps, fps).to(motion.device)[None]
+    lengths = torch.tensor([motion.num_frames], device=motion.device)
+    rot = slerp_frames(motion.rotations[None], times, lengths)[0]
+    root = interpolate_frames(motion.root_translation[None], times, lengths)[0]
+    trans = None if motion.translations is None else interpolate_frames(motion.translations[None], times, lengths)[0]
+    return replace(motion, rotations=rot, root_translation=root, translations=trans, fps=fps, labels=dict(motion.labels))

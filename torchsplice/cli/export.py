@@ -13,20 +13,22 @@ from .common import add_output_flags, command_line, say
 from ..core.errors import TorchspliceError
 
 
-def _npz_option(name: str):
+def _option(format: str, name: str):
     from ..formats.exporters import get_exporter
 
-    return get_exporter("npz").options[name]
+    return get_exporter(format).options[name]
 
 
 class Export(Command):
     name = "export"
-    help = "write clips of a database as BVH or NumPy .npz (for training and other tools)"
+    help = "write clips of a database as BVH, NumPy .npz or a HumanML3D folder (for training and other tools)"
     description = ("Write clips (by name, as `info` lists them, or --all) as BVH files with the skeleton's original "
                    "channel layout, or as .npz: local rotations (WXYZ), root translation, trajectory, local "
                    "translations, world positions, fps, joints, parents, offsets and labels (layout: "
-                   "torchsplice/formats/npz.py). -o is a file for one clip (or --packed), else a folder, one file "
-                   "per clip.")
+                   "torchsplice/formats/npz.py), or as a HumanML3D folder for text-to-motion training (--format "
+                   "humanml3d: the SMPL body's 263 features at 20 fps, captions from the labels, Mean/Std, splits by "
+                   "source clip, index.csv; layout: torchsplice/formats/humanml3d_exporter.py). -o is a file for one "
+                   "clip (or --packed), else a folder, one file per clip.")
 
     def add_arguments(self, s) -> None:
         from ..formats.exporters import DEFAULT_FORMAT, available_exporters
@@ -39,13 +41,30 @@ class Export(Command):
         s.add_argument("--format", choices=formats, default=None,
                        help=f"{' or '.join(formats) if len(formats) < 3 else ', '.join(formats)} (default: from -o's "
                             f"suffix; {DEFAULT_FORMAT} for a folder unless --packed or --features)")
-        packed, features = _npz_option("packed"), _npz_option("features")
+        packed, features = _option("npz", "packed"), _option("npz", "features")
         s.add_argument("--packed", action="store_true", default=packed.default,
                        help="npz: one file with every clip concatenated along frames and offsets[i]:offsets[i+1] "
                             "slicing clip i (clips of one skeleton topology)")
         s.add_argument("--features", choices=features.choices, default=features.default,
                        help="npz: add 6D rotations (Zhou et al. 2019), joint, root and trajectory velocities, and per-"
                             "dimension mean and std of every array over all exported clips, for normalisation")
+        h = {k: _option("humanml3d", k).default for k in ("mirror", "split_ratios", "split_seed", "paraphrases")}
+        s.add_argument("--captions", default=None, metavar="FILE",
+                       help="humanml3d: your captions per source clip (JSON: clip name -> list of captions, each "
+                            "'caption#word/POS ...#0.0#0.0' or word/POS words); they compose like the labels' phrases")
+        s.add_argument("--mirror", action="store_true", default=None,
+                       help=f"humanml3d: add each clip's mirrored copy (M + ID), left and right swapped in the motion and "
+                            f"its captions (default: {'on' if h['mirror'] else 'off'})")
+        s.add_argument("--window", type=float, default=None, metavar="SECONDS",
+                       help="humanml3d: cut clips longer than SECONDS into windows of SECONDS spread over the clip, "
+                            "each with the clip's captions (MDM keeps clips of at most 196 frames, 9.8 s)")
+        s.add_argument("--split-ratios", default=None, metavar="TRAIN,VAL,TEST",
+                       help="humanml3d: fractions of the source clips in each split; a result is in a split when all its "
+                            f"sources are (default: {','.join(f'{r:g}' for r in h['split_ratios'])})")
+        s.add_argument("--split-seed", type=int, default=None, metavar="N",
+                       help=f"humanml3d: the seed of the split (default: {h['split_seed']})")
+        s.add_argument("--paraphrases", type=int, default=None, metavar="N",
+                       help=f"humanml3d: captions per clip, at most (default: {h['paraphrases']})")
         s.add_argument("--skeleton", default=None, metavar="K[,K...]",
                        help="only clips on these skeletons (ids as `info` lists them)")
         add_output_flags(s)
@@ -64,7 +83,9 @@ class Export(Command):
                 raise TorchspliceError(f"--skeleton: expected skeleton ids such as 0 or 0,1, got {args.skeleton!r}") from None
         result = export_clips(args.database, None if args.all else args.clips, out=args.output, format=args.format,
                               overwrite=args.force, skeletons=skeletons, command=command_line(args),
-                              packed=args.packed, features=args.features)
+                              packed=args.packed, features=args.features, captions=args.captions, mirror=args.mirror,
+                              window=args.window, split_ratios=args.split_ratios, split_seed=args.split_seed,
+                              paraphrases=args.paraphrases)
         say(args, f"wrote {result.summary}")
         return 0
 

@@ -51,13 +51,14 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..store.database import MotionDatabase
 
 __all__ = ["Exporter", "selected_names", "ExportOption", "ExportResult", "register_exporter", "get_exporter", "available_exporters",
-           "choose_exporter", "export_clips", "export_targets", "select_rows", "clip_filename", "clip_filenames",
+           "choose_exporter", "export_clips", "export_targets", "folder_targets", "select_rows", "clip_filename", "clip_filenames",
            "MAX_FILE_BYTES", "DEFAULT_FORMAT"]
 
 DEFAULT_FORMAT = "bvh"
 """The format of an export that names none, whose output's suffix is no format's and whose
 options no format needs (a folder of BVH files)."""
-_BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz_exporter")
+_BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz_exporter",
+                    "torchsplice.formats.humanml3d_exporter")
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 _SUFFIX = re.compile(r"^\.[A-Za-z0-9][A-Za-z0-9_-]*$")
 READ_BATCH = 64
@@ -128,7 +129,7 @@ class Exporter:
             raise TorchspliceError(f"format {self.name!r} takes no option {unknown[0]!r}"
                                    + (f" (it takes {', '.join(declared)})" if declared else ""))
         self.options = {k: o.default for k, o in declared.items()}
-        self.options.update(options)
+        self.options.update({k: v for k, v in options.items() if v is not None})  # None: the default
         for k, o in declared.items():
             if o.choices is not None and self.options[k] != o.default and self.options[k] not in o.choices:
                 raise TorchspliceError(f"{{{k}}} must be one of {', '.join(map(str, o.choices))}, got {self.options[k]!r}",
@@ -155,6 +156,14 @@ class Exporter:
     def single_file(self) -> bool:
         """Every clip goes to one file (a packed file), whatever their number."""
         return False
+
+    def layout(self) -> list[str] | None:
+        """A folder format's files: their paths inside the output folder (``/``-separated,
+        subfolders allowed), in the order :meth:`items` yields what :meth:`write` writes to
+        them; ``None`` (the default) for one file per clip, named after it. A format whose
+        export is a folder of several kinds of file (a dataset's layout: per-clip files in
+        subfolders, statistics, split lists) overrides it, as :mod:`.humanml3d_exporter` does."""
+        return None
 
     def check(self) -> None:
         """What must hold before any file is made (e.g. statistics over every clip); one-line errors."""
@@ -307,8 +316,12 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
     cls = choose_exporter(format, out, options)
     exporter = cls(database, clips, skeletons=skeletons, **{k: v for k, v in options.items() if k in cls.options})
     names = exporter.names
-    single = exporter.single_file or (len(names) == 1 and named)
-    files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
+    layout = exporter.layout()
+    if layout is not None:
+        files, folder = folder_targets(out, layout, exporter, inputs=[database], overwrite=overwrite)
+    else:
+        single = exporter.single_file or (len(names) == 1 and named)
+        files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
     exporter.check()
     from .staging import staged_files
 
@@ -385,6 +398,34 @@ def export_targets(out, names: list[str], exporter: Exporter | type[Exporter], s
             check_output(f, (suffix,), what, inputs=inputs, overwrite=overwrite)
         files.append(f)
     return files, None if out.is_dir() else out
+
+
+def folder_targets(out, layout: list[str], exporter: Exporter, inputs=(),
+                   overwrite: bool = False) -> tuple[list[Path], list[Path]]:
+    """The files of a folder format's export (``layout``: paths inside ``out``), checked before
+    any work, and the folders to create (``out`` and the subfolders, parents first)."""
+    from ..store.atomic import check_output
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise TorchspliceError(f"{out}: is a file; the {exporter.title} format writes a folder: give {{output}} a folder",
+                               options=("output",))
+    if not out.is_dir() and out.suffix.lower() in {e.suffix.lower() for e in _REGISTRY.values()}:
+        raise TorchspliceError(f"{out}: the {exporter.title} format writes a folder: give {{output}} a folder name "
+                               f"(not a {out.suffix} file)", options=("output",))
+    if not out.parent.is_dir():
+        raise TorchspliceError(f"{out}: folder {out.parent} does not exist")
+    files, folders = [], {out: None}
+    for rel in layout:
+        f = out.joinpath(*rel.split("/"))
+        for parent in reversed(f.relative_to(out).parents[:-1]):
+            folders.setdefault(out / parent, None)
+        if f.parent.is_dir() or f.exists():
+            check_output(f, (f.suffix,), f"a {f.suffix} file", inputs=inputs, overwrite=overwrite)
+        files.append(f)
+    if len({f.as_posix().casefold() for f in files}) != len(files):
+        raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) names one file twice in its layout")
+    return files, list(folders)
 
 
 # --------------------------------------------------------------------------------------------

@@ -41,7 +41,8 @@ from ..align.curve import interpolate_frames, resample_times
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_to_6d
 
 __all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "FPS", "GROUPS", "normalize_positions",
-           "positions_to_features", "features_to_positions", "gaussian_smooth", "resample_positions", "FeatureStats"]
+           "positions_to_features", "features_to_positions", "gaussian_smooth", "resample_positions", "FeatureStats",
+           "pad_clips"]
 
 FPS = 20.0
 """The format's frame rate."""
@@ -69,10 +70,10 @@ _UP = (0.0, 1.0, 0.0)
 
 
 def _check(positions: torch.Tensor) -> None:
-    if positions.dim() != 3 or positions.shape[1:] != (JOINTS, 3):
-        raise ValueError(f"positions must be (T, {JOINTS}, 3), got {tuple(positions.shape)}")
-    if positions.shape[0] < 2:
-        raise ValueError(f"a clip needs at least 2 frames, got {positions.shape[0]}")
+    if positions.dim() < 3 or positions.shape[-2:] != (JOINTS, 3):
+        raise ValueError(f"positions must be (..., T, {JOINTS}, 3), got {tuple(positions.shape)}")
+    if positions.shape[-3] < 2:
+        raise ValueError(f"a clip needs at least 2 frames, got {positions.shape[-3]}")
 
 
 def gaussian_smooth(x: torch.Tensor, sigma: float, dim: int = 0) -> torch.Tensor:
@@ -90,88 +91,112 @@ def gaussian_smooth(x: torch.Tensor, sigma: float, dim: int = 0) -> torch.Tensor
     return out.reshape(shape).movedim(-1, dim)
 
 
+def _across(p: torch.Tensor, l_hip: int, r_hip: int) -> torch.Tensor:
+    """The sum of the hips' ``l_hip -> r_hip`` vector and the shoulders' right-to-left one, unit."""
+    across = (p[..., r_hip, :] - p[..., l_hip, :]) + (p[..., _R_SHOULDER, :] - p[..., _L_SHOULDER, :])
+    return across / across.norm(dim=-1, keepdim=True)
+
+
+def _turn_to_z(forward: torch.Tensor) -> torch.Tensor:
+    """``(..., 4)`` the turn about +Y taking horizontal ``forward`` ``(..., 3)`` onto +Z (the short
+    way; a forward along -Z turns about Y too, where the smallest rotation has no unique axis)."""
+    half = -0.5 * torch.atan2(forward[..., 0], forward[..., 2])
+    zero = torch.zeros_like(half)
+    return torch.stack((torch.cos(half), zero, torch.sin(half), zero), dim=-1)
+
+
 def _heading(positions: torch.Tensor, smooth: bool) -> torch.Tensor:
-    """``(T, 4)`` the root's heading rotation (taking its forward onto +Z), as the format's
+    """``(..., T, 4)`` the root's heading rotation (taking its forward onto +Z), as the format's
     features have it (see the module docstring)."""
-    across = (positions[:, _L_HIP] - positions[:, _R_HIP]) + (positions[:, _R_SHOULDER] - positions[:, _L_SHOULDER])
-    across = across / across.norm(dim=-1, keepdim=True)
+    across = _across(positions, _R_HIP, _L_HIP)  # the reference's order: left minus right hip
     forward = torch.linalg.cross(torch.tensor(_UP, dtype=positions.dtype).expand_as(across), across, dim=-1)
     if smooth:
-        forward = gaussian_smooth(forward, 20.0, dim=0)
-    forward = forward / forward.norm(dim=-1, keepdim=True)
-    target = torch.tensor((0.0, 0.0, 1.0), dtype=positions.dtype).expand_as(forward)
-    return quat_between(forward, target)
+        forward = gaussian_smooth(forward, 20.0, dim=-2)
+    return _turn_to_z(forward)
 
 
 def normalize_positions(positions: torch.Tensor) -> torch.Tensor:
-    """``(T, 22, 3)`` the clip on the floor (its lowest joint at Y = 0), its first frame's root
-    above the origin, and turned about Y to face +Z at its first frame (the format's rules)."""
+    """``(..., T, 22, 3)`` each clip on the floor (its lowest joint at Y = 0), its first frame's
+    root above the origin, and turned about Y to face +Z at its first frame (the format's rules)."""
     _check(positions)
     p = positions.clone()
-    p[..., 1] -= p[..., 1].min()
-    start = p[0, 0].clone()
-    start[1] = 0.0
+    p[..., 1] -= p[..., 1].amin(dim=(-2, -1))[..., None, None]
+    start = p[..., :1, :1, :].clone()
+    start[..., 1] = 0.0
     p = p - start
-    first = p[0]
-    across = (first[_R_HIP] - first[_L_HIP]) + (first[_R_SHOULDER] - first[_L_SHOULDER])
-    across = across / across.norm()
-    forward = torch.linalg.cross(torch.tensor(_UP, dtype=p.dtype), across, dim=-1)
-    forward = forward / forward.norm()
-    turn = quat_between(forward, torch.tensor((0.0, 0.0, 1.0), dtype=p.dtype))
-    return quat_apply(turn.expand(p.shape[:-1] + (4,)), p)
+    across = _across(p[..., 0, :, :], _L_HIP, _R_HIP)
+    forward = torch.linalg.cross(torch.tensor(_UP, dtype=p.dtype).expand_as(across), across, dim=-1)
+    turn = _turn_to_z(forward)
+    return quat_apply(turn[..., None, None, :].expand(p.shape[:-1] + (4,)), p)
 
 
 def _joint_rotations(positions: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
-    """``(T, 22, 4)`` each joint's rotation in its parent's frame: the swing taking its raw
+    """``(..., T, 22, 4)`` each joint's rotation in its parent's frame: the swing taking its raw
     offset direction onto its bone (chain by chain, from the heading ``root``)."""
-    T = positions.shape[0]
-    out = torch.zeros(T, JOINTS, 4, dtype=positions.dtype)
+    out = torch.zeros(positions.shape[:-1] + (4,), dtype=positions.dtype)
     out[..., 0] = 1.0
-    out[:, 0] = root
+    out[..., 0, :] = root
     raw = torch.tensor(RAW_OFFSETS, dtype=positions.dtype)
     for chain in CHAINS:
         R = root
         for a, b in zip(chain, chain[1:]):
-            v = positions[:, b] - positions[:, a]
+            v = positions[..., b, :] - positions[..., a, :]
             v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
             swing = quat_between(raw[b].expand_as(v), v)
             local = quat_mul(quat_conj(R), swing)
-            out[:, b] = local
+            out[..., b, :] = local
             R = quat_mul(R, local)
     return out
 
 
 def positions_to_features(positions: torch.Tensor, normalize: bool = True) -> torch.Tensor:
-    """``(T - 1, 263)`` features of a clip's joint positions ``(T, 22, 3)`` (see the module
-    docstring); ``normalize`` first puts it on the floor, at the origin, facing +Z
-    (:func:`normalize_positions`), as the format's folders hold them."""
+    """``(..., T - 1, 263)`` features of clips' joint positions ``(..., T, 22, 3)`` (see the module
+    docstring); ``normalize`` first puts each on the floor, at the origin, facing +Z
+    (:func:`normalize_positions`), as the format's folders hold them.
+
+    Clips of other lengths go in one batch padded at the end with copies of their last frame
+    (:func:`pad_clips`): the smoothing repeats the last frame there anyway, so each clip's
+    first ``T_i - 1`` rows are its own features exactly."""
     _check(positions)
     p = normalize_positions(positions.to(torch.float64)) if normalize else positions.to(torch.float64)
-    T = p.shape[0]
+    T = p.shape[-3]
     # contacts
-    step = ((p[1:, list(_FEET)] - p[:-1, list(_FEET)]) ** 2).sum(-1)
+    step = ((p[..., 1:, _FEET, :] - p[..., :-1, _FEET, :]) ** 2).sum(-1)
     feet = (step < FOOT_THRESHOLD).to(torch.float64)
     # the heading, smoothed (the first frame's is the identity: the clip faces +Z there), and
     # the rotations from it
     r_rot = _heading(p, smooth=True)
-    r_rot[0] = torch.tensor((1.0, 0.0, 0.0, 0.0), dtype=p.dtype)
+    r_rot[..., 0, :] = torch.tensor((1.0, 0.0, 0.0, 0.0), dtype=p.dtype)
     quats = _joint_rotations(p, r_rot)
-    root_vel = quat_apply(r_rot[1:], p[1:, 0] - p[:-1, 0])
-    r_vel = quat_mul(r_rot[1:], quat_conj(r_rot[:-1]))
+    root_vel = quat_apply(r_rot[..., 1:, :], p[..., 1:, 0, :] - p[..., :-1, 0, :])
+    r_vel = quat_mul(r_rot[..., 1:, :], quat_conj(r_rot[..., :-1, :]))
     # the turn's own (short) quaternion: where the heading crosses 180 degrees its quaternion changes
     # cover, and the raw product's Y part would flip sign (the reference keeps that flip: one frame of
     # a clip turning past 180 degrees then recovers turning the wrong way; here it recovers right)
-    r_vel = torch.where(r_vel[:, :1] < 0, -r_vel, r_vel)
-    yaw = torch.asin(r_vel[:, 2:3].clamp(-1.0, 1.0))
+    r_vel = torch.where(r_vel[..., :1] < 0, -r_vel, r_vel)
+    yaw = torch.asin(r_vel[..., 2:3].clamp(-1.0, 1.0))
     # joints relative to the root, in the heading frame
     local = p.clone()
-    local[..., 0] -= p[:, 0:1, 0]
-    local[..., 2] -= p[:, 0:1, 2]
-    local = quat_apply(r_rot[:, None].expand(T, JOINTS, 4), local)
-    six = quat_to_6d(quats[:, 1:]).reshape(T, -1)
-    vel = quat_apply(r_rot[:-1, None].expand(T - 1, JOINTS, 4), p[1:] - p[:-1]).reshape(T - 1, -1)
-    return torch.cat([yaw, root_vel[:, [0, 2]], p[:-1, 0, 1:2], local[:-1, 1:].reshape(T - 1, -1), six[:-1], vel,
-                      feet], dim=-1)
+    local[..., 0] -= p[..., 0:1, 0]
+    local[..., 2] -= p[..., 0:1, 2]
+    local = quat_apply(r_rot[..., None, :].expand(local.shape[:-1] + (4,)), local)
+    lead = p.shape[:-3]
+    six = quat_to_6d(quats[..., 1:, :]).reshape(lead + (T, -1))
+    vel = quat_apply(r_rot[..., :-1, None, :].expand(lead + (T - 1, JOINTS, 4)), p[..., 1:, :, :] - p[..., :-1, :, :])
+    return torch.cat([yaw, root_vel[..., [0, 2]], p[..., :-1, 0, 1:2], local[..., :-1, 1:, :].reshape(lead + (T - 1, -1)),
+                      six[..., :-1, :], vel.reshape(lead + (T - 1, -1)), feet], dim=-1)
+
+
+def pad_clips(clips) -> torch.Tensor:
+    """``(B, T_max, ...)`` clips ``(T_i, ...)`` stacked, each padded at its end with copies of its
+    last frame (how :func:`positions_to_features` takes clips of other lengths in one batch)."""
+    clips = list(clips)
+    longest = max(c.shape[0] for c in clips)
+    out = torch.empty((len(clips), longest) + tuple(clips[0].shape[1:]), dtype=clips[0].dtype)
+    for i, c in enumerate(clips):
+        out[i, :c.shape[0]] = c
+        out[i, c.shape[0]:] = c[-1]
+    return out
 
 
 def features_to_positions(features: torch.Tensor) -> torch.Tensor:
@@ -212,7 +237,8 @@ def resample_positions(positions: torch.Tensor, fps: float, to: float = FPS) -> 
 class FeatureStats:
     """``Mean.npy`` and ``Std.npy`` of feature arrays, as the format computes them: the mean and
     the (population) standard deviation of every column over every row of every clip, then each
-    kind's standard deviations replaced by their mean (:data:`GROUPS`). Streamed: :meth:`add` one
+    kind's standard deviations replaced by their mean (:data:`GROUPS`; a kind whose deviation is
+    0 gets 1, so that normalizing divides by no zero). Streamed: :meth:`add` one
     clip's ``(N, 263)`` at a time, memory flat in the number of clips (sums in float64)."""
 
     def __init__(self):
@@ -236,4 +262,6 @@ class FeatureStats:
         std = (self.squares / self.n - mean * mean).clamp_min(0).sqrt()
         for a, b in GROUPS:
             std[a:b] = std[a:b].mean()
-        return mean, std
+        # a kind that never varies (every foot always in contact, in a handful of clips) would
+        # divide by zero in training: 1 there, the one departure from the format's computation
+        return mean, torch.where(std > 1e-8, std, torch.ones_like(std))

@@ -5,8 +5,8 @@ it is given, a hidden name beside it (``.NAME.staged-HOST-PID``). When every fil
 they are installed under their names; on an error or an interrupt (while writing, or while
 installing) no file of the export appears and none it replaced is lost: the staged files go,
 the files already installed are taken back (those they replaced, moved aside meanwhile, are put
-back), and the folder made for the export is removed if it is empty again. The same export then
-runs again as it was.
+back), and the folders made for the export (a folder format's subfolders too) are removed if
+they are empty again. The same export then runs again as it was.
 
 The output (a file, or the folder of the export) is locked meanwhile (:func:`~torchsplice.store.lock.output_lock`):
 a second export to it is refused at once. Staged files a killed export left in a folder (of
@@ -20,7 +20,7 @@ from __future__ import annotations
 import contextlib
 import os
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 from ..core.errors import OutputExistsError, TorchspliceError
 
@@ -40,14 +40,15 @@ def make_folder(folder: Path) -> None:
 
 
 @contextlib.contextmanager
-def staged_files(output, folder: Path | None = None, overwrite: bool = False,
+def staged_files(output, folder: Path | Sequence[Path] | None = None, overwrite: bool = False,
                  command: str = "") -> Iterator[Callable[[Path], Path]]:
     """Write files all or none (see the module docstring).
 
     Args:
         output: what the export writes (its one file, or its folder): the lock guards it.
-        folder: the folder to create for the files (``None``: none to create); removed again,
-            if empty, when the export fails.
+        folder: the folder to create for the files, or several (parents before children;
+            ``None``: none to create); those it made are removed again, if empty, when the
+            export fails.
         overwrite: replace existing files; without it a file that appeared meanwhile (another
             process wrote it) is refused with :class:`~torchsplice.core.errors.OutputExistsError`.
         command: what the lock records as its holder's command.
@@ -67,10 +68,14 @@ def staged_files(output, folder: Path | None = None, overwrite: bool = False,
         staged[f] = temp_path(f, "staged")
         return staged[f]
 
+    folders = [] if folder is None else [Path(folder)] if isinstance(folder, (str, Path)) else [Path(f) for f in folder]
+    made: list[Path] = []
     with output_lock(Path(output), command):
-        if folder is not None:
-            make_folder(folder)
         try:
+            for f in folders:
+                if not f.is_dir():
+                    make_folder(f)
+                    made.append(f)
             yield stage
             taken = [f for f in staged if f.exists()] if not overwrite else []
             if taken:  # written meanwhile by another process
@@ -80,9 +85,9 @@ def staged_files(output, folder: Path | None = None, overwrite: bool = False,
             for tmp in staged.values():
                 with contextlib.suppress(OSError):
                     tmp.unlink()
-            if folder is not None:
+            for f in reversed(made):
                 with contextlib.suppress(OSError):
-                    folder.rmdir()  # made for this export, and empty again
+                    f.rmdir()  # made for this export, and empty again
             raise
 
 

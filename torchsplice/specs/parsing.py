@@ -99,14 +99,18 @@ def spec_fields(data: dict, where: str, path: Path | None = None, from_json: boo
     """Validate the tables of a spec file (or its JSON form, ``from_json``) into the fields of a
     :class:`~torchsplice.specs.DatasetSpec` (its keyword arguments); ``where`` names the file
     in messages."""
-    allowed = {"dataset", "joints", "clips"} | ({"name", "path", "notes", "guessed"} if from_json else set())
+    allowed = {"dataset", "joints", "clips", "text"} | ({"name", "path", "notes", "guessed"} if from_json else set())
     extra = sorted(set(data) - allowed)
     if extra:
-        raise SpecError(f"{where}: unknown top-level key or table [{extra[0]}] (allowed: dataset, joints, clips)")
+        raise SpecError(f"{where}: unknown top-level key or table [{extra[0]}] (allowed: dataset, joints, clips, text)")
     dataset = _section(data, where, "dataset", required=True)
     joints = _section(data, where, "joints", required=True)
     clips = _section(data, where, "clips", required=False)
     fields_ = {**_parse_dataset(dataset), **_parse_joints(joints), **_parse_clips(clips)}
+    if "text" in data:  # the phrase table, for captions: checked here, read by specs.text when captions are made
+        from .text import parse_phrase_table
+
+        parse_phrase_table(data["text"], where, fields_["name"])
     notes, guessed = (), ()
     if from_json:
         path, notes = _json_extras(data, where, fields_["name"])

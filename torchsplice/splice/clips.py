@@ -9,11 +9,11 @@ joint, offsets where not animated), positions ``(B, T, J, 3)`` and global rotati
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import torch
 
-from ..align.curve import interpolate_frames, resample_times, slerp_frames
+from ..align.curve import interpolate_frames, resample_motion, slerp_frames
 from ..core.errors import MotionError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
@@ -88,18 +88,6 @@ def with_fk(rotations: torch.Tensor, translations: torch.Tensor, lengths: torch.
     pos, grot = forward_kinematics(rotations, translations[:, :, 0], skeleton.offsets.to(rotations),
                                    skeleton.parents, translations)
     return ClipTensors(rotations, translations, lengths, pos, grot)
-
-
-def resample_motion(motion: Motion, fps: float) -> Motion:
-    """The clip played at ``fps`` (slerp and linear interpolation); itself if already there."""
-    if abs(motion.fps - fps) <= 1e-6 * fps:
-        return motion
-    times = resample_times(motion.num_frames, motion.fps, fps).to(motion.device)[None]
-    lengths = torch.tensor([motion.num_frames], device=motion.device)
-    rot = slerp_frames(motion.rotations[None], times, lengths)[0]
-    root = interpolate_frames(motion.root_translation[None], times, lengths)[0]
-    trans = None if motion.translations is None else interpolate_frames(motion.translations[None], times, lengths)[0]
-    return replace(motion, rotations=rot, root_translation=root, translations=trans, fps=fps, labels=dict(motion.labels))
 
 
 def clips_to_tensors(motions: list[Motion], skeleton: Skeleton, dtype=torch.float32, device=None) -> ClipTensors:

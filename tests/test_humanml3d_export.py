@@ -1,0 +1,356 @@
+"""``torchsplice export --format humanml3d``: a folder text-to-motion training reads as HumanML3D.
+
+Checked on the spliced sample (every pair of the built-in sample) and on real clips of Bandai
+Namco, CMU and LAFAN1 (retargeted onto the SMPL body):
+
+- positions recovered from the exported features equal ``new_joints`` (1e-5 m); features
+  derived again from ``new_joints`` agree with ``new_joint_vecs`` away from the clip's end
+  (5e-3, 60 frames: the heading is smoothed by a Gaussian of sigma 20 frames, and ``new_joints``
+  lacks the clip's last frame) and contacts on 99% of frames;
+- bones keep their lengths (1e-6 m) and the feet stand on y = 0 (the 5th percentile of the
+  lowest joint within 1 cm);
+- Mean/Std equal a brute-force computation over every file; the folder reads as MDM's loader
+  reads it (split list, length filter, ``caption#tokens#start#end`` lines, ``word/POS``);
+- splits leak no source clip; mirrored copies are the mirrored motion with left and right
+  swapped in the captions; windows cut long clips; captions known answers; bad input one line.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from cli_helpers import error_line, run
+from torchsplice.cli import main
+from torchsplice.formats.captions import gerund, mirror_caption, parse_caption_line
+from torchsplice.formats.exporters import export_clips
+from torchsplice.formats.humanml3d_features import GROUPS, features_to_positions, positions_to_features
+from torchsplice.specs.smpl import SMPL22_PARENTS
+from torchsplice.specs.text import POS_TAGS
+
+BANDAI = "bandai_namco_research_motiondataset"
+
+
+@pytest.fixture(scope="module")
+def spliced(sample_db, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("h3") / "spliced.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(out), "-q"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def folder(spliced, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("h3out") / "HumanML3D"
+    assert main(["export", str(spliced), "--all", "-o", str(out), "--format", "humanml3d", "--mirror", "-q"]) == 0
+    return out
+
+
+def _motions(folder: Path):
+    for f in sorted((folder / "new_joint_vecs").glob("*.npy")):
+        vecs = np.load(f)
+        joints = np.load(folder / "new_joints" / f.name)
+        yield f.stem, torch.from_numpy(vecs).double(), torch.from_numpy(joints).double()
+
+
+def _index(folder: Path) -> list[dict]:
+    with open(folder / "index.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _check_motions(folder: Path, margin: int = 60) -> dict:
+    """The format's properties over every motion of an exported folder; returns the worst figures."""
+    worst = {"recover": 0.0, "bones": 0.0, "derived": 0.0, "contacts": 1.0}
+    lows = []
+    for name, vecs, joints in _motions(folder):
+        assert vecs.shape[1] == 263 and joints.shape == (vecs.shape[0], 22, 3), name
+        assert bool(torch.isfinite(vecs).all()) and bool(torch.isfinite(joints).all()), name
+        worst["recover"] = max(worst["recover"], float((features_to_positions(vecs) - joints).abs().max()))
+        bones = torch.stack([(joints[:, c] - joints[:, p]).norm(dim=-1) for c, p in enumerate(SMPL22_PARENTS) if p >= 0], 1)
+        worst["bones"] = max(worst["bones"], float((bones - bones.mean(0)).abs().max()))
+        lows.append(joints[..., 1].amin(1))
+        again = positions_to_features(joints, normalize=False)
+        n = again.shape[0]
+        if n > margin:
+            worst["derived"] = max(worst["derived"], float((again[:n - margin, :259] - vecs[:n - margin, :259]).abs().max()))
+        worst["contacts"] = min(worst["contacts"], float((again[:, 259:] == vecs[:n, 259:]).double().mean()))
+    worst["floor_p5"] = float(torch.cat(lows).quantile(0.05))
+    return worst
+
+
+def test_the_folder_holds_the_formats_files(folder):
+    index = _index(folder)
+    ids = [r["id"] for r in index]
+    assert len(ids) == 50 and sum(i.startswith("M") for i in ids) == 25  # 25 splices and their mirrors
+    for i in ids:
+        for sub, suffix in (("new_joint_vecs", ".npy"), ("new_joints", ".npy"), ("texts", ".txt")):
+            assert (folder / sub / f"{i}{suffix}").is_file(), (sub, i)
+    assert np.load(folder / "Mean.npy").shape == (263,) and np.load(folder / "Std.npy").shape == (263,)
+    assert np.load(folder / "Mean.npy").dtype == np.float32
+    all_ids = (folder / "all.txt").read_text().split()
+    assert all_ids == ids
+    train, val = (folder / "train.txt").read_text().split(), (folder / "val.txt").read_text().split()
+    assert (folder / "train_val.txt").read_text().split() == train + val
+    assert not [p for p in folder.rglob(".*")]  # nothing staged is left
+
+
+def test_exported_motions_have_the_formats_properties(folder):
+    worst = _check_motions(folder)
+    assert worst["recover"] < 1e-5, worst
+    assert worst["bones"] < 1e-6, worst
+    assert worst["derived"] < 5e-3 and worst["contacts"] >= 0.99, worst
+    assert abs(worst["floor_p5"]) < 0.01, worst
+
+
+def test_mean_and_std_are_the_formats_over_every_file(folder):
+    rows = np.concatenate([np.load(f).astype(np.float64) for f in sorted((folder / "new_joint_vecs").glob("*.npy"))])
+    mean, std = rows.mean(0), rows.std(0)
+    for a, b in GROUPS:
+        std[a:b] = std[a:b].mean()
+    std[std <= 1e-8] = 1.0
+    assert np.allclose(np.load(folder / "Mean.npy"), mean, rtol=1e-5, atol=1e-6)
+    assert np.allclose(np.load(folder / "Std.npy"), std, rtol=1e-5, atol=1e-6)
+
+
+def _mdm_style_read(root: Path, split: str, min_len: int = 40, max_len: int = 200) -> dict:
+    """How MDM's ``Text2MotionDatasetV2`` reads a HumanML3D folder (written here from the format's
+    description): the split's ids, ``new_joint_vecs/ID.npy`` kept when ``min_len <= N < max_len``,
+    each text line split at ``#`` into caption, ``word/POS`` tokens, start and end, then the
+    motion normalized by Mean and Std."""
+    mean, std = np.load(root / "Mean.npy"), np.load(root / "Std.npy")
+    data = {}
+    for name in (root / f"{split}.txt").read_text().splitlines():
+        motion = np.load(root / "new_joint_vecs" / f"{name.strip()}.npy")
+        if len(motion) < min_len or len(motion) >= max_len:
+            continue
+        texts = []
+        for line in (root / "texts" / f"{name.strip()}.txt").read_text().splitlines():
+            caption, tokens, f_tag, to_tag = line.strip().split("#")
+            f_tag, to_tag = float(f_tag), float(to_tag)
+            words = tokens.split(" ")
+            assert caption and all(len(t.split("/")) == 2 and t.split("/")[1] in POS_TAGS for t in words), line
+            assert all(t.split("/")[0].isalpha() for t in words), line
+            assert (f_tag, to_tag) == (0.0, 0.0)
+            texts.append({"caption": caption, "tokens": words})
+        assert texts, name
+        normalized = (motion - mean) / std
+        assert np.isfinite(normalized).all()
+        data[name] = (normalized, texts)
+    return data
+
+
+def test_the_folder_reads_as_mdms_loader_reads_it(folder):
+    train = _mdm_style_read(folder, "train")
+    test = _mdm_style_read(folder, "test")
+    assert train and test
+    for normalized, texts in train.values():
+        assert normalized.shape[1] == 263 and 40 <= len(normalized) < 200
+        assert 1 <= len(texts) <= 3
+
+
+def test_splits_leak_no_source_clip_and_mirrors_follow_their_originals(folder):
+    index = _index(folder)
+    by_split: dict[str, set] = {}
+    for r in index:
+        if r["split"]:
+            by_split.setdefault(r["split"], set()).update({("l", r["locomotion"]), ("a", r["action"])})
+    sources = {s: {name for _, name in v} for s, v in by_split.items()}
+    assert sources["train"] and sources["test"]
+    assert not sources["train"] & sources["test"] and not sources["train"] & sources.get("val", set())
+    split_of = {r["id"]: r["split"] for r in index}
+    for i, s in split_of.items():
+        if i.startswith("M"):
+            assert s == split_of[i[1:]]
+    for s in ("train", "val", "test"):
+        assert set((folder / f"{s}.txt").read_text().split()) == {i for i, v in split_of.items() if v == s}
+
+
+def test_the_split_is_seeded_and_its_ratios_are_options(spliced, tmp_path):
+    a = export_clips(spliced, out=tmp_path / "a", format="humanml3d", split_seed=1, split_ratios="0.6,0.2,0.2")
+    b = export_clips(spliced, out=tmp_path / "b", format="humanml3d", split_seed=1, split_ratios=(0.6, 0.2, 0.2))
+    c = export_clips(spliced, out=tmp_path / "c", format="humanml3d", split_seed=2, split_ratios=(0.6, 0.2, 0.2))
+    splits = [[r["split"] for r in _index(Path(x.output))] for x in (a, b, c)]
+    assert splits[0] == splits[1] and splits[0] != splits[2]
+    assert (Path(a.output) / "new_joint_vecs" / "000000.npy").read_bytes() == \
+        (Path(c.output) / "new_joint_vecs" / "000000.npy").read_bytes()
+
+
+def test_a_mirrored_copy_is_the_mirrored_motion_with_left_and_right_swapped_in_its_captions(folder):
+    swap = [0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20]
+    joints = np.load(folder / "new_joints" / "000007.npy")
+    mirrored = np.load(folder / "new_joints" / "M000007.npy")
+    expect = joints[:, swap] * np.array([-1.0, 1.0, 1.0])
+    assert np.abs(mirrored - expect).max() < 1e-4
+    text = (folder / "texts" / "000007.txt").read_text().splitlines()
+    mtext = (folder / "texts" / "M000007.txt").read_text().splitlines()
+    assert "right hand" in text[0] and "left hand" in mtext[0]
+    assert mtext == [mirror_caption(parse_caption_line(t, "t")).line() for t in text]
+
+
+def test_captions_say_the_locomotion_and_the_action(folder):
+    index = {r["clip"]: r["id"] for r in _index(folder) if r["mirrored"] == "0"}
+    lines = (folder / "texts" / f"{index['walk_curve+wave']}.txt").read_text().splitlines()
+    assert lines[0].split("#")[0] in {
+        "a person walks in a curve to the left while waving the right hand",
+        "someone walks in a curve to the left while waving the right hand",
+        "the person walks in a curve to the left while waving the right hand",
+        "a person walks in a curve to the left while waving with the right arm overhead",
+        "someone walks forward curving left while waving the right hand",
+    } or "while waving" in lines[0]
+    assert all(" while " in ln.split("#")[0] for ln in lines) and len(set(lines)) == len(lines) == 3
+    tokens = lines[0].split("#")[1].split()
+    assert "wave/VERB" in tokens and "walk/VERB" in tokens and "while/SCONJ" in tokens
+    box = (folder / "texts" / f"{index['jog+carry_box']}.txt").read_text()
+    assert "jogs" in box or "runs slowly" in box
+    assert "carrying a heavy box" in box or "holding a big box" in box
+
+
+def test_gerunds_of_common_verbs():
+    assert [gerund(v) for v in ("wave", "run", "step", "jog", "carry", "lie", "see", "walk", "bow", "punch", "shrug",
+                                 "beckon", "open")] == [
+        "waving", "running", "stepping", "jogging", "carrying", "lying", "seeing", "walking", "bowing", "punching",
+        "shrugging", "beckoning", "opening"]
+
+
+def test_users_captions_per_source_clip_compose_the_same_way(spliced, tmp_path):
+    captions = tmp_path / "captions.json"
+    captions.write_text(json.dumps({
+        "walk_curve": ["a man walks in a circle.#a/DET man/NOUN walk/VERB in/ADP a/DET circle/NOUN#0.0#0.0"],
+        "wave": ["someone/PRON claps=clap/VERB the/DET hands=hand/NOUN"],
+    }))
+    out = tmp_path / "h"
+    export_clips(spliced, ["walk_curve+wave", "walk_straight+wave"], out=out, format="humanml3d", captions=captions)
+    index = {r["clip"]: r["id"] for r in _index(out)}
+    text = (out / "texts" / f"{index['walk_curve+wave']}.txt").read_text().splitlines()
+    assert text == ["someone walks in a circle while clapping the hands#someone/PRON walk/VERB in/ADP a/DET "
+                    "circle/NOUN while/SCONJ clap/VERB the/DET hand/NOUN#0.0#0.0"]
+    other = (out / "texts" / f"{index['walk_straight+wave']}.txt").read_text()
+    assert "while clapping the hands" in other and "walks" in other
+
+
+def test_a_window_cuts_long_clips_into_windows_with_the_clips_captions(spliced, tmp_path):
+    out = tmp_path / "w"
+    export_clips(spliced, ["walk_curve+wave"], out=out, format="humanml3d", window=3.0)
+    rows = _index(out)
+    whole = tmp_path / "whole"
+    export_clips(spliced, ["walk_curve+wave"], out=whole, format="humanml3d")
+    total = int(_index(whole)[0]["rows"]) + 1
+    assert len(rows) == -(-total // 60) >= 2
+    assert all(int(r["rows"]) == 59 for r in rows)
+    assert float(rows[0]["start_s"]) == 0.0 and float(rows[-1]["end_s"]) == pytest.approx((total - 1) / 20.0)
+    texts = {(out / "texts" / f"{r['id']}.txt").read_text() for r in rows}
+    assert len(texts) == 1 and texts == {(whole / "texts" / "000000.txt").read_text()}
+
+
+def _real_db(mocap_dir, tmp_path) -> Path:
+    files = [mocap_dir / BANDAI / f"{n}.bvh" for n in (
+        "dataset-1_walk_normal_001", "dataset-1_bye_normal_001", "dataset-2_walk-turn-left_normal_025",
+        "dataset-2_walk_elderly_006")]
+    files += [mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh", mocap_dir / "lafan1_via_pypi_bvhtools" / "test.bvh"]
+    files = [f for f in files if f.is_file()]
+    assert len(files) >= 5
+    db = tmp_path / "real.h5"
+    assert main(["import", *map(str, files), "-o", str(db), "-q"]) == 0
+    return db
+
+
+def test_real_clips_of_three_datasets_export_with_the_formats_properties(mocap_dir, tmp_path):
+    db = _real_db(mocap_dir, tmp_path)
+    out = tmp_path / "real"
+    result = export_clips(db, out=out, format="humanml3d", window=9.8)
+    worst = _check_motions(out)
+    assert worst["recover"] < 1e-5 and worst["bones"] < 1e-6, worst
+    assert worst["derived"] < 5e-3 and worst["contacts"] >= 0.99, worst
+    assert abs(worst["floor_p5"]) < 0.01, worst
+    rows = _index(out)
+    assert {r["clip"] for r in rows} >= {"dataset-2_walk_elderly_006", "cmu_12_01_walk", "test"}
+    assert all(int(r["rows"]) < 196 for r in rows)
+    elderly = [r for r in rows if r["clip"] == "dataset-2_walk_elderly_006"][0]
+    assert "elderly person walks" in (out / "texts" / f"{elderly['id']}.txt").read_text() or \
+        "old person walks" in (out / "texts" / f"{elderly['id']}.txt").read_text()
+    assert "HumanML3D" in result.summary
+
+
+def test_a_spliced_bandai_clip_is_captioned_from_both_sources(mocap_dir, tmp_path):
+    db = _real_db(mocap_dir, tmp_path)
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(db), "-o", str(spliced), "--locomotions", "dataset-2_walk-turn-left_normal_025",
+                 "--actions", "dataset-2_walk_elderly_006,dataset-1_bye_normal_001", "-q"]) == 0
+    out = tmp_path / "sp"
+    export_clips(spliced, out=out, format="humanml3d")
+    texts = {r["action"]: (out / "texts" / f"{r['id']}.txt").read_text() for r in _index(out)}
+    assert any(p in texts["dataset-2_walk_elderly_006"] for p in ("an elderly person walks", "an old person walks"))
+    assert "turns" in texts["dataset-2_walk_elderly_006"] and " while " not in texts["dataset-2_walk_elderly_006"]
+    assert "while waving goodbye" in texts["dataset-1_bye_normal_001"]
+
+
+def test_bad_input_is_one_line_and_leaves_nothing(spliced, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"wave": ["waves"]}')
+    for args, words in (
+            (["--captions", bad], "bad.json: 'wave': 'waves' is not word/POS"),
+            (["--captions", tmp_path / "none.json"], "none.json: no such captions file"),
+            (["--window", "0.01"], "--window must be a length in seconds"),
+            (["--split-ratios", "0.5,0.6"], "--split-ratios must be three numbers"),
+            (["--paraphrases", "0"], "--paraphrases must be a whole number")):
+        out = tmp_path / "o"
+        rc, _, err = run(capsys, "export", spliced, "--all", "-o", out, "--format", "humanml3d", *args)
+        assert rc == 2 and words in error_line(err), (args, err)
+        assert not out.exists()
+    (tmp_path / "file.txt").write_text("x")
+    rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "file.txt", "--format", "humanml3d")
+    assert rc == 2 and "writes a folder" in error_line(err)
+    rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "x.npz", "--mirror")
+    assert rc == 2 and "writes a folder" in error_line(err) and not (tmp_path / "x.npz").exists()
+
+
+def test_a_skeleton_that_does_not_map_onto_smpl_is_refused_naming_the_database(tmp_path, capsys):
+    from dataclasses import replace
+
+    from torchsplice.sample import sample_motions
+    from torchsplice.store.database import MotionDatabase
+
+    m = sample_motions()[0]
+    sk = m.skeleton
+    keep = [j for j in range(sk.num_joints) if not any(w in sk.names[j] for w in ("Arm", "Hand", "Shoulder"))]
+    index = {j: n for n, j in enumerate(keep)}
+    armless = replace(sk, names=tuple(sk.names[j] for j in keep),
+                      parents=tuple(index[sk.parents[j]] if sk.parents[j] >= 0 else -1 for j in keep),
+                      offsets=sk.offsets[keep], channels=tuple(sk.channels[j] for j in keep),
+                      end_site_parents=tuple(index[p] for p in sk.end_site_parents if p in index),
+                      end_site_offsets=sk.end_site_offsets[[e for e, p in enumerate(sk.end_site_parents) if p in index]])
+    stump = replace(m, skeleton=armless, rotations=m.rotations[:, keep],
+                    translations=None if m.translations is None else m.translations[:, keep])
+    db = tmp_path / "stumps.h5"
+    with MotionDatabase.create(db) as w:
+        w.append(stump)
+    rc, _, err = run(capsys, "export", db, "--all", "-o", tmp_path / "o", "--format", "humanml3d")
+    line = error_line(err)
+    assert rc == 2 and "stumps.h5" in line and "SMPL" in line and "elbow" in line, line
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_failure_midway_leaves_no_file_and_a_rerun_writes_the_same(spliced, tmp_path, monkeypatch):
+    from torchsplice.formats import humanml3d_exporter as hx
+
+    out = tmp_path / "h"
+    calls = {"n": 0}
+    real = hx.HumanML3DExporter.write
+
+    def failing(self, item, path):
+        calls["n"] += 1
+        if calls["n"] == 40:
+            raise KeyboardInterrupt
+        real(self, item, path)
+
+    monkeypatch.setattr(hx.HumanML3DExporter, "write", failing)
+    with pytest.raises(KeyboardInterrupt):
+        export_clips(spliced, out=out, format="humanml3d")
+    assert not out.exists()
+    monkeypatch.setattr(hx.HumanML3DExporter, "write", real)
+    export_clips(spliced, out=out, format="humanml3d")
+    assert len(list((out / "new_joint_vecs").glob("*.npy"))) == 25

@@ -1,0 +1,353 @@
+"""The ``humanml3d`` export format: a folder that text-to-motion training code (MDM, MoMask,
+T2M-GPT, MotionGPT, MotionLCM) reads as it reads HumanML3D.
+
+The folder::
+
+    OUT/
+      new_joint_vecs/000000.npy   (N, 263) float32: the motion's features (humanml3d_features)
+      new_joints/000000.npy       (N, 22, 3) float32: joint positions (m) recovered from them
+      texts/000000.txt            captions, one a line: caption#lemma/POS ...#0.0#0.0
+      M000000.*                   the mirrored copy (mirror=True)
+      Mean.npy, Std.npy           (263,) float32, over every file of new_joint_vecs
+      train.txt val.txt test.txt train_val.txt all.txt   IDs, one a line
+      index.csv                   each ID: its clip, window (start_s, end_s), rows, mirror, split,
+                                  role, locomotion, action, method, database, retargeted_from,
+                                  described (0: no phrase said what it does)
+
+Each clip goes onto the SMPL body's 22 joints (``smpl22``: HumanML3D's joint order, metres, its
+standard bone lengths) by the analytic retargeting of :mod:`torchsplice.ops.retarget` with the
+feet held (:mod:`torchsplice.ops.feet`), unless it is on that body already; then it is
+resampled to 20 fps (rotations by slerp, the root linearly: bones keep their lengths), put on the floor, at the origin and facing +Z,
+and turned into features as the format does (:mod:`.humanml3d_features`). A clip of fewer than
+:data:`MIN_FRAMES` frames at 20 fps is left out (the summary says how many). ``window`` (seconds)
+cuts longer clips into windows of that length, spread evenly over the clip, each with the
+clip's captions. Captions come from the clips' labels (:mod:`.captions`), splits from the
+source clips (:mod:`.splits`). Mean and Std are the format's: the mean of each column over
+every row, and the standard deviation of each kind of feature (one value per kind, the mean of
+its columns'; :data:`~.humanml3d_features.GROUPS`).
+
+Registered on import; imports no torch until it exports.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from functools import cached_property
+from pathlib import Path
+
+from ..core.errors import SpecError, TorchspliceError
+from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
+from .splits import DEFAULT_RATIOS, SPLITS, clip_sources, clip_split, parse_ratios, split_sources
+
+__all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MAX_FRAMES", "INDEX_COLUMNS"]
+
+MIN_FRAMES = 3
+"""Frames (at 20 fps) a clip needs to be exported."""
+MDM_MAX_FRAMES = 196
+"""The longest clip MDM's loader keeps (frames at 20 fps): longer ones want ``window``."""
+INDEX_COLUMNS = ("id", "clip", "start_s", "end_s", "rows", "mirrored", "split", "role", "locomotion", "action",
+                 "method", "database", "retargeted_from", "described")
+_SMPL_MIRROR = (0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20)
+
+
+class HumanML3DExporter(Exporter):
+    """Clips as a HumanML3D folder (see the module docstring)."""
+
+    name = "humanml3d"
+    suffix = ".npy"
+    what = "a HumanML3D folder"
+    title = "HumanML3D"
+    options = {
+        "captions": ExportOption(None),
+        "mirror": ExportOption(False),
+        "window": ExportOption(None),
+        "split_ratios": ExportOption(DEFAULT_RATIOS),
+        "split_seed": ExportOption(0),
+        "paraphrases": ExportOption(3),
+    }
+
+    # -- the plan: which files, made from the clip table alone --------------------------------
+    @cached_property
+    def _plan(self) -> dict:
+        from ..store.database import MotionDatabase
+
+        o = self.options
+        ratios = parse_ratios(o["split_ratios"])
+        window = o["window"]
+        if window is not None:
+            try:
+                window = float(window)
+            except (TypeError, ValueError):
+                window = -1.0
+            if not (window >= MIN_FRAMES / 20.0 and math.isfinite(window)):
+                raise TorchspliceError(f"{{window}} must be a length in seconds of at least {MIN_FRAMES / 20.0:g}, "
+                                       f"got {o['window']!r}", options=("window",))
+        count = o["paraphrases"]
+        if not isinstance(count, int) or isinstance(count, bool) or count < 1:
+            raise TorchspliceError(f"{{paraphrases}} must be a whole number of at least 1, got {count!r}",
+                                   options=("paraphrases",))
+        with MotionDatabase.open(self.database) as db:
+            table = db.clip_table()
+            rows = [db.index(n) for n in self.names]
+            return _plan_items(table, rows, window, bool(o["mirror"]), ratios, int(o["split_seed"]), str(self.database))
+
+    def layout(self) -> list[str]:
+        files = []
+        for item in self._plan["items"]:
+            files += [f"new_joint_vecs/{item['id']}.npy", f"new_joints/{item['id']}.npy", f"texts/{item['id']}.txt"]
+        return files + ["Mean.npy", "Std.npy"] + [f"{s}.txt" for s in (*SPLITS, "train_val", "all")] + ["index.csv"]
+
+    # -- checks before any file ---------------------------------------------------------------
+    @cached_property
+    def _user_captions(self) -> dict:
+        from .captions import read_captions
+
+        return read_captions(self.options["captions"]) if self.options["captions"] is not None else {}
+
+    @cached_property
+    def _movers(self) -> dict:
+        """Per skeleton id: ``None`` (on the SMPL body already) or its retargeting map onto it."""
+        from ..ops.retarget import retarget_map
+        from ..specs import load_spec
+        from ..specs.smpl import SMPL22, SMPL22_NAMES, SMPL22_PARENTS, smpl22_skeleton
+        from ..store.database import MotionDatabase
+
+        target = smpl22_skeleton()
+        target_roles = load_spec(SMPL22).bind(target)
+        movers = {}
+        with MotionDatabase.open(self.database) as db:
+            for k in sorted({item["skeleton"] for item in self._plan["items"]}):
+                sk, info = db.skeletons[k], db.skeleton_info(k)
+                if tuple(sk.names) == SMPL22_NAMES and tuple(sk.parents) == SMPL22_PARENTS and info.units in ("m", ""):
+                    movers[k] = None
+                    continue
+                try:
+                    spec = db.spec(k)
+                    movers[k] = retarget_map(sk, spec.bind(sk), target, target_roles,
+                                             source_name=f"{self.database}: skeleton {k} ({spec.name})",
+                                             target_name=SMPL22)
+                except SpecError as exc:
+                    raise SpecError(f"{self.database}: skeleton {k} does not map onto the SMPL body: "
+                                    f"{' '.join(str(exc).split())}") from None
+        return movers
+
+    @cached_property
+    def _tables(self) -> dict:
+        """Per skeleton id, the phrase tables its clips' labels are looked up in."""
+        from ..specs import list_specs, load_spec
+        from ..specs.text import spec_phrase_table
+        from ..store.database import MotionDatabase
+
+        shipped = [t for t in (spec_phrase_table(load_spec(n)) for n in list_specs()) if t is not None]
+        out = {}
+        with MotionDatabase.open(self.database) as db:
+            for k in sorted({item["skeleton"] for item in self._plan["items"]}):
+                try:
+                    own = spec_phrase_table(db.spec(k))
+                except SpecError:
+                    own = None
+                out[k] = ([own] if own is not None else []) + [t for t in shipped if t is not own]
+        return out
+
+    def check(self) -> None:
+        """The plan, the user's captions and every skeleton's map onto the SMPL body, before any file."""
+        self._user_captions  # noqa: B018
+        self._movers  # noqa: B018
+        self._tables  # noqa: B018
+        if not self._plan["items"]:
+            raise TorchspliceError(f"{self.database}: no clip has {MIN_FRAMES} frames or more at 20 fps to export")
+
+    # -- the files ----------------------------------------------------------------------------
+    def items(self):
+        import numpy as np
+
+        from .humanml3d_features import FeatureStats
+
+        stats = FeatureStats()
+        rows = []
+        for item, vecs, joints, captions in self._clips():
+            stats.add(vecs)
+            yield ("npy", item, vecs.numpy().astype(np.float32))
+            yield ("npy", None, joints.numpy().astype(np.float32))
+            yield ("text", None, "".join(c.line() + "\n" for c in captions))
+            rows.append(item)
+        mean, std = stats.result()
+        yield ("npy", None, mean.numpy().astype(np.float32))
+        yield ("npy", None, std.numpy().astype(np.float32))
+        ids = {s: [r["id"] for r in rows if r["split"] == s] for s in SPLITS}
+        ids["train_val"] = ids["train"] + ids["val"]
+        ids["all"] = [r["id"] for r in rows]
+        for s in (*SPLITS, "train_val", "all"):
+            yield ("text", None, "".join(i + "\n" for i in ids[s]))
+        out = io.StringIO()
+        writer = csv.writer(out, lineterminator="\n")
+        writer.writerow(INDEX_COLUMNS)
+        for r in rows:
+            writer.writerow([r[c] for c in INDEX_COLUMNS])
+        yield ("text", None, out.getvalue())
+
+    def _clips(self):
+        """``(item, features (N, 263), positions (N, 22, 3), captions)`` per planned item, in
+        order, computed a batch of clips at a time."""
+        import torch
+
+        from ..store.database import MotionDatabase
+        from .captions import clip_captions, mirror_caption
+        from .humanml3d_features import features_to_positions, pad_clips, positions_to_features
+
+        items = self._plan["items"]
+        by_clip: dict[str, list[dict]] = {}
+        for item in items:
+            by_clip.setdefault(item["clip"], []).append(item)
+        names = list(by_clip)
+        count = self.options["paraphrases"]
+        with MotionDatabase.open(self.database) as db:
+            for b in range(0, len(names), READ_BATCH):
+                chunk = names[b:b + READ_BATCH]
+                positions = self._positions(db.read_many(chunk, dtype=torch.float64))
+                pieces, meta = [], []
+                for name, p in zip(chunk, positions):
+                    for item in by_clip[name]:
+                        piece = p[item["first"]:item["first"] + item["frames"]]
+                        if item["mirrored"]:
+                            piece = piece[:, _SMPL_MIRROR] * torch.tensor([-1.0, 1.0, 1.0], dtype=piece.dtype)
+                        pieces.append(piece)
+                        meta.append(item)
+                order = sorted(range(len(pieces)), key=lambda i: pieces[i].shape[0])
+                done: dict[int, tuple] = {}
+                for s in range(0, len(order), READ_BATCH):  # clips of like lengths padded together
+                    group = order[s:s + READ_BATCH]
+                    feats = positions_to_features(pad_clips([pieces[i] for i in group]))
+                    back = features_to_positions(feats)
+                    for j, i in enumerate(group):
+                        n = pieces[i].shape[0] - 1
+                        done[i] = (feats[j, :n], back[j, :n])
+                captions_of: dict[str, tuple] = {}
+                for i, item in enumerate(meta):
+                    name = item["clip"]
+                    if name not in captions_of:
+                        captions_of[name] = clip_captions(name, item["role"], item["labels"], self._tables[item["skeleton"]],
+                                                          self._user_captions, count, item["locomotion"], item["action"])
+                    captions, described = captions_of[name]
+                    if item["mirrored"]:
+                        captions = [mirror_caption(c) for c in captions]
+                    item["described"] = int(described)
+                    yield item, done[i][0], done[i][1], captions
+
+    def _positions(self, motions) -> list:
+        """Each clip's joint positions ``(T', 22, 3)`` in metres on the SMPL body at 20 fps."""
+        import torch
+
+        from ..align.curve import resample_motion
+        from ..ops.retarget import retarget_motions
+        from .humanml3d_features import FPS
+
+        out: list = [None] * len(motions)
+        groups: dict[int, list[int]] = {}
+        for i, m in enumerate(motions):
+            groups.setdefault(self._plan["skeleton_of"][m.name], []).append(i)
+        for k, idx in groups.items():
+            chunk = [motions[i] for i in idx]
+            if self._movers[k] is not None:
+                chunk = retarget_motions(chunk, self._movers[k], True, None)
+            for i, m in zip(idx, chunk):  # rotations resampled, so that bones keep their lengths
+                out[i] = resample_motion(m.to(torch.float64), FPS).global_positions()
+        return out
+
+    def measure(self, item) -> tuple[int, float | None]:
+        kind, meta, array = item
+        if meta is None:
+            return 0, None
+        return int(array.shape[0]), 20.0
+
+    def write(self, item, path: Path) -> None:
+        import numpy as np
+
+        kind, _, payload = item
+        if kind == "npy":
+            with open(path, "wb") as f:
+                np.save(f, payload, allow_pickle=False)
+        else:
+            Path(path).write_text(payload, encoding="utf-8")
+
+    def summary(self, result: ExportResult) -> str:
+        plan = self._plan
+        items = plan["items"]
+        split = {s: sum(1 for i in items if i["split"] == s) for s in SPLITS}
+        unsplit = sum(1 for i in items if i["split"] == "")
+        undescribed = sum(1 for i in items if not i.get("described", 1))
+        long = sum(1 for i in items if i["frames"] > MDM_MAX_FRAMES + 1)
+        notes = []
+        if plan["short"]:
+            notes.append(f"{len(plan['short'])} clip{'s' if len(plan['short']) != 1 else ''} under {MIN_FRAMES} frames "
+                         "left out")
+        if unsplit:
+            notes.append(f"{unsplit} in no split (their sources are in different splits)")
+        if undescribed:
+            notes.append(f"{undescribed} whose labels no phrase table describes (captioned 'moves': give them captions)")
+        if long:
+            notes.append(f"{long} longer than MDM's {MDM_MAX_FRAMES} frames (cut them with a window)")
+        return (f"{result.output}: {len(plan['clips'])} clips as HumanML3D, {len(items)} motions"
+                f"{' with mirrors' if self.options['mirror'] else ''}, {result.frames} frames at 20 fps; "
+                f"train/val/test {split['train']}/{split['val']}/{split['test']}"
+                + (f"; {'; '.join(notes)}" if notes else ""))
+
+
+def frames_at_20(length: int, fps: float) -> int:
+    """Frames a clip of ``length`` frames at ``fps`` has at 20 fps (as the resampling makes them)."""
+    return int((length - 1) * 20.0 / fps + 1e-9) + 1
+
+
+def _plan_items(table, rows: list[int], window: float | None, mirror: bool, ratios, seed: int, database: str) -> dict:
+    """Every motion the export writes, in order, from the clip table alone: per clip its windows
+    (all of it without ``window``), each then its mirrored copy; ids, splits and index columns."""
+    clips, short, skeleton_of = [], [], {}
+    for r in rows:
+        name = table.names[r]
+        if frames_at_20(int(table.length[r]), float(table.fps[r])) < MIN_FRAMES:
+            short.append(name)
+        else:
+            clips.append(r)
+    infos = {}
+    for r in clips:
+        info = {"labels": table.labels[r]}
+        for col in ("locomotion", "action", "method"):
+            info[col] = str(table.extra[col][r]) if col in table.extra else ""
+        infos[r] = info
+    actions, locos = [], []
+    for r in clips:
+        a, l = clip_sources(table.names[r], str(table.role[r]), infos[r])
+        actions += a
+        locos += l
+    assigned = split_sources([actions, locos], ratios, seed)
+    items, n = [], 0
+    size = None if window is None else max(MIN_FRAMES, int(round(window * 20.0)))
+    for r in clips:
+        name, role, info = table.names[r], str(table.role[r]), infos[r]
+        skeleton_of[name] = int(table.skeleton[r])
+        total = frames_at_20(int(table.length[r]), float(table.fps[r]))
+        if size is None or total <= size:
+            spans = [(0, total)]
+        else:
+            count = math.ceil(total / size)
+            spans = [(int(round(k * (total - size) / (count - 1))), size) for k in range(count)]
+        a, l = clip_sources(name, role, info)
+        split = clip_split(a + l, assigned) or ""
+        labels = info["labels"]
+        for first, frames in spans:
+            base = {"clip": name, "skeleton": int(table.skeleton[r]), "role": role, "labels": labels,
+                    "locomotion": info["locomotion"], "action": info["action"], "method": info["method"],
+                    "first": first, "frames": frames, "rows": frames - 1, "start_s": f"{first / 20.0:g}",
+                    "end_s": f"{(first + frames - 1) / 20.0:g}", "split": split, "database": database,
+                    "retargeted_from": labels.get("retargeted_from", labels.get("action.retargeted_from", "")),
+                    "described": 1}
+            items.append({**base, "id": f"{n:06d}", "mirrored": 0})
+            if mirror:
+                items.append({**base, "id": f"M{n:06d}", "mirrored": 1})
+            n += 1
+    return {"items": items, "clips": [table.names[r] for r in clips], "short": short, "skeleton_of": skeleton_of}
+
+
+register_exporter(HumanML3DExporter)

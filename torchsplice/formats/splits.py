@@ -1,0 +1,89 @@
+"""Train, validation and test splits without leakage: by source clips, not by results.
+
+In an n x m spliced database every action appears in about n results and every locomotion in
+about m, so a random split of the results puts the same action in train and in test. Here the
+*source* clips are split (seeded, in the ratios asked for): the actions among themselves, then
+the locomotions not split already (a clip that is both keeps one split), and a result is in a
+split only when all its sources are (:func:`clip_split`): no locomotion or action of the test
+split occurs in train. A result whose sources fall in different splits is in none (it is
+exported, and listed in ``all``). A source clip's windows (``split_from``) are one performance
+and split together.
+
+With ratios ``(train, val, test)`` of the sources, about ``train^2`` of the results are in
+train and ``test^2`` in test; each split with a ratio above 0 gets at least one source of each
+kind where there are enough.
+"""
+
+from __future__ import annotations
+
+import random
+from typing import Sequence
+
+from ..core.errors import TorchspliceError
+
+__all__ = ["SPLITS", "DEFAULT_RATIOS", "parse_ratios", "split_sources", "clip_sources", "clip_split"]
+
+SPLITS = ("train", "val", "test")
+DEFAULT_RATIOS = (0.8, 0.1, 0.1)
+"""Of the source clips: train, validation, test."""
+
+
+def parse_ratios(value) -> tuple[float, float, float]:
+    """``(train, val, test)`` from three numbers (a sequence, or text ``"0.8,0.1,0.1"``), each at
+    least 0, train above 0, summing to 1 (within 1e-6); one-line error naming ``split_ratios``."""
+    try:
+        items = [float(v) for v in (value.replace(":", ",").split(",") if isinstance(value, str) else value)]
+    except (TypeError, ValueError):
+        items = []
+    if len(items) != 3 or min(items) < 0 or items[0] <= 0 or abs(sum(items) - 1.0) > 1e-6:
+        raise TorchspliceError(f"{{split_ratios}} must be three numbers train,val,test that sum to 1 (such as "
+                               f"0.8,0.1,0.1), got {value!r}", options=("split_ratios",))
+    return items[0], items[1], items[2]
+
+
+def _counts(n: int, ratios: Sequence[float]) -> list[int]:
+    """``n`` items over the splits by largest remainder, each split with a ratio above 0 getting
+    at least one where ``n`` allows (taken from the largest)."""
+    raw = [n * r for r in ratios]
+    counts = [int(x) for x in raw]
+    for i in sorted(range(len(raw)), key=lambda i: counts[i] - raw[i])[:n - sum(counts)]:
+        counts[i] += 1
+    for i, r in enumerate(ratios):
+        if r > 0 and counts[i] == 0 and n >= sum(1 for q in ratios if q > 0):
+            counts[max(range(len(counts)), key=lambda j: counts[j])] -= 1
+            counts[i] += 1
+    return counts
+
+
+def split_sources(groups: Sequence[Sequence[str]], ratios: Sequence[float] = DEFAULT_RATIOS,
+                  seed: int = 0) -> dict[str, str]:
+    """Each source clip's split: each group (the actions, then the locomotions) shuffled with
+    ``seed`` and cut in ``ratios``; a name already split by an earlier group keeps its split."""
+    out: dict[str, str] = {}
+    for k, group in enumerate(groups):
+        names = sorted(set(n for n in group if n not in out))
+        random.Random(f"{seed}:{k}").shuffle(names)
+        start = 0
+        for split, count in zip(SPLITS, _counts(len(names), ratios)):
+            for name in names[start:start + count]:
+                out[name] = split
+            start += count
+    return out
+
+
+def clip_sources(name: str, role: str, info: dict) -> tuple[list[str], list[str]]:
+    """``(actions, locomotions)``: the source clips a clip comes from (a spliced clip's two; a
+    source clip itself, or the take it was cut from)."""
+    labels = info.get("labels", {})
+    if role == "spliced":
+        loco = info.get("locomotion") or labels.get("locomotion", "")
+        action = info.get("action") or labels.get("action", "")
+        return [labels.get("action.split_from", action)], [labels.get("locomotion.split_from", loco)]
+    own = labels.get("split_from", name)
+    return ([own], []) if role == "action" else ([], [own])
+
+
+def clip_split(sources: Sequence[str], assigned: dict[str, str]) -> str | None:
+    """The split of a clip made of ``sources``: theirs when they agree, else ``None``."""
+    splits = {assigned[s] for s in sources}
+    return splits.pop() if len(splits) == 1 else None
