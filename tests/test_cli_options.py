@@ -19,7 +19,7 @@ from torchsplice.cli import build_parser
 from torchsplice.cli.declared import ASKED, live_value, static_value
 from torchsplice.evaluation.report import evaluate_database
 from torchsplice.formats.exporters import DEFAULT_FORMAT, available_exporters, get_exporter
-from torchsplice.formats.importer import import_bvh
+from torchsplice.formats.importer import FORMATS as IMPORT_FORMATS, import_bvh
 from torchsplice.formats.npz import FEATURE_SETS
 from torchsplice.retarget import retarget_clips
 from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS, JobConfig, job_config
@@ -59,6 +59,7 @@ def expected() -> dict:
         ("import", "split_overlap"): (param(import_bvh, "split_overlap"), None),
         ("import", "float64"): (param(import_bvh, "float64"), None),
         ("import", "append"): (param(import_bvh, "append"), None),
+        ("import", "format"): (param(import_bvh, "format"), IMPORT_FORMATS),
         ("retarget", "fix_feet"): (param(retarget_clips, "fix_feet"), None),
         ("export", "format"): (None, available_exporters()),
         ("export", "packed"): (get_exporter("npz").options["packed"].default, None),

@@ -45,14 +45,18 @@ class Sample(Command):
 
 class Import(Command):
     name = "import"
-    help = "import BVH files or folders into a motion database"
-    description = ("Import BVH files (folders are searched recursively) into one HDF5 motion database. A file that "
-                   "cannot be read is skipped with a one-line reason and the good files still land; the exit code "
-                   "is then 1.")
+    help = "import BVH files or folders (or HumanML3D folders) into a motion database"
+    description = ("Import BVH files (folders are searched recursively) into one HDF5 motion database; a HumanML3D "
+                   "folder (one holding new_joint_vecs/) gives its motions on the SMPL body at 20 fps, their captions "
+                   "kept as the clips' captions label. A file that cannot be read is skipped with a one-line reason "
+                   "and the good files still land; the exit code is then 1.")
 
     def add_arguments(self, s) -> None:
         spec = declared(IMPORTER, "import_bvh.spec")
-        s.add_argument("paths", nargs="+", metavar="PATH", help="BVH files or folders")
+        s.add_argument("paths", nargs="+", metavar="PATH", help="BVH files or folders, or HumanML3D folders")
+        s.add_argument("--format", choices=declared(IMPORTER, "FORMATS"), default=declared(IMPORTER, "import_bvh.format"),
+                       help="what the paths hold: auto (default: a folder holding new_joint_vecs/ is HumanML3D, the "
+                            "rest BVH), bvh or humanml3d")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
         s.add_argument("--spec", default=spec,
                        help="dataset spec: a shipped name (bandai_namco, cmu, cmu_max, lafan1, sample, generic) or a "
@@ -82,7 +86,8 @@ class Import(Command):
         try:
             report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
                                 float64=args.float64, split=args.split, split_overlap=args.split_overlap,
-                                units=args.units, progress=lambda it, total, desc: progress(it, total, desc, args.quiet))
+                                units=args.units, progress=lambda it, total, desc: progress(it, total, desc, args.quiet),
+                                format=args.format)
         except NothingImportedError as exc:
             skipped_lines(exc.report.skipped)
             raise
@@ -105,8 +110,16 @@ class Import(Command):
         return 1 if report.skipped else 0
 
 
-def _labels_text(labels: dict) -> str:
-    return " ".join(f"{k}={v}" for k, v in sorted(labels.items()))
+def _labels_text(labels: dict, limit: int = 60) -> str:
+    """Labels on one line: a long or multi-line value (captions) by its first line, cut."""
+    def short(k: str, v: str) -> str:
+        v = str(v)
+        first = v.split("\n", 1)[0]
+        if k.split(".")[-1] == "captions":  # HumanML3D lines: the caption, without its tokens
+            first = first.split("#", 1)[0]
+        return (first[:limit] + "...") if first != v or len(first) > limit else first
+
+    return " ".join(f"{k}={short(k, v)}" for k, v in sorted(labels.items()))
 
 
 class Info(Command):

@@ -18,7 +18,9 @@ Where the words come from, for a clip (:func:`clip_captions`):
 - a source clip says ``SUBJECT LOCOMOTION`` (a locomotion, or both) or ``SUBJECT ACTION`` (an
   action);
 - each part is, first found: the user's captions of that source clip (:func:`read_captions`,
-  a caption's subject and verb phrase split at its first verb), the clip's own captions
+  a caption's subject and verb phrase split at its first verb; a caption that is itself a
+  splice, "walks forward while waving", gives the locomotion before ``while`` and the action
+  after it), the clip's own captions
   (label ``captions``, as a HumanML3D import keeps them), or the phrase tables of the specs
   (:mod:`torchsplice.specs.text`: the clip's own spec's, then every shipped spec's);
 - paraphrases: every combination of the parts' phrases, up to ``count``, in an order fixed by
@@ -202,6 +204,18 @@ def _caption_clause(caption: Caption) -> Clause:
     return Clause(words, caption.tokens, verb, aligned=False)
 
 
+def _half(predicate: Clause, part: str) -> Clause:
+    """The part of a caption's predicate that says ``part``: a caption that is itself a splice
+    ("walks forward while waving") gives its locomotion before ``while`` and its action after."""
+    wi = next((i for i, w in enumerate(predicate.words) if w.lower() == "while"), None)
+    ti = next((i for i, t in enumerate(predicate.tokens) if t == ("while", "SCONJ")), None)
+    if wi is None or ti is None or wi == 0 or wi == len(predicate.words) - 1:
+        return predicate
+    if part == "locomotion":
+        return Clause(predicate.words[:wi], predicate.tokens[:ti], predicate.verb, predicate.aligned)
+    return Clause(predicate.words[wi + 1:], predicate.tokens[ti + 1:], 0, predicate.aligned)
+
+
 def read_captions(path) -> dict[str, list[Caption]]:
     """A user's captions per source clip: a JSON object ``{"clip name": ["caption", ...]}``, each
     caption a HumanML3D line (``caption#tokens#start#end``) or ``word/POS`` words. One-line
@@ -246,7 +260,7 @@ def _source_parts(name: str, labels: dict, user: dict, tables, part: str, where:
     if given:
         split = [_caption_clause(c).split() for c in given]
         subjects = [s for s, _ in split if s is not None]
-        return subjects or None, [p for _, p in split]
+        return subjects or None, list(dict.fromkeys(_half(p, part) for _, p in split))
     style = _lookup(tables, "style", labels)
     return style or None, _lookup(tables, part, labels)
 

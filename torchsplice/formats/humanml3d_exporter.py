@@ -49,7 +49,6 @@ MDM_MAX_FRAMES = 196
 """The longest clip MDM's loader keeps (frames at 20 fps): longer ones want ``window``."""
 INDEX_COLUMNS = ("id", "clip", "start_s", "end_s", "rows", "mirrored", "split", "role", "locomotion", "action",
                  "method", "database", "retargeted_from", "described")
-_SMPL_MIRROR = (0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20)
 
 
 class HumanML3DExporter(Exporter):
@@ -193,6 +192,7 @@ class HumanML3DExporter(Exporter):
         order, computed a batch of clips at a time."""
         import torch
 
+        from ..specs.smpl import SMPL22_MIRROR
         from ..store.database import MotionDatabase
         from .captions import clip_captions, mirror_caption
         from .humanml3d_features import features_to_positions, pad_clips, positions_to_features
@@ -212,7 +212,7 @@ class HumanML3DExporter(Exporter):
                     for item in by_clip[name]:
                         piece = p[item["first"]:item["first"] + item["frames"]]
                         if item["mirrored"]:
-                            piece = piece[:, _SMPL_MIRROR] * torch.tensor([-1.0, 1.0, 1.0], dtype=piece.dtype)
+                            piece = piece[:, list(SMPL22_MIRROR)] * torch.tensor([-1.0, 1.0, 1.0], dtype=piece.dtype)
                         pieces.append(piece)
                         meta.append(item)
                 order = sorted(range(len(pieces)), key=lambda i: pieces[i].shape[0])

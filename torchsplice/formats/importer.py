@@ -25,7 +25,8 @@ from typing import Callable, Iterable, Sequence
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.names import control_character, printable
 
-__all__ = ["import_bvh", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh"]
+__all__ = ["import_bvh", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh",
+           "collect_inputs", "FORMATS"]
 
 DATABASE_SUFFIXES = (".h5", ".hdf5")
 
@@ -137,13 +138,56 @@ def one_line(message, path=None, limit: int = 300) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
+FORMATS = ("auto", "bvh", "humanml3d")
+"""What :func:`import_bvh` reads: ``auto`` takes a folder holding ``new_joint_vecs/`` as a
+HumanML3D folder and anything else as BVH."""
+
+
+@dataclass(frozen=True)
+class _HumanML3DItem:
+    """One motion of a HumanML3D folder, to import."""
+
+    folder: Path
+    id: str
+    split: str | None
+
+    def __str__(self) -> str:
+        return str(self.folder / "new_joint_vecs" / f"{self.id}.npy")
+
+
+def collect_inputs(paths: Iterable, format: str = "auto") -> tuple[list, list[tuple[str, str]]]:
+    """What to import from ``paths``: BVH files (:func:`collect_bvh`) and the motions of HumanML3D
+    folders (:mod:`.humanml3d_import`), in order; and ``(path, why)`` for what holds none."""
+    from .humanml3d_import import humanml3d_ids, is_humanml3d_folder
+
+    if format not in FORMATS:
+        raise TorchspliceError(f"{{format}} must be one of {', '.join(FORMATS)}, got {format!r}", options=("format",))
+    items, skipped, bvh = [], [], []
+    for p in map(Path, paths):
+        if format != "bvh" and is_humanml3d_folder(p):
+            ids, split, missing = humanml3d_ids(p)
+            skipped += missing
+            items += [_HumanML3DItem(p, i, split.get(i)) for i in ids]
+            if not ids:
+                skipped.append((str(p), "HumanML3D folder holds no motions (new_joint_vecs/*.npy)"))
+        elif format == "humanml3d":
+            skipped.append((str(p), "not a HumanML3D folder (it holds no new_joint_vecs folder)"))
+        else:
+            bvh.append(p)
+    files, missing = collect_bvh(bvh) if bvh else ([], [])
+    return items + files, skipped + missing
+
+
 def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overwrite: bool = False,
                float64: bool = False, split: float | None = None, split_overlap: float = 1.0,
-               units: str | None = None, progress: Callable | None = None) -> ImportReport:
-    """Import BVH files and folders into the database ``output`` (see the module docstring).
+               units: str | None = None, progress: Callable | None = None, format: str = "auto") -> ImportReport:
+    """Import BVH files and folders (and HumanML3D folders) into the database ``output`` (see
+    the module docstring).
 
     Args:
-        paths: files and folders (searched recursively for ``.bvh``).
+        paths: files and folders (searched recursively for ``.bvh``); a HumanML3D folder (one
+            holding ``new_joint_vecs/``) gives its motions on the SMPL body, with their captions
+            (:mod:`.humanml3d_import`; ``spec`` does not apply to them: theirs is ``smpl22``).
         output: the database to write (``.h5`` or ``.hdf5``).
         spec: ``"auto"`` (a spec per file, :func:`~torchsplice.specs.detect_spec`), a shipped
             spec's name, a ``.toml`` path or a :class:`~torchsplice.specs.DatasetSpec`.
@@ -156,6 +200,8 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
             ... see :mod:`torchsplice.ops.units`), so that datasets share one database;
             ``None`` keeps the files' own units.
         progress: ``progress(iterable, total, desc) -> iterable`` to show progress (e.g. tqdm).
+        format: ``"auto"`` (a HumanML3D folder as such, anything else as BVH), ``"bvh"`` or
+            ``"humanml3d"`` (:data:`FORMATS`).
 
     Returns the :class:`ImportReport`. Raises :class:`NothingImportedError` (with the report)
     when no clip could be imported, and :class:`~torchsplice.core.errors.TorchspliceError` for
@@ -165,8 +211,10 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     import torch
 
     from ..specs import DatasetSpec, detect_spec, load_spec
+    from ..specs.smpl import SMPL22
     from ..store.atomic import check_output
     from .bvh import read_bvh
+    from .humanml3d_import import read_humanml3d_motion
     from ..store.database import MotionDatabase
     from ..ops.units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
@@ -174,7 +222,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
         why = f"unknown length unit {units!r}" if units not in UNITS else f"cannot convert to {units!r} units"
         raise TorchspliceError(f"{{units}}: {why}; name a length unit ({', '.join(CONVERTIBLE_UNITS)})",
                                options=("units",))
-    files, skipped = collect_bvh(paths)
+    files, skipped = collect_inputs(paths, format)
     out = Path(output)
     if append:
         if out.suffix.lower() not in DATABASE_SUFFIXES:
@@ -184,10 +232,12 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
             raise TorchspliceError(f"{out}: no such database to append to (leave out {{append}} to make a new one)",
                                    options=("append",))
     else:
-        out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=files, overwrite=overwrite)
+        out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=[f for f in files if isinstance(f, Path)],
+                           overwrite=overwrite)
     report = ImportReport(output=out, skipped=skipped, split=split)
     if not files:
-        raise NothingImportedError("no BVH files to import", report)
+        raise NothingImportedError("no HumanML3D motions to import" if format == "humanml3d" else "no BVH files to import",
+                                   report)
     if split is not None and not (math.isfinite(split) and split >= MIN_SPLIT_SECONDS):
         raise TorchspliceError(f"{{split}} ({split:g} s) must be at least {MIN_SPLIT_SECONDS:g} s: a window is a clip "
                                "to splice", options=("split",))
@@ -205,19 +255,28 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     with db:
         for f in todo:
             try:
-                bad = control_character(f.stem)
-                if bad:  # printed raw, such a name would drive the terminal
-                    raise TorchspliceError(f"clip name {f.stem!r} (the file's name) contains {bad}; rename the file")
-                with warnings.catch_warnings(record=True) as caught:
-                    warnings.simplefilter("always")
-                    m = read_bvh(f, dtype=dtype)
-                report.warnings += [(str(f), one_line(w.message, f)) for w in caught]
-                m.check_finite()
-                s = (fixed or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
-                s.bind(m.skeleton)
-                if units is not None:  # lengths in one unit, so that datasets share the database
-                    m, s = convert_units(m, s, units)
-                m.role, m.labels = s.clip_metadata(m.name)
+                if isinstance(f, _HumanML3DItem):
+                    bad = control_character(f.id)
+                    if bad:
+                        raise TorchspliceError(f"clip name {f.id!r} (the file's name) contains {bad}; rename the file")
+                    m = read_humanml3d_motion(f.folder, f.id, f.split).to(dtype)
+                    s = load_spec(SMPL22)
+                    if units is not None:
+                        m, s = convert_units(m, s, units)
+                else:
+                    bad = control_character(f.stem)
+                    if bad:  # printed raw, such a name would drive the terminal
+                        raise TorchspliceError(f"clip name {f.stem!r} (the file's name) contains {bad}; rename the file")
+                    with warnings.catch_warnings(record=True) as caught:
+                        warnings.simplefilter("always")
+                        m = read_bvh(f, dtype=dtype)
+                    report.warnings += [(str(f), one_line(w.message, f)) for w in caught]
+                    m.check_finite()
+                    s = (fixed or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
+                    s.bind(m.skeleton)
+                    if units is not None:  # lengths in one unit, so that datasets share the database
+                        m, s = convert_units(m, s, units)
+                    m.role, m.labels = s.clip_metadata(m.name)
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
                 pieces = m.windows(split, split_overlap) if split else [m]

@@ -1,0 +1,139 @@
+"""``torchsplice import DIR`` of a HumanML3D folder: each motion a clip on the SMPL body, its
+captions kept, so that HumanML3D motions splice with each other and with any humanoid's.
+
+Known answers: importing an export gives back the exported positions (1e-4 m); imported
+motions splice, and their results' captions compose the sources' captions; every kind of bad
+motion is one line naming its file, and the others land.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from cli_helpers import run
+from torchsplice.cli import main
+from torchsplice.formats.exporters import export_clips
+from torchsplice.formats.humanml3d_import import positions_to_motion
+from torchsplice.store.database import MotionDatabase
+
+
+@pytest.fixture(scope="module")
+def exported(sample_db, tmp_path_factory) -> Path:
+    """The spliced sample, exported as a HumanML3D folder with mirrors."""
+    folder = tmp_path_factory.mktemp("h3i")
+    spliced = folder / "spliced.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
+    out = folder / "HumanML3D"
+    export_clips(spliced, out=out, format="humanml3d", mirror=True)
+    return out
+
+
+def test_importing_an_export_gives_back_its_positions_and_captions(exported, tmp_path, capsys):
+    db = tmp_path / "back.h5"
+    rc, out, _ = run(capsys, "import", exported, "-o", db)
+    assert rc == 0 and "imported 50 clips" in out
+    with MotionDatabase.open(db) as d:
+        assert d.skeleton_info(0).spec_name == "smpl22" and d.skeleton_info(0).units == "m"
+        worst = 0.0
+        for name in d.names:
+            m = d.read(name, dtype=torch.float64)
+            joints = torch.from_numpy(np.load(exported / "new_joints" / f"{name}.npy")).double()
+            assert m.fps == 20.0 and m.num_frames == joints.shape[0] and m.role == "both"
+            worst = max(worst, float((m.global_positions() - joints).abs().max()))
+            lines = (exported / "texts" / f"{name}.txt").read_text().splitlines()
+            assert m.labels["captions"].splitlines() == lines
+        assert worst < 1e-4, worst
+        splits = {r["id"]: r["split"] for r in csv.DictReader(open(exported / "index.csv"))}
+        for name in d.names:
+            assert d.clip_info(name)["labels"].get("split", "") == splits[name]
+
+
+def test_positions_back_from_a_motion_are_exact_on_the_standard_body():
+    """FK of the motion made from positions gives the positions (they are on the body's lengths)."""
+    from torchsplice.ops.retarget import retarget_map, retarget_motions
+    from torchsplice.sample import sample_motions
+    from torchsplice.specs import load_spec
+    from torchsplice.specs.smpl import smpl22_skeleton
+
+    ms = [m.to(torch.float64) for m in sample_motions()[:3]]
+    sk = smpl22_skeleton()
+    rmap = retarget_map(ms[0].skeleton, load_spec("sample").bind(ms[0].skeleton), sk, load_spec("smpl22").bind(sk))
+    for m in retarget_motions(ms, rmap):
+        p = m.global_positions()
+        back = positions_to_motion(p, m.name, m.fps)
+        assert float((back.global_positions() - p).abs().max()) < 1e-9
+
+
+def test_imported_motions_splice_and_their_captions_compose(exported, tmp_path):
+    db = tmp_path / "h.h5"
+    assert main(["import", str(exported), "-o", str(db), "-q"]) == 0
+    index = {r["clip"]: r["id"] for r in csv.DictReader(open(exported / "index.csv")) if r["mirrored"] == "0"}
+    loco, action = index["walk_curve+carry_cup"], index["walk_straight+wave"]
+    spliced = tmp_path / "s.h5"
+    assert main(["splice-all", str(db), "-o", str(spliced), "--locomotions", loco, "--actions", action, "-q"]) == 0
+    out = tmp_path / "again"
+    export_clips(spliced, out=out, format="humanml3d")
+    lines = [ln.split("#")[0] for ln in (out / "texts" / "000000.txt").read_text().splitlines()]
+    assert lines and all(("walks in a curve to the left" in ln or "curving left" in ln) for ln in lines), lines
+    assert all(ln.count(" while ") == 1 and "waving" in ln and "cup" not in ln for ln in lines), lines
+
+
+def _damaged(exported: Path, tmp_path: Path) -> Path:
+    """A copy of the export with one of each kind of bad motion."""
+    import shutil
+
+    bad = tmp_path / "bad"
+    shutil.copytree(exported, bad)
+    np.save(bad / "new_joint_vecs" / "000001.npy", np.zeros((30, 251), np.float32))  # wrong width
+    nan = np.load(bad / "new_joint_vecs" / "000002.npy")
+    nan[5, 7] = np.nan
+    np.save(bad / "new_joint_vecs" / "000002.npy", nan)
+    (bad / "texts" / "000003.txt").unlink()                                           # no text
+    (bad / "texts" / "000004.txt").write_text("a person walks#a/DET person walk/VERB#0.0#0.0\n")  # malformed
+    (bad / "new_joint_vecs" / "000005.npy").unlink()                                  # listed, no motion
+    (bad / "new_joint_vecs" / "000006.npy").write_bytes(b"not numpy")
+    return bad
+
+
+def test_bad_motions_are_one_line_each_and_the_others_land(exported, tmp_path, capsys):
+    bad = _damaged(exported, tmp_path)
+    db = tmp_path / "b.h5"
+    rc, out, err = run(capsys, "import", bad, "-o", db, "-q")
+    assert rc == 1 and "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
+    expect = {
+        "000001.npy": "expected (frames, 263) features, got shape (30, 251)",
+        "000002.npy": "not finite (NaN or infinity) at frame 5",
+        "000003.txt": "missing",
+        "000004.txt": "token 'person' is not word/POS",
+        "000006.npy": "not a NumPy array file",
+    }
+    for f, words in expect.items():
+        assert any(f in ln and words in ln for ln in lines), (f, err)
+    assert any("all.txt" in ln and "'000005'" in ln and "no motion" in ln for ln in lines), err
+    with MotionDatabase.open(db) as d:
+        names = set(d.names)
+    assert {"000000", "000007", "M000001"} <= names and not names & {"000001", "000002", "000003", "000004", "000006"}
+
+
+def test_the_format_option_and_its_errors(exported, tmp_path, capsys):
+    rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "x.h5", "--format", "bvh")
+    assert rc == 2 and "no BVH files to import" in err and "folder holds no .bvh files" in err
+    rc, _, err = run(capsys, "import", tmp_path, "-o", tmp_path / "y.h5", "--format", "humanml3d")
+    assert rc == 2 and "not a HumanML3D folder" in err and "no HumanML3D motions to import" in err
+    with pytest.raises(SystemExit) as exit_:
+        main(["import", str(exported), "-o", str(tmp_path / "z.h5"), "--format", "fbx"])
+    assert exit_.value.code == 2 and "invalid choice: 'fbx'" in capsys.readouterr().err
+    assert not (tmp_path / "x.h5").exists() and not (tmp_path / "y.h5").exists()
+    rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "cm.h5", "--units", "cm", "-q")
+    assert rc == 0
+    with MotionDatabase.open(tmp_path / "cm.h5") as d:
+        assert d.skeleton_info(0).units == "cm"
+        m = d.read(d.names[0], dtype=torch.float64)
+    joints = torch.from_numpy(np.load(exported / "new_joints" / f"{m.name}.npy")).double()
+    assert float((m.global_positions() / 100.0 - joints).abs().max()) < 1e-4

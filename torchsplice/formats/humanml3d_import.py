@@ -1,0 +1,164 @@
+"""Reading a HumanML3D folder: each motion as a clip on the SMPL body, its captions kept.
+
+A HumanML3D folder (the format's own, or one :mod:`.humanml3d_exporter` wrote) holds
+``new_joint_vecs/ID.npy`` (``(N, 263)`` features), ``texts/ID.txt`` and the split lists. Each
+ID (those of ``all.txt`` where it exists, else every ``new_joint_vecs/*.npy``) becomes a clip
+named ``ID`` of ``N`` frames at 20 fps on the built-in SMPL body (:mod:`torchsplice.specs.smpl`,
+metres, Y up, spec ``smpl22``; a mirrored copy, whose left and right bones have swapped lengths,
+on its mirror image, ``smpl22_skeleton(mirrored=True)``, chosen by the bone lengths):
+
+- the joint positions are the features' (:func:`~.humanml3d_features.features_to_positions`:
+  the root integrated from its velocities, the joints from their root-relative positions);
+- the local rotations come from those positions (:func:`positions_to_motion`): the pelvis and
+  the chest by two directions each (across the hips or collars, and up the spine), every other
+  joint by the swing taking its rest bone onto its bone, as the format's own rotations are
+  (swing only: no twist about a bone); the root is the pelvis's position. On the format's
+  standard bone lengths, forward kinematics gives the positions back (to the rounding of the
+  lengths, 0.1 mm a bone);
+- the captions are kept as the clip's ``captions`` label (one line each, as in the file), so
+  that spliced results compose them (:mod:`.captions`); role ``both`` (any motion can give
+  either body half), and label ``split`` (``train``, ``val``, ``test``) where a list names it.
+
+A motion that cannot be used (a file of the wrong width, NaN, fewer than 2 frames, a missing or
+malformed text, an ID a list names without a motion) is skipped with one line naming its file;
+the others land.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from ..core.errors import TorchspliceError
+from ..core.motion import Motion
+from ..core.rotations import quat_between, quat_apply, quat_conj, quat_mul, rotmat_to_quat
+from ..specs.smpl import SMPL22_PARENTS, smpl22_skeleton
+from .captions import parse_caption_line
+from .humanml3d_features import FEATURES, FPS, features_to_positions
+
+__all__ = ["is_humanml3d_folder", "humanml3d_ids", "read_humanml3d_motion", "positions_to_motion", "SPLIT_FILES"]
+
+SPLIT_FILES = ("train", "val", "test")
+_FRAMES = ((0, (1, 2), 3), (9, (13, 14), 12))  # (joint, (left, right), up): the pelvis and the chest
+
+
+def is_humanml3d_folder(path) -> bool:
+    """Whether ``path`` is a folder holding ``new_joint_vecs/``."""
+    path = Path(path)
+    return path.is_dir() and (path / "new_joint_vecs").is_dir()
+
+
+def humanml3d_ids(folder) -> tuple[list[str], dict[str, str], list[tuple[str, str]]]:
+    """``(ids, split of each id, skipped)``: the motions to read (``all.txt``'s, else every
+    ``new_joint_vecs/*.npy``, in order), the split lists' memberships, and ``(file, why)`` for
+    an ID a list names without a motion."""
+    folder = Path(folder)
+    vecs = folder / "new_joint_vecs"
+    present = {f.stem for f in vecs.glob("*.npy")}
+    listed: dict[str, list[str]] = {}
+    for name in (*SPLIT_FILES, "all"):
+        f = folder / f"{name}.txt"
+        if f.is_file():
+            listed[name] = [ln.strip() for ln in f.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
+    split = {i: s for s in SPLIT_FILES for i in listed.get(s, [])}
+    skipped = []
+    for name, ids in listed.items():
+        for i in ids:
+            if i not in present:
+                skipped.append((str(folder / f"{name}.txt"), f"lists {i!r}, which has no motion (new_joint_vecs/{i}.npy)"))
+    ids = [i for i in listed["all"] if i in present] if "all" in listed else sorted(present)
+    return list(dict.fromkeys(ids)), split, skipped
+
+
+def positions_to_motion(positions: torch.Tensor, name: str = "clip", fps: float = FPS) -> Motion:
+    """A :class:`~torchsplice.core.motion.Motion` on the SMPL body from its joint positions
+    ``(T, 22, 3)`` in metres (HumanML3D's joint order): see the module docstring. Float64."""
+    p = positions.to(torch.float64)
+    if p.dim() != 3 or p.shape[1:] != (22, 3):
+        raise ValueError(f"positions must be (T, 22, 3), got {tuple(p.shape)}")
+    lengths = torch.stack([(p[:, j] - p[:, parent]).norm(dim=-1).mean() for j, parent in enumerate(SMPL22_PARENTS)
+                           if parent >= 0])
+    bodies = [smpl22_skeleton(), smpl22_skeleton(mirrored=True)]
+    misfit = [float(((b.offsets[1:].norm(dim=-1) - lengths) ** 2).sum()) for b in bodies]
+    sk = bodies[misfit.index(min(misfit))]  # a mirrored copy stands on the mirrored body
+    rest = sk.offsets
+    T = p.shape[0]
+    children: dict[int, list[int]] = {}
+    for j, parent in enumerate(SMPL22_PARENTS):
+        if parent >= 0:
+            children.setdefault(parent, []).append(j)
+    G = torch.zeros(T, 22, 4, dtype=torch.float64)
+    G[..., 0] = 1.0
+    framed = {j: (lr, up) for j, lr, up in _FRAMES}
+    for j, parent in enumerate(SMPL22_PARENTS):
+        if j in framed:
+            (left, right), up = framed[j]
+            G[:, j] = _two_directions(p[:, left] - p[:, right], p[:, up] - p[:, j],
+                                      rest[left] - rest[right], rest[up])
+        elif len(children.get(j, [])) == 1:
+            c = children[j][0]
+            bone = p[:, c] - p[:, j]
+            bone = bone / bone.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+            at_rest = quat_apply(G[:, parent], (rest[c] / rest[c].norm()).expand(T, 3))
+            G[:, j] = quat_mul(quat_between(at_rest, bone), G[:, parent])
+        else:  # an end (feet, head, wrists): as its parent
+            G[:, j] = G[:, parent]
+    local = G.clone()
+    for j, parent in enumerate(SMPL22_PARENTS):
+        if parent >= 0:
+            local[:, j] = quat_mul(quat_conj(G[:, parent]), G[:, j])
+    return Motion(skeleton=sk, rotations=local, root_translation=p[:, 0].clone(), fps=float(fps), name=name)
+
+
+def _two_directions(across: torch.Tensor, up: torch.Tensor, rest_across: torch.Tensor,
+                    rest_up: torch.Tensor) -> torch.Tensor:
+    """``(T, 4)`` the rotation taking the rest frame of (across, up) onto the frames ``(T, 3)``."""
+    def frame(a, u):
+        y = u / u.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        x = a - (a * y).sum(-1, keepdim=True) * y
+        x = x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        return torch.stack([x, y, torch.linalg.cross(x, y, dim=-1)], dim=-1)
+
+    now = frame(across, up)
+    then = frame(rest_across.expand_as(across), rest_up.expand_as(up))
+    return rotmat_to_quat(now @ then.transpose(-1, -2))
+
+
+def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
+    """The motion ``id`` of the HumanML3D ``folder`` as a clip (see the module docstring);
+    :class:`~torchsplice.core.errors.TorchspliceError` naming the file for one that cannot be used."""
+    import numpy as np
+
+    folder = Path(folder)
+    f = folder / "new_joint_vecs" / f"{id}.npy"
+    try:
+        data = np.load(f, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise TorchspliceError(f"{f}: not a NumPy array file ({' '.join(str(exc).split())})") from None
+    if data.ndim != 2 or data.shape[1] != FEATURES:
+        raise TorchspliceError(f"{f}: expected (frames, {FEATURES}) features, got shape {tuple(data.shape)}")
+    if data.shape[0] < 2:
+        raise TorchspliceError(f"{f}: {data.shape[0]} frame(s); a clip needs at least 2")
+    if not np.issubdtype(data.dtype, np.floating) or not np.isfinite(data).all():
+        bad = int(np.argwhere(~np.isfinite(data))[0][0]) if np.issubdtype(data.dtype, np.floating) else 0
+        raise TorchspliceError(f"{f}: not finite (NaN or infinity) at frame {bad}" if np.issubdtype(data.dtype, np.floating)
+                               else f"{f}: features of type {data.dtype}, not floating point")
+    text = folder / "texts" / f"{id}.txt"
+    try:
+        lines = [ln for ln in text.read_text(encoding="utf-8").splitlines() if ln.strip()]
+    except FileNotFoundError:
+        raise TorchspliceError(f"{text}: missing (every motion has its captions in texts/ID.txt)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TorchspliceError(f"{text}: cannot read its captions ({' '.join(str(exc).split())})") from None
+    if not lines:
+        raise TorchspliceError(f"{text}: holds no caption")
+    for k, line in enumerate(lines, 1):
+        parse_caption_line(line, f"{text}: line {k}")
+    positions = features_to_positions(torch.from_numpy(data.astype(np.float64)))
+    m = positions_to_motion(positions, name=id)
+    m.role = "both"
+    m.labels = {"captions": "\n".join(ln.strip() for ln in lines)}
+    if split:
+        m.labels["split"] = split
+    return m
