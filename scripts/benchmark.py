@@ -27,6 +27,9 @@ Sections:
           bone directions, feet, cross-dataset splices, joint-frames/s, and splice-all with
           actions on another skeleton against the same actions on the locomotions' own
           [<= 1% (worst < 2%), <= 3 deg, skate <= +1 cm/s, >= 1M/s, >= 0.8]
+  humanml3d the HumanML3D export and import (scripts/bench_humanml3d.py): export clips/s with the
+          files, the features alone and the files alone; on every real clip, the format's
+          properties and the import's round trip        [>= 2,000 clips/s, 1e-5 m, 1e-6 m, 1e-4 m]
 
 Without real data (no ../shared/mocap and no TORCHSPLICE_MOCAP), the built-in synthetic
 sample stands in and the figures say so. Timings are the best of several repeats; the machine
@@ -606,8 +609,8 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget",
-                   help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget")
+    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d",
+                   help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget, humanml3d")
     p.add_argument("--mix-db", type=Path, default=None,
                    help="the real mix on this database (e.g. the whole Bandai Namco dataset imported) instead of "
                         "the Bandai Namco clips of --mocap")
@@ -640,6 +643,10 @@ def main() -> int:
             from bench_retarget import bench_retarget
 
             bench_retarget(files, args.mocap)
+        if "humanml3d" in sections:
+            from bench_humanml3d import bench_humanml3d
+
+            bench_humanml3d(real_files(args.mocap))
     return 0
 
 

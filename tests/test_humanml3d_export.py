@@ -354,3 +354,30 @@ def test_a_failure_midway_leaves_no_file_and_a_rerun_writes_the_same(spliced, tm
     monkeypatch.setattr(hx.HumanML3DExporter, "write", real)
     export_clips(spliced, out=out, format="humanml3d")
     assert len(list((out / "new_joint_vecs").glob("*.npy"))) == 25
+
+
+def test_a_malformed_phrase_table_is_one_line_when_the_spec_loads(tmp_path):
+    from torchsplice.core.errors import SpecError
+    from torchsplice.specs import load_spec
+
+    base = (Path(__file__).resolve().parents[1] / "datasets_spec" / "sample.toml").read_text()
+    base = base[:base.index("[text.locomotion]")]
+    for table, words in (
+            ('[text.action]\nwave = ["waves/VB"]\n', "mine.toml: [text.action] wave: 'waves/VB': unknown part of speech 'VB'"),
+            ('[text.action]\nwave = ["waves"]\n', "'waves' is not word/POS or word=lemma/POS"),
+            ('[text.moods]\nhappy = ["a/DET person/NOUN"]\n', "[text] moods: unknown key (allowed: locomotion, action, style)"),
+            ('[text.style]\nkey = "style"\n', "names no label"),
+            ('[text.action]\nwave = 3\n', "expected a list of phrases")):
+        f = tmp_path / "mine.toml"
+        f.write_text(base.replace('name = "sample"', 'name = "mine"') + table)
+        with pytest.raises(SpecError) as info:
+            load_spec(f)
+        assert words in str(info.value) and "\n" not in str(info.value), (table, str(info.value))
+    f.write_text(base.replace('name = "sample"', 'name = "mine"') + '[text.locomotion]\nkey = "{content}-{path}"\n'
+                 '"walk-straight" = ["strolls=stroll/VERB"]\n')
+    from torchsplice.specs.text import spec_phrase_table
+
+    table = spec_phrase_table(load_spec(f))
+    assert table.key("locomotion", {"content": "walk", "path": "straight"}) == "walk-straight"
+    assert table.lookup("locomotion", {"content": "walk"}) is None
+    assert [t.lemma for t in table.lookup("locomotion", {"content": "walk", "path": "straight"})[0]] == ["stroll"]

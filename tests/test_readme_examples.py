@@ -142,3 +142,45 @@ def test_the_plugin_snippet_registers_a_method_every_command_takes(spliced):
     r = splice(loco, act, spec, method="locomotion_only")
     assert r.motion.name == f"{BANDAI[1]}+{BANDAI[2]}.locomotion_only"
     assert torch.equal(r.motion.rotations, loco.rotations.to(r.motion.rotations.dtype))
+
+
+def _bash_block(after_heading: str) -> list[list[str]]:
+    """The commands of the first ```bash block after ``after_heading`` (continued lines joined)."""
+    import shlex
+
+    text = README.read_text()
+    start = text.index(after_heading)
+    m = re.search(r"```bash\n(.*?)```", text[start:], re.S)
+    assert m, f"no bash block after {after_heading!r}"
+    lines = m.group(1).replace("\\\n", " ").splitlines()
+    return [shlex.split(ln.split("  #")[0]) for ln in lines if ln.strip()]
+
+
+def test_the_humanml3d_commands_and_the_loader_snippet_run_as_written(spliced, tmp_path, monkeypatch, capsys):
+    """The "Train a text-to-motion model on it" commands on the Bandai Namco splices, then its
+    Python snippet reading the folder as MDM does."""
+    import json
+
+    heading = "## Train a text-to-motion model on it"
+    commands = _bash_block(heading)
+    assert [c[:2] for c in commands] == [["torchsplice", "export"], ["torchsplice", "export"], ["torchsplice", "import"]]
+    shutil.copy(spliced / "spliced.h5", tmp_path / "spliced.h5")
+    (tmp_path / "my_captions.json").write_text(json.dumps(
+        {"dataset-1_walk_old_001": ["an/DET old/ADJ man/NOUN shuffles=shuffle/VERB along/ADV"]}))
+    monkeypatch.chdir(tmp_path)
+    for c in commands:
+        assert main(c[1:] + ["-q"]) == 0, c
+    capsys.readouterr()
+    from torchsplice.store.database import MotionDatabase
+
+    with MotionDatabase.open(tmp_path / "spliced.h5") as d:
+        count = len(d)
+    assert len((tmp_path / "HumanML3D" / "all.txt").read_text().split()) == 2 * count  # each splice and its mirror
+    with MotionDatabase.open(tmp_path / "humanml3d.h5") as d:
+        assert len(d) == 2 * count and d.skeleton_info(0).spec_name == "smpl22"
+    texts = " ".join(p.read_text() for p in (tmp_path / "HumanML3D_windows" / "texts").glob("*.txt"))
+    assert "while shuffling along" in texts
+    code = snippet(heading)
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert scope["motion"].shape[1] == 263 and len(scope["tokens"].split()) >= 3

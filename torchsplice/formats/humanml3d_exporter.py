@@ -252,8 +252,10 @@ class HumanML3DExporter(Exporter):
             chunk = [motions[i] for i in idx]
             if self._movers[k] is not None:
                 chunk = retarget_motions(chunk, self._movers[k], True, None)
-            for i, m in zip(idx, chunk):  # rotations resampled, so that bones keep their lengths
-                out[i] = resample_motion(m.to(torch.float64), FPS).global_positions()
+            # rotations resampled (so that bones keep their lengths), then one FK for the chunk
+            chunk = [resample_motion(m.to(torch.float64), FPS) for m in chunk]
+            for i, p in zip(idx, _positions_of(chunk)):
+                out[i] = p
         return out
 
     def measure(self, item) -> tuple[int, float | None]:
@@ -293,6 +295,25 @@ class HumanML3DExporter(Exporter):
                 f"{' with mirrors' if self.options['mirror'] else ''}, {result.frames} frames at 20 fps; "
                 f"train/val/test {split['train']}/{split['val']}/{split['test']}"
                 + (f"; {'; '.join(notes)}" if notes else ""))
+
+
+def _positions_of(motions) -> list:
+    """Each clip's joint positions ``(T_i, J, 3)``: clips of one skeleton by one forward
+    kinematics over their frames concatenated (FK is frame by frame)."""
+    import torch
+
+    from ..core.fk import forward_kinematics
+
+    first = motions[0]
+    same = all(m.skeleton is first.skeleton or (m.skeleton.parents == first.skeleton.parents and bool(
+        torch.equal(m.skeleton.offsets, first.skeleton.offsets))) for m in motions)
+    animated = {m.translations is None for m in motions}
+    if not same or len(animated) != 1:
+        return [m.global_positions() for m in motions]
+    trans = None if first.translations is None else torch.cat([m.translations for m in motions])
+    pos, _ = forward_kinematics(torch.cat([m.rotations for m in motions]), torch.cat([m.root_translation for m in motions]),
+                                first.skeleton.offsets.to(first.rotations), first.skeleton.parents, trans)
+    return list(torch.split(pos, [m.num_frames for m in motions]))
 
 
 def frames_at_20(length: int, fps: float) -> int:

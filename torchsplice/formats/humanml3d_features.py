@@ -38,7 +38,7 @@ from __future__ import annotations
 import torch
 
 from ..align.curve import interpolate_frames, resample_times
-from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_to_6d
+from ..core.rotations import quat_between, quat_conj, quat_mul, quat_to_6d
 
 __all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "FPS", "GROUPS", "normalize_positions",
            "positions_to_features", "features_to_positions", "gaussian_smooth", "resample_positions", "FeatureStats",
@@ -66,7 +66,6 @@ CHAINS = ((0, 2, 5, 8, 11), (0, 1, 4, 7, 10), (0, 3, 6, 9, 12, 15), (9, 14, 17, 
 
 _L_HIP, _R_HIP, _L_SHOULDER, _R_SHOULDER = 1, 2, 16, 17
 _FEET = (7, 10, 8, 11)  # left ankle, left foot, right ankle, right foot
-_UP = (0.0, 1.0, 0.0)
 
 
 def _check(positions: torch.Tensor) -> None:
@@ -91,6 +90,28 @@ def gaussian_smooth(x: torch.Tensor, sigma: float, dim: int = 0) -> torch.Tensor
     return out.reshape(shape).movedim(-1, dim)
 
 
+def _yaw_apply(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """Rotate ``(..., 3)`` vectors by turns about +Y given as quaternions ``(w, 0, y, 0)``
+    (broadcastable ``(..., 4)``): ``quat_apply`` for the heading, without its general cross products."""
+    w, y = q[..., 0:1], q[..., 2:3]
+    c, s = w * w - y * y, 2.0 * w * y  # cos and sin of the turn
+    x, z = v[..., 0:1], v[..., 2:3]
+    return torch.cat((c * x + s * z, v[..., 1:2], c * z - s * x), dim=-1)
+
+
+def _cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``a x b`` for broadcastable ``(..., 3)`` vectors."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return torch.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), dim=-1)
+
+
+def _cross_up(v: torch.Tensor) -> torch.Tensor:
+    """``up x v`` with up = +Y: ``(v_z, 0, -v_x)`` (what ``torch.linalg.cross`` gives, without
+    broadcasting the constant)."""
+    return torch.stack((v[..., 2], torch.zeros_like(v[..., 0]), -v[..., 0]), dim=-1)
+
+
 def _across(p: torch.Tensor, l_hip: int, r_hip: int) -> torch.Tensor:
     """The sum of the hips' ``l_hip -> r_hip`` vector and the shoulders' right-to-left one, unit."""
     across = (p[..., r_hip, :] - p[..., l_hip, :]) + (p[..., _R_SHOULDER, :] - p[..., _L_SHOULDER, :])
@@ -109,7 +130,7 @@ def _heading(positions: torch.Tensor, smooth: bool) -> torch.Tensor:
     """``(..., T, 4)`` the root's heading rotation (taking its forward onto +Z), as the format's
     features have it (see the module docstring)."""
     across = _across(positions, _R_HIP, _L_HIP)  # the reference's order: left minus right hip
-    forward = torch.linalg.cross(torch.tensor(_UP, dtype=positions.dtype).expand_as(across), across, dim=-1)
+    forward = _cross_up(across)
     if smooth:
         forward = gaussian_smooth(forward, 20.0, dim=-2)
     return _turn_to_z(forward)
@@ -125,9 +146,9 @@ def normalize_positions(positions: torch.Tensor) -> torch.Tensor:
     start[..., 1] = 0.0
     p = p - start
     across = _across(p[..., 0, :, :], _L_HIP, _R_HIP)
-    forward = torch.linalg.cross(torch.tensor(_UP, dtype=p.dtype).expand_as(across), across, dim=-1)
+    forward = _cross_up(across)
     turn = _turn_to_z(forward)
-    return quat_apply(turn[..., None, None, :].expand(p.shape[:-1] + (4,)), p)
+    return _yaw_apply(turn[..., None, None, :], p)
 
 
 def _joint_rotations(positions: torch.Tensor, root: torch.Tensor) -> torch.Tensor:
@@ -142,33 +163,42 @@ def _joint_rotations(positions: torch.Tensor, root: torch.Tensor) -> torch.Tenso
         for a, b in zip(chain, chain[1:]):
             v = positions[..., b, :] - positions[..., a, :]
             v = v / v.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-            swing = quat_between(raw[b].expand_as(v), v)
+            # the smallest rotation from the raw direction u onto v (never antipodal for a body's bones;
+            # quat_between's fallback is kept for that case)
+            u = raw[b]
+            d = (v * u).sum(-1, keepdim=True)
+            swing = torch.cat((1.0 + d, _cross(u, v)), dim=-1)
+            if bool((1.0 + d < 1e-6).any()):
+                swing = torch.where(1.0 + d < 1e-6, quat_between(u.expand_as(v), v), swing)
+            swing = swing / swing.norm(dim=-1, keepdim=True)
             local = quat_mul(quat_conj(R), swing)
             out[..., b, :] = local
             R = quat_mul(R, local)
     return out
 
 
-def positions_to_features(positions: torch.Tensor, normalize: bool = True) -> torch.Tensor:
+def positions_to_features(positions: torch.Tensor, normalize: bool = True, dtype=torch.float64) -> torch.Tensor:
     """``(..., T - 1, 263)`` features of clips' joint positions ``(..., T, 22, 3)`` (see the module
     docstring); ``normalize`` first puts each on the floor, at the origin, facing +Z
-    (:func:`normalize_positions`), as the format's folders hold them.
+    (:func:`normalize_positions`), as the format's folders hold them. Computed in ``dtype``
+    (float64 by default, as the export does: in float32, root-relative positions of a clip far
+    from the origin lose bone lengths to 4e-5 m).
 
     Clips of other lengths go in one batch padded at the end with copies of their last frame
     (:func:`pad_clips`): the smoothing repeats the last frame there anyway, so each clip's
     first ``T_i - 1`` rows are its own features exactly."""
     _check(positions)
-    p = normalize_positions(positions.to(torch.float64)) if normalize else positions.to(torch.float64)
+    p = normalize_positions(positions.to(dtype)) if normalize else positions.to(dtype)
     T = p.shape[-3]
     # contacts
     step = ((p[..., 1:, _FEET, :] - p[..., :-1, _FEET, :]) ** 2).sum(-1)
-    feet = (step < FOOT_THRESHOLD).to(torch.float64)
+    feet = (step < FOOT_THRESHOLD).to(dtype)
     # the heading, smoothed (the first frame's is the identity: the clip faces +Z there), and
     # the rotations from it
     r_rot = _heading(p, smooth=True)
     r_rot[..., 0, :] = torch.tensor((1.0, 0.0, 0.0, 0.0), dtype=p.dtype)
     quats = _joint_rotations(p, r_rot)
-    root_vel = quat_apply(r_rot[..., 1:, :], p[..., 1:, 0, :] - p[..., :-1, 0, :])
+    root_vel = _yaw_apply(r_rot[..., 1:, :], p[..., 1:, 0, :] - p[..., :-1, 0, :])
     r_vel = quat_mul(r_rot[..., 1:, :], quat_conj(r_rot[..., :-1, :]))
     # the turn's own (short) quaternion: where the heading crosses 180 degrees its quaternion changes
     # cover, and the raw product's Y part would flip sign (the reference keeps that flip: one frame of
@@ -179,10 +209,10 @@ def positions_to_features(positions: torch.Tensor, normalize: bool = True) -> to
     local = p.clone()
     local[..., 0] -= p[..., 0:1, 0]
     local[..., 2] -= p[..., 0:1, 2]
-    local = quat_apply(r_rot[..., None, :].expand(local.shape[:-1] + (4,)), local)
+    local = _yaw_apply(r_rot[..., None, :], local)
     lead = p.shape[:-3]
     six = quat_to_6d(quats[..., 1:, :]).reshape(lead + (T, -1))
-    vel = quat_apply(r_rot[..., :-1, None, :].expand(lead + (T - 1, JOINTS, 4)), p[..., 1:, :, :] - p[..., :-1, :, :])
+    vel = _yaw_apply(r_rot[..., :-1, None, :], p[..., 1:, :, :] - p[..., :-1, :, :])
     return torch.cat([yaw, root_vel[..., [0, 2]], p[..., :-1, 0, 1:2], local[..., :-1, 1:, :].reshape(lead + (T - 1, -1)),
                       six[..., :-1, :], vel.reshape(lead + (T - 1, -1)), feet], dim=-1)
 
@@ -214,10 +244,10 @@ def features_to_positions(features: torch.Tensor) -> torch.Tensor:
     step = torch.zeros(f.shape[:-1] + (3,), dtype=f.dtype, device=f.device)
     step[..., 1:, 0] = f[..., :-1, 1]
     step[..., 1:, 2] = f[..., :-1, 2]
-    root = torch.cumsum(quat_apply(quat_conj(r_rot), step), dim=-2)
+    root = torch.cumsum(_yaw_apply(quat_conj(r_rot), step), dim=-2)
     root[..., 1] = f[..., 3]
     joints = f[..., 4:4 + (JOINTS - 1) * 3].reshape(f.shape[:-1] + (JOINTS - 1, 3))
-    joints = quat_apply(quat_conj(r_rot)[..., None, :].expand(joints.shape[:-1] + (4,)), joints)
+    joints = _yaw_apply(quat_conj(r_rot)[..., None, :], joints)
     joints[..., 0] += root[..., None, 0]
     joints[..., 2] += root[..., None, 2]
     return torch.cat([root[..., None, :], joints], dim=-2)
