@@ -194,13 +194,11 @@ def test_a_mirrored_copy_is_the_mirrored_motion_with_left_and_right_swapped_in_i
 def test_captions_say_the_locomotion_and_the_action(folder):
     index = {r["clip"]: r["id"] for r in _index(folder) if r["mirrored"] == "0"}
     lines = (folder / "texts" / f"{index['walk_curve+wave']}.txt").read_text().splitlines()
-    assert lines[0].split("#")[0] in {
-        "a person walks in a curve to the left while waving the right hand",
-        "someone walks in a curve to the left while waving the right hand",
-        "the person walks in a curve to the left while waving the right hand",
-        "a person walks in a curve to the left while waving with the right arm overhead",
-        "someone walks forward curving left while waving the right hand",
-    } or "while waving" in lines[0]
+    subjects = ("a person", "someone", "the person")
+    legs = ("walks in a curve to the left", "walks forward curving left")
+    arms = ("waving the right hand", "waving with the right arm overhead")
+    allowed = {f"{s} {l} while {a}" for s in subjects for l in legs for a in arms}
+    assert {ln.split("#")[0] for ln in lines} <= allowed, lines
     assert all(" while " in ln.split("#")[0] for ln in lines) and len(set(lines)) == len(lines) == 3
     tokens = lines[0].split("#")[1].split()
     assert "wave/VERB" in tokens and "walk/VERB" in tokens and "while/SCONJ" in tokens
@@ -381,3 +379,94 @@ def test_a_malformed_phrase_table_is_one_line_when_the_spec_loads(tmp_path):
     assert table.key("locomotion", {"content": "walk", "path": "straight"}) == "walk-straight"
     assert table.lookup("locomotion", {"content": "walk"}) is None
     assert [t.lemma for t in table.lookup("locomotion", {"content": "walk", "path": "straight"})[0]] == ["stroll"]
+
+
+def test_a_spliced_clip_whose_action_or_locomotion_no_phrase_says_is_flagged_never_captioned_empty():
+    from torchsplice.formats.captions import clip_captions
+    from torchsplice.specs.text import parse_phrase_table
+
+    table = parse_phrase_table({"locomotion": {"walk": ["walks=walk/VERB"], "float": []},
+                                "action": {"wave": ["waves=wave/VERB"], "walk": []}}, "t.toml", "t")
+    def said(loco, action):
+        labels = {"locomotion.content": loco, "action.content": action}
+        return clip_captions("x", "spliced", labels, [table], locomotion="l", action="a")
+
+    captions, described = said("walk", "wave")
+    assert described and "walks while waving" in captions[0].text
+    captions, described = said("walk", "walk")  # the action says nothing more: described
+    assert described and captions and all(" while " not in c.text for c in captions)
+    for loco, action in (("walk", "juggle"), ("float", "wave"), ("swim", "wave")):
+        captions, described = said(loco, action)
+        assert not described and captions and all(" walks" in c.text or " moves" in c.text for c in captions), (loco, action)
+
+
+def test_caption_lines_are_checked_as_the_loaders_split_them():
+    from torchsplice.core.errors import TorchspliceError
+
+    for line, words in (("one half#1/2/NUM#0.0#0.0", "token '1/2/NUM' is not word/POS"),
+                        ("and or#and/or/CCONJ#0.0#0.0", "token 'and/or/CCONJ' is not word/POS"),
+                        ("a b#a/DET b/NOUN#x#0.0", "start or end 'x' is not a number"),
+                        ("a b#a/DET b/NOUN#2.0#1.0", "ends (1 s) before it starts (2 s)"),
+                        ("a b#a/DET b/NOUN#0.0#0.0#7", "is not 'caption#tokens#start#end'")):
+        with pytest.raises(TorchspliceError, match=None) as info:
+            parse_caption_line(line, "c.json")
+        assert words in str(info.value), (line, str(info.value))
+    c = parse_caption_line("a person waves.#a/DET person/NOUN wave/VERB#1.5#3.0", "c")
+    assert (c.start, c.end) == (1.5, 3.0) and c.line() == "a person waves.#a/DET person/NOUN wave/VERB#1.5#3.0"
+    assert c.within(2.0, 10.0).line().endswith("#0.0#1.0") and c.within(3.5, 9.0) is None
+
+
+def test_captions_made_from_real_sentences_read_as_one_sentence():
+    from torchsplice.formats.captions import clip_captions
+
+    user = {"l": [parse_caption_line("a person is walking forward.#a/DET person/NOUN is/AUX walk/VERB forward/ADV#0.0#0.0",
+                                     "u")],
+            "a": [parse_caption_line("a man waves his left hand while walking#a/DET man/NOUN wave/VERB his/DET left/ADJ "
+                                     "hand/NOUN while/SCONJ walk/VERB#0.0#0.0", "u")],
+            "b": [parse_caption_line("someone is clapping#someone/PRON is/AUX clap/VERB#0.0#0.0", "u")]}
+    (caption,), _ = clip_captions("x", "spliced", {}, [], user, count=1, locomotion="l", action="a")
+    assert caption.text == "a man is walking forward while waving his left hand", caption
+    (caption,), _ = clip_captions("y", "spliced", {}, [], user, count=1, locomotion="l", action="b")
+    assert caption.text == "someone is walking forward while clapping", caption
+    assert [w for w, _ in caption.tokens] == ["someone", "is", "walk", "forward", "while", "clap"]
+
+
+def test_mirroring_swaps_compound_words_once():
+    c = parse_caption_line("a person turns counter-clockwise with a left-handed wave#a/DET person/NOUN turn/VERB "
+                           "counterclockwise/ADV with/ADP a/DET lefthanded/ADJ wave/NOUN#0.0#0.0", "c")
+    m = mirror_caption(c)
+    assert m.text == "a person turns clockwise with a right-handed wave"
+    assert ("clockwise", "ADV") in m.tokens and ("righthanded", "ADJ") in m.tokens
+    assert mirror_caption(m).text == "a person turns counterclockwise with a left-handed wave"
+
+
+def test_part_captions_go_to_the_windows_they_overlap_in_their_time(spliced, tmp_path):
+    captions = tmp_path / "c.json"
+    captions.write_text(json.dumps({"walk_curve+wave": [
+        "a person walks#a/DET person/NOUN walk/VERB#0.0#0.0",
+        "a person waves late#a/DET person/NOUN wave/VERB late/ADV#5.0#6.0"]}))
+    out = tmp_path / "w"
+    export_clips(spliced, ["walk_curve+wave"], out=out, format="humanml3d", window=3.0, captions=captions)
+    for r in _index(out):
+        lines = (out / "texts" / f"{r['id']}.txt").read_text().splitlines()
+        assert lines[0] == "a person walks#a/DET person/NOUN walk/VERB#0.0#0.0"
+        start, end = float(r["start_s"]), float(r["end_s"])
+        late = [ln for ln in lines if "late" in ln]
+        if end > 5.0:
+            a, b = max(5.0, start) - start, min(6.0, end) - start
+            assert late == [f"a person waves late#a/DET person/NOUN wave/VERB late/ADV#{round(a, 4)}#{round(b, 4)}"], (r, late)
+        else:
+            assert not late, r
+
+
+def test_an_export_with_force_into_an_earlier_one_leaves_none_of_its_files(spliced, tmp_path):
+    out = tmp_path / "h"
+    export_clips(spliced, out=out, format="humanml3d", mirror=True)
+    assert len(list((out / "new_joint_vecs").glob("*.npy"))) == 50
+    (out / "notes.md").write_text("mine")  # not the format's: kept
+    export_clips(spliced, ["walk_straight+wave", "jog+punch"], out=out, format="humanml3d", overwrite=True)
+    for sub in ("new_joint_vecs", "new_joints", "texts"):
+        assert sorted(f.stem for f in (out / sub).iterdir()) == ["000000", "000001"], sub
+    assert (out / "all.txt").read_text().split() == ["000000", "000001"] and (out / "notes.md").read_text() == "mine"
+    rows = np.concatenate([np.load(f) for f in sorted((out / "new_joint_vecs").glob("*.npy"))]).astype(np.float64)
+    assert np.allclose(np.load(out / "Mean.npy"), rows.mean(0), rtol=1e-5, atol=1e-6)

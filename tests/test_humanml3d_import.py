@@ -1,7 +1,7 @@
 """``torchsplice import DIR`` of a HumanML3D folder: each motion a clip on the SMPL body, its
 captions kept, so that HumanML3D motions splice with each other and with any humanoid's.
 
-Known answers: importing an export gives back the exported positions (1e-4 m); imported
+Known answers: importing an export gives back the exported positions (1e-5 m; the target is 1e-4); imported
 motions splice, and their results' captions compose the sources' captions; every kind of bad
 motion is one line naming its file, and the others land.
 """
@@ -47,7 +47,7 @@ def test_importing_an_export_gives_back_its_positions_and_captions(exported, tmp
             worst = max(worst, float((m.global_positions() - joints).abs().max()))
             lines = (exported / "texts" / f"{name}.txt").read_text().splitlines()
             assert m.labels["captions"].splitlines() == lines
-        assert worst < 1e-4, worst
+        assert worst < 1e-5, worst  # the issue's target: 1e-4 m
         splits = {r["id"]: r["split"] for r in csv.DictReader(open(exported / "index.csv"))}
         for name in d.names:
             assert d.clip_info(name)["labels"].get("split", "") == splits[name]
@@ -137,3 +137,32 @@ def test_the_format_option_and_its_errors(exported, tmp_path, capsys):
         m = d.read(d.names[0], dtype=torch.float64)
     joints = torch.from_numpy(np.load(exported / "new_joints" / f"{m.name}.npy")).double()
     assert float((m.global_positions() / 100.0 - joints).abs().max()) < 1e-4
+
+
+def test_an_imported_folders_splits_and_mirrors_hold_when_exported_again(exported, tmp_path):
+    """Imported motions keep their split, and a mirrored copy splits with its original, so a
+    re-export never puts a test motion (or its mirror) in train."""
+    db = tmp_path / "h.h5"
+    assert main(["import", str(exported), "-o", str(db), "-q"]) == 0
+    first = {r["id"]: r["split"] for r in csv.DictReader(open(exported / "index.csv"))}
+    for seed in (0, 1, 2):
+        out = tmp_path / f"again{seed}"
+        export_clips(db, out=out, format="humanml3d", split_seed=seed, split_ratios=(0.34, 0.33, 0.33))
+        again = {r["clip"]: r["split"] for r in csv.DictReader(open(out / "index.csv"))}
+        for name, split in again.items():
+            if first[name]:
+                assert split == first[name], (seed, name)
+            if name.startswith("M"):
+                assert split == again[name[1:]], (seed, name)
+
+
+def test_an_npz_archive_named_npy_is_one_line(exported, tmp_path, capsys):
+    import shutil
+
+    bad = tmp_path / "bad"
+    shutil.copytree(exported, bad)
+    np.savez(bad / "new_joint_vecs" / "000003.npy", x=np.zeros(3))
+    (bad / "new_joint_vecs" / "000003.npy.npz").rename(bad / "new_joint_vecs" / "000003.npy")
+    rc, _, err = run(capsys, "import", bad, "-o", tmp_path / "b.h5", "-q")
+    assert rc == 1 and "Traceback" not in err and "unexpected" not in err
+    assert any("000003.npy" in ln and "a NumPy .npz archive, not one array" in ln for ln in err.splitlines()), err

@@ -57,7 +57,7 @@ class Export(Command):
                             f"its captions (default: {'on' if h['mirror'] else 'off'})")
         s.add_argument("--window", type=float, default=None, metavar="SECONDS",
                        help="humanml3d: cut clips longer than SECONDS into windows of SECONDS spread over the clip, "
-                            "each with the clip's captions (MDM keeps clips of at most 196 frames, 9.8 s)")
+                            "each with the clip's captions (MDM and MoMask keep motions of 40 to 199 frames: windows of at most 9.95 s, at least 2.05 s)")
         s.add_argument("--split-ratios", default=None, metavar="TRAIN,VAL,TEST",
                        help="humanml3d: fractions of the source clips in each split; a result is in a split when all its "
                             f"sources are (default: {','.join(f'{r:g}' for r in h['split_ratios'])})")

@@ -17,6 +17,7 @@ Where the words come from, for a clip (:func:`clip_captions`):
   the action's phrase is empty, e.g. a styled walk whose style says it all);
 - a source clip says ``SUBJECT LOCOMOTION`` (a locomotion, or both) or ``SUBJECT ACTION`` (an
   action);
+- a clip the user's captions name itself (a result, or a source clip) gets those, as they are;
 - each part is, first found: the user's captions of that source clip (:func:`read_captions`,
   a caption's subject and verb phrase split at its first verb; a caption that is itself a
   splice, "walks forward while waving", gives the locomotion before ``while`` and the action
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import random
 import re
 import zlib
@@ -57,21 +59,41 @@ MOVES = parse_phrase("moves=move/VERB")
 """What a locomotion does when nothing says it (counted as undescribed)."""
 
 _MIRROR = {"left": "right", "right": "left", "clockwise": "counterclockwise", "counterclockwise": "clockwise",
-           "anticlockwise": "clockwise", "leftward": "rightward", "rightward": "leftward", "leftwards": "rightwards",
-           "rightwards": "leftwards"}
+           "anticlockwise": "clockwise", "counter-clockwise": "clockwise", "anti-clockwise": "clockwise",
+           "leftward": "rightward", "rightward": "leftward", "leftwards": "rightwards", "rightwards": "leftwards",
+           "lefthanded": "righthanded", "righthanded": "lefthanded"}
+LOCOMOTION_VERBS = frozenset((
+    "walk", "run", "jog", "step", "sidestep", "stroll", "march", "jump", "hop", "skip", "turn", "move", "go", "sprint",
+    "dash", "limp", "stride", "shuffle", "pace", "wander", "circle", "strut", "tiptoe", "stumble", "climb", "descend",
+    "ascend", "crawl", "travel", "proceed", "head", "approach", "advance", "retreat", "backpedal"))
+"""Verbs that say what the legs do: of a caption that is itself "X while Y", the half led by one
+is its locomotion, the other its action."""
 _VOWELS = set("aeiou")
 
 
 @dataclass(frozen=True)
 class Caption:
-    """A sentence and its tokens ``((lemma, pos), ...)``."""
+    """A sentence, its tokens ``((lemma, pos), ...)``, and the part of the clip it describes:
+    ``start`` and ``end`` in seconds (``0.0, 0.0``: the whole clip, as HumanML3D writes it)."""
 
     text: str
     tokens: tuple
+    start: float = 0.0
+    end: float = 0.0
 
-    def line(self, start: float = 0.0, end: float = 0.0) -> str:
+    def line(self) -> str:
         """The caption as one line of a HumanML3D text file."""
-        return f"{self.text}#{' '.join(f'{w}/{p}' for w, p in self.tokens)}#{start}#{end}"
+        return f"{self.text}#{' '.join(f'{w}/{p}' for w, p in self.tokens)}#{self.start}#{self.end}"
+
+    def within(self, start: float, end: float) -> "Caption | None":
+        """The caption of the window ``start..end`` (seconds) of its clip: a whole-clip caption as
+        it is; a part's, moved into the window's time (``None`` when it lies outside it)."""
+        if self.start == 0.0 and self.end == 0.0:
+            return self
+        a, b = max(self.start, start), min(self.end, end)
+        if b <= a:
+            return None
+        return Caption(self.text, self.tokens, round(a - start, 4), round(b - start, 4))
 
 
 @dataclass(frozen=True)
@@ -122,10 +144,15 @@ def gerund(lemma: str) -> str:
 def _as_gerund(clause: Clause) -> Clause:
     if clause.verb is None:
         return clause
-    words = list(clause.words)
+    words, tokens = list(clause.words), list(clause.tokens)
     t = clause.verb if clause.aligned else _token_verb(clause.tokens)
-    words[clause.verb] = gerund(clause.tokens[t][0])
-    return Clause(tuple(words), clause.tokens, clause.verb, clause.aligned)
+    if (tokens[t][1] == "AUX" and tokens[t][0] in ("be", "is", "are") and t + 1 < len(tokens)
+            and tokens[t + 1][1] == "VERB" and clause.verb + 1 < len(words)):
+        # "is waving": the progressive's verb is the gerund already; the auxiliary goes
+        del words[clause.verb], tokens[t]
+        return Clause(tuple(words), tuple(tokens), clause.verb, clause.aligned)
+    words[clause.verb] = gerund(tokens[t][0])
+    return Clause(tuple(words), tuple(tokens), clause.verb, clause.aligned)
 
 
 def compose(subject: Clause, locomotion: Clause, action: Clause | None = None) -> Caption:
@@ -147,8 +174,14 @@ def mirror_caption(caption: Caption) -> Caption:
             return word
         return other.capitalize() if word[:1].isupper() else other
 
-    text = re.sub(r"[A-Za-z]+", lambda m: swap(m.group(0)), caption.text)
-    return Caption(text, tuple((swap(w), p) for w, p in caption.tokens))
+    def swap_compound(word: str) -> str:
+        whole = swap(word)
+        if whole != word or "-" not in word:
+            return whole
+        return "-".join(swap(part) if part.lower() in ("left", "right") else part for part in word.split("-"))
+
+    text = re.sub(r"[A-Za-z]+(?:-[A-Za-z]+)*", lambda m: swap_compound(m.group(0)), caption.text)
+    return Caption(text, tuple((swap(w), p) for w, p in caption.tokens), caption.start, caption.end)
 
 
 def parse_caption_line(line: str, where: str) -> Caption:
@@ -162,19 +195,25 @@ def parse_caption_line(line: str, where: str) -> Caption:
             raise TorchspliceError(f"{where}: {_short(text)!r} is not 'caption#tokens#start#end'")
         tokens = []
         for item in parts[1].split():
-            word, sep, pos = item.rpartition("/")
-            if not sep or not word or pos not in POS_TAGS:
-                raise TorchspliceError(f"{where}: token {item!r} is not word/POS with a universal tag (in {_short(text)!r})")
+            word, sep, pos = item.partition("/")
+            if not sep or not word.isalpha() or pos not in POS_TAGS:
+                raise TorchspliceError(f"{where}: token {item!r} is not word/POS (a word of letters, a universal tag; "
+                                       f"in {_short(text)!r})")
             tokens.append((word, pos))
         if not tokens:
             raise TorchspliceError(f"{where}: {_short(text)!r} has no tokens")
+        times = [0.0, 0.0]
         if len(parts) == 4:
-            for value in parts[2:]:
+            for k, value in enumerate(parts[2:]):
                 try:
-                    float(value)
+                    times[k] = float(value)
                 except ValueError:
                     raise TorchspliceError(f"{where}: start or end {value!r} is not a number (in {_short(text)!r})") from None
-        return Caption(" ".join(parts[0].split()), tuple(tokens))
+                if not math.isfinite(times[k]) or times[k] < 0:
+                    raise TorchspliceError(f"{where}: start or end {value!r} is not a time in seconds (in {_short(text)!r})")
+            if times[1] < times[0] and times[1] != 0.0:
+                raise TorchspliceError(f"{where}: ends ({times[1]:g} s) before it starts ({times[0]:g} s) (in {_short(text)!r})")
+        return Caption(" ".join(parts[0].split()), tuple(tokens), times[0], times[1])
     try:
         phrase = parse_phrase(text, where)
     except Exception as exc:  # a SpecError: say it as a caption problem
@@ -211,9 +250,16 @@ def _half(predicate: Clause, part: str) -> Clause:
     ti = next((i for i, t in enumerate(predicate.tokens) if t == ("while", "SCONJ")), None)
     if wi is None or ti is None or wi == 0 or wi == len(predicate.words) - 1:
         return predicate
-    if part == "locomotion":
-        return Clause(predicate.words[:wi], predicate.tokens[:ti], predicate.verb, predicate.aligned)
-    return Clause(predicate.words[wi + 1:], predicate.tokens[ti + 1:], 0, predicate.aligned)
+    first = Clause(predicate.words[:wi], predicate.tokens[:ti], predicate.verb, predicate.aligned)
+    second = Clause(predicate.words[wi + 1:], predicate.tokens[ti + 1:], 0, predicate.aligned)
+    # the half led by a verb of the legs is the locomotion ("walks while waving", "waves while walking")
+    legs_first = _leads_with_legs(first) or not _leads_with_legs(second)
+    return (first if legs_first else second) if part == "locomotion" else (second if legs_first else first)
+
+
+def _leads_with_legs(clause: Clause) -> bool:
+    verb = next((lemma for lemma, pos in clause.tokens if pos == "VERB"), None)
+    return verb in LOCOMOTION_VERBS
 
 
 def read_captions(path) -> dict[str, list[Caption]]:
@@ -256,7 +302,7 @@ def _lookup(tables: Sequence[PhraseTable], part: str, labels: dict):
 def _source_parts(name: str, labels: dict, user: dict, tables, part: str, where: str):
     """``(subjects, predicates)`` of a source clip's part: from the user's captions, its own,
     or the phrase tables (``None`` where nothing says it)."""
-    given = user.get(name) or own_captions(labels, where)
+    given = _given(name, labels, user, where)
     if given:
         split = [_caption_clause(c).split() for c in given]
         subjects = [s for s, _ in split if s is not None]
@@ -265,21 +311,29 @@ def _source_parts(name: str, labels: dict, user: dict, tables, part: str, where:
     return style or None, _lookup(tables, part, labels)
 
 
+def _given(name: str, labels: dict, user: dict, where: str) -> list[Caption]:
+    """The user's captions of a clip (or of the take it was cut from), else its own."""
+    return user.get(name) or user.get(labels.get("split_from", "")) or own_captions(labels, where)
+
+
 def clip_captions(name: str, role: str, labels: dict, tables: Sequence[PhraseTable], user: dict | None = None,
                   count: int = 3, locomotion: str = "", action: str = "") -> tuple[list[Caption], bool]:
     """The captions of one clip (see the module docstring) and whether its motion was described
-    (``False``: only "moves" could be said of it).
+    (``False``: its locomotion could only be said to "move", or its action was not said).
 
     Args:
         name, role, labels: the clip's name, role and labels (a spliced clip's sources' labels
             prefixed ``locomotion.`` and ``action.``).
         tables: phrase tables to look labels up in, first found wins.
         user: the user's captions by source clip name (:func:`read_captions`).
-        count: at most this many paraphrases.
+        count: at most this many paraphrases (a clip's own or the user's captions of it are kept,
+            every one).
         locomotion, action: a spliced clip's sources' names.
     """
     user = user or {}
     where = f"clip {name!r}"
+    if role == "spliced" and user.get(name):  # the user's captions of this very result
+        return list(user[name]), True
     if role == "spliced":
         loco_labels = {k[11:]: v for k, v in labels.items() if k.startswith("locomotion.")}
         act_labels = {k[7:]: v for k, v in labels.items() if k.startswith("action.")}
@@ -287,12 +341,13 @@ def clip_captions(name: str, role: str, labels: dict, tables: Sequence[PhraseTab
         a_subjects, a_preds = _source_parts(action, act_labels, user, tables, "action", where)
         subjects = a_subjects or l_subjects or [Clause.of(p) for p in DEFAULT_SUBJECTS]
         actions = a_preds if a_preds is not None else [None]
-        described = l_preds is not None
-        locos = l_preds if l_preds is not None else [Clause.of(MOVES)]
+        # described when the legs are said and the action is (an empty phrase list: said to add nothing)
+        described = bool(l_preds) and a_preds is not None
+        locos = l_preds if l_preds else [Clause.of(MOVES)]
     else:
-        given = user.get(name) or own_captions(labels, where)
-        if given:
-            return given[:count] if count else given, True
+        given = _given(name, labels, user, where)
+        if given:  # the clip's own (or the user's) captions, every one, with their times
+            return list(given), True
         subjects = _lookup(tables, "style", labels) or [Clause.of(p) for p in DEFAULT_SUBJECTS]
         part = "action" if role == "action" else "locomotion"
         preds = _lookup(tables, part, labels)

@@ -165,6 +165,11 @@ class Exporter:
         subfolders, statistics, split lists) overrides it, as :mod:`.humanml3d_exporter` does."""
         return None
 
+    def owned(self, folder: Path) -> list[Path]:
+        """A folder format's files an earlier export of it left in ``folder`` (its per-clip files):
+        an export that overwrites removes those it did not write again, once it is installed."""
+        return []
+
     def check(self) -> None:
         """What must hold before any file is made (e.g. statistics over every clip); one-line errors."""
 
@@ -347,6 +352,19 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         if count != len(files):
             raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave {count} files of the "
                                    f"{len(files)} of this export")
+    if layout is not None and overwrite:  # an earlier export's files this one did not write again
+        written = set(files)
+        for stale in exporter.owned(Path(out)):
+            if stale not in written:
+                try:
+                    stale.unlink()
+                except FileNotFoundError:
+                    pass
+                except OSError as exc:
+                    from ..store.atomic import os_error_message
+
+                    raise TorchspliceError(f"{os_error_message(stale, exc)} (an earlier export's file; the new export is "
+                                           "in place)") from None
     result.summary = exporter.summary(result)
     return result
 

@@ -11,17 +11,20 @@ The folder::
       Mean.npy, Std.npy           (263,) float32, over every file of new_joint_vecs
       train.txt val.txt test.txt train_val.txt all.txt   IDs, one a line
       index.csv                   each ID: its clip, window (start_s, end_s), rows, mirror, split,
-                                  role, locomotion, action, method, database, retargeted_from,
-                                  described (0: no phrase said what it does)
+                                  role, locomotion, action, method, database (exported),
+                                  locomotion_db and action_db (a spliced clip's sources'
+                                  databases, from its run record), retargeted_from, described
+                                  (0: its locomotion or its action was not said)
 
 Each clip goes onto the SMPL body's 22 joints (``smpl22``: HumanML3D's joint order, metres, its
 standard bone lengths) by the analytic retargeting of :mod:`torchsplice.ops.retarget` with the
 feet held (:mod:`torchsplice.ops.feet`), unless it is on that body already; then it is
 resampled to 20 fps (rotations by slerp, the root linearly: bones keep their lengths), put on the floor, at the origin and facing +Z,
 and turned into features as the format does (:mod:`.humanml3d_features`). A clip of fewer than
-:data:`MIN_FRAMES` frames at 20 fps is left out (the summary says how many). ``window`` (seconds)
-cuts longer clips into windows of that length, spread evenly over the clip, each with the
-clip's captions. Captions come from the clips' labels (:mod:`.captions`), splits from the
+:data:`MIN_FRAMES` frames at 20 fps is left out (the summary says how many, and how many motions
+MDM would drop: :data:`MDM_MIN_ROWS`, :data:`MDM_MAX_ROWS`). ``window`` (seconds) cuts longer
+clips into windows of that length, spread evenly over the clip, each with the clip's captions
+(a caption of a part, ``#start#end``, in the windows it overlaps, in their time). Captions come from the clips' labels (:mod:`.captions`), splits from the
 source clips (:mod:`.splits`). Mean and Std are the format's: the mean of each column over
 every row, and the standard deviation of each kind of feature (one value per kind, the mean of
 its columns'; :data:`~.humanml3d_features.GROUPS`).
@@ -41,14 +44,15 @@ from ..core.errors import SpecError, TorchspliceError
 from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
 from .splits import DEFAULT_RATIOS, SPLITS, clip_sources, clip_split, parse_ratios, split_sources
 
-__all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MAX_FRAMES", "INDEX_COLUMNS"]
+__all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MIN_ROWS", "MDM_MAX_ROWS", "INDEX_COLUMNS"]
 
 MIN_FRAMES = 3
 """Frames (at 20 fps) a clip needs to be exported."""
-MDM_MAX_FRAMES = 196
-"""The longest clip MDM's loader keeps (frames at 20 fps): longer ones want ``window``."""
+MDM_MIN_ROWS, MDM_MAX_ROWS = 40, 200
+"""MDM's and MoMask's loaders keep motions of 40 to 199 feature rows (and crop to 196);
+``window`` cuts longer clips, and is itself at least 40 frames long."""
 INDEX_COLUMNS = ("id", "clip", "start_s", "end_s", "rows", "mirrored", "split", "role", "locomotion", "action",
-                 "method", "database", "retargeted_from", "described")
+                 "method", "database", "locomotion_db", "action_db", "retargeted_from", "described")
 
 
 class HumanML3DExporter(Exporter):
@@ -80,9 +84,10 @@ class HumanML3DExporter(Exporter):
                 window = float(window)
             except (TypeError, ValueError):
                 window = -1.0
-            if not (window >= MIN_FRAMES / 20.0 and math.isfinite(window)):
-                raise TorchspliceError(f"{{window}} must be a length in seconds of at least {MIN_FRAMES / 20.0:g}, "
-                                       f"got {o['window']!r}", options=("window",))
+            if not (window >= (MDM_MIN_ROWS + 1) / 20.0 and math.isfinite(window)):
+                raise TorchspliceError(f"{{window}} must be a length in seconds of at least {(MDM_MIN_ROWS + 1) / 20.0:g} "
+                                       f"(MDM drops motions of fewer than {MDM_MIN_ROWS} frames), got {o['window']!r}",
+                                       options=("window",))
         count = o["paraphrases"]
         if not isinstance(count, int) or isinstance(count, bool) or count < 1:
             raise TorchspliceError(f"{{paraphrases}} must be a whole number of at least 1, got {count!r}",
@@ -90,13 +95,18 @@ class HumanML3DExporter(Exporter):
         with MotionDatabase.open(self.database) as db:
             table = db.clip_table()
             rows = [db.index(n) for n in self.names]
-            return _plan_items(table, rows, window, bool(o["mirror"]), ratios, int(o["split_seed"]), str(self.database))
+            return _plan_items(table, rows, window, bool(o["mirror"]), ratios, int(o["split_seed"]), str(self.database),
+                               _job_sources(db.attrs.get("run")))
 
     def layout(self) -> list[str]:
         files = []
         for item in self._plan["items"]:
             files += [f"new_joint_vecs/{item['id']}.npy", f"new_joints/{item['id']}.npy", f"texts/{item['id']}.txt"]
         return files + ["Mean.npy", "Std.npy"] + [f"{s}.txt" for s in (*SPLITS, "train_val", "all")] + ["index.csv"]
+
+    def owned(self, folder: Path) -> list[Path]:
+        return [f for sub, suffix in (("new_joint_vecs", ".npy"), ("new_joints", ".npy"), ("texts", ".txt"))
+                for f in sorted((folder / sub).glob(f"*{suffix}")) if not f.name.startswith(".")]
 
     # -- checks before any file ---------------------------------------------------------------
     @cached_property
@@ -190,6 +200,8 @@ class HumanML3DExporter(Exporter):
     def _clips(self):
         """``(item, features (N, 263), positions (N, 22, 3), captions)`` per planned item, in
         order, computed a batch of clips at a time."""
+        from dataclasses import replace
+
         import torch
 
         from ..specs.smpl import SMPL22_MIRROR
@@ -231,10 +243,17 @@ class HumanML3DExporter(Exporter):
                         captions_of[name] = clip_captions(name, item["role"], item["labels"], self._tables[item["skeleton"]],
                                                           self._user_captions, count, item["locomotion"], item["action"])
                     captions, described = captions_of[name]
+                    start, end = item["first"] / 20.0, (item["first"] + item["frames"] - 1) / 20.0
+                    inside = [c for c in (c.within(start, end) for c in captions) if c is not None]
+                    if not inside:  # only captions of other parts of the clip: said whole, and flagged
+                        inside, described = [replace(c, start=0.0, end=0.0) for c in captions], False
                     if item["mirrored"]:
-                        captions = [mirror_caption(c) for c in captions]
+                        inside = [mirror_caption(c) for c in inside]
                     item["described"] = int(described)
-                    yield item, done[i][0], done[i][1], captions
+                    if not bool(torch.isfinite(done[i][0]).all()):
+                        raise TorchspliceError(f"{self.database}: clip {name!r}: its features are not finite (NaN or "
+                                               "infinity); nothing written")
+                    yield item, done[i][0], done[i][1], inside
 
     def _positions(self, motions) -> list:
         """Each clip's joint positions ``(T', 22, 3)`` in metres on the SMPL body at 20 fps."""
@@ -280,7 +299,8 @@ class HumanML3DExporter(Exporter):
         split = {s: sum(1 for i in items if i["split"] == s) for s in SPLITS}
         unsplit = sum(1 for i in items if i["split"] == "")
         undescribed = sum(1 for i in items if not i.get("described", 1))
-        long = sum(1 for i in items if i["frames"] > MDM_MAX_FRAMES + 1)
+        long = sum(1 for i in items if i["rows"] >= MDM_MAX_ROWS)
+        short = sum(1 for i in items if i["rows"] < MDM_MIN_ROWS)
         notes = []
         if plan["short"]:
             notes.append(f"{len(plan['short'])} clip{'s' if len(plan['short']) != 1 else ''} under {MIN_FRAMES} frames "
@@ -290,11 +310,29 @@ class HumanML3DExporter(Exporter):
         if undescribed:
             notes.append(f"{undescribed} whose labels no phrase table describes (captioned 'moves': give them captions)")
         if long:
-            notes.append(f"{long} longer than MDM's {MDM_MAX_FRAMES} frames (cut them with a window)")
+            notes.append(f"{long} of {MDM_MAX_ROWS} frames or more, which MDM and MoMask drop (cut them with a window)")
+        if short:
+            notes.append(f"{short} under {MDM_MIN_ROWS} frames, which MDM and MoMask drop")
         return (f"{result.output}: {len(plan['clips'])} clips as HumanML3D, {len(items)} motions"
                 f"{' with mirrors' if self.options['mirror'] else ''}, {result.frames} frames at 20 fps; "
                 f"train/val/test {split['train']}/{split['val']}/{split['test']}"
                 + (f"; {'; '.join(notes)}" if notes else ""))
+
+
+def _job_sources(run) -> tuple[str, str]:
+    """``(locomotions' database, actions' database)`` of a spliced database, as its run record
+    names them (``("", "")`` where it names none)."""
+    import json
+
+    try:
+        record = json.loads(run) if isinstance(run, (str, bytes)) else {}
+    except ValueError:
+        return "", ""
+    if not isinstance(record, dict):
+        return "", ""
+    db = record.get("database")
+    loco = str(db.get("path", "")) if isinstance(db, dict) else str(db or "")
+    return loco, str(record.get("actions_db") or loco)
 
 
 def _positions_of(motions) -> list:
@@ -321,7 +359,8 @@ def frames_at_20(length: int, fps: float) -> int:
     return int((length - 1) * 20.0 / fps + 1e-9) + 1
 
 
-def _plan_items(table, rows: list[int], window: float | None, mirror: bool, ratios, seed: int, database: str) -> dict:
+def _plan_items(table, rows: list[int], window: float | None, mirror: bool, ratios, seed: int, database: str,
+                sources: tuple[str, str] = ("", "")) -> dict:
     """Every motion the export writes, in order, from the clip table alone: per clip its windows
     (all of it without ``window``), each then its mirrored copy; ids, splits and index columns."""
     clips, short, skeleton_of = [], [], {}
@@ -337,12 +376,13 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
         for col in ("locomotion", "action", "method"):
             info[col] = str(table.extra[col][r]) if col in table.extra else ""
         infos[r] = info
-    actions, locos = [], []
+    actions, locos, fixed = [], [], {}
     for r in clips:
         a, l = clip_sources(table.names[r], str(table.role[r]), infos[r])
-        actions += a
-        locos += l
-    assigned = split_sources([actions, locos], ratios, seed)
+        actions += [k for k, _ in a]
+        locos += [k for k, _ in l]
+        fixed.update({k: f for k, f in a + l if f})
+    assigned = split_sources([actions, locos], ratios, seed, fixed)
     items, n = [], 0
     size = None if window is None else max(MIN_FRAMES, int(round(window * 20.0)))
     for r in clips:
@@ -355,13 +395,15 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
             count = math.ceil(total / size)
             spans = [(int(round(k * (total - size) / (count - 1))), size) for k in range(count)]
         a, l = clip_sources(name, role, info)
-        split = clip_split(a + l, assigned) or ""
+        split = clip_split([k for k, _ in a + l], assigned) or ""
         labels = info["labels"]
         for first, frames in spans:
             base = {"clip": name, "skeleton": int(table.skeleton[r]), "role": role, "labels": labels,
                     "locomotion": info["locomotion"], "action": info["action"], "method": info["method"],
                     "first": first, "frames": frames, "rows": frames - 1, "start_s": f"{first / 20.0:g}",
                     "end_s": f"{(first + frames - 1) / 20.0:g}", "split": split, "database": database,
+                    "locomotion_db": sources[0] if role == "spliced" else "",
+                    "action_db": sources[1] if role == "spliced" else "",
                     "retargeted_from": labels.get("retargeted_from", labels.get("action.retargeted_from", "")),
                     "described": 1}
             items.append({**base, "id": f"{n:06d}", "mirrored": 0})

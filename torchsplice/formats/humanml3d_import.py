@@ -17,7 +17,9 @@ on its mirror image, ``smpl22_skeleton(mirrored=True)``, chosen by the bone leng
   lengths, 0.1 mm a bone);
 - the captions are kept as the clip's ``captions`` label (one line each, as in the file), so
   that spliced results compose them (:mod:`.captions`); role ``both`` (any motion can give
-  either body half), and label ``split`` (``train``, ``val``, ``test``) where a list names it.
+  either body half), label ``split`` (``train``, ``val``, ``test``) where a list names it (an
+  export keeps it: :mod:`.splits`), and ``mirror_of`` on a mirrored copy ``M``+ID whose
+  original is in the folder (the two split together).
 
 A motion that cannot be used (a file of the wrong width, NaN, fewer than 2 frames, a missing or
 malformed text, an ID a list names without a motion) is skipped with one line naming its file;
@@ -134,8 +136,11 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
     f = folder / "new_joint_vecs" / f"{id}.npy"
     try:
         data = np.load(f, allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError) as exc:
         raise TorchspliceError(f"{f}: not a NumPy array file ({' '.join(str(exc).split())})") from None
+    if not isinstance(data, np.ndarray):  # an .npz archive under an .npy name
+        data.close()
+        raise TorchspliceError(f"{f}: a NumPy .npz archive, not one array (.npy)")
     if data.ndim != 2 or data.shape[1] != FEATURES:
         raise TorchspliceError(f"{f}: expected (frames, {FEATURES}) features, got shape {tuple(data.shape)}")
     if data.shape[0] < 2:
@@ -161,4 +166,6 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
     m.labels = {"captions": "\n".join(ln.strip() for ln in lines)}
     if split:
         m.labels["split"] = split
+    if id.startswith("M") and (folder / "new_joint_vecs" / f"{id[1:]}.npy").is_file():
+        m.labels["mirror_of"] = id[1:]  # one source with its original, for splits
     return m

@@ -7,7 +7,9 @@ the locomotions not split already (a clip that is both keeps one split), and a r
 split only when all its sources are (:func:`clip_split`): no locomotion or action of the test
 split occurs in train. A result whose sources fall in different splits is in none (it is
 exported, and listed in ``all``). A source clip's windows (``split_from``) are one performance
-and split together.
+and split together, as are a mirrored copy and its original (``mirror_of``); a source whose
+labels give it a split (``split``: an imported HumanML3D motion's) keeps it, so that a model
+is never trained on the format's own test motions.
 
 With ratios ``(train, val, test)`` of the sources, about ``train^2`` of the results are in
 train and ``test^2`` in test; each split with a ratio above 0 gets at least one source of each
@@ -56,10 +58,11 @@ def _counts(n: int, ratios: Sequence[float]) -> list[int]:
 
 
 def split_sources(groups: Sequence[Sequence[str]], ratios: Sequence[float] = DEFAULT_RATIOS,
-                  seed: int = 0) -> dict[str, str]:
-    """Each source clip's split: each group (the actions, then the locomotions) shuffled with
-    ``seed`` and cut in ``ratios``; a name already split by an earlier group keeps its split."""
-    out: dict[str, str] = {}
+                  seed: int = 0, fixed: dict[str, str] | None = None) -> dict[str, str]:
+    """Each source clip's split: those ``fixed`` gives (a split the clip already has, such as an
+    imported HumanML3D motion's) kept; then each group (the actions, then the locomotions)
+    shuffled with ``seed`` and cut in ``ratios``; a name already split keeps its split."""
+    out: dict[str, str] = {k: v for k, v in (fixed or {}).items() if v in SPLITS}
     for k, group in enumerate(groups):
         names = sorted(set(n for n in group if n not in out))
         random.Random(f"{seed}:{k}").shuffle(names)
@@ -71,15 +74,23 @@ def split_sources(groups: Sequence[Sequence[str]], ratios: Sequence[float] = DEF
     return out
 
 
-def clip_sources(name: str, role: str, info: dict) -> tuple[list[str], list[str]]:
+def _source(labels: dict, prefix: str, own: str) -> tuple[str, str]:
+    """``(key, fixed split)`` of one source: a mirrored copy and its original are one source
+    (``mirror_of``), as are a take's windows (``split_from``); a ``split`` label fixes its split."""
+    key = labels.get(prefix + "mirror_of") or labels.get(prefix + "split_from") or own
+    split = labels.get(prefix + "split", "")
+    return key, split if split in SPLITS else ""
+
+
+def clip_sources(name: str, role: str, info: dict) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
     """``(actions, locomotions)``: the source clips a clip comes from (a spliced clip's two; a
-    source clip itself, or the take it was cut from)."""
+    source clip itself, or the take it was cut from), each ``(key, fixed split or "")``."""
     labels = info.get("labels", {})
     if role == "spliced":
         loco = info.get("locomotion") or labels.get("locomotion", "")
         action = info.get("action") or labels.get("action", "")
-        return [labels.get("action.split_from", action)], [labels.get("locomotion.split_from", loco)]
-    own = labels.get("split_from", name)
+        return [_source(labels, "action.", action)], [_source(labels, "locomotion.", loco)]
+    own = _source(labels, "", name)
     return ([own], []) if role == "action" else ([], [own])
 
 

@@ -17,7 +17,8 @@ The table::
 
 A phrase is words separated by spaces, each ``word/POS`` or ``word=lemma/POS``: ``word`` is
 what the caption says, ``lemma/POS`` its token (HumanML3D's tokens give nouns and verbs as
-lemmas, so ``walks=walk/VERB``), POS one of spaCy's universal tags (:data:`POS_TAGS`). So
+lemmas, so ``walks=walk/VERB``), POS one of spaCy's universal tags (:data:`POS_TAGS`); words
+are letters only, as the format's tokens are (its loaders split each at ``/``). So
 captions come with their tokens without a tagger. The ``key`` templates default to
 ``"{content}"`` (locomotion, action) and ``"{style}"``; a clip lacking a label its template
 names has no key (so no phrase) for that part. Several phrases for one key are paraphrases.
@@ -48,7 +49,7 @@ PARTS = ("locomotion", "action", "style")
 """The parts of a caption a table says: what the legs do, what the arms do, who moves."""
 
 _DEFAULT_KEYS = {"locomotion": "{content}", "action": "{content}", "style": "{style}"}
-_WORD = re.compile(r"^([A-Za-z][A-Za-z'-]*)(?:=([A-Za-z][A-Za-z'-]*))?/([A-Z]+)$")
+_WORD = re.compile(r"^([A-Za-z]+)(?:=([A-Za-z]+))?/([A-Z]+)$")
 _FIELD = re.compile(r"\{([^{}]+)\}")
 
 
@@ -73,7 +74,7 @@ def parse_phrase(text: str, where: str = "phrase") -> Phrase:
     for item in text.split():
         m = _WORD.fullmatch(item)
         if m is None:
-            raise SpecError(f"{where}: {item!r} is not word/POS or word=lemma/POS (in {text!r})")
+            raise SpecError(f"{where}: {item!r} is not word/POS or word=lemma/POS, words of letters only (in {text!r})")
         word, lemma, pos = m.group(1), m.group(2) or m.group(1), m.group(3)
         if pos not in POS_TAGS:
             raise SpecError(f"{where}: {item!r}: unknown part of speech {pos!r} (one of {', '.join(POS_TAGS)})")
