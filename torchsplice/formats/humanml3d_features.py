@@ -131,8 +131,9 @@ def _heading(positions: torch.Tensor, smooth: bool) -> torch.Tensor:
     features have it (see the module docstring)."""
     across = _across(positions, _R_HIP, _L_HIP)  # the reference's order: left minus right hip
     forward = _cross_up(across)
-    if smooth:
-        forward = gaussian_smooth(forward, 20.0, dim=-2)
+    if smooth:  # its Y is 0: only X and Z need smoothing
+        xz = gaussian_smooth(forward[..., ::2], 20.0, dim=-2)
+        forward = torch.stack((xz[..., 0], torch.zeros_like(xz[..., 0]), xz[..., 1]), dim=-1)
     return _turn_to_z(forward)
 
 
@@ -171,9 +172,8 @@ def _joint_rotations(positions: torch.Tensor, root: torch.Tensor) -> torch.Tenso
             if bool((1.0 + d < 1e-6).any()):
                 swing = torch.where(1.0 + d < 1e-6, quat_between(u.expand_as(v), v), swing)
             swing = swing / swing.norm(dim=-1, keepdim=True)
-            local = quat_mul(quat_conj(R), swing)
-            out[..., b, :] = local
-            R = quat_mul(R, local)
+            out[..., b, :] = quat_mul(quat_conj(R), swing)
+            R = swing  # R (R^-1 swing): the bone's global rotation is its swing
     return out
 
 
