@@ -30,10 +30,9 @@ sys.path.insert(0, str(REPO))
 
 from torchsplice.formats.exporters import export_clips  # noqa: E402
 from torchsplice.formats.humanml3d_exporter import HumanML3DExporter  # noqa: E402
-from torchsplice.formats.humanml3d_features import features_to_positions, positions_to_features  # noqa: E402
+from torchsplice.evaluation.humanml3d import folder_properties  # noqa: E402
 from torchsplice.formats.humanml3d_import import read_humanml3d_motion  # noqa: E402
 from torchsplice.specs import load_spec  # noqa: E402
-from torchsplice.specs.smpl import SMPL22_PARENTS  # noqa: E402
 from torchsplice.store.database import MotionDatabase  # noqa: E402
 
 
@@ -61,26 +60,6 @@ def _smpl_database(tmp: Path, clips: int, frames: int = 201) -> Path:
             m = base[i % len(base)]
             w.append(replace(m, name=f"clip{i:05d}", labels=dict(m.labels)), spec=spec)
     return db
-
-
-def _properties(folder: Path) -> dict:
-    worst = {"recover": 0.0, "bones": 0.0, "contacts": 1.0, **{f"derived{m}": 0.0 for m in (20, 40, 60)}}
-    lows = []
-    for f in sorted((folder / "new_joint_vecs").glob("*.npy")):
-        vecs = torch.from_numpy(np.load(f)).double()
-        joints = torch.from_numpy(np.load(folder / "new_joints" / f.name)).double()
-        worst["recover"] = max(worst["recover"], float((features_to_positions(vecs) - joints).abs().max()))
-        bones = torch.stack([(joints[:, c] - joints[:, p]).norm(dim=-1) for c, p in enumerate(SMPL22_PARENTS) if p >= 0], 1)
-        worst["bones"] = max(worst["bones"], float((bones - bones.mean(0)).abs().max()))
-        lows.append(joints[..., 1].amin(1))
-        again = positions_to_features(joints, normalize=False)
-        n = again.shape[0]
-        for m in (20, 40, 60):
-            if n > m:
-                worst[f"derived{m}"] = max(worst[f"derived{m}"], float((again[:n - m, :259] - vecs[:n - m, :259]).abs().max()))
-        worst["contacts"] = min(worst["contacts"], float((again[:, 259:] == vecs[:n, 259:]).double().mean()))
-    worst["floor_p5"] = float(torch.cat(lows).quantile(0.05))
-    return worst
 
 
 def bench_humanml3d(files: list[Path], clips: int = 2000) -> None:
@@ -127,7 +106,7 @@ def bench_humanml3d(files: list[Path], clips: int = 2000) -> None:
         t = time.perf_counter()
         result = export_clips(real, out=out, format="humanml3d", window=9.8)
         dt = time.perf_counter() - t
-        w = _properties(out)
+        w = folder_properties(out)
         print(f"humanml3d export of {n} real clips ({frames:,} frames; retargeted, windows of 9.8 s): {n / dt:,.1f} clips/s; "
               f"{result.summary}")
         print(f"humanml3d properties: positions from features vs new_joints {w['recover']:.1e} m [1e-5]; bones "

@@ -18,6 +18,7 @@ import pytest
 import torch
 
 from conftest import MOCAP, REPO, _require_mocap
+from rigs import armless_sample
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.bvh_write import write_bvh
 from torchsplice.formats.importer import import_bvh
@@ -154,17 +155,7 @@ def test_bad_targets_are_refused_in_one_line_naming_them(tmp_path):
 
 def test_a_skeleton_that_is_not_a_humanoid_is_refused_naming_what_it_lacks(tmp_path):
     """An armless rig as the source and as the target: one line each, naming the missing joints."""
-    m = sample_motions()[0]
-    sk = m.skeleton
-    keep = [j for j in range(sk.num_joints) if not any(w in sk.names[j] for w in ("Arm", "Hand", "Shoulder"))]
-    index = {j: n for n, j in enumerate(keep)}
-    armless = replace(sk, names=tuple(sk.names[j] for j in keep),
-                      parents=tuple(index[sk.parents[j]] if sk.parents[j] >= 0 else -1 for j in keep),
-                      offsets=sk.offsets[keep], channels=tuple(sk.channels[j] for j in keep),
-                      end_site_parents=tuple(index[p] for p in sk.end_site_parents if p in index),
-                      end_site_offsets=sk.end_site_offsets[[e for e, p in enumerate(sk.end_site_parents) if p in index]])
-    stump = replace(m, skeleton=armless, rotations=m.rotations[:, keep],
-                    translations=None if m.translations is None else m.translations[:, keep])
+    stump = armless_sample()
     rig = tmp_path / "stump.bvh"
     write_bvh(stump, rig)
     db = _sample_db(tmp_path)
