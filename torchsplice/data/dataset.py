@@ -152,8 +152,9 @@ class MotionDataset(Dataset):
     Items (``ds[i]``): a dict with each feature as a ``(T, ...)`` tensor and ``name`` (str),
     ``length`` (int, ``T``), ``fps`` (float), ``index`` (the clip's row in the database),
     ``start`` (the window's first frame within the clip, 0 for whole clips) and ``skeleton``
-    (int, the database skeleton the clip is on). Clips of several skeletons may be mixed;
-    filter with ``where={"skeleton": k}`` to batch J-dependent features.
+    (int, the database skeleton the clip is on). Clips of several skeletons may be mixed: batch
+    them with :meth:`batch_sampler` (each batch of one skeleton topology), or filter with
+    ``where={"skeleton": k}``.
 
     Attributes:
         path, features, window, stride, dtype, preload: as given (features as a tuple).
@@ -415,6 +416,22 @@ class MotionDataset(Dataset):
         where = [self._locate(i) for i in indices]
         return [self._item(c, start, n, f) for (c, start, n), f in zip(where, self._fetch(where))]
 
+    def batch_sampler(self, batch_size: int, shuffle: bool = False, seed: int = 0, drop_last: bool = False):
+        """A ``DataLoader`` ``batch_sampler`` whose batches each hold items of one skeleton
+        topology (so that :func:`collate_motion` can stack their joints), for a dataset whose
+        clips are on several: ``DataLoader(ds, batch_sampler=ds.batch_sampler(32, shuffle=True),
+        collate_fn=collate_motion)`` (:class:`~torchsplice.data.sampler.SkeletonBatchSampler`)."""
+        from .sampler import SkeletonBatchSampler
+
+        groups: dict[int, list[int]] = {}
+        topology: dict[int, int] = {}
+        for k in sorted(set(self._skel.tolist())):
+            topology[k] = next((g for g in topology if self.skeletons[g].same_topology(self.skeletons[k])), k)
+        skel = self._skel if self.window is None else self._skel[self._win_clip]
+        for i, k in enumerate(np.asarray(skel).tolist()):
+            groups.setdefault(topology[k], []).append(i)
+        return SkeletonBatchSampler(list(groups.values()), batch_size, shuffle, seed, drop_last)
+
     @property
     def skeleton(self) -> Skeleton:
         """The one skeleton every selected clip is on (an error if they are on several)."""
@@ -441,14 +458,13 @@ class MotionDataset(Dataset):
         exactly (Chan et al.'s pairwise update), so the result does not depend on
         ``batch_frames`` beyond rounding.
 
-        Normalise with ``(x - mean) / torch.where(std > eps, std, 1)`` (``eps`` e.g. 1e-6):
-        a dimension that never changes (a joint's fixed translation, Bandai Namco's still
-        ``joint_Root``) has ``std == 0``.
+        Normalise with ``(x - mean) / torch.where(std > eps, std, 1)`` (``eps`` e.g. 1e-6): a dimension
+        that never changes (a joint's fixed translation, Bandai Namco's ``joint_Root``) has ``std == 0``.
 
         The selected clips must share one skeleton topology and one unit (means of different
         joints or units mean nothing), and their values must be finite (a per-frame column is
         NaN on clips that do not give it, such as the sources copied into a spliced database):
-        otherwise :class:`DatasetError` names the skeletons or the clip, and says how to filter.
+        otherwise :class:`DatasetError` names the skeletons and clips, and says how to filter.
         """
         names = [f for f in (self.features if features is None else ([features] if isinstance(features, str) else features))
                  if f not in NOT_PER_FRAME]
@@ -462,9 +478,10 @@ class MotionDataset(Dataset):
         ks = sorted(set(self._skel.tolist()))
         for k in ks[1:]:
             if not self.skeletons[k].same_topology(self.skeletons[ks[0]]):
+                a, b = (str(self._names_arr[int(np.flatnonzero(self._skel == x)[0])]) for x in (ks[0], k))
                 raise DatasetError(f"{self.path}: statistics need clips of one skeleton topology; the selected clips "
-                                   f"are on skeletons {ks} (skeleton {k} against {ks[0]}: {self.skeletons[ks[0]].mismatch(self.skeletons[k])}); "
-                                   "filter with where={'skeleton': k}")
+                                   f"are on skeletons {ks} (skeleton {k}, clip {b!r}, against {ks[0]}, clip {a!r}: "
+                                   f"{self.skeletons[ks[0]].mismatch(self.skeletons[k])}); filter with where={{'skeleton': k}}")
         units = sorted({self.units.get(k, "") for k in ks})
         if len(units) > 1:
             raise DatasetError(f"{self.path}: statistics need clips of one unit; the selected clips are in {units} "
@@ -534,8 +551,9 @@ def collate_motion(items: Sequence[dict]) -> dict:
     - ``name``, ``index``, ``start``, ``skeleton``: lists (and any other non-tensor key as a list,
       e.g. ``labels``: a list of dicts).
 
-    Raises ``ValueError`` when a feature's per-frame shape differs between items (e.g. clips
-    on skeletons with different numbers of joints).
+    Raises :class:`DatasetError` (a ``ValueError``), one line naming two of the clips, when a
+    feature's per-frame shape differs between items (clips on skeletons with other joints: see
+    :meth:`MotionDataset.batch_sampler`).
     """
     items = list(items)
     if not items:
@@ -556,9 +574,13 @@ def collate_motion(items: Sequence[dict]) -> dict:
             shape = values[0].shape[1:]
             for it, v in zip(items, values):
                 if v.shape != (int(it["length"]), *shape):
-                    raise ValueError(
-                        f"cannot batch {key!r}: item {it.get('name', '?')!r} has shape {tuple(v.shape)}, "
-                        f"the first has (T, {', '.join(map(str, shape))}) (clips on different skeletons?)")
+                    other = (f"skeleton {it['skeleton']} against {items[0]['skeleton']}: "
+                             if "skeleton" in it and it["skeleton"] != items[0].get("skeleton") else "")
+                    raise DatasetError(
+                        f"cannot batch {key!r}: clip {it.get('name', '?')!r} has shape {tuple(v.shape)}, clip "
+                        f"{items[0].get('name', '?')!r} (T, {', '.join(map(str, shape))}) ({other}clips on skeletons of "
+                        "other joints); batch them with DataLoader(ds, batch_sampler=ds.batch_sampler(B), "
+                        "collate_fn=collate_motion), or filter with where={'skeleton': K}")
             x = torch.empty((B, T, *shape), dtype=values[0].dtype)
             for b, v in enumerate(values):
                 n = v.shape[0]

@@ -273,6 +273,12 @@ def _find_motion(lines: list[str], path) -> tuple[int, int, float, int]:
     if motion is None:
         if not any(l.strip() for l in lines):
             raise _error(path, "empty file")
+        first = next(i for i, l in enumerate(lines) if l.strip())
+        head = lines[first].split()[0]
+        if head.upper() != "HIERARCHY":  # neither section: some other kind of file
+            shown = head if len(head) <= 30 else head[:27] + "..."
+            raise _error(path, f"not a BVH file: it starts with {shown!r}, and a BVH file starts with HIERARCHY "
+                               "and holds a MOTION section", first + 1)
         raise _error(path, "missing MOTION section (truncated file?)", len(lines))
     i = motion + 1
 

@@ -326,6 +326,13 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         files, folder = folder_targets(out, layout, exporter, inputs=[database], overwrite=overwrite)
     else:
         single = exporter.single_file or (len(names) == 1 and named)
+        suffix = Path(out).suffix.lower()
+        if format is None and single and suffix and not Path(out).is_dir() and suffix not in {
+                e.suffix.lower() for e in _REGISTRY.values()}:
+            formats = ", ".join(f"{n} ({e.suffix})" if e.layout is Exporter.layout else f"{n} (a folder)"
+                                for n, e in _REGISTRY.items())
+            raise TorchspliceError(f"{out}: no export format writes {suffix} files; the formats are {formats} "
+                                   "({format} chooses one)", options=("format",))
         files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
     exporter.check()
     from .staging import staged_files

@@ -163,7 +163,9 @@ class NpzExport:
 
     def _describe(self, k: int) -> str:
         a = self._attrs[k]
-        return f"skeleton {k} ({a['spec'] or 'no spec'}, {self._ds.skeletons[k].num_joints} joints, {a['units'] or '?'})"
+        first = next(self._ds.names[c] for c in self._order if int(self._ds._skel[c]) == k)
+        return (f"skeleton {k} ({a['spec'] or 'no spec'}, {self._ds.skeletons[k].num_joints} joints, {a['units'] or '?'}; "
+                f"clip {first!r})")
 
     def check_one_skeleton(self, doing: str) -> None:
         """Refuse, in one line, clips of several skeleton topologies or units (``doing`` says why it matters)."""

@@ -35,7 +35,7 @@ from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
-PLAN_VERSION = 4
+PLAN_VERSION = 5
 MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
@@ -436,7 +436,8 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, re
     time-aligned ones first, each locomotion against each action; and, for the rest, the
     number of pairs per skip reason. Each reason is decided once per clip, per skeleton pair or
     per clip pair, and combined over the ``L x A`` grid by array operations; the first reason
-    wins, in this order: a clip onto itself, skeletons (``kinds``, :func:`_skeleton_pairs`:
+    wins, in this order: a clip onto itself (or a window onto another window of its take),
+    skeletons (``kinds``, :func:`_skeleton_pairs`:
     pairs on other skeletons are retargeted where they can be), too short, length ratio,
     damaged, not locomoting, no reference."""
     L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
@@ -463,6 +464,14 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, re
 
     if same:
         put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
+        # windows of one take (import --split: label split_from) are one performance, like a clip itself
+        takes: dict[str, int] = {}
+        tk_l = np.array([takes.setdefault(tl.labels[r].get("split_from", ""), len(takes)) if tl.labels[r].get("split_from")
+                         else -1 for r in L.tolist()], dtype=np.int64)
+        tk_a = np.array([takes.setdefault(ta.labels[r].get("split_from", ""), len(takes)) if ta.labels[r].get("split_from")
+                         else -2 for r in A.tolist()], dtype=np.int64)
+        if takes:
+            put(np.where(tk_l[:, None] == tk_a[None, :], code("windows of one take are not spliced onto each other"), 0))
     kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
     xs, ys = np.unique(kl).tolist(), np.unique(ka).tolist()
     by_pair = np.zeros((max(xs) + 1, max(ys) + 1), dtype=np.int64)

@@ -1,0 +1,112 @@
+"""What a newcomer hit in the first hour (the issue "The first hour"), item by item; each test
+failed before its fix.
+
+- 5: a dataset of clips on several skeletons batches with ``ds.batch_sampler(B)`` (each batch one
+  topology), and mixing them in one batch is one line naming two clips and the way out;
+- 7: windows of one take (``import --split``) are not spliced onto each other;
+- 9: a Markdown file given as BVH says it is not BVH; ``-o walk.fbx`` names the formats there
+  are; a mistyped command or choice gets "did you mean"; a skeleton mismatch names a clip.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cli_helpers import error_line, run
+from torchsplice.cli import main
+from torchsplice.data import DatasetError, MotionDataset, collate_motion
+from torchsplice.store.database import MotionDatabase
+
+BANDAI = "bandai_namco_research_motiondataset"
+
+
+@pytest.fixture(scope="module")
+def mixed(mocap_dir, tmp_path_factory) -> Path:
+    """Two Bandai Namco clips (22 joints) and the CMU walk (31 joints)."""
+    out = tmp_path_factory.mktemp("first_hour") / "mixed.h5"
+    files = [mocap_dir / BANDAI / "dataset-1_walk_normal_001.bvh", mocap_dir / BANDAI / "dataset-1_bye_normal_001.bvh",
+             mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"]
+    assert main(["import", *map(str, files), "-o", str(out), "--units", "cm", "-q"]) == 0
+    return out
+
+
+def test_5_a_mixed_dataset_batches_one_skeleton_topology_at_a_time(mixed):
+    from torch.utils.data import DataLoader
+
+    ds = MotionDataset(mixed, window=30, stride=30, features=("rotations",))
+    with pytest.raises(DatasetError) as info:
+        collate_motion([ds[0], ds[len(ds) - 1]])
+    text = str(info.value)
+    assert "\n" not in text and "cmu_12_01_walk" in text and "batch_sampler" in text and "where={'skeleton'" in text
+    sampler = ds.batch_sampler(4, shuffle=True, seed=3)
+    seen = []
+    for batch in DataLoader(ds, batch_sampler=sampler, collate_fn=collate_motion):
+        joints = {ds.skeletons[k].num_joints for k in batch["skeleton"]}
+        assert len(joints) == 1 and batch["rotations"].shape[2] == joints.pop()
+        seen += list(zip(batch["index"], batch["start"]))
+    assert len(seen) == len(ds) == len(set(seen))  # every item once an epoch
+    first, again = [list(b) for b in sampler], [list(b) for b in sampler]
+    assert first != again and len(first) == len(sampler)
+    assert sorted(sum(first, [])) == sorted(sum(again, [])) == list(range(len(ds)))
+    fixed = ds.batch_sampler(4, shuffle=True, seed=3)
+    assert [list(b) for b in fixed] == [list(b) for b in ds.batch_sampler(4, shuffle=True, seed=3)]
+    assert all(len(b) == 4 for b in ds.batch_sampler(4, drop_last=True))
+
+
+def test_7_windows_of_one_take_are_not_spliced_onto_each_other(sample_db, tmp_path, capsys):
+    bvh = tmp_path / "bvh"
+    assert main(["export", str(sample_db), "walk_straight", "jog", "-o", str(bvh), "-q"]) == 0
+    db = tmp_path / "win.h5"
+    assert main(["import", str(bvh), "-o", str(db), "--split", "2", "--split-overlap", "0.5", "-q"]) == 0
+    out = tmp_path / "sp.h5"
+    rc, stdout, _ = run(capsys, "splice-all", db, "-o", out, "--locomotions", "walk_straight*", "--actions",
+                        "walk_straight*,jog*")
+    assert rc == 0 and "windows of one take are not spliced onto each other" in stdout
+    with MotionDatabase.open(out) as d:
+        table = d.clip_table()
+        pairs = [(lab["locomotion.split_from"], lab["action.split_from"]) for lab in table.labels]
+    assert pairs and all(a != b for a, b in pairs)
+    assert {b for _, b in pairs} == {"jog"}  # every walk window onto every jog window, none onto a walk window
+
+
+def test_9_a_file_that_is_not_bvh_says_so(tmp_path, capsys):
+    md = tmp_path / "README.md"
+    md.write_text("# My clips\n\nSome notes.\n")
+    rc, _, err = run(capsys, "import", md, "-o", tmp_path / "x.h5")
+    assert rc == 2 and "README.md:1: not a BVH file: it starts with '#'" in err and "MOTION section (truncated" not in err
+    cut = tmp_path / "cut.bvh"
+    cut.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n")
+    rc, _, err = run(capsys, "import", cut, "-o", tmp_path / "y.h5")
+    assert rc == 2 and "missing MOTION section (truncated file?)" in err
+
+
+def test_9_an_output_suffix_no_format_writes_names_the_formats(sample_db, tmp_path, capsys):
+    rc, _, err = run(capsys, "export", sample_db, "walk_straight", "-o", tmp_path / "walk.fbx")
+    line = error_line(err)
+    assert rc == 2 and "no export format writes .fbx files" in line and "bvh (.bvh)" in line and "--format" in line
+    rc, _, err = run(capsys, "export", sample_db, "walk_straight", "-o", tmp_path / "walk.fbx", "--format", "bvh")
+    assert rc == 2 and "the output is BVH, so its name must end in .bvh" in error_line(err)
+
+
+def test_9_a_mistyped_command_or_choice_gets_did_you_mean(capsys):
+    with pytest.raises(SystemExit):
+        main(["splce-all", "a.h5", "-o", "b.h5"])
+    assert "did you mean 'splice-all'?" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["export", "a.h5", "--all", "-o", "x", "--format", "hmanml3d"])
+    assert "did you mean 'humanml3d'?" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["zzz"])
+    assert "did you mean" not in capsys.readouterr().err
+
+
+def test_9_a_skeleton_mismatch_names_a_clip_of_each_skeleton(mixed, tmp_path, capsys):
+    rc, _, err = run(capsys, "export", mixed, "--all", "--packed", "-o", tmp_path / "all.npz")
+    line = error_line(err)
+    assert rc == 2 and "cmu_12_01_walk" in line and "dataset-1_walk_normal_001" in line, line
+    ds = MotionDataset(mixed, features=("rotations",))
+    with pytest.raises(DatasetError) as info:
+        ds.statistics(("rotations",))
+    assert "cmu_12_01_walk" in str(info.value) and "dataset-1_walk_normal_001" in str(info.value), str(info.value)
