@@ -110,3 +110,24 @@ def test_9_a_skeleton_mismatch_names_a_clip_of_each_skeleton(mixed, tmp_path, ca
     with pytest.raises(DatasetError) as info:
         ds.statistics(("rotations",))
     assert "cmu_12_01_walk" in str(info.value) and "dataset-1_walk_normal_001" in str(info.value), str(info.value)
+
+
+def test_8_evaluate_writes_every_row_for_scripts_and_says_where_its_tables_stop(sample_db, tmp_path, capsys):
+    import csv
+    import json
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
+    rc, out, _ = run(capsys, "evaluate", spliced, "-o", tmp_path / "r.md", "--no-pictures", "--max-rows", "4",
+                     "--csv", tmp_path / "r.csv", "--json", tmp_path / "r.json")
+    assert rc == 0 and "r.csv" in out and "r.json" in out
+    rows = list(csv.DictReader(open(tmp_path / "r.csv")))
+    doc = json.loads((tmp_path / "r.json").read_text())
+    with MotionDatabase.open(spliced) as d:
+        names = set(d.names)
+    assert {r["name"] for r in rows} == {c["name"] for c in doc["clips"]} == names and len(rows) == len(names) == 25
+    assert set(doc["aggregates"]) == {"splice"} and doc["aggregates"]["splice"]["clips"] == 25
+    assert float(rows[0]["foot_skate"]) == pytest.approx(doc["clips"][0]["foot_skate"])
+    assert "21 more (the table stops at 4 rows; every row: evaluate's csv or json)" in (tmp_path / "r.md").read_text()
+    rc, _, err = run(capsys, "evaluate", spliced, "-o", tmp_path / "s.md", "--csv", tmp_path / "r.txt")
+    assert rc == 2 and "must end in .csv" in error_line(err) and not (tmp_path / "s.md").exists()

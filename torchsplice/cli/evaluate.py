@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .base import Command, register_command
-from .common import add_output_flags, declared, locked, output, positive_int
+from .common import add_output_flags, declared, locked, output, positive_int, progress
 
 REPORT = "torchsplice.evaluation.report"
 
@@ -23,16 +23,24 @@ class Evaluate(Command):
         s.add_argument("--no-pictures", action="store_true", default=not declared(REPORT, "evaluate_database.pictures"),
                        help="tables only")
         s.add_argument("--max-rows", type=positive_int, default=max_rows, metavar="N",
-                       help=f"per-clip rows per method (default {max_rows})")
+                       help=f"per-clip rows per method in the report (default {max_rows}; --csv and --json hold every row)")
+        s.add_argument("--csv", metavar="FILE", default=None, help="also write every clip's row as CSV, for scripts")
+        s.add_argument("--json", metavar="FILE", default=None,
+                       help="also write the aggregates and every clip's row as JSON, for scripts")
         add_output_flags(s, force_help="overwrite an existing report")
 
     def run(self, args) -> int:
         from ..evaluation.report import evaluate_database
 
+        from ..store.atomic import check_output
+
         out = output(args, "report")
+        tables = [None if f is None else check_output(f, (suffix,), what, inputs=[args.database, out], overwrite=args.force)
+                  for f, suffix, what in ((args.csv, ".csv", "a CSV file"), (args.json, ".json", "a JSON file"))]
         with locked(out, args):
             agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
-                                    max_rows=args.max_rows)
+                                    max_rows=args.max_rows, csv=tables[0], json=tables[1],
+                                    progress=lambda it, total, desc: progress(it, total, desc, args.quiet, unit="batch"))
         if not args.quiet:
             from ..store.database import MotionDatabase
 
@@ -44,7 +52,7 @@ class Evaluate(Command):
                       if a["gt_error"] is not None else "")
                 print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f} {u}/s, "
                       f"posture kept {a['posture']:.2f} {u}{gt}")
-            print(f"wrote {out}")
+            print(f"wrote {out}" + "".join(f", {t}" for t in tables if t is not None))
         return 0
 
 

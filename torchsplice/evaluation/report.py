@@ -149,11 +149,15 @@ def _fmt(v, digits=2) -> str:
     return f"{v:.{digits}f}"
 
 
-def evaluate_database(path, output, sources=None, pictures: bool = True, max_rows: int = 60, examples: int = 3) -> dict:
+def evaluate_database(path, output, sources=None, pictures: bool = True, max_rows: int = 60, examples: int = 3,
+                      csv=None, json=None, progress=None) -> dict:
     """Write the Markdown report for the splice job's output ``path`` to ``output``.
 
     Returns the aggregate figures per method (also in the report). Pictures (filmstrips and
     alignment plots of a few example pairs) go to ``<output stem>_files/`` beside the report.
+    ``csv`` and ``json`` (paths, or ``None``) get every clip's row, the tables' ``max_rows`` cut
+    aside (JSON: ``{"database", "units", "aggregates", "clips"}``, NaN as ``null``); each is
+    written atomically. ``progress(iterable, total, description)`` wraps the batches measured.
     """
     path, output = Path(path), Path(output)
     with MotionDatabase.open(path) as db:
@@ -165,7 +169,8 @@ def evaluate_database(path, output, sources=None, pictures: bool = True, max_row
             raise TorchspliceError(f"{path}: holds no spliced clip")
         srcs = _source_dbs(db, sources)
         try:
-            return _evaluate(db, t, rows, _Sources(srcs, db), path, output, pictures, max_rows, examples)
+            return _evaluate(db, t, rows, _Sources(srcs, db), path, output, pictures, max_rows, examples,
+                             (csv, json), progress)
         finally:
             for s in srcs:
                 s.close()
@@ -180,7 +185,8 @@ def _method_order(names) -> list[str]:
     return sorted(names, key=lambda m: (known.index(m), "") if m in known else (len(known), m))
 
 
-def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, examples) -> dict:
+def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, examples, tables=(None, None),
+              progress=None) -> dict:
     k = int(t["skeleton"][rows[0]])
     sk = db.skeletons[k]
     spec = db.spec(k)
@@ -192,38 +198,38 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
     per_clip: list[dict] = []
     captured_names = set()
     moved: dict = {}  # action name -> the action retargeted onto the results' skeleton
-    for method in methods:
-        mrows = [i for i in rows if t["method"][i] == method]
-        for b in range(0, len(mrows), 64):
-            chunk = mrows[b:b + 64]
-            results = [db.read(i) for i in chunk]
-            locos = [sources.get(str(t["locomotion"][i])) for i in chunk]
-            acts = [_action_as_spliced(sources, str(t["action"][i]), r, (path, k, spec, units_k), moved)
-                    for i, r in zip(chunk, results)]
-            captured_names.update(m.name for m in locos + acts)
-            fps = results[0].fps
-            m = _metrics(results, locos, acts, roles, fps)
-            caps = [_find_capture(spec, lo, ac, candidates) for lo, ac in zip(locos, acts)]
-            gt, bound = [None] * len(chunk), [None] * len(chunk)
-            have = [n for n, c in enumerate(caps) if c is not None]
-            if have:
-                got, want = [results[n] for n in have], [sources.get(caps[n]) for n in have]
-                err, best = upper_body_error(got, want, roles), best_posture_error(got, want, roles)
-                for n, e, o in zip(have, err.tolist(), best.tolist()):
-                    gt[n], bound[n] = e, o
-            stand = _standing_rows(db, t, chunk, results, acts, roles)
-            moves = _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved)
-            for n, i in enumerate(chunk):
-                per_clip.append({
-                    "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
-                    "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
-                    "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
-                    "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
-                    "gt_bound": bound[n],
-                    "loco_type": locomotion_type(locos[n]),
-                    **stand.get(n, {"timing": "timewarp"}),
-                    **moves.get(n, {}),
-                })
+    batches = [(method, chunk) for method in methods
+               for mrows in ([i for i in rows if t["method"][i] == method],) for chunk in
+               (mrows[b:b + 64] for b in range(0, len(mrows), 64))]
+    for method, chunk in (progress(batches, len(batches), "evaluating") if progress else batches):
+        results = [db.read(i) for i in chunk]
+        locos = [sources.get(str(t["locomotion"][i])) for i in chunk]
+        acts = [_action_as_spliced(sources, str(t["action"][i]), r, (path, k, spec, units_k), moved)
+                for i, r in zip(chunk, results)]
+        captured_names.update(m.name for m in locos + acts)
+        fps = results[0].fps
+        m = _metrics(results, locos, acts, roles, fps)
+        caps = [_find_capture(spec, lo, ac, candidates) for lo, ac in zip(locos, acts)]
+        gt, bound = [None] * len(chunk), [None] * len(chunk)
+        have = [n for n, c in enumerate(caps) if c is not None]
+        if have:
+            got, want = [results[n] for n in have], [sources.get(caps[n]) for n in have]
+            err, best = upper_body_error(got, want, roles), best_posture_error(got, want, roles)
+            for n, e, o in zip(have, err.tolist(), best.tolist()):
+                gt[n], bound[n] = e, o
+        stand = _standing_rows(db, t, chunk, results, acts, roles)
+        moves = _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved)
+        for n, i in enumerate(chunk):
+            per_clip.append({
+                "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
+                "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
+                "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
+                "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
+                "gt_bound": bound[n],
+                "loco_type": locomotion_type(locos[n]),
+                **stand.get(n, {"timing": "timewarp"}),
+                **moves.get(n, {}),
+            })
     captured = [sources.get(n) for n in sorted(captured_names)]
     lo, hi = _captured_phase_band(captured, roles)
     for c in per_clip:
@@ -234,7 +240,36 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
     text = _markdown(path, spec, units, methods, aggregates, per_clip, (lo, hi), figures, max_rows, len(captured))
     with atomic_path(output) as tmp:
         Path(tmp).write_text(text)
+    _write_rows(tables, path, units, aggregates, per_clip)
     return aggregates
+
+
+def _write_rows(tables, path, units, aggregates, per_clip) -> None:
+    """Every clip's row as CSV and/or JSON (``tables``: their paths or ``None``), atomically."""
+    import csv as csv_module
+    import io
+    import json as json_module
+    import math
+
+    def clean(v):
+        return None if isinstance(v, float) and not math.isfinite(v) else v
+
+    csv_path, json_path = tables
+    if csv_path is not None:
+        columns = list(dict.fromkeys(k for c in per_clip for k in c))
+        out = io.StringIO()
+        w = csv_module.DictWriter(out, columns, lineterminator="\n")
+        w.writeheader()
+        for c in per_clip:
+            w.writerow({k: "" if clean(v) is None else v for k, v in c.items()})
+        with atomic_path(csv_path) as tmp:
+            Path(tmp).write_text(out.getvalue())
+    if json_path is not None:
+        doc = {"database": str(path), "units": units,
+               "aggregates": {m: {k: clean(v) for k, v in a.items()} for m, a in aggregates.items()},
+               "clips": [{k: clean(v) for k, v in c.items()} for c in per_clip]}
+        with atomic_path(json_path) as tmp:
+            Path(tmp).write_text(json_module.dumps(doc, indent=1, allow_nan=False))
 
 
 def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, moved: dict) -> Motion:
@@ -500,6 +535,7 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
                          f" | {_fmt(c['posture'])} | "
                          f"{md(c['capture'] or '-')} | {_fmt(c['gt_error'])} |")
         if len(cs) > max_rows:
-            lines.append(f"| ... {len(cs) - max_rows} more | | | | | | |")
+            lines.append(f"| ... {len(cs) - max_rows} more (the table stops at {max_rows} rows; every row: "
+                         "evaluate's csv or json) | | | | | | |")
         lines.append("")
     return "\n".join(lines)
