@@ -131,3 +131,27 @@ def test_8_evaluate_writes_every_row_for_scripts_and_says_where_its_tables_stop(
     assert "21 more (the table stops at 4 rows; every row: evaluate's csv or json)" in (tmp_path / "r.md").read_text()
     rc, _, err = run(capsys, "evaluate", spliced, "-o", tmp_path / "s.md", "--csv", tmp_path / "r.txt")
     assert rc == 2 and "must end in .csv" in error_line(err) and not (tmp_path / "s.md").exists()
+
+
+def test_3_export_and_info_take_the_selection_language(sample_db, tmp_path, capsys):
+    import json
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q", "--method", "splice,naive"]) == 0
+    rc, out, _ = run(capsys, "export", spliced, "role:spliced", "-o", tmp_path / "all")
+    assert rc == 0 and len(list((tmp_path / "all").glob("*.bvh"))) == 50
+    rc, out, _ = run(capsys, "export", spliced, "--all", "--select", "method:naive", "--select", "action:wave",
+                     "-o", tmp_path / "naive_waves")
+    names = sorted(f.stem for f in (tmp_path / "naive_waves").glob("*.bvh"))
+    assert rc == 0 and len(names) == 5 and all(n.endswith("+wave.naive") for n in names), names
+    rc, _, _ = run(capsys, "export", spliced, "walk_curve+wave", "jog+*", "-o", tmp_path / "mix", "--format", "npz")
+    assert rc == 0 and len(list((tmp_path / "mix").glob("*.npz"))) == 1 + 10  # one named, jog's ten by a glob
+    rc, _, err = run(capsys, "export", spliced, "nothing*", "-o", tmp_path / "none")
+    assert rc == 2 and "'nothing*' selects no clip" in error_line(err) and not (tmp_path / "none").exists()
+    rc, out, _ = run(capsys, "info", spliced, "label:action.content=punch", "--json", "--select", "method:splice")
+    assert rc == 0 and [c["name"] for c in json.loads(out)["clips"]] == [
+        "walk_straight+punch", "walk_curve+punch", "turn_sharp+punch", "sidestep+punch", "jog+punch"]
+    rc, out, _ = run(capsys, "info", spliced, "--limit", "3")
+    lines = out.splitlines()
+    assert rc == 0 and lines[-1] == "... 47 more clips (--limit; select some with CLIP or --select)"
+    assert sum(1 for ln in lines if "+" in ln.split()[0]) == 3

@@ -130,6 +130,12 @@ class Info(Command):
 
     def add_arguments(self, s) -> None:
         s.add_argument("database", help="motion database (.h5)")
+        s.add_argument("clips", nargs="*", metavar="CLIP",
+                       help="only these clips: names, or selectors ('role:spliced', 'method:naive', 'walk_*')")
+        s.add_argument("--select", action="append", metavar="SELECT", default=None,
+                       help="only clips this selector selects (repeat: all of them)")
+        s.add_argument("--limit", type=int, default=None, metavar="N",
+                       help="list at most N clips (the rest counted); default all (--json: all)")
         s.add_argument("--json", action="store_true", help="machine-readable output")
 
     def run(self, args) -> int:
@@ -137,6 +143,16 @@ class Info(Command):
 
         with MotionDatabase.open(args.database) as db:
             s = db.summary()
+            if args.clips or args.select:
+                from ..store.select import names_or_selector, select_clips
+
+                table = db.clip_table()
+                names, chosen = names_or_selector(table, args.clips) if args.clips else (None, None)
+                selectors = list(args.select or []) + ([chosen] if chosen else [])
+                keep = set(names) if names is not None else set(table.names)
+                if selectors:
+                    keep &= {table.names[r] for r in select_clips(table, selectors, "selector", str(args.database))}
+                s["clips"] = [c for c in s["clips"] if c["name"] in keep]
         if args.json:
             print(json.dumps(s, indent=2))
             return 0
@@ -155,9 +171,12 @@ class Info(Command):
         if s["clips"]:
             w = max(4, max(len(c["name"]) for c in s["clips"]))
             print(f"{'name':<{w}}  {'frames':>6}  {'fps':>5}  {'sec':>6}  {'role':<10}  labels")
-            for c in s["clips"]:
+            shown = s["clips"] if args.limit is None else s["clips"][:max(args.limit, 0)]
+            for c in shown:
                 print(f"{c['name']:<{w}}  {c['frames']:>6}  {c['fps']:>5g}  {c['duration_s']:>6.2f}  "
                       f"{c['role'] or '-':<10}  {_labels_text(c['labels'])}")
+            if len(shown) < len(s["clips"]):
+                print(f"... {len(s['clips']) - len(shown)} more clips (--limit; select some with CLIP or --select)")
         return 0
 
 

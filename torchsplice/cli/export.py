@@ -35,7 +35,9 @@ class Export(Command):
 
         formats = available_exporters()
         s.add_argument("database", help="motion database (.h5)")
-        s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names")
+        s.add_argument("clips", nargs="*", metavar="CLIP",
+                       help="clip names, or selectors of the selection language ('role:spliced', 'method:naive', "
+                            "'label:action.style=old', 'walk_*'), any of which selects a clip")
         s.add_argument("-o", "--output", required=True, help="file to write (one clip, --packed), or folder (several clips)")
         s.add_argument("--all", action="store_true", help="export every clip (or every clip of --skeleton)")
         s.add_argument("--format", choices=formats, default=None,
@@ -65,6 +67,8 @@ class Export(Command):
                        help=f"humanml3d: the seed of the split (default: {h['split_seed']})")
         s.add_argument("--paraphrases", type=int, default=None, metavar="N",
                        help=f"humanml3d: captions per clip, at most (default: {h['paraphrases']})")
+        s.add_argument("--select", action="append", metavar="SELECT", default=None,
+                       help="only clips this selector selects (repeat: all of them), as splice-all's --locomotions read")
         s.add_argument("--skeleton", default=None, metavar="K[,K...]",
                        help="only clips on these skeletons (ids as `info` lists them)")
         add_output_flags(s)
@@ -81,7 +85,15 @@ class Export(Command):
                 skeletons = sorted({int(k) for k in args.skeleton.split(",") if k.strip()})
             except ValueError:
                 raise TorchspliceError(f"--skeleton: expected skeleton ids such as 0 or 0,1, got {args.skeleton!r}") from None
-        result = export_clips(args.database, None if args.all else args.clips, out=args.output, format=args.format,
+        clips, select = None, list(args.select or [])
+        if not args.all:
+            from ..store.database import MotionDatabase
+            from ..store.select import names_or_selector
+
+            with MotionDatabase.open(args.database) as db:
+                clips, chosen = names_or_selector(db.clip_table(), args.clips)
+            select += [chosen] if chosen else []
+        result = export_clips(args.database, clips, out=args.output, format=args.format, select=select or None,
                               overwrite=args.force, skeletons=skeletons, command=command_line(args),
                               packed=args.packed, features=args.features, captions=args.captions, mirror=args.mirror,
                               window=args.window, split_ratios=args.split_ratios, split_seed=args.split_seed,

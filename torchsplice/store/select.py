@@ -30,7 +30,7 @@ import numpy as np
 from ..core.errors import TorchspliceError
 from .table import ClipTable
 
-__all__ = ["select_clips", "parse_selector"]
+__all__ = ["select_clips", "parse_selector", "names_or_selector"]
 
 
 def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, str, str]]:
@@ -133,3 +133,16 @@ def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, so
         raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
                                options=_option(what))
     return np.flatnonzero(keep).tolist()
+
+
+def names_or_selector(table: ClipTable, items: Sequence[str]) -> tuple[list[str] | None, str | None]:
+    """What a command's clip arguments mean: ``(names, None)`` when every item is a clip name of
+    ``table`` (kept in their order), else ``(None, selector)``: the items as alternatives of one
+    selector (``export db.h5 'role:spliced'``, ``render db.h5 'walk_*'``), clip names among them
+    matched exactly. A selector that selects nothing is refused by :func:`select_clips`."""
+    known = set(table.names)
+    items = list(items)
+    if all(i in known for i in items):
+        return items, None
+    escaped = [re.sub(r"([*?\[])", r"[\1]", i) if i in known else i for i in items]
+    return None, ",".join(escaped)
