@@ -155,3 +155,16 @@ def test_3_export_and_info_take_the_selection_language(sample_db, tmp_path, caps
     lines = out.splitlines()
     assert rc == 0 and lines[-1] == "... 47 more clips (--limit; select some with CLIP or --select)"
     assert sum(1 for ln in lines if "+" in ln.split()[0]) == 3
+
+
+def test_11_long_titles_fit_their_panels_on_two_lines():
+    from torchsplice.viz.render import fit_title
+
+    assert fit_title("walk_curve+carry_box", 2.2) == ("walk_curve+carry_box", 10)
+    text, size = fit_title("dataset-2_walk-turn-left_normal_025+dataset-2_wave-right-hand_normal_001", 2.2)
+    room = int(2.2 * 72 / (0.6 * size))
+    lines = text.split("\n")
+    assert size < 10 and len(lines) == 2 and all(len(ln) <= room for ln in lines)
+    assert lines[0].startswith("dataset-2_walk") and lines[0].endswith("_025+") and lines[1].endswith("normal_001")
+    text, _ = fit_title("x" * 500, 1.0)
+    assert all(len(ln) <= int(72 / (0.6 * 8)) for ln in text.split("\n"))

@@ -458,7 +458,8 @@ class _Panel:
                                            markeredgewidth=0.8 * lw, zorder=6))
         x0, y0, w, h = rect
         if title is not None:
-            fig.text(x0 + w / 2, y0 + h + 0.02 * h, title, ha="center", va="bottom", fontsize=10)
+            text, size = fit_title(title, scene.panel_w)
+            fig.text(x0 + w / 2, y0 + h + 0.02 * h, text, ha="center", va="bottom", fontsize=size, linespacing=1.0)
         # the filmstrip labels every cell with its time; the animation draws one time label for
         # the whole figure (text is the costliest artist to draw) and "(end)" under a held clip
         self.label = fig.text(x0 + w / 2, y0 - 0.015 * h, "" if not animated else "(end)", ha="center", va="top",
@@ -531,6 +532,32 @@ def _legend(fig, x_in: float, y_in: float) -> None:
                               color=_COLORS[side], lw=2.2, solid_capstyle="round"))
         fig.text((x + 0.28) / W, y_in / H, text, ha="left", va="center", fontsize=8, color="#666666")
         x += 1.05
+
+
+def fit_title(title: str, width_in: float, size: int = 10) -> tuple[str, int]:
+    """``(text, font size)`` of a panel's title that fits ``width_in`` inches: as it is when it
+    fits; else on two lines in a smaller font, broken after a ``+`` (a spliced clip's sources) or
+    a space where there is one, each line shortened in its middle (``dataset-2_walk…normal_025``)
+    if it is still too long, so that neighbouring titles never overlap."""
+    def per_line(points: int) -> int:
+        return max(6, int(width_in * 72.0 / (0.6 * points)))
+
+    if len(title) <= per_line(size):
+        return title, size
+    small = max(6, size - 2)
+    room = per_line(small)
+    cut = max((title.rfind(c, 0, len(title) // 2 + room // 2) for c in "+ "), default=-1)
+    lines = [title[:cut + 1], title[cut + 1:]] if 0 < cut < len(title) - 1 else [title]
+    if len(lines) == 1 and len(title) > room:
+        lines = [title[:len(title) // 2], title[len(title) // 2:]]
+
+    def shorten(line: str) -> str:
+        if len(line) <= room:
+            return line
+        keep = room - 1
+        return line[:(keep + 1) // 2] + "\u2026" + line[len(line) - keep // 2:]
+
+    return "\n".join(shorten(line.strip()) for line in lines), small
 
 
 def _animation_figure(scene: _Scene, clips: list[_Clip], titles: list[str], dpi: int, grid_dots: bool = False):
