@@ -27,7 +27,8 @@ _extras="${TORCHSPLICE_EXTRAS:-test}"
 # The stamp holds the pyproject.toml checksum and the extras installed: a later run with fewer
 # extras (the demo after the tests) reuses the environment instead of reinstalling.
 _stamp="$_root/.venv/.torchsplice-installed"
-_sum="$(cksum < "$_root/pyproject.toml")"
+# (the install mode is part of it: "compat" below)
+_sum="$(cksum < "$_root/pyproject.toml") compat"
 _have="$(cat "$_stamp" 2>/dev/null || true)"
 _install=0
 if [ "${_have% *}" != "$_sum" ]; then
@@ -42,7 +43,10 @@ else
 fi
 if [ "$_install" = 1 ]; then
   echo "setup: installing torchsplice and its dependencies" >&2
-  _pip install -e "$_root[$_extras]"
+  # compat: the repository's folder goes on sys.path, so that a script or `python -m` run from the
+  # clone's parent folder (itself named torchsplice) imports the package, not the clone as an empty
+  # namespace package ("cannot import name '__version__' from 'torchsplice'")
+  _pip install -e "$_root[$_extras]" --config-settings editable_mode=compat
   echo "$_sum $_extras" > "$_stamp"
 fi
 # compile the CPU splicer's kernels once per version of their sources (numba caches them)

@@ -168,3 +168,21 @@ def test_11_long_titles_fit_their_panels_on_two_lines():
     assert lines[0].startswith("dataset-2_walk") and lines[0].endswith("_025+") and lines[1].endswith("normal_001")
     text, _ = fit_title("x" * 500, 1.0)
     assert all(len(ln) <= int(72 / (0.6 * 8)) for ln in text.split("\n"))
+
+
+def test_12_the_package_imports_from_the_clones_parent_folder(tmp_path):
+    """Run from the folder holding a clone named torchsplice, Python sees that folder as an empty
+    namespace package unless the environment puts the repository itself on sys.path (the setup's
+    compat editable install); then the real package wins."""
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parents[1]
+    (tmp_path / "torchsplice").mkdir()  # a clone's folder: no __init__.py at its top
+    (tmp_path / "torchsplice" / "README.md").write_text("a clone")
+    env = {"PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", "from torchsplice import __version__; import torchsplice; "
+                          "print(__version__, torchsplice.__file__)"], cwd=tmp_path, env=env, capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split()[1] == str(repo / "torchsplice" / "__init__.py")
