@@ -27,8 +27,8 @@ _extras="${TORCHSPLICE_EXTRAS:-test}"
 # The stamp holds the pyproject.toml checksum and the extras installed: a later run with fewer
 # extras (the demo after the tests) reuses the environment instead of reinstalling.
 _stamp="$_root/.venv/.torchsplice-installed"
-# (the install mode is part of it: "compat" below)
-_sum="$(cksum < "$_root/pyproject.toml") compat"
+# (with a mark of how it installs: "repository-pth", the .pth below)
+_sum="$(cksum < "$_root/pyproject.toml") repository-pth"
 _have="$(cat "$_stamp" 2>/dev/null || true)"
 _install=0
 if [ "${_have% *}" != "$_sum" ]; then
@@ -43,10 +43,12 @@ else
 fi
 if [ "$_install" = 1 ]; then
   echo "setup: installing torchsplice and its dependencies" >&2
-  # compat: the repository's folder goes on sys.path, so that a script or `python -m` run from the
-  # clone's parent folder (itself named torchsplice) imports the package, not the clone as an empty
-  # namespace package ("cannot import name '__version__' from 'torchsplice'")
-  _pip install -e "$_root[$_extras]" --config-settings editable_mode=compat
+  _pip install -e "$_root[$_extras]"
+  # the repository's folder on sys.path too (after everything else), so that a script or `python -m`
+  # run from the clone's parent folder (itself named torchsplice) imports the package, not the clone
+  # as an empty namespace package ("cannot import name '__version__' from 'torchsplice'"): a regular
+  # package anywhere on sys.path wins over a namespace one
+  echo "$_root" > "$(python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/torchsplice-repository.pth"
   echo "$_sum $_extras" > "$_stamp"
 fi
 # compile the CPU splicer's kernels once per version of their sources (numba caches them)

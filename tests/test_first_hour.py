@@ -186,3 +186,33 @@ def test_12_the_package_imports_from_the_clones_parent_folder(tmp_path):
                          text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[1] == str(repo / "torchsplice" / "__init__.py")
+
+
+def test_training_splits_by_source_clip_in_the_dataset_match_the_export(sample_db, tmp_path):
+    import csv
+
+    from torchsplice.formats.exporters import export_clips
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
+    ratios = (0.4, 0.3, 0.3)
+    parts = {s: MotionDataset(spliced, split=s, split_ratios=ratios, split_seed=5, features=("labels",))
+             for s in ("train", "val", "test")}
+    sources = {s: {(lab["locomotion"], lab["action"]) for lab in (ds[i]["labels"] for i in range(len(ds)))}
+               for s, ds in parts.items()}
+    locos = {s: {a for a, _ in v} for s, v in sources.items()}
+    acts = {s: {b for _, b in v} for s, v in sources.items()}
+    for a in ("train", "val", "test"):
+        for b in ("train", "val", "test"):
+            if a != b:
+                assert not locos[a] & locos[b] and not acts[a] & acts[b], (a, b)
+    out = tmp_path / "h"
+    export_clips(spliced, out=out, format="humanml3d", split_ratios=ratios, split_seed=5)
+    exported = {r["clip"]: r["split"] for r in csv.DictReader(open(out / "index.csv"))}
+    for s, ds in parts.items():
+        assert all(exported[n] == s for n in ds.names), s
+    loco = sorted(locos["train"])[0]
+    some = MotionDataset(spliced, split="train", split_ratios=ratios, split_seed=5, select=f"locomotion:{loco}")
+    assert set(some.names) == {n for n in parts["train"].names if n.startswith(loco + "+")} != set()
+    with pytest.raises(DatasetError, match="split must be one of train, val, test"):
+        MotionDataset(spliced, split="dev")

@@ -91,6 +91,7 @@ from ..core.skeleton import Skeleton
 from ..core.errors import TorchspliceError
 from ..store import MotionDatabase
 from ..store.select import select_clips
+from .collate import collate_motion  # noqa: F401 (its home before data.collate)
 from .errors import DatasetError
 from .features import BUILTIN_FEATURES, NEEDS_FK, NOT_PER_FRAME, VELOCITY, derive_features, trajectory_joint
 from .where import clip_mask, where_mask
@@ -148,6 +149,12 @@ class MotionDataset(Dataset):
         select: selectors of the job's and the exports' selection language (one string or a
             list, all of which a clip must pass; see :mod:`torchsplice.store.select`), e.g.
             ``["role:spliced", "method:splice", "label:action.style=elderly"]``.
+        split: ``"train"``, ``"val"`` or ``"test"``: only the clips of that split, split by
+            source clips (:mod:`torchsplice.data.splits`: ``split_ratios`` of the locomotions and
+            actions, seeded by ``split_seed``; a result is in a split when both its sources are),
+            so that no action or locomotion of the test split is trained on. Sources are split
+            over the whole database, so a clip's split is the same whatever else is selected,
+            and the same as the HumanML3D export gives it with the same ratios and seed.
 
     Items (``ds[i]``): a dict with each feature as a ``(T, ...)`` tensor and ``name`` (str),
     ``length`` (int, ``T``), ``fps`` (float), ``index`` (the clip's row in the database),
@@ -171,7 +178,8 @@ class MotionDataset(Dataset):
     def __init__(self, path, clips: Iterable[str | int] | None = None, where: Mapping[str, Any] | None = None,
                  window: int | None = None, stride: int | None = None,
                  features: Sequence[str] = ("rotations", "root_translation"),
-                 dtype: torch.dtype = torch.float32, preload: bool = False, select: str | Sequence[str] | None = None):
+                 dtype: torch.dtype = torch.float32, preload: bool = False, select: str | Sequence[str] | None = None,
+                 split: str | None = None, split_ratios: Sequence[float] = (0.8, 0.1, 0.1), split_seed: int = 0):
         self.path = Path(path)
         if isinstance(features, str):
             features = (features,)
@@ -218,10 +226,16 @@ class MotionDataset(Dataset):
                 chosen = np.zeros(len(keep), dtype=bool)
                 chosen[rows] = True
                 keep &= chosen
+            if split is not None:  # by source clips over the whole database: no action in two splits
+                from .splits import SPLITS, table_splits
+
+                if split not in SPLITS:
+                    raise DatasetError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
+                keep &= np.asarray(table_splits(clip_table, split_ratios, split_seed)) == split
             if not keep.any():
                 raise DatasetError(
                     f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}"
-                    + (f", select={select!r}" if select is not None else ""))
+                    + (f", select={select!r}" if select is not None else "") + (f", split={split!r}" if split else ""))
             sel = np.flatnonzero(keep)
             self.indices = sel.astype(np.int64)
             chosen = clip_table.take(sel)
@@ -537,64 +551,3 @@ class MotionDataset(Dataset):
 # --------------------------------------------------------------------------------------------
 # batching
 # --------------------------------------------------------------------------------------------
-def collate_motion(items: Sequence[dict]) -> dict:
-    """Pad items of :class:`MotionDataset` to the longest and stack them into a batch.
-
-    Per-frame tensors (those whose first dimension is the item's ``length``: every feature)
-    become ``(B, T, ...)`` with ``T`` the longest length; shorter items are padded by
-    repeating their last frame. Other tensors are stacked as ``(B, ...)``.
-
-    Returns a dict with the stacked features and:
-
-    - ``lengths``: ``(B,)`` int64 real frames per item; ``mask``: ``(B, T)`` bool, True on real frames;
-    - ``fps``: ``(B,)`` float64;
-    - ``name``, ``index``, ``start``, ``skeleton``: lists (and any other non-tensor key as a list,
-      e.g. ``labels``: a list of dicts).
-
-    Raises :class:`DatasetError` (a ``ValueError``), one line naming two of the clips, when a
-    feature's per-frame shape differs between items (clips on skeletons with other joints: see
-    :meth:`MotionDataset.batch_sampler`).
-    """
-    items = list(items)
-    if not items:
-        raise ValueError("collate_motion needs at least one item")
-    lengths = torch.tensor([int(it["length"]) for it in items], dtype=torch.int64)
-    T = int(lengths.max())
-    B = len(items)
-    out: dict[str, Any] = {}
-    for key in items[0]:
-        if key in ("length", "lengths", "mask"):
-            continue
-        values = [it[key] for it in items]
-        if key == "fps":
-            out[key] = torch.tensor([float(v) for v in values], dtype=torch.float64)
-        elif not isinstance(values[0], torch.Tensor):
-            out[key] = values
-        elif values[0].dim() >= 1 and values[0].shape[0] == int(lengths[0]):
-            shape = values[0].shape[1:]
-            for it, v in zip(items, values):
-                if v.shape != (int(it["length"]), *shape):
-                    other = (f"skeleton {it['skeleton']} against {items[0]['skeleton']}: "
-                             if "skeleton" in it and it["skeleton"] != items[0].get("skeleton") else "")
-                    raise DatasetError(
-                        f"cannot batch {key!r}: clip {it.get('name', '?')!r} has shape {tuple(v.shape)}, clip "
-                        f"{items[0].get('name', '?')!r} (T, {', '.join(map(str, shape))}) ({other}clips on skeletons of "
-                        "other joints); batch them with DataLoader(ds, batch_sampler=ds.batch_sampler(B), "
-                        "collate_fn=collate_motion), or filter with where={'skeleton': K}")
-            x = torch.empty((B, T, *shape), dtype=values[0].dtype)
-            for b, v in enumerate(values):
-                n = v.shape[0]
-                x[b, :n] = v
-                if 0 < n < T:
-                    x[b, n:] = v[n - 1]
-                elif n == 0:
-                    x[b].zero_()
-            out[key] = x
-        else:
-            try:
-                out[key] = torch.stack(values)
-            except RuntimeError as exc:
-                raise ValueError(f"cannot batch {key!r}: {exc}") from None
-    out["lengths"] = lengths
-    out["mask"] = torch.arange(T)[None, :] < lengths[:, None]
-    return out

@@ -42,7 +42,7 @@ from pathlib import Path
 
 from ..core.errors import SpecError, TorchspliceError
 from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
-from .splits import DEFAULT_RATIOS, SPLITS, clip_sources, clip_split, parse_ratios, split_sources
+from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_ratios, table_splits
 
 __all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MIN_ROWS", "MDM_MAX_ROWS", "INDEX_COLUMNS"]
 
@@ -376,13 +376,7 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
         for col in ("locomotion", "action", "method"):
             info[col] = str(table.extra[col][r]) if col in table.extra else ""
         infos[r] = info
-    actions, locos, fixed = [], [], {}
-    for r in clips:
-        a, l = clip_sources(table.names[r], str(table.role[r]), infos[r])
-        actions += [k for k, _ in a]
-        locos += [k for k, _ in l]
-        fixed.update({k: f for k, f in a + l if f})
-    assigned = split_sources([actions, locos], ratios, seed, fixed)
+    splits = table_splits(table, ratios, seed)  # over the whole database: a selection keeps its clips' splits
     items, n = [], 0
     size = None if window is None else max(MIN_FRAMES, int(round(window * 20.0)))
     for r in clips:
@@ -394,8 +388,7 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
         else:
             count = math.ceil(total / size)
             spans = [(int(round(k * (total - size) / (count - 1))), size) for k in range(count)]
-        a, l = clip_sources(name, role, info)
-        split = clip_split([k for k, _ in a + l], assigned) or ""
+        split = splits[r]
         labels = info["labels"]
         for first, frames in spans:
             base = {"clip": name, "skeleton": int(table.skeleton[r]), "role": role, "labels": labels,

@@ -23,7 +23,7 @@ from typing import Sequence
 
 from ..core.errors import TorchspliceError
 
-__all__ = ["SPLITS", "DEFAULT_RATIOS", "parse_ratios", "split_sources", "clip_sources", "clip_split"]
+__all__ = ["SPLITS", "DEFAULT_RATIOS", "parse_ratios", "split_sources", "clip_sources", "clip_split", "table_splits"]
 
 SPLITS = ("train", "val", "test")
 DEFAULT_RATIOS = (0.8, 0.1, 0.1)
@@ -98,3 +98,20 @@ def clip_split(sources: Sequence[str], assigned: dict[str, str]) -> str | None:
     """The split of a clip made of ``sources``: theirs when they agree, else ``None``."""
     splits = {assigned[s] for s in sources}
     return splits.pop() if len(splits) == 1 else None
+
+
+def table_splits(table, ratios: Sequence[float] = DEFAULT_RATIOS, seed: int = 0) -> list[str]:
+    """Every clip's split (``""``: its sources are in different splits) of a database's clip
+    ``table`` (:class:`~torchsplice.store.table.ClipTable`): sources split once over the whole
+    table, so that a selection of its clips keeps their splits (the HumanML3D export and
+    ``MotionDataset(split=...)`` both read this)."""
+    ratios = parse_ratios(ratios)
+    extra = table.extra
+    infos = []
+    for r, (name, role) in enumerate(zip(table.names, table.role)):
+        info = {"labels": table.labels[r], **{c: str(extra[c][r]) for c in ("locomotion", "action") if c in extra}}
+        infos.append(clip_sources(name, str(role), info))
+    fixed = {k: f for a, l in infos for k, f in a + l if f}
+    assigned = split_sources([[k for a, _ in infos for k, _ in a], [k for _, l in infos for k, _ in l]], ratios, seed,
+                             fixed)
+    return [clip_split([k for k, _ in a + l], assigned) or "" for a, l in infos]
