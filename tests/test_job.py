@@ -343,13 +343,19 @@ def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_pat
     waves = [c for c in cs if c["action"] == WAVE]
     assert len(waves) == 3
     for c in cs:
-        assert (f"{WAVE} does not locomote" in c["flags"]) == (c["action"] == WAVE), c["name"]
+        # flags are codes (the figures in columns of their own), flag_details says them in words
+        assert ("action_not_locomoting" in c["flags"].split(",")) == (c["action"] == WAVE), c["name"]
+        assert (f"{WAVE} does not locomote" in c["flag_details"]) == (c["action"] == WAVE), c["name"]
+        assert set(c["flags"].split(",")) - {""} <= {"action_not_locomoting", "poor_alignment"}, c["flags"]
+        assert ("poor_alignment" in c["flags"]) == (c["alignment_distance"] > 0.10), c["name"]
         assert json.loads(c["params"])["force_locomotion"] is True
     assert "skipped" not in text
-    # the summary counts flagged clips: one line "flagged N clips", N = clips with a non-empty flags column
+    # the summary counts flagged clips: one line "flagged N clips", N = clips with a non-empty flags column,
+    # then one line per code with what it means
     flagged = sum(1 for c in cs if c["flags"])
     m = re.search(r"flagged (\d+) clips", text)
     assert m and int(m.group(1)) == flagged, text
+    assert re.search(r"  3 x action_not_locomoting: the action does not locomote", text), text
 
 
 STANDING_LOCOS = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031", "dataset-2_walk_normal_008"]

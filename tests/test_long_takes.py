@@ -60,12 +60,14 @@ def test_max_length_ratio_skips_pairs_of_very_different_lengths(lafan, tmp_path,
     db = tmp_path / "mixed.h5"
     assert main(["import", str(lafan / "test.bvh"), "-o", str(db), "-q"]) == 0
     assert main(["import", str(lafan / "test2.bvh"), "-o", str(db), "-q", "--append", "--split", "20"]) == 0
-    rc, text, err = run(capsys, "splice-all", db, "-o", tmp_path / "o.h5", "--locomotions", "test,test2#000",
+    assert main(["import", str(lafan / "test.bvh"), "-o", str(db), "-q", "--append", "--split", "20"]) == 0
+    rc, text, err = run(capsys, "splice-all", db, "-o", tmp_path / "o.h5", "--locomotions", "test,test#000,test2#000",
                         "--actions", "test2#00[1-2]", "--max-length-ratio", "3", "--force-locomotion", "--workers", "1")
     assert rc == 0, err
     assert "2 x lengths differ by more than --max-length-ratio 3" in text  # 244 s against 20 s
+    assert "2 x windows of one take are not spliced onto each other" in text  # test2#000 onto test2#001, #002
     with MotionDatabase.open(tmp_path / "o.h5") as out:
-        assert sorted(out.names) == ["test2#000+test2#001", "test2#000+test2#002"]
+        assert sorted(out.names) == ["test#000+test2#001", "test#000+test2#002"]
         assert json.loads(out.attrs["run"])["max_length_ratio"] == 3
 
 

@@ -63,10 +63,10 @@ from .sources import Sources
 from .size import OutputSize, estimate_output, format_bytes
 from .summary import JobSummary, progress_bar
 from .target import onto_target
-from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT
+from .task import FLAG_CODES, FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, POOR_ALIGNMENT
 
 __all__ = ["JobConfig", "JobSummary", "SpliceJob", "merge_job", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT",
-           "FLAG_SEPARATOR", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS"]
+           "FLAG_SEPARATOR", "FLAG_CODES", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS"]
 
 log = logging.getLogger("torchsplice.job")
 

@@ -24,7 +24,7 @@ from pathlib import Path
 from ..core.errors import DatabaseError
 from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
-from .task import FLAG_SEPARATOR, FRAME_COLUMNS, OUTPUT_COLUMNS, Part, flag_kind
+from .task import FRAME_COLUMNS, OUTPUT_COLUMNS, Part
 
 __all__ = ["Sink", "HDF5Sink", "OutputWriter", "make_sink"]
 
@@ -91,7 +91,7 @@ class OutputWriter:
             t = str(t) or "timewarp"
             self.timings[t] = self.timings.get(t, 0) + 1
         for f in flags:
-            kinds = {flag_kind(x) for x in str(f).split(FLAG_SEPARATOR) if x}
+            kinds = {x for x in str(f).split(",") if x}
             for kind in kinds:
                 self.flagged[kind] = self.flagged.get(kind, 0) + 1
             self.flagged_clips += bool(kinds)

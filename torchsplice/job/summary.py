@@ -97,8 +97,11 @@ class JobSummary:
                        "could not be retargeted onto one another:")
             out += [f"  {n} x {say(why)}" for why, n in sorted(apart.items(), key=lambda kv: -kv[1])]
         if self.flagged:
-            out.append(f"flagged {self.flagged_clips} clips (see the 'flags' column):")
-            out += [f"  {n} x {why}" for why, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
+            from .task import FLAG_CODES
+
+            out.append(f"flagged {self.flagged_clips} clips (their 'flags' column; 'flag_details' says why, clip by clip):")
+            out += [f"  {n} x {code}: {FLAG_CODES.get(code, '')}".rstrip(": ")
+                    for code, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
         return out
 
     def _room(self) -> str:

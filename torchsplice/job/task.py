@@ -29,16 +29,26 @@ from .config import JobConfig
 from .plan import Plan, Task
 from .sources import Sources
 
-__all__ = ["Part", "run_task", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT", "poor_alignment", "FLAG_SEPARATOR", "flag_kind"]
+__all__ = ["Part", "run_task", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT", "poor_alignment", "FLAG_SEPARATOR",
+           "FLAG_CODES", "alignment_distance"]
 
 log = logging.getLogger("torchsplice.job")
 
 OUTPUT_COLUMNS = {
     "locomotion": "str", "action": "str", "reference": "str", "method": "str", "params": "str", "flags": "str",
-    "locomotion_id": "int", "action_id": "int", "crop": "int",
-    "cost": "float", "posture_deg": "float", "pelvis_correction_deg": "float", "coverage": "float",
-    "timing": "str", "acting": "str",
+    "flag_details": "str", "locomotion_id": "int", "action_id": "int", "crop": "int",
+    "cost": "float", "alignment_distance": "float", "posture_deg": "float", "pelvis_correction_deg": "float",
+    "coverage": "float", "timing": "str", "acting": "str",
 }
+FLAG_CODES = {
+    "poor_alignment": "the lower bodies align poorly (alignment_distance above 0.10 leg lengths): other locomotion "
+                      "types, or a long take of several activities",
+    "locomotion_not_locomoting": "the locomotion does not locomote (spliced with force_locomotion)",
+    "action_not_locomoting": "the action does not locomote (spliced through the timewarp with force_locomotion)",
+}
+"""The codes of the ``flags`` column (comma-separated, sorted; ``""``: none) and what each means;
+the figures behind them are columns of their own (``alignment_distance``), and ``flag_details``
+says each flag in words with its figures and clip names."""
 FRAME_COLUMNS = ("action_frame",)
 POOR_ALIGNMENT = 0.10
 """Flag a pair whose aligned lower-body landmarks lie further apart than this, on average, in
@@ -48,18 +58,22 @@ worse than 95% of those (different locomotion types, or a long take with several
 cut those with ``import --split``)."""
 
 
+def alignment_distance(cost: float, leg: float) -> float:
+    """The aligned lower-body landmarks' mean distance in leg lengths, ``sqrt(cost) / leg`` (0
+    where it cannot be said)."""
+    return math.sqrt(max(cost, 0.0)) / leg if leg > 0 and math.isfinite(cost) else 0.0
+
+
 def poor_alignment(cost: float, leg: float) -> str:
-    """The flag for a pair of alignment ``cost`` on legs of length ``leg``, or ``""`` when fine."""
-    dist = math.sqrt(max(cost, 0.0)) / leg if leg > 0 and math.isfinite(cost) else 0.0
+    """The flag's words for a pair of alignment ``cost`` on legs of length ``leg``, or ``""`` when fine."""
+    dist = alignment_distance(cost, leg)
     if dist <= POOR_ALIGNMENT:
         return ""
     return f"poor alignment (mean landmark distance {dist:.2f} leg lengths, above {POOR_ALIGNMENT:g})"
+
+
 FLAG_SEPARATOR = " | "
-
-
-def flag_kind(flag: str) -> str:
-    """The kind of a flag, without the clip-specific details in parentheses."""
-    return flag.split(" (")[0].split(": ")[0] if " does not locomote" not in flag else "clip does not locomote"
+"""Between the flags said in words in ``flag_details``."""
 
 
 @dataclass
@@ -200,20 +214,28 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
     mean_corr = np.add.reduceat(corr, starts) / frames if len(corr) else np.zeros(len(keys))
     loco_frames = np.array([plan.clips[k[0]].frames for k in keys])
-    flags = []
+    flags, details = [], []
     standing = getattr(task, "mode", "timewarp") == "standing"
+    distance = np.array([alignment_distance(float(c), group.leg) for c in cost])
     for b, k in enumerate(keys):
-        f = [f"{name} does not locomote ({plan.flags[key]})"
-             for key, name in ((k[0], lnames[b]), (k[1], anames[b]))[:1 if standing else 2] if key in plan.flags]
+        codes, words = [], []
+        for key, name, code in ((k[0], lnames[b], "locomotion_not_locomoting"),
+                                (k[1], anames[b], "action_not_locomoting"))[:1 if standing else 2]:
+            if key in plan.flags:
+                codes.append(code)
+                words.append(f"{name} does not locomote ({plan.flags[key]})")
         poor = poor_alignment(float(cost[b]), group.leg)
         if poor:
-            f.append(poor)
-        flags.append(FLAG_SEPARATOR.join(f))
+            codes.append("poor_alignment")
+            words.append(poor)
+        flags.append(",".join(sorted(codes)))
+        details.append(FLAG_SEPARATOR.join(words))
     named = get_method(method).clip_name
     extra = {
         "locomotion": lnames, "action": anames,
         "reference": [plan.clips[k[2]].name if k[2] else "" for k in keys], "method": [method] * len(keys),
-        "params": [config.params()] * len(keys), "flags": flags,
+        "params": [config.params()] * len(keys), "flags": flags, "flag_details": details,
+        "alignment_distance": distance,
         "locomotion_id": [p.loco for p in pairs], "action_id": [p.action for p in pairs],
         "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": posture,
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,

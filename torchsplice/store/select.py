@@ -8,7 +8,7 @@ A selector is a comma-separated list of alternatives, any of which selects a cli
 - ``skeleton:K``: the clips on skeleton ``K`` of the database;
 - ``COLUMN:VALUE``: a text column the database declares (a spliced database's ``method``,
   ``flags``, ``timing``, ``locomotion``, ``action``...), ``VALUE`` a shell-style glob
-  (``method:naive``, ``flags:*poor alignment*``, ``flags:`` for the clips without a flag);
+  (``method:naive``, ``flags:*poor_alignment*``, ``flags:`` for the clips without a flag);
 - anything else: a shell-style glob on the clip name (``'*walk*'``), case-sensitive.
 
 Several selectors (a repeated command-line flag, or a list) must all select a clip:
