@@ -216,3 +216,30 @@ def test_training_splits_by_source_clip_in_the_dataset_match_the_export(sample_d
     assert set(some.names) == {n for n in parts["train"].names if n.startswith(loco + "+")} != set()
     with pytest.raises(DatasetError, match="split must be one of train, val, test"):
         MotionDataset(spliced, split="dev")
+
+
+def test_6_flags_are_codes_that_selections_filter_with_the_figures_in_their_own_columns(mocap_dir, tmp_path):
+    """A run's upper body onto a walking turn aligns poorly (0.16 leg lengths apart): its flag is
+    the code, its figure a number in a column of its own."""
+    folder = mocap_dir / BANDAI
+    db = tmp_path / "b.h5"
+    names = ["dataset-2_walk-turn-left_normal_025", "dataset-1_run_chimpira_001", "dataset-2_walk_elderly_006"]
+    assert main(["import", *[str(folder / f"{n}.bvh") for n in names], "-o", str(db), "-q"]) == 0
+    out = tmp_path / "sp.h5"
+    assert main(["splice-all", str(db), "-o", str(out), "-q", "--locomotions", names[0], "--actions",
+                 f"{names[1]},{names[2]}", "--force-locomotion"]) == 0
+    with MotionDatabase.open(out) as d:
+        t = d.clip_table()
+        rows = {t.names[r]: {c: t.extra[c][r] for c in ("flags", "flag_details", "alignment_distance")}
+                for r in range(len(t))}
+    for name, row in rows.items():
+        codes = set(str(row["flags"]).split(",")) - {""}
+        assert codes <= {"poor_alignment", "action_not_locomoting", "locomotion_not_locomoting"}, row
+        assert ("poor_alignment" in codes) == (float(row["alignment_distance"]) > 0.10), (name, row)
+        assert bool(codes) == bool(row["flag_details"]), row
+    flagged = {n for n, r in rows.items() if r["flags"]}
+    assert flagged and flagged != set(rows), rows
+    clean = MotionDataset(out, where={"flags": ""}, features=("rotations",))
+    assert set(clean.names) == set(rows) - flagged
+    assert set(MotionDataset(out, select="flags:*poor_alignment*", features=("rotations",)).names) == \
+        {n for n, r in rows.items() if "poor_alignment" in r["flags"]}
