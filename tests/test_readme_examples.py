@@ -184,3 +184,43 @@ def test_the_humanml3d_commands_and_the_loader_snippet_run_as_written(spliced, t
     scope: dict = {}
     exec(compile(code, "README.md", "exec"), scope)
     assert scope["motion"].shape[1] == 263 and len(scope["tokens"].split()) >= 3
+
+
+def test_the_python_api_snippet_runs_as_written_in_a_fresh_folder(tmp_path, monkeypatch):
+    """Every name it uses is defined in it (the built-in sample, no data), and it runs twice."""
+    code = snippet("## Python API")
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):  # a reader who runs it again gets no "already exists"
+        scope: dict = {}
+        exec(compile(code, "README.md", "exec"), scope)
+    assert scope["result"].motion.num_frames > 0 and len(scope["results"]) == 2
+    assert scope["pos"].shape[-1] == 3 and scope["clip"].name == "walk_straight"
+
+
+def test_the_n_x_m_block_and_the_pipeline_snippet_run_in_order_in_one_folder(spliced, tmp_path, monkeypatch, capsys):
+    """The n x m job's commands one after the other, as a reader runs them (each writes its own
+    output), then the whole-pipeline snippet in the same folder, twice."""
+    import subprocess
+    import sys
+
+    shutil.copy(spliced / "bandai.h5", tmp_path / "bandai.h5")
+    shutil.copytree(spliced / "bvh", tmp_path / "bvh")
+    monkeypatch.chdir(tmp_path)
+    commands = _bash_block("## The n x m job")
+    assert [c[0] for c in commands] == ["torchsplice", "torchsplice", "python"]
+    for c in commands:
+        if c[0] == "torchsplice":
+            assert main(c[1:] + ["-q", "--workers", "1"]) == 0, c
+        else:
+            script = Path(__file__).resolve().parents[1] / c[1]
+            out = subprocess.run([sys.executable, str(script), *c[2:], "-q", "--workers", "1"], capture_output=True,
+                                 text=True, timeout=600)
+            assert out.returncode == 0, out.stderr
+    outputs = [c[c.index("-o") + 1] for c in commands]
+    assert len(set(outputs)) == len(outputs) and all((tmp_path / o).is_file() for o in outputs)
+    code = snippet("### The whole pipeline from Python")
+    for _ in range(2):
+        scope: dict = {}
+        exec(compile(code, "README.md", "exec"), scope)
+        assert scope["summary"].spliced > 0
+    capsys.readouterr()
