@@ -148,6 +148,8 @@ class Info(Command):
 
                 table = db.clip_table()
                 names, chosen = names_or_selector(table, args.clips) if args.clips else (None, None)
+                for name in names or ():
+                    db.index(name)  # an unknown name: the database's one line, with similar names
                 selectors = list(args.select or []) + ([chosen] if chosen else [])
                 keep = set(names) if names is not None else set(table.names)
                 if selectors:

@@ -1,13 +1,24 @@
 """Training data: motion databases as PyTorch datasets (see :mod:`torchsplice.data.dataset`).
 
-``MotionDataset(path, clips=None, where=None, window=None, stride=None, features=..., select=None)`` serves
-clips or fixed-length windows of any torchsplice motion database as dicts of tensors
-(quaternions WXYZ, positions in file units); ``collate_motion`` pads them into batches with
-``lengths`` and ``mask``; ``ds.batch_sampler(B)`` batches a database of several skeletons one
-topology at a time (:class:`SkeletonBatchSampler`).
+``MotionDataset(path, clips=None, where=None, window=None, stride=None, features=..., select=None,
+split=None)`` serves clips or fixed-length windows of any torchsplice motion database as dicts of
+tensors (quaternions WXYZ, positions in file units); ``collate_motion`` pads them into batches
+with ``lengths`` and ``mask``; ``ds.batch_sampler(B)`` batches a database of several skeletons one
+topology at a time (:class:`SkeletonBatchSampler`); :mod:`.splits` splits clips by source clip.
+
+The names below are imported on first use, so that :mod:`.splits` (which the exports and the
+command line read) loads without torch.
 """
 
-from .dataset import DatasetError, MotionDataset, collate_motion
-from .sampler import SkeletonBatchSampler
-
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "SkeletonBatchSampler"]
+
+_LAZY = {"MotionDataset": "dataset", "collate_motion": "collate", "DatasetError": "errors",
+         "SkeletonBatchSampler": "sampler"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -139,10 +139,15 @@ def names_or_selector(table: ClipTable, items: Sequence[str]) -> tuple[list[str]
     """What a command's clip arguments mean: ``(names, None)`` when every item is a clip name of
     ``table`` (kept in their order), else ``(None, selector)``: the items as alternatives of one
     selector (``export db.h5 'role:spliced'``, ``render db.h5 'walk_*'``), clip names among them
-    matched exactly. A selector that selects nothing is refused by :func:`select_clips`."""
+    matched exactly. A selector that selects nothing is refused by :func:`select_clips`; an item
+    that reads as a plain name (no glob, prefix or comma) but names no clip comes back alone as a
+    name, so that reading it gives the database's "no clip named" error."""
     known = set(table.names)
     items = list(items)
     if all(i in known for i in items):
         return items, None
+    plain = [i for i in items if i not in known and not re.search(r"[*?\[,:]", i)]
+    if plain:  # meant as a name: the database's own "no clip named" (with similar names)
+        return plain, None
     escaped = [re.sub(r"([*?\[])", r"[\1]", i) if i in known else i for i in items]
     return None, ",".join(escaped)
