@@ -119,3 +119,30 @@ def bench_humanml3d(files: list[Path], clips: int = 2000) -> None:
             joints = torch.from_numpy(np.load(out / "new_joints" / f.name)).double()
             worst = max(worst, float((m.global_positions() - joints).abs().max()))
         print(f"humanml3d round trip: import of the export against its positions {worst:.1e} m [1e-4]")
+
+
+def bench_packed_memory(sizes=(1000, 4000, 10000)) -> None:
+    """Peak memory of `torchsplice export --all --packed` against the number of clips (fresh
+    processes; 200-frame clips on the SMPL body), and the file's size: flat, as the packed file
+    is streamed member by member."""
+    import subprocess
+
+    probe = ("import resource, sys; from torchsplice.cli import main; rc = main(sys.argv[1:]); "
+             "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for n in sizes:
+            sub = tmp / str(n)
+            sub.mkdir()
+            db = _smpl_database(sub, n)
+            out = sub / "all.npz"
+            p = subprocess.run([sys.executable, "-c", probe, "export", str(db), "--all", "--packed", "-o", str(out), "-q"],
+                               capture_output=True, text=True)
+            if p.returncode != 0:
+                print(f"packed  export of {n} clips failed: {p.stderr.strip()[-300:]}")
+                return
+            rows.append((n, int(p.stdout.split()[-1]), out.stat().st_size / 2**20))
+            shutil.rmtree(sub)
+    text = "; ".join(f"{n:,} clips: {mb:,} MB peak for a {size:,.0f} MB file" for n, mb, size in rows)
+    print(f"packed  npz export, peak memory of the process against the clips [flat]: {text}")

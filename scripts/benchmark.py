@@ -30,6 +30,7 @@ Sections:
   humanml3d the HumanML3D export and import (scripts/bench_humanml3d.py): export clips/s with the
           files, the features alone and the files alone; on every real clip, the format's
           properties and the import's round trip        [>= 2,000 clips/s, 1e-5 m, 1e-6 m, 1e-4 m]
+  packed  peak memory of a packed .npz export of 1,000, 4,000 and 10,000 clips   [flat]
 
 Without real data (no ../shared/mocap and no TORCHSPLICE_MOCAP), the built-in synthetic
 sample stands in and the figures say so. Timings are the best of several repeats; the machine
@@ -609,8 +610,9 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d",
-                   help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget, humanml3d")
+    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d,packed",
+                   help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget, humanml3d, "
+                        "packed")
     p.add_argument("--mix-db", type=Path, default=None,
                    help="the real mix on this database (e.g. the whole Bandai Namco dataset imported) instead of "
                         "the Bandai Namco clips of --mocap")
@@ -647,6 +649,10 @@ def main() -> int:
             from bench_humanml3d import bench_humanml3d
 
             bench_humanml3d(real_files(args.mocap))
+        if "packed" in sections:
+            from bench_humanml3d import bench_packed_memory
+
+            bench_packed_memory()
     return 0
 
 

@@ -383,3 +383,16 @@ def test_a_killed_exports_staged_files_are_removed_by_the_next_export(db, bandai
     assert rc == 0, err
     assert not dead.exists() and alive.exists() and other.exists()
     assert sorted(f.name for f in out.glob("*.npz")) == sorted(f"{n}.npz" for n in bandai_names[:2])
+
+
+def test_the_streamed_packed_file_holds_what_packed_gives_array_for_array(db, bandai_names, tmp_path, capsys):
+    """The packed file is written member by member from files of rows (memory flat in the number of
+    clips): it equals, array for array, the layout :meth:`NpzExport.packed` makes in memory."""
+    rc, _, err = run(capsys, "export", db, *bandai_names, "--packed", "--features", "6d", "-o", tmp_path / "p.npz", "-q")
+    assert rc == 0, err
+    want = NpzExport(db, bandai_names, features="6d").packed()
+    with np.load(tmp_path / "p.npz", allow_pickle=False) as got:
+        assert sorted(got.files) == sorted(want)
+        for key, a in want.items():
+            assert got[key].dtype == np.asarray(a).dtype and np.array_equal(got[key], a), key
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no row files left

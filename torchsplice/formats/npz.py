@@ -283,6 +283,71 @@ class NpzExport:
         return out
 
 
+    def packed_frames(self) -> int:
+        """Frames of the packed file (every exported clip's)."""
+        return int(sum(int(self._ds._len[c]) for c in self._order))
+
+    def write_packed(self, path) -> None:
+        """Write :meth:`packed`'s file at ``path`` (straight there: the export stages it) with memory
+        flat in the number of clips: one pass over the clips appends each frame array's rows to a
+        file of its own beside ``path``, then the ``.npz`` (a zip of ``.npy`` members, as
+        ``numpy.savez`` writes it) is assembled from them member by member. Values that are not
+        finite are refused, naming the clip, before the file is complete."""
+        import shutil
+        import tempfile
+        import zipfile
+
+        self.check_one_skeleton("pack")
+        ks = self.skeleton_ids()
+        sk0 = self._ds.skeletons[ks[0]]
+        dtype = np.dtype(np.result_type(*(self._attrs[k]["dtype"] for k in ks)))
+        path = Path(path)
+        names, roles, labels, fps, skel, joint_offsets, ends, lengths = [], [], [], [], [], [], [], []
+        tails: dict[str, tuple] = {}
+        with tempfile.TemporaryDirectory(prefix=f".{path.name}.", dir=path.parent) as tmp:
+            parts = {f: open(Path(tmp) / f"{f}.raw", "wb") for f in self.frame_arrays}
+            try:
+                for item in self._items():
+                    k = int(item["skeleton"])
+                    for f in self.frame_arrays:
+                        a = np.ascontiguousarray(item[f].numpy().astype(dtype))
+                        tails.setdefault(f, a.shape[1:])
+                        parts[f].write(a.tobytes())
+                    names.append(item["name"])
+                    roles.append(str(self._ds.table["role"][self._clip(item)]))
+                    labels.append(json.dumps(item["labels"], sort_keys=True))
+                    fps.append(item["fps"])
+                    skel.append(k)
+                    joint_offsets.append(self._ds.skeletons[k].offsets.numpy())
+                    ends.append(self._ds.skeletons[k])
+                    lengths.append(int(item["length"]))
+            finally:
+                for f in parts.values():
+                    f.close()
+            offsets = np.zeros(len(lengths) + 1, dtype=np.int64)
+            offsets[1:] = np.cumsum(lengths)
+            small = {"format": np.array(NPZ_FORMAT), "version": np.int64(NPZ_VERSION), "layout": np.array("packed"),
+                     **self._skeleton_arrays(ks[0]), "offsets": offsets,
+                     "names": np.array(names, dtype=str), "roles": np.array(roles, dtype=str),
+                     "labels": np.array(labels, dtype=str), "fps": np.array(fps, dtype=np.float64),
+                     "skeleton": np.array(skel, dtype=np.int64), "joint_offsets": np.stack(joint_offsets)}
+            if all(s.end_site_parents == sk0.end_site_parents for s in ends):
+                small["end_site_parents"] = np.array(sk0.end_site_parents, dtype=np.int64).reshape(-1)
+                small["end_site_offsets"] = np.stack([s.end_site_offsets.numpy().reshape(-1, 3) for s in ends])
+            small.update(self._stat_arrays())
+            with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                for key, a in small.items():
+                    buf = io.BytesIO()
+                    np.lib.format.write_array(buf, np.asanyarray(a), allow_pickle=False)
+                    zf.writestr(f"{key}.npy", buf.getvalue())
+                for f in self.frame_arrays:
+                    header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
+                              "shape": (int(offsets[-1]), *tails.get(f, ()))}
+                    with zf.open(f"{f}.npy", "w", force_zip64=True) as member, open(Path(tmp) / f"{f}.raw", "rb") as raw:
+                        np.lib.format.write_array_header_2_0(member, header)
+                        shutil.copyfileobj(raw, member, 1 << 22)
+
+
 def write_npz(path, arrays: dict[str, np.ndarray], what: str = "", atomic: bool = True) -> None:
     """Write ``arrays`` as an uncompressed ``.npz`` at ``path``, atomically (``atomic=False``:
     straight to ``path``, for a caller that stages its files already, like the exports).

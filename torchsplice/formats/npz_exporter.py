@@ -48,19 +48,24 @@ class NpzExporter(Exporter):
 
     def items(self):
         if self.single_file:
-            yield None, self._export.packed()
+            yield None, None  # the packed file, streamed by write (memory flat in the number of clips)
         else:
             yield from self._export.per_clip()
 
     def measure(self, item) -> tuple[int, float | None]:
         name, arrays = item
-        return int(arrays["rotations"].shape[0]), None if name is None else float(arrays["fps"])
+        if name is None:
+            return self._export.packed_frames(), None
+        return int(arrays["rotations"].shape[0]), float(arrays["fps"])
 
     def write(self, item, path: Path) -> None:
         from . import npz
 
         name, arrays = item
-        npz.write_npz(path, arrays, what=f"clip {name!r}" if name is not None else "", atomic=False)  # staged already
+        if name is None:
+            self._export.write_packed(path)  # staged already
+            return
+        npz.write_npz(path, arrays, what=f"clip {name!r}", atomic=False)  # staged already
 
     def summary(self, result: ExportResult) -> str:
         features = self.options["features"]
