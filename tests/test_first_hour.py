@@ -243,3 +243,20 @@ def test_6_flags_are_codes_that_selections_filter_with_the_figures_in_their_own_
     assert set(clean.names) == set(rows) - flagged
     assert set(MotionDataset(out, select="flags:*poor_alignment*", features=("rotations",)).names) == \
         {n for n, r in rows.items() if "poor_alignment" in r["flags"]}
+
+
+def test_3_render_view_and_evaluate_take_the_selection_language_too(sample_db, tmp_path, capsys):
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
+    rc, out, _ = run(capsys, "render", spliced, "walk_curve+*", "jog+wave", "-o", tmp_path / "r.png", "--frames", "2")
+    assert rc == 0 and "6 clips" in out  # five by the glob, one by name
+    rc, out, _ = run(capsys, "view", spliced, "action:wave", "-o", tmp_path / "v.html")
+    assert rc == 0 and "v.html" in out
+    rc, out, _ = run(capsys, "evaluate", spliced, "-o", tmp_path / "r.md", "--no-pictures", "--select", "action:wave",
+                     "--select", "locomotion:walk_*", "--json", tmp_path / "r.json")
+    import json
+
+    assert rc == 0 and sorted(c["name"] for c in json.loads((tmp_path / "r.json").read_text())["clips"]) == [
+        "walk_curve+wave", "walk_straight+wave"]
+    rc, _, err = run(capsys, "render", spliced, "zz*", "-o", tmp_path / "z.png")
+    assert rc == 2 and "'zz*' selects no clip" in error_line(err)

@@ -20,7 +20,7 @@ from .declared import declared
 
 __all__ = ["cli_message", "flag", "output", "locked", "say", "n", "at", "one_line", "progress", "command_line",
            "positive_int", "positive_float", "share", "bounded_int", "add_output_flags", "device",
-           "Terminated", "on_sigterm", "stopped", "stop_code", "JOB", "SPLICE", "ALIGN", "STANDING"]
+           "Terminated", "on_sigterm", "stopped", "stop_code", "JOB", "SPLICE", "ALIGN", "STANDING", "expand_clips"]
 
 JOB = "torchsplice.job.config"  # JobConfig: the options of splice-all and torchsplice.job.splice_all
 SPLICE = "torchsplice.splice.options"  # SpliceOptions: the options of splice and torchsplice.splice.splice
@@ -207,3 +207,24 @@ def stopped(exc: BaseException) -> str:
 def stop_code(exc: BaseException) -> int:
     """The exit code of a stopped command: 143 for SIGTERM, 130 for Ctrl-C."""
     return 143 if _terminated(exc) else 130
+
+
+def expand_clips(database, items) -> list[str]:
+    """A command's clip arguments as names, in order: a clip name (of the database, or of a source
+    database) as it is, a selector of the selection language (``'walk_*'``, ``'role:spliced'``,
+    ``'method:naive,method:splice'``) replaced by the database's clips it selects, in row order."""
+    import re
+
+    from ..store.database import MotionDatabase
+    from ..store.select import select_clips
+
+    out: list[str] = []
+    with MotionDatabase.open(database) as db:
+        table = None
+        for item in items:
+            if item in db or not re.search(r"[*?\[,:]", item):
+                out.append(item)
+                continue
+            table = table if table is not None else db.clip_table()
+            out += [table.names[r] for r in select_clips(table, item, "clip selector", str(database))]
+    return list(dict.fromkeys(out))

@@ -24,6 +24,8 @@ class Evaluate(Command):
                        help="tables only")
         s.add_argument("--max-rows", type=positive_int, default=max_rows, metavar="N",
                        help=f"per-clip rows per method in the report (default {max_rows}; --csv and --json hold every row)")
+        s.add_argument("--select", action="append", metavar="SELECT", default=None,
+                       help="only the spliced clips this selector selects (repeat: all of them), e.g. method:splice")
         s.add_argument("--csv", metavar="FILE", default=None, help="also write every clip's row as CSV, for scripts")
         s.add_argument("--json", metavar="FILE", default=None,
                        help="also write the aggregates and every clip's row as JSON, for scripts")
@@ -39,7 +41,7 @@ class Evaluate(Command):
                   for f, suffix, what in ((args.csv, ".csv", "a CSV file"), (args.json, ".json", "a JSON file"))]
         with locked(out, args):
             agg = evaluate_database(args.database, out, sources=args.sources, pictures=not args.no_pictures,
-                                    max_rows=args.max_rows, csv=tables[0], json=tables[1],
+                                    max_rows=args.max_rows, csv=tables[0], json=tables[1], select=args.select,
                                     progress=lambda it, total, desc: progress(it, total, desc, args.quiet, unit="batch"))
         if not args.quiet:
             from ..store.database import MotionDatabase

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 
 from .base import Command, register_command
-from .common import add_output_flags, bounded_int, declared, locked, output, positive_float, positive_int, say
+from .common import add_output_flags, bounded_int, declared, expand_clips, locked, output, positive_float, positive_int, say
 
 RENDER = "torchsplice.viz.render"
 VIEWER = "torchsplice.viz.viewer"
@@ -23,7 +23,8 @@ class Render(Command):
     def add_arguments(self, s) -> None:
         frames = declared(RENDER, "render.frames")
         s.add_argument("database", help="motion database (.h5)")
-        s.add_argument("clips", nargs="+", metavar="CLIP", help="clip names")
+        s.add_argument("clips", nargs="+", metavar="CLIP",
+                       help="clip names, or selectors ('walk_curve+*', 'method:naive'): their clips in row order")
         s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
         s.add_argument("--frames", type=bounded_int(1, MAX_FILMSTRIP), default=frames, metavar="N",
                        help=f"frames per clip in a PNG filmstrip (default {frames}, at most {MAX_FILMSTRIP})")
@@ -39,7 +40,7 @@ class Render(Command):
         from ..viz.sources import read_clips
 
         out = output(args, "render")
-        clips, spec = read_clips(args.database, args.clips, sources=args.sources)
+        clips, spec = read_clips(args.database, expand_clips(args.database, args.clips), sources=args.sources)
         longest = max(c.num_frames for c in clips)
         frames = args.frames
         if out.suffix.lower() == ".png" and frames > longest:
@@ -65,8 +66,8 @@ class View(Command):
         max_clips = declared(VIEWER, "write_viewer.max_clips")
         s.add_argument("database", help="motion database (.h5)")
         s.add_argument("clips", nargs="*", metavar="CLIP",
-                       help="clips to include (with the sources and other methods of spliced ones); default: all, "
-                            "up to --max-clips")
+                       help="clips to include (with the sources and other methods of spliced ones), names or "
+                            "selectors ('role:spliced', 'action:wave'); default: all, up to --max-clips")
         s.add_argument("-o", "--output", required=True, help="page to write (.html)")
         s.add_argument("--sources", nargs="+", metavar="DB",
                        help="databases holding the spliced clips' locomotions and actions (default: as recorded)")
@@ -81,7 +82,8 @@ class View(Command):
 
         out = output(args, "viewer")
         with locked(out, args):
-            got = write_viewer(args.database, out, clips=args.clips, sources=args.sources, max_clips=args.max_clips,
+            got = write_viewer(args.database, out, clips=expand_clips(args.database, args.clips) if args.clips else args.clips,
+                               sources=args.sources, max_clips=args.max_clips,
                                quiet=True)
         if not args.quiet:
             for line in viewer_notes(got, args.database, args.max_clips, flag):

@@ -150,7 +150,7 @@ def _fmt(v, digits=2) -> str:
 
 
 def evaluate_database(path, output, sources=None, pictures: bool = True, max_rows: int = 60, examples: int = 3,
-                      csv=None, json=None, progress=None) -> dict:
+                      csv=None, json=None, progress=None, select=None) -> dict:
     """Write the Markdown report for the splice job's output ``path`` to ``output``.
 
     Returns the aggregate figures per method (also in the report). Pictures (filmstrips and
@@ -158,6 +158,8 @@ def evaluate_database(path, output, sources=None, pictures: bool = True, max_row
     ``csv`` and ``json`` (paths, or ``None``) get every clip's row, the tables' ``max_rows`` cut
     aside (JSON: ``{"database", "units", "aggregates", "clips"}``, NaN as ``null``); each is
     written atomically. ``progress(iterable, total, description)`` wraps the batches measured.
+    ``select``: selectors of the selection language (:mod:`torchsplice.store.select`) the
+    evaluated clips must pass, e.g. ``"method:splice"`` or ``["flags:", "action:wave"]``.
     """
     path, output = Path(path), Path(output)
     with MotionDatabase.open(path) as db:
@@ -167,6 +169,13 @@ def evaluate_database(path, output, sources=None, pictures: bool = True, max_row
         rows = [i for i, r in enumerate(t["role"]) if r == "spliced"]
         if not rows:
             raise TorchspliceError(f"{path}: holds no spliced clip")
+        if select is not None:
+            from ..store.select import select_clips
+
+            chosen = set(select_clips(db.clip_table(), select, "{select}", str(path)))
+            rows = [i for i in rows if i in chosen]
+            if not rows:
+                raise TorchspliceError(f"{path}: {{select}} selects no spliced clip", options=("select",))
         srcs = _source_dbs(db, sources)
         try:
             return _evaluate(db, t, rows, _Sources(srcs, db), path, output, pictures, max_rows, examples,
