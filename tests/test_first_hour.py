@@ -260,3 +260,21 @@ def test_3_render_view_and_evaluate_take_the_selection_language_too(sample_db, t
         "walk_curve+wave", "walk_straight+wave"]
     rc, _, err = run(capsys, "render", spliced, "zz*", "-o", tmp_path / "z.png")
     assert rc == 2 and "'zz*' selects no clip" in error_line(err)
+
+
+def test_12_files_a_generic_spec_reads_can_be_given_their_units(sample_db, tmp_path, capsys):
+    bvh = tmp_path / "bvh"
+    assert main(["export", str(sample_db), "walk_straight", "jog", "-o", str(bvh), "-q"]) == 0
+    rc, _, err = run(capsys, "import", bvh, "-o", tmp_path / "a.h5", "--spec", "generic", "--units", "m")
+    assert rc == 2 and "cannot" in err.lower() and not (tmp_path / "a.h5").exists()
+    rc, _, err = run(capsys, "import", bvh, "-o", tmp_path / "b.h5", "--spec", "generic", "--file-units", "cm",
+                     "--units", "m", "-q")
+    assert rc == 0, err
+    with MotionDatabase.open(tmp_path / "b.h5") as d, MotionDatabase.open(sample_db) as s:
+        assert d.skeleton_info(0).units == "m"
+        a, b = d.read("walk_straight"), s.read("walk_straight")
+    assert float((a.global_positions() * 100 - b.global_positions()).abs().max()) < 1e-3
+    rc, _, err = run(capsys, "import", bvh, "-o", tmp_path / "c.h5", "--spec", "sample", "--file-units", "m")
+    assert rc == 2 and "its spec 'sample' says its units are 'cm', not 'm'" in err
+    rc, _, err = run(capsys, "import", bvh, "-o", tmp_path / "d.h5", "--file-units", "furlong")
+    assert rc == 2 and "--file-units: unknown length unit 'furlong'" in error_line(err)

@@ -16,6 +16,7 @@ database is written atomically (appending works on a copy that replaces the file
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -180,7 +181,8 @@ def collect_inputs(paths: Iterable, format: str = "auto") -> tuple[list, list[tu
 
 def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overwrite: bool = False,
                float64: bool = False, split: float | None = None, split_overlap: float = 1.0,
-               units: str | None = None, progress: Callable | None = None, format: str = "auto") -> ImportReport:
+               units: str | None = None, progress: Callable | None = None, format: str = "auto",
+               file_units: str | None = None) -> ImportReport:
     """Import BVH files and folders (and HumanML3D folders) into the database ``output`` (see
     the module docstring).
 
@@ -199,6 +201,9 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
         units: convert every clip's lengths from its spec's units to these (``"cm"``, ``"m"``,
             ... see :mod:`torchsplice.ops.units`), so that datasets share one database;
             ``None`` keeps the files' own units.
+        file_units: the units the BVH files are in, where their spec does not say (``generic``,
+            a guessed spec: units ``unknown``), so that they are recorded and ``units`` can
+            convert them; a spec that names other units is refused for that file, in one line.
         progress: ``progress(iterable, total, desc) -> iterable`` to show progress (e.g. tqdm).
         format: ``"auto"`` (a HumanML3D folder as such, anything else as BVH), ``"bvh"`` or
             ``"humanml3d"`` (:data:`FORMATS`).
@@ -218,6 +223,9 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     from ..store.database import MotionDatabase
     from ..ops.units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
+    if file_units is not None and file_units not in CONVERTIBLE_UNITS:
+        raise TorchspliceError(f"{{file_units}}: unknown length unit {file_units!r}; name one of "
+                               f"{', '.join(CONVERTIBLE_UNITS)}", options=("file_units",))
     if units is not None and units not in CONVERTIBLE_UNITS:  # a known unit, checked before any work
         why = f"unknown length unit {units!r}" if units not in UNITS else f"cannot convert to {units!r} units"
         raise TorchspliceError(f"{{units}}: {why}; name a length unit ({', '.join(CONVERTIBLE_UNITS)})",
@@ -273,6 +281,11 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                     report.warnings += [(str(f), one_line(w.message, f)) for w in caught]
                     m.check_finite()
                     s = (fixed or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
+                    if file_units is not None and s.units != file_units:
+                        if s.units != "unknown":
+                            raise TorchspliceError(f"its spec {s.name!r} says its units are {s.units!r}, not {file_units!r} "
+                                                   "(file_units is for specs that do not say)")
+                        s = dataclasses.replace(s, units=file_units)
                     s.bind(m.skeleton)
                     if units is not None:  # lengths in one unit, so that datasets share the database
                         m, s = convert_units(m, s, units)
