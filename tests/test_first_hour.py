@@ -278,3 +278,22 @@ def test_12_files_a_generic_spec_reads_can_be_given_their_units(sample_db, tmp_p
     assert rc == 2 and "its spec 'sample' says its units are 'cm', not 'm'" in err
     rc, _, err = run(capsys, "import", bvh, "-o", tmp_path / "d.h5", "--file-units", "furlong")
     assert rc == 2 and "--file-units: unknown length unit 'furlong'" in error_line(err)
+
+
+def test_per_clip_metrics_as_csv_for_any_database(sample_db, tmp_path, capsys):
+    import csv
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q", "--method", "splice,naive"]) == 0
+    rc, _, _ = run(capsys, "info", spliced, "method:naive", "--csv", tmp_path / "naive.csv", "--limit", "0")
+    rows = list(csv.DictReader(open(tmp_path / "naive.csv")))
+    assert rc == 0 and len(rows) == 25 and all(r["method"] == "naive" for r in rows)
+    with MotionDatabase.open(spliced) as d:
+        t = d.clip_table()
+        cost = {t.names[r]: float(t.extra["cost"][r]) for r in range(len(t))}
+    for r in rows:
+        assert {"flags", "alignment_distance", "coverage", "labels"} <= set(r)
+        want = cost[r["name"]]  # NaN where unset (the naive method aligns nothing): an empty cell
+        assert (r["cost"] == "") if want != want else float(r["cost"]) == pytest.approx(want)
+    rc, _, err = run(capsys, "info", spliced, "--csv", tmp_path / "x.txt")
+    assert rc == 2 and "must end in .csv" in error_line(err)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from .base import Command, register_command
 from .common import add_output_flags, at, declared, n, output, positive_float, progress, say
@@ -125,6 +126,23 @@ def _labels_text(labels: dict, limit: int = 60) -> str:
     return " ".join(f"{k}={short(k, v)}" for k, v in sorted(labels.items()))
 
 
+def _write_csv(path, clips: list[dict]) -> None:
+    """The clips' rows as CSV, atomically: every key of the first as a column, labels as JSON."""
+    import csv
+    import io
+
+    from ..store.atomic import atomic_path
+
+    out = io.StringIO()
+    columns = list(dict.fromkeys(k for c in clips for k in c))
+    w = csv.DictWriter(out, columns, lineterminator="\n")
+    w.writeheader()
+    for c in clips:
+        w.writerow({k: json.dumps(v, sort_keys=True) if isinstance(v, dict) else v for k, v in c.items()})
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(out.getvalue())
+
+
 class Info(Command):
     name = "info"
     help = "list a database's clips, skeletons and roles"
@@ -140,10 +158,17 @@ class Info(Command):
         s.add_argument("--limit", type=int, default=None, metavar="N",
                        help="list at most N clips (the rest counted); default all (--json: all)")
         s.add_argument("--json", action="store_true", help="machine-readable output")
+        s.add_argument("--csv", metavar="FILE", default=None,
+                       help="also write the (selected) clips' table as CSV: every column, a spliced clip's cost, "
+                            "alignment_distance, flags, coverage...; labels as JSON")
 
     def run(self, args) -> int:
         from ..store.database import MotionDatabase
 
+        if args.csv is not None:
+            from ..store.atomic import check_output
+
+            check_output(args.csv, (".csv",), "a CSV file", inputs=[args.database], overwrite=True)
         with MotionDatabase.open(args.database) as db:
             s = db.summary()
             if args.clips or args.select:
@@ -158,6 +183,8 @@ class Info(Command):
                 if selectors:
                     keep &= {table.names[r] for r in select_clips(table, selectors, "selector", str(args.database))}
                 s["clips"] = [c for c in s["clips"] if c["name"] in keep]
+        if args.csv is not None:
+            _write_csv(args.csv, s["clips"])
         if args.json:
             print(json.dumps(s, indent=2))
             return 0
