@@ -247,18 +247,19 @@ class NpzExport:
     def _clip(self, item: dict) -> int:
         return int(np.searchsorted(self._ds.indices, item["index"]))
 
-    def packed(self) -> dict[str, np.ndarray]:
-        """Every exported clip in the packed layout (one skeleton topology and unit, else a one-line error)."""
+    def _packed_pass(self, take) -> dict[str, np.ndarray]:
+        """One pass over the exported clips for the packed layout: ``take(name, rows)`` gets each
+        clip's rows of each frame array (in the file's float type), in order; returns every
+        other array of the layout (names, offsets, statistics...)."""
         self.check_one_skeleton("pack")
         ks = self.skeleton_ids()
         sk0 = self._ds.skeletons[ks[0]]
         dtype = np.result_type(*(self._attrs[k]["dtype"] for k in ks))
-        frames: dict[str, list[np.ndarray]] = {f: [] for f in self.frame_arrays}
         names, roles, labels, fps, skel, joint_offsets, ends, lengths = [], [], [], [], [], [], [], []
         for item in self._items():
             k = int(item["skeleton"])
             for f in self.frame_arrays:
-                frames[f].append(item[f].numpy().astype(dtype))
+                take(f, np.ascontiguousarray(item[f].numpy().astype(dtype)))
             names.append(item["name"])
             roles.append(str(self._ds.table["role"][self._clip(item)]))
             labels.append(json.dumps(item["labels"], sort_keys=True))
@@ -277,11 +278,17 @@ class NpzExport:
         if all(s.end_site_parents == sk0.end_site_parents for s in ends):
             out["end_site_parents"] = np.array(sk0.end_site_parents, dtype=np.int64).reshape(-1)
             out["end_site_offsets"] = np.stack([s.end_site_offsets.numpy().reshape(-1, 3) for s in ends])
-        for f, parts in frames.items():
-            out[f] = np.concatenate(parts)
         out.update(self._stat_arrays())
         return out
 
+    def packed(self) -> dict[str, np.ndarray]:
+        """Every exported clip in the packed layout (one skeleton topology and unit, else a one-line
+        error), in memory; :meth:`write_packed` writes the same file with memory flat in the clips."""
+        frames: dict[str, list[np.ndarray]] = {f: [] for f in self.frame_arrays}
+        out = self._packed_pass(lambda f, rows: frames[f].append(rows))
+        for f, parts in frames.items():
+            out[f] = np.concatenate(parts)
+        return out
 
     def packed_frames(self) -> int:
         """Frames of the packed file (every exported clip's)."""
@@ -297,52 +304,29 @@ class NpzExport:
         import tempfile
         import zipfile
 
-        self.check_one_skeleton("pack")
-        ks = self.skeleton_ids()
-        sk0 = self._ds.skeletons[ks[0]]
-        dtype = np.dtype(np.result_type(*(self._attrs[k]["dtype"] for k in ks)))
         path = Path(path)
-        names, roles, labels, fps, skel, joint_offsets, ends, lengths = [], [], [], [], [], [], [], []
-        tails: dict[str, tuple] = {}
+        shapes: dict[str, tuple] = {}
         with tempfile.TemporaryDirectory(prefix=f".{path.name}.", dir=path.parent) as tmp:
             parts = {f: open(Path(tmp) / f"{f}.raw", "wb") for f in self.frame_arrays}
+
+            def take(f, rows):
+                shapes.setdefault(f, (rows.dtype, rows.shape[1:]))
+                parts[f].write(rows.tobytes())
+
             try:
-                for item in self._items():
-                    k = int(item["skeleton"])
-                    for f in self.frame_arrays:
-                        a = np.ascontiguousarray(item[f].numpy().astype(dtype))
-                        tails.setdefault(f, a.shape[1:])
-                        parts[f].write(a.tobytes())
-                    names.append(item["name"])
-                    roles.append(str(self._ds.table["role"][self._clip(item)]))
-                    labels.append(json.dumps(item["labels"], sort_keys=True))
-                    fps.append(item["fps"])
-                    skel.append(k)
-                    joint_offsets.append(self._ds.skeletons[k].offsets.numpy())
-                    ends.append(self._ds.skeletons[k])
-                    lengths.append(int(item["length"]))
+                small = self._packed_pass(take)
             finally:
                 for f in parts.values():
                     f.close()
-            offsets = np.zeros(len(lengths) + 1, dtype=np.int64)
-            offsets[1:] = np.cumsum(lengths)
-            small = {"format": np.array(NPZ_FORMAT), "version": np.int64(NPZ_VERSION), "layout": np.array("packed"),
-                     **self._skeleton_arrays(ks[0]), "offsets": offsets,
-                     "names": np.array(names, dtype=str), "roles": np.array(roles, dtype=str),
-                     "labels": np.array(labels, dtype=str), "fps": np.array(fps, dtype=np.float64),
-                     "skeleton": np.array(skel, dtype=np.int64), "joint_offsets": np.stack(joint_offsets)}
-            if all(s.end_site_parents == sk0.end_site_parents for s in ends):
-                small["end_site_parents"] = np.array(sk0.end_site_parents, dtype=np.int64).reshape(-1)
-                small["end_site_offsets"] = np.stack([s.end_site_offsets.numpy().reshape(-1, 3) for s in ends])
-            small.update(self._stat_arrays())
+            total = int(small["offsets"][-1])
             with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
                 for key, a in small.items():
                     buf = io.BytesIO()
                     np.lib.format.write_array(buf, np.asanyarray(a), allow_pickle=False)
                     zf.writestr(f"{key}.npy", buf.getvalue())
                 for f in self.frame_arrays:
-                    header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
-                              "shape": (int(offsets[-1]), *tails.get(f, ()))}
+                    dtype, tail = shapes[f]
+                    header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": (total, *tail)}
                     with zf.open(f"{f}.npy", "w", force_zip64=True) as member, open(Path(tmp) / f"{f}.raw", "rb") as raw:
                         np.lib.format.write_array_header_2_0(member, header)
                         shutil.copyfileobj(raw, member, 1 << 22)
