@@ -60,6 +60,7 @@ def expected() -> dict:
         ("import", "float64"): (param(import_bvh, "float64"), None),
         ("import", "append"): (param(import_bvh, "append"), None),
         ("import", "format"): (param(import_bvh, "format"), IMPORT_FORMATS),
+        ("import", "name_prefix"): (param(import_bvh, "name_prefix"), None),
         ("retarget", "fix_feet"): (param(retarget_clips, "fix_feet"), None),
         ("export", "format"): (None, available_exporters()),
         ("export", "packed"): (get_exporter("npz").options["packed"].default, None),

@@ -166,3 +166,19 @@ def test_an_npz_archive_named_npy_is_one_line(exported, tmp_path, capsys):
     rc, _, err = run(capsys, "import", bad, "-o", tmp_path / "b.h5", "-q")
     assert rc == 1 and "Traceback" not in err and "unexpected" not in err
     assert any("000003.npy" in ln and "a NumPy .npz archive, not one array" in ln for ln in err.splitlines()), err
+
+
+def test_two_folders_with_the_same_ids_share_a_database_by_a_name_prefix(exported, tmp_path, capsys):
+    db = tmp_path / "two.h5"
+    assert main(["import", str(exported), "-o", str(db), "-q"]) == 0
+    rc, _, err = run(capsys, "import", exported, "-o", db, "--append", "-q")
+    assert rc == 2 and "already in the database" in err  # every motion of the second: skipped, one line each
+    rc, _, err = run(capsys, "import", exported, "-o", db, "--append", "--name-prefix", "again_", "-q")
+    assert rc == 0, err
+    with MotionDatabase.open(db) as d:
+        names = set(d.names)
+        mirrored = d.clip_info("again_M000003")["labels"]
+    assert len(names) == 100 and {"000003", "again_000003", "again_M000003"} <= names
+    assert mirrored["mirror_of"] == "again_000003"
+    rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "x.h5", "--name-prefix", "a:b")
+    assert rc == 2 and "--name-prefix 'a:b' must be text without control characters, commas or colons" in err

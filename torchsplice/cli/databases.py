@@ -71,6 +71,9 @@ class Import(Command):
         s.add_argument("--file-units", default=declared(IMPORTER, "import_bvh.file_units"), metavar="UNIT",
                        help="the units the files are in, where their spec does not say (the generic spec: joints "
                             "guessed): recorded, and converted by --units")
+        s.add_argument("--name-prefix", default=declared(IMPORTER, "import_bvh.name_prefix"), metavar="PREFIX",
+                       help="put PREFIX before every clip's name, so that sources with the same file names (two "
+                            "HumanML3D folders) share a database")
         s.add_argument("--split", type=positive_float, default=declared(IMPORTER, "import_bvh.split"), metavar="SECONDS",
                        help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, "
                             "...; labels split_from and split_frame say where each came from), so that long takes "
@@ -91,7 +94,7 @@ class Import(Command):
             report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
                                 float64=args.float64, split=args.split, split_overlap=args.split_overlap,
                                 units=args.units, progress=lambda it, total, desc: progress(it, total, desc, args.quiet),
-                                format=args.format, file_units=args.file_units)
+                                format=args.format, file_units=args.file_units, name_prefix=args.name_prefix)
         except NothingImportedError as exc:
             skipped_lines(exc.report.skipped)
             raise

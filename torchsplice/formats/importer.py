@@ -182,7 +182,7 @@ def collect_inputs(paths: Iterable, format: str = "auto") -> tuple[list, list[tu
 def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overwrite: bool = False,
                float64: bool = False, split: float | None = None, split_overlap: float = 1.0,
                units: str | None = None, progress: Callable | None = None, format: str = "auto",
-               file_units: str | None = None) -> ImportReport:
+               file_units: str | None = None, name_prefix: str = "") -> ImportReport:
     """Import BVH files and folders (and HumanML3D folders) into the database ``output`` (see
     the module docstring).
 
@@ -205,6 +205,9 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
             a guessed spec: units ``unknown``), so that they are recorded and ``units`` can
             convert them; a spec that names other units is refused for that file, in one line.
         progress: ``progress(iterable, total, desc) -> iterable`` to show progress (e.g. tqdm).
+        name_prefix: put before every clip's name (``"h1_"`` for a second HumanML3D folder whose
+            IDs are the first's, ``"cmu_"``), so that sources with the same file names share a
+            database; labels that name a clip (``mirror_of``) get it too.
         format: ``"auto"`` (a HumanML3D folder as such, anything else as BVH), ``"bvh"`` or
             ``"humanml3d"`` (:data:`FORMATS`).
 
@@ -223,6 +226,10 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     from ..store.database import MotionDatabase
     from ..ops.units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
+    bad = control_character(name_prefix) if name_prefix else ""
+    if bad or not isinstance(name_prefix, str) or "," in name_prefix or ":" in name_prefix:
+        raise TorchspliceError(f"{{name_prefix}} {name_prefix!r} must be text without control characters, commas or "
+                               "colons (clip names are read by the selection language)", options=("name_prefix",))
     if file_units is not None and file_units not in CONVERTIBLE_UNITS:
         raise TorchspliceError(f"{{file_units}}: unknown length unit {file_units!r}; name one of "
                                f"{', '.join(CONVERTIBLE_UNITS)}", options=("file_units",))
@@ -290,6 +297,10 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                     if units is not None:  # lengths in one unit, so that datasets share the database
                         m, s = convert_units(m, s, units)
                     m.role, m.labels = s.clip_metadata(m.name)
+                if name_prefix:
+                    m.name = name_prefix + m.name
+                    if "mirror_of" in m.labels:
+                        m.labels["mirror_of"] = name_prefix + m.labels["mirror_of"]
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
                 pieces = m.windows(split, split_overlap) if split else [m]
