@@ -23,7 +23,7 @@ import torch
 from torchsplice.core.rotations import axis_angle_to_quat, quat_apply
 from torchsplice.formats.humanml3d_features import (FEATURES, GROUPS, JOINTS, FeatureStats, features_to_positions,
                                                     gaussian_smooth, normalize_positions, pad_clips,
-                                                    positions_to_features, resample_positions)
+                                                    positions_to_features)
 from torchsplice.ops.retarget import retarget_map, retarget_motions
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
@@ -114,16 +114,21 @@ def test_shapes_are_checked():
     assert math.isclose(FEATURES, 4 + 63 + 126 + 66 + 4)
 
 
-def test_resampling_to_20_fps_interpolates_in_time():
-    T = 31  # one second at 30 fps
-    t = torch.arange(T, dtype=torch.float64) / 30.0
-    p = torch.stack([t, t * t, torch.sin(t)], dim=-1)[:, None].expand(T, 2, 3).clone()
-    r = resample_positions(p, 30.0)
-    assert r.shape == (21, 2, 3)
-    assert torch.allclose(r[:, 0, 0], torch.arange(21, dtype=torch.float64) / 20.0, atol=1e-12)  # linear: exact
-    assert torch.allclose(r[::2], p[::3])  # every second 20 fps frame is a 30 fps frame
-    assert torch.equal(resample_positions(p, 20.0), p)
-    assert resample_positions(p[:4], 120.0).shape[0] == 1  # 4 frames at 120 fps (25 ms): less than one 20 fps step
+def test_resampling_to_20_fps_keeps_bone_lengths_and_lands_on_the_source_frames():
+    """The export resamples rotations (align.curve.resample_motion), not positions: interpolating
+    positions would shorten a fast limb's bones between frames."""
+    from torchsplice.align.curve import resample_motion
+
+    m = sample_motions()[3].to(torch.float64)  # the side-step, 30 fps
+    r = resample_motion(m, 20.0)
+    assert r.num_frames == int((m.num_frames - 1) * 20 / 30) + 1 and r.fps == 20.0
+    p, q = m.global_positions(), r.global_positions()
+    assert torch.allclose(q[::2], p[::3][:q[::2].shape[0]], atol=1e-6)  # every second 20 fps frame is a 30 fps one
+    sk = m.skeleton
+    def bones(x):
+        return torch.stack([(x[:, j] - x[:, sk.parents[j]]).norm(dim=-1) for j in range(1, sk.num_joints)], 1)
+    assert float((bones(q) - bones(p)[:1]).abs().max()) < 1e-5  # cm; float32 rotations underneath
+    assert resample_motion(m, 30.0) is m
 
 
 def test_the_statistics_are_the_formats_and_do_not_depend_on_how_the_clips_are_cut():

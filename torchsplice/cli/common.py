@@ -213,16 +213,14 @@ def expand_clips(database, items) -> list[str]:
     """A command's clip arguments as names, in order: a clip name (of the database, or of a source
     database) as it is, a selector of the selection language (``'walk_*'``, ``'role:spliced'``,
     ``'method:naive,method:splice'``) replaced by the database's clips it selects, in row order."""
-    import re
-
     from ..store.database import MotionDatabase
-    from ..store.select import select_clips
+    from ..store.select import looks_like_selector, select_clips
 
     out: list[str] = []
     with MotionDatabase.open(database) as db:
         table = None
         for item in items:
-            if item in db or not re.search(r"[*?\[,:]", item):
+            if item in db or not looks_like_selector(item):
                 out.append(item)
                 continue
             table = table if table is not None else db.clip_table()

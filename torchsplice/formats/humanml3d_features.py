@@ -37,11 +37,10 @@ from __future__ import annotations
 
 import torch
 
-from ..align.curve import interpolate_frames, resample_times
 from ..core.rotations import quat_between, quat_conj, quat_mul, quat_to_6d
 
 __all__ = ["FEATURES", "JOINTS", "FOOT_THRESHOLD", "RAW_OFFSETS", "CHAINS", "FPS", "GROUPS", "normalize_positions",
-           "positions_to_features", "features_to_positions", "gaussian_smooth", "resample_positions", "FeatureStats",
+           "positions_to_features", "features_to_positions", "gaussian_smooth", "FeatureStats",
            "pad_clips"]
 
 FPS = 20.0
@@ -251,17 +250,6 @@ def features_to_positions(features: torch.Tensor) -> torch.Tensor:
     joints[..., 0] += root[..., None, 0]
     joints[..., 2] += root[..., None, 2]
     return torch.cat([root[..., None, :], joints], dim=-2)
-
-
-def resample_positions(positions: torch.Tensor, fps: float, to: float = FPS) -> torch.Tensor:
-    """``(T', J, 3)`` positions ``(T, J, 3)`` at ``fps`` resampled to ``to`` frames a second by
-    linear interpolation in time, from the first frame to the last one the clip reaches
-    (``T' = floor((T - 1) * to / fps) + 1``); at the same rate, the clip as it is."""
-    if fps <= 0 or to <= 0:
-        raise ValueError(f"frame rates must be positive, got {fps} and {to}")
-    if positions.shape[0] < 2 or abs(fps - to) < 1e-9:
-        return positions.clone()
-    return interpolate_frames(positions[None], resample_times(positions.shape[0], fps, to)[None])[0]
 
 
 class FeatureStats:

@@ -214,22 +214,24 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
     mean_corr = np.add.reduceat(corr, starts) / frames if len(corr) else np.zeros(len(keys))
     loco_frames = np.array([plan.clips[k[0]].frames for k in keys])
-    flags, details = [], []
     standing = getattr(task, "mode", "timewarp") == "standing"
-    distance = np.array([alignment_distance(float(c), group.leg) for c in cost])
-    for b, k in enumerate(keys):
-        codes, words = [], []
+    cost = np.asarray(cost, dtype=np.float64)
+    distance = np.where(np.isfinite(cost), np.sqrt(np.maximum(cost, 0.0)), 0.0) / group.leg if group.leg > 0 \
+        else np.zeros(len(keys))  # alignment_distance, for every pair at once
+    poor = distance > POOR_ALIGNMENT
+    unmoving = np.array([k[0] in plan.flags or (not standing and k[1] in plan.flags) for k in keys], dtype=bool)
+    flags, details = [""] * len(keys), [""] * len(keys)
+    for b in np.flatnonzero(poor | unmoving).tolist():  # words only for the pairs flagged
+        k, codes, words = keys[b], [], []
         for key, name, code in ((k[0], lnames[b], "locomotion_not_locomoting"),
                                 (k[1], anames[b], "action_not_locomoting"))[:1 if standing else 2]:
             if key in plan.flags:
                 codes.append(code)
                 words.append(f"{name} does not locomote ({plan.flags[key]})")
-        poor = poor_alignment(float(cost[b]), group.leg)
-        if poor:
+        if poor[b]:
             codes.append("poor_alignment")
-            words.append(poor)
-        flags.append(",".join(sorted(codes)))
-        details.append(FLAG_SEPARATOR.join(words))
+            words.append(poor_alignment(float(cost[b]), group.leg))
+        flags[b], details[b] = ",".join(sorted(codes)), FLAG_SEPARATOR.join(words)
     named = get_method(method).clip_name
     extra = {
         "locomotion": lnames, "action": anames,

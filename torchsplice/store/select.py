@@ -30,7 +30,7 @@ import numpy as np
 from ..core.errors import TorchspliceError
 from .table import ClipTable
 
-__all__ = ["select_clips", "parse_selector", "names_or_selector"]
+__all__ = ["select_clips", "parse_selector", "names_or_selector", "looks_like_selector"]
 
 
 def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, str, str]]:
@@ -135,6 +135,12 @@ def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, so
     return np.flatnonzero(keep).tolist()
 
 
+def looks_like_selector(text: str) -> bool:
+    """Whether a command's clip argument reads as a selector (a glob, a ``PREFIX:`` or
+    alternatives) rather than a plain clip name."""
+    return re.search(r"[*?\[,:]", text) is not None
+
+
 def names_or_selector(table: ClipTable, items: Sequence[str]) -> tuple[list[str] | None, str | None]:
     """What a command's clip arguments mean: ``(names, None)`` when every item is a clip name of
     ``table`` (kept in their order), else ``(None, selector)``: the items as alternatives of one
@@ -146,7 +152,7 @@ def names_or_selector(table: ClipTable, items: Sequence[str]) -> tuple[list[str]
     items = list(items)
     if all(i in known for i in items):
         return items, None
-    plain = [i for i in items if i not in known and not re.search(r"[*?\[,:]", i)]
+    plain = [i for i in items if i not in known and not looks_like_selector(i)]
     if plain:  # meant as a name: the database's own "no clip named" (with similar names)
         return plain, None
     escaped = [re.sub(r"([*?\[])", r"[\1]", i) if i in known else i for i in items]
