@@ -29,7 +29,7 @@ from torchsplice.splice.registry import available_methods
 from torchsplice.splice.standing import parse_limbs
 from torchsplice.store.database import COMPRESSIONS
 from torchsplice.splice.backends import backend_choices
-from torchsplice.viz.render import render
+from torchsplice.viz.render import CAMERAS, render
 from torchsplice.viz.viewer import write_viewer
 
 
@@ -68,6 +68,9 @@ def expected() -> dict:
         ("splice", "method"): (param(splice, "method"), available_methods()),
         ("render", "frames"): (param(render, "frames"), None),
         ("render", "max_seconds"): (param(render, "max_seconds"), None),
+        ("render", "camera"): (param(render, "camera"), CAMERAS),
+        ("render", "azimuth"): (param(render, "azimuth"), None),
+        ("render", "elevation"): (param(render, "elevation"), None),
         ("view", "max_clips"): (param(write_viewer, "max_clips"), None),
         ("evaluate", "max_rows"): (param(evaluate_database, "max_rows"), None),
         ("evaluate", "no_pictures"): (not param(evaluate_database, "pictures"), None),

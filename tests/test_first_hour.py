@@ -297,3 +297,33 @@ def test_per_clip_metrics_as_csv_for_any_database(sample_db, tmp_path, capsys):
         assert (r["cost"] == "") if want != want else float(r["cost"]) == pytest.approx(want)
     rc, _, err = run(capsys, "info", spliced, "--csv", tmp_path / "x.txt")
     assert rc == 2 and "must end in .csv" in error_line(err)
+
+
+def test_11_the_demo_draws_the_pair_where_the_naive_splice_loses_the_actions_posture_most():
+    """The demo's preview pair is, of the sample's 25, the one whose naive and method's splices
+    differ most in mean trunk lean, and the README's figures for it hold: the box carrier leans
+    back about 12 degrees, the method's splice keeps it, the naive one stands at about 5."""
+    from test_splice import leans
+    from torchsplice.sample import sample_motions
+    from torchsplice.specs import load_spec
+    from torchsplice.splice import splice
+
+    spec = load_spec("sample")
+    clips = {c.name: c for c in sample_motions()}
+    roles = spec.bind(clips["jog"].skeleton)
+    locomotions = ["walk_straight", "walk_curve", "turn_sharp", "sidestep", "jog"]
+    actions = ["carry_box", "carry_cup", "wave", "punch", "arms_out"]
+    lean = {}
+    for lo in locomotions:
+        for ac in actions:
+            for method in ("splice", "naive"):
+                lean[lo, ac, method] = float(leans(splice(clips[lo], clips[ac], spec, method=method).motion, roles).mean())
+    gap = {(lo, ac): abs(lean[lo, ac, "splice"] - lean[lo, ac, "naive"]) for lo in locomotions for ac in actions}
+    assert max(gap, key=gap.get) == ("jog", "carry_box")
+    action = float(leans(clips["carry_box"], roles).mean())
+    assert abs(action + 12) < 1 and abs(lean["jog", "carry_box", "splice"] + 12) < 1  # leans: forward positive
+    assert abs(lean["jog", "carry_box", "naive"] + 5) < 1
+    demo = (Path(__file__).resolve().parents[1] / "scripts" / "demo.sh").read_text()
+    assert "--overlay jog+carry_box jog+carry_box.naive" in demo
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert "leans back (12 degrees" in readme and "stands straighter (5 degrees)" in readme

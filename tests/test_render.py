@@ -350,7 +350,7 @@ def test_unknown_suffix(tmp_path, clips, name):
 def test_bad_arguments(tmp_path, clips):
     with pytest.raises(TorchspliceError, match="at least one clip"):
         render([], tmp_path / "x.png")
-    with pytest.raises(TorchspliceError, match="one title per clip"):
+    with pytest.raises(TorchspliceError, match="one title per panel"):
         render([clips["walk"]], tmp_path / "x.png", titles=["a", "b"])
     with pytest.raises(TorchspliceError, match="up_axis"):
         render([clips["walk"]], tmp_path / "x.png", up_axis=3)
@@ -402,3 +402,84 @@ def test_oversized_gif_is_refused_before_drawing(tmp_path, clips, monkeypatch):
         render([clips["walk"]], tmp_path / "x.gif", **SMALL)
     assert "\n" not in str(err.value)
     assert list(tmp_path.iterdir()) == []
+
+
+# -- the heading camera and overlay panels (the issue "The first hour", item 11) ------------------
+
+
+def _yaw_quat(deg, up=1) -> torch.Tensor:
+    """``(T, 4)`` WXYZ rotations by ``deg`` about axis ``up``."""
+    h = torch.deg2rad(torch.as_tensor(deg, dtype=torch.float64)) / 2
+    q = torch.zeros(h.shape + (4,), dtype=torch.float64)
+    q[..., 0], q[..., 1 + up] = torch.cos(h), torch.sin(h)
+    return q
+
+
+def _qmul(a, b):
+    w1, x1, y1, z1 = a.unbind(-1)
+    w2, x2, y2, z2 = b.unbind(-1)
+    return torch.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], -1)
+
+
+@pytest.mark.parametrize("up", [0, 1, 2])
+def test_heading_yaw_recovers_turns_beyond_half_a_turn_under_any_tilt(up):
+    deg = torch.linspace(-30.0, 400.0, 90, dtype=torch.float64)
+    tilt = torch.zeros(90, 4, dtype=torch.float64)  # a swing about another axis, after the yaw
+    tilt[:, 0], tilt[:, 1 + (up + 1) % 3] = math.cos(math.radians(10)), math.sin(math.radians(10))
+    q = _qmul(_yaw_quat(deg, up), tilt)
+    yaw = np.degrees(render_mod.heading_yaw(q.numpy(), up))
+    assert np.allclose(yaw, deg.numpy(), atol=1e-9)
+    d = np.degrees(render_mod.heading_yaw(-q.numpy(), up)) - yaw  # -q is the same rotation: whole turns apart
+    assert np.allclose(d, d[0], atol=1e-9) and abs(d[0] / 360 - round(d[0] / 360)) < 1e-9
+
+
+def _turning_in_place(frames=90, degrees=120.0) -> Motion:
+    """The sample walk's first pose held still, its root yawing at a constant rate."""
+    m = sample_motion("walk_straight", dtype=torch.float64).slice(0, 1)
+    rot = m.rotations.expand(frames, -1, -1).clone()
+    rot[:, 0] = _qmul(_yaw_quat(torch.linspace(0.0, degrees, frames, dtype=torch.float64)), rot[:, 0])
+    root = m.root_translation.expand(frames, 3).clone()
+    return Motion(m.skeleton, rot, root, 30.0, name="turning")
+
+
+def test_the_heading_camera_turns_with_the_character_and_the_world_camera_does_not():
+    m = _turning_in_place()
+    half = 15  # half the heading camera's one-second window at 30 fps: inside it the smoothing is exact
+    heading = render_mod._prepare(m, 1, -55.0, 22.0, "heading").screen[half:-half, :-1]
+    world = render_mod._prepare(m, 1, -55.0, 22.0, "world").screen[half:-half, :-1]
+    assert np.abs(heading - heading[:1]).max() < 1e-9  # seen from the same side all the way round
+    assert np.abs(world - world[:1]).max() > 20.0  # centimetres: the figure turns in front of it
+
+
+def test_an_overlaid_clip_is_seen_from_the_first_clips_camera(clips):
+    walk = clips["curve"]
+    lead = render_mod._prepare(walk, 1, -55.0, 22.0, "heading")
+    same = render_mod._prepare(walk, 1, -55.0, 22.0, "heading", leader=lead)
+    assert np.array_equal(same.screen, lead.screen, equal_nan=True)
+    by = np.array([10.0, 0.0, -4.0])
+    moved = render_mod._prepare(shifted(walk, list(by)), 1, -55.0, 22.0, "heading", leader=lead)
+    want = lead.screen[:, :-1] + np.einsum("tik,k->ti", lead.view, by)[:, None]
+    assert np.allclose(moved.screen[:, :-1], want, atol=1e-9)  # not re-centred on its own root
+
+
+def test_an_overlay_panel_draws_the_further_clips_in_grey(tmp_path, clips):
+    from matplotlib.colors import to_rgb
+
+    grey = np.array([round(255 * v) for v in to_rgb(render_mod._GHOST_COLOR)])
+    walk, box = clips["walk"], clips["box"]
+    alone = pixels(render([walk], tmp_path / "alone.png", frames=2, **SMALL))
+    over = pixels(render([[walk, shifted(box, (40.0, 0.0, 0.0))]], tmp_path / "over.png", frames=2, **SMALL))
+    n_alone, n_over = ((np.abs(p[40:] - grey).max(-1) <= 3).sum() for p in (alone, over))  # below the legend
+    assert n_over > 60 and n_over > 4 * n_alone, (n_alone, n_over)
+
+
+def test_render_command_takes_an_overlay_a_camera_and_its_angles(tmp_path, capsys, sample_db):
+    from cli_helpers import error_line, run
+
+    out = tmp_path / "o.png"
+    rc, text, _ = run(capsys, "render", sample_db, "walk_curve", "--overlay", "walk_curve", "jog", "--camera", "world",
+                      "--azimuth", "-90", "--elevation", "5", "--frames", "2", "-o", out)
+    assert rc == 0 and "1 clip and a panel of 2 drawn over each other" in text and out.is_file()
+    rc, _, err = run(capsys, "render", sample_db, "walk_curve", "--elevation", "95", "-o", tmp_path / "x.png")
+    assert rc != 0 and "elevation from -90 to 90" in error_line(err) and not (tmp_path / "x.png").exists()

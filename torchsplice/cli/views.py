@@ -16,9 +16,10 @@ MAX_FILMSTRIP = 64  # columns of a PNG filmstrip: more would not fit a screen (a
 class Render(Command):
     name = "render"
     help = "stick-figure preview of clips side by side (GIF, MP4 or PNG filmstrip)"
-    description = ("Draw clips as stick figures side by side (e.g. locomotion, action, naive, spliced) from a fixed "
-                   "camera that follows each root, with clip names as titles and a ground grid. .gif and .mp4 (needs "
-                   "ffmpeg) animate; .png is a filmstrip.")
+    description = ("Draw clips as stick figures side by side (e.g. locomotion, action, naive, spliced) from a camera "
+                   "that follows each root and turns with its heading, with clip names as titles and a ground grid; "
+                   "--overlay adds a panel drawing clips over each other (a splice with its naive result in grey). "
+                   ".gif and .mp4 (needs ffmpeg) animate; .png is a filmstrip.")
 
     def add_arguments(self, s) -> None:
         frames = declared(RENDER, "render.frames")
@@ -30,6 +31,20 @@ class Render(Command):
                        help=f"frames per clip in a PNG filmstrip (default {frames}, at most {MAX_FILMSTRIP})")
         s.add_argument("--max-seconds", type=positive_float, default=declared(RENDER, "render.max_seconds"),
                        metavar="SECONDS", help="show at most this many seconds")
+        s.add_argument("--overlay", nargs="+", metavar="CLIP",
+                       help="one more panel: these clips drawn over each other, the first in colour, the others in "
+                            "grey at the same times, seen from the first's camera (e.g. 'walk_curve+carry_box' "
+                            "'walk_curve+carry_box.naive')")
+        camera = declared(RENDER, "render.camera")
+        s.add_argument("--camera", choices=declared(RENDER, "CAMERAS"), default=camera,
+                       help=f"heading: the camera turns with each character's heading; world: its direction is "
+                            f"fixed (default {camera}); it follows the character in both")
+        azimuth, elevation = declared(RENDER, "render.azimuth"), declared(RENDER, "render.elevation")
+        s.add_argument("--azimuth", type=float, default=azimuth, metavar="DEG",
+                       help=f"the camera's angle about the up axis at the first frame (default {azimuth:g}: front "
+                            "right of a character facing +Z; -90 its right side)")
+        s.add_argument("--elevation", type=float, default=elevation, metavar="DEG",
+                       help=f"the camera's height above the floor, in degrees (default {elevation:g})")
         s.add_argument("--sources", nargs="+", metavar="DB",
                        help="databases holding clips not in DATABASE, e.g. a spliced clip's locomotion and action "
                             "(default: the inputs its run record names)")
@@ -41,6 +56,11 @@ class Render(Command):
 
         out = output(args, "render")
         clips, spec = read_clips(args.database, expand_clips(args.database, args.clips), sources=args.sources)
+        panels, titles = list(clips), [c.name for c in clips]
+        if args.overlay:
+            over, _ = read_clips(args.database, expand_clips(args.database, args.overlay), sources=args.sources)
+            panels.append(over)
+            titles.append(over[0].name + (f"; grey: {', '.join(c.name for c in over[1:])}" if len(over) > 1 else ""))
         longest = max(c.num_frames for c in clips)
         frames = args.frames
         if out.suffix.lower() == ".png" and frames > longest:
@@ -48,9 +68,10 @@ class Render(Command):
                   file=sys.stderr)
             frames = longest
         with locked(out, args):
-            render(clips, out, titles=[c.name for c in clips], up_axis=spec.up_axis, frames=frames,
-                   max_seconds=args.max_seconds)
-        say(args, f"wrote {out}: {len(clips)} clip{'s' if len(clips) != 1 else ''}")
+            render(panels, out, titles=titles, up_axis=spec.up_axis, frames=frames, max_seconds=args.max_seconds,
+                   camera=args.camera, azimuth=args.azimuth, elevation=args.elevation)
+        overlay = f" and a panel of {len(panels[-1])} drawn over each other" if args.overlay else ""
+        say(args, f"wrote {out}: {len(clips)} clip{'s' if len(clips) != 1 else ''}{overlay}")
         return 0
 
 

@@ -13,11 +13,14 @@ Camera and projection (:func:`view_rotation`, :func:`project`):
   shipped dataset). Positions are taken in a right-handed frame ``(e1, e2, up)`` with
   ``e1 = (up+1) % 3`` and ``e2 = (up+2) % 3`` (for Y up: ``e1 = Z``, ``e2 = X``), so the
   picture is never mirrored.
-- One fixed orthographic view for every panel and frame: the camera sits at ``azimuth``
-  degrees about the up axis from ``e1`` (towards ``e2``) and ``elevation`` degrees above the
-  floor, looking down at the character. The default (-55, 22) is an elevated three-quarter
-  view: for Y up, from ``+Z`` and ``-X``, so the sample's characters, which face ``+Z`` with
-  their left at ``+X``, are first seen from the front right. Up maps to screen up.
+- An orthographic view: the camera sits at ``azimuth`` degrees about the up axis from ``e1``
+  (towards ``e2``) and ``elevation`` degrees above the floor, looking down at the character.
+  The default (-55, 22) is an elevated three-quarter view: for Y up, from ``+Z`` and ``-X``,
+  so the sample's characters, which face ``+Z`` with their left at ``+X``, are first seen
+  from the front right. Up maps to screen up. With ``camera="heading"`` (the default) the
+  camera turns about the up axis with the character's heading (the followed joint's yaw,
+  smoothed over a second), so a curved walk or a turn stays seen from the same side as at
+  its first frame and the grid turns under it; ``camera="world"`` keeps the direction fixed.
 - The camera follows each clip's root in the floor plane (smoothed over half a second, so
   the gait's side-to-side sway stays visible; for a skeleton whose root stays on the ground
   and whose child is animated, like Bandai Namco's ``joint_Root`` and ``Hips``, it follows
@@ -27,6 +30,10 @@ Camera and projection (:func:`view_rotation`, :func:`project`):
 - The scale is fixed over time and equal in x and y. Panels share one scale, so sizes and
   speeds compare, unless the skeletons differ in size by more than a factor of 1.5 (other
   units); then each panel is scaled to its own skeleton.
+
+A panel may hold several clips drawn over each other (``motions`` entries that are sequences):
+the first in the side colours, the camera its; the others in grey, at the same times, seen
+from the first's camera (e.g. a naive result over the splice, as in the paper's Figure 4).
 
 Forward kinematics runs once per clip, vectorised over frames; drawing a frame only sets the
 data of a few ``Line2D`` artists. An animation plays in real time to the longest clip; a
@@ -58,20 +65,24 @@ from ..core.motion import Motion
 from ..store.atomic import atomic_path
 from ..core.fk import end_site_positions, forward_kinematics
 
-__all__ = ["render", "project", "view_rotation", "SUPPORTED_SUFFIXES"]
+__all__ = ["render", "project", "view_rotation", "SUPPORTED_SUFFIXES", "CAMERAS"]
 
 SUPPORTED_SUFFIXES = (".gif", ".mp4", ".png")
 """Output types :func:`render` writes, chosen by the output's suffix."""
 
 DEFAULT_AZIMUTH = -55.0
 DEFAULT_ELEVATION = 22.0
+CAMERAS = ("heading", "world")
+"""How the camera turns: with the character's heading, or never (it follows the root in both)."""
 
 _CENTER, _LEFT, _RIGHT = 0, 1, 2
 _COLORS = {_CENTER: "#2b2b2b", _LEFT: "#1f6fb4", _RIGHT: "#d0342c"}
 _GRID_COLOR = "#cfd3d8"
 _DOT_COLOR = "#a9b0b8"  # the grid's crossings in a GIF, a little darker than its lines
 _TRAIL_COLOR = "#8fb9d9"
+_GHOST_COLOR = "#9b9b9b"  # the further clips of an overlay panel
 _FOLLOW_SECONDS = 0.5  # smoothing window of the follow camera
+_HEADING_SECONDS = 1.0  # smoothing window of the heading camera (a gait's twist averages out)
 _TRAIL_SECONDS = 2.0
 
 
@@ -114,6 +125,33 @@ def view_rotation(up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation:
     rot = np.zeros((3, 3))
     rot[:, canonical_axes(up)] = canon  # columns back in the file's axis order
     return rot
+
+
+def view_rotations(up_axis: int, azimuth: np.ndarray, elevation: float = DEFAULT_ELEVATION) -> np.ndarray:
+    """:func:`view_rotation` for each of ``(T,)`` azimuths (degrees): ``(T, 3, 3)`` float64."""
+    up = check_up_axis(up_axis)
+    az, el = np.radians(np.asarray(azimuth, dtype=np.float64)), math.radians(elevation)
+    ca, sa, ce, se = np.cos(az), np.sin(az), math.cos(el), math.sin(el)
+    zero = np.zeros_like(ca)
+    canon = np.stack([
+        np.stack([-sa, ca, zero], -1),
+        np.stack([-se * ca, -se * sa, zero + ce], -1),
+        np.stack([ce * ca, ce * sa, zero + se], -1),
+    ], -2)
+    rot = np.zeros(canon.shape)
+    rot[..., canonical_axes(up)] = canon
+    return rot
+
+
+def heading_yaw(rotations: np.ndarray, up_axis: int) -> np.ndarray:
+    """``(T,)`` unwrapped yaw in radians about the up axis of ``(T, 4)`` world rotations (WXYZ):
+    the angle of each rotation's twist about that axis (swing-twist), continuous over frames."""
+    q = np.asarray(rotations, dtype=np.float64)
+    if q.ndim != 2 or q.shape[-1] != 4:
+        raise ValueError(f"rotations must be (T, 4), got {q.shape}")
+    yaw = 2.0 * np.arctan2(q[:, 1 + check_up_axis(up_axis)], q[:, 0])
+    yaw = np.where(np.isfinite(yaw), yaw, 0.0)
+    return np.unwrap(yaw)
 
 
 def project(points, up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation: float = DEFAULT_ELEVATION) -> np.ndarray:
@@ -172,9 +210,11 @@ class _Clip:
     ``screen``: ``(T, P + 1, 2)`` joints then end sites, the last row NaN (a line break);
     ``lines``: per side, an index array into ``P + 1`` (``a, b, NaN, a, b, NaN, ...``);
     ``head``: ``(T, 2)`` head circle centre or ``None``; ``head_size``: its diameter (units);
-    ``root``: ``(T, 2)`` projected floor point under the followed joint (screen, absolute);
-    ``center``: ``(T, 2)`` projected camera centre (absolute); ``floor_center``: ``(T, 2)``
-    the camera centre in the floor plane ``(e1, e2)``; ``floor``: the floor's height;
+    ``root``: ``(T, 3)`` the floor point under the followed joint (world);
+    ``center``: ``(T, 3)`` the camera centre (world, on the floor); ``view``: ``(T, 2, 3)``
+    the screen's right and up at each frame (world directions; see :func:`view_rotation`);
+    ``floor_center``: ``(T, 2)`` the camera centre in the floor plane ``(e1, e2)``; ``floor``:
+    the floor's height;
     ``height``: the figure's greatest height above the floor (at least a quarter of the
     skeleton's size, for a figure lying flat); ``size``: the skeleton's size
     (units); ``drawn``: indices of the points that some bone uses.
@@ -188,6 +228,7 @@ class _Clip:
     head_size: float
     root: np.ndarray
     center: np.ndarray
+    view: np.ndarray
     floor_center: np.ndarray
     floor: float
     height: float
@@ -240,13 +281,15 @@ class Figure3D:
     2 right), an index array ``a, b, P, a, b, P, ...`` into the points, ``P`` a line break;
     ``follow``: the joint whose floor path is the character's (the root, or a root child with
     animated translation such as Bandai Namco's ``Hips`` under ``joint_Root``); ``drawn``:
-    indices of the points some bone uses.
+    indices of the points some bone uses; ``follow_rotation``: ``(T, 4)`` the followed joint's
+    world rotation (WXYZ), whose yaw the heading camera turns with.
     """
 
     points: np.ndarray
     lines: dict[int, np.ndarray]
     follow: int
     drawn: np.ndarray
+    follow_rotation: np.ndarray | None = None
 
 
 def figure_points(motion: Motion) -> Figure3D:
@@ -278,11 +321,18 @@ def figure_points(motion: Motion) -> Figure3D:
         segs[_side(sk.names[p])] += [p, J + e, P]
     lines = {k: np.asarray(v, dtype=np.int64) for k, v in segs.items() if v}
     drawn = np.unique(np.concatenate(list(lines.values())))[:-1] if lines else np.array([follow])
-    return Figure3D(points=pts, lines=lines, follow=follow, drawn=drawn)
+    return Figure3D(points=pts, lines=lines, follow=follow, drawn=drawn, follow_rotation=grot[:, follow].numpy())
 
 
-def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
-    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy."""
+def _at_times(n: int, fps: float, leader: _Clip) -> np.ndarray:
+    """``(n,)`` the leader's frame nearest each of ``n`` frames at ``fps`` (held at its ends)."""
+    return np.clip(np.rint(np.arange(n) / fps * leader.fps).astype(np.int64), 0, leader.num_frames - 1)
+
+
+def _prepare(motion: Motion, up: int, azimuth: float, elevation: float, camera: str,
+             leader: _Clip | None = None) -> _Clip:
+    """Forward kinematics once for the whole clip, then everything drawing needs, as numpy.
+    With ``leader``, the clip is seen from the leader's camera at the same times (an overlay)."""
     sk = motion.skeleton
     fig3 = figure_points(motion)
     pts, lines, follow, drawn = fig3.points, fig3.lines, fig3.follow, fig3.drawn
@@ -296,21 +346,33 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
 
     floor_xy = pts[:, follow][:, axes[:2]]  # (T, 2) in (e1, e2)
     floor_xy = np.where(np.isfinite(floor_xy), floor_xy, 0.0)
-    smooth = _moving_average(floor_xy, max(1, int(round(_FOLLOW_SECONDS * motion.fps))) | 1)
-    cam3 = np.zeros((T, 3))
-    cam3[:, axes[0]], cam3[:, axes[1]], cam3[:, up] = smooth[:, 0], smooth[:, 1], floor
-    root3 = cam3.copy()
+    root3 = np.zeros((T, 3))
     root3[:, axes[0]], root3[:, axes[1]] = floor_xy[:, 0], floor_xy[:, 1]
+    if leader is not None:
+        at = _at_times(T, motion.fps, leader)
+        cam3, view, smooth = leader.center[at], leader.view[at], leader.floor_center[at]
+        root3[:, up] = cam3[:, up]
+    else:
+        smooth = _moving_average(floor_xy, max(1, int(round(_FOLLOW_SECONDS * motion.fps))) | 1)
+        cam3 = np.zeros((T, 3))
+        cam3[:, axes[0]], cam3[:, axes[1]], cam3[:, up] = smooth[:, 0], smooth[:, 1], floor
+        root3[:, up] = floor
+        az = np.full(T, float(azimuth))
+        if camera == "heading" and fig3.follow_rotation is not None and T > 1:
+            yaw = heading_yaw(fig3.follow_rotation, up)
+            yaw = _moving_average(yaw[:, None], max(1, int(round(_HEADING_SECONDS * motion.fps))) | 1)[:, 0]
+            az = az + np.degrees(yaw - yaw[0])
+        view = view_rotations(up, az, elevation)[:, :2]  # (T, 2, 3)
 
-    scr = (pts - cam3[:, None]) @ view[:2].T  # (T, P, 2), relative to the camera centre
+    scr = np.einsum("tpk,tik->tpi", pts - cam3[:, None], view)  # (T, P, 2), relative to the camera centre
     screen = np.concatenate([scr, np.full((T, 1, 2), np.nan)], axis=1)
 
     head, head_size = head_joint(sk, pts, up)
     if head is not None:
-        head = (head - cam3) @ view[:2].T
+        head = np.einsum("tk,tik->ti", head - cam3, view)
     return _Clip(
         name=motion.name, fps=motion.fps, screen=screen, lines=lines, head=head, head_size=head_size,
-        root=root3 @ view[:2].T, center=cam3 @ view[:2].T, floor_center=smooth, floor=floor,
+        root=root3, center=cam3, view=view, floor_center=smooth, floor=floor,
         height=max(top - floor, 0.25 * sk.size(), 1e-9), size=max(sk.size(), 1e-9), drawn=drawn,
     )
 
@@ -322,7 +384,7 @@ def _prepare(motion: Motion, up: int, view: np.ndarray) -> _Clip:
 
 @dataclass
 class _Scene:
-    """What the panels share: view, fixed limits, grid layout, panel size.
+    """What the panels share: fixed limits, grid layout, panel size.
 
     Limits and grid sizes are in *reference units*: panel ``i`` shows them times
     ``scale[i]`` in its clip's own units. ``scale`` is all ones (one scale for every panel,
@@ -331,7 +393,6 @@ class _Scene:
     own skeleton's :meth:`~torchsplice.core.skeleton.Skeleton.size`.
     """
 
-    view: np.ndarray
     up: int
     xlim: tuple[float, float]
     ylim: tuple[float, float]
@@ -342,13 +403,14 @@ class _Scene:
     scale: list[float]
 
 
-def _scene(clips: list[_Clip], up: int, view: np.ndarray, size: float) -> _Scene:
-    """Shared limits: every clip's every frame fits, equal aspect, a margin of floor in front."""
-    sizes = [c.size for c in clips]
-    scale = [1.0] * len(clips) if max(sizes) <= 1.5 * min(sizes) else sizes
-    H = max(c.height / k for c, k in zip(clips, scale))
+def _scene(panels: list[list[_Clip]], up: int, size: float) -> _Scene:
+    """Shared limits: every clip's every frame fits, equal aspect, a margin of floor in front.
+    ``panels``: per panel its clips, the first leading (its size sets the panel's scale)."""
+    sizes = [p[0].size for p in panels]
+    scale = [1.0] * len(panels) if max(sizes) <= 1.5 * min(sizes) else sizes
+    H = max(c.height / k for p, k in zip(panels, scale) for c in p)
     xs, ys = [np.zeros(1)], [np.zeros(1)]
-    for c, k in zip(clips, scale):
+    for c, k in ((c, k) for p, k in zip(panels, scale) for c in p):
         pts = c.screen[:, c.drawn] / k
         ok = np.isfinite(pts).all(-1)
         xs.append(pts[..., 0][ok])
@@ -371,7 +433,7 @@ def _scene(clips: list[_Clip], up: int, view: np.ndarray, size: float) -> _Scene
         extra = 2 * half_w * ratio - (y1 - y0)
         y0, y1 = y0 - 0.5 * extra, y1 + 0.5 * extra
     reach = 2.5 * max(half_w, y1 - y0)
-    return _Scene(view=view, up=up, xlim=(-half_w, half_w), ylim=(y0, y1), height=H, reach=reach,
+    return _Scene(up=up, xlim=(-half_w, half_w), ylim=(y0, y1), height=H, reach=reach,
                   panel_w=panel_w, panel_h=panel_h, scale=[float(k) for k in scale])
 
 
@@ -397,7 +459,7 @@ def _grid_lines(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple[np.
     canon = np.concatenate(out)
     world = np.zeros_like(canon)
     world[:, canonical_axes(scene.up)] = canon
-    xy = world @ scene.view[:2].T
+    xy = world @ clip.view[f].T
     return xy[:, 0], xy[:, 1]
 
 
@@ -412,19 +474,20 @@ def _grid_crossings(scene: _Scene, clip: _Clip, f: int, k: float = 1.0) -> tuple
     canon = np.stack([A.ravel(), B.ravel(), np.zeros(A.size)], axis=-1)
     world = np.zeros_like(canon)
     world[:, canonical_axes(scene.up)] = canon
-    xy = world @ scene.view[:2].T
+    xy = world @ clip.view[f].T
     return xy[:, 0], xy[:, 1]
 
 
 class _Panel:
-    """One axes showing one clip; :meth:`show` puts frame ``f`` on it by setting line data.
+    """One axes showing one clip (and ``others`` over it, in grey, at the same times);
+    :meth:`show` puts frame ``f`` on it by setting line data.
 
     With ``animated=True`` the moving artists are left out of a full draw: the animation
     draws the static background once and blits them over it each frame (:meth:`blit`).
     """
 
     def __init__(self, fig, rect, scene: _Scene, clip: _Clip, k: float, title: str | None, animated: bool,
-                 grid_dots: bool = False):
+                 grid_dots: bool = False, others: Sequence[_Clip] = ()):
         from matplotlib.lines import Line2D
         from matplotlib.patches import Rectangle
 
@@ -450,6 +513,12 @@ class _Panel:
             ln = Line2D([], [], color=_COLORS[side], lw=lw, zorder=4 if side == _CENTER else 3, marker="o",
                         markersize=lw * 1.3, markeredgewidth=0, solid_capstyle="round", solid_joinstyle="round")
             self.bones.append((ax.add_line(ln), idx))
+        self.others = []
+        for o in others:  # every bone of a further clip in one grey line, under the first clip's
+            idx = np.concatenate(list(o.lines.values())) if o.lines else np.zeros(0, dtype=np.int64)
+            ln = Line2D([], [], color=_GHOST_COLOR, lw=lw, zorder=2.5, marker="o", markersize=lw * 1.3,
+                        markeredgewidth=0, solid_capstyle="round", solid_joinstyle="round")
+            self.others.append((ax.add_line(ln), idx, o))
         self.head = None
         if clip.head is not None:
             ppu = 72.0 * scene.panel_h / (k * (scene.ylim[1] - scene.ylim[0]))  # points per data unit
@@ -465,7 +534,8 @@ class _Panel:
         self.label = fig.text(x0 + w / 2, y0 - 0.015 * h, "" if not animated else "(end)", ha="center", va="top",
                               fontsize=8, color="#444444")
         self.animated = animated
-        self.moving = [self.grid, self.trail] + [ln for ln, _ in self.bones] + ([self.head] if self.head else [])
+        self.moving = ([self.grid, self.trail] + [ln for ln, _, _ in self.others] + [ln for ln, _ in self.bones]
+                       + ([self.head] if self.head else []))
         for a in self.moving + [self.label]:
             a.set_animated(animated)
         self.held = False
@@ -476,7 +546,7 @@ class _Panel:
         c = self.clip
         gx, gy = (_grid_crossings if self.grid_dots else _grid_lines)(self.scene, c, f, self.k)
         self.grid.set_data(gx, gy)
-        tr = c.root[max(0, f - self._trail_frames):f + 1] - c.center[f]
+        tr = (c.root[max(0, f - self._trail_frames):f + 1] - c.center[f]) @ c.view[f].T
         self.trail.set_data(tr[:, 0], tr[:, 1])
         pts = c.screen[f]
         for ln, idx in self.bones:
@@ -484,6 +554,10 @@ class _Panel:
             ln.set_data(xy[:, 0], xy[:, 1])
         if self.head is not None:
             self.head.set_data(c.head[f, :1], c.head[f, 1:])
+        for ln, idx, o in self.others:  # the frame of each at this frame's time
+            g = min(int(round(f / c.fps * o.fps)), o.num_frames - 1)
+            xy = o.screen[g][idx]
+            ln.set_data(xy[:, 0], xy[:, 1])
         if held != self.held:  # past its end the clip holds its last frame, faded
             for ln, _ in self.bones:
                 ln.set_alpha(_ENDED_ALPHA if held else None)
@@ -520,16 +594,18 @@ _MARGIN = 0.08
 _LEGEND_H = 0.2  # a band at the top for the side colours' legend
 
 
-def _legend(fig, x_in: float, y_in: float) -> None:
+def _legend(fig, x_in: float, y_in: float, grey: bool = False) -> None:
     """The side colours, left to right from (``x_in``, ``y_in``) inches: a short bone of each
-    colour and its name ("left side", "right side": the character's own)."""
+    colour and its name ("left side", "right side": the character's own); with ``grey``, the
+    colour of the clips drawn over another ("over it": named in the panel's title)."""
     from matplotlib.lines import Line2D
 
     W, H = fig.get_size_inches()
     x = x_in
-    for side, text in ((_LEFT, "left side"), (_RIGHT, "right side")):
+    keys = [(_COLORS[_LEFT], "left side"), (_COLORS[_RIGHT], "right side")]
+    for color, text in keys + ([(_GHOST_COLOR, "drawn over it")] if grey else []):
         fig.add_artist(Line2D([x / W, (x + 0.22) / W], [y_in / H, y_in / H], transform=fig.transFigure,
-                              color=_COLORS[side], lw=2.2, solid_capstyle="round"))
+                              color=color, lw=2.2, solid_capstyle="round"))
         fig.text((x + 0.28) / W, y_in / H, text, ha="left", va="center", fontsize=8, color="#666666")
         x += 1.05
 
@@ -560,43 +636,45 @@ def fit_title(title: str, width_in: float, size: int = 10) -> tuple[str, int]:
     return "\n".join(shorten(line.strip()) for line in lines), small
 
 
-def _animation_figure(scene: _Scene, clips: list[_Clip], titles: list[str], dpi: int, grid_dots: bool = False):
+def _animation_figure(scene: _Scene, groups: list[list[_Clip]], titles: list[str], dpi: int, grid_dots: bool = False):
     """One row of panels, a title above and a time label under each, the side colours' legend."""
-    n = len(clips)
+    n = len(groups)
     gap = 0.1
     W = n * scene.panel_w + (n + 1) * gap
     Hh = scene.panel_h + _TITLE_H + 2 * _LABEL_H + _MARGIN + _LEGEND_H
     fig = _new_figure(W, Hh, dpi)
     W, Hh = fig.get_size_inches()
     panels = []
-    for i, (clip, title) in enumerate(zip(clips, titles)):
+    for i, (group, title) in enumerate(zip(groups, titles)):
         rect = ((gap + i * (scene.panel_w + gap)) / W, (2 * _LABEL_H + _MARGIN / 2) / Hh, scene.panel_w / W, scene.panel_h / Hh)
-        panels.append(_Panel(fig, rect, scene, clip, scene.scale[i], title, animated=True, grid_dots=grid_dots))
+        panels.append(_Panel(fig, rect, scene, group[0], scene.scale[i], title, animated=True, grid_dots=grid_dots,
+                             others=group[1:]))
     clock = fig.text(0.5, 0.04 / Hh, "", ha="center", va="bottom", fontsize=9, color="#333333", animated=True)
-    _legend(fig, gap, Hh - _LEGEND_H / 2 - 0.02)
+    _legend(fig, gap, Hh - _LEGEND_H / 2 - 0.02, grey=any(len(g) > 1 for g in groups))
     return fig, panels, clock
 
 
-def _filmstrip_figure(scene: _Scene, clips: list[_Clip], titles: list[str], frames: int, dpi: int):
-    """One row per clip (its name above the row), one column per frame shown, a time label under
+def _filmstrip_figure(scene: _Scene, groups: list[list[_Clip]], titles: list[str], frames: int, dpi: int):
+    """One row per panel (its title above the row), one column per frame shown, a time label under
     each, the side colours' legend at the top right."""
-    n = len(clips)
+    n = len(groups)
     gap = 0.06
     row_h = _TITLE_H + scene.panel_h + _LABEL_H
     W = frames * scene.panel_w + (frames + 1) * gap
     Hh = n * row_h + _MARGIN + _LEGEND_H
     fig = _new_figure(W, Hh, dpi)
     W, Hh = fig.get_size_inches()
-    _legend(fig, gap, Hh - _LEGEND_H / 2 - 0.02)
+    _legend(fig, gap, Hh - _LEGEND_H / 2 - 0.02, grey=any(len(g) > 1 for g in groups))
     cells = []
-    for r, (clip, title) in enumerate(zip(clips, titles)):
+    for r, (group, title) in enumerate(zip(groups, titles)):
+        clip = group[0]
         top = Hh - _LEGEND_H - _MARGIN / 2 - r * row_h
         fig.text(gap / W, (top - 0.04) / Hh, title, ha="left", va="top", fontsize=11, fontweight="bold")
         row = []
         for k in range(frames):
             rect = ((gap + k * (scene.panel_w + gap)) / W, (top - _TITLE_H - scene.panel_h) / Hh,
                     scene.panel_w / W, scene.panel_h / Hh)
-            row.append(_Panel(fig, rect, scene, clip, scene.scale[r], None, animated=False))
+            row.append(_Panel(fig, rect, scene, clip, scene.scale[r], None, animated=False, others=group[1:]))
         cells.append(row)
     return fig, cells
 
@@ -649,7 +727,7 @@ def _palette():
     from PIL import Image
 
     white, grid = np.ones(3), np.array(to_rgb(_GRID_COLOR))
-    inks = [np.array(to_rgb(c)) for c in (*_COLORS.values(), _GRID_COLOR, _TRAIL_COLOR, *_TEXT_COLORS)]
+    inks = [np.array(to_rgb(c)) for c in (*_COLORS.values(), _GRID_COLOR, _TRAIL_COLOR, _GHOST_COLOR, *_TEXT_COLORS)]
     entries = {(255, 255, 255)}
     for ink in inks:
         for a in np.linspace(1.0 / _PALETTE_LEVELS, 1.0, _PALETTE_LEVELS):
@@ -736,7 +814,7 @@ def _truncate(m: Motion, max_seconds: float | None) -> Motion:
 
 
 def render(
-    motions: Sequence[Motion],
+    motions: Sequence[Motion | Sequence[Motion]],
     output,
     titles: Sequence[str] | None = None,
     up_axis: int = 1,
@@ -748,19 +826,22 @@ def render(
     *,
     azimuth: float = DEFAULT_AZIMUTH,
     elevation: float = DEFAULT_ELEVATION,
+    camera: str = "heading",
 ) -> Path:
     """Draw clips as stick figures side by side and write ``output``; returns its path.
 
     Args:
         motions: the clips, one panel each (any skeletons, lengths and frame rates). Each is
             drawn from its own ``rotations`` ``(T, J, 4)`` (WXYZ), ``root_translation``
-            ``(T, 3)`` and ``translations``, in file units.
+            ``(T, 3)`` and ``translations``, in file units. An entry that is a sequence of
+            clips is one panel drawing them over each other: the first in the side colours
+            (the panel's camera and length are its), the others in grey at the same times.
         output: the file to write; its suffix picks the type (see :data:`SUPPORTED_SUFFIXES`):
             ``.gif`` an animation (matplotlib's PillowWriter), ``.mp4`` an animation (matplotlib's
             FFMpegWriter, H.264; needs ``ffmpeg`` on ``PATH``), ``.png`` a filmstrip: one row per
             clip, ``frames`` columns at evenly spaced frames from the clip's first to its last
             (each row its own length), the time and frame number under each figure.
-        titles: one title per clip; the clips' names by default.
+        titles: one title per panel; the (first) clips' names by default.
         up_axis: the vertical axis of the data (0, 1, 2 or ``"x"``, ``"y"``, ``"z"``); the
             dataset spec's.
         fps: the animation's frame rate; for MP4 the clips' (the highest, if they differ) by
@@ -772,7 +853,10 @@ def render(
         size: width of one panel in inches (its height follows the figures' proportions).
         dpi: pixels per inch; :data:`GIF_DPI` for a GIF, 100 otherwise, by default.
         max_seconds: keep only the first ``max_seconds`` of each clip.
-        azimuth, elevation: the fixed camera, degrees (see :func:`view_rotation`).
+        azimuth, elevation: the camera, degrees (see :func:`view_rotation`); with
+            ``camera="heading"`` the azimuth at the first frame.
+        camera: ``"heading"`` (the camera turns with the character's heading, smoothed over a
+            second) or ``"world"`` (its direction never changes); one of :data:`CAMERAS`.
 
     The animation has as many frames as the longest clip needs at ``fps``; shorter clips hold
     their last frame, faded (their label says ``(end)``). A GIF is assembled in memory and refused
@@ -794,12 +878,17 @@ def render(
         )
     if suffix == ".mp4" and not _ffmpeg_available():
         raise TorchspliceError(".mp4 needs ffmpeg on PATH; write .gif or .png instead")
-    motions = list(motions)
-    if not motions:
-        raise TorchspliceError("render needs at least one clip")
-    titles = [m.name for m in motions] if titles is None else [str(t) for t in titles]
-    if len(titles) != len(motions):
-        raise TorchspliceError(f"{len(titles)} titles for {len(motions)} clips; give one title per clip")
+    groups = [[m] if isinstance(m, Motion) else list(m) for m in motions]
+    if not groups or not all(groups):
+        raise TorchspliceError("render needs at least one clip" if not groups else "a panel of no clips; give each one")
+    titles = [g[0].name for g in groups] if titles is None else [str(t) for t in titles]
+    if len(titles) != len(groups):
+        raise TorchspliceError(f"{len(titles)} titles for {len(groups)} panel{'s' if len(groups) != 1 else ''}; "
+                              "give one title per panel")
+    if not (math.isfinite(azimuth) and math.isfinite(elevation) and -90.0 <= elevation <= 90.0):
+        raise TorchspliceError(f"azimuth must be a number and elevation from -90 to 90 degrees, got {azimuth}, {elevation}")
+    if camera not in CAMERAS:
+        raise TorchspliceError(f"camera must be one of {', '.join(CAMERAS)}, got {camera!r}")
     up = check_up_axis(up_axis)
     if fps is not None and not fps > 0:
         raise TorchspliceError(f"fps must be positive, got {fps}")
@@ -812,9 +901,13 @@ def render(
     if max_seconds is not None and not max_seconds > 0:
         raise TorchspliceError(f"max_seconds must be positive, got {max_seconds}")
 
-    view = view_rotation(up, azimuth, elevation)
-    clips = [_prepare(_truncate(m, max_seconds), up, view) for m in motions]
-    scene = _scene(clips, up, view, float(size))
+    prepared = []
+    for g in groups:
+        lead = _prepare(_truncate(g[0], max_seconds), up, azimuth, elevation, camera)
+        prepared.append([lead] + [_prepare(_truncate(m, max_seconds), up, azimuth, elevation, camera, leader=lead)
+                                  for m in g[1:]])
+    clips = [g[0] for g in prepared]
+    scene = _scene(prepared, up, float(size))
     rate = float(fps) if fps is not None else max(c.fps for c in clips)
     if suffix == ".gif":  # a rate GIF stores exactly: 100 / a whole number of hundredths
         rate = 100.0 / gif_delay(min(float(fps) if fps is not None else GIF_FPS, _GIF_MAX_FPS))
@@ -827,7 +920,7 @@ def render(
     with atomic_path(output) as tmp:
         if suffix == ".png":
             n_cols = int(frames)
-            fig, cells = _filmstrip_figure(scene, clips, titles, n_cols, int(dpi))
+            fig, cells = _filmstrip_figure(scene, prepared, titles, n_cols, int(dpi))
             try:
                 for row, c in zip(cells, clips):
                     for panel, f in zip(row, filmstrip_frames(c.num_frames, n_cols)):
@@ -837,7 +930,7 @@ def render(
                 _release(fig)
         else:
             n_out = int(math.floor(last * rate + 1e-6)) + 1
-            fig, panels, clock = _animation_figure(scene, clips, titles, int(dpi), grid_dots=suffix == ".gif")
+            fig, panels, clock = _animation_figure(scene, prepared, titles, int(dpi), grid_dots=suffix == ".gif")
             same_rate = all(c.fps == rate for c in clips)
             try:
                 canvas = fig.canvas
