@@ -149,7 +149,7 @@ def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tm
         for k, name in enumerate(FILE_NAMES):
             w.append(replace(clips[k % len(clips)], name=name), spec=spec)
     assert main(["export", str(db), "--all", "-o", str(tmp_path / "bvh"), "-q"]) == 0
-    files = sorted(p.name for p in (tmp_path / "bvh").iterdir())
+    files = sorted(p.name for p in (tmp_path / "bvh").glob("*.bvh"))  # and the index beside them
     assert len(files) == len(FILE_NAMES) and len({f.casefold() for f in files}) == len(files)
     for f in files:
         stem = f[:-4]

@@ -327,3 +327,47 @@ def test_11_the_demo_draws_the_pair_where_the_naive_splice_loses_the_actions_pos
     assert "--overlay jog+carry_box jog+carry_box.naive" in demo
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     assert "leans back (12 degrees" in readme and "stands straighter (5 degrees)" in readme
+
+
+def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip(sample_db, tmp_path, capsys):
+    """A BVH folder: index.csv (each file's clip, split and metrics, in export order) and
+    train/val/test.txt, the splits the dataset gives (no locomotion or action in two splits); a
+    packed file: NAME.index.csv beside it; one clip or --no-index: none; a bad ratio: nothing."""
+    import csv
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q", "--workers", "1", "--method", "splice,naive"]) == 0
+    out = tmp_path / "bvh"
+    rc, text, err = run(capsys, "export", spliced, "--all", "-o", out, "--split-ratios", "0.4,0.3,0.3", "--split-seed", "5")
+    assert rc == 0, err
+    with MotionDatabase.open(spliced) as d:
+        names, cost = d.names, {n: float(c) for n, c in zip(d.names, d.clip_table().extra["cost"])}
+    rows = list(csv.DictReader(open(out / "index.csv")))
+    assert [r["clip"] for r in rows] == names and all((out / r["file"]).is_file() for r in rows)
+    for r in rows:  # a naive splice has no cost (NaN in the table, empty here)
+        c = cost[r["clip"]]
+        assert (r["cost"] == "") if c != c else abs(float(r["cost"]) - c) <= 1e-9 * max(1.0, c)
+    assert any(r["cost"] for r in rows)
+    assert {"flags", "coverage", "alignment_distance", "locomotion", "action", "method"} <= set(rows[0])
+    for s in ("train", "val", "test"):
+        listed = (out / f"{s}.txt").read_text().split()
+        assert listed == [r["file"] for r in rows if r["split"] == s]
+        ds = MotionDataset(spliced, split=s, split_ratios=(0.4, 0.3, 0.3), split_seed=5, features=("rotations",))
+        assert sorted(ds.names) == sorted(r["clip"] for r in rows if r["split"] == s)
+    by = {s: [r for r in rows if r["split"] == s] for s in ("train", "val", "test")}
+    for a in by:
+        for b in by:
+            if a != b:  # no source clip in two splits
+                assert not {r["locomotion"] for r in by[a]} & {r["locomotion"] for r in by[b]}
+                assert not {r["action"] for r in by[a]} & {r["action"] for r in by[b]}
+    assert f"index.csv, train/val/test {len(by['train'])}/{len(by['val'])}/{len(by['test'])}" in text
+    rc, _, err = run(capsys, "export", spliced, "method:naive", "--packed", "-o", tmp_path / "naive.npz")
+    assert rc == 0, err
+    packed = list(csv.DictReader(open(tmp_path / "naive.index.csv")))
+    assert {r["file"] for r in packed} == {"naive.npz"} and all(r["method"] == "naive" for r in packed)
+    assert run(capsys, "export", spliced, "--all", "-o", tmp_path / "plain", "--no-index")[0] == 0
+    assert not list((tmp_path / "plain").glob("*.csv")) and not list((tmp_path / "plain").glob("*.txt"))
+    assert run(capsys, "export", spliced, names[0], "-o", tmp_path / "one.bvh")[0] == 0
+    assert sorted(p.name for p in tmp_path.glob("one*")) == ["one.bvh"]
+    rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "bad", "--split-ratios", "0.5,0.5")
+    assert rc == 2 and "split-ratios" in error_line(err) and not (tmp_path / "bad").exists()

@@ -18,6 +18,8 @@ import torch
 
 from cli_helpers import error_line, run
 from conftest import REPO
+
+INDEX = ["index.csv", "test.txt", "train.txt", "val.txt"]  # beside every export of several clips
 from torchsplice.core.errors import OutputExistsError, TorchspliceError
 from torchsplice.formats.exporters import available_exporters, export_clips, get_exporter
 from torchsplice.store.database import MotionDatabase
@@ -61,8 +63,8 @@ def test_the_toy_format_through_the_command_line(sample_db, tmp_path):
     assert p.returncode == 0, p.stderr
     with MotionDatabase.open(sample_db) as d:
         names, frames = d.names, int(d.clip_table().length.sum())
-    assert p.stdout.strip().endswith(f"{len(names)} clips as root CSV, {frames} frames")
-    assert sorted(f.name for f in out.iterdir()) == sorted(f"{n}.csv" for n in names)
+    assert f"{len(names)} clips as root CSV, {frames} frames; index.csv, train/val/test " in p.stdout
+    assert sorted(f.name for f in out.iterdir()) == sorted([f"{n}.csv" for n in names] + INDEX)
     check_clips(sample_db, out, names)
     help_text = cli("--plugin", "toy_exporter", "export", "--help").stdout
     assert "{bvh,npz,humanml3d,toy}" in help_text
@@ -95,7 +97,7 @@ def test_the_toy_format_from_python(sample_db, tmp_path, toy):
     r = export_clips(sample_db, None, format="toy", out=tmp_path / "all")
     assert r.format == "toy" and r.names == names and [f.name for f in r.files] == [f"{n}.csv" for n in names]
     check_clips(sample_db, tmp_path / "all", names)
-    assert everything(tmp_path) == sorted(["all", *(f"all/{n}.csv" for n in names)])
+    assert everything(tmp_path) == sorted(["all", *(f"all/{n}.csv" for n in names), *(f"all/{i}" for i in INDEX)])
     one = export_clips(sample_db, ["carry_box"], out=tmp_path / "box.csv")  # the format from the suffix
     assert one.format == "toy" and one.files == [tmp_path / "box.csv"]
     with pytest.raises(OutputExistsError):
@@ -139,7 +141,7 @@ def test_an_export_failing_midway_leaves_nothing(sample_db, tmp_path, toy, monke
     assert everything(tmp_path) == (["out"] if folder_exists else [])  # no file, no temporary, no lock, no folder
     monkeypatch.undo()
     r = export_clips(sample_db, None, format="toy", out=out)  # the same export then runs as it was
-    assert len(r.files) == len(list(out.iterdir()))
+    assert len(r.files) + len(r.index_files) == len(list(out.iterdir())) and len(r.index_files) == len(INDEX)
 
 
 def test_a_rename_failing_while_installing_puts_everything_back(sample_db, tmp_path, toy, monkeypatch):
@@ -173,7 +175,7 @@ def test_a_rename_failing_while_installing_puts_everything_back(sample_db, tmp_p
     monkeypatch.undo()
     assert len(installs) == 3
     assert {f.name: f.read_bytes() for f in out.iterdir()} == before  # every file as it was
-    assert everything(tmp_path) == sorted(["out", *(f"out/{f.name}" for f in first.files)])
+    assert everything(tmp_path) == sorted(["out", *(f"out/{f.name}" for f in first.files + first.index_files)])
 
 
 def test_the_readme_format_snippet_runs(sample_db, tmp_path, monkeypatch):
@@ -189,6 +191,6 @@ def test_the_readme_format_snippet_runs(sample_db, tmp_path, monkeypatch):
     with MotionDatabase.open(sample_db) as d:
         names = d.names
         walk = d.read("walk_curve", dtype=torch.float64)
-    assert sorted(f.name for f in (tmp_path / "roots").iterdir()) == sorted(f"{n}.csv" for n in names)
+    assert sorted(f.name for f in (tmp_path / "roots").iterdir()) == sorted([f"{n}.csv" for n in names] + INDEX)
     rows = [[float(v) for v in ln.split(",")] for ln in (tmp_path / "roots" / "walk_curve.csv").read_text().splitlines()]
     assert rows == walk.root_translation.tolist()

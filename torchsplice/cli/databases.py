@@ -131,19 +131,11 @@ def _labels_text(labels: dict, limit: int = 60) -> str:
 
 def _write_csv(path, clips: list[dict]) -> None:
     """The clips' rows as CSV, atomically: every key of the first as a column, labels as JSON."""
-    import csv
-    import io
-
+    from ..formats.index import rows_csv
     from ..store.atomic import atomic_path
 
-    out = io.StringIO()
-    columns = list(dict.fromkeys(k for c in clips for k in c))
-    w = csv.DictWriter(out, columns, lineterminator="\n")
-    w.writeheader()
-    for c in clips:
-        w.writerow({k: json.dumps(v, sort_keys=True) if isinstance(v, dict) else v for k, v in c.items()})
     with atomic_path(path) as tmp:
-        Path(tmp).write_text(out.getvalue())
+        Path(tmp).write_text(rows_csv(clips))
 
 
 class Info(Command):

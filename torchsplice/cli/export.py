@@ -9,8 +9,10 @@ formats (``--format``) are the registry's, so a ``--plugin`` module's format is 
 from __future__ import annotations
 
 from .base import Command, register_command
-from .common import add_output_flags, command_line, say
+from .common import add_output_flags, command_line, declared, say
 from ..core.errors import TorchspliceError
+
+EXPORTERS = "torchsplice.formats.exporters"
 
 
 def _option(format: str, name: str):
@@ -61,10 +63,14 @@ class Export(Command):
                        help="humanml3d: cut clips longer than SECONDS into windows of SECONDS spread over the clip, "
                             "each with the clip's captions (MDM and MoMask keep motions of 40 to 199 frames: windows of at most 9.95 s, at least 2.05 s)")
         s.add_argument("--split-ratios", default=None, metavar="TRAIN,VAL,TEST",
-                       help="humanml3d: fractions of the source clips in each split; a result is in a split when all its "
-                            f"sources are (default: {','.join(f'{r:g}' for r in h['split_ratios'])})")
+                       help="fractions of the source clips in each split of the index (every format) or the "
+                            "HumanML3D lists; a result is in a split when all its sources are "
+                            f"(default: {','.join(f'{r:g}' for r in h['split_ratios'])})")
         s.add_argument("--split-seed", type=int, default=None, metavar="N",
-                       help=f"humanml3d: the seed of the split (default: {h['split_seed']})")
+                       help=f"the seed of the split (default: {h['split_seed']})")
+        s.add_argument("--no-index", dest="index", action="store_false", default=declared(EXPORTERS, "export_clips.index"),
+                       help="several clips: write no index.csv (each file's clip, split, role, labels, cost, flags, "
+                            "coverage...) and no train/val/test.txt beside them")
         s.add_argument("--paraphrases", type=int, default=None, metavar="N",
                        help=f"humanml3d: captions per clip, at most (default: {h['paraphrases']})")
         s.add_argument("--select", action="append", metavar="SELECT", default=None,
@@ -97,7 +103,7 @@ class Export(Command):
                               overwrite=args.force, skeletons=skeletons, command=command_line(args),
                               packed=args.packed, features=args.features, captions=args.captions, mirror=args.mirror,
                               window=args.window, split_ratios=args.split_ratios, split_seed=args.split_seed,
-                              paraphrases=args.paraphrases)
+                              paraphrases=args.paraphrases, index=args.index)
         say(args, f"wrote {result.summary}")
         return 0
 

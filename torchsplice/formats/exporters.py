@@ -62,6 +62,9 @@ _BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 _SUFFIX = re.compile(r"^\.[A-Za-z0-9][A-Za-z0-9_-]*$")
 READ_BATCH = 64
+SHARED_OPTIONS = ("split_ratios", "split_seed")
+"""Options of every export: the splits of its index (:mod:`.index`; a format that writes its own
+splits, as HumanML3D's does, declares them too and gets them)."""
 """Clips read from the database at a time by :meth:`Exporter.items`."""
 
 
@@ -86,6 +89,8 @@ class ExportResult:
         frames: frames written in all.
         fps: the frame rate of each clip written as a file of its own (empty for a packed file).
         summary: one line saying what was written (``"OUT: 3 clips as BVH, 900 frames"``).
+        index_files: the index and split lists written beside the clips (:mod:`.index`; empty
+            for one clip, without ``index``, or for a format with a layout of its own).
     """
 
     format: str
@@ -95,6 +100,7 @@ class ExportResult:
     frames: int = 0
     fps: list[float] = field(default_factory=list)
     summary: str = ""
+    index_files: list[Path] = field(default_factory=list)
 
 
 class Exporter:
@@ -266,11 +272,11 @@ def choose_exporter(format: str | None, output, options: dict) -> type[Exporter]
     option given (not ``None`` or ``False``), else the one whose suffix ``output`` has, else
     :data:`DEFAULT_FORMAT`. An option the format does not take is refused in one line."""
     _ensure_builtins()
-    unknown = sorted(k for k in options if not any(k in e.options for e in _REGISTRY.values()))
+    unknown = sorted(k for k in options if k not in SHARED_OPTIONS and not any(k in e.options for e in _REGISTRY.values()))
     if unknown:
-        taken = sorted({k for e in _REGISTRY.values() for k in e.options})
+        taken = sorted({k for e in _REGISTRY.values() for k in e.options} | set(SHARED_OPTIONS))
         raise TorchspliceError(f"unknown export option {unknown[0]!r}; the formats take {', '.join(taken) or 'none'}")
-    given = [k for k, v in options.items() if v is not None and v is not False]
+    given = [k for k, v in options.items() if v is not None and v is not False and k not in SHARED_OPTIONS]
     if format is None:
         takers = [n for n, e in _REGISTRY.items() if all(k in e.options for k in given)] if given else []
         suffix = Path(output).suffix.lower()
@@ -290,7 +296,7 @@ def choose_exporter(format: str | None, output, options: dict) -> type[Exporter]
 # --------------------------------------------------------------------------------------------
 def export_clips(database, clips: Sequence[str] | None = None, *, out, format: str | None = None,
                  overwrite: bool = False, skeletons: Iterable[int] | None = None, command: str = "",
-                 select: str | Sequence[str] | None = None, **options) -> ExportResult:
+                 select: str | Sequence[str] | None = None, index: bool = True, **options) -> ExportResult:
     """Write clips of a database as files of a registered format, all or nothing.
 
     Args:
@@ -307,7 +313,13 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             list, all of which a clip must pass; :mod:`torchsplice.store.select`), e.g.
             ``"role:spliced"`` or ``["method:naive", "label:action.style=elderly"]``; with
             ``clips``, the named clips it selects.
-        options: the format's options (``packed=True``, ``features="6d"`` for ``npz``).
+        index: with several clips (a folder of files, or a packed file), also write ``index.csv``
+            (each file's clip, split and every column ``torchsplice info --csv`` gives: role,
+            labels, cost, flags, coverage ...) and, in a folder, ``train.txt``, ``val.txt`` and
+            ``test.txt`` (:mod:`.index`); a format with a layout of its own (HumanML3D) writes its own.
+        options: the format's options (``packed=True``, ``features="6d"`` for ``npz``), and
+            every export's ``split_ratios`` (train, val, test fractions of the source clips;
+            default 0.8, 0.1, 0.1) and ``split_seed`` (default 0), the index's splits.
 
     Everything is checked before any file is made (one-line
     :class:`~torchsplice.core.errors.TorchspliceError`: an unknown clip or format, an output of
@@ -334,6 +346,13 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             raise TorchspliceError(f"{out}: no export format writes {suffix} files; the formats are {formats} "
                                    "({format} chooses one)", options=("format",))
         files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
+    indexed = {}
+    if index and layout is None and (exporter.single_file or not single):
+        indexed = _index_targets(out, files, not single, database, overwrite)
+        if options.get("split_ratios") is not None:
+            from ..data.splits import parse_ratios
+
+            parse_ratios(options["split_ratios"])  # a bad one refused before any work
     exporter.check()
     from .staging import staged_files
 
@@ -359,6 +378,19 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         if count != len(files):
             raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave {count} files of the "
                                    f"{len(files)} of this export")
+        if indexed:
+            from ..store.atomic import os_error_message
+            from .index import index_files
+
+            texts = index_files(database, names, files, indexed, options.get("split_ratios"), options.get("split_seed"))
+            counts = [texts[indexed[s]].count("\n") for s in ("train", "val", "test") if s in indexed]
+            index_note = f"; {indexed['index'].name}" + (f", train/val/test {'/'.join(map(str, counts))}" if counts else "")
+            result.index_files = list(texts)
+            for target, text in texts.items():
+                try:
+                    stage(target).write_text(text)
+                except OSError as exc:
+                    raise TorchspliceError(os_error_message(target, exc)) from None
     if layout is not None and overwrite:  # an earlier export's files this one did not write again
         written = set(files)
         for stale in exporter.owned(Path(out)):
@@ -372,8 +404,25 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
 
                     raise TorchspliceError(f"{os_error_message(stale, exc)} (an earlier export's file; the new export is "
                                            "in place)") from None
-    result.summary = exporter.summary(result)
+    result.summary = exporter.summary(result) + (index_note if indexed else "")
     return result
+
+
+def _index_targets(out, files: list[Path], folder_export: bool, database, overwrite: bool) -> dict[str, Path]:
+    """The index's files (:func:`.index.index_targets`), checked like the clips' before any work."""
+    from ..store.atomic import check_output
+    from .index import index_targets
+
+    targets = index_targets(out, folder_export)
+    clash = set(targets.values()) & set(files)
+    if clash:
+        raise TorchspliceError(f"{sorted(clash)[0]}: a clip's file would have the name of the export's index; export "
+                               "that clip on its own, or with index=False")
+    for t in targets.values():
+        if t.parent.is_dir():
+            check_output(t, (t.suffix,), "an index" if t.suffix == ".csv" else "a split list", inputs=[database],
+                         overwrite=overwrite)
+    return targets
 
 
 def _write(exporter: Exporter, item, target: Path, path: Path, names: list[str]) -> None:
