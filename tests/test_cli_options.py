@@ -18,10 +18,11 @@ import pytest
 from torchsplice.cli import build_parser
 from torchsplice.cli.declared import ASKED, live_value, static_value
 from torchsplice.evaluation.report import evaluate_database
-from torchsplice.formats.exporters import DEFAULT_FORMAT, available_exporters, get_exporter
+from torchsplice.formats.exporters import DEFAULT_FORMAT, available_exporters, export_clips, get_exporter
 from torchsplice.formats.importer import FORMATS as IMPORT_FORMATS, import_bvh
 from torchsplice.formats.npz import FEATURE_SETS
 from torchsplice.retarget import retarget_clips
+from torchsplice.retarget.mirror import mirror_clips
 from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS, JobConfig, job_config
 from torchsplice.job.engines import available_engines
 from torchsplice.splice import SpliceOptions, TIMINGS, splice
@@ -62,6 +63,8 @@ def expected() -> dict:
         ("import", "format"): (param(import_bvh, "format"), IMPORT_FORMATS),
         ("import", "name_prefix"): (param(import_bvh, "name_prefix"), None),
         ("retarget", "fix_feet"): (param(retarget_clips, "fix_feet"), None),
+        ("mirror", "originals"): (param(mirror_clips, "originals"), None),
+        ("export", "index"): (param(export_clips, "index"), None),
         ("export", "format"): (None, available_exporters()),
         ("export", "packed"): (get_exporter("npz").options["packed"].default, None),
         ("export", "features"): (get_exporter("npz").options["features"].default, tuple(FEATURE_SETS)),

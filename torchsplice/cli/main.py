@@ -21,7 +21,7 @@ from .common import cli_message, on_sigterm, one_line, stop_code, stopped
 
 __all__ = ["main", "build_parser", "COMMAND_MODULES"]
 
-COMMAND_MODULES = ("databases", "retarget", "export", "splice", "views", "evaluate", "jobs")
+COMMAND_MODULES = ("databases", "retarget", "mirror", "export", "splice", "views", "evaluate", "jobs")
 """The built-in commands' modules, in the order their commands are listed."""
 
 

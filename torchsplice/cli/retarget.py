@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from .base import Command, register_command
-from .common import add_output_flags, command_line, declared, output, progress, say
+from .common import add_output_flags, command_line, declared, expand_clips, output, progress, say
 from ..core.errors import TorchspliceError
 
 RETARGET = "torchsplice.retarget.clips"
@@ -27,7 +27,7 @@ class Retarget(Command):
 
     def add_arguments(self, s) -> None:
         s.add_argument("database", help="motion database (.h5)")
-        s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names")
+        s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names, or selectors ('walk_*', 'role:action')")
         s.add_argument("--to", required=True, metavar="TARGET",
                        help="other.h5, other.h5:K, a .bvh file, or smpl22")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
@@ -50,7 +50,8 @@ class Retarget(Command):
         if args.all and args.clips:
             raise TorchspliceError("name the clips to retarget, or pass --all (not both)")
         output(args, "database")
-        report = retarget_clips(args.database, args.clips or None, to=args.to, out=args.output, select=args.select,
+        clips = expand_clips(args.database, args.clips) if args.clips else None  # names or selectors
+        report = retarget_clips(args.database, clips, to=args.to, out=args.output, select=args.select,
                                 fix_feet=args.fix_feet, overwrite=args.force, command=command_line(args),
                                 progress=lambda it, total, desc: progress(it, total, desc, args.quiet, unit="chunk"))
         say(args, f"wrote {report.summary()}")
