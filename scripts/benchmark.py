@@ -31,6 +31,9 @@ Sections:
           files, the features alone and the files alone; on every real clip, the format's
           properties and the import's round trip        [>= 2,000 clips/s, 1e-5 m, 1e-6 m, 1e-4 m]
   packed  peak memory of a packed .npz export of 1,000, 4,000 and 10,000 clips   [flat]
+  startup each command's wall time on a small database (the sample), best of five, beside the
+          interpreter alone and the interpreter importing torch: what a command adds of its own
+          [--help <= 0.5 s; a command reading clips <= torch's import + 0.8 s]
 
 Without real data (no ../shared/mocap and no TORCHSPLICE_MOCAP), the built-in synthetic
 sample stands in and the figures say so. Timings are the best of several repeats; the machine
@@ -606,13 +609,44 @@ def bench_mix(files: list[Path], device: str, mix_db: Path | None) -> None:
               f"uninterrupted run [<= 1.15x]; output {'bit-identical' if _same_content(killed, out) else 'DIFFERENT'}")
 
 
+def bench_startup() -> None:
+    """Each command's wall time as a user runs it, beside ``python -c pass`` and ``import torch``."""
+    print("\n== startup: commands on the built-in sample, best of 5 (wall s)")
+    py = [sys.executable]
+
+    def wall(argv, cwd) -> float:
+        def once():
+            out = subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=300)
+            if out.returncode != 0:
+                raise RuntimeError(f"{' '.join(argv)}: {out.stderr.strip()[-300:]}")
+        return best_of(once, repeats=5)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        ts = py + ["-m", "torchsplice"]
+        subprocess.run(ts + ["sample", "-o", "s.h5", "-q"], cwd=tmp, check=True)
+        base, torch_import = wall(py + ["-c", "pass"], tmp), wall(py + ["-c", "import torch"], tmp)
+        print(f"  python alone {base:.2f} s; python importing torch {torch_import:.2f} s")
+        rows = [("--help", ts + ["--help"], False), ("info", ts + ["info", "s.h5"], True),
+                ("info --json", ts + ["info", "s.h5", "--json"], True),
+                ("export one clip (BVH)", ts + ["export", "s.h5", "walk_curve", "-o", "w.bvh", "-f", "-q"], True),
+                ("splice one pair (BVH)", ts + ["splice", "s.h5", "--locomotion", "walk_curve", "--action", "wave",
+                                                "-o", "p.bvh", "-f", "-q"], True)]
+        for label, argv, clips in rows:
+            s = wall(argv, tmp)
+            ours = s - (torch_import if clips else base)
+            target = 0.8 if clips else 0.5
+            print(f"  {label:24s} {s:.2f} s: {ours:.2f} s beyond {'torch' if clips else 'python'} "
+                  f"[{'<=' if clips else '<='} {target}{' + torch' if clips else ''}]"
+                  f"{'' if (ours if clips else s) <= target else '  NOT MET'}")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d,packed",
+    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d,packed,startup",
                    help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget, humanml3d, "
-                        "packed")
+                        "packed, startup")
     p.add_argument("--mix-db", type=Path, default=None,
                    help="the real mix on this database (e.g. the whole Bandai Namco dataset imported) instead of "
                         "the Bandai Namco clips of --mocap")
@@ -653,6 +687,8 @@ def main() -> int:
             from bench_humanml3d import bench_packed_memory
 
             bench_packed_memory()
+        if "startup" in sections:
+            bench_startup()
     return 0
 
 

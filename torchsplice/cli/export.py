@@ -58,7 +58,8 @@ class Export(Command):
                             "'caption#word/POS ...#0.0#0.0' or word/POS words); they compose like the labels' phrases")
         s.add_argument("--mirror", action="store_true", default=None,
                        help=f"humanml3d: add each clip's mirrored copy (M + ID), left and right swapped in the motion and "
-                            f"its captions (default: {'on' if h['mirror'] else 'off'})")
+                            f"its captions (default: {'on' if h['mirror'] else 'off'}); for the other formats, write "
+                            "the mirror images with `torchsplice mirror` and export that database")
         s.add_argument("--window", type=float, default=None, metavar="SECONDS",
                        help="humanml3d: cut clips longer than SECONDS into windows of SECONDS spread over the clip, "
                             "each with the clip's captions (MDM and MoMask keep motions of 40 to 199 frames: windows of at most 9.95 s, at least 2.05 s)")
