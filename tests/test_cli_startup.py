@@ -49,3 +49,27 @@ def test_info_json_has_the_run_record(tmp_path, capsys):
     assert run["methods"] == ["naive"] and run["command"].startswith("torchsplice splice-all")
     assert main(["info", str(out)]) == 0
     assert f"run: {run['command']}" in capsys.readouterr().out
+
+
+def test_a_command_line_declares_only_its_commands_options():
+    """Start-up reads only the named command's defaults from the library (every command's for
+    ``--help`` or a mistyped command), and that command parses as it does with every one declared."""
+    from torchsplice.cli import declared as declared_mod
+    from torchsplice.cli.main import _command_in, build_parser
+
+    assert _command_in(["--plugin", "mymod", "info", "db.h5"]) == "info"
+    assert _command_in(["--plugin=mymod", "-h"]) is None and _command_in([]) is None
+    argv = ["render", "db.h5", "walk", "-o", "x.png", "--camera", "world", "--overlay", "a", "b"]
+    declared_mod.ASKED.clear()
+    one = build_parser(only="render")
+    asked_one = {m for m, _ in declared_mod.ASKED}
+    declared_mod.ASKED.clear()
+    every = build_parser(only=None)
+    asked_every = {m for m, _ in declared_mod.ASKED}
+    assert asked_one == {"torchsplice.viz.render"} and asked_one < asked_every
+    a, b = vars(one.parse_args(argv)), vars(every.parse_args(argv))
+    assert {k: v for k, v in a.items() if k not in ("func", "cli_command")} == \
+        {k: v for k, v in b.items() if k not in ("func", "cli_command")}
+    declared_mod.ASKED.clear()
+    build_parser(only="splce-all")  # a mistyped command: every command's, as for --help
+    assert {m for m, _ in declared_mod.ASKED} == asked_every

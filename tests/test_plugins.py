@@ -169,6 +169,7 @@ def test_toy_method_in_the_job_api_and_evaluate(toy, sample_db, tmp_path, capsys
     assert "shifted_upper" in text and text.index("naive") < text.index("shifted_upper")
 
 
+@pytest.mark.slow  # worker processes in a fresh process, about 11 s: CI and --all run it
 def test_toy_method_on_the_command_line_with_workers(plugin_dir, sample_db, tmp_path):
     """``--plugin`` in the driver; the plan records the module, so the two worker processes import it."""
     out = tmp_path / "cli.h5"

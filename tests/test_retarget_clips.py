@@ -131,6 +131,7 @@ def _cli(*args, cwd):
                           text=True, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"})
 
 
+@pytest.mark.slow  # command lines in fresh processes, 6 to 11 s: CI and --all run it
 def test_bad_targets_are_refused_in_one_line_naming_them(tmp_path):
     db = _sample_db(tmp_path)
     two = tmp_path / "two.h5"
@@ -196,6 +197,7 @@ def test_a_failure_midway_leaves_no_output_and_an_existing_one_untouched(tmp_pat
         retarget_clips(db, to="smpl22", out=out)
 
 
+@pytest.mark.slow  # command lines in fresh processes, 6 to 11 s: CI and --all run it
 def test_the_command_names_the_clips_or_all_and_says_what_it_wrote(tmp_path):
     db = _sample_db(tmp_path)
     r = _cli("retarget", db, "--to", "smpl22", "-o", tmp_path / "o.h5", cwd=tmp_path)

@@ -37,8 +37,25 @@ def _plugins_in(argv: list[str]) -> list[str]:
     return out
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser of every registered command (plug-ins loaded before it is built show in its choices)."""
+def _command_in(argv: list[str]) -> str | None:
+    """The command a command line names (its first word that is not a top-level option), or ``None``."""
+    skip = False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a == "--plugin":
+            skip = True
+        elif not a.startswith("-"):
+            return a
+    return None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every registered command (plug-ins loaded before it is built show in its choices).
+
+    ``only``: a command whose options alone are declared (the others are listed, with their
+    help, but their options are not read from the library): what a command line that names one
+    pays at start-up. Unknown, or ``None``: every command's."""
     from ..splice.registry import available_methods
 
     available_methods()  # loads the entry points and TORCHSPLICE_PLUGINS first: their formats and engines are choices
@@ -54,9 +71,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "formats (repeatable; also TORCHSPLICE_PLUGINS=MODULE[,MODULE...] and the torchsplice.methods "
                         "entry point group)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for command in registered_commands():
+    commands = registered_commands()
+    everyone = only not in {c.name for c in commands}
+    for command in commands:
         s = sub.add_parser(command.name, help=command.help, description=command.description)
-        command.add_arguments(s)
+        if everyone or command.name == only:
+            command.add_arguments(s)
         s.set_defaults(func=command.run, cli_command=command)
     return p
 
@@ -82,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         from ..splice.registry import load_plugins
 
         load_plugins(_plugins_in(argv))
-        parser = build_parser()
+        parser = build_parser(only=_command_in(argv))  # only that command's options: a quicker start
     except TorchspliceError as exc:
         return _fail(exc)
     args = parser.parse_args(argv)
