@@ -209,6 +209,27 @@ def stop_code(exc: BaseException) -> int:
     return 143 if _terminated(exc) else 130
 
 
+def add_clip_arguments(s, verb: str) -> None:
+    """A command's clips of one database: ``DATABASE [CLIP ...]``, ``--all``, ``--select``; read
+    them back with :func:`chosen_clips`."""
+    s.add_argument("database", help="motion database (.h5)")
+    s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names, or selectors ('walk_*', 'role:action')")
+    s.add_argument("--all", action="store_true", help=f"{verb} every clip")
+    s.add_argument("--select", action="append", default=None, metavar="SELECTOR",
+                   help="only clips this selector selects (the selection language of splice-all: names, globs, "
+                        "role:R, label:K=V, skeleton:K; repeat for all of several)")
+
+
+def chosen_clips(args, verb: str) -> list[str] | None:
+    """The clips :func:`add_clip_arguments` named (selectors expanded), or ``None`` for every clip
+    (``--all``, or every one ``--select`` selects); one line when none or both are given."""
+    if not (args.clips or args.all or args.select):
+        raise TorchspliceError(f"name the clips to {verb} (as `torchsplice info` lists them), or pass --all or --select")
+    if args.all and args.clips:
+        raise TorchspliceError(f"name the clips to {verb}, or pass --all (not both)")
+    return expand_clips(args.database, args.clips) if args.clips else None
+
+
 def expand_clips(database, items) -> list[str]:
     """A command's clip arguments as names, in order: a clip name (of the database, or of a source
     database) as it is, a selector of the selection language (``'walk_*'``, ``'role:spliced'``,

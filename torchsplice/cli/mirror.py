@@ -10,8 +10,7 @@ from __future__ import annotations
 import argparse
 
 from .base import Command, register_command
-from .common import add_output_flags, command_line, declared, expand_clips, output, progress, say
-from ..core.errors import TorchspliceError
+from .common import add_clip_arguments, add_output_flags, chosen_clips, command_line, declared, output, progress, say
 
 MIRROR = "torchsplice.retarget.mirror"
 
@@ -26,12 +25,8 @@ class Mirror(Command):
                    "Export, train on or splice the output as any database.")
 
     def add_arguments(self, s) -> None:
-        s.add_argument("database", help="motion database (.h5)")
-        s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names, or selectors ('walk_*', 'role:action')")
+        add_clip_arguments(s, "mirror")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
-        s.add_argument("--all", action="store_true", help="mirror every clip")
-        s.add_argument("--select", action="append", default=None, metavar="SELECTOR",
-                       help="only clips this selector selects (the selection language; repeat for all of several)")
         s.add_argument("--originals", action=argparse.BooleanOptionalAction,
                        default=declared(MIRROR, "mirror_clips.originals"),
                        help="write each original before its mirror image (default: on; --no-originals: mirrors only)")
@@ -40,12 +35,8 @@ class Mirror(Command):
     def run(self, args) -> int:
         from ..retarget.mirror import mirror_clips
 
-        if not (args.clips or args.all or args.select):
-            raise TorchspliceError("name the clips to mirror (as `torchsplice info` lists them), or pass --all or --select")
-        if args.all and args.clips:
-            raise TorchspliceError("name the clips to mirror, or pass --all (not both)")
+        clips = chosen_clips(args, "mirror")
         output(args, "database")
-        clips = expand_clips(args.database, args.clips) if args.clips else None  # names or selectors
         report = mirror_clips(args.database, clips, out=args.output, select=args.select,
                               originals=args.originals, overwrite=args.force, command=command_line(args),
                               progress=lambda it, total, desc: progress(it, total, desc, args.quiet, unit="chunk"))

@@ -9,8 +9,7 @@ from __future__ import annotations
 import argparse
 
 from .base import Command, register_command
-from .common import add_output_flags, command_line, declared, expand_clips, output, progress, say
-from ..core.errors import TorchspliceError
+from .common import add_clip_arguments, add_output_flags, chosen_clips, command_line, declared, output, progress, say
 
 RETARGET = "torchsplice.retarget.clips"
 
@@ -26,15 +25,10 @@ class Retarget(Command):
                    "retargeted_to labels.")
 
     def add_arguments(self, s) -> None:
-        s.add_argument("database", help="motion database (.h5)")
-        s.add_argument("clips", nargs="*", metavar="CLIP", help="clip names, or selectors ('walk_*', 'role:action')")
+        add_clip_arguments(s, "retarget")
         s.add_argument("--to", required=True, metavar="TARGET",
                        help="other.h5, other.h5:K, a .bvh file, or smpl22")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
-        s.add_argument("--all", action="store_true", help="retarget every clip")
-        s.add_argument("--select", action="append", default=None, metavar="SELECTOR",
-                       help="only clips this selector selects (the selection language of splice-all: names, globs, "
-                            "role:R, label:K=V, skeleton:K; repeat for all of several)")
         s.add_argument("--fix-feet", action=argparse.BooleanOptionalAction,
                        default=declared(RETARGET, "retarget_clips.fix_feet"),
                        help="hold each foot where the source's stands, at the source's height above the floor "
@@ -44,13 +38,8 @@ class Retarget(Command):
     def run(self, args) -> int:
         from ..retarget import retarget_clips
 
-        if not (args.clips or args.all or args.select):
-            raise TorchspliceError("name the clips to retarget (as `torchsplice info` lists them), or pass --all or "
-                                   "--select")
-        if args.all and args.clips:
-            raise TorchspliceError("name the clips to retarget, or pass --all (not both)")
+        clips = chosen_clips(args, "retarget")
         output(args, "database")
-        clips = expand_clips(args.database, args.clips) if args.clips else None  # names or selectors
         report = retarget_clips(args.database, clips, to=args.to, out=args.output, select=args.select,
                                 fix_feet=args.fix_feet, overwrite=args.force, command=command_line(args),
                                 progress=lambda it, total, desc: progress(it, total, desc, args.quiet, unit="chunk"))
