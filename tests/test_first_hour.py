@@ -18,6 +18,8 @@ from cli_helpers import error_line, run
 from torchsplice.cli import main
 from torchsplice.data import DatasetError, MotionDataset, collate_motion
 from torchsplice.store.database import MotionDatabase
+from torchsplice.core.errors import TorchspliceError
+from torchsplice.formats.exporters import export_clips
 
 BANDAI = "bandai_namco_research_motiondataset"
 
@@ -371,3 +373,10 @@ def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip
     assert sorted(p.name for p in tmp_path.glob("one*")) == ["one.bvh"]
     rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "bad", "--split-ratios", "0.5,0.5")
     assert rc == 2 and "split-ratios" in error_line(err) and not (tmp_path / "bad").exists()
+    rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "bad", "--split-ratios", "0.5,0.5", "--no-index")
+    assert rc == 2 and "split-ratios" in error_line(err) and not (tmp_path / "bad").exists(), err  # with no index too
+    for index in (True, False):
+        with pytest.raises(TorchspliceError, match="split_seed must be a whole number, got 'x'"):
+            export_clips(spliced, None, out=tmp_path / "bad", split_seed="x", index=index)
+    packed_one = export_clips(spliced, names[:1], out=tmp_path / "one.npz", packed=True)  # a packed file, even of one
+    assert [p.name for p in packed_one.index_files] == ["one.index.csv"]

@@ -18,8 +18,11 @@ from torchsplice.core.motion import Motion
 from torchsplice.core.rotations import quat_angle
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.formats.bvh import read_bvh
-from torchsplice.ops.mirror import mirror_motion, mirror_rest, mirror_text, side_partners
-from torchsplice.sample import sample_motion
+from torchsplice.data.splits import clip_sources, table_splits
+from torchsplice.ops.mirror import mirror_labels, mirror_motion, mirror_rest, mirror_text, side_partners
+from torchsplice.retarget.mirror import mirror_clips
+from torchsplice.specs import load_spec
+from torchsplice.sample import sample_motion, sample_motions
 from torchsplice.store.database import MotionDatabase
 
 F64 = torch.float64
@@ -151,7 +154,89 @@ def test_mirror_command_writes_originals_and_mirrors_with_columns_and_splits_tog
     assert f"{2 * len(names)} clips" in text and f"{len(names)} of them mirror images" in text
     assert run(capsys, "export", out, "--all", "-o", tmp_path / "bvh")[0] == 0
     split = {r["clip"]: r["split"] for r in csv.DictReader(open(tmp_path / "bvh" / "index.csv"))}
-    assert all(split[n + ".mirror"] == split[n] for n in names) and set(split.values()) > {""}
+    assert all(split[n + ".mirror"] == split[n] for n in names) and set(split.values()) - {""}
     rc, _, err = run(capsys, "mirror", out, "--all", "-o", tmp_path / "again.h5")
     assert rc != 0 and ".mirror.mirror' exists" not in err and "exists already" in error_line(err)
     assert not (tmp_path / "again.h5").exists()
+
+
+def test_letters_alone_pair_only_with_a_partner_and_words_only_as_words():
+    """``ROOT`` is not the partner of a ``LOOT`` (the letter rule pairs only where the partner
+    exists; else the joint is the centre), ``Bright`` holds no ``right``, and capitals and
+    CamelCase parts pair as words."""
+    names = ["ROOT", "Bright", "LEFTARM", "RIGHTARM", "handLeft", "handRight", "RHand", "LHand", "R"]
+    parents = [-1, 0, 1, 1, 2, 3, 4, 5, 0]
+    sk = Skeleton(names, parents, torch.zeros(len(names), 3, dtype=F64), [[] for _ in names])
+    assert side_partners(sk) == [0, 1, 3, 2, 5, 4, 7, 6, 8]
+    worded = Skeleton(["ROOT", "Bright", "LEFTARM"], [-1, 0, 1], torch.zeros(3, 3, dtype=F64), [[]] * 3)
+    with pytest.raises(TorchspliceError, match="'LEFTARM' has no partner 'RIGHTARM'"):  # a word must pair
+        side_partners(worded)
+
+
+def test_mirrored_rotations_are_canonical_over_time(mocap_dir):
+    """The first frame's w >= 0 and no sign flip between frames, on a real clip turning through
+    half turns (the matrix-to-quaternion step alone flips signs)."""
+    m = real(mocap_dir, "bandai_namco_research_motiondataset", "dataset-2_walk-turn-left_active_025", 400)
+    mm = mirror_motion(m)
+    q = mm.rotations.to(F64)
+    assert float(q[0, :, 0].min()) >= 0
+    assert float((q[1:] * q[:-1]).sum(-1).min()) > 0
+    sigma = side_partners(m.skeleton)  # the same motion: each step turns as far as the partner's does
+    step = quat_angle(m.rotations[1:], m.rotations[:-1])[:, sigma]
+    assert torch.allclose(quat_angle(mm.rotations[1:], mm.rotations[:-1]), step, atol=1e-3)
+
+
+def test_labels_that_name_clips_or_files_are_not_swapped():
+    labels = {"content": "wave-right-hand", "split_from": "take-left", "split_frame": "12", "split": "test",
+              "path": "/data/right/x.bvh", "retargeted_from": "right.h5", "action.split_from": "wave-right",
+              "action.content": "wave-right-hand", "action.mirror_of": "wave-left", "locomotion": "walk-turn-left",
+              "action": "wave-right-hand", "method": "splice"}
+    out = mirror_labels(labels, "walk-turn-left+wave-right-hand")
+    assert out["content"] == out["action.content"] == "wave-left-hand"
+    for k in ("split_from", "split_frame", "split", "path", "retargeted_from", "action.split_from",
+              "action.mirror_of", "locomotion", "action"):
+        assert out[k] == labels[k], k
+    assert out["mirror_of"] == "take-left"  # a window's take
+    assert mirror_labels({"locomotion": "turn-left"}, "x")["locomotion"] == "turn-right"  # a label, not a source
+
+
+def test_a_mirrored_window_and_a_window_of_a_mirror_split_with_their_take(tmp_path):
+    """Windows of one take are one source; so are their mirror images and the windows of the
+    take's mirror image: every split puts them all in one split."""
+    spec = load_spec("sample")
+    clips = [c.slice(0, 90) for c in sample_motions()]
+    db, out = tmp_path / "db.h5", tmp_path / "mirrored.h5"
+    with MotionDatabase.create(db) as w:
+        for c in clips:
+            w.append(c, spec=spec)
+            for win in c.windows(1.0):  # 3 windows of each take
+                w.append(win, spec=spec)
+            for win in mirror_motion(c, name=c.name + ".flip").windows(1.0):
+                w.append(win, spec=spec)
+    mirror_clips(db, out=out, select="label:split_from=*")  # the windows, each with its mirror image
+    with MotionDatabase.open(out) as d:
+        table = d.clip_table()
+    assert len(table.names) == 2 * 6 * len(clips)
+    keys = {n: clip_sources(n, str(r), {"labels": table.labels[i]}) for i, (n, r) in enumerate(zip(table.names, table.role))}
+    for c in clips:
+        mine = [n for n in table.names if n.startswith(c.name + "#") or n.startswith(c.name + ".flip#")]
+        assert len(mine) == 12 and {k for n in mine for k, _ in sum(keys[n], [])} == {c.name}, mine
+    for seed in range(5):
+        split = dict(zip(table.names, table_splits(table, (0.4, 0.3, 0.3), seed)))
+        for c in clips:
+            assert len({split[n] for n in table.names if n.split("#")[0].split(".")[0] == c.name}) == 1
+
+
+def test_mirroring_many_clips_computes_the_rig_once_and_the_mirrors_alone_may_be_mirrored_again(sample_db, tmp_path):
+    m = sample_motion("wave", dtype=F64).slice(0, 30)
+    sigma = side_partners(m.skeleton)
+    given = mirror_motion(m, sigma=sigma, rest=mirror_rest(m.skeleton, sigma, 0, 1))
+    assert torch.equal(given.rotations, mirror_motion(m).rotations)
+    both = tmp_path / "both.h5"
+    mirror_clips(sample_db, out=both)
+    with pytest.raises(TorchspliceError, match="exists already"):
+        mirror_clips(both, out=tmp_path / "again.h5")
+    report = mirror_clips(both, out=tmp_path / "again.h5", originals=False)  # X.mirror.mirror: new names
+    with MotionDatabase.open(both) as a, MotionDatabase.open(tmp_path / "again.h5") as b:
+        assert report.clips == len(b) == len(a) and all(n + ".mirror" in b.names for n in a.names)
+        assert b.clip_table().labels[b.index("wave.mirror.mirror")]["mirror_of"] == "wave"

@@ -109,6 +109,29 @@ def test_the_toy_format_from_python(sample_db, tmp_path, toy):
         export_clips(sample_db, None, format="toy", out=tmp_path / "x", packed=True)
 
 
+def test_a_clip_whose_file_would_be_the_index_is_refused_whatever_its_case(tmp_path, toy, capsys):
+    """The toy format writes CSV files, so a clip named ``INDEX`` would overwrite ``index.csv`` on
+    a case-blind disk: refused before any work, naming the option that gets past it (the
+    library's ``index=False``, the command line's ``--no-index``)."""
+    from dataclasses import replace
+
+    from torchsplice.sample import sample_motions
+    from torchsplice.specs import load_spec
+
+    db = tmp_path / "db.h5"
+    walk, box = sample_motions()[:2]
+    with MotionDatabase.create(db) as w:
+        w.append(replace(walk, name="INDEX"), spec=load_spec("sample"))
+        w.append(box, spec=load_spec("sample"))
+    with pytest.raises(TorchspliceError, match=r"INDEX\.csv: a clip's file would have the name of the export's index; "
+                       r".* without an index \(index=False\)$"):
+        export_clips(db, None, format="toy", out=tmp_path / "out")
+    rc, _, err = run(capsys, "--plugin", "toy_exporter", "export", db, "--all", "--format", "toy", "-o", tmp_path / "out")
+    assert rc == 2 and error_line(err).endswith("without an index (--no-index)") and not (tmp_path / "out").exists()
+    r = export_clips(db, None, format="toy", out=tmp_path / "out", index=False)
+    assert sorted(f.name for f in r.files) == ["INDEX.csv", f"{box.name}.csv"] and not r.index_files
+
+
 @pytest.mark.parametrize("failure", ["raises", "disk full", "interrupt"])
 @pytest.mark.parametrize("folder_exists", [False, True])
 def test_an_export_failing_midway_leaves_nothing(sample_db, tmp_path, toy, monkeypatch, failure, folder_exists):

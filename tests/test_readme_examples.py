@@ -282,7 +282,8 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
     """A reader's first hour: a fresh copy of the repository, their data beside the commands, and
     every block of the README run top to bottom in that one folder (bash blocks by bash, Python
     blocks by python, both from the repository root), each exiting 0; afterwards nothing the README
-    wrote is left untracked in the repository (git status)."""
+    wrote is left untracked in the repository (git status), what it wrote is what it names (the
+    outputs .gitignore keeps out of commits), and no command left a work file behind."""
     import json
     import subprocess
     import sys
@@ -335,3 +336,13 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
     status = subprocess.run(["git", "-C", str(clone), "status", "--porcelain", "--untracked-files=all"],
                             capture_output=True, text=True, check=True).stdout.splitlines()
     assert [s for s in status if not s.startswith("A ")] == [], "the README's commands left files in the repository"
+    ignored = subprocess.run(["git", "-C", str(clone), "status", "--porcelain", "--ignored"], capture_output=True,
+                             text=True, check=True).stdout.splitlines()
+    outputs = {ln[3:].rstrip("/") for ln in ignored if ln.startswith("!! ")} - {".venv"}
+    outputs = {o for o in outputs if "__pycache__" not in o and not o.endswith(".egg-info")}
+    text = README.read_text()
+    assert len(outputs) >= 10, outputs  # what the README wrote, each an output it names (not a work file left over)
+    assert not [o for o in outputs if Path(o).name not in text], "outputs the README does not name"
+    left = [os.path.join(d, n) for d, dirs, files in os.walk(clone) if ".git" not in Path(d).relative_to(clone).parts
+            for n in dirs + files if n.startswith(".") and (n.endswith((".parts", ".lock")) or ".partial-" in n)]
+    assert left == [], "work files of an unfinished command left behind"

@@ -463,6 +463,29 @@ def test_an_overlaid_clip_is_seen_from_the_first_clips_camera(clips):
     assert np.allclose(moved.screen[:, :-1], want, atol=1e-9)  # not re-centred on its own root
 
 
+def test_an_overlaid_clip_at_another_frame_rate_is_drawn_at_the_first_clips_times_and_no_longer(clips):
+    """The same walk stored at twice the rate (each frame twice) and longer than the first clip:
+    drawn from the first clip's camera at its frames' times, exactly where the walk is, and its
+    frames past the first clip's end take no part (the panel's limits are the first clip's)."""
+    walk = clips["curve"]
+    lead = render_mod._prepare(walk.slice(0, walk.num_frames - 20), 1, -55.0, 22.0, "heading")
+    double = Motion(walk.skeleton, walk.rotations.repeat_interleave(2, 0), walk.root_translation.repeat_interleave(2, 0),
+                    2 * walk.fps, name="double")
+    ghost = render_mod._prepare(double, 1, -55.0, 22.0, "heading", leader=lead)
+    assert ghost.num_frames == lead.num_frames and ghost.fps == lead.fps
+    assert np.allclose(ghost.screen, lead.screen, atol=1e-9, equal_nan=True)
+
+
+def test_the_heading_holds_through_frames_that_are_not_finite():
+    q = _yaw_quat(torch.linspace(0.0, 90.0, 10, dtype=torch.float64)).numpy()
+    q[[0, 4, 5]] = np.nan
+    yaw = np.degrees(render_mod.heading_yaw(q, 1))
+    want = np.linspace(0.0, 90.0, 10)
+    want[[0]], want[[4, 5]] = want[1], want[3]  # the first finite before the start; the last before a gap
+    assert np.allclose(yaw, want, atol=1e-9)
+    assert np.array_equal(render_mod.heading_yaw(np.full((3, 4), np.nan), 1), np.zeros(3))
+
+
 def test_an_overlay_panel_draws_the_further_clips_in_grey(tmp_path, clips):
     from matplotlib.colors import to_rgb
 
@@ -472,6 +495,24 @@ def test_an_overlay_panel_draws_the_further_clips_in_grey(tmp_path, clips):
     over = pixels(render([[walk, shifted(box, (40.0, 0.0, 0.0))]], tmp_path / "over.png", frames=2, **SMALL))
     n_alone, n_over = ((np.abs(p[40:] - grey).max(-1) <= 3).sum() for p in (alone, over))  # below the legend
     assert n_over > 60 and n_over > 4 * n_alone, (n_alone, n_over)
+
+
+def test_a_filmstrip_draws_as_many_frames_as_its_longest_panel_an_overlay_too(tmp_path, capsys):
+    from cli_helpers import run
+    from torchsplice.sample import sample_motions
+    from torchsplice.specs import load_spec
+    from torchsplice.store.database import MotionDatabase
+
+    db = tmp_path / "short.h5"
+    walk, box = sample_motions()[:2]
+    with MotionDatabase.create(db) as w:
+        w.append(walk.slice(0, 5), spec=load_spec("sample"))
+        w.append(box.slice(0, 12), spec=load_spec("sample"))
+    rc, _, err = run(capsys, "render", db, walk.name, "--overlay", box.name, walk.name, "--frames", "8",
+                     "-o", tmp_path / "a.png")
+    assert rc == 0 and "note" not in err, err  # the overlay's first clip has 12 frames: 8 fit
+    rc, _, err = run(capsys, "render", db, walk.name, "--overlay", box.name, "--frames", "20", "-o", tmp_path / "b.png")
+    assert rc == 0 and "more than the 12 frames of the longest clip; drawing 12" in err, err
 
 
 def test_render_command_takes_an_overlay_a_camera_and_its_angles(tmp_path, capsys, sample_db):

@@ -61,7 +61,7 @@ class Render(Command):
             over, _ = read_clips(args.database, expand_clips(args.database, args.overlay), sources=args.sources)
             panels.append(over)
             titles.append(over[0].name + (f"; grey: {', '.join(c.name for c in over[1:])}" if len(over) > 1 else ""))
-        longest = max(c.num_frames for c in clips)
+        longest = max(p[0].num_frames if isinstance(p, list) else p.num_frames for p in panels)  # an overlay's too
         frames = args.frames
         if out.suffix.lower() == ".png" and frames > longest:
             print(f"note: --frames {frames} is more than the {longest} frames of the longest clip; drawing {longest}",

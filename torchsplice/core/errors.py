@@ -21,7 +21,7 @@ Errors are structured, so that the library never names command-line flags:
 from __future__ import annotations
 
 __all__ = ["TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError", "OutputExistsError",
-           "NotLocomotingError", "UnfinishedJobError", "HINTS", "render_message"]
+           "NotLocomotingError", "UnfinishedJobError", "HINTS", "SPELLINGS", "render_message"]
 
 HINTS = {
     "overwrite": "pass overwrite=True to replace it",
@@ -31,7 +31,12 @@ HINTS = {
 """Hint keys, with what a library caller can do (the command line says it with its flags)."""
 
 
-def render_message(message: str, options=(), option_name=lambda o: o) -> str:
+SPELLINGS = {"no_index": "index=False"}
+"""Options a message names by a setting rather than a name (``{no_index}``: ``index=False``;
+the command line's flag ``--no-index``)."""
+
+
+def render_message(message: str, options=(), option_name=lambda o: SPELLINGS.get(o, o)) -> str:
     """``message`` with each ``{option}`` of ``options`` written as ``option_name(option)``."""
     for o in options:
         message = message.replace("{" + o + "}", option_name(o))

@@ -23,7 +23,7 @@ from typing import Sequence
 
 from ..core.errors import TorchspliceError
 
-__all__ = ["SPLITS", "DEFAULT_RATIOS", "parse_ratios", "split_sources", "clip_sources", "clip_split", "table_splits"]
+__all__ = ["SPLITS", "DEFAULT_RATIOS", "parse_ratios", "parse_seed", "split_sources", "clip_sources", "clip_split", "table_splits"]
 
 SPLITS = ("train", "val", "test")
 DEFAULT_RATIOS = (0.8, 0.1, 0.1)
@@ -41,6 +41,16 @@ def parse_ratios(value) -> tuple[float, float, float]:
         raise TorchspliceError(f"{{split_ratios}} must be three numbers train,val,test that sum to 1 (such as "
                                f"0.8,0.1,0.1), got {value!r}", options=("split_ratios",))
     return items[0], items[1], items[2]
+
+
+def parse_seed(value) -> int:
+    """The split's seed: a whole number (``3``, ``"3"``); one-line error naming ``split_seed``."""
+    try:
+        if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+            raise ValueError
+        return int(value)
+    except (TypeError, ValueError):
+        raise TorchspliceError(f"{{split_seed}} must be a whole number, got {value!r}", options=("split_seed",)) from None
 
 
 def _counts(n: int, ratios: Sequence[float]) -> list[int]:
@@ -105,7 +115,7 @@ def table_splits(table, ratios: Sequence[float] = DEFAULT_RATIOS, seed: int = 0)
     ``table`` (:class:`~torchsplice.store.table.ClipTable`): sources split once over the whole
     table, so that a selection of its clips keeps their splits (the HumanML3D export and
     ``MotionDataset(split=...)`` both read this)."""
-    ratios = parse_ratios(ratios)
+    ratios, seed = parse_ratios(ratios), parse_seed(seed)
     extra = table.extra
     infos = []
     for r, (name, role) in enumerate(zip(table.names, table.role)):

@@ -62,10 +62,10 @@ _BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 _SUFFIX = re.compile(r"^\.[A-Za-z0-9][A-Za-z0-9_-]*$")
 READ_BATCH = 64
+"""Clips read from the database at a time by :meth:`Exporter.items`."""
 SHARED_OPTIONS = ("split_ratios", "split_seed")
 """Options of every export: the splits of its index (:mod:`.index`; a format that writes its own
 splits, as HumanML3D's does, declares them too and gets them)."""
-"""Clips read from the database at a time by :meth:`Exporter.items`."""
 
 
 @dataclass(frozen=True)
@@ -313,7 +313,7 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             list, all of which a clip must pass; :mod:`torchsplice.store.select`), e.g.
             ``"role:spliced"`` or ``["method:naive", "label:action.style=elderly"]``; with
             ``clips``, the named clips it selects.
-        index: with several clips (a folder of files, or a packed file), also write ``index.csv``
+        index: with several clips in a folder of files, or in a packed file (even of one), also write ``index.csv``
             (each file's clip, split and every column ``torchsplice info --csv`` gives: role,
             labels, cost, flags, coverage ...) and, in a folder, ``train.txt``, ``val.txt`` and
             ``test.txt`` (:mod:`.index`); a format with a layout of its own (HumanML3D) writes its own.
@@ -346,13 +346,15 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             raise TorchspliceError(f"{out}: no export format writes {suffix} files; the formats are {formats} "
                                    "({format} chooses one)", options=("format",))
         files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
+    from ..data.splits import parse_ratios, parse_seed
+
+    if options.get("split_ratios") is not None:
+        parse_ratios(options["split_ratios"])  # bad ones refused before any work, index or not
+    if options.get("split_seed") is not None:
+        parse_seed(options["split_seed"])
     indexed = {}
     if index and layout is None and (exporter.single_file or not single):
         indexed = _index_targets(out, files, not single, database, overwrite)
-        if options.get("split_ratios") is not None:
-            from ..data.splits import parse_ratios
-
-            parse_ratios(options["split_ratios"])  # a bad one refused before any work
     exporter.check()
     from .staging import staged_files
 
@@ -414,10 +416,11 @@ def _index_targets(out, files: list[Path], folder_export: bool, database, overwr
     from .index import index_targets
 
     targets = index_targets(out, folder_export)
-    clash = set(targets.values()) & set(files)
+    own = {t.as_posix().casefold() for t in targets.values()}  # case-blind, as the clips' names are checked
+    clash = sorted(f for f in files if f.as_posix().casefold() in own)
     if clash:
-        raise TorchspliceError(f"{sorted(clash)[0]}: a clip's file would have the name of the export's index; export "
-                               "that clip on its own, or with index=False")
+        raise TorchspliceError(f"{clash[0]}: a clip's file would have the name of the export's index; export that clip "
+                               "on its own, or without an index ({no_index})", options=("no_index",))
     for t in targets.values():
         if t.parent.is_dir():
             check_output(t, (t.suffix,), "an index" if t.suffix == ".csv" else "a split list", inputs=[database],

@@ -42,7 +42,7 @@ from pathlib import Path
 
 from ..core.errors import SpecError, TorchspliceError
 from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
-from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_ratios, table_splits
+from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_ratios, parse_seed, table_splits
 
 __all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MIN_ROWS", "MDM_MAX_ROWS", "INDEX_COLUMNS"]
 
@@ -95,7 +95,7 @@ class HumanML3DExporter(Exporter):
         with MotionDatabase.open(self.database) as db:
             table = db.clip_table()
             rows = [db.index(n) for n in self.names]
-            return _plan_items(table, rows, window, bool(o["mirror"]), ratios, int(o["split_seed"]), str(self.database),
+            return _plan_items(table, rows, window, bool(o["mirror"]), ratios, parse_seed(o["split_seed"]), str(self.database),
                                _job_sources(db.attrs.get("run")))
 
     def layout(self) -> list[str]:

@@ -4,8 +4,8 @@ A training script needs, next to the files, which clip each file holds, what the
 role, locomotion, action, method, labels) and how good it is (a spliced clip's ``cost``,
 ``alignment_distance``, ``flags``, ``coverage`` ...), and a train/val/test split that does not
 leak: every action appears with every locomotion, so a random split of the results puts the
-same action in train and in test. So an export of several clips (any format whose export is
-one file per clip, or a packed file) also writes:
+same action in train and in test. So an export of several clips to a folder (any format whose
+export is one file per clip), and every packed file, also writes:
 
 - ``index.csv`` (in the export's folder; beside a packed file ``NAME.index.csv``): one row per
   exported clip, in export order: ``file`` (the file's name in the folder; the packed file's,
@@ -64,13 +64,13 @@ def index_files(database, names: Sequence[str], files: Sequence[Path], targets: 
                 split_ratios=None, split_seed: int | None = None) -> dict[Path, str]:
     """The text of each of ``targets`` (:func:`index_targets`) for clips ``names`` exported to
     ``files`` (one per clip, or one packed file for all)."""
-    from ..data.splits import DEFAULT_RATIOS, SPLITS, table_splits
+    from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_seed, table_splits
     from ..store.database import MotionDatabase
 
     with MotionDatabase.open(database) as db:
         table = db.clip_table()
         splits = table_splits(table, DEFAULT_RATIOS if split_ratios is None else split_ratios,
-                              0 if split_seed is None else int(split_seed))
+                              0 if split_seed is None else parse_seed(split_seed))
         by_name = {c["name"]: c for c in db.summary()["clips"]}
         row_of = {n: r for r, n in enumerate(table.names)}
     base = targets["index"].parent

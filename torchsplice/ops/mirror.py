@@ -6,10 +6,14 @@ Conventions (as everywhere: quaternions WXYZ, file units, the file's up axis):
 - The mirror is the world reflection ``M`` that negates one horizontal axis, ``axis``: X for
   Y-up and Z-up data, Y for X-up data (:func:`mirror_axis`). For a character facing +Z (Y up)
   it swaps its left and right in place; a clip walking along +X comes back walking along -X.
-- Joints pair by name (:func:`side_partners`): ``Left``/``Right``, ``left``/``right``, ``L``/``R``
-  and ``l``/``r`` as a word of the name (``LeftArm``, ``l_hip``, ``RHand``, ``hand_r``); a joint
-  with neither side is its own partner. End sites pair with their joints. The partners must
-  form a mirror-symmetric hierarchy (a joint's partner's parent is its parent's partner).
+- Joints pair by name (:func:`side_partners`): ``Left``/``Right``, ``left``/``right`` and
+  ``LEFT``/``RIGHT`` as a word or a CamelCase part of the name (``LeftArm``, ``left_knee``,
+  ``handLeft``, ``LEFT_ARM``; not ``Bright`` or ``leftover``), else ``L``/``R`` and ``l``/``r`` as
+  a letter of their own (``l_hip``, ``RHand``, ``hand_r``, ``Bip01 L Thigh``). A joint with
+  neither side is its own partner, and so is one that only the letter rule pairs with a name
+  the skeleton lacks (``ROOT`` is not the partner of a ``LOOT``). End sites pair with their
+  joints. The partners must form a mirror-symmetric hierarchy (a joint's partner's parent is
+  its parent's partner).
 - The mirrored clip keeps the skeleton: joint ``j`` moves as ``M`` applied to its partner,
   ``p'_j = M p_σ(j)``. Its world rotations are ``G'_k = M G_σ(k) M S_k``, where ``S_k`` is a
   constant rotation of joint ``k``'s frame taking its children's rest offsets to the mirror
@@ -26,9 +30,17 @@ Conventions (as everywhere: quaternions WXYZ, file units, the file's up axis):
 - Animated joint translations (Bandai Namco's ``Hips`` under ``joint_Root``) are the mirrored
   positions expressed in the mirrored parent's frame, so they are exact too.
 
+- Local rotations come out canonical over time: the first frame's ``w >= 0`` and each later
+  frame in the hemisphere of the one before (no sign flips between frames).
+
 Labels and names are swapped by :func:`mirror_text` (left and right, clockwise and
 counterclockwise, as words or parts of compound words: ``wave-right-hand`` becomes
-``wave-left-hand``). Mirroring twice gives the clip back (rotations up to sign).
+``wave-left-hand``), except the labels that name clips or files (:data:`IDENTITY_LABELS`:
+``split_from``, ``mirror_of``, ``retargeted_from`` ...; a spliced clip's ``locomotion`` and
+``action``), so that a mirror image stays with its sources in splits. ``mirror_of`` names the
+take the clip comes from: the clip itself, or for a window (``split_from``) its take, and it
+is kept when a mirror image is mirrored again. Mirroring twice gives the clip's positions back
+on a rig whose two sides are congruent.
 """
 
 from __future__ import annotations
@@ -44,9 +56,13 @@ from ..core.motion import Motion
 from ..core.rotations import quat_conj, quat_mul, quat_to_rotmat, rotmat_to_quat
 from ..core.skeleton import Skeleton
 
-__all__ = ["mirror_axis", "side_partners", "mirror_rest", "mirror_motion", "mirror_text"]
+__all__ = ["mirror_axis", "side_partners", "mirror_rest", "mirror_motion", "mirror_text", "mirror_labels",
+           "IDENTITY_LABELS"]
 
 _SIDES = {"left": "right", "right": "left", "Left": "Right", "Right": "Left", "LEFT": "RIGHT", "RIGHT": "LEFT"}
+_SIDE_PART = re.compile(r"(?<![A-Za-z])(?:left|right)(?![a-z])|(?:Left|Right)(?![a-z])|(?<![A-Z])(?:LEFT|RIGHT)")
+"""A side in a joint's name: a word (``left_knee``), a CamelCase part (``LeftArm``, ``handLeft``)
+or capitals (``LEFT_ARM``, ``LEFTARM``); not inside another word (``Bright``, ``leftover``)."""
 _LETTER = re.compile(r"(?:(?<=^)|(?<=[_:.\s|-]))([LlRr])(?=[A-Z0-9_.:\s|-]|$)")
 _SIDE_WORD = re.compile(r"(?<![A-Za-z])(?i:counterclockwise|anticlockwise|clockwise|left|right)(?![a-z])"
                         r"|(?<=[a-z])(?:Counterclockwise|Anticlockwise|Clockwise|Left|Right)(?![a-z])")
@@ -55,17 +71,25 @@ _SIDE_WORD = re.compile(r"(?<![A-Za-z])(?i:counterclockwise|anticlockwise|clockw
 _WORDS = {"left": "right", "right": "left", "clockwise": "counterclockwise", "counterclockwise": "clockwise",
           "anticlockwise": "clockwise"}
 
+IDENTITY_LABELS = frozenset({"mirror_of", "split_from", "split_frame", "split", "retargeted_from", "retargeted_to",
+                             "path", "source", "file", "database", "id"})
+"""Labels that name a clip, a file or a place rather than describe the motion: a mirror image
+keeps them as they are (so do a spliced clip's ``action.`` and ``locomotion.`` copies of them,
+and its ``locomotion`` and ``action``, the names of its source clips)."""
+
 
 def mirror_axis(up_axis: int) -> int:
     """The world axis the mirror negates: X (0) unless X is up, then Y (1)."""
     return 1 if int(up_axis) == 0 else 0
 
 
-def _partner_name(name: str) -> str:
-    swapped = re.sub("left|right|Left|Right|LEFT|RIGHT", lambda m: _SIDES[m.group(0)], name)
+def _partner_name(name: str) -> tuple[str, bool]:
+    """``(the name with its side swapped, whether a side word said it)``: the name itself for a
+    joint of neither side."""
+    swapped = _SIDE_PART.sub(lambda m: _SIDES[m.group(0)], name)
     if swapped != name:
-        return swapped
-    return _LETTER.sub(lambda m: {"L": "R", "R": "L", "l": "r", "r": "l"}[m.group(1)], name)
+        return swapped, True
+    return _LETTER.sub(lambda m: {"L": "R", "R": "L", "l": "r", "r": "l"}[m.group(1)], name), False
 
 
 def side_partners(skeleton: Skeleton, where: str = "") -> list[int]:
@@ -78,8 +102,8 @@ def side_partners(skeleton: Skeleton, where: str = "") -> list[int]:
     index = {n: j for j, n in enumerate(names)}
     sigma = []
     for j, n in enumerate(names):
-        other = _partner_name(n)
-        if other == n:
+        other, worded = _partner_name(n)
+        if other == n or (other not in index and not worded):  # a letter alone (ROOT) with no partner: the centre
             sigma.append(j)
         elif other in index:
             sigma.append(index[other])
@@ -155,7 +179,7 @@ def mirror_rest(skeleton: Skeleton, sigma: list[int], axis: int, up: int) -> tor
 
 
 def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = None, name: str | None = None,
-                  where: str = "") -> Motion:
+                  where: str = "", sigma: list[int] | None = None, rest: torch.Tensor | None = None) -> Motion:
     """The mirror image of ``motion`` on its own skeleton (see the module docstring).
 
     Args:
@@ -165,15 +189,18 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
         axis: the world axis to negate (default :func:`mirror_axis`).
         name: the result's name (default the clip's, left and right swapped by :func:`mirror_text`).
         where: what names the clip in messages (default its name).
+        sigma, rest: the skeleton's :func:`side_partners` and :func:`mirror_rest` (for this
+            ``axis``), where the caller mirrors many clips of one skeleton; computed when ``None``.
 
     Returns a :class:`Motion` in the clip's dtype whose joint ``j`` stands at the reflection of
-    joint ``sigma(j)``; its labels swapped by :func:`mirror_text`, with ``mirror_of`` naming the
-    clip. Vectorised over frames and joints.
+    joint ``sigma(j)``; its labels by :func:`mirror_labels` (``mirror_of`` naming the take).
+    Vectorised over frames and joints.
     """
     sk = motion.skeleton
     up_axis = "xyz".index(up_axis.lower()) if isinstance(up_axis, str) else int(up_axis)
     where = where or motion.name or "clip"
-    sigma = side_partners(sk, where)
+    if sigma is None:
+        sigma = side_partners(sk, where)
     ax = mirror_axis(up_axis) if axis is None else int(axis)
     dtype = motion.rotations.dtype
     rot = motion.rotations.to(torch.float64)
@@ -182,7 +209,7 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
     pos, grot = forward_kinematics(rot, root, sk.offsets.to(torch.float64), sk.parents, trans)
     M = torch.ones(3, dtype=torch.float64)
     M[ax] = -1.0
-    S = mirror_rest(sk, sigma, ax, int(up_axis))
+    S = mirror_rest(sk, sigma, ax, int(up_axis)) if rest is None else rest.to(torch.float64)
     G = quat_to_rotmat(grot[:, sigma])  # (T, J, 3, 3) the partners'
     G2 = (M[:, None] * G * M[None, :]) @ S  # M G M S
     q2 = rotmat_to_quat(G2)
@@ -190,6 +217,7 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
     par = torch.tensor([max(p, 0) for p in parents])
     local = quat_mul(quat_conj(q2[:, par]), q2)
     local[:, 0] = q2[:, 0]
+    local = _continuous(local)
     p2 = pos[:, sigma] * M
     trans2 = None
     if trans is not None:
@@ -198,16 +226,45 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
         animated = torch.tensor(sk.translation_animated)
         trans2 = torch.where(animated[None, :, None], trans2, sk.offsets.to(torch.float64)[None])
         trans2[:, 0] = p2[:, 0]
-    labels = {k: mirror_text(v) if isinstance(v, str) else v for k, v in motion.labels.items()}
-    labels["mirror_of"] = motion.name
+    labels = mirror_labels(motion.labels, motion.name)
     return replace(motion, rotations=local.to(dtype), root_translation=p2[:, 0].to(dtype),
                    translations=None if trans2 is None else trans2.to(dtype),
                    name=mirror_text(motion.name) if name is None else name, labels=labels)
 
 
+def _continuous(q: torch.Tensor) -> torch.Tensor:
+    """``(T, J, 4)`` quaternions with signs chosen so that the first frame has ``w >= 0`` and each
+    frame is in the hemisphere of the one before (a cumulative product of the flips: no loop)."""
+    if q.shape[0] == 0:
+        return q
+    flip = torch.ones(q.shape[:2], dtype=q.dtype)
+    flip[0] = torch.where(q[0, :, 0] < 0, -1.0, 1.0)
+    if q.shape[0] > 1:
+        flip[1:] = torch.where((q[1:] * q[:-1]).sum(-1) < 0, -1.0, 1.0)
+    return q * torch.cumprod(flip, 0)[..., None]
+
+
+def mirror_labels(labels: dict, name: str) -> dict:
+    """A mirror image's labels: text values' left and right swapped by :func:`mirror_text`,
+    except :data:`IDENTITY_LABELS` (bare or after ``action.`` / ``locomotion.``) and a spliced
+    clip's ``locomotion`` and ``action``; ``mirror_of`` the take the clip ``name`` comes from
+    (its ``mirror_of`` when it is a mirror image already, else its ``split_from`` when it is a
+    window of a take, else ``name``), so that splits keep a mirror image with its original."""
+    out = {}
+    for k, v in labels.items():
+        bare = k.split(".", 1)[1] if k.startswith(("action.", "locomotion.")) else k
+        keep = (bare in IDENTITY_LABELS or (k in ("locomotion", "action") and "method" in labels)  # a spliced clip's sources
+                or not isinstance(v, str))
+        out[k] = v if keep else mirror_text(v)
+    out["mirror_of"] = labels.get("mirror_of") or labels.get("split_from") or name
+    return out
+
+
 def mirror_text(text: str) -> str:
     """``text`` with left and right (and clockwise and counterclockwise) swapped, as words or
-    parts of compound words (``wave-right-hand`` -> ``wave-left-hand``), keeping their case."""
+    parts of compound words (``wave-right-hand`` -> ``wave-left-hand``), keeping their case.
+    ``anticlockwise`` becomes ``clockwise``, whose mirror is ``counterclockwise``: twice gives
+    the same meaning, not always the same word."""
     def swap(m: re.Match) -> str:
         word = m.group(0)
         other = _WORDS.get(word.lower())

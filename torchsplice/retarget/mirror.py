@@ -4,10 +4,12 @@ left/right map, like HumanML3D's ``M`` copies.
 
 Each clip is mirrored on its own skeleton (:func:`~torchsplice.ops.mirror.mirror_motion`: the
 world reflection that swaps the character's left and right, exact in positions for any rest
-pose whose two sides are congruent), named ``NAME.mirror``, with its labels' left and right swapped (``wave-right-hand`` ->
-``wave-left-hand``) and a ``mirror_of`` label naming the original, so that splits keep a copy
-with its original (:mod:`torchsplice.data.splits`). The clip table's extra columns (a spliced
-clip's cost, flags, coverage, locomotion, action ...) are carried over to both. With
+pose whose two sides are congruent), named ``NAME.mirror``, with its labels' left and right
+swapped (``wave-right-hand`` -> ``wave-left-hand``; labels that name clips or files kept) and a
+``mirror_of`` label naming the original's take, so that splits keep a copy with its original
+and with the other windows of its take (:mod:`torchsplice.data.splits`). The clip table's
+extra columns (a spliced clip's cost, flags, coverage, locomotion, action ...) are carried
+over to both. With
 ``originals`` (the default) the output holds every original followed by its mirror, else the
 mirrors only. Every export, the dataset and ``splice-all`` then read it as any database. The
 output appears when complete (an error or an interrupt leaves no file); a skeleton that has
@@ -29,7 +31,7 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..core.version import __version__
-from ..ops.mirror import mirror_motion, side_partners
+from ..ops.mirror import mirror_axis, mirror_motion, mirror_rest, side_partners
 
 __all__ = ["mirror_clips", "MirrorReport", "MIRROR_SUFFIX"]
 
@@ -81,15 +83,17 @@ def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=No
         rows = list(range(len(table.names))) if clips is None else list(dict.fromkeys(db.index(c) for c in clips))
         if not rows:
             raise TorchspliceError(f"{database}: no clip to mirror")
-        taken = set(table.names)
+        taken = set(table.names) if originals else set()  # the mirrors alone: their names are new to the output
         for r in rows:
             if table.names[r] + MIRROR_SUFFIX in taken:
                 raise TorchspliceError(f"{database}: clip {table.names[r] + MIRROR_SUFFIX!r} exists already; mirror "
                                        "the database's clips that are not mirrors (select them)")
-        specs = {}
-        for k in sorted({int(table.skeleton[r]) for r in rows}):
+        specs, rigs = {}, {}
+        for k in sorted({int(table.skeleton[r]) for r in rows}):  # once per skeleton, refused before any work
             specs[k] = db.spec(k)
-            side_partners(db.skeletons[k], f"{database}: skeleton {k} ({specs[k].name})")  # refused before any work
+            sigma = side_partners(db.skeletons[k], f"{database}: skeleton {k} ({specs[k].name})")
+            up = "xyz".index(specs[k].up_axis.lower()) if isinstance(specs[k].up_axis, str) else int(specs[k].up_axis)
+            rigs[k] = (sigma, mirror_rest(db.skeletons[k], sigma, mirror_axis(up), up))
         columns = dict(db.columns)
         record = {"command": command or "mirror_clips", "tool": f"torchsplice {__version__}",
                   "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -106,8 +110,9 @@ def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=No
                         new.append(m, spec=specs[k], extra=extra)
                         report.clips += 1
                         report.frames += m.num_frames
-                    new.append(mirror_motion(m, specs[k].up_axis, name=m.name + MIRROR_SUFFIX,
-                                             where=f"{database}: clip {m.name!r}"), spec=specs[k], extra=extra)
+                    new.append(mirror_motion(m, specs[k].up_axis, name=m.name + MIRROR_SUFFIX, sigma=rigs[k][0],
+                                             rest=rigs[k][1], where=f"{database}: clip {m.name!r}"),
+                               spec=specs[k], extra=extra)
                     report.clips += 1
                     report.mirrored += 1
                     report.frames += m.num_frames

@@ -145,13 +145,18 @@ def view_rotations(up_axis: int, azimuth: np.ndarray, elevation: float = DEFAULT
 
 def heading_yaw(rotations: np.ndarray, up_axis: int) -> np.ndarray:
     """``(T,)`` unwrapped yaw in radians about the up axis of ``(T, 4)`` world rotations (WXYZ):
-    the angle of each rotation's twist about that axis (swing-twist), continuous over frames."""
+    the angle of each rotation's twist about that axis (swing-twist), continuous over frames. A
+    frame whose rotation is not finite holds the yaw of the last one that is (the first finite
+    one before it; 0 where none is)."""
     q = np.asarray(rotations, dtype=np.float64)
     if q.ndim != 2 or q.shape[-1] != 4:
         raise ValueError(f"rotations must be (T, 4), got {q.shape}")
     yaw = 2.0 * np.arctan2(q[:, 1 + check_up_axis(up_axis)], q[:, 0])
-    yaw = np.where(np.isfinite(yaw), yaw, 0.0)
-    return np.unwrap(yaw)
+    ok = np.isfinite(yaw)
+    if not ok.any():
+        return np.zeros_like(yaw)
+    last = np.maximum.accumulate(np.where(ok, np.arange(len(yaw)), int(np.argmax(ok))))  # the last finite frame
+    return np.unwrap(yaw[last])
 
 
 def project(points, up_axis: int = 1, azimuth: float = DEFAULT_AZIMUTH, elevation: float = DEFAULT_ELEVATION) -> np.ndarray:
@@ -325,17 +330,23 @@ def figure_points(motion: Motion) -> Figure3D:
 
 
 def _at_times(n: int, fps: float, leader: _Clip) -> np.ndarray:
-    """``(n,)`` the leader's frame nearest each of ``n`` frames at ``fps`` (held at its ends)."""
-    return np.clip(np.rint(np.arange(n) / fps * leader.fps).astype(np.int64), 0, leader.num_frames - 1)
+    """``(leader's frames,)`` the frame of a clip of ``n`` frames at ``fps`` nearest each of the
+    leader's frames' times (held at its last)."""
+    return np.minimum(np.rint(np.arange(leader.num_frames) / leader.fps * fps).astype(np.int64), n - 1)
 
 
 def _prepare(motion: Motion, up: int, azimuth: float, elevation: float, camera: str,
              leader: _Clip | None = None) -> _Clip:
     """Forward kinematics once for the whole clip, then everything drawing needs, as numpy.
-    With ``leader``, the clip is seen from the leader's camera at the same times (an overlay)."""
+    With ``leader``, the clip is resampled to the leader's frames (its frame nearest each of
+    their times, held at its end; nothing past the leader's end) and seen from the leader's
+    camera at each (an overlay)."""
     sk = motion.skeleton
     fig3 = figure_points(motion)
     pts, lines, follow, drawn = fig3.points, fig3.lines, fig3.follow, fig3.drawn
+    fps = motion.fps
+    if leader is not None:
+        pts, fps = pts[_at_times(pts.shape[0], fps, leader)], leader.fps
     T = pts.shape[0]
     axes = canonical_axes(up)
 
@@ -349,8 +360,7 @@ def _prepare(motion: Motion, up: int, azimuth: float, elevation: float, camera: 
     root3 = np.zeros((T, 3))
     root3[:, axes[0]], root3[:, axes[1]] = floor_xy[:, 0], floor_xy[:, 1]
     if leader is not None:
-        at = _at_times(T, motion.fps, leader)
-        cam3, view, smooth = leader.center[at], leader.view[at], leader.floor_center[at]
+        cam3, view, smooth = leader.center, leader.view, leader.floor_center
         root3[:, up] = cam3[:, up]
     else:
         smooth = _moving_average(floor_xy, max(1, int(round(_FOLLOW_SECONDS * motion.fps))) | 1)
@@ -371,7 +381,7 @@ def _prepare(motion: Motion, up: int, azimuth: float, elevation: float, camera: 
     if head is not None:
         head = np.einsum("tk,tik->ti", head - cam3, view)
     return _Clip(
-        name=motion.name, fps=motion.fps, screen=screen, lines=lines, head=head, head_size=head_size,
+        name=motion.name, fps=fps, screen=screen, lines=lines, head=head, head_size=head_size,
         root=root3, center=cam3, view=view, floor_center=smooth, floor=floor,
         height=max(top - floor, 0.25 * sk.size(), 1e-9), size=max(sk.size(), 1e-9), drawn=drawn,
     )
@@ -554,9 +564,8 @@ class _Panel:
             ln.set_data(xy[:, 0], xy[:, 1])
         if self.head is not None:
             self.head.set_data(c.head[f, :1], c.head[f, 1:])
-        for ln, idx, o in self.others:  # the frame of each at this frame's time
-            g = min(int(round(f / c.fps * o.fps)), o.num_frames - 1)
-            xy = o.screen[g][idx]
+        for ln, idx, o in self.others:  # resampled to this clip's frames (:func:`_prepare`)
+            xy = o.screen[f][idx]
             ln.set_data(xy[:, 0], xy[:, 1])
         if held != self.held:  # past its end the clip holds its last frame, faded
             for ln, _ in self.bones:
