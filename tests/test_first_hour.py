@@ -172,6 +172,34 @@ def test_11_long_titles_fit_their_panels_on_two_lines():
     assert all(len(ln) <= int(72 / (0.6 * 8)) for ln in text.split("\n"))
 
 
+def test_10_the_readme_says_what_info_shows_of_bandai_namcos_skeletons(mocap_dir, tmp_path, capsys):
+    """The README's figures (clips per skeleton and dataset, the Head End Sites' distance) are
+    what importing the Bandai Namco clips of ../shared/mocap gives and ``info`` prints."""
+    import re
+
+    from conftest import REPO
+
+    said = re.search(r"shows skeleton 0 \((\d+) clips of dataset 1\) and\s+skeleton 1 \((\d+) of dataset 1 and (\d+) "
+                     r"of dataset 2\): the same (\d+) joints, their Head End Site (\d+) cm\s+apart",
+                     (REPO / "README.md").read_text())
+    assert said, "the README no longer says what info shows of Bandai Namco's skeletons"
+    db = tmp_path / "bandai.h5"
+    assert main(["import", str(mocap_dir / BANDAI), "-o", str(db), "-q"]) == 0
+    rc, text, _ = run(capsys, "info", db, "--limit", "0")
+    assert rc == 0
+    with MotionDatabase.open(db) as d:
+        table = d.clip_table()
+        count = {}
+        for k, labels in zip(table.skeleton, table.labels):
+            count[(int(k), labels["dataset"])] = count.get((int(k), labels["dataset"]), 0) + 1
+        heads = [sk.end_site_offsets[sk.end_site_parents.index(sk.names.index("Head"))] for sk in d.skeletons]
+        joints = {sk.num_joints for sk in d.skeletons}
+    zero, one_1, one_2, n_joints, apart = map(int, said.groups())
+    assert count == {(0, "1"): zero, (1, "1"): one_1, (1, "2"): one_2} and joints == {n_joints}
+    assert round(float((heads[0] - heads[1]).norm())) == apart
+    assert f"skeleton 0: {n_joints} joints" in text and f"{zero} clips" in text and f"{one_1 + one_2} clips" in text
+
+
 def test_12_the_package_imports_from_the_clones_parent_folder(tmp_path):
     """Run from the folder holding a clone named torchsplice, Python sees that folder as an empty
     namespace package unless the environment puts the repository itself on sys.path (the setup's
@@ -380,3 +408,59 @@ def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip
             export_clips(spliced, None, out=tmp_path / "bad", split_seed="x", index=index)
     packed_one = export_clips(spliced, names[:1], out=tmp_path / "one.npz", packed=True)  # a packed file, even of one
     assert [p.name for p in packed_one.index_files] == ["one.index.csv"]
+
+
+def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_db, tmp_path, capsys):
+    """``splice-all`` writes ``OUT.index.csv`` beside its output (every clip's cost, flags,
+    coverage, labels and split by source clip, as the exports' index and ``info --csv``), and
+    so does ``merge`` after sliced runs; ``--no-index`` (``index=False``) writes none."""
+    import csv
+
+    from torchsplice.data.splits import table_splits
+    from torchsplice.job import splice_all
+
+    out = tmp_path / "sp.h5"
+    rc, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--workers", "1", "--method", "splice,naive")
+    assert rc == 0, err
+    assert "every clip's metrics and split in sp.index.csv" in text
+    rows = list(csv.DictReader(open(tmp_path / "sp.index.csv")))
+    with MotionDatabase.open(out) as d:
+        table = d.clip_table()
+        names, cost = list(table.names), [float(c) for c in table.extra["cost"]]
+        splits = table_splits(table)
+    assert [r["clip"] for r in rows] == names and {r["file"] for r in rows} == {"sp.h5"}
+    assert [r["split"] for r in rows] == splits and {"train", "val", "test"} & set(splits)
+    assert all((r["cost"] == "") if c != c else abs(float(r["cost"]) - c) <= 1e-9 * max(1.0, c) for r, c in zip(rows, cost))
+    assert {"flags", "coverage", "alignment_distance", "locomotion", "action", "method", "labels"} <= set(rows[0])
+    rc, _, _ = run(capsys, "info", out, "--csv", tmp_path / "info.csv")
+    info = list(csv.DictReader(open(tmp_path / "info.csv")))
+    assert rc == 0 and [{k: r["clip" if k == "name" else k] for k in info[0]} for r in rows] == info  # the same values
+    splice_all(sample_db, tmp_path / "plain.h5", locomotions="jog", workers=1, index=False)
+    assert sorted(p.name for p in tmp_path.glob("plain*")) == ["plain.h5"]
+    for k in (1, 2):
+        assert run(capsys, "splice-all", sample_db, "-o", tmp_path / "sliced.h5", "--locomotions", "jog", "--workers", "1",
+                   "--shard", f"{k}/2", "-q")[0] == 0
+    assert not (tmp_path / "sliced.index.csv").exists()  # a slice writes no output, so no index
+    rc, text, err = run(capsys, "merge", tmp_path / "sliced.h5")
+    assert rc == 0 and "sliced.index.csv" in text, err
+    merged = list(csv.DictReader(open(tmp_path / "sliced.index.csv")))
+    with MotionDatabase.open(tmp_path / "sliced.h5") as d:
+        assert [r["clip"] for r in merged] == list(d.names)
+
+
+def test_a_full_disk_while_writing_the_jobs_index_says_the_output_is_complete(sample_db, tmp_path, capsys, monkeypatch):
+    import errno
+
+    real = Path.write_text
+
+    def full(self, *a, **k):
+        if ".index.csv" in self.name:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Path, "write_text", full)
+    out = tmp_path / "sp.h5"
+    rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "jog", "--workers", "1", "-q")
+    line = error_line(err)
+    assert rc != 0 and "sp.index.csv" in line and "no space left" in line.lower() and "sp.h5 itself is complete" in line
+    assert out.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["sp.h5"]  # no temporary left

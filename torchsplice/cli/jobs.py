@@ -16,6 +16,7 @@ from .common import (JOB, add_output_flags, command_line, declared, device, flag
 from .splice import add_splice_options, job_default, methods
 from ..core.errors import TorchspliceError
 
+MERGE = "torchsplice.job.merge"  # merge_job: the options of merge
 LOG_LEVELS = ("debug", "info", "warning", "error")  # --log-level: the logging levels worth choosing
 
 
@@ -68,6 +69,9 @@ class SpliceAll(Command):
                        help="pairs per batch (overrides the budget)")
         s.add_argument("--copy-sources", action="store_true", default=job_default("copy_sources"),
                        help="copy the source clips into the output too")
+        s.add_argument("--no-index", dest="index", action="store_false", default=job_default("index"),
+                       help="write no OUT.index.csv beside the output (by default: every clip's cost, flags, coverage, "
+                            "labels and split by source clip, as info --csv and the exports give them)")
         s.add_argument("--max-length-ratio", type=positive_float, default=job_default("max_length_ratio"), metavar="R",
                        help="skip pairs whose longer clip lasts more than R times the shorter (e.g. 3); long takes are "
                             "better cut with import --split")
@@ -121,7 +125,7 @@ class SpliceAll(Command):
             acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, device=device(args.device),
             compression=args.compression, layout=args.layout, engine=args.engine, workers=args.workers,
             ray_address=args.ray_address, backend=args.backend, retarget=args.retarget, fix_feet=args.fix_feet,
-            target=args.target,
+            target=args.target, index=args.index,
         )
         if args.ray_address and args.engine != "ray":
             raise TorchspliceError("--ray-address needs --engine ray")
@@ -147,13 +151,15 @@ class Merge(Command):
 
     def add_arguments(self, s) -> None:
         s.add_argument("output", help="the output the job was run with (-o of splice-all)")
+        s.add_argument("--no-index", dest="index", action="store_false", default=declared(MERGE, "merge_job.index"),
+                       help="write no OUT.index.csv beside the output")
         add_output_flags(s, force_help="overwrite an existing output")
 
     def run(self, args) -> int:
         from ..job import merge_job
 
         summary = merge_job(Path(args.output), overwrite=args.force, progress=not args.quiet,
-                            command=command_line(args))
+                            command=command_line(args), index=args.index)
         if not args.quiet:
             print("\n".join(summary.lines(flag)))
         return 0

@@ -15,6 +15,9 @@ export is one file per clip), and every packed file, also writes:
 - ``train.txt``, ``val.txt``, ``test.txt`` (a folder export only): the files of each split, one
   a line.
 
+``splice-all`` (and ``merge``) write the same index beside the job's output database,
+``NAME.index.csv`` (:func:`write_database_index`), whose ``file`` is the database's name.
+
 Splits are by source clip (:mod:`torchsplice.data.splits`: seeded, ``split_ratios`` of the
 source clips in train, val and test, a result in a split only when all its sources are; the
 same splits as the HumanML3D export's and ``MotionDataset(split=...)``'s, computed over the
@@ -32,7 +35,7 @@ import json
 from pathlib import Path
 from typing import Sequence
 
-__all__ = ["INDEX_NAME", "index_targets", "index_files", "rows_csv"]
+__all__ = ["INDEX_NAME", "index_targets", "index_files", "rows_csv", "write_database_index"]
 
 INDEX_NAME = "index.csv"
 """The index's name in an export's folder (beside a packed file: ``NAME.index.csv``)."""
@@ -74,14 +77,36 @@ def index_files(database, names: Sequence[str], files: Sequence[Path], targets: 
         by_name = {c["name"]: c for c in db.summary()["clips"]}
         row_of = {n: r for r, n in enumerate(table.names)}
     base = targets["index"].parent
+    paths = [Path(f) for f in files]
+    shown = {f: str(f.relative_to(base)) if f.parent == base else str(f) for f in set(paths)}
     rows = []
     for k, name in enumerate(names):
-        f = files[k] if len(files) == len(names) else files[0]
+        f = paths[k] if len(paths) == len(names) else paths[0]
         info = {key: v for key, v in by_name[name].items() if key != "name"}
-        rows.append({"file": str(Path(f).relative_to(base)) if Path(f).parent == base else str(f), "clip": name,
-                     "split": splits[row_of[name]], **info})
+        rows.append({"file": shown[f], "clip": name, "split": splits[row_of[name]], **info})
     texts = {targets["index"]: rows_csv(rows)}
     for s in SPLITS:
         if s in targets:
             texts[targets[s]] = "".join(f"{r['file']}\n" for r in rows if r["split"] == s)
     return texts
+
+
+def write_database_index(database, split_ratios=None, split_seed: int | None = None) -> Path:
+    """Write ``NAME.index.csv`` beside the database ``database`` (every clip's row, in the
+    database's order; see the module docstring), atomically; returns its path. An OS error (a
+    full disk) is one line naming the index and saying the database itself is complete."""
+    from ..core.errors import TorchspliceError
+    from ..store.atomic import atomic_path
+    from ..store.database import MotionDatabase
+
+    database = Path(database)
+    targets = index_targets(database, folder_export=False)
+    with MotionDatabase.open(database) as db:
+        names = list(db.names)
+    text = index_files(database, names, [database], targets, split_ratios, split_seed)[targets["index"]]
+    try:
+        with atomic_path(targets["index"]) as tmp:
+            tmp.write_text(text)
+    except TorchspliceError as exc:
+        raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written)") from None
+    return targets["index"]

@@ -61,6 +61,11 @@ class JobConfig:
             beside the output (:mod:`torchsplice.job.target`); ``None``: each pair on its
             locomotion's skeleton.
         copy_sources: copy the selected source clips into the output too.
+        index: write ``NAME.index.csv`` beside the output when it is complete: every clip's row
+            of ``torchsplice info --csv`` (cost, alignment_distance, flags, coverage, role,
+            locomotion, action, labels ...) and its split by source clip
+            (:func:`torchsplice.formats.index.write_database_index`). Not part of the plan: a
+            resumed run may change it.
         max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
             (LZF on everything but rotations: fast, read by h5py), ``"lzf"``, ``"gzip"`` (read by
@@ -96,6 +101,7 @@ class JobConfig:
     fix_feet: bool = True
     target: str | None = None
     copy_sources: bool = False
+    index: bool = True
     max_run: int = 3
     posture: bool = True
     twist: float = 0.0
@@ -248,7 +254,7 @@ def _check_types(c: JobConfig) -> None:
         v = getattr(c, name)
         if not isinstance(v, tuple) or not all(isinstance(x, str) for x in v):
             raise bad(name, "a string or a sequence of strings", v)
-    for name in ("force_locomotion", "copy_sources", "posture", "retarget", "fix_feet"):
+    for name in ("force_locomotion", "copy_sources", "index", "posture", "retarget", "fix_feet"):
         if not isinstance(getattr(c, name), (bool, np.bool_)):
             raise bad(name, "True or False", getattr(c, name))
     for name, lo, optional in (("max_run", 1, False), ("memory_budget_mb", 1, False), ("batch_pairs", 1, True),

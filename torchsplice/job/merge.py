@@ -32,8 +32,10 @@ __all__ = ["merge_job", "OutputMerge", "source_rows", "open_output", "STAGING", 
 log = logging.getLogger("torchsplice.job")
 
 
-def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None) -> JobSummary:
-    """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs).
+def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None,
+              index: bool = True) -> JobSummary:
+    """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs), and
+    with ``index`` its ``NAME.index.csv`` beside it (as the job does: see ``JobConfig.index``).
 
     Resumable as the job is: a merge killed midway goes on from its last checkpoint."""
     output = Path(output)
@@ -115,6 +117,10 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         finally:
             sources.close()
         shutil.rmtree(work, ignore_errors=True)
+        if index:
+            from ..formats.index import write_database_index
+
+            summary.index = write_database_index(output)
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0
     return summary
 

@@ -120,6 +120,10 @@ class SpliceJob:
                 sources.close()
             if self.shard is None:
                 shutil.rmtree(self.work, ignore_errors=True)
+                if c.index:
+                    from ..formats.index import write_database_index
+
+                    summary.index = write_database_index(c.output)
         summary.seconds = time.perf_counter() - t0
         if c.target is not None:
             summary.target = f"{c.target} ({', '.join(str(p) for p in (c.database, c.actions_db) if p is not None)})"
@@ -293,7 +297,7 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
       match; ``None``: the spec's roles), ``actions_db``, ``max_length_ratio``;
     - splicing: ``methods`` (``"splice,naive"`` or a sequence; plug-ins included),
       ``force_locomotion``, ``timing``, ``acting_limbs``, ``max_run``, ``posture``, ``device``;
-    - output: ``copy_sources``, ``compression``, ``layout``;
+    - output: ``copy_sources``, ``compression``, ``layout``, ``index`` (``NAME.index.csv`` beside it);
     - running: ``engine`` (``"local"`` or ``"ray"``), ``workers``, ``ray_address``,
       ``memory_budget_mb``, ``batch_pairs``.
 

@@ -48,6 +48,7 @@ class JobSummary:
     expected: OutputSize | None = None  # the output's expected size (see torchsplice.job.size)
     written: int | None = None  # bytes the output took
     free: int | None = None  # bytes free beside the output when the job started
+    index: Path | None = None  # NAME.index.csv written beside the output
 
     def lines(self, option_name=None) -> list[str]:
         """The closing summary, as printed by the command line; ``option_name(option)`` writes the
@@ -82,6 +83,8 @@ class JobSummary:
         if self.retargeted:
             out.append(f"  {self.retargeted} {'would have' if self.dry_run else 'had'} the action retargeted onto the "
                        "locomotion's skeleton (labels retargeted_from, retargeted_to)")
+        if self.index is not None and not self.dry_run:
+            out.append(f"  every clip's metrics and split in {self.index.name}")
         if self.written is not None and not self.dry_run:
             out.append(f"  {format_bytes(self.written)} on disk" + (f" (expected {format_bytes(self.expected.bytes)})"
                                                                     if self.expected is not None else ""))
