@@ -437,6 +437,9 @@ def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_d
     assert rc == 0 and [{k: r["clip" if k == "name" else k] for k in info[0]} for r in rows] == info  # the same values
     splice_all(sample_db, tmp_path / "plain.h5", locomotions="jog", workers=1, index=False)
     assert sorted(p.name for p in tmp_path.glob("plain*")) == ["plain.h5"]
+    rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--workers", "1", "--locomotions", "jog", "--force",
+                     "--no-index", "-q")
+    assert rc == 0 and not (tmp_path / "sp.index.csv").exists(), err  # an earlier run's index is not left beside it
     for k in (1, 2):
         assert run(capsys, "splice-all", sample_db, "-o", tmp_path / "sliced.h5", "--locomotions", "jog", "--workers", "1",
                    "--shard", f"{k}/2", "-q")[0] == 0

@@ -168,6 +168,12 @@ def test_letters_alone_pair_only_with_a_partner_and_words_only_as_words():
     parents = [-1, 0, 1, 1, 2, 3, 4, 5, 0]
     sk = Skeleton(names, parents, torch.zeros(len(names), 3, dtype=F64), [[] for _ in names])
     assert side_partners(sk) == [0, 1, 3, 2, 5, 4, 7, 6, 8]
+    loose = ["Hips", "Leftupleg", "Leftleg", "Rightupleg", "Rightleg", "lhand", "rhand", "HANDLEFT", "HANDRIGHT"]
+    sk = Skeleton(loose, [-1, 0, 1, 0, 3, 0, 0, 0, 0], torch.zeros(len(loose), 3, dtype=F64), [[] for _ in loose])
+    assert side_partners(sk) == [0, 3, 4, 1, 2, 6, 5, 8, 7]  # sides inside words pair where the partner exists
+    sideless = Skeleton(["Hips", "Spine", "Head"], [-1, 0, 1], torch.zeros(3, 3, dtype=F64), [[]] * 3)
+    with pytest.raises(TorchspliceError, match="x.h5: cannot mirror: no joint's name says its side"):
+        side_partners(sideless, "x.h5")
     worded = Skeleton(["ROOT", "Bright", "LEFTARM"], [-1, 0, 1], torch.zeros(3, 3, dtype=F64), [[]] * 3)
     with pytest.raises(TorchspliceError, match="'LEFTARM' has no partner 'RIGHTARM'"):  # a word must pair
         side_partners(worded)

@@ -35,7 +35,8 @@ import json
 from pathlib import Path
 from typing import Sequence
 
-__all__ = ["INDEX_NAME", "index_targets", "index_files", "rows_csv", "write_database_index"]
+__all__ = ["INDEX_NAME", "index_targets", "index_files", "rows_csv", "write_database_index",
+           "refresh_database_index"]
 
 INDEX_NAME = "index.csv"
 """The index's name in an export's folder (beside a packed file: ``NAME.index.csv``)."""
@@ -108,5 +109,18 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
         with atomic_path(targets["index"]) as tmp:
             tmp.write_text(text)
     except TorchspliceError as exc:
-        raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written)") from None
+        raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written: "
+                               "torchsplice.formats.index.write_database_index writes it)") from None
     return targets["index"]
+
+
+def refresh_database_index(database, write: bool = True) -> Path | None:
+    """After a database ``database`` was (re)written: remove any earlier ``NAME.index.csv``
+    beside it (an earlier run's, with its splits and costs), then with ``write`` write its own
+    (:func:`write_database_index`); returns the index written, or ``None``."""
+    old = index_targets(database, folder_export=False)["index"]
+    try:
+        old.unlink(missing_ok=True)
+    except OSError:
+        pass  # written over below, or left for the user: not worth failing a finished output
+    return write_database_index(database) if write else None

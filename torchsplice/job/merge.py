@@ -117,10 +117,9 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         finally:
             sources.close()
         shutil.rmtree(work, ignore_errors=True)
-        if index:
-            from ..formats.index import write_database_index
+        from ..formats.index import refresh_database_index
 
-            summary.index = write_database_index(output)
+        summary.index = refresh_database_index(output, write=index)  # never an earlier run's left beside it
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0
     return summary
 

@@ -120,10 +120,9 @@ class SpliceJob:
                 sources.close()
             if self.shard is None:
                 shutil.rmtree(self.work, ignore_errors=True)
-                if c.index:
-                    from ..formats.index import write_database_index
+                from ..formats.index import refresh_database_index
 
-                    summary.index = write_database_index(c.output)
+                summary.index = refresh_database_index(c.output, write=c.index)  # never an earlier run's left beside it
         summary.seconds = time.perf_counter() - t0
         if c.target is not None:
             summary.target = f"{c.target} ({', '.join(str(p) for p in (c.database, c.actions_db) if p is not None)})"

@@ -9,9 +9,10 @@ Conventions (as everywhere: quaternions WXYZ, file units, the file's up axis):
 - Joints pair by name (:func:`side_partners`): ``Left``/``Right``, ``left``/``right`` and
   ``LEFT``/``RIGHT`` as a word or a CamelCase part of the name (``LeftArm``, ``left_knee``,
   ``handLeft``, ``LEFT_ARM``; not ``Bright`` or ``leftover``), else ``L``/``R`` and ``l``/``r`` as
-  a letter of their own (``l_hip``, ``RHand``, ``hand_r``, ``Bip01 L Thigh``). A joint with
-  neither side is its own partner, and so is one that only the letter rule pairs with a name
-  the skeleton lacks (``ROOT`` is not the partner of a ``LOOT``). End sites pair with their
+  a letter of their own (``l_hip``, ``RHand``, ``hand_r``, ``Bip01 L Thigh``), a side anywhere
+  in the name (``Leftfoot``) or a leading lower-case letter (CMU's ``lhand``); these last three
+  only where the partner exists (``ROOT`` is not the partner of a ``LOOT``). A joint with
+  neither side is its own partner; a rig where no joint pairs is refused. End sites pair with their
   joints. The partners must form a mirror-symmetric hierarchy (a joint's partner's parent is
   its parent's partner).
 - The mirrored clip keeps the skeleton: joint ``j`` moves as ``M`` applied to its partner,
@@ -83,33 +84,50 @@ def mirror_axis(up_axis: int) -> int:
     return 1 if int(up_axis) == 0 else 0
 
 
-def _partner_name(name: str) -> tuple[str, bool]:
-    """``(the name with its side swapped, whether a side word said it)``: the name itself for a
-    joint of neither side."""
+_LOOSE = re.compile("left|right|Left|Right|LEFT|RIGHT")
+"""A side anywhere in a name (``Leftfoot``, ``HANDLEFT``): trusted only where the partner exists."""
+_LEADING = re.compile(r"^([lr])(?=[a-z])")
+"""A leading lower-case side letter (CMU's ``lhand``, ASF's ``lhumerus``): trusted only where the
+partner exists."""
+
+
+def _partner_name(name: str, names) -> tuple[str, bool]:
+    """``(the partner's name, whether a side word said it)``: the name itself for a joint of
+    neither side. A side word is a word or CamelCase part (it must pair); a side letter, a side
+    anywhere in the name or a leading lower-case letter pair only with a joint of ``names``."""
     swapped = _SIDE_PART.sub(lambda m: _SIDES[m.group(0)], name)
     if swapped != name:
         return swapped, True
-    return _LETTER.sub(lambda m: {"L": "R", "R": "L", "l": "r", "r": "l"}[m.group(1)], name), False
+    letters = {"L": "R", "R": "L", "l": "r", "r": "l"}
+    for candidate in (_LETTER.sub(lambda m: letters[m.group(1)], name), _LOOSE.sub(lambda m: _SIDES[m.group(0)], name),
+                      _LEADING.sub(lambda m: letters[m.group(1)], name)):
+        if candidate != name and candidate in names:
+            return candidate, False
+    return name, False
 
 
 def side_partners(skeleton: Skeleton, where: str = "") -> list[int]:
     """``sigma``: each joint's left/right partner (itself for a joint of neither side), by name.
 
     Raises a one-line :class:`~torchsplice.core.errors.TorchspliceError` naming ``where`` (a file
-    or clip) and the joint when a side's joint has no partner or the partners' hierarchy is not
-    mirror-symmetric."""
+    or clip) and the joint when a side's joint has no partner, when no joint pairs at all (a rig
+    of more than one joint whose sides its names do not say), or when the partners' hierarchy is
+    not mirror-symmetric."""
     names = list(skeleton.names)
     index = {n: j for j, n in enumerate(names)}
     sigma = []
     for j, n in enumerate(names):
-        other, worded = _partner_name(n)
-        if other == n or (other not in index and not worded):  # a letter alone (ROOT) with no partner: the centre
+        other, worded = _partner_name(n, index)
+        if other == n:
             sigma.append(j)
         elif other in index:
             sigma.append(index[other])
         else:
             raise TorchspliceError(f"{where or 'skeleton'}: cannot mirror: joint {n!r} has no partner {other!r} on the "
                                    "other side")
+    if len(names) > 1 and all(s == j for j, s in enumerate(sigma)):
+        raise TorchspliceError(f"{where or 'skeleton'}: cannot mirror: no joint's name says its side (Left/Right, "
+                               "L/R, l_/r_), so no joint has a partner")
     parents = skeleton.parents
     for j, s in enumerate(sigma):
         if sigma[s] != j or (parents[j] >= 0) != (parents[s] >= 0) or (parents[j] >= 0 and sigma[parents[j]] != parents[s]):
@@ -226,7 +244,7 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
         animated = torch.tensor(sk.translation_animated)
         trans2 = torch.where(animated[None, :, None], trans2, sk.offsets.to(torch.float64)[None])
         trans2[:, 0] = p2[:, 0]
-    labels = mirror_labels(motion.labels, motion.name)
+    labels = mirror_labels(motion.labels, motion.name, spliced=(motion.role == "spliced") if motion.role else None)
     return replace(motion, rotations=local.to(dtype), root_translation=p2[:, 0].to(dtype),
                    translations=None if trans2 is None else trans2.to(dtype),
                    name=mirror_text(motion.name) if name is None else name, labels=labels)
@@ -244,16 +262,19 @@ def _continuous(q: torch.Tensor) -> torch.Tensor:
     return q * torch.cumprod(flip, 0)[..., None]
 
 
-def mirror_labels(labels: dict, name: str) -> dict:
+def mirror_labels(labels: dict, name: str, spliced: bool | None = None) -> dict:
     """A mirror image's labels: text values' left and right swapped by :func:`mirror_text`,
     except :data:`IDENTITY_LABELS` (bare or after ``action.`` / ``locomotion.``) and a spliced
     clip's ``locomotion`` and ``action``; ``mirror_of`` the take the clip ``name`` comes from
     (its ``mirror_of`` when it is a mirror image already, else its ``split_from`` when it is a
-    window of a take, else ``name``), so that splits keep a mirror image with its original."""
+    window of a take, else ``name``), so that splits keep a mirror image with its original.
+    ``spliced``: whether the clip is a spliced clip (``None``: guessed from a ``method`` label)."""
+    if spliced is None:
+        spliced = "method" in labels
     out = {}
     for k, v in labels.items():
         bare = k.split(".", 1)[1] if k.startswith(("action.", "locomotion.")) else k
-        keep = (bare in IDENTITY_LABELS or (k in ("locomotion", "action") and "method" in labels)  # a spliced clip's sources
+        keep = (bare in IDENTITY_LABELS or (k in ("locomotion", "action") and spliced)  # a spliced clip's sources
                 or not isinstance(v, str))
         out[k] = v if keep else mirror_text(v)
     out["mirror_of"] = labels.get("mirror_of") or labels.get("split_from") or name

@@ -146,8 +146,8 @@ def view_rotations(up_axis: int, azimuth: np.ndarray, elevation: float = DEFAULT
 def heading_yaw(rotations: np.ndarray, up_axis: int) -> np.ndarray:
     """``(T,)`` unwrapped yaw in radians about the up axis of ``(T, 4)`` world rotations (WXYZ):
     the angle of each rotation's twist about that axis (swing-twist), continuous over frames. A
-    frame whose rotation is not finite holds the yaw of the last one that is (the first finite
-    one before it; 0 where none is)."""
+    frame whose rotation is not finite holds the yaw of the last finite frame before it (frames
+    before the first finite one take its yaw; all 0 where none is finite)."""
     q = np.asarray(rotations, dtype=np.float64)
     if q.ndim != 2 or q.shape[-1] != 4:
         raise ValueError(f"rotations must be (T, 4), got {q.shape}")
