@@ -19,7 +19,7 @@ from torchsplice.core.rotations import quat_angle
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.data.splits import clip_sources, table_splits
-from torchsplice.ops.mirror import mirror_labels, mirror_motion, mirror_rest, mirror_text, side_partners
+from torchsplice.ops.mirror import mirror_labels, mirror_motion, mirror_rest, mirror_rig, mirror_text, side_partners
 from torchsplice.retarget.mirror import mirror_clips
 from torchsplice.specs import load_spec
 from torchsplice.sample import sample_motion, sample_motions
@@ -233,11 +233,18 @@ def test_a_mirrored_window_and_a_window_of_a_mirror_split_with_their_take(tmp_pa
             assert len({split[n] for n in table.names if n.split("#")[0].split(".")[0] == c.name}) == 1
 
 
-def test_mirroring_many_clips_computes_the_rig_once_and_the_mirrors_alone_may_be_mirrored_again(sample_db, tmp_path):
+def test_mirroring_many_clips_computes_the_rig_once_and_the_mirrors_alone_may_be_mirrored_again(sample_db, tmp_path,
+                                                                                                monkeypatch):
     m = sample_motion("wave", dtype=F64).slice(0, 30)
-    sigma = side_partners(m.skeleton)
-    given = mirror_motion(m, sigma=sigma, rest=mirror_rest(m.skeleton, sigma, 0, 1))
+    given = mirror_motion(m, rig=mirror_rig(m.skeleton, "y"))
     assert torch.equal(given.rotations, mirror_motion(m).rotations)
+    import torchsplice.retarget.mirror as retarget_mirror
+
+    calls = []
+    monkeypatch.setattr(retarget_mirror, "mirror_rig", lambda *a, **k: calls.append(a[0]) or mirror_rig(*a, **k))
+    mirror_clips(sample_db, out=tmp_path / "counted.h5")
+    with MotionDatabase.open(sample_db) as d:
+        assert len(calls) == len(d.skeletons) < len(d)  # once per skeleton, not per clip
     both = tmp_path / "both.h5"
     mirror_clips(sample_db, out=both)
     with pytest.raises(TorchspliceError, match="exists already"):

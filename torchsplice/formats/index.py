@@ -64,10 +64,10 @@ def rows_csv(rows: Sequence[dict]) -> str:
     return out.getvalue()
 
 
-def index_files(database, names: Sequence[str], files: Sequence[Path], targets: dict[str, Path],
+def index_files(database, names: Sequence[str] | None, files: Sequence[Path], targets: dict[str, Path],
                 split_ratios=None, split_seed: int | None = None) -> dict[Path, str]:
-    """The text of each of ``targets`` (:func:`index_targets`) for clips ``names`` exported to
-    ``files`` (one per clip, or one packed file for all)."""
+    """The text of each of ``targets`` (:func:`index_targets`) for clips ``names`` (``None``: every
+    clip, in the database's order) exported to ``files`` (one per clip, or one packed file for all)."""
     from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_seed, table_splits
     from ..store.database import MotionDatabase
 
@@ -77,6 +77,8 @@ def index_files(database, names: Sequence[str], files: Sequence[Path], targets: 
                               0 if split_seed is None else parse_seed(split_seed))
         by_name = {c["name"]: c for c in db.summary()["clips"]}
         row_of = {n: r for r, n in enumerate(table.names)}
+    if names is None:
+        names = list(table.names)
     base = targets["index"].parent
     paths = [Path(f) for f in files]
     shown = {f: str(f.relative_to(base)) if f.parent == base else str(f) for f in set(paths)}
@@ -98,13 +100,10 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
     full disk) is one line naming the index and saying the database itself is complete."""
     from ..core.errors import TorchspliceError
     from ..store.atomic import atomic_path
-    from ..store.database import MotionDatabase
 
     database = Path(database)
     targets = index_targets(database, folder_export=False)
-    with MotionDatabase.open(database) as db:
-        names = list(db.names)
-    text = index_files(database, names, [database], targets, split_ratios, split_seed)[targets["index"]]
+    text = index_files(database, None, [database], targets, split_ratios, split_seed)[targets["index"]]
     try:
         with atomic_path(targets["index"]) as tmp:
             tmp.write_text(text)

@@ -57,7 +57,7 @@ from ..core.motion import Motion
 from ..core.rotations import quat_conj, quat_mul, quat_to_rotmat, rotmat_to_quat
 from ..core.skeleton import Skeleton
 
-__all__ = ["mirror_axis", "side_partners", "mirror_rest", "mirror_motion", "mirror_text", "mirror_labels",
+__all__ = ["mirror_axis", "side_partners", "mirror_rest", "mirror_rig", "mirror_motion", "mirror_text", "mirror_labels",
            "IDENTITY_LABELS"]
 
 _SIDES = {"left": "right", "right": "left", "Left": "Right", "Right": "Left", "LEFT": "RIGHT", "RIGHT": "LEFT"}
@@ -91,19 +91,19 @@ _LEADING = re.compile(r"^([lr])(?=[a-z])")
 partner exists."""
 
 
-def _partner_name(name: str, names) -> tuple[str, bool]:
-    """``(the partner's name, whether a side word said it)``: the name itself for a joint of
-    neither side. A side word is a word or CamelCase part (it must pair); a side letter, a side
-    anywhere in the name or a leading lower-case letter pair only with a joint of ``names``."""
+def _partner_name(name: str, names) -> str:
+    """The partner's name: the name itself for a joint of neither side. A side word is a word
+    or CamelCase part (its partner must exist); a side letter, a side anywhere in the name or a
+    leading lower-case letter pair only with a joint of ``names``."""
     swapped = _SIDE_PART.sub(lambda m: _SIDES[m.group(0)], name)
     if swapped != name:
-        return swapped, True
+        return swapped
     letters = {"L": "R", "R": "L", "l": "r", "r": "l"}
     for candidate in (_LETTER.sub(lambda m: letters[m.group(1)], name), _LOOSE.sub(lambda m: _SIDES[m.group(0)], name),
                       _LEADING.sub(lambda m: letters[m.group(1)], name)):
         if candidate != name and candidate in names:
-            return candidate, False
-    return name, False
+            return candidate
+    return name
 
 
 def side_partners(skeleton: Skeleton, where: str = "") -> list[int]:
@@ -117,7 +117,7 @@ def side_partners(skeleton: Skeleton, where: str = "") -> list[int]:
     index = {n: j for j, n in enumerate(names)}
     sigma = []
     for j, n in enumerate(names):
-        other, worded = _partner_name(n, index)
+        other = _partner_name(n, index)
         if other == n:
             sigma.append(j)
         elif other in index:
@@ -196,8 +196,19 @@ def mirror_rest(skeleton: Skeleton, sigma: list[int], axis: int, up: int) -> tor
     return S
 
 
+def mirror_rig(skeleton: Skeleton, up_axis: int | str = 1, axis: int | None = None,
+               where: str = "") -> tuple[list[int], torch.Tensor, int]:
+    """``(sigma, S, axis)`` of ``skeleton``: its :func:`side_partners`, each joint's
+    :func:`mirror_rest` and the world axis negated (default :func:`mirror_axis` of ``up_axis``,
+    0, 1, 2 or ``"x"``, ``"y"``, ``"z"``). Once per skeleton where many clips are mirrored."""
+    up = "xyz".index(up_axis.lower()) if isinstance(up_axis, str) else int(up_axis)
+    ax = mirror_axis(up) if axis is None else int(axis)
+    sigma = side_partners(skeleton, where)
+    return sigma, mirror_rest(skeleton, sigma, ax, up), ax
+
+
 def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = None, name: str | None = None,
-                  where: str = "", sigma: list[int] | None = None, rest: torch.Tensor | None = None) -> Motion:
+                  where: str = "", rig: tuple[list[int], torch.Tensor, int] | None = None) -> Motion:
     """The mirror image of ``motion`` on its own skeleton (see the module docstring).
 
     Args:
@@ -207,19 +218,16 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
         axis: the world axis to negate (default :func:`mirror_axis`).
         name: the result's name (default the clip's, left and right swapped by :func:`mirror_text`).
         where: what names the clip in messages (default its name).
-        sigma, rest: the skeleton's :func:`side_partners` and :func:`mirror_rest` (for this
-            ``axis``), where the caller mirrors many clips of one skeleton; computed when ``None``.
+        rig: the skeleton's :func:`mirror_rig` (``up_axis`` and ``axis`` then unused), where the
+            caller mirrors many clips of one skeleton; computed when ``None``.
 
     Returns a :class:`Motion` in the clip's dtype whose joint ``j`` stands at the reflection of
     joint ``sigma(j)``; its labels by :func:`mirror_labels` (``mirror_of`` naming the take).
     Vectorised over frames and joints.
     """
     sk = motion.skeleton
-    up_axis = "xyz".index(up_axis.lower()) if isinstance(up_axis, str) else int(up_axis)
-    where = where or motion.name or "clip"
-    if sigma is None:
-        sigma = side_partners(sk, where)
-    ax = mirror_axis(up_axis) if axis is None else int(axis)
+    sigma, S, ax = mirror_rig(sk, up_axis, axis, where or motion.name or "clip") if rig is None else rig
+    S = S.to(torch.float64)
     dtype = motion.rotations.dtype
     rot = motion.rotations.to(torch.float64)
     root = motion.root_translation.to(torch.float64)
@@ -227,7 +235,6 @@ def mirror_motion(motion: Motion, up_axis: int | str = 1, axis: int | None = Non
     pos, grot = forward_kinematics(rot, root, sk.offsets.to(torch.float64), sk.parents, trans)
     M = torch.ones(3, dtype=torch.float64)
     M[ax] = -1.0
-    S = mirror_rest(sk, sigma, ax, int(up_axis)) if rest is None else rest.to(torch.float64)
     G = quat_to_rotmat(grot[:, sigma])  # (T, J, 3, 3) the partners'
     G2 = (M[:, None] * G * M[None, :]) @ S  # M G M S
     q2 = rotmat_to_quat(G2)

@@ -31,7 +31,7 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..core.version import __version__
-from ..ops.mirror import mirror_axis, mirror_motion, mirror_rest, side_partners
+from ..ops.mirror import mirror_motion, mirror_rig
 
 __all__ = ["mirror_clips", "MirrorReport", "MIRROR_SUFFIX"]
 
@@ -91,9 +91,7 @@ def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=No
         specs, rigs = {}, {}
         for k in sorted({int(table.skeleton[r]) for r in rows}):  # once per skeleton, refused before any work
             specs[k] = db.spec(k)
-            sigma = side_partners(db.skeletons[k], f"{database}: skeleton {k} ({specs[k].name})")
-            up = "xyz".index(specs[k].up_axis.lower()) if isinstance(specs[k].up_axis, str) else int(specs[k].up_axis)
-            rigs[k] = (sigma, mirror_rest(db.skeletons[k], sigma, mirror_axis(up), up))
+            rigs[k] = mirror_rig(db.skeletons[k], specs[k].up_axis, where=f"{database}: skeleton {k} ({specs[k].name})")
         columns = dict(db.columns)
         record = {"command": command or "mirror_clips", "tool": f"torchsplice {__version__}",
                   "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -110,8 +108,8 @@ def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=No
                         new.append(m, spec=specs[k], extra=extra)
                         report.clips += 1
                         report.frames += m.num_frames
-                    new.append(mirror_motion(m, specs[k].up_axis, name=m.name + MIRROR_SUFFIX, sigma=rigs[k][0],
-                                             rest=rigs[k][1], where=f"{database}: clip {m.name!r}"),
+                    new.append(mirror_motion(m, specs[k].up_axis, name=m.name + MIRROR_SUFFIX, rig=rigs[k],
+                                             where=f"{database}: clip {m.name!r}"),
                                spec=specs[k], extra=extra)
                     report.clips += 1
                     report.mirrored += 1
