@@ -23,7 +23,7 @@ from torchsplice.formats.importer import FORMATS as IMPORT_FORMATS, import_bvh
 from torchsplice.formats.npz import FEATURE_SETS
 from torchsplice.retarget import retarget_clips
 from torchsplice.retarget.mirror import mirror_clips
-from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS, JobConfig, job_config
+from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS, STORES, JobConfig, job_config
 from torchsplice.job.engines import available_engines
 from torchsplice.job.merge import merge_job
 from torchsplice.splice import SpliceOptions, TIMINGS, splice
@@ -93,6 +93,7 @@ def expected() -> dict:
         ("splice-all", "fix_feet"): (JOB["fix_feet"], None),
         ("splice-all", "target"): (JOB["target"], None),
         ("splice-all", "layout"): (JOB["layout"], LAYOUTS),
+        ("splice-all", "store"): (JOB["store"], STORES),
         ("splice-all", "compression"): (JOB["compression"] or "none", None),  # choices: see below
         **{(c, k): (v, TIMINGS if k == "timing" else backend_choices() if k == "backend" else None)
            for c, o, force in (("splice", ONE, ONE.force), ("splice-all", JOB, JOB["force_locomotion"]))

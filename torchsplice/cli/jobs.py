@@ -90,6 +90,11 @@ class SpliceAll(Command):
                        help="copy: one self-contained output file (default); virtual: the output's frames are HDF5 "
                             "virtual datasets over the task shards, kept in OUT.shards/ beside it (no copy, for "
                             "outputs too large to copy)")
+        s.add_argument("--store", default=job_default("store"), choices=list(declared(JOB, "STORES")),
+                       help="motion: each spliced clip's frames (default); alignment: each source clip once and per "
+                            "spliced clip what splicing computed (alignment curve, pelvis rotation), about a tenth of "
+                            "the disk; every reader assembles the motions, bit for bit the same ('torchsplice "
+                            "materialize' writes them out)")
         s.add_argument("--compression", default=job_default("compression") or "none", choices=list(compressions()),
                        help="compression of the output: auto (default: LZF on translations and per-frame columns, "
                             "rotations raw; fast, read by h5py), lzf (everything), gzip (smallest, read by every "
@@ -123,7 +128,7 @@ class SpliceAll(Command):
             batch_pairs=args.batch_size, force_locomotion=args.force_locomotion, copy_sources=args.copy_sources,
             max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing,
             acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, device=device(args.device),
-            compression=args.compression, layout=args.layout, engine=args.engine, workers=args.workers,
+            compression=args.compression, layout=args.layout, store=args.store, engine=args.engine, workers=args.workers,
             ray_address=args.ray_address, backend=args.backend, retarget=args.retarget, fix_feet=args.fix_feet,
             target=args.target, index=args.index,
         )

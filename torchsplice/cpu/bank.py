@@ -192,7 +192,13 @@ class PackedSplices:
     (``dtype``), ``curve (M,)`` (action frame at the locomotion's rate, crop included, float64) and
     ``correction (M,)`` (pelvis correction, radians). Per pair: ``frames``, ``crop``, ``cost``
     (mean path cost, NaN for naive), ``posture`` (radians), ``cells (B, P, 2)`` and
-    ``path_length`` (the DP path in cropped frames); ``status`` (0, or why the pair failed)."""
+    ``path_length`` (the DP path in cropped frames); ``status`` (0, or why the pair failed).
+
+    The parts the frames were assembled from (:mod:`torchsplice.cpu.assemble`): ``part_curve
+    (M,)`` (float64: the action frame counted from the crop; a standing pair's: its action frame)
+    and ``pelvis (M, 4)`` (float64, timewarp pairs: the pelvis's rotation); per pair ``window``
+    (standing pairs: the action's first frame played onto a shorter locomotion) and ``loops
+    (B, 2)`` (standing pairs: the loop points)."""
 
     start: np.ndarray
     frames: np.ndarray
@@ -206,6 +212,10 @@ class PackedSplices:
     cells: np.ndarray
     path_length: np.ndarray
     status: np.ndarray
+    part_curve: np.ndarray | None = None
+    pelvis: np.ndarray | None = None
+    window: np.ndarray | None = None
+    loops: np.ndarray | None = None
 
 
 _NOTED = False
@@ -243,10 +253,12 @@ class Buffers:
 
     @staticmethod
     def _get(store: dict, rows: int, J: int, dtype) -> tuple:
+        """``(rotations, translations, curve, correction, pelvis)`` with room for ``rows`` frames."""
         have = store.get("arrays")
         if have is None or have[0].shape[0] < rows or have[0].shape[1] != J or have[0].dtype != dtype:
             rows = max(rows, int(1.25 * (have[0].shape[0] if have is not None else 0)))
-            have = (np.empty((rows, J, 4), dtype), np.empty((rows, J, 3), dtype), np.empty(rows), np.empty(rows))
+            have = (np.empty((rows, J, 4), dtype), np.empty((rows, J, 3), dtype), np.empty(rows), np.empty(rows),
+                    np.empty((rows, 4)))
             store["arrays"] = have
         return have
 
@@ -276,9 +288,10 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
     M, J = int(room.sum()), bank.rot.shape[1]
     P = int((bank.lengths[loco] + bank.lengths[act]).max()) if B else 1
     if buffers is not None:
-        orot, otrans, ocurve, ocorr = Buffers._get(buffers.room, M, J, dtype)
+        orot, otrans, ocurve, ocorr, opel = Buffers._get(buffers.room, M, J, dtype)
     else:
-        orot, otrans, ocurve, ocorr = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M), np.empty(M)
+        orot, otrans, ocurve, ocorr, opel = (np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M),
+                                             np.empty(M), np.empty((M, 4)))
     cells = np.empty((B, P, 2), np.int64)
     status, ocrop, plen, frames = (np.empty(B, np.int64) for _ in range(4))
     cost, angle = np.empty(B), np.empty(B)
@@ -287,8 +300,8 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
             float(knot_spacing), float(smoothing))
     if B:
         splice_batch((bank.rot, bank.trans, bank.pos, bank.grot), bank.feat, bank.starts, bank.lengths, METHOD_CODES[method],
-                     loco, act, ref, bank.joints, opts, bool(posture), float(twist), out_start, orot, otrans, ocurve, ocorr, cells,
-                     status, ocrop, plen, cost, frames, angle)
+                     loco, act, ref, bank.joints, opts, bool(posture), float(twist), out_start, orot, otrans, ocurve, ocorr, opel,
+                     cells, status, ocrop, plen, cost, frames, angle)
     bad = np.nonzero(status != 0)[0]
     if len(bad) and on_error == "raise":
         b = int(bad[0])
@@ -297,14 +310,17 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
         new_start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
         n = int(frames.sum())
         if buffers is not None:
-            crot, ctrans, ccurve, ccorr = Buffers._get(buffers.packed, n, J, dtype)
+            crot, ctrans, ccurve, ccorr, cpel = Buffers._get(buffers.packed, n, J, dtype)
         else:
-            crot, ctrans, ccurve, ccorr = np.empty((n, J, 4), dtype), np.empty((n, J, 3), dtype), np.empty(n), np.empty(n)
-        compact(orot, otrans, ocurve, ocorr, out_start, frames, new_start, crot, ctrans, ccurve, ccorr)
-        orot, otrans, ocurve, ocorr, out_start = crot[:n], ctrans[:n], ccurve[:n], ccorr[:n], new_start
+            crot, ctrans, ccurve, ccorr, cpel = (np.empty((n, J, 4), dtype), np.empty((n, J, 3), dtype), np.empty(n),
+                                                 np.empty(n), np.empty((n, 4)))
+        compact(orot, otrans, ocurve, ocorr, opel, out_start, frames, new_start, crot, ctrans, ccurve, ccorr, cpel)
+        orot, otrans, ocurve, ocorr, opel, out_start = crot[:n], ctrans[:n], ccurve[:n], ccorr[:n], cpel[:n], new_start
     else:
-        orot, otrans, ocurve, ocorr = orot[:0], otrans[:0], ocurve[:0], ocorr[:0]
-    return PackedSplices(out_start, frames, orot, otrans, ocurve, ocorr, ocrop, cost, angle, cells, plen, status)
+        orot, otrans, ocurve, ocorr, opel = orot[:0], otrans[:0], ocurve[:0], ocorr[:0], opel[:0]
+    curve = ocurve + np.repeat(np.where(status == 0, ocrop, 0), frames)  # at the locomotion's rate, crop included
+    return PackedSplices(out_start, frames, orot, otrans, curve, ocorr, ocrop, cost, angle, cells, plen, status,
+                         part_curve=ocurve, pelvis=opel, window=np.zeros(B, np.int64), loops=np.zeros((B, 2), np.int64))
 
 
 def standing_bank(bank: ClipBank, loco, act, acting, tables: StandingTables, method: str = "splice",
@@ -328,17 +344,19 @@ def standing_bank(bank: ClipBank, loco, act, acting, tables: StandingTables, met
     start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
     M, J = int(frames.sum()), bank.rot.shape[1]
     if buffers is not None:
-        orot, otrans, ocurve, ocorr = Buffers._get(buffers.packed, M, J, dtype)
+        orot, otrans, ocurve, ocorr, _ = Buffers._get(buffers.packed, M, J, dtype)
         orot, otrans, ocurve, ocorr = orot[:M], otrans[:M], ocurve[:M], ocorr[:M]
     else:
         orot, otrans, ocurve, ocorr = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M), np.empty(M)
     ocorr[:] = 0.0
+    window = np.zeros(B, np.int64)
     loops = bank.loop_points(act, masks, tables) if timing == "loop" and B else np.zeros((B, 2), np.int64)
     if B:
         sj = (tables.upper, tables.spine, tables.arms, int(tables.chest), tables.hands, tables.feat_joints,
               int(tables.blend), int(tables.window), bank.pos, bank.grot)
         standing_batch(bank.rot, bank.trans, bank.starts, bank.lengths, METHOD_CODES[method], TIMING_CODES[timing], loco,
-                       act, masks, acting, loops, sj, start, orot, otrans, ocurve, frames)
+                       act, masks, acting, loops, sj, start, orot, otrans, ocurve, frames, window)
     zeros = np.zeros(B, np.int64)
     return PackedSplices(start, frames, orot, otrans, ocurve, ocorr, zeros.copy(), np.full(B, np.nan), np.zeros(B),
-                         np.full((B, 1, 2), -1, np.int64), zeros.copy(), zeros.copy())
+                         np.full((B, 1, 2), -1, np.int64), zeros.copy(), zeros.copy(), part_curve=ocurve, pelvis=None,
+                         window=window, loops=np.asarray(loops, np.int64).reshape(B, 2))

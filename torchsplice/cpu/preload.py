@@ -25,13 +25,13 @@ def preload(dtype=np.float32) -> None:
     opts = (0.0,) * 8
     kernels = {
         splice_mod.splice_batch: ((f8, f8, f8, f8), (f8, m8, v8, v8, v8), i8, i8, 0, i8, i8, i8, joints, opts, True, 0.0, i8,
-                                  out, out, v8, v8, np.zeros((1, 1, 2), np.int64), i8, i8, i8, v8, i8, v8),
-        splice_mod.compact: (out, out, v8, v8, i8, i8, i8, out, out, v8, v8),
+                                  out, out, v8, v8, m8, np.zeros((1, 1, 2), np.int64), i8, i8, i8, v8, i8, v8),
+        splice_mod.compact: (out, out, v8, v8, m8, i8, i8, i8, out, out, v8, v8, m8),
         fk_clips: (f8, f8, i8, i8, i8, f8, f8),
         bank_mod._features: (f8, i8, i8, i8, i8, 0, f8, m8, v8, v8, v8),
         standing_mod.standing_batch: (f8, f8, i8, i8, 0, 0, i8, i8, m8, np.zeros((1, 2), np.bool_), np.zeros((1, 2), np.int64),
                                       (np.zeros(1, np.bool_), i8, np.zeros((1, 1), np.bool_), 0, i8, i8, 0, 0, f8, f8), i8,
-                                      out, out, v8, i8),
+                                      out, out, v8, i8, i8),
         standing_mod.loop_points_batch: (f8, f8, i8, i8, i8, m8, 0, i8, i8, 0, np.zeros((1, 2), np.int64)),
     }
     for kernel, args in kernels.items():

@@ -34,6 +34,7 @@ from .curve import fit_curve, resample_clip, split_time
 from .fk import fk_clip
 from .grid import distance_row_block, phase_crop_pair
 from .horn import horn_cloud
+from .assemble import timewarp_rows
 from .quat import qconj, qload, qmul, qrot, qslerp, qstore, rotmat_to_q
 from .timewarp import dp_pair
 
@@ -160,9 +161,12 @@ def _pelvis_cloud(pos, grot, t, pelvis, cloud, out):
 
 
 @njit(cache=True, nogil=True)
-def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, twist, cells, curve, orot, otrans, ocorr):
+def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, twist, cells, curve, orot, otrans, ocorr,
+                opel):
     """The Heck et al. splice of one pair; returns ``(status, crop, path_length, cost, frames, posture_angle)``.
-    ``twist``: the share of the locomotion's torso twist the posture takes (0: none)."""
+    ``twist``: the share of the locomotion's torso twist the posture takes (0: none). Its parts
+    go to ``curve`` (the action frame after the crop) and ``opel`` (the pelvis's rotation), its
+    frames, assembled from them (:func:`torchsplice.cpu.assemble.timewarp_rows`), to ``orot``/``otrans``."""
     rot, trans, pos, grot = bank
     parents, upper, fk_joints, act_joints, landmarks, hips, shoulders, pcloud, pelvis, pelvis_parent, up = joints
     J = rot.shape[1]
@@ -223,27 +227,27 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, t
             local = qmul(qmul(qconj(qpar), world), qpar)
             p = qmul(local, (prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3]))
             prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3] = p
-    all_joints = np.arange(J)
-    _assemble(rot, trans, ls, arot, atrans, T, all_joints, upper, pelvis, prot, orot, otrans)
+    for t in range(T):
+        for c in range(4):
+            opel[t, c] = prot[t, c]
+    timewarp_rows(rot, trans, ls, as_ + crop, n_c, upper, pelvis, curve, prot, T, orot, otrans)
     return 0, crop, plen, cost, T, angle
 
 
 @njit(cache=True, nogil=True)
-def _naive_one(bank, starts, lengths, loco, act, joints, curve, orot, otrans):
-    """Naive DOF replacement of one pair; returns the number of frames."""
+def _naive_one(bank, starts, lengths, loco, act, joints, curve, orot, otrans, opel):
+    """Naive DOF replacement of one pair; returns the number of frames. As a timewarp clip's
+    parts: the curve ``t`` and the pelvis's rotation of whichever clip gives the upper body."""
     rot, trans, pos, grot = bank
     upper, pelvis = joints[1], joints[8]
-    J = rot.shape[1]
     ls, as_ = starts[loco], starts[act]
     T = min(lengths[loco], lengths[act])
+    src = as_ if upper[pelvis] else ls
     for t in range(T):
         curve[t] = t
-        for j in range(J):
-            src = as_ + t if upper[j] and j != pelvis else ls + t
-            for c in range(4):
-                orot[t, j, c] = rot[as_ + t if upper[j] else ls + t, j, c]
-            for c in range(3):
-                otrans[t, j, c] = trans[src, j, c]
+        for c in range(4):
+            opel[t, c] = rot[src + t, pelvis, c]
+    timewarp_rows(rot, trans, ls, as_, lengths[act], upper, pelvis, curve, opel, T, orot, otrans)
     return T
 
 
@@ -288,7 +292,7 @@ def _cpmc_one(bank, feat, starts, lengths, loco, act, ref, joints, opts, cells, 
 
 @njit(cache=True, parallel=True, nogil=True)
 def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, opts, posture, twist, out_start,
-                 orot, otrans, ocurve, ocorr, cells, status, crop, plen, cost, frames, angle):
+                 orot, otrans, ocurve, ocorr, opel, cells, status, crop, plen, cost, frames, angle):
     """Splice every pair ``b`` (bank clips ``loco[b]``, ``act[b]``, ``ref[b]`` for cpmc) in parallel.
 
     Per pair: ``status`` (0 ok, else a :data:`STATUS` code), ``crop`` (action frames skipped),
@@ -296,23 +300,25 @@ def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, op
     ``angle`` (posture rotation, radians; ``twist`` is the share of the locomotion's torso twist
     it takes); per result frame from row ``out_start[b]``:
     ``orot``/``otrans`` (float32 local rotations and translations), ``ocurve`` (action frame,
-    after the crop) and ``ocorr`` (pelvis correction, radians).
+    counted from the crop), ``ocorr`` (pelvis correction, radians) and ``opel (M, 4)`` (the
+    pelvis's local rotation; splice and naive: with ``ocurve``, the parts the frames are
+    assembled from, see :mod:`torchsplice.cpu.assemble`).
     """
     for b in prange(loco.shape[0]):
         o = out_start[b]
         n = lengths[loco[b]]
-        r, tr, cu, co = orot[o:o + n], otrans[o:o + n], ocurve[o:o + n], ocorr[o:o + n]
+        r, tr, cu, co, pe = orot[o:o + n], otrans[o:o + n], ocurve[o:o + n], ocorr[o:o + n], opel[o:o + n]
         for t in range(n):
             co[t] = 0.0
         if method == 1:
-            frames[b] = _naive_one(bank, starts, lengths, loco[b], act[b], joints, cu, r, tr)
+            frames[b] = _naive_one(bank, starts, lengths, loco[b], act[b], joints, cu, r, tr, pe)
             status[b], crop[b], plen[b], cost[b], angle[b] = 0, 0, 0, np.nan, 0.0
             cells[b, :, :] = -1
             continue
         cb = np.empty((cells.shape[1], 2), dtype=np.int64)
         if method == 0:
             st, c, pl, cs, T, ang = _splice_one(bank, feat, starts, lengths, loco[b], act[b], joints, opts, posture,
-                                                twist, cb, cu, r, tr, co)
+                                                twist, cb, cu, r, tr, co, pe)
         else:
             st, c, pl, cs, T = _cpmc_one(bank, feat, starts, lengths, loco[b], act[b], ref[b], joints, opts, cb, cu, r, tr)
             ang = 0.0
@@ -320,12 +326,10 @@ def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, op
         for p in range(cells.shape[1]):
             cells[b, p, 0] = cb[p, 0] if p < pl else -1
             cells[b, p, 1] = cb[p, 1] if p < pl else -1
-        for t in range(T):
-            cu[t] += c
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def compact(rot, trans, curve, corr, start, frames, new_start, crot, ctrans, ccurve, ccorr):
+def compact(rot, trans, curve, corr, pel, start, frames, new_start, crot, ctrans, ccurve, ccorr, cpel):
     """Copy pair ``b``'s ``frames[b]`` rows from ``start[b]`` to ``new_start[b]`` (packing the
     results of :func:`splice_batch` without gaps), in parallel over pairs."""
     for b in prange(start.shape[0]):
@@ -334,3 +338,4 @@ def compact(rot, trans, curve, corr, start, frames, new_start, crot, ctrans, ccu
         ctrans[d:d + n] = trans[s:s + n]
         ccurve[d:d + n] = curve[s:s + n]
         ccorr[d:d + n] = corr[s:s + n]
+        cpel[d:d + n] = pel[s:s + n]

@@ -29,8 +29,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .curve import split_time
-from .quat import qconj, qload, qmul, qnormalize, qrot, qslerp, qstore
+from .assemble import standing_rows
+from .quat import qconj, qload, qrot
 
 __all__ = ["TIMING_CODES", "CORE_SHARE", "TIE", "hands_in_chest", "motion_core", "best_window", "loop_points",
            "loop_points_batch", "standing_batch"]
@@ -167,68 +167,13 @@ def loop_points_batch(pos, grot, starts, lengths, clips, masks, chest, hands, fe
 
 
 @njit(cache=True, nogil=True)
-def _aa(q):
-    """Rotation vector of a unit quaternion (as :func:`~torchsplice.core.rotations.quat_to_axis_angle`)."""
-    if q[0] < 0:
-        q = (-q[0], -q[1], -q[2], -q[3])
-    sn = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    angle = 2.0 * math.atan2(sn, q[0])
-    sc = angle / sn if sn > 1e-8 else 2.0 + sn * sn / 3
-    return (q[1] * sc, q[2] * sc, q[3] * sc)
-
-
-@njit(cache=True, nogil=True)
-def _exp(x, y, z):
-    """Unit quaternion of a rotation vector (as :func:`~torchsplice.core.rotations.axis_angle_to_quat`)."""
-    angle = math.sqrt(x * x + y * y + z * z)
-    half = 0.5 * angle
-    sc = math.sin(half) / angle if angle > 1e-8 else 0.5 - angle * angle / 48
-    return (math.cos(half), x * sc, y * sc, z * sc)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _lin_offset(trans, a, c, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g):
-    """Component ``c`` of the inertialization offset of joint ``j``'s translation: the pose
-    difference ``x[end] - x[start]`` times ``f`` plus the velocity difference times ``g``."""
-    lb = trans[a + b0, j, c] + bw * (trans[a + b1, j, c] - trans[a + b0, j, c])
-    lbp = trans[a + bp0, j, c] + bpw * (trans[a + bp1, j, c] - trans[a + bp0, j, c])
-    lsn = trans[a + s0, j, c] + sw * (trans[a + s1, j, c] - trans[a + s0, j, c])
-    lnn = trans[a + n0, j, c] + nw * (trans[a + n1, j, c] - trans[a + n0, j, c])
-    return (lb - lsn) * f + ((lb - lbp) - (lnn - lsn)) * g
-
-
-@njit(cache=True, nogil=True)
-def _times(Tl, Ta, timing, window, loop_s, loop_e, blend, times, blend_from, phase):
-    """Action frame, fade source and fade phase of every result frame (as
-    :func:`torchsplice.splice.standing.action_times`)."""
-    for t in range(Tl):
-        phase[t] = 1.0
-        if timing == 2:  # fit
-            times[t] = t * (Ta - 1.0) / max(Tl - 1.0, 1.0)
-        elif Tl <= Ta:  # a window of the action
-            times[t] = min(window + t, Ta - 1.0)
-        elif timing == 1:  # hold
-            times[t] = min(float(t), Ta - 1.0)
-        else:  # loop
-            period = max(loop_e - loop_s, 1.0)
-            if t >= loop_e:
-                after = t - loop_e
-                u = after - math.floor(after / period) * period
-                times[t] = loop_s + u
-                if u < blend:
-                    phase[t] = min(max(u / blend, 0.0), 1.0)
-            else:
-                times[t] = float(t)
-        blend_from[t] = loop_e if phase[t] < 1.0 else times[t]
-
-
-@njit(cache=True, nogil=True)
 def _standing_one(rot, trans, starts, lengths, loco, act, mask, acting, loop_s, loop_e, method, timing, sj,
                   curve, orot, otrans):
-    """One standing pair into rows ``0 .. Tl - 1`` of ``orot``/``otrans``; the action frame of
-    each result frame into ``curve``. Returns the number of frames."""
+    """One standing pair into rows ``0 .. Tl - 1`` of ``orot``/``otrans`` (the assembly of
+    :func:`torchsplice.cpu.assemble.standing_rows`), the action frame of each result frame into
+    ``curve``. Returns ``(frames, window)``: the action's first frame played onto a locomotion
+    no longer than it (0 otherwise)."""
     upper, spine, arms, chest, hands, feat_joints, blend_s, W, pos, grot = sj
-    J = rot.shape[1]
     ls, as_ = starts[loco], starts[act]
     Tl, Ta = lengths[loco], lengths[act]
     window = 0
@@ -236,96 +181,20 @@ def _standing_one(rot, trans, starts, lengths, loco, act, mask, acting, loop_s, 
         rel = np.empty((Ta, 2, 3))
         hands_in_chest(pos, grot, as_, Ta, chest, hands, rel)
         window = best_window(rel, Ta, mask, Tl)
-    blend = max(min(blend_s, Ta // 3), 1)
-    times = curve
-    blend_from = np.empty(Tl)
-    phase = np.empty(Tl)
-    _times(Tl, Ta, timing, float(window), float(loop_s), float(loop_e), float(blend), times, blend_from, phase)
-    # the locomotion's mean posture of each spine joint (splice)
-    S = spine.shape[0]
-    mean = np.zeros((S, 4))
-    if method == 0:
-        for k in range(S):
-            j = spine[k]
-            q0 = qload(rot, ls, j)
-            for t in range(Tl):
-                q = qload(rot, ls + t, j)
-                sg = -1.0 if q[0] * q0[0] + q[1] * q0[1] + q[2] * q0[2] + q[3] * q0[3] < 0 else 1.0
-                for c in range(4):
-                    mean[k, c] += sg * q[c]
-            m = qnormalize((mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3]))
-            mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3] = m
-    spine_k = np.full(J, -1, np.int64)
-    for k in range(S):
-        spine_k[spine[k]] = k
-    idle = np.zeros(J, np.bool_)
-    for a in range(2):
-        if not acting[a]:
-            for j in range(J):
-                if arms[a, j]:
-                    idle[j] = True
-    for t in range(Tl):
-        i0, i1, w = split_time(times[t], Ta)
-        fading = phase[t] < 1.0
-        f = g = bw = bpw = sw = nw = 0.0
-        b0 = b1 = bp0 = bp1 = s0 = s1 = n0 = n1 = 0
-        if fading:
-            sph = phase[t]
-            u = sph * blend
-            f = 1 - sph * sph * (3 - 2 * sph)
-            g = u * (1 - sph) ** 2
-            b0, b1, bw = split_time(blend_from[t], Ta)
-            bp0, bp1, bpw = split_time(blend_from[t] - 1, Ta)
-            s0, s1, sw = split_time(float(loop_s), Ta)
-            n0, n1, nw = split_time(loop_s + 1.0, Ta)
-        for j in range(J):
-            if not upper[j] or (method == 0 and idle[j]):
-                qstore(orot, t, j, qload(rot, ls + t, j))
-                for c in range(3):
-                    otrans[t, j, c] = trans[ls + t, j, c]
-                continue
-            q = qslerp(qload(rot, as_ + i0, j), qload(rot, as_ + i1, j), w)
-            tx = trans[as_ + i0, j, 0] + w * (trans[as_ + i1, j, 0] - trans[as_ + i0, j, 0])
-            ty = trans[as_ + i0, j, 1] + w * (trans[as_ + i1, j, 1] - trans[as_ + i0, j, 1])
-            tz = trans[as_ + i0, j, 2] + w * (trans[as_ + i1, j, 2] - trans[as_ + i0, j, 2])
-            if fading:  # inertialization of the jump back (see torchsplice.splice.standing._sample)
-                qb = qslerp(qload(rot, as_ + b0, j), qload(rot, as_ + b1, j), bw)
-                qbp = qslerp(qload(rot, as_ + bp0, j), qload(rot, as_ + bp1, j), bpw)
-                qs = qslerp(qload(rot, as_ + s0, j), qload(rot, as_ + s1, j), sw)
-                qn = qslerp(qload(rot, as_ + n0, j), qload(rot, as_ + n1, j), nw)
-                r = _aa(qmul(qb, qconj(qs)))
-                v1 = _aa(qmul(qb, qconj(qbp)))
-                v2 = _aa(qmul(qn, qconj(qs)))
-                q = qnormalize(qmul(_exp(r[0] * f + (v1[0] - v2[0]) * g, r[1] * f + (v1[1] - v2[1]) * g,
-                                         r[2] * f + (v1[2] - v2[2]) * g), q))
-                if method == 1:  # only naive takes the action's translations
-                    tx += _lin_offset(trans, as_, 0, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
-                    ty += _lin_offset(trans, as_, 1, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
-                    tz += _lin_offset(trans, as_, 2, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
-            lq = qload(rot, ls + t, j)
-            if method == 1:  # naive: the action's upper body, translations too
-                qstore(orot, t, j, q)
-                otrans[t, j, 0], otrans[t, j, 1], otrans[t, j, 2] = tx, ty, tz
-                continue
-            if method == 2:  # cpmc: the action's motion since its first frame, on the locomotion
-                q = qnormalize(qmul(lq, qmul(qconj(qload(rot, as_, j)), q)))
-            elif spine_k[j] >= 0:  # splice: the action's posture with the locomotion's deviation from its mean
-                k = spine_k[j]
-                q = qnormalize(qmul(q, qmul(qconj((mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3])), lq)))
-            qstore(orot, t, j, q)
-            for c in range(3):
-                otrans[t, j, c] = trans[ls + t, j, c]
-    return Tl
+    standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, loop_e, acting, upper, spine, arms,
+                  blend_s, 0, Tl, curve, orot, otrans)
+    return Tl, window
 
 
 @njit(cache=True, parallel=True, nogil=True)
 def standing_batch(rot, trans, starts, lengths, method, timing, loco, act, masks, acting, loops, sj, out_start,
-                   orot, otrans, ocurve, frames):
+                   orot, otrans, ocurve, frames, window):
     """Splice every standing pair ``b`` (bank clips ``loco[b]``, ``act[b]``; hand mask
     ``masks[b] (2,)``, acting arms ``acting[b] (2,)``, loop points ``loops[b] (2,)``) in parallel,
-    into rows ``out_start[b] :`` (room for the locomotion's length) of ``orot``/``otrans``/``ocurve``."""
+    into rows ``out_start[b] :`` (room for the locomotion's length) of ``orot``/``otrans``/``ocurve``;
+    ``window[b]``: the action's first frame played onto a locomotion shorter than it."""
     for b in prange(loco.shape[0]):
         o = out_start[b]
         n = lengths[loco[b]]
-        frames[b] = _standing_one(rot, trans, starts, lengths, loco[b], act[b], masks[b], acting[b], loops[b, 0],
-                                  loops[b, 1], method, timing, sj, ocurve[o:o + n], orot[o:o + n], otrans[o:o + n])
+        frames[b], window[b] = _standing_one(rot, trans, starts, lengths, loco[b], act[b], masks[b], acting[b], loops[b, 0],
+                                             loops[b, 1], method, timing, sj, ocurve[o:o + n], orot[o:o + n], otrans[o:o + n])

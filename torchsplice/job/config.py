@@ -25,11 +25,14 @@ from ..splice.options import SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules
 from .engines import available_engines
 
-__all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "parse_shard"]
+__all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "STORES", "parse_shard"]
 
 DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
 DEFAULT_ACTIONS = ("role:action,role:both",)
 LAYOUTS = ("copy", "virtual")
+STORES = ("motion", "alignment")
+"""What the output stores (``store``): each spliced clip's frames, or what splicing computed
+(:mod:`torchsplice.store.assembly`); the same as :data:`torchsplice.store.assembly.STORES`."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,12 @@ class JobConfig:
             every HDF5 tool, several times slower to write) or ``None``.
         layout: ``"copy"`` (one self-contained file) or ``"virtual"`` (the output's frames are
             HDF5 virtual datasets over the shards, kept in ``OUT.shards/`` beside it: no copy).
+        store: ``"motion"`` (each spliced clip's frames) or ``"alignment"`` (each source clip
+            once and, per spliced clip, what splicing computed: its alignment curve, the
+            pelvis's rotation per frame, a standing action's timing; every read assembles the
+            motion, bit for bit the motion store's; about a tenth of the disk and less; see
+            :mod:`torchsplice.store.assembly`). Methods whose result is not an alignment
+            (``cpmc`` through the timewarp, plug-ins) keep their frames in either.
         memory_budget_mb: bound on the memory of one task, which sets the pairs per task.
         batch_pairs: pairs per task; ``None`` derives it from the budget.
 
@@ -107,6 +116,7 @@ class JobConfig:
     twist: float = 0.0
     compression: str | None = "auto"
     layout: str = "copy"
+    store: str = "motion"
     memory_budget_mb: int = 1024
     batch_pairs: int | None = None
     engine: str = "local"
@@ -131,6 +141,15 @@ class JobConfig:
             raise TorchspliceError(f"unknown engine {c.engine!r}; choose one of {', '.join(available_engines())}")
         if c.layout not in LAYOUTS:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
+        if c.store not in STORES:
+            import difflib
+
+            near = difflib.get_close_matches(str(c.store), STORES, n=1)
+            raise TorchspliceError(f"unknown store {c.store!r}" + (f"; did you mean {near[0]!r}?" if near else "")
+                                   + f" (choose {' or '.join(STORES)})")
+        if c.store == "alignment" and c.layout == "virtual":
+            raise TorchspliceError("{store} alignment writes one self-contained file; it does not take {layout} virtual",
+                                   options=("store", "layout"))
         if c.layout == "virtual" and c.copy_sources:
             raise TorchspliceError("{copy_sources} needs {layout} copy: a virtual output holds only the spliced clips",
                                    options=("copy_sources", "layout"))
@@ -228,6 +247,7 @@ class JobConfig:
             "locomotions": list(self.locomotions), "actions": list(self.actions), "methods": list(self.methods),
             "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
+            **({"store": self.store} if self.store != "motion" else {}),  # plans of motion stores stay valid
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
             **({"twist": self.twist} if self.twist else {}),  # plans of runs without it stay valid
             "timing": self.timing, "acting_limbs": None if self.acting_limbs is None else list(self.acting_limbs),
@@ -272,7 +292,7 @@ def _check_types(c: JobConfig) -> None:
     if c.acting_limbs is not None and (not isinstance(c.acting_limbs, tuple)
                                        or not all(isinstance(x, str) for x in c.acting_limbs)):
         raise bad("acting_limbs", "None, 'auto', 'none', 'both' or arm names", c.acting_limbs)
-    for name in ("ray_address", "device", "compression", "backend"):
+    for name in ("ray_address", "device", "compression", "backend", "store"):
         v = getattr(c, name)
         if v is not None and not isinstance(v, str):
             raise bad(name, "a string or None", v)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import logging
 import os
+
+import numpy as np
 import re
 import shutil
 import time
@@ -25,7 +27,7 @@ from .sources import Sources
 from .summary import JobSummary, progress_bar
 from .task import Part
 
-__all__ = ["merge_job", "OutputMerge", "source_rows", "open_output", "STAGING", "CHECKPOINT_SECONDS",
+__all__ = ["merge_job", "OutputMerge", "source_rows", "open_output", "output_banks", "STAGING", "CHECKPOINT_SECONDS",
            "source_skeleton", "summarise_output", "checkpointed_tasks", "discard_staging", "task_finished",
            "remove_merged_shards"]
 
@@ -266,7 +268,9 @@ def open_output(sink, config: JobConfig, plan: Plan, work: Path, run: dict, over
         out.abort()
         discard_staging(work)
     skeletons = _output_skeletons(plan, group_skeleton, sources if config.copy_sources else None)
-    out = sink.open_output(config.output, config.compression, run, overwrite, staging, skeletons)
+    banks = output_banks(plan, sources, config) if config.store == "alignment" else ()
+    out = sink.open_output(config.output, config.compression, run, overwrite, staging, skeletons, store=config.store,
+                           banks=banks)
     out.expect_plan = plan.digest()
     return out, 0
 
@@ -314,6 +318,40 @@ def _output_skeletons(plan: Plan, group_skeleton, sources: Sources | None) -> li
             for r in rows:
                 k = int(ks[r])
                 out.append((db.skeletons[k], db.stored_spec(k)))
+    return out
+
+
+def output_banks(plan: Plan, sources: Sources, config: JobConfig) -> list[dict]:
+    """The banks of source clips an alignment store holds: each bank the job's groups splice
+    from (:meth:`~torchsplice.job.sources.Sources.bank`, built here where not yet), once, with
+    its clips' keys, names and rate and the joint tables its clips are assembled with."""
+    from ..splice.standing import LIMBS
+    from .sources import retargeted_parts
+
+    out, seen = [], set()
+    options = config.splice_options()
+    for n, g in enumerate(plan.groups):
+        backend = config.splice_backend()
+        skeleton = sources.motion(g.clips[0]).skeleton
+        roles = g.roles(skeleton)
+        bank, index = sources.bank(n, g.clips, g.fps, roles, options, backend)
+        if id(bank) in seen:
+            continue
+        seen.add(id(bank))
+        arrays = backend.assembly_bank(bank)
+        if arrays is None:
+            raise TorchspliceError(f"{config.output}: the {backend.name} splicer gives no alignments to store; "
+                                   "write {store} motion", options=("store",))
+        st = sources.standing_tables(n, roles, skeleton, g.fps)
+        keys = sorted(index, key=index.get)
+        names = [plan.clips[k].name + (" (retargeted)" if retargeted_parts(k) else "") if k in plan.clips else k
+                 for k in keys]
+        tables = {"upper": arrays["upper"], "pelvis": arrays["pelvis"],
+                  "standing_upper": [int(j) for j in np.flatnonzero(st.upper)], "spine": [int(j) for j in st.spine],
+                  "arms": [[int(j) for j in np.flatnonzero(st.arms[a])] for a in range(len(LIMBS))],
+                  "blend": int(st.blend)}
+        out.append({"rotations": arrays["rotations"], "translations": arrays["translations"],
+                    "lengths": arrays["lengths"], "names": names, "keys": keys, "fps": g.fps, "tables": tables})
     return out
 
 

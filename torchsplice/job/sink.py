@@ -46,8 +46,9 @@ class Sink:
         raise NotImplementedError
 
     def open_output(self, path: Path, compression, run: dict, overwrite: bool, staging: Path,
-                    skeletons=()) -> "OutputWriter":
-        """A new output written at ``staging``, holding ``skeletons`` (``(Skeleton, spec)``) first."""
+                    skeletons=(), store: str = "motion", banks=()) -> "OutputWriter":
+        """A new output written at ``staging``, holding ``skeletons`` (``(Skeleton, spec)``) first;
+        an alignment store (``store``) holds the ``banks`` of source clips too."""
         raise NotImplementedError
 
     def resume_output(self, path: Path, staging: Path, overwrite: bool) -> "tuple[OutputWriter, dict] | None":
@@ -66,6 +67,40 @@ class OutputWriter:
         self.skipped: dict[str, int] = {}
         self.timings: dict[str, int] = {}  # clips by timing: "timewarp", or a standing action's "loop", "hold", "fit"
         self.expect_plan: str | None = None  # the plan digest every shard must carry
+        self.banks: dict = db.bank_index() if db.store == "alignment" else {}  # (bank, key, fps) -> row
+        self.bank_of: dict = {}  # (key, fps) -> the banks holding it
+        for b, key, fps in self.banks:
+            self.bank_of.setdefault((key, fps), []).append(b)
+
+    def add_banks(self, banks: list[dict]) -> None:
+        """Store an alignment store's banks of source clips (:func:`~torchsplice.job.sources.output_banks`)."""
+        for bank in banks:
+            b = self.db.add_bank(bank["rotations"], bank["translations"], bank["lengths"], bank["names"], bank["keys"],
+                                 bank["fps"], bank["tables"])
+            for r, k in enumerate(bank["keys"]):
+                self.banks[(b, str(k), float(bank["fps"]))] = r
+                self.bank_of.setdefault((str(k), float(bank["fps"])), []).append(b)
+
+    def _append_parts(self, part: Part) -> None:
+        """A part's clips as their parts (an alignment store): source keys become bank rows."""
+        from ..store.assembly import KIND_CODES
+
+        p, fps = part.parts, float(part.fps[0])
+        bank, lo, ac = [], [], []
+        for lk, ak in zip(p["locomotion"], p["action"]):
+            both = [b for b in self.bank_of.get((lk, fps), []) if (b, ak, fps) in self.banks]
+            if not both:
+                raise DatabaseError(f"{self.db.path}: no bank of the output holds the source clips {lk} and {ak}")
+            bank.append(both[0])
+            lo.append(self.banks[(both[0], lk, fps)])
+            ac.append(self.banks[(both[0], ak, fps)])
+        parts = {"assembly_kind": [KIND_CODES[k] for k in p["kind"]], "assembly_bank": bank,
+                 "assembly_locomotion": lo, "assembly_action": ac,
+                 **{f"assembly_{k}": p[k] for k in ("crop", "method", "timing", "window", "loop_start", "loop_end",
+                                                     "acting")}}
+        self.db.append_parts(part.skeleton, part.lengths, part.names, part.fps, curve=p["curve"], pelvis=p["pelvis"],
+                             parts=parts, spec=DatasetSpec.from_json(part.spec), sources=part.sources, roles="spliced",
+                             labels=part.labels, extra=part.extra, frame_extra={"action_frame": part.action_frame})
 
     def counts(self) -> dict:
         """What the closing summary reports so far (kept in each checkpoint)."""
@@ -104,7 +139,10 @@ class OutputWriter:
         refers to as ``refer_as``, where it will be once the output is complete)."""
         if part is not None and not virtual:
             self._count(part.extra["flags"], part.skipped, part.extra["timing"])
-            if part.names:
+            if part.names and part.parts is not None:
+                self._append_parts(part)
+                self.clips += len(part.names)
+            elif part.names:
                 self.db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations,
                                       part.lengths, part.names, part.fps, spec=DatasetSpec.from_json(part.spec),
                                       sources=part.sources, roles="spliced", labels=part.labels, extra=part.extra,
@@ -174,18 +212,20 @@ class HDF5Sink(Sink):
             return json.loads(str(db.attrs.get("skipped", "")) or "{}")
 
     def open_output(self, path: Path, compression, run: dict, overwrite: bool, staging: Path,
-                    skeletons=()) -> OutputWriter:
+                    skeletons=(), store: str = "motion", banks=()) -> OutputWriter:
         # 256-frame chunks: random training windows decompress little (see torchsplice.data)
         db = MotionDatabase.create(path, overwrite=overwrite, columns=OUTPUT_COLUMNS, chunk_frames=256,
                                    compression=compression, frame_columns=FRAME_COLUMNS, attrs={"run": json.dumps(run)},
-                                   staging=staging)
+                                   staging=staging, store=store)
         try:
             for skeleton, spec in skeletons:  # before the first checkpoint: every write is then crash-safe
                 db.add_skeleton(skeleton, spec)
+            out = OutputWriter(db)
+            out.add_banks(list(banks))
         except BaseException:
             db.abort(failed=True)
             raise
-        return OutputWriter(db)
+        return out
 
     def resume_output(self, path: Path, staging: Path, overwrite: bool) -> tuple[OutputWriter, dict] | None:
         resumed = MotionDatabase.resume(path, staging, overwrite)

@@ -81,7 +81,14 @@ class Part:
     """One task's results, packed along frames (see :meth:`MotionDatabase.append_packed`):
     ``rotations (N, J, 4)`` and ``translations (N, J, 3)`` float32 (row 0 the root),
     ``lengths``, ``names``, ``fps``, ``labels`` (JSON), the output ``extra`` columns and the
-    per-frame ``action_frame``; ``skipped`` counts the pairs left out, by reason."""
+    per-frame ``action_frame``; ``skipped`` counts the pairs left out, by reason.
+
+    For an alignment store (``JobConfig.store``), ``parts`` holds what the clips are assembled
+    from instead of their frames (``rotations`` and ``translations`` then have no rows): per
+    clip ``kind`` (see :data:`torchsplice.store.assembly.KIND_CODES`), ``locomotion`` and
+    ``action`` (the clips' keys, see :mod:`torchsplice.job.sources`), ``crop``, ``method``,
+    ``timing``, ``window``, ``loop_start``, ``loop_end``, ``acting``; per frame ``curve``
+    (float64) and ``pelvis`` (``(N, 4)`` float32, or ``None`` for standing clips)."""
 
     task: str
     skeleton: object
@@ -96,6 +103,7 @@ class Part:
     action_frame: np.ndarray
     skipped: dict = field(default_factory=dict)
     plan: str = ""  # the digest of the plan it was made for
+    parts: dict | None = None
 
     @property
     def sources(self) -> list[str]:
@@ -112,6 +120,9 @@ class Part:
         arrays = {"lengths": np.asarray(self.lengths), "fps": np.asarray(self.fps), "rotations": self.rotations,
                   "translations": self.translations, "action_frame": self.action_frame,
                   **{f"extra.{k}": np.asarray(v) for k, v in self.extra.items() if OUTPUT_COLUMNS[k] != "str"}}
+        if self.parts is not None:
+            meta["parts"] = {k: list(v) for k, v in self.parts.items() if k in PART_KEYS}
+            arrays.update({f"parts.{k}": np.asarray(v) for k, v in self.parts.items() if k not in PART_KEYS and v is not None})
         arrays = {k: np.ascontiguousarray(a) for k, a in arrays.items()}
         at, table = 0, {}
         for k, a in arrays.items():
@@ -138,10 +149,14 @@ class Part:
         meta = head["meta"]
         extra = {k: arrays[f"extra.{k}"] for k, kind in OUTPUT_COLUMNS.items() if kind != "str"}
         extra.update(meta["extra"])
+        parts = None
+        if "parts" in meta:
+            parts = {**meta["parts"], "pelvis": None,
+                     **{k[6:]: a for k, a in arrays.items() if k.startswith("parts.")}}
         return cls(task=meta["task"], skeleton=skeleton, spec=meta["spec"], names=meta["names"], lengths=arrays["lengths"],
                    fps=arrays["fps"], rotations=arrays["rotations"], translations=arrays["translations"],
                    labels=meta["labels"], extra=extra, action_frame=arrays["action_frame"], skipped=meta["skipped"],
-                   plan=meta["plan"])
+                   plan=meta["plan"], parts=parts)
 
 
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
@@ -192,9 +207,42 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture)
+    part.parts = _parts(plan, config, task, [keys[b] for b in kept], batch, ok, standing)
+    if part.parts is not None:  # the clips are their parts: no frames to carry
+        part.rotations, part.translations = rot[:0], trans[:0]
     part.skipped = skipped
     part.plan = plan.digest()
     return part
+
+
+PART_KEYS = ("kind", "locomotion", "action")
+"""The per-clip parts of :attr:`Part.parts` kept as lists (the rest are arrays)."""
+
+
+def _parts(plan: Plan, config: JobConfig, task: Task, keys, batch, ok: np.ndarray, standing: bool) -> dict | None:
+    """A task's parts for an alignment store (see :class:`Part`), or ``None`` where its clips keep
+    their frames: a motion store, a backend that gives no parts, or cpmc through the timewarp
+    (whose result is a per-joint difference on the locomotion, not an alignment)."""
+    from ..store.assembly import METHOD_CODES, TIMING_CODES
+    from ..splice.standing import LIMBS
+
+    method = task.method
+    if config.store != "alignment" or batch.parts is None or method not in METHOD_CODES or (
+            not standing and method == "cpmc"):
+        return None
+    p = batch.parts
+    C = len(keys)
+    acting = [sum(1 << i for i, limb in enumerate(LIMBS) if limb in (plan.clips[k[1]].acting or ())) if standing else 0
+              for k in keys]
+    loops = np.asarray(p["loops"], np.int64)[ok] if standing else np.zeros((C, 2), np.int64)
+    return {"kind": ["standing" if standing else "timewarp"] * C, "locomotion": [k[0] for k in keys],
+            "action": [k[1] for k in keys], "crop": np.asarray(p["crop"], np.int64)[ok],
+            "method": np.full(C, METHOD_CODES[method], np.int64),
+            "timing": np.full(C, TIMING_CODES[config.timing] if standing else -1, np.int64),
+            "window": np.asarray(p["window"], np.int64)[ok], "loop_start": loops[:, 0].copy(),
+            "loop_end": loops[:, 1].copy(), "acting": np.array(acting, np.int64),
+            "curve": np.array(p["curve"], np.float64),
+            "pelvis": None if standing else np.asarray(p["pelvis"], np.float32)}
 
 
 def _float32(x) -> np.ndarray:

@@ -18,6 +18,7 @@ import numpy as np
 from ..core.errors import DatabaseError
 from ..core.names import CONTROL, control_character, printable
 from ..core.skeleton import Skeleton
+from .assembly import ALIGNMENT, check_assembly, store_kind
 from .schema import (CLIPS, COMPRESSIONS, FORMAT, SCHEMA_VERSION, SKELETONS, Damage, cap, checked_dataset, extra_columns,
                      short, skeleton_from_group, skeleton_path, text_attr)
 
@@ -100,6 +101,8 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
         if ds.shape[0] != C:
             raise Damage(f"clips/{name} has {ds.shape[0]} rows, clips/name {C}")
     if C == 0:
+        if store_kind(h5.attrs) == ALIGNMENT:
+            check_assembly(h5, skeletons, frames)
         return skeletons
     sk, start, length, fps = (c[n][()] for n in ("skeleton", "start", "length", "fps"))
 
@@ -130,6 +133,8 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
     bad = control_name(c["name"].asstr()[()])
     if bad is not None:
         raise Damage(bad)
+    if store_kind(h5.attrs) == ALIGNMENT:
+        check_assembly(h5, skeletons, frames)
     return skeletons
 
 

@@ -36,6 +36,8 @@ from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .checks import check_header
 from .lock import check_name_length, output_lock, temp_path
+from .assembling import Assembling
+from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES
 from .reading import ClipBatch, Reading, virtual_files
 from .resumable import RowLog, clear_status_flags, commit_path, detach, last_checkpoint, rows_path
 from .schema import (FRAME_ARRAYS, CLIPS, COLUMNS, COMPRESSIONS, FORMAT, KINDS, SCHEMA_VERSION, SKELETONS, extra_columns,
@@ -54,7 +56,7 @@ def _writer_lock(path: Path):
     return output_lock(path, shlex.join(sys.argv)[:300]).acquire()
 
 
-class MotionDatabase(Reading, Writing):
+class MotionDatabase(Reading, Writing, Assembling):
     """A motion database file; make one with :meth:`create`, open one with :meth:`open`.
 
     Use it as a context manager: leaving the ``with`` block normally commits a write (the
@@ -70,7 +72,8 @@ class MotionDatabase(Reading, Writing):
         self._name_index: dict[str, int] | None = None
         self._flushed = h5[f"{CLIPS}/name"].shape[0]
         columns, frame_columns = extra_columns(h5.attrs)
-        self.columns: dict[str, str] = columns
+        self._declared: dict[str, str] = columns  # every declared clip column, the store's own parts too
+        self.columns: dict[str, str] = {n: kind for n, kind in columns.items() if n not in PART_COLUMNS}
         self.frame_columns: tuple[str, ...] = frame_columns
         self._staged: list[tuple] = []
         self._staged_frames = 0
@@ -84,7 +87,7 @@ class MotionDatabase(Reading, Writing):
     def create(cls, path, overwrite: bool = False, dtype=np.float32, chunk_frames: int = 1024,
                compression: str | None = "gzip", columns: dict[str, str] | None = None,
                frame_columns: tuple[str, ...] = (), attrs: dict | None = None,
-               staging: Path | None = None) -> "MotionDatabase":
+               staging: Path | None = None, store: str = "motion") -> "MotionDatabase":
         """Start a new database that appears at ``path`` when closed.
 
         Frames are stored as ``dtype`` (float32 by default) in chunks of ``chunk_frames``,
@@ -96,6 +99,10 @@ class MotionDatabase(Reading, Writing):
         ``columns`` declares extra per-clip columns (name -> ``"str"``, ``"float"`` or ``"int"``),
         ``frame_columns`` extra per-frame float32 columns; ``attrs`` are extra root attributes.
 
+        ``store="alignment"`` makes an alignment store (:mod:`torchsplice.store.assembly`):
+        spliced clips are appended as their parts (:meth:`append_parts`) beside banks of their
+        source clips (:meth:`add_bank`), and every read assembles their frames.
+
         With ``staging`` the file is written there (a path that outlives this process, instead
         of a temporary name beside ``path``) and is *resumable*: see :meth:`checkpoint` and
         :meth:`resume`. Skeletons added before the first checkpoint (:meth:`add_skeleton`) are
@@ -103,6 +110,10 @@ class MotionDatabase(Reading, Writing):
         skeleton the file will hold first.
         """
         columns = dict(columns or {})
+        if store not in STORES:
+            raise ValueError(f"store must be one of {STORES}, got {store!r}")
+        if store == ALIGNMENT:
+            columns.update(PART_COLUMNS)
         bad = [c for c in list(columns) + list(frame_columns)
                if c in COLUMNS or c in FRAME_ARRAYS or not c.isidentifier()]
         if bad or any(k not in KINDS for k in columns.values()):
@@ -126,11 +137,12 @@ class MotionDatabase(Reading, Writing):
                 rows_path(tmp).unlink(missing_ok=True)
             h5 = h5py.File(tmp, "w", **({"libver": "latest"} if staging is not None else {}))
             h5.attrs.update({
-                "format": FORMAT, "schema_version": SCHEMA_VERSION, "quaternion_order": "wxyz",
+                "format": FORMAT, "schema_version": SCHEMA_VERSION if store == ALIGNMENT else 1, "quaternion_order": "wxyz",
                 "rotation_convention": "local joint rotation, parent-from-child, column vectors",
                 "units": "", "up_axis": "", "created_by": f"torchsplice {__version__}",
                 "chunk_frames": chunk_frames, "compression": compression or "",
                 "extra_columns": json.dumps({"clip": columns, "frame": list(frame_columns)}),
+                **({"store": ALIGNMENT, "store_readme": STORE_README} if store == ALIGNMENT else {}),
                 **(attrs or {}),
             })
             h5.create_group(SKELETONS)

@@ -29,7 +29,7 @@ from ..specs import DatasetSpec, detect_spec
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, SKELETONS, cap, short, skeleton_path
 from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
 
-__all__ = ["Reading", "ClipBatch", "FrameArray", "reads", "virtual_files"]
+__all__ = ["Reading", "ClipBatch", "FrameArray", "AssembledArray", "reads", "virtual_files"]
 
 
 @dataclass
@@ -143,6 +143,28 @@ class FrameArray:
         ds = self._ds
         return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
                              f"({short(exc)})")
+
+
+class AssembledArray(FrameArray):
+    """A frame array of an alignment store (``rotations``, ``root_translation`` or
+    ``translations``): :class:`FrameArray`'s interface, the rows assembled from the parts when
+    read (see :mod:`torchsplice.store.assembly`). The last ranges' frames are kept, so reading
+    the three arrays of the same rows assembles them once."""
+
+    def __init__(self, db, skeleton: int, name: str):
+        super().__init__(db.h5[skeleton_path(skeleton)][name])
+        self._db, self._k, self._name = db, skeleton, name
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        lo, hi, _ = rows.indices(len(self))
+        return self.gather(np.array([lo]), np.array([max(hi - lo, 0)]))
+
+    def gather(self, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        key = (self._k, np.asarray(starts).tobytes(), np.asarray(lengths).tobytes())
+        last = getattr(self._db, "_last_assembled", None)
+        if last is None or last[0] != key:
+            last = self._db._last_assembled = (key, self._db.assembled(self._k, starts, lengths))
+        return last[1][self._name]
 
 
 def virtual_files(path: Path) -> set[Path]:
@@ -312,6 +334,8 @@ class Reading:
         g = self.h5[skeleton_path(skeleton)]
         if name not in (*FRAME_ARRAYS, *self.frame_columns) or name not in g:
             raise DatabaseError(f"{self.path}: skeleton {skeleton} stores no per-frame array {name!r}")
+        if name in FRAME_ARRAYS and self.store == "alignment":
+            return AssembledArray(self, skeleton, name)
         return FrameArray(g[name])
 
     @reads
@@ -337,6 +361,8 @@ class Reading:
         ``translations`` (when stored) and the per-frame columns, rows as in the file (read at
         once: meant for a splice job's parts and other small files)."""
         g = self.h5[skeleton_path(skeleton)]
+        if self.store == "alignment":
+            return self.whole_frames(skeleton)
         with self._frames(skeleton):
             return {n: g[n][()] for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g}
 
@@ -351,6 +377,8 @@ class Reading:
         ct = self.clip_table()  # labels decoded once
         t = ct.to_dict()
         blocks: dict[int, tuple[int, dict]] = {}  # skeleton -> (first row, whole block of its frames)
+        if self.store == "alignment":  # assembled, the clips of one skeleton at once
+            return self._read_assembled(idx, ct, dtype)
         for k in sorted({int(t["skeleton"][i]) for i in idx}):
             mine = [i for i in idx if int(t["skeleton"][i]) == k]
             lo = min(int(t["start"][i]) for i in mine)
@@ -378,14 +406,36 @@ class Reading:
             ))
         return out
 
+    def _read_assembled(self, idx: list[int], ct: ClipTable, dtype) -> list[Motion]:
+        """:meth:`read_many` of an alignment store: each skeleton's clips assembled at once."""
+        out: dict[int, Motion] = {}
+        for k in sorted({int(ct.skeleton[i]) for i in idx}):
+            mine = list(dict.fromkeys(i for i in idx if int(ct.skeleton[i]) == k))
+            starts, lengths = ct.start[mine].astype(np.int64), ct.length[mine].astype(np.int64)
+            made = self.assembled(k, starts, lengths)
+            at = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+            for i, a, n in zip(mine, at, lengths):
+                def get(name):
+                    return torch.from_numpy(np.ascontiguousarray(made[name][a:a + n])).to(dtype)
+
+                out[i] = Motion(skeleton=self._skeletons[k], rotations=get("rotations"),
+                                root_translation=get("root_translation"),
+                                translations=get("translations") if "translations" in made else None,
+                                fps=float(ct.fps[i]), name=str(ct.name[i]), source=str(ct.source[i]),
+                                role=str(ct.role[i]), labels=dict(ct.labels[i]))
+        return [out[i] for i in idx]
+
     @reads
     def read(self, clip: str | int, dtype: torch.dtype = torch.float32, device=None) -> Motion:
         """One clip as a :class:`Motion` (``dtype`` and ``device`` as asked)."""
         info = self.clip_info(clip)
         g = self.h5[skeleton_path(info['skeleton'])]
         s, n = info["start"], info["length"]
+        made = self.assembled(info["skeleton"], [s], [n]) if self.store == "alignment" else None
 
         def get(name):
+            if made is not None:
+                return torch.from_numpy(made[name]).to(device=device, dtype=dtype)
             with self._frames(info["skeleton"], [self.index(clip)]):
                 a = g[name][s:s + n]
             return torch.from_numpy(a).to(device=device, dtype=dtype)
@@ -419,7 +469,13 @@ class Reading:
         contiguous = hi - lo <= 2 * int(lengths.sum())
         rows = starts[:, None] + np.minimum(np.arange(T)[None, :], lengths[:, None] - 1)  # edge padding
 
+        made = self.assembled(k, starts, lengths) if self.store == "alignment" else None
+
         def gather(name):
+            if made is not None:  # packed clip after clip: row r of clip b is offset[b] + r
+                offset = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+                out = made[name][offset[:, None] + (rows - starts[:, None])]
+                return torch.from_numpy(out).to(device=device, dtype=dtype)
             ds = g[name]
             with self._frames(k, idx):
                 if contiguous:
@@ -457,8 +513,11 @@ class Reading:
             k = int(t["skeleton"][i])
             if k not in frames:
                 g = self.h5[skeleton_path(k)]
-                with self._frames(k):
-                    frames[k] = {n: g[n][()] for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g}
+                if self.store == "alignment":
+                    frames[k] = self.whole_frames(k)
+                else:
+                    with self._frames(k):
+                        frames[k] = {n: g[n][()] for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g}
             f, s, n = frames[k], int(t["start"][i]), int(t["length"][i])
 
             def get(name):

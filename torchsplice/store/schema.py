@@ -55,7 +55,9 @@ __all__ = ["FORMAT", "SCHEMA_VERSION", "COMPRESSIONS", "MIXED", "STR", "COLUMNS"
            "text_attr", "extra_columns"]
 
 FORMAT = "torchsplice.motiondb"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""The newest schema this version reads: 1 for motion databases, 2 for alignment stores
+(:mod:`torchsplice.store.assembly`), which older versions must refuse rather than misread."""
 STR = h5py.string_dtype()
 COLUMNS = {  # the built-in clip columns: name -> dtype
     "name": STR, "source": STR, "role": STR, "labels": STR,

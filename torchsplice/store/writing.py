@@ -27,6 +27,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .checks import control_name
+from .assembly import ALIGNMENT, FRAME_PARTS
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, STR, short, skeleton_path, skeleton_to_group
 
 __all__ = ["Writing", "guarded", "io_failure", "SPACE_MARGIN", "FLUSH_FRAMES"]
@@ -93,6 +94,15 @@ def frame_values(values, T: int, column: str, clip: str) -> np.ndarray:
     if a.shape != (T,):
         raise DatabaseError(f"clip {clip!r}: column {column!r} needs {T} values, got shape {a.shape}")
     return a
+
+
+def grow_rows(g: h5py.Group, n: int) -> None:
+    """Give every per-frame dataset of the skeleton group ``g`` ``n`` rows: those a write did not
+    fill (an alignment store's parts beside stored frames, and the reverse) are left unwritten,
+    which HDF5 stores as nothing."""
+    for ds in g.values():
+        if isinstance(ds, h5py.Dataset) and ds.maxshape and ds.maxshape[0] is None and ds.shape[0] < n:
+            ds.resize(n, axis=0)
 
 
 def per_clip(v, C: int, what: str, path) -> list:
@@ -206,6 +216,10 @@ class Writing:
             comp = dataset_compression(policy, name)
             g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float32, chunks=(chunk,),
                              compression=comp, shuffle=comp is not None)
+        if self.store == ALIGNMENT:  # the per-frame parts of spliced clips (see torchsplice.store.assembly)
+            for name, (shape, dt) in FRAME_PARTS.items():
+                g.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dt, chunks=(chunk,) + shape,
+                                 compression="lzf", shuffle=True)
         self._skeletons.append(skeleton)
         self._skeleton_ids[id(skeleton)] = (skeleton, k)
         return k
@@ -218,7 +232,7 @@ class Writing:
         ``frame_extra`` per-frame arrays ``(T,)`` of the declared frame columns (missing: NaN).
         """
         extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
-        unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
+        unknown = [k for k in extra if k not in self._declared] + [k for k in frame_extra if k not in self.frame_columns]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         self._writable()
@@ -280,7 +294,7 @@ class Writing:
                 c = int(np.searchsorted(starts, row, side="right") - 1)
                 raise DatabaseError(f"{self.path}: clip {names[c]!r} has non-finite {name} at frame {row - starts[c]}")
         extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
-        unknown = [k for k in extra if k not in self.columns] + [k for k in frame_extra if k not in self.frame_columns]
+        unknown = [k for k in extra if k not in self._declared] + [k for k in frame_extra if k not in self.frame_columns]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         if C == 0:
@@ -312,6 +326,7 @@ class Writing:
                 ds = g[name]
                 ds.resize(n0 + N, axis=0)
                 ds[n0:] = a.astype(ds.dtype, copy=False)
+            grow_rows(g, n0 + N)
             self._store_rows(rows)
         except BaseException as exc:
             if io_failure(exc):
@@ -380,7 +395,7 @@ class Writing:
         if lengths.shape != (C,) or (lengths < 1).any():
             raise DatabaseError(f"{self.path}: {C} clip names need {C} lengths of at least one frame, got "
                                 f"{len(lengths)} ({', '.join(map(str, lengths[:6].tolist()))}{', ...' if len(lengths) > 6 else ''})")
-        unknown = [n for n in extra if n not in self.columns]
+        unknown = [n for n in extra if n not in self._declared]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         each = lambda v, what: per_clip(v, C, what, self.path)  # noqa: E731
@@ -390,7 +405,7 @@ class Writing:
                        for v in each(labels if labels is not None else "{}", "labels")],
             "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
         }
-        for n, kind in self.columns.items():
+        for n, kind in self._declared.items():
             rows[n] = each(extra[n], f"column {n!r}") if n in extra else [KINDS[kind][1]] * C
         return rows
 
@@ -461,7 +476,8 @@ class Writing:
                 ds = g[name]
                 ds.resize(n0 + a.shape[0], axis=0)
                 ds[n0:] = a.astype(ds.dtype)
-        rows = {c: [] for c in [*COLUMNS, *self.columns]}
+            grow_rows(g, g["rotations"].shape[0])
+        rows = {c: [] for c in [*COLUMNS, *self._declared]}
         for m, k, extra, _ in self._staged:
             rows["name"].append(m.name)
             rows["source"].append(m.source)
@@ -471,7 +487,7 @@ class Writing:
             rows["start"].append(starts[k])
             rows["length"].append(m.num_frames)
             rows["fps"].append(m.fps)
-            for n, kind in self.columns.items():
+            for n, kind in self._declared.items():
                 rows[n].append(extra.get(n, KINDS[kind][1]))
             starts[k] += m.num_frames
         self._store_rows(rows)
@@ -482,14 +498,14 @@ class Writing:
         :meth:`close` writes to the datasets at once (HDF5's heap of variable-length strings is
         not covered by SWMR's ordered writes, so a killed process could leave it torn)."""
         if self._resumable:
-            self._row_log.append({name: column_array(self.columns, name, values) for name, values in rows.items()})
+            self._row_log.append({name: column_array(self._declared, name, values) for name, values in rows.items()})
             return
         c = self.h5[CLIPS]
         m0 = c["name"].shape[0]
         try:
             for name, values in rows.items():
                 c[name].resize(m0 + len(values), axis=0)
-                c[name][m0:] = column_array(self.columns, name, values)
+                c[name][m0:] = column_array(self._declared, name, values)
         except BaseException as exc:
             if io_failure(exc):
                 raise  # the whole write is discarded (see guarded)
@@ -507,6 +523,6 @@ class Writing:
         records = list(self._row_log.records())
         for name in c:
             values = [r[name] for r in records]
-            column = np.concatenate(values) if values else column_array(self.columns, name, [])
+            column = np.concatenate(values) if values else column_array(self._declared, name, [])
             c[name].resize(len(column), axis=0)
             c[name][:] = column

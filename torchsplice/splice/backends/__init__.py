@@ -56,6 +56,11 @@ class SplicedBatch:
         paths: a sequence, per pair, of the ``(P, 2)`` int64 DP path (locomotion frame, cropped
             action frame).
         failed: pair index -> why it could not be spliced (those pairs have no frames).
+        parts: what the frames were assembled from, where the backend gives it (the compiled
+            splicer; ``None`` otherwise): ``curve (N,)`` float64 (the action frame counted from
+            the crop, at the locomotion's rate), ``pelvis (N, 4)`` (timewarp pairs) or ``None``,
+            and per pair ``crop``, ``window``, ``loops (B, 2)`` in the bank's frames (see
+            :mod:`torchsplice.cpu.assemble`).
     """
 
     start: np.ndarray
@@ -69,6 +74,7 @@ class SplicedBatch:
     posture: np.ndarray
     paths: Any
     failed: dict
+    parts: dict | None = None
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -172,6 +178,13 @@ class Backend:
         raise NotImplementedError
 
     # Resources. A backend that computes in threads of its own says how many here.
+    def assembly_bank(self, prepared) -> dict | None:
+        """What an alignment store keeps of prepared clips whose pairs this backend gives parts
+        for (:attr:`SplicedBatch.parts`): ``rotations (N, J, 4)`` and ``translations (N, J, 3)``
+        float64, packed, ``lengths (C,)``, the upper-body joint indices ``upper`` and the
+        ``pelvis``; ``None`` for a backend that gives no parts."""
+        return None
+
     def threads(self) -> int | None:
         return None
 

@@ -86,7 +86,7 @@ class CompiledBackend(Backend):
             raise PairFailedError(b, STATUS[int(out.status[b])])
         return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve,
                             np.degrees(out.correction, out=out.correction), out.crop, out.cost, np.degrees(out.posture),
-                            _Paths(out.cells, out.path_length), failed)
+                            _Paths(out.cells, out.path_length), failed, parts=_parts(out))
 
     def standing(self, prepared, loco, action, acting, tables, method, options, fps, *, buffers=None, keep_going=False):
         from ...cpu.bank import standing_bank
@@ -97,7 +97,12 @@ class CompiledBackend(Backend):
                             buffers=buffers)
         B = len(out.frames)
         return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, out.correction, out.crop,
-                            out.cost, out.posture, [np.zeros((0, 2), np.int64)] * B, {})
+                            out.cost, out.posture, [np.zeros((0, 2), np.int64)] * B, {}, parts=_parts(out))
+
+    def assembly_bank(self, prepared):
+        b = prepared
+        return {"rotations": np.asarray(b.rot), "translations": np.asarray(b.trans), "lengths": np.asarray(b.lengths),
+                "upper": np.flatnonzero(b.joints[1]).tolist(), "pelvis": int(b.joints[8])}
 
     def threads(self):
         from ...cpu import get_threads
@@ -152,6 +157,12 @@ class _Paths:
 
     def __iter__(self):
         return (self[b] for b in range(len(self)))
+
+
+def _parts(out) -> dict:
+    """A :class:`~torchsplice.cpu.bank.PackedSplices`' parts, as :attr:`SplicedBatch.parts`."""
+    return {"curve": out.part_curve, "pelvis": out.pelvis, "crop": np.asarray(out.crop, np.int64).copy(),
+            "window": out.window, "loops": out.loops}
 
 
 def _dtype(options):

@@ -1,0 +1,243 @@
+"""Compiled assembly: a spliced clip's frames from what splicing computed (its *parts*) and its
+two source clips, the one code that both the motion store writes with and every read of an
+alignment store runs (see :mod:`torchsplice.store.assembly`).
+
+A spliced clip is made of the same few parts, whatever store holds it:
+
+- ``timewarp`` clips (``splice``, and ``naive``, whose curve is ``t``): per result frame ``t``
+  the action's frame ``curve[t]`` (fractional, counted from the action's ``crop``) and the
+  pelvis's local rotation ``pelvis[t]``; the root and the lower body are the locomotion's frame
+  ``t``, the upper body the action slerped at ``curve[t]`` (translations linearly);
+- ``standing`` clips (actions that do not locomote): the action's frame for each result frame
+  follows from a few integers per clip (``timing``, ``window``, the loop points), and the
+  assembly of :mod:`torchsplice.cpu.standing` (acting arms and spine from the action with the
+  locomotion's secondary spine motion, a loop's seam smoothed by inertialization).
+
+Inputs index a bank of source clips packed along frames (float64 local rotations
+``rot (N, J, 4)``, WXYZ, and local translations ``trans (N, J, 3)``, row 0 the root's
+position; clip ``c`` is rows ``starts[c] : starts[c] + lengths[c]``). Outputs are written as
+their arrays' dtype (float32 for the stores). Every function computes result frames
+``first .. first + count - 1`` of a clip, so a read of a window costs the window only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .curve import split_time
+from .quat import qconj, qload, qmul, qnormalize, qslerp, qstore
+
+__all__ = ["timewarp_rows", "standing_rows", "standing_times", "assemble_timewarp", "assemble_standing"]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lerp(a, b, w):
+    """``a + w (b - a)``, and ``a`` itself at ``w = 0`` (its sign of zero kept)."""
+    return a if w == 0.0 else a + w * (b - a)
+
+
+@njit(cache=True, nogil=True)
+def timewarp_rows(rot, trans, ls, as_, n_act, upper, pelvis, curve, prot, n, orot, otrans):
+    """``n`` result frames of a timewarp clip into rows ``0 .. n - 1`` of ``orot``/``otrans``.
+
+    ``ls``: the bank row of the locomotion's first frame wanted; ``as_``: the bank row of the
+    action's frame 0 after its crop, ``n_act`` its frames from there; ``curve (n,)``: the
+    action frame (from ``as_``) of each result frame; ``prot (n, 4)``: the pelvis's rotation.
+    """
+    J = rot.shape[1]
+    for t in range(n):
+        i0, i1, w = split_time(curve[t], n_act)
+        for j in range(J):
+            if j == pelvis:
+                for c in range(4):
+                    orot[t, j, c] = prot[t, c]
+                for c in range(3):
+                    otrans[t, j, c] = trans[ls + t, j, c]
+            elif upper[j]:
+                qstore(orot, t, j, qslerp(qload(rot, as_ + i0, j), qload(rot, as_ + i1, j), w))
+                for c in range(3):
+                    otrans[t, j, c] = _lerp(trans[as_ + i0, j, c], trans[as_ + i1, j, c], w)
+            else:
+                for c in range(4):
+                    orot[t, j, c] = rot[ls + t, j, c]
+                for c in range(3):
+                    otrans[t, j, c] = trans[ls + t, j, c]
+
+
+@njit(cache=True, nogil=True)
+def standing_times(t, Tl, Ta, timing, window, loop_s, loop_e, blend):
+    """``(time, fade source, fade phase)`` of result frame ``t`` of a standing clip (as
+    :func:`torchsplice.splice.standing.action_times`): the action frame it plays, and during a
+    loop's fade the frame faded from and how far the fade is (1: none)."""
+    phase = 1.0
+    if timing == 2:  # fit
+        x = t * (Ta - 1.0) / max(Tl - 1.0, 1.0)
+    elif Tl <= Ta:  # a window of the action
+        x = min(window + t, Ta - 1.0)
+    elif timing == 1:  # hold
+        x = min(float(t), Ta - 1.0)
+    else:  # loop
+        period = max(loop_e - loop_s, 1.0)
+        if t >= loop_e:
+            after = t - loop_e
+            u = after - math.floor(after / period) * period
+            x = loop_s + u
+            if u < blend:
+                phase = min(max(u / blend, 0.0), 1.0)
+        else:
+            x = float(t)
+    return x, (loop_e if phase < 1.0 else x), phase
+
+
+@njit(cache=True, nogil=True)
+def _aa(q):
+    """Rotation vector of a unit quaternion (as :func:`~torchsplice.core.rotations.quat_to_axis_angle`)."""
+    if q[0] < 0:
+        q = (-q[0], -q[1], -q[2], -q[3])
+    sn = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    angle = 2.0 * math.atan2(sn, q[0])
+    sc = angle / sn if sn > 1e-8 else 2.0 + sn * sn / 3
+    return (q[1] * sc, q[2] * sc, q[3] * sc)
+
+
+@njit(cache=True, nogil=True)
+def _exp(x, y, z):
+    """Unit quaternion of a rotation vector (as :func:`~torchsplice.core.rotations.axis_angle_to_quat`)."""
+    angle = math.sqrt(x * x + y * y + z * z)
+    half = 0.5 * angle
+    sc = math.sin(half) / angle if angle > 1e-8 else 0.5 - angle * angle / 48
+    return (math.cos(half), x * sc, y * sc, z * sc)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lin_offset(trans, a, c, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g):
+    """Component ``c`` of the inertialization offset of joint ``j``'s translation: the pose
+    difference ``x[end] - x[start]`` times ``f`` plus the velocity difference times ``g``."""
+    lb = trans[a + b0, j, c] + bw * (trans[a + b1, j, c] - trans[a + b0, j, c])
+    lbp = trans[a + bp0, j, c] + bpw * (trans[a + bp1, j, c] - trans[a + bp0, j, c])
+    lsn = trans[a + s0, j, c] + sw * (trans[a + s1, j, c] - trans[a + s0, j, c])
+    lnn = trans[a + n0, j, c] + nw * (trans[a + n1, j, c] - trans[a + n0, j, c])
+    return (lb - lsn) * f + ((lb - lbp) - (lnn - lsn)) * g
+
+
+@njit(cache=True, nogil=True)
+def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, loop_e, acting, upper, spine, arms,
+                  blend_s, first, n, curve, orot, otrans):
+    """Result frames ``first .. first + n - 1`` of a standing clip into rows ``0 .. n - 1`` of
+    ``orot``/``otrans``, and the action frame each plays into ``curve``.
+
+    The locomotion is bank rows ``ls ..`` (``Tl`` frames), the action ``as_ ..`` (``Ta``);
+    ``method`` 0 splice, 1 naive, 2 cpmc; ``timing`` 0 loop, 1 hold, 2 fit; ``window`` the
+    action's first frame played onto a locomotion no longer than it; ``loop_s``/``loop_e`` the
+    loop points; ``acting (2,)`` the arms that act (left, right); ``upper``, ``spine``,
+    ``arms (2, J)`` and ``blend_s`` the skeleton's tables (:class:`torchsplice.cpu.bank.StandingTables`).
+    """
+    J = rot.shape[1]
+    blend = max(min(blend_s, Ta // 3), 1)
+    # the locomotion's mean posture of each spine joint (splice)
+    S = spine.shape[0]
+    mean = np.zeros((S, 4))
+    if method == 0:
+        for k in range(S):
+            j = spine[k]
+            q0 = qload(rot, ls, j)
+            for t in range(Tl):
+                q = qload(rot, ls + t, j)
+                sg = -1.0 if q[0] * q0[0] + q[1] * q0[1] + q[2] * q0[2] + q[3] * q0[3] < 0 else 1.0
+                for c in range(4):
+                    mean[k, c] += sg * q[c]
+            m = qnormalize((mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3]))
+            mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3] = m
+    spine_k = np.full(J, -1, np.int64)
+    for k in range(S):
+        spine_k[spine[k]] = k
+    idle = np.zeros(J, np.bool_)
+    for a in range(2):
+        if not acting[a]:
+            for j in range(J):
+                if arms[a, j]:
+                    idle[j] = True
+    for i in range(n):
+        t = first + i
+        x, source, phase = standing_times(t, Tl, Ta, timing, float(window), float(loop_s), float(loop_e), float(blend))
+        curve[i] = x
+        i0, i1, w = split_time(x, Ta)
+        fading = phase < 1.0
+        f = g = bw = bpw = sw = nw = 0.0
+        b0 = b1 = bp0 = bp1 = s0 = s1 = n0 = n1 = 0
+        if fading:
+            sph = phase
+            u = sph * blend
+            f = 1 - sph * sph * (3 - 2 * sph)
+            g = u * (1 - sph) ** 2
+            b0, b1, bw = split_time(source, Ta)
+            bp0, bp1, bpw = split_time(source - 1, Ta)
+            s0, s1, sw = split_time(float(loop_s), Ta)
+            n0, n1, nw = split_time(loop_s + 1.0, Ta)
+        for j in range(J):
+            if not upper[j] or (method == 0 and idle[j]):
+                qstore(orot, i, j, qload(rot, ls + t, j))
+                for c in range(3):
+                    otrans[i, j, c] = trans[ls + t, j, c]
+                continue
+            q = qslerp(qload(rot, as_ + i0, j), qload(rot, as_ + i1, j), w)
+            tx = trans[as_ + i0, j, 0] + w * (trans[as_ + i1, j, 0] - trans[as_ + i0, j, 0])
+            ty = trans[as_ + i0, j, 1] + w * (trans[as_ + i1, j, 1] - trans[as_ + i0, j, 1])
+            tz = trans[as_ + i0, j, 2] + w * (trans[as_ + i1, j, 2] - trans[as_ + i0, j, 2])
+            if fading:  # inertialization of the jump back (see torchsplice.splice.standing._sample)
+                qb = qslerp(qload(rot, as_ + b0, j), qload(rot, as_ + b1, j), bw)
+                qbp = qslerp(qload(rot, as_ + bp0, j), qload(rot, as_ + bp1, j), bpw)
+                qs = qslerp(qload(rot, as_ + s0, j), qload(rot, as_ + s1, j), sw)
+                qn = qslerp(qload(rot, as_ + n0, j), qload(rot, as_ + n1, j), nw)
+                r = _aa(qmul(qb, qconj(qs)))
+                v1 = _aa(qmul(qb, qconj(qbp)))
+                v2 = _aa(qmul(qn, qconj(qs)))
+                q = qnormalize(qmul(_exp(r[0] * f + (v1[0] - v2[0]) * g, r[1] * f + (v1[1] - v2[1]) * g,
+                                         r[2] * f + (v1[2] - v2[2]) * g), q))
+                if method == 1:  # only naive takes the action's translations
+                    tx += _lin_offset(trans, as_, 0, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
+                    ty += _lin_offset(trans, as_, 1, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
+                    tz += _lin_offset(trans, as_, 2, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
+            lq = qload(rot, ls + t, j)
+            if method == 1:  # naive: the action's upper body, translations too
+                qstore(orot, i, j, q)
+                otrans[i, j, 0], otrans[i, j, 1], otrans[i, j, 2] = tx, ty, tz
+                continue
+            if method == 2:  # cpmc: the action's motion since its first frame, on the locomotion
+                q = qnormalize(qmul(lq, qmul(qconj(qload(rot, as_, j)), q)))
+            elif spine_k[j] >= 0:  # splice: the action's posture with the locomotion's deviation from its mean
+                k = spine_k[j]
+                q = qnormalize(qmul(q, qmul(qconj((mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3])), lq)))
+            qstore(orot, i, j, q)
+            for c in range(3):
+                otrans[i, j, c] = trans[ls + t, j, c]
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def assemble_timewarp(rot, trans, starts, lengths, loco, act, crop, upper, pelvis, curve, prot, first, count, out_start,
+                      orot, otrans):
+    """Timewarp clips ``b`` in parallel: result frames ``first[b] .. first[b] + count[b] - 1`` of
+    the pair (bank clips ``loco[b]``, ``act[b]``, the action cropped by ``crop[b]``) into rows
+    ``out_start[b] ..`` of ``orot``/``otrans``; ``curve``/``prot`` hold those frames' parts in
+    the same rows."""
+    for b in prange(loco.shape[0]):
+        o, n = out_start[b], count[b]
+        a = act[b]
+        timewarp_rows(rot, trans, starts[loco[b]] + first[b], starts[a] + crop[b], lengths[a] - crop[b], upper, pelvis,
+                      curve[o:o + n], prot[o:o + n], n, orot[o:o + n], otrans[o:o + n])
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def assemble_standing(rot, trans, starts, lengths, loco, act, method, timing, window, loops, acting, upper, spine, arms,
+                      blend_s, first, count, out_start, orot, otrans, ocurve):
+    """Standing clips ``b`` in parallel (per-clip arguments as :func:`standing_rows`'s, ``loops
+    (B, 2)``, ``acting (B, 2)``): result frames ``first[b] ..`` into rows ``out_start[b] ..``."""
+    for b in prange(loco.shape[0]):
+        o, n = out_start[b], count[b]
+        lo, a = loco[b], act[b]
+        standing_rows(rot, trans, starts[lo], lengths[lo], starts[a], lengths[a], method[b], timing[b], window[b],
+                      loops[b, 0], loops[b, 1], acting[b], upper, spine, arms, blend_s, first[b], n, ocurve[o:o + n],
+                      orot[o:o + n], otrans[o:o + n])

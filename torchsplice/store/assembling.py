@@ -1,0 +1,158 @@
+"""The alignment store's methods of :class:`~torchsplice.store.database.MotionDatabase`
+(:class:`Assembling`, a mixin): its kind, assembled frames, and writing banks of source clips
+and spliced clips as their parts. The layout is :mod:`torchsplice.store.assembly`'s."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from ..core.errors import DatabaseError
+from .assembly import ALIGNMENT, BANKS, Assembly, store_kind
+from .reading import FrameArray
+from .schema import CLIPS, FRAME_ARRAYS, STR, skeleton_path
+from .writing import io_failure
+
+__all__ = ["Assembling"]
+
+
+class Assembling:
+    """The alignment store's methods of :class:`~torchsplice.store.database.MotionDatabase` (a
+    mixin: the database's state, file and opening live there)."""
+
+    @property
+    def store(self) -> str:
+        """``"alignment"`` or ``"motion"`` (see the module docstring)."""
+        return store_kind(self.h5.attrs)
+
+    def _assembly(self) -> Assembly:
+        have = getattr(self, "_assembly_cache", None)
+        if have is None or len(have.skeleton) != self.h5[f"{CLIPS}/name"].shape[0]:
+            self.flush()
+            self._table_written()
+            have = self._assembly_cache = Assembly(self)
+        return have
+
+    def frame_rows(self, k: int, name: str, starts, lengths) -> np.ndarray:
+        """Stored rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s dataset ``name``,
+        concatenated (a damaged chunk: one line naming the file)."""
+        return FrameArray(self.h5[skeleton_path(k)][name]).gather(np.asarray(starts, np.int64), np.asarray(lengths, np.int64))
+
+    def assembled(self, k: int, starts, lengths) -> dict[str, np.ndarray]:
+        """Frames of skeleton ``k`` (rows ``starts[i] : starts[i] + lengths[i]``, each within one
+        clip) as a motion store holds them: ``rotations``, ``root_translation``, ``translations``
+        (where stored) and the per-frame columns; in an alignment store assembled from the parts."""
+        starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
+        if self.store == ALIGNMENT:
+            out = self._assembly().frames(self, k, starts, lengths)
+        else:
+            g = self.h5[skeleton_path(k)]
+            out = {n: self.frame_rows(k, n, starts, lengths) for n in FRAME_ARRAYS if n in g}
+        for n in self.frame_columns:
+            out[n] = self.frame_rows(k, n, starts, lengths)
+        return out
+
+    def whole_frames(self, k: int) -> dict[str, np.ndarray]:
+        """Every row of skeleton ``k``'s frame arrays and per-frame columns, as a motion store
+        holds them (:meth:`~torchsplice.store.reading.Reading.packed` of an alignment store)."""
+        g = self.h5[skeleton_path(k)]
+        N = g["rotations"].shape[0]
+        starts, rows = self._assembly().clips_of(k)
+        lengths = self._assembly().length[rows]
+        made = self.assembled(k, starts, lengths)
+        at = np.repeat(starts - np.concatenate(([0], np.cumsum(lengths)[:-1])), lengths) + np.arange(int(lengths.sum()))
+        out = {}
+        for name, a in made.items():
+            whole = np.zeros((N,) + a.shape[1:], a.dtype)
+            whole[at] = a
+            out[name] = whole
+        return out
+
+    def add_bank(self, rotations: np.ndarray, translations: np.ndarray, lengths, names, keys, fps, tables: dict) -> int:
+        """Store a bank of source clips (packed ``(N, J, 4)`` float64 rotations and ``(N, J, 3)``
+        local translations, ``C`` lengths, names, keys and rates) with its joint tables (see
+        :func:`_tables`: joint indices); returns its number. Values float32 holds exactly are
+        stored as float32."""
+        self._writable()
+        if self.store != ALIGNMENT:
+            raise DatabaseError(f"{self.path}: is a motion store; source banks belong in an alignment store")
+        rot, trans = np.asarray(rotations), np.asarray(translations)
+        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        exact = all(np.array_equal(a.astype(np.float32), a) for a in (rot, trans))
+        dt = np.float32 if exact else np.float64
+        self._reserve(rot.size * np.dtype(dt).itemsize * 7 // 4 + 200 * len(lengths))
+        banks = self.h5.require_group(BANKS)
+        b = len(banks)
+        g = banks.create_group(str(b))
+        for name, a in (("rotations", rot), ("translations", trans)):
+            g.create_dataset(name, data=a.astype(dt), chunks=(min(max(len(a), 1), 1024),) + a.shape[1:],
+                             compression="lzf", shuffle=True)
+        g["starts"] = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        g["lengths"] = lengths
+        g["names"] = np.array([str(n) for n in names], dtype=object).astype(STR)
+        g["keys"] = np.array([str(n) for n in keys], dtype=object).astype(STR)
+        g["fps"] = np.asarray(fps, np.float64).reshape(-1) * np.ones(len(lengths))
+        g.attrs["tables"] = json.dumps(tables)
+        return b
+
+    def bank_index(self) -> dict[tuple[int, str, float], int]:
+        """``(bank, key, fps) -> row`` of every source clip the banks hold (the job's keys)."""
+        out = {}
+        for b in range(len(self.h5[BANKS]) if BANKS in self.h5 else 0):
+            g = self.h5[f"{BANKS}/{b}"]
+            for r, (key, fps) in enumerate(zip(g["keys"].asstr()[()], g["fps"][()])):
+                out[(b, str(key), float(fps))] = r
+        return out
+
+    def append_parts(self, skeleton, lengths, names, fps, *, curve, pelvis, parts: dict, spec=None, sources="",
+                     roles="", labels=None, extra: dict | None = None, frame_extra: dict | None = None) -> None:
+        """Add spliced clips of one skeleton as their parts: per frame ``curve (N,)`` and
+        ``pelvis (N, 4)`` (``None`` for standing clips), per clip the :data:`PART_COLUMNS` in
+        ``parts`` (``C`` values each); other arguments as :meth:`append_packed`'s."""
+        self._writable()
+        if self.store != ALIGNMENT:
+            raise DatabaseError(f"{self.path}: is a motion store; it cannot take clips as parts (write their motions)")
+        self.flush()
+        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        names = [str(n) for n in names]
+        C, N = len(names), int(lengths.sum())
+        if C == 0:
+            return
+        index = self._new_names(names)
+        frame_extra = dict(frame_extra or {})
+        arrays = {"assembly_curve": np.asarray(curve, np.float64).reshape(N)}
+        if pelvis is not None:
+            arrays["assembly_pelvis"] = np.asarray(pelvis, np.float32).reshape(N, 4)
+        for name in self.frame_columns:
+            v = frame_extra.get(name)
+            arrays[name] = np.full(N, np.nan, np.float32) if v is None else np.asarray(v, np.float32).reshape(N)
+        rows = self._rows(names, lengths, fps, sources, roles, labels, {**(extra or {}), **parts})
+        k = self.add_skeleton(skeleton, spec)
+        self._no_virtual(k)
+        g = self.h5[skeleton_path(k)]
+        self._reserve(sum(a.nbytes for a in arrays.values()) + 300 * C)
+        n0 = g["rotations"].shape[0]
+        rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        grown = [n for n in g if isinstance(g[n], h5py.Dataset) and g[n].maxshape and g[n].maxshape[0] is None]
+        try:
+            for name in grown:
+                g[name].resize(n0 + N, axis=0)
+            for name, a in arrays.items():
+                g[name][n0:] = a
+            self._store_rows(rows)
+        except BaseException as exc:
+            if io_failure(exc):
+                raise
+            try:
+                for name in grown:
+                    g[name].resize(n0, axis=0)
+            except Exception:
+                pass
+            raise
+        for n in names:
+            index[n] = len(index)
+        if self._names is not None:
+            self._names += names
+        self._flushed += C

@@ -1,0 +1,267 @@
+"""Alignment stores: spliced clips kept as what splicing computed, their motions assembled where
+they are read.
+
+A motion store (every database but these) holds each clip's frames. An *alignment store*
+(``splice-all --store alignment``) holds each source clip once and, per spliced clip, only
+its parts; every read assembles the motion from them with the compiled kernels of
+:mod:`torchsplice.cpu.assemble`, the same code the motion store's frames were written with,
+so a read gives the motion store's clip bit for bit. Readers (``read``, ``read_many``,
+``read_batch``, ``batches``, ``read_all``, ``packed``, ``frame_array``) see frames either way;
+the database's methods for alignment stores are :class:`~torchsplice.store.assembling.Assembling`'s.
+
+Layout, besides :mod:`torchsplice.store.schema`'s (root attribute ``store="alignment"``,
+``schema_version=2``, and ``store_readme``, which says this in prose for a reader with plain h5py)::
+
+    /assembly/banks/<b>/      one group per bank of source clips (one skeleton, one frame rate)
+        rotations           (N_b, J, 4)  local rotations, WXYZ (float32, or float64 where the
+                                         splicer's bank held values float32 cannot)
+        translations        (N_b, J, 3)  local translations, row 0 the root's position
+        starts, lengths     (C_b,) int64 source clip c is rows starts[c]:starts[c]+lengths[c]
+        names               (C_b,) str   the source clip (an action retargeted onto this
+                                         skeleton: "NAME (retargeted)")
+        keys                (C_b,) str   the job's key of each source clip
+        fps                 (C_b,) float64
+        attrs: tables (JSON: upper, pelvis, standing_upper, spine, arms, blend; joint indices)
+    /skeletons/<k>/assembly_curve   (N_k,) float64   per spliced frame: the action frame it
+                                                     plays (timewarp clips: counted from the crop)
+    /skeletons/<k>/assembly_pelvis  (N_k, 4) float32 per spliced frame: the pelvis's local
+                                                     rotation (timewarp clips)
+    /clips/assembly_kind    -1: frames stored in rotations/... as in a motion store (methods whose
+                            result is not an alignment: cpmc through the timewarp, plug-ins;
+                            copied source clips);
+                            1: timewarp (splice, naive); 2: standing action
+    /clips/assembly_bank, assembly_locomotion, assembly_action: the bank and its two source clips
+    /clips/assembly_crop, assembly_method (0 splice, 1 naive, 2 cpmc), assembly_timing (0 loop,
+           1 hold, 2 fit), assembly_window, assembly_loop_start, assembly_loop_end,
+           assembly_acting (bit 0 left arm, bit 1 right arm)
+
+The ``assembly_*`` clip columns are not among a database's :attr:`columns` (they are the
+store's, not the user's: ``info --csv`` and the indexes do not list them). The frame datasets
+(``rotations``, ...) have a row for every frame, written only for clips of kind -1 (HDF5 stores
+no chunk that was never written).
+"""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from ..core.errors import DatabaseError
+from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
+
+__all__ = ["STORES", "ALIGNMENT", "MOTION", "PART_COLUMNS", "FRAME_PARTS", "KIND_CODES", "METHOD_CODES", "TIMING_CODES", "BANKS", "STORE_README",
+           "store_kind", "check_assembly", "Assembly"]
+
+MOTION, ALIGNMENT = "motion", "alignment"
+STORES = (MOTION, ALIGNMENT)
+"""What a spliced output stores: each clip's frames, or what splicing computed (see the module docstring)."""
+BANKS = "assembly/banks"
+PART_COLUMNS = {name: "int" for name in (
+    "assembly_kind", "assembly_bank", "assembly_locomotion", "assembly_action", "assembly_crop", "assembly_method",
+    "assembly_timing", "assembly_window", "assembly_loop_start", "assembly_loop_end", "assembly_acting")}
+"""The per-clip parts (hidden clip columns of an alignment store)."""
+FRAME_PARTS = {"assembly_curve": ((), np.float64), "assembly_pelvis": ((4,), np.float32)}
+"""The per-frame parts: name -> (shape of a row, dtype)."""
+METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
+"""``assembly_method``: the built-in methods (as :data:`torchsplice.cpu.splice.METHOD_CODES`)."""
+TIMING_CODES = {"loop": 0, "hold": 1, "fit": 2}
+"""``assembly_timing``: a standing action's timing (as :data:`torchsplice.cpu.standing.TIMING_CODES`)."""
+KIND_CODES = {"motion": -1, "timewarp": 1, "standing": 2}
+"""``assembly_kind``: -1 (an int column's empty value) for a clip whose frames are stored."""
+STORE_README = (
+    "torchsplice alignment store: the spliced clips' motions are not stored; each is assembled from two source "
+    "clips and what splicing computed. Source clips: /assembly/banks/<b>/rotations (N,J,4 WXYZ local) and "
+    "translations (N,J,3 local, row 0 the root), clip c at rows starts[c]:starts[c]+lengths[c]. A spliced clip "
+    "(row i of /clips, frames start:start+length of /skeletons/<k>) of assembly_kind 1 plays, at frame t, the root "
+    "and lower body of bank clip assembly_locomotion frame t, the pelvis rotation assembly_pelvis[t], and the upper "
+    "body of bank clip assembly_action slerped at frame assembly_crop + assembly_curve[t] (translations linearly); "
+    "kind 2 (standing actions) and the exact joint sets are in torchsplice's torchsplice/cpu/assemble.py; kind -1 "
+    "clips hold their frames in /skeletons/<k>/rotations etc. `torchsplice materialize IN -o OUT` writes every "
+    "motion as an ordinary database; torchsplice's MotionDatabase reads either transparently.")
+
+
+def store_kind(attrs) -> str:
+    """``"alignment"`` or ``"motion"``: what a database's root attributes say it stores."""
+    v = attrs.get("store", MOTION)
+    v = v.decode(errors="replace") if isinstance(v, bytes) else str(v)
+    return v or MOTION
+
+
+def check_assembly(h5: h5py.File, skeletons: list, frames: list[int]) -> None:
+    """Check an alignment store's banks, parts and the clips' references into them (vectorised);
+    raises :class:`Damage` naming the first problem."""
+    banks = h5.get(BANKS)
+    if not isinstance(banks, h5py.Group):
+        raise Damage("it is an alignment store without its source clips (assembly/banks is missing)")
+    keys = list(banks)
+    if sorted(keys, key=lambda k: (len(k), k)) != [str(b) for b in range(len(keys))]:
+        raise Damage(f"assembly/banks holds {cap(', '.join(keys))}, expected groups 0..{len(keys) - 1}")
+    sizes, counts, joints = [], [], []
+    for b in range(len(keys)):
+        where = f"{BANKS}/{b}"
+        g = banks[str(b)]
+        if not isinstance(g, h5py.Group):
+            raise Damage(f"{where} is not a group")
+        rot = checked_dataset(g, "rotations", where, (None, None, 4), "f")
+        N, J = rot.shape[0], rot.shape[1]
+        checked_dataset(g, "translations", where, (N, J, 3), "f")
+        C = checked_dataset(g, "starts", where, (None,), "iu").shape[0]
+        for name, kind in (("lengths", "iu"), ("names", "str"), ("keys", "str"), ("fps", "fiu")):
+            checked_dataset(g, name, where, (C,), kind)
+        starts, lengths = g["starts"][()].astype(np.int64), g["lengths"][()].astype(np.int64)
+        if C and ((starts < 0).any() or (lengths < 1).any() or (starts + lengths > N).any()):
+            raise Damage(f"{where} has source clips outside its {N} frames")
+        try:
+            tables = json.loads(g.attrs.get("tables", ""))
+            _tables(tables, J)
+        except (ValueError, TypeError, KeyError, IndexError) as exc:
+            raise Damage(f"{where} has no valid joint tables ({cap(str(exc), 60)})") from None
+        sizes.append(lengths)
+        counts.append(C)
+        joints.append(J)
+    for k, (sk, N) in enumerate(zip(skeletons, frames)):
+        g = h5[skeleton_path(k)]
+        for name, (shape, _) in FRAME_PARTS.items():
+            checked_dataset(g, name, skeleton_path(k), (N, *shape), "f")
+    c = h5[CLIPS]
+    if c["name"].shape[0] == 0:
+        return
+    p = {n: c[n][()].astype(np.int64) for n in PART_COLUMNS}
+    sk = c["skeleton"][()].astype(np.int64)
+    kind, bank = p["assembly_kind"], p["assembly_bank"]
+    bad = ~np.isin(kind, list(KIND_CODES.values()))
+    parts = kind > 0
+    bad |= parts & ((bank < 0) | (bank >= len(keys)))
+    if not bad.any() and parts.any():
+        C = np.array(counts, np.int64)[np.where(parts, bank, 0)]
+        J = np.array(joints, np.int64)[np.where(parts, bank, 0)]
+        lo, ac = p["assembly_locomotion"], p["assembly_action"]
+        bad |= parts & ((lo < 0) | (lo >= C) | (ac < 0) | (ac >= C))
+        bad |= parts & (J != np.array([s.num_joints for s in skeletons], np.int64)[sk])
+        if not bad.any():
+            length = c["length"][()].astype(np.int64)
+            la = np.zeros(len(kind), np.int64)
+            aa = np.zeros(len(kind), np.int64)
+            for b in range(len(keys)):
+                m = parts & (bank == b)
+                la[m], aa[m] = sizes[b][lo[m]], sizes[b][ac[m]]
+            bad |= parts & ((length > la) | (p["assembly_crop"] < 0) | (p["assembly_crop"] >= np.maximum(aa, 1)))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise Damage(f"clip {cap(c['name'].asstr()[i])}'s parts do not fit the alignment store's source clips "
+                     f"(kind {int(kind[i])}, bank {int(bank[i])})")
+
+
+def _tables(raw: dict, J: int) -> dict:
+    """A bank's joint tables as the kernels take them (checked against ``J`` joints)."""
+    def mask(v):
+        m = np.zeros(J, np.bool_)
+        m[np.asarray(v, np.int64)] = True
+        return m
+
+    arms = np.zeros((2, J), np.bool_)
+    for a in range(2):
+        arms[a] = mask(raw["arms"][a])
+    pelvis = int(raw["pelvis"])
+    if not 0 <= pelvis < J:
+        raise IndexError(f"pelvis {pelvis}")
+    spine = np.asarray(raw["spine"], np.int64).reshape(-1)
+    if ((spine < 0) | (spine >= J)).any():
+        raise IndexError(f"spine joint out of {J}")
+    return {"upper": mask(raw["upper"]), "pelvis": pelvis, "standing_upper": mask(raw["standing_upper"]),
+            "spine": spine, "arms": arms, "blend": int(raw["blend"])}
+
+
+class Assembly:
+    """An alignment store's source banks and per-clip parts, read once per open database, and the
+    assembly of frame ranges from them (:meth:`frames`)."""
+
+    def __init__(self, db):
+        h5 = db.h5
+        self.banks = []
+        for b in range(len(h5[BANKS])):
+            g = h5[f"{BANKS}/{b}"]
+            rot, trans = g["rotations"][()], g["translations"][()]
+            self.banks.append({
+                "rot": rot.astype(np.float64), "trans": trans.astype(np.float64),
+                "starts": g["starts"][()].astype(np.int64), "lengths": g["lengths"][()].astype(np.int64),
+                "tables": _tables(json.loads(g.attrs["tables"]), rot.shape[1])})
+        c = h5[CLIPS]
+        self.parts = {n: c[n][()].astype(np.int64) for n in PART_COLUMNS}
+        self.skeleton = c["skeleton"][()].astype(np.int64)
+        self.start = c["start"][()].astype(np.int64)
+        self.length = c["length"][()].astype(np.int64)
+        self.by_skeleton: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def clips_of(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(starts, rows)``: the clips of skeleton ``k`` sorted by their first frame."""
+        if k not in self.by_skeleton:
+            rows = np.flatnonzero(self.skeleton == k)
+            rows = rows[np.argsort(self.start[rows], kind="stable")]
+            self.by_skeleton[k] = (self.start[rows], rows)
+        return self.by_skeleton[k]
+
+    def frames(self, db, k: int, starts: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s frame arrays (each range
+        within one clip), concatenated: ``rotations``, ``root_translation`` and ``translations``
+        (where the skeleton stores them), as the store's dtype."""
+        from ..cpu.assemble import assemble_standing, assemble_timewarp
+
+        starts = np.asarray(starts, np.int64).reshape(-1)
+        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        g = db.h5[skeleton_path(k)]
+        J = g["rotations"].shape[1]
+        dtype = g["rotations"].dtype
+        N = int(lengths.sum())
+        out_start = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        first_frames, rows = self.clips_of(k)
+        at = np.searchsorted(first_frames, starts, side="right") - 1
+        clip = rows[np.maximum(at, 0)]
+        first = starts - self.start[clip]
+        if len(starts) and ((at < 0).any() or (first + lengths > self.length[clip]).any()):
+            i = int(np.flatnonzero((at < 0) | (first + lengths > self.length[clip]))[0])
+            raise DatabaseError(f"{db.path}: frames {int(starts[i])}:{int(starts[i] + lengths[i])} of skeleton {k} are not "
+                                "within one clip of this alignment store")
+        orot = np.empty((N, J, 4), dtype)
+        otrans = np.empty((N, J, 3), dtype)
+        p = {n: v[clip] for n, v in self.parts.items()}
+        kind = p["assembly_kind"]
+        stored = kind <= 0
+        if stored.any():  # frames kept as they are
+            s, n, o = starts[stored], lengths[stored], out_start[stored]
+            at_rows = np.repeat(o - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+            orot[at_rows] = db.frame_rows(k, "rotations", s, n)
+            otrans[at_rows, 0] = db.frame_rows(k, "root_translation", s, n)
+            if "translations" in g:
+                otrans[at_rows, 1:] = db.frame_rows(k, "translations", s, n)[:, 1:]
+        timewarp = kind == 1
+        curve = prot = None
+        if timewarp.any():
+            s, n = starts[timewarp], lengths[timewarp]
+            curve = np.zeros(N)
+            prot = np.zeros((N, 4), np.float32)
+            at_rows = np.repeat(out_start[timewarp] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+            curve[at_rows] = db.frame_rows(k, "assembly_curve", s, n)
+            prot[at_rows] = db.frame_rows(k, "assembly_pelvis", s, n)
+        for b in sorted(set(p["assembly_bank"][kind > 0].tolist())):
+            bank = self.banks[b]
+            t = bank["tables"]
+            args = (bank["rot"], bank["trans"], bank["starts"], bank["lengths"])
+            m = timewarp & (p["assembly_bank"] == b)
+            if m.any():
+                assemble_timewarp(*args, p["assembly_locomotion"][m], p["assembly_action"][m], p["assembly_crop"][m],
+                                  t["upper"], t["pelvis"], curve, prot, first[m], lengths[m], out_start[m], orot, otrans)
+            m = (kind == 2) & (p["assembly_bank"] == b)
+            if m.any():
+                acting = np.stack([(p["assembly_acting"][m] & 1) > 0, (p["assembly_acting"][m] & 2) > 0], axis=1)
+                loops = np.stack([p["assembly_loop_start"][m], p["assembly_loop_end"][m]], axis=1)
+                assemble_standing(*args, p["assembly_locomotion"][m], p["assembly_action"][m], p["assembly_method"][m],
+                                  p["assembly_timing"][m], p["assembly_window"][m], loops, acting, t["standing_upper"],
+                                  t["spine"], t["arms"], t["blend"], first[m], lengths[m], out_start[m], orot, otrans,
+                                  np.empty(N))
+        out = {"rotations": orot, "root_translation": np.ascontiguousarray(otrans[:, 0])}
+        if "translations" in g:
+            out["translations"] = otrans
+        return out
