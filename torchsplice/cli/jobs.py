@@ -170,5 +170,29 @@ class Merge(Command):
         return 0
 
 
+class Materialize(Command):
+    name = "materialize"
+    help = "write the motions of an alignment store (splice-all --store alignment) as an ordinary database"
+    description = ("Assemble every clip of an alignment store and write them as a motion store: the same clips, "
+                   "table and columns, bit for bit what splice-all --store motion writes for the same job. Streams "
+                   "in bounded memory.")
+
+    def add_arguments(self, s) -> None:
+        s.add_argument("database", help="the alignment store (.h5)")
+        s.add_argument("-o", "--output", required=True, help="the motion store to write (.h5)")
+        s.add_argument("--no-index", dest="index", action="store_false", default=True,
+                       help="write no OUT.index.csv beside the output")
+        add_output_flags(s, force_help="overwrite an existing output")
+
+    def run(self, args) -> int:
+        from ..job.materialize import materialize
+
+        n = materialize(args.database, args.output, overwrite=args.force, progress=not args.quiet, index=args.index)
+        if not args.quiet:
+            print(f"wrote {args.output}: {n} clips")
+        return 0
+
+
 register_command(SpliceAll())
 register_command(Merge())
+register_command(Materialize())

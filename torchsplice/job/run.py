@@ -150,6 +150,7 @@ class SpliceJob:
                                  dry_run=True, standing=sum(p.mode == "standing" for p in plan.pairs),
                                  retargeted=plan.retargeted)
             summary.expected = self._expected(plan, sources)
+            summary.alignment = self._expected_alignment(plan, sources)
             summary.free = _free_bytes(c.output.parent)
         finally:
             sources.close()
@@ -163,7 +164,21 @@ class SpliceJob:
             for db, rows in source_rows(plan, sources):
                 t = db.clip_table()
                 copied += [(int(t.length[r]), db.skeletons[int(t.skeleton[r])]) for r in rows]
-        return estimate_output(plan, lambda g: source_skeleton(plan, g, sources)[0], self.config.compression, copied)
+        return estimate_output(plan, lambda g: source_skeleton(plan, g, sources)[0], self.config.compression, copied,
+                               store=self.config.store)
+
+    def _expected_alignment(self, plan: Plan, sources: Sources) -> OutputSize | None:
+        """What ``--store alignment`` would take, for a job of motions (``None`` for an alignment store)."""
+        if self.config.store == "alignment":
+            return None
+        from dataclasses import replace
+
+        mine = self.config
+        try:
+            self.config = replace(mine, store="alignment")
+            return self._expected(plan, sources)
+        finally:
+            self.config = mine
 
     def _check_room(self, plan: Plan, sources: Sources) -> tuple[OutputSize, int | None]:
         """The output's expected size and the free space; refuses, before any work, a job whose
@@ -174,10 +189,13 @@ class SpliceJob:
         banks = sources.unsaved_bank_bytes(self.work) if _shares_banks(c) else 0
         need = max(0, expected.bytes - held) + banks
         if free is not None and need > free:
+            other = self._expected_alignment(plan, sources)
+            hint = ("" if other is None else f", or write {{store}} alignment (about {format_bytes(other.bytes)}: the "
+                    "source clips once and what splicing computed; every reader assembles the motions)")
             raise TorchspliceError(
                 f"{c.output}: the job needs about {format_bytes(need)} more on the disk (an output of about "
                 f"{format_bytes(expected.bytes)}, {expected.frames:,} frames) and {c.output.parent} has "
-                f"{format_bytes(free)} free; free some space, or splice fewer pairs")
+                f"{format_bytes(free)} free; free some space, or splice fewer pairs{hint}", options=("store",))
         return expected, free
 
     def _run(self, sources: Sources, t0: float) -> JobSummary:

@@ -58,14 +58,41 @@ def frame_bytes(joints: int, joint_translations: bool, compression) -> float:
             + (12 * joints * f["translations"] if joint_translations else 0.0))
 
 
-def estimate_output(plan, skeleton_of, compression, copied: list | None = None) -> OutputSize:
+PART_BYTES = {"timewarp": 0.9 * (8 + 16 + 4), "standing": 0.9 * 4}
+"""An alignment store's bytes on disk per spliced frame (``--store alignment``): the curve
+(float64) and the pelvis's rotation (float32) of a timewarp clip, and the action frame, under
+LZF; a standing clip's frames take only their action frame."""
+PART_TABLE_BYTES = 100
+"""An alignment store's further table bytes per clip (its parts' integers)."""
+BANK_SHARE = 0.75
+"""Share of a bank's raw float32 rotations and translations that LZF writes to disk."""
+
+
+def _alignment_bytes(plan, skeleton_of, info) -> float:
+    """The banks of an alignment store: every clip of every group once per frame rate."""
+    seen, total = set(), 0.0
+    for n, g in enumerate(plan.groups):
+        J = skeleton_of(n).num_joints
+        for key in g.clips:
+            if (key, g.fps) not in seen and key in info:
+                seen.add((key, g.fps))
+                frames, fps = info[key]
+                total += frames * g.fps / fps * J * 28 * BANK_SHARE
+    return total
+
+
+def estimate_output(plan, skeleton_of, compression, copied: list | None = None, store: str = "motion") -> OutputSize:
     """The expected size of ``plan``'s output. ``skeleton_of(group)`` gives a locomotion group's
     :class:`~torchsplice.core.skeleton.Skeleton`; ``copied`` lists ``(frames, skeleton)`` of
     the source clips copied in as well (``copy_sources``). A standing action's result is as long
-    as its locomotion; a time-aligned one at most as long as the shorter clip of the pair."""
+    as its locomotion; a time-aligned one at most as long as the shorter clip of the pair.
+    ``store="alignment"``: its parts (:data:`PART_BYTES`) and banks instead of the spliced
+    clips' frames (but those of cpmc through the timewarp and of plug-ins)."""
     frames = clips = 0
     total = 0.0
     info = {k: (c.frames, c.fps) for k, c in plan.clips.items()}
+    if store == "alignment":
+        total += _alignment_bytes(plan, skeleton_of, info)
     for g in {t.group for t in plan.tasks}:  # the last, partly filled chunk of each skeleton's frames
         sk = skeleton_of(g)
         total += CHUNK_FRAMES * frame_bytes(sk.num_joints, sk.has_joint_translations, None)
@@ -82,7 +109,10 @@ def estimate_output(plan, skeleton_of, compression, copied: list | None = None) 
         sk = skeleton_of(t.group)
         frames += count
         clips += len(pairs)
-        total += count * frame_bytes(sk.num_joints, sk.has_joint_translations, compression)
+        if store == "alignment" and (t.mode == "standing" or t.method in ("splice", "naive")):
+            total += count * PART_BYTES["standing" if t.mode == "standing" else "timewarp"] + len(pairs) * PART_TABLE_BYTES
+        else:
+            total += count * frame_bytes(sk.num_joints, sk.has_joint_translations, compression)
     for n, sk in copied or ():
         frames += n
         clips += 1

@@ -46,6 +46,7 @@ class JobSummary:
     retargeted: int = 0  # pairs whose action (and reference) were retargeted onto the locomotion's skeleton
     target: str = ""  # --target: what every clip was brought onto first, and where those clips are
     expected: OutputSize | None = None  # the output's expected size (see torchsplice.job.size)
+    alignment: OutputSize | None = None  # a dry run of a motion store: what --store alignment would take
     written: int | None = None  # bytes the output took
     free: int | None = None  # bytes free beside the output when the job started
     index: Path | None = None  # NAME.index.csv written beside the output
@@ -114,7 +115,9 @@ class JobSummary:
         free = f"{format_bytes(self.free)} free in {folder}" if self.free is not None else ""
         fits = "" if self.expected is None or self.free is None else \
             ("" if self.free >= self.expected.bytes else " (it does not fit)")
-        return "; ".join(x for x in (expect, free) if x) + fits
+        other = (f"; with --store alignment about {format_bytes(self.alignment.bytes)}"
+                 if self.alignment is not None else "")
+        return "; ".join(x for x in (expect, free) if x) + fits + other
 
 
 REASONS_SHOWN = 8

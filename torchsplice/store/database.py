@@ -37,7 +37,7 @@ from .atomic import os_error_message
 from .checks import check_header
 from .lock import check_name_length, output_lock, temp_path
 from .assembling import Assembling
-from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES
+from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES, store_kind
 from .reading import ClipBatch, Reading, virtual_files
 from .resumable import RowLog, clear_status_flags, commit_path, detach, last_checkpoint, rows_path
 from .schema import (FRAME_ARRAYS, CLIPS, COLUMNS, COMPRESSIONS, FORMAT, KINDS, SCHEMA_VERSION, SKELETONS, extra_columns,
@@ -301,6 +301,9 @@ class MotionDatabase(Reading, Writing, Assembling):
             raise DatabaseError(os_error_message(path, exc)) from None
         try:
             skeletons = check_header(path, h5, mode)
+            if mode == "a" and store_kind(h5.attrs) == ALIGNMENT:
+                raise DatabaseError(f"{path}: is an alignment store (spliced clips kept as their parts); clips cannot be "
+                                    f"appended to it: write its motions first (torchsplice materialize {path} -o OUT.h5)")
         except DatabaseError:
             h5.close()
             if tmp is not None:

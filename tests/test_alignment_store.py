@@ -1,0 +1,256 @@
+"""Alignment stores (``splice-all --store alignment``): each source clip once and, per spliced
+clip, what splicing computed; every read assembles the motion, bit for bit the motion store's.
+
+Known answers: the motion store of the same job (written with the same assembly), on the
+built-in sample (splice, naive, cpmc) and on real Bandai Namco clips (standing actions looped,
+held and fitted; LAFAN1 actions retargeted onto Bandai Namco's skeleton)."""
+
+from __future__ import annotations
+
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from cli_helpers import error_line, run
+from torchsplice.core.errors import DatabaseError, TorchspliceError
+from torchsplice.job import splice_all
+from torchsplice.store.database import MotionDatabase
+
+READ = ("rotations", "root_translation", "translations")
+
+
+def _job(db, out, store, **options):
+    options.setdefault("methods", "splice,naive,cpmc")
+    options.setdefault("index", False)
+    splice_all(db, out, store=store, overwrite=True, **options)
+    return out
+
+
+def _bits(a) -> bytes:
+    return a.numpy().tobytes() if isinstance(a, torch.Tensor) else np.ascontiguousarray(a).tobytes()
+
+
+def assert_reads_alike(alignment, motion):
+    """Every reader of the two files gives the same bits, and the same clip table."""
+    with MotionDatabase.open(alignment) as a, MotionDatabase.open(motion) as m:
+        assert a.store == "alignment" and m.store == "motion"
+        assert a.names == m.names and a.columns == m.columns and a.frame_columns == m.frame_columns
+        ta, tm = a.table(), m.table()
+        assert set(ta) == set(tm)
+        for col in tm:
+            x, y = np.asarray(ta[col]), np.asarray(tm[col])
+            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), col
+        for x, y in zip(a.read_many(range(len(a))), m.read_many(range(len(m)))):
+            for k in READ:
+                p, q = getattr(x, k), getattr(y, k)
+                assert (p is None) == (q is None) and (p is None or _bits(p) == _bits(q)), (x.name, k)
+        for i in range(0, len(m), max(1, len(m) // 7)):
+            assert _bits(a.read(i).rotations) == _bits(m.read(i).rotations)
+        for ba, bm in zip(a.batches(batch_size=9), m.batches(batch_size=9)):
+            assert ba.names == bm.names
+            for k in READ:
+                p, q = getattr(ba, k), getattr(bm, k)
+                assert (p is None) == (q is None) and (p is None or _bits(p) == _bits(q)), k
+        for (ma, ea, fa), (mm, em, fm) in zip(a.read_all(), m.read_all()):
+            assert _bits(ma.rotations) == _bits(mm.rotations) and ea.keys() == em.keys()
+            assert _bits(fa["action_frame"]) == _bits(fm["action_frame"])
+        for k in range(len(m.skeletons)):
+            pa, pm = a.packed(k), m.packed(k)
+            t = m.clip_table()
+            mine = t.skeleton == k
+            rows = np.concatenate([np.arange(s, s + n) for s, n in zip(t.start[mine], t.length[mine])])
+            for name in pm:
+                assert _bits(pa[name][rows]) == _bits(pm[name][rows]), name
+            # windows inside clips, as the training dataset reads them
+            starts, lengths = t.start[mine][:5] + 1, np.minimum(t.length[mine][:5] - 1, 17)
+            for name in ("rotations", "root_translation"):
+                wa = a.frame_array(k, name).gather(starts, lengths)
+                wm = m.frame_array(k, name).gather(starts, lengths)
+                assert _bits(wa) == _bits(wm), name
+
+
+@pytest.fixture(scope="module")
+def sample_jobs(sample_db, tmp_path_factory):
+    """The sample's job (splice, naive, cpmc) as a motion store and as an alignment store."""
+    folder = tmp_path_factory.mktemp("stores")
+    return (_job(sample_db, folder / "motion.h5", "motion", workers=2),
+            _job(sample_db, folder / "alignment.h5", "alignment", workers=2))
+
+
+def test_an_alignment_store_reads_bit_for_bit_as_the_motion_store(sample_jobs):
+    motion, alignment = sample_jobs
+    assert_reads_alike(alignment, motion)
+    with h5py.File(alignment, "r") as f:  # what plain h5py finds
+        assert f.attrs["store"] == "alignment" and "assembly_curve" in f.attrs["store_readme"]
+        assert int(f.attrs["schema_version"]) == 2
+        kind, method = f["clips/assembly_kind"][()], f["clips/method"].asstr()[()]
+        assert set(kind[method == "cpmc"]) == {-1}  # cpmc through the timewarp keeps its frames
+        assert set(kind[method != "cpmc"]) == {1}  # splice and naive: a curve and a pelvis rotation
+        sk = f["skeletons/0"]
+        cpmc = np.concatenate([np.arange(s, s + n) for s, n, m in zip(f["clips/start"][()], f["clips/length"][()], method)
+                               if m == "cpmc"])
+        assert np.isfinite(sk["rotations"][()][cpmc]).all() and sk["assembly_curve"].dtype == np.float64
+
+
+def test_the_alignment_store_of_splice_and_naive_is_smaller(sample_db, tmp_path):
+    motion = _job(sample_db, tmp_path / "m.h5", "motion", methods="splice,naive")
+    alignment = _job(sample_db, tmp_path / "a.h5", "alignment", methods="splice,naive")
+    assert alignment.stat().st_size < 0.75 * motion.stat().st_size
+
+
+def test_the_alignment_store_is_self_contained(sample_db, sample_jobs, tmp_path):
+    db = tmp_path / "input.h5"
+    shutil.copy(sample_db, db)
+    out = _job(db, tmp_path / "alone.h5", "alignment", workers=1)
+    db.unlink()  # its input deleted, the output reads the same
+    assert_reads_alike(out, sample_jobs[0])
+
+
+def test_a_resumed_alignment_store_is_bit_identical(sample_db, sample_jobs, tmp_path, monkeypatch):
+    import torchsplice.job.engines.inline as executors
+
+    out = tmp_path / "out.h5"
+    real, calls = executors.run_task, []
+
+    def interrupted(plan, task, *args, **kw):
+        calls.append(task)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(plan, task, *args, **kw)
+
+    monkeypatch.setattr(executors, "run_task", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        splice_all(sample_db, out, store="alignment", methods="splice,naive,cpmc", workers=1, batch_pairs=7, index=False)
+    assert not out.exists()
+    monkeypatch.setattr(executors, "run_task", real)
+    summary = splice_all(sample_db, out, store="alignment", methods="splice,naive,cpmc", workers=1, batch_pairs=7,
+                         index=False)
+    assert summary.resumed > 0
+    assert_reads_alike(out, sample_jobs[0])
+    with h5py.File(out, "r") as f, h5py.File(sample_jobs[1], "r") as g:
+        assert np.array_equal(f["assembly/banks/0/rotations"][()], g["assembly/banks/0/rotations"][()])
+        for col in ("assembly_bank", "assembly_locomotion", "assembly_action", "assembly_crop"):
+            assert np.array_equal(f[f"clips/{col}"][()], g[f"clips/{col}"][()]), col
+
+
+def test_the_dataset_reads_an_alignment_store_as_a_motion_store(sample_jobs):
+    from torchsplice.data import MotionDataset
+
+    motion, alignment = sample_jobs
+    feats = ["rotations", "root_translation", "positions", "action_frame"]
+    for kw in ({}, {"window": 16, "stride": 9}):
+        da, dm = MotionDataset(alignment, features=feats, **kw), MotionDataset(motion, features=feats, **kw)
+        assert len(da) == len(dm) > 0
+        for i in range(0, len(dm), max(1, len(dm) // 6)):
+            x, y = da[i], dm[i]
+            for f in feats:
+                assert _bits(x[f]) == _bits(y[f]), (i, f)
+
+
+def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
+    motion, alignment = sample_jobs
+    out = tmp_path / "materialized.h5"
+    rc, stdout, _ = run(capsys, "materialize", alignment, "-o", out, "-q")
+    assert rc == 0 and out.is_file() and (tmp_path / "materialized.index.csv").is_file()
+    with MotionDatabase.open(out) as db:
+        assert db.store == "motion" and "assembly_curve" not in db.h5["skeletons/0"]
+    for x, y in ((out, motion),):
+        with MotionDatabase.open(x) as a, MotionDatabase.open(y) as m:
+            assert a.names == m.names
+            for k in READ[:2]:
+                assert _bits(a.packed(0)[k]) == _bits(m.packed(0)[k])
+    rc, _, err = run(capsys, "materialize", motion, "-o", tmp_path / "again.h5")
+    assert rc != 0 and "is a motion store already" in error_line(err)
+
+
+def test_bad_input_gets_one_line(sample_db, sample_jobs, tmp_path, capsys):
+    motion, alignment = sample_jobs
+    with pytest.raises(SystemExit) as exit_:
+        run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--store", "alignmnt")
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "did you mean 'alignment'" in err and "Traceback" not in err
+    with pytest.raises(TorchspliceError, match="did you mean 'alignment'"):
+        splice_all(sample_db, tmp_path / "x.h5", store="alignmnt")
+    rc, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--store", "alignment", "--layout", "virtual")
+    assert rc != 0 and "--store alignment" in error_line(err) and "--layout virtual" in err
+    rc, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--store", "alignment", "--shard", "1/2")
+    assert rc != 0 and "--shard" in error_line(err)
+    # an append of motions to an alignment store
+    with pytest.raises(DatabaseError, match="is an alignment store.*materialize"):
+        MotionDatabase.open(alignment, "a")
+    # damaged source rows, missing banks, parts that point nowhere: one line naming the file
+    for damage in ("no banks", "short bank", "bad row"):
+        broken = tmp_path / f"{damage.replace(' ', '_')}.h5"
+        shutil.copy(alignment, broken)
+        with h5py.File(broken, "r+") as f:
+            if damage == "no banks":
+                del f["assembly/banks"]
+            elif damage == "short bank":
+                f["assembly/banks/0/lengths"][0] = 10 ** 7
+            else:
+                f["clips/assembly_action"][3] = 10 ** 6
+        with pytest.raises(DatabaseError) as exc:
+            MotionDatabase.open(broken).close()
+        assert str(broken) in str(exc.value) and "\n" not in str(exc.value), damage
+        rc, _, err = run(capsys, "info", broken)
+        assert rc != 0 and str(broken) in error_line(err)
+
+
+def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path, capsys):
+    rc, out, _ = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--dry-run")
+    assert rc == 0 and "with --store alignment about" in out
+
+
+def test_the_stores_codes_are_the_kernels():
+    from torchsplice.cpu.splice import METHOD_CODES
+    from torchsplice.cpu.standing import TIMING_CODES
+    from torchsplice.store import assembly
+
+    assert assembly.METHOD_CODES == METHOD_CODES and assembly.TIMING_CODES == TIMING_CODES
+
+
+BANDAI = ("dataset-1_walk_normal_001", "dataset-2_walk_normal_008", "dataset-2_walk-turn-left_active_025",
+          "dataset-1_bow_normal_001", "dataset-2_wave-left-hand_normal_001", "dataset-2_raise-up-both-hands_normal_001")
+
+
+@pytest.fixture(scope="module")
+def real_dbs(mocap_dir, tmp_path_factory):
+    """Six Bandai Namco takes (walks, a turn, standing actions) and the LAFAN1 clips, imported."""
+    from torchsplice.formats.importer import import_bvh
+
+    folder = tmp_path_factory.mktemp("real")
+    src = folder / "bn"
+    src.mkdir()
+    for name in BANDAI:
+        (src / f"{name}.bvh").symlink_to(mocap_dir / "bandai_namco_research_motiondataset" / f"{name}.bvh")
+    import_bvh([src], folder / "bn.h5", spec="bandai_namco")
+    import_bvh([mocap_dir / "lafan1_via_pypi_bvhtools"], folder / "lafan.h5")
+    return folder / "bn.h5", folder / "lafan.h5"
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("timing", ["loop", pytest.param("hold", marks=pytest.mark.slow),
+                                    pytest.param("fit", marks=pytest.mark.slow)])
+def test_standing_actions_on_real_clips_read_bit_for_bit(real_dbs, tmp_path, timing):
+    bn, _ = real_dbs
+    motion = _job(bn, tmp_path / "m.h5", "motion", timing=timing)
+    alignment = _job(bn, tmp_path / "a.h5", "alignment", timing=timing)
+    with MotionDatabase.open(alignment) as db:
+        kinds = set(db.h5["clips/assembly_kind"][()].tolist())
+        assert 2 in kinds and 1 in kinds  # standing and time-aligned clips
+    assert_reads_alike(alignment, motion)
+
+
+@pytest.mark.realdata
+def test_retargeted_actions_read_bit_for_bit(real_dbs, tmp_path):
+    bn, lafan = real_dbs
+    options = dict(actions_db=lafan, actions="*", methods="splice,naive")
+    motion = _job(bn, tmp_path / "m.h5", "motion", **options)
+    alignment = _job(bn, tmp_path / "a.h5", "alignment", **options)
+    with MotionDatabase.open(alignment) as db:
+        names = [n for b in db.h5["assembly/banks"].values() for n in b["names"].asstr()[()]]
+        assert any(n.endswith("(retargeted)") for n in names)  # each action once per target skeleton
+    assert_reads_alike(alignment, motion)
