@@ -25,6 +25,7 @@ from torchsplice.retarget import retarget_clips
 from torchsplice.retarget.mirror import mirror_clips
 from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS, STORES, JobConfig, job_config
 from torchsplice.job.engines import available_engines
+from torchsplice.job.materialize import materialize
 from torchsplice.job.merge import merge_job
 from torchsplice.splice import SpliceOptions, TIMINGS, splice
 from torchsplice.splice.registry import available_methods
@@ -84,6 +85,7 @@ def expected() -> dict:
         ("splice-all", "copy_sources"): (JOB["copy_sources"], None),
         ("splice-all", "index"): (JOB["index"], None),
         ("merge", "index"): (param(merge_job, "index"), None),
+        ("materialize", "index"): (param(materialize, "index"), None),
         ("splice-all", "max_length_ratio"): (JOB["max_length_ratio"], None),
         ("splice-all", "engine"): (JOB["engine"], available_engines()),
         ("splice-all", "workers"): (JOB["workers"], None),

@@ -17,6 +17,7 @@ from .splice import add_splice_options, job_default, methods
 from ..core.errors import TorchspliceError
 
 MERGE = "torchsplice.job.merge"  # merge_job: the options of merge
+MATERIALIZE = "torchsplice.job.materialize"  # materialize: the options of materialize
 LOG_LEVELS = ("debug", "info", "warning", "error")  # --log-level: the logging levels worth choosing
 
 
@@ -180,7 +181,7 @@ class Materialize(Command):
     def add_arguments(self, s) -> None:
         s.add_argument("database", help="the alignment store (.h5)")
         s.add_argument("-o", "--output", required=True, help="the motion store to write (.h5)")
-        s.add_argument("--no-index", dest="index", action="store_false", default=True,
+        s.add_argument("--no-index", dest="index", action="store_false", default=declared(MATERIALIZE, "materialize.index"),
                        help="write no OUT.index.csv beside the output")
         add_output_flags(s, force_help="overwrite an existing output")
 
