@@ -136,6 +136,34 @@ def test_a_resumed_alignment_store_is_bit_identical(sample_db, sample_jobs, tmp_
             assert np.array_equal(f[f"clips/{col}"][()], g[f"clips/{col}"][()]), col
 
 
+def test_shards_merge_into_the_same_alignment_store(sample_db, sample_jobs, tmp_path, capsys):
+    out = tmp_path / "sliced.h5"
+    for k in (1, 2, 3):
+        rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--store", "alignment", "--method", "splice,naive,cpmc",
+                         "--batch-size", "9", "--shard", f"{k}/3", "-q")
+        assert rc == 0, err
+    shards = sorted((tmp_path / ".sliced.h5.parts").glob("part-*.shard"))
+    assert len(shards) == 9  # a task's parts, not its frames
+    broken = shards[4].read_bytes()
+    shards[4].write_bytes(broken[:-7])  # a shard cut short: one line naming it
+    rc, _, err = run(capsys, "merge", out)
+    assert rc != 0 and str(shards[4]) in error_line(err) and "not a whole part" in err
+    shards[4].write_bytes(broken)
+    rc, _, err = run(capsys, "merge", out, "-q")
+    assert rc == 0, err
+    assert_reads_alike(out, sample_jobs[0])
+
+
+def test_copied_sources_keep_their_frames_in_an_alignment_store(sample_db, tmp_path):
+    out = _job(sample_db, tmp_path / "copied.h5", "alignment", methods="splice", copy_sources=True)
+    with MotionDatabase.open(out) as db, MotionDatabase.open(sample_db) as src:
+        t = db.clip_table()
+        assert set(t.role) > {"spliced"} and len(db) == 25 + len(src)
+        for name in src.names:
+            assert _bits(db.read(name).rotations) == _bits(src.read(name).rotations)
+        assert set(db.h5["clips/assembly_kind"][()][t.role != "spliced"].tolist()) == {-1}
+
+
 def test_the_dataset_reads_an_alignment_store_as_a_motion_store(sample_jobs):
     from torchsplice.data import MotionDataset
 
@@ -176,8 +204,6 @@ def test_bad_input_gets_one_line(sample_db, sample_jobs, tmp_path, capsys):
         splice_all(sample_db, tmp_path / "x.h5", store="alignmnt")
     rc, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--store", "alignment", "--layout", "virtual")
     assert rc != 0 and "--store alignment" in error_line(err) and "--layout virtual" in err
-    rc, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--store", "alignment", "--shard", "1/2")
-    assert rc != 0 and "--shard" in error_line(err)
     # an append of motions to an alignment store
     with pytest.raises(DatabaseError, match="is an alignment store.*materialize"):
         MotionDatabase.open(alignment, "a")

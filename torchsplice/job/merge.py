@@ -55,8 +55,12 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
     config = JobConfig(database=Path(key["database"]["path"]), output=output,
                        actions_db=Path(key["actions_db"]["path"]) if key["actions_db"] else None,
                        copy_sources=key["copy_sources"], compression=key["compression"], layout=key["layout"],
-                       fix_feet=key.get("fix_feet", True)).checked()
-    if config.copy_sources and Path(key["database"]["path"]).exists():
+                       fix_feet=key.get("fix_feet", True), store=key.get("store", "motion")).checked()
+    if config.store == "alignment" and not all(Path(key[k]["path"]).is_file() for k in ("database", "actions_db")
+                                               if key[k]):
+        raise UnfinishedJobError(f"{output}: an alignment store holds the job's source clips, and its input databases "
+                                 "are gone; merge where they are")
+    if (config.copy_sources or config.store == "alignment") and Path(key["database"]["path"]).exists():
         from .plan import plan_key as plan_key
 
         now = plan_key(config)
@@ -90,15 +94,17 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         sources = Sources(config.database, config.actions_db, fix_feet=config.fix_feet)
         out = None
         try:
-            out, merged = open_output(sink, config, plan, work, run, overwrite,
-                                       lambda g: _shard_skeleton(plan, g, sink, shard_dir), sources)
+            skeleton_of = (lambda g: source_skeleton(plan, g, sources)) if config.store == "alignment" else \
+                (lambda g: _shard_skeleton(plan, g, sink, shard_dir))
+            out, merged = open_output(sink, config, plan, work, run, overwrite, skeleton_of, sources)
             remove_merged_shards(shard_dir, sink, plan.tasks[:merged], config.layout)
             if any(not (shard_dir / sink.shard_name(t.id)).exists() for t in plan.tasks[merged:]):
                 raise TorchspliceError(f"{output}: the merge's staged output could not be resumed and some shards it "
                                        "held are gone; run the whole job once without {shard} to splice them again",
                                        options=("shard",))
             summary.resumed = sum(t.size for t in plan.tasks[:merged])
-            merge = OutputMerge(out, sink, config, plan, plan.tasks, shard_dir, merged, {t.id for t in plan.tasks})
+            merge = OutputMerge(out, sink, config, plan, plan.tasks, shard_dir, merged, {t.id for t in plan.tasks},
+                                skeleton_of)
             bar = progress_bar(len(plan.pairs), summary.resumed, progress)
             try:
                 for t in plan.tasks[merged:]:
@@ -184,6 +190,8 @@ class OutputMerge:
             name, file = self.sink.shard_name(task.id), self.shard_dir / self.sink.part_name(task.id)
             if part is None and file.exists():
                 part = Part.load(file, self.group_skeleton(task.group)[0])
+            elif part is None:  # a shard that is a part (an alignment store's), or None: the sink reads it
+                part = self.sink.load_shard(self.shard_dir / name, lambda: self.group_skeleton(task.group)[0])
             self.out.append_shard(self.shard_dir / name, part, virtual=c.layout == "virtual",
                                   refer_as=run_shards(c, self.plan) / name)
             self.next += 1

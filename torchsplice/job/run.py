@@ -96,9 +96,6 @@ class SpliceJob:
             raise OutputExistsError(f"{c.output}: already exists")
         if self.dry_run:
             return self._dry_run(t0)
-        if self.shard is not None and c.store == "alignment":
-            raise TorchspliceError("{store} alignment writes its output in one run for now; run it without {shard}",
-                                   options=("store", "shard"))
         prestart(c.engine, c.worker_count(), c.device, c.backend)
         if self.shard is not None and self.restart:
             raise TorchspliceError("{restart} discards the whole job, every slice's work too: run it once without {shard}",

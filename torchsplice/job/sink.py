@@ -26,7 +26,7 @@ from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .task import FRAME_COLUMNS, OUTPUT_COLUMNS, Part
 
-__all__ = ["Sink", "HDF5Sink", "OutputWriter", "make_sink"]
+__all__ = ["Sink", "HDF5Sink", "AlignmentSink", "OutputWriter", "make_sink"]
 
 
 class Sink:
@@ -44,6 +44,11 @@ class Sink:
 
     def shard_skipped(self, path: Path) -> dict:
         raise NotImplementedError
+
+    def load_shard(self, path: Path, skeleton) -> Part | None:
+        """A shard as a :class:`Part` on the group's ``skeleton`` (a callable giving it), for sinks
+        whose shards are parts; ``None`` where :meth:`OutputWriter.append_shard` reads the file."""
+        return None
 
     def open_output(self, path: Path, compression, run: dict, overwrite: bool, staging: Path,
                     skeletons=(), store: str = "motion", banks=()) -> "OutputWriter":
@@ -138,6 +143,9 @@ class OutputWriter:
         with ``virtual``, only the shard's table (its frames stay in the shard, which the output
         refers to as ``refer_as``, where it will be once the output is complete)."""
         if part is not None and not virtual:
+            if self.expect_plan is not None and part.plan and part.plan != self.expect_plan:
+                raise DatabaseError(f"{path}: this shard belongs to another plan of the job; rerun with {{restart}}",
+                                    options=("restart",))
             self._count(part.extra["flags"], part.skipped, part.extra["timing"])
             if part.names and part.parts is not None:
                 self._append_parts(part)
@@ -236,7 +244,26 @@ class HDF5Sink(Sink):
         return out, resumed[1]
 
 
+class AlignmentSink(HDF5Sink):
+    """The sink of an alignment store: its output is an alignment store (:class:`HDF5Sink`'s
+    output with ``store="alignment"``), and its shards (``--shard`` runs) are the tasks' parts
+    as :meth:`Part.save` writes them (a task's parts are kilobytes; their source clips are the
+    output's banks, which the merge writes once)."""
+
+    def shard_name(self, task_id: str) -> str:
+        return f"part-{task_id}.shard"
+
+    def write_shard(self, part: Part, path: Path, compression) -> None:
+        part.save(path)
+
+    def shard_skipped(self, path: Path) -> dict:
+        return Part.header(path)["meta"]["skipped"]
+
+    def load_shard(self, path: Path, skeleton) -> Part:
+        return Part.load(path, skeleton())
+
+
 def make_sink(config) -> Sink:
     """The sink of a job of ``config`` (the one place the job, its workers and the merge get it):
-    an :class:`HDF5Sink` for every job today."""
-    return HDF5Sink()
+    an :class:`AlignmentSink` for ``store="alignment"``, an :class:`HDF5Sink` otherwise."""
+    return AlignmentSink() if getattr(config, "store", "motion") == "alignment" else HDF5Sink()

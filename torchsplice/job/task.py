@@ -136,14 +136,33 @@ class Part:
                 a.tofile(f)
         os.replace(tmp, path)
 
+    @staticmethod
+    def header(path: Path) -> dict:
+        """The JSON header of a part file (see :meth:`save`): ``meta``, ``arrays`` and ``base``
+        (where the arrays start); a file that is not a whole part is one
+        :class:`~torchsplice.core.errors.TorchspliceError` line."""
+        try:
+            size = Path(path).stat().st_size
+            with open(path, "rb") as f:
+                n = int.from_bytes(f.read(8), "little")
+                if not 0 < n <= size - 8:
+                    raise ValueError("no header")
+                head = json.loads(f.read(n))
+            end = 8 + n + max((at + int(np.prod(shape)) * np.dtype(dt).itemsize
+                               for at, dt, shape in head["arrays"].values()), default=0)
+            if end != size:
+                raise ValueError(f"{size} bytes where its arrays end at {end}")
+            return {**head, "base": 8 + n}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise TorchspliceError(f"{path}: not a whole part of the job ({str(exc)[:80]}); delete it and run the job's "
+                                   "slice again") from None
+
     @classmethod
     def load(cls, path: Path, skeleton) -> "Part":
         """A part written by :meth:`save` (on ``skeleton``, its locomotion group's), its arrays
         mapped from the file rather than read."""
-        with open(path, "rb") as f:
-            n = int.from_bytes(f.read(8), "little")
-            head = json.loads(f.read(n))
-        base = 8 + n
+        head = cls.header(path)
+        base = head["base"]
         arrays = {k: np.memmap(path, dtype=np.dtype(dt), mode="r", offset=base + at, shape=tuple(shape))
                   if int(np.prod(shape)) else np.zeros(shape, np.dtype(dt)) for k, (at, dt, shape) in head["arrays"].items()}
         meta = head["meta"]
