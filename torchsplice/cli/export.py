@@ -74,6 +74,9 @@ class Export(Command):
                             "coverage...) and no train/val/test.txt beside them")
         s.add_argument("--paraphrases", type=int, default=None, metavar="N",
                        help=f"humanml3d: captions per clip, at most (default: {h['paraphrases']})")
+        s.add_argument("--shards", type=int, default=None, metavar="N",
+                       help="humanml3d: write the motions as about N tar files in WebDataset's layout (ID.npy, ID.txt; "
+                            "SPLIT-000000.tar ...) instead of one file each")
         s.add_argument("--select", action="append", metavar="SELECT", default=None,
                        help="only clips this selector selects (repeat: all of them), as splice-all's --locomotions read")
         s.add_argument("--skeleton", default=None, metavar="K[,K...]",
@@ -104,7 +107,7 @@ class Export(Command):
                               overwrite=args.force, skeletons=skeletons, command=command_line(args),
                               packed=args.packed, features=args.features, captions=args.captions, mirror=args.mirror,
                               window=args.window, split_ratios=args.split_ratios, split_seed=args.split_seed,
-                              paraphrases=args.paraphrases, index=args.index)
+                              paraphrases=args.paraphrases, shards=args.shards, index=args.index)
         say(args, f"wrote {result.summary}")
         return 0
 

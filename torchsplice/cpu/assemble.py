@@ -17,7 +17,9 @@ Inputs index a bank of source clips packed along frames (float64 local rotations
 ``rot (N, J, 4)``, WXYZ, and local translations ``trans (N, J, 3)``, row 0 the root's
 position; clip ``c`` is rows ``starts[c] : starts[c] + lengths[c]``). Outputs are written as
 their arrays' dtype (float32 for the stores). Every function computes result frames
-``first .. first + count - 1`` of a clip, so a read of a window costs the window only.
+``first .. first + count - 1`` of a clip, so a read of a window costs the window only. The batch
+functions run in the calling thread (no parallel region: a read may happen in a forked
+``DataLoader`` worker, or beside other threads); processes give the parallelism.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .curve import split_time
 from .quat import qconj, qload, qmul, qnormalize, qslerp, qstore
@@ -216,26 +218,26 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
                 otrans[i, j, c] = trans[ls + t, j, c]
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
 def assemble_timewarp(rot, trans, starts, lengths, loco, act, crop, upper, pelvis, curve, prot, first, count, out_start,
                       orot, otrans):
-    """Timewarp clips ``b`` in parallel: result frames ``first[b] .. first[b] + count[b] - 1`` of
+    """Timewarp clips ``b``: result frames ``first[b] .. first[b] + count[b] - 1`` of
     the pair (bank clips ``loco[b]``, ``act[b]``, the action cropped by ``crop[b]``) into rows
     ``out_start[b] ..`` of ``orot``/``otrans``; ``curve``/``prot`` hold those frames' parts in
     the same rows."""
-    for b in prange(loco.shape[0]):
+    for b in range(loco.shape[0]):
         o, n = out_start[b], count[b]
         a = act[b]
         timewarp_rows(rot, trans, starts[loco[b]] + first[b], starts[a] + crop[b], lengths[a] - crop[b], upper, pelvis,
                       curve[o:o + n], prot[o:o + n], n, orot[o:o + n], otrans[o:o + n])
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@njit(cache=True, nogil=True)
 def assemble_standing(rot, trans, starts, lengths, loco, act, method, timing, window, loops, acting, upper, spine, arms,
                       blend_s, first, count, out_start, orot, otrans, ocurve):
-    """Standing clips ``b`` in parallel (per-clip arguments as :func:`standing_rows`'s, ``loops
+    """Standing clips ``b`` (per-clip arguments as :func:`standing_rows`'s, ``loops
     (B, 2)``, ``acting (B, 2)``): result frames ``first[b] ..`` into rows ``out_start[b] ..``."""
-    for b in prange(loco.shape[0]):
+    for b in range(loco.shape[0]):
         o, n = out_start[b], count[b]
         lo, a = loco[b], act[b]
         standing_rows(rot, trans, starts[lo], lengths[lo], starts[a], lengths[a], method[b], timing[b], window[b],

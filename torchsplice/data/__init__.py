@@ -4,16 +4,17 @@
 split=None)`` serves clips or fixed-length windows of any torchsplice motion database as dicts of
 tensors (quaternions WXYZ, positions in file units); ``collate_motion`` pads them into batches
 with ``lengths`` and ``mask``; ``ds.batch_sampler(B)`` batches a database of several skeletons one
-topology at a time (:class:`SkeletonBatchSampler`); :mod:`.splits` splits clips by source clip.
+topology at a time (:class:`SkeletonBatchSampler`); :mod:`.splits` splits clips by source clip;
+``MotionStream`` streams batches in chunk-shuffled order, resumable mid-epoch (:mod:`.stream`).
 
 The names below are imported on first use, so that :mod:`.splits` (which the exports and the
 command line read) loads without torch.
 """
 
-__all__ = ["MotionDataset", "collate_motion", "DatasetError", "SkeletonBatchSampler"]
+__all__ = ["MotionDataset", "collate_motion", "DatasetError", "SkeletonBatchSampler", "MotionStream", "ChunkedStream"]
 
 _LAZY = {"MotionDataset": "dataset", "collate_motion": "collate", "DatasetError": "errors",
-         "SkeletonBatchSampler": "sampler"}
+         "SkeletonBatchSampler": "sampler", "MotionStream": "stream", "ChunkedStream": "stream"}
 
 
 def __getattr__(name):

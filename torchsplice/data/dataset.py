@@ -438,13 +438,18 @@ class MotionDataset(Dataset):
         from .sampler import SkeletonBatchSampler
 
         groups: dict[int, list[int]] = {}
+        for i, g in enumerate(self.item_topologies().tolist()):
+            groups.setdefault(g, []).append(i)
+        return SkeletonBatchSampler(list(groups.values()), batch_size, shuffle, seed, drop_last)
+
+    def item_topologies(self) -> np.ndarray:
+        """``(len(self),)`` int64: for each item, the first skeleton id of its skeleton's topology
+        (items of equal values stack in one batch)."""
         topology: dict[int, int] = {}
         for k in sorted(set(self._skel.tolist())):
             topology[k] = next((g for g in topology if self.skeletons[g].same_topology(self.skeletons[k])), k)
         skel = self._skel if self.window is None else self._skel[self._win_clip]
-        for i, k in enumerate(np.asarray(skel).tolist()):
-            groups.setdefault(topology[k], []).append(i)
-        return SkeletonBatchSampler(list(groups.values()), batch_size, shuffle, seed, drop_last)
+        return np.array([topology[k] for k in np.asarray(skel).tolist()], np.int64)
 
     @property
     def skeleton(self) -> Skeleton:

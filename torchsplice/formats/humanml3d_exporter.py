@@ -29,6 +29,13 @@ source clips (:mod:`.splits`). Mean and Std are the format's: the mean of each c
 every row, and the standard deviation of each kind of feature (one value per kind, the mean of
 its columns'; :data:`~.humanml3d_features.GROUPS`).
 
+``shards=N`` (``--shards N``) writes the motions as tar files in WebDataset's layout instead of
+one file each: ``SPLIT-000000.tar`` ... (about ``N`` in all, each split its own share, at least
+one), each member pair ``ID.npy`` (the features, as ``new_joint_vecs/ID.npy``) and ``ID.txt``
+(the captions, as ``texts/ID.txt``); ``Mean.npy``, ``Std.npy``, the split lists and
+``index.csv`` beside them as ever. A large export is then a handful of files, which
+``webdataset.WebDataset("OUT/train-{000000..000003}.tar")`` or plain ``tarfile`` reads.
+
 Registered on import; imports no torch until it exports.
 """
 
@@ -69,6 +76,7 @@ class HumanML3DExporter(Exporter):
         "split_ratios": ExportOption(DEFAULT_RATIOS),
         "split_seed": ExportOption(0),
         "paraphrases": ExportOption(3),
+        "shards": ExportOption(None),
     }
 
     # -- the plan: which files, made from the clip table alone --------------------------------
@@ -92,13 +100,21 @@ class HumanML3DExporter(Exporter):
         if not isinstance(count, int) or isinstance(count, bool) or count < 1:
             raise TorchspliceError(f"{{paraphrases}} must be a whole number of at least 1, got {count!r}",
                                    options=("paraphrases",))
+        shards = o["shards"]
+        if shards is not None and (not isinstance(shards, int) or isinstance(shards, bool) or shards < 1):
+            raise TorchspliceError(f"{{shards}} must be a whole number of at least 1, got {shards!r}", options=("shards",))
         with MotionDatabase.open(self.database) as db:
             table = db.clip_table()
             rows = [db.index(n) for n in self.names]
-            return _plan_items(table, rows, window, bool(o["mirror"]), ratios, parse_seed(o["split_seed"]), str(self.database),
-                               _job_sources(db.attrs.get("run")))
+            plan = _plan_items(table, rows, window, bool(o["mirror"]), ratios, parse_seed(o["split_seed"]),
+                               str(self.database), _job_sources(db.attrs.get("run")))
+        plan["shards"] = _shard_items(plan["items"], shards) if shards is not None else {}
+        return plan
 
     def layout(self) -> list[str]:
+        if self._plan["shards"]:
+            return (list(self._plan["shards"]) + ["Mean.npy", "Std.npy"] + [f"{s}.txt" for s in (*SPLITS, "train_val", "all")]
+                    + ["index.csv"])
         files = []
         for item in self._plan["items"]:
             files += [f"new_joint_vecs/{item['id']}.npy", f"new_joints/{item['id']}.npy", f"texts/{item['id']}.txt"]
@@ -106,7 +122,8 @@ class HumanML3DExporter(Exporter):
 
     def owned(self, folder: Path) -> list[Path]:
         return [f for sub, suffix in (("new_joint_vecs", ".npy"), ("new_joints", ".npy"), ("texts", ".txt"))
-                for f in sorted((folder / sub).glob(f"*{suffix}")) if not f.name.startswith(".")]
+                for f in sorted((folder / sub).glob(f"*{suffix}")) if not f.name.startswith(".")] + [
+                f for f in sorted(folder.glob("*-[0-9][0-9][0-9][0-9][0-9][0-9].tar"))]
 
     # -- checks before any file ---------------------------------------------------------------
     @cached_property
@@ -176,12 +193,30 @@ class HumanML3DExporter(Exporter):
 
         stats = FeatureStats()
         rows = []
-        for item, vecs, joints, captions in self._clips():
-            stats.add(vecs)
-            yield ("npy", item, vecs.numpy().astype(np.float32))
-            yield ("npy", None, joints.numpy().astype(np.float32))
-            yield ("text", None, "".join(c.line() + "\n" for c in captions))
-            rows.append(item)
+        if self._plan["shards"]:
+            for name, items in self._plan["shards"].items():
+                written = {"frames": 0}
+
+                def members(items=items, written=written):  # computed as the tar is written
+                    for item, vecs, _, captions in self._clips(items):
+                        stats.add(vecs)
+                        rows.append(item)
+                        written["frames"] += int(vecs.shape[0])
+                        buf = io.BytesIO()
+                        np.save(buf, vecs.numpy().astype(np.float32), allow_pickle=False)
+                        yield f"{item['id']}.npy", buf.getvalue()
+                        yield f"{item['id']}.txt", "".join(c.line() + "\n" for c in captions).encode("utf-8")
+
+                yield ("tar", written, members())
+            order = {item["id"]: n for n, item in enumerate(self._plan["items"])}
+            rows.sort(key=lambda r: order[r["id"]])
+        else:
+            for item, vecs, joints, captions in self._clips():
+                stats.add(vecs)
+                yield ("npy", item, vecs.numpy().astype(np.float32))
+                yield ("npy", None, joints.numpy().astype(np.float32))
+                yield ("text", None, "".join(c.line() + "\n" for c in captions))
+                rows.append(item)
         mean, std = stats.result()
         yield ("npy", None, mean.numpy().astype(np.float32))
         yield ("npy", None, std.numpy().astype(np.float32))
@@ -197,63 +232,79 @@ class HumanML3DExporter(Exporter):
             writer.writerow([r[c] for c in INDEX_COLUMNS])
         yield ("text", None, out.getvalue())
 
-    def _clips(self):
-        """``(item, features (N, 263), positions (N, 22, 3), captions)`` per planned item, in
-        order, computed a batch of clips at a time."""
+    def _clips(self, items=None, db=None):
+        """``(item, features (N, 263), positions (N, 22, 3), captions)`` per planned item (or per
+        one of ``items``, planned items), grouped by clip, computed a batch of clips at a time
+        (from ``db``, the open database, where given)."""
+        if db is None:
+            from ..store.database import MotionDatabase
+
+            with MotionDatabase.open(self.database) as db:
+                yield from self._clips(items, db)
+            return
         from dataclasses import replace
 
         import torch
 
         from ..specs.smpl import SMPL22_MIRROR
-        from ..store.database import MotionDatabase
         from .captions import clip_captions, mirror_caption
         from .humanml3d_features import features_to_positions, pad_clips, positions_to_features
 
-        items = self._plan["items"]
+        items = self._plan["items"] if items is None else items
         by_clip: dict[str, list[dict]] = {}
         for item in items:
             by_clip.setdefault(item["clip"], []).append(item)
         names = list(by_clip)
         count = self.options["paraphrases"]
-        with MotionDatabase.open(self.database) as db:
-            for b in range(0, len(names), READ_BATCH):
-                chunk = names[b:b + READ_BATCH]
-                positions = self._positions(db.read_many(chunk, dtype=torch.float64))
-                pieces, meta = [], []
-                for name, p in zip(chunk, positions):
-                    for item in by_clip[name]:
-                        piece = p[item["first"]:item["first"] + item["frames"]]
-                        if item["mirrored"]:
-                            piece = piece[:, list(SMPL22_MIRROR)] * torch.tensor([-1.0, 1.0, 1.0], dtype=piece.dtype)
-                        pieces.append(piece)
-                        meta.append(item)
-                order = sorted(range(len(pieces)), key=lambda i: pieces[i].shape[0])
-                done: dict[int, tuple] = {}
-                for s in range(0, len(order), READ_BATCH):  # clips of like lengths padded together
-                    group = order[s:s + READ_BATCH]
-                    feats = positions_to_features(pad_clips([pieces[i] for i in group]))
-                    back = features_to_positions(feats)
-                    for j, i in enumerate(group):
-                        n = pieces[i].shape[0] - 1
-                        done[i] = (feats[j, :n], back[j, :n])
-                captions_of: dict[str, tuple] = {}
-                for i, item in enumerate(meta):
-                    name = item["clip"]
-                    if name not in captions_of:
-                        captions_of[name] = clip_captions(name, item["role"], item["labels"], self._tables[item["skeleton"]],
-                                                          self._user_captions, count, item["locomotion"], item["action"])
-                    captions, described = captions_of[name]
-                    start, end = item["first"] / 20.0, (item["first"] + item["frames"] - 1) / 20.0
-                    inside = [c for c in (c.within(start, end) for c in captions) if c is not None]
-                    if not inside:  # only captions of other parts of the clip: said whole, and flagged
-                        inside, described = [replace(c, start=0.0, end=0.0) for c in captions], False
+        for b in range(0, len(names), READ_BATCH):
+            chunk = names[b:b + READ_BATCH]
+            positions = self._positions(db.read_many(chunk, dtype=torch.float64))
+            pieces, meta = [], []
+            for name, p in zip(chunk, positions):
+                for item in by_clip[name]:
+                    piece = p[item["first"]:item["first"] + item["frames"]]
                     if item["mirrored"]:
-                        inside = [mirror_caption(c) for c in inside]
-                    item["described"] = int(described)
-                    if not bool(torch.isfinite(done[i][0]).all()):
-                        raise TorchspliceError(f"{self.database}: clip {name!r}: its features are not finite (NaN or "
-                                               "infinity); nothing written")
-                    yield item, done[i][0], done[i][1], inside
+                        piece = piece[:, list(SMPL22_MIRROR)] * torch.tensor([-1.0, 1.0, 1.0], dtype=piece.dtype)
+                    pieces.append(piece)
+                    meta.append(item)
+            order = sorted(range(len(pieces)), key=lambda i: pieces[i].shape[0])
+            done: dict[int, tuple] = {}
+            for s in range(0, len(order), READ_BATCH):  # clips of like lengths padded together
+                group = order[s:s + READ_BATCH]
+                feats = positions_to_features(pad_clips([pieces[i] for i in group]))
+                back = features_to_positions(feats)
+                for j, i in enumerate(group):
+                    n = pieces[i].shape[0] - 1
+                    done[i] = (feats[j, :n], back[j, :n])
+            captions_of: dict[str, tuple] = {}
+            for i, item in enumerate(meta):
+                name = item["clip"]
+                if name not in captions_of:
+                    captions_of[name] = clip_captions(name, item["role"], item["labels"], self._tables[item["skeleton"]],
+                                                      self._user_captions, count, item["locomotion"], item["action"])
+                captions, described = captions_of[name]
+                start, end = item["first"] / 20.0, (item["first"] + item["frames"] - 1) / 20.0
+                inside = [c for c in (c.within(start, end) for c in captions) if c is not None]
+                if not inside:  # only captions of other parts of the clip: said whole, and flagged
+                    inside, described = [replace(c, start=0.0, end=0.0) for c in captions], False
+                if item["mirrored"]:
+                    inside = [mirror_caption(c) for c in inside]
+                item["described"] = int(described)
+                if not bool(torch.isfinite(done[i][0]).all()):
+                    raise TorchspliceError(f"{self.database}: clip {name!r}: its features are not finite (NaN or "
+                                           "infinity); nothing written")
+                yield item, done[i][0], done[i][1], inside
+
+    @property
+    def planned_items(self) -> list[dict]:
+        """Every motion the export writes, in order: ``id``, ``clip``, ``first``, ``frames`` (at 20
+        fps), ``rows``, ``mirrored``, ``split`` ... (the columns of its ``index.csv``)."""
+        return self._plan["items"]
+
+    def motions(self, items=None, db=None):
+        """``(item, features (N, 263), positions (N, 22, 3), captions)`` of ``items`` (planned
+        items; ``None``: all), exactly as the export writes them (see :meth:`_clips`)."""
+        return self._clips(items, db)
 
     def _positions(self, motions) -> list:
         """Each clip's joint positions ``(T', 22, 3)`` in metres on the SMPL body at 20 fps."""
@@ -279,6 +330,8 @@ class HumanML3DExporter(Exporter):
 
     def measure(self, item) -> tuple[int, float | None]:
         kind, meta, array = item
+        if kind == "tar":
+            return meta["frames"], 20.0
         if meta is None:
             return 0, None
         return int(array.shape[0]), 20.0
@@ -287,7 +340,15 @@ class HumanML3DExporter(Exporter):
         import numpy as np
 
         kind, _, payload = item
-        if kind == "npy":
+        if kind == "tar":  # members as they are computed; fixed metadata, so equal exports give equal bytes
+            import tarfile
+
+            with tarfile.open(path, "w", format=tarfile.USTAR_FORMAT) as tar:
+                for name, data in payload:
+                    info = tarfile.TarInfo(name)
+                    info.size, info.mode, info.mtime = len(data), 0o644, 0
+                    tar.addfile(info, io.BytesIO(data))
+        elif kind == "npy":
             with open(path, "wb") as f:
                 np.save(f, payload, allow_pickle=False)
         else:
@@ -317,6 +378,20 @@ class HumanML3DExporter(Exporter):
                 f"{' with mirrors' if self.options['mirror'] else ''}, {result.frames} frames at 20 fps; "
                 f"train/val/test {split['train']}/{split['val']}/{split['test']}"
                 + (f"; {'; '.join(notes)}" if notes else ""))
+
+
+def _shard_items(items: list[dict], shards: int) -> dict[str, list[dict]]:
+    """The tar files of a sharded export (``SPLIT-000000.tar`` ...: each split's motions in plan
+    order, cut into its share of ``shards``, at least one) and the items of each."""
+    out: dict[str, list[dict]] = {}
+    groups = {s: [i for i in items if (i["split"] or "nosplit") == s] for s in (*SPLITS, "nosplit")}
+    for s, group in groups.items():
+        if not group:
+            continue
+        n = min(len(group), max(1, round(shards * len(group) / len(items))))
+        for k in range(n):
+            out[f"{s}-{k:06d}.tar"] = group[k * len(group) // n:(k + 1) * len(group) // n]
+    return out
 
 
 def _job_sources(run) -> tuple[str, str]:
