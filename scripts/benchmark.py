@@ -31,6 +31,10 @@ Sections:
           files, the features alone and the files alone; on every real clip, the format's
           properties and the import's round trip        [>= 2,000 clips/s, 1e-5 m, 1e-6 m, 1e-4 m]
   packed  peak memory of a packed .npz export of 1,000, 4,000 and 10,000 clips   [flat]
+  store   alignment stores against motion stores (scripts/bench_store.py): size, job time, reads bit
+          for bit, assembly clips/s per core, MotionDataset frames/s, SIGKILL and resume, streaming
+          HumanML3D features against the export and a T2M-GPT-style loader; --big-db: the default job
+          on a whole dataset                    [>= 10x smaller, <= 1.0x time, >= 1x reads, <= 30 min, <= 12 GB]
   startup each command's wall time on a small database (the sample), best of five, beside the
           interpreter alone and the interpreter importing torch: what a command adds of its own
           [--help <= 0.5 s; a command reading clips <= torch's import + 0.8 s]
@@ -644,9 +648,12 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
                    help="folder of real BVH files (default ../shared/mocap or $TORCHSPLICE_MOCAP)")
-    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d,packed,startup",
+    p.add_argument("--only", default="parse,stages,splice,job,engines,mix,retarget,humanml3d,packed,store,startup",
                    help="comma-separated sections: parse, stages, splice, job, engines, mix, retarget, humanml3d, "
-                        "packed, startup")
+                        "packed, store, startup")
+    p.add_argument("--big-db", type=Path, default=None,
+                   help="store: also run the default job with --store alignment on this database (e.g. the whole "
+                        "Bandai Namco dataset imported)")
     p.add_argument("--mix-db", type=Path, default=None,
                    help="the real mix on this database (e.g. the whole Bandai Namco dataset imported) instead of "
                         "the Bandai Namco clips of --mocap")
@@ -687,6 +694,10 @@ def main() -> int:
             from bench_humanml3d import bench_packed_memory
 
             bench_packed_memory()
+        if "store" in sections:
+            from bench_store import bench_store
+
+            bench_store(real_files(args.mocap), args.big_db)
         if "startup" in sections:
             bench_startup()
     return 0

@@ -230,6 +230,36 @@ def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path, c
     assert rc == 0 and "with --store alignment about" in out
 
 
+def _torch_against_kernels(path) -> float:
+    """The largest difference between the torch assembly (on the CPU) and the compiled kernels'."""
+    worst = 0.0
+    with MotionDatabase.open(path) as db:
+        t = db.clip_table()
+        for k in sorted(set(t.skeleton.tolist())):
+            r = np.flatnonzero(t.skeleton == k)
+            for starts, lengths in ((t.start[r], t.length[r]), (t.start[r] + 3, np.minimum(t.length[r] - 3, 20))):
+                a = db.assembled(k, starts, lengths)
+                b = db.assembled_on(k, starts, lengths, "cpu")
+                assert a.keys() == b.keys()
+                for name in ("rotations", "root_translation", "translations"):
+                    if name in a:
+                        assert b[name].dtype == torch.float32 and b[name].shape == a[name].shape
+                        worst = max(worst, float(np.abs(a[name] - b[name].numpy()).max()))
+    return worst
+
+
+def test_the_torch_assembly_for_gpus_gives_the_kernels_frames(sample_jobs):
+    assert _torch_against_kernels(sample_jobs[1]) <= 1e-5
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_a_batch_asked_for_on_a_gpu_is_assembled_there(sample_jobs):
+    with MotionDatabase.open(sample_jobs[1]) as a, MotionDatabase.open(sample_jobs[0]) as m:
+        ba, bm = a.read_batch(list(range(12)), device="cuda"), m.read_batch(list(range(12)))
+        assert ba.rotations.device.type == "cuda"
+        assert float((ba.rotations.cpu() - bm.rotations).abs().max()) <= 1e-5
+
+
 def test_the_stores_codes_are_the_kernels():
     from torchsplice.cpu.splice import METHOD_CODES
     from torchsplice.cpu.standing import TIMING_CODES
@@ -268,6 +298,7 @@ def test_standing_actions_on_real_clips_read_bit_for_bit(real_dbs, tmp_path, tim
         kinds = set(db.h5["clips/assembly_kind"][()].tolist())
         assert 2 in kinds and 1 in kinds  # standing and time-aligned clips
     assert_reads_alike(alignment, motion)
+    assert _torch_against_kernels(alignment) <= 1e-5  # a loop's inertialized seams too
 
 
 @pytest.mark.realdata

@@ -54,6 +54,23 @@ class Assembling:
             out[n] = self.frame_rows(k, n, starts, lengths)
         return out
 
+    def assembled_on(self, k: int, starts, lengths, device) -> dict:
+        """:meth:`assembled` as float32 tensors on ``device``: an alignment store's clips
+        assembled there by torch (:mod:`torchsplice.store.assembly_torch`; equal to the compiled
+        kernels' frames to float32's rounding), a motion store's frames read and moved there."""
+        import torch
+
+        starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
+        if self.store == ALIGNMENT:
+            out = self._assembly().frames_on(self, k, starts, lengths, device)
+        else:
+            g = self.h5[skeleton_path(k)]
+            out = {n: torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device, dtype=torch.float32)
+                   for n in FRAME_ARRAYS if n in g}
+        for n in self.frame_columns:
+            out[n] = torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device)
+        return out
+
     def whole_frames(self, k: int) -> dict[str, np.ndarray]:
         """Every row of skeleton ``k``'s frame arrays and per-frame columns, as a motion store
         holds them (:meth:`~torchsplice.store.reading.Reading.packed` of an alignment store)."""

@@ -265,3 +265,82 @@ class Assembly:
         if "translations" in g:
             out["translations"] = otrans
         return out
+
+    def frames_on(self, db, k: int, starts: np.ndarray, lengths: np.ndarray, device) -> dict:
+        """:meth:`frames` assembled by torch on ``device`` (:mod:`.assembly_torch`): float32
+        tensors there, equal to the compiled kernels' to float32's rounding."""
+        import torch
+
+        from .assembly_torch import as_tensor, standing_frames, timewarp_frames
+
+        starts = np.asarray(starts, np.int64).reshape(-1)
+        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        g = db.h5[skeleton_path(k)]
+        J, N = g["rotations"].shape[1], int(lengths.sum())
+        first_frames, rows = self.clips_of(k)
+        at = np.searchsorted(first_frames, starts, side="right") - 1
+        clip = rows[np.maximum(at, 0)]
+        first = starts - self.start[clip]
+        if len(starts) and ((at < 0).any() or (first + lengths > self.length[clip]).any()):
+            raise DatabaseError(f"{db.path}: frames asked of skeleton {k} are not within one clip of this alignment store")
+        p = {n: v[clip] for n, v in self.parts.items()}
+        kind = np.repeat(p["assembly_kind"], lengths)
+        owner = np.repeat(np.arange(len(starts)), lengths)  # the range of each result frame
+        t = np.repeat(first, lengths) + np.arange(N) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+        orot = torch.empty((N, J, 4), dtype=torch.float32, device=device)
+        otrans = torch.empty((N, J, 3), dtype=torch.float32, device=device)
+        stored = kind <= 0
+        if stored.any():
+            s, n = starts[p["assembly_kind"] <= 0], lengths[p["assembly_kind"] <= 0]
+            at_rows = as_tensor(np.flatnonzero(stored), device)
+            orot[at_rows] = as_tensor(db.frame_rows(k, "rotations", s, n), device, torch.float32)
+            otrans[at_rows, 0] = as_tensor(db.frame_rows(k, "root_translation", s, n), device, torch.float32)
+            if "translations" in g:
+                otrans[at_rows, 1:] = as_tensor(db.frame_rows(k, "translations", s, n)[:, 1:], device, torch.float32)
+        cache = self.__dict__.setdefault("_device_banks", {})
+        for b in sorted(set(p["assembly_bank"][p["assembly_kind"] > 0].tolist())):
+            key = (b, str(device))
+            if key not in cache:
+                bank = self.banks[b]
+                cache[key] = (as_tensor(bank["rot"], device), as_tensor(bank["trans"], device),
+                              {n: (as_tensor(v, device) if isinstance(v, np.ndarray) else v)
+                               for n, v in bank["tables"].items()})
+            rot, trans, tb = cache[key]
+            bank = self.banks[b]
+            mine = np.repeat(p["assembly_bank"] == b, lengths)
+            sel = np.flatnonzero(mine & (kind == 1))
+            if len(sel):
+                tw = np.flatnonzero((p["assembly_kind"] == 1) & (p["assembly_bank"] == b))
+                curve = db.frame_rows(k, "assembly_curve", starts[tw], lengths[tw])
+                prot = db.frame_rows(k, "assembly_pelvis", starts[tw], lengths[tw])
+                o = owner[sel]
+                act, crop = p["assembly_action"][o], p["assembly_crop"][o]
+                n_act = bank["lengths"][act] - crop
+                x = np.minimum(np.maximum(curve, 0.0), n_act - 1.0)
+                i0 = np.floor(x)
+                i1 = np.minimum(i0 + 1, n_act - 1)
+                base = bank["starts"][act] + crop
+                r, tr = timewarp_frames(rot, trans, as_tensor(bank["starts"][p["assembly_locomotion"][o]] + t[sel], device),
+                                        as_tensor(base + i0.astype(np.int64), device),
+                                        as_tensor(base + i1.astype(np.int64), device), as_tensor(x - i0, device),
+                                        as_tensor(prot, device), tb["upper"], tb["pelvis"])
+                orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
+            sel = np.flatnonzero(mine & (kind == 2))
+            if len(sel):
+                cl = np.flatnonzero((p["assembly_kind"] == 2) & (p["assembly_bank"] == b))
+                index = np.full(len(starts), -1, np.int64)
+                index[cl] = np.arange(len(cl))
+                lo, ac = p["assembly_locomotion"][cl], p["assembly_action"][cl]
+                per = lambda a: as_tensor(a, device)  # noqa: E731
+                acting = np.stack([(p["assembly_acting"][cl] & 1) > 0, (p["assembly_acting"][cl] & 2) > 0], axis=1)
+                r, tr = standing_frames(rot, trans, per(index[owner[sel]]), per(t[sel]), per(bank["starts"][lo]),
+                                        per(bank["lengths"][lo]), per(bank["starts"][ac]), per(bank["lengths"][ac]),
+                                        per(p["assembly_method"][cl]), per(p["assembly_timing"][cl]),
+                                        per(p["assembly_window"][cl]), per(p["assembly_loop_start"][cl]),
+                                        per(p["assembly_loop_end"][cl]), per(acting), tb["standing_upper"], tb["spine"],
+                                        tb["arms"], int(tb["blend"]))
+                orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
+        out = {"rotations": orot, "root_translation": otrans[:, 0].contiguous()}
+        if "translations" in g:
+            out["translations"] = otrans
+        return out

@@ -450,7 +450,8 @@ class Reading:
 
     @reads
     def read_batch(self, clips: Sequence[str | int], dtype: torch.dtype = torch.float32, device=None) -> ClipBatch:
-        """Several clips of one skeleton as a padded :class:`ClipBatch`."""
+        """Several clips of one skeleton as a padded :class:`ClipBatch` (``device``: on it; an
+        alignment store's clips asked for on a GPU are assembled there)."""
         if len(clips) == 0:
             raise DatabaseError(f"{self.path}: an empty batch was asked for")
         idx = [self.index(c) for c in clips]
@@ -469,13 +470,18 @@ class Reading:
         contiguous = hi - lo <= 2 * int(lengths.sum())
         rows = starts[:, None] + np.minimum(np.arange(T)[None, :], lengths[:, None] - 1)  # edge padding
 
-        made = self.assembled(k, starts, lengths) if self.store == "alignment" else None
+        made = None
+        if self.store == "alignment":  # assembled on the device asked for where it is a GPU
+            on_gpu = device is not None and torch.device(device).type == "cuda"
+            made = self.assembled_on(k, starts, lengths, device) if on_gpu else self.assembled(k, starts, lengths)
 
         def gather(name):
             if made is not None:  # packed clip after clip: row r of clip b is offset[b] + r
                 offset = np.concatenate(([0], np.cumsum(lengths)[:-1]))
-                out = made[name][offset[:, None] + (rows - starts[:, None])]
-                return torch.from_numpy(out).to(device=device, dtype=dtype)
+                at = offset[:, None] + (rows - starts[:, None])
+                m = made[name]
+                out = m[torch.as_tensor(at, device=m.device)] if isinstance(m, torch.Tensor) else torch.from_numpy(m[at])
+                return out.to(device=device, dtype=dtype)
             ds = g[name]
             with self._frames(k, idx):
                 if contiguous:
