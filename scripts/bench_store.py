@@ -46,7 +46,7 @@ def _job(db: Path, out: Path, store: str, locos: str, actions: str, kill_at=None
     from torchsplice.store.database import MotionDatabase
 
     cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions", locos,
-           "--actions", actions, "--store", store, "-q", "--no-index", *extra]
+           "--actions", actions, "--store", store, "-q", "--no-index", "--force", *extra]
     work = out.with_name(f".{out.name}.parts")
     t0 = time.perf_counter()
     log = tempfile.TemporaryFile("w+")

@@ -194,6 +194,18 @@ def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
     assert rc != 0 and "is a motion store already" in error_line(err)
 
 
+def test_render_and_view_draw_an_alignment_store_as_the_motion_store(sample_jobs, tmp_path, capsys):
+    motion, alignment = sample_jobs
+    for store, path in (("m", motion), ("a", alignment)):
+        rc, _, err = run(capsys, "render", path, "jog+carry_box", "-o", tmp_path / f"{store}.png", "-q")
+        assert rc == 0, err
+        rc, _, err = run(capsys, "view", path, "jog+carry_box", "jog+wave", "-o", tmp_path / f"{store}.html", "-q")
+        assert rc == 0, err
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "m.png").read_bytes()
+    page = (tmp_path / "a.html").read_text().replace(str(alignment), str(motion)).replace(alignment.name, motion.name)
+    assert page == (tmp_path / "m.html").read_text()
+
+
 def test_bad_input_gets_one_line(sample_db, sample_jobs, tmp_path, capsys):
     motion, alignment = sample_jobs
     with pytest.raises(SystemExit) as exit_:

@@ -207,6 +207,10 @@ def test_window_reads_only_its_frames(plain_db):
             self.calls.append((key.start, key.stop))
             return self.ds[key]
 
+        def gather(self, starts, lengths):  # the rows of several ranges (one read each, or their span)
+            self.calls += [(int(s), int(s + n)) for s, n in zip(starts, lengths)]
+            return self.ds.gather(starts, lengths)
+
     for features, ctx in ((("rotations", "root_translation"), 0), (("velocities",), 1)):
         ds = MotionDataset(plain_db, clips=["walk_curve"], window=40, stride=30, features=features)
         ds[0]  # opens the file and the datasets

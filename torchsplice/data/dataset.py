@@ -383,25 +383,26 @@ class MotionDataset(Dataset):
             by_skeleton.setdefault(int(self._skel[c]), []).append(p)
         vel = bool(VELOCITY & set(self.features))
         for k, members in by_skeleton.items():
-            raw: dict[str, list[torch.Tensor]] = {name: [] for name in self._raw[k]}
-            ctxs, sizes, fps, clip_first = [], [], [], []
+            ctxs, sizes, fps, clip_first, los = [], [], [], [], []
             for p in members:
                 c, start, n = parts[p]
                 ctx = 1 if (vel and start > 0) else 0  # the frame before, for velocities
-                lo = int(self._row0[c]) + start - ctx
-                for name in raw:
-                    raw[name].append(torch.from_numpy(self._dataset(k, name)[lo:lo + n + ctx]))
+                los.append(int(self._row0[c]) + start - ctx)
                 ctxs.append(ctx)
                 sizes.append(n + ctx)
                 fps.append(float(self._fps[c]))
                 clip_first.append(start == 0)
+            # every range of the skeleton in one read per array (an alignment store assembles them at once)
+            los_a, sizes_a = np.array(los, np.int64), np.array(sizes, np.int64)
+            raw = {name: torch.from_numpy(np.ascontiguousarray(self._dataset(k, name).gather(los_a, sizes_a)))
+                   for name in self._raw[k]}
             sizes_t = torch.tensor(sizes, dtype=torch.int64)
             seg_first = torch.zeros(int(sizes_t.sum()), dtype=torch.bool)
             offsets = torch.cumsum(sizes_t, 0) - sizes_t
             seg_first[offsets[sizes_t > 0]] = True
             clip_first_rows = seg_first.clone()
             clip_first_rows[offsets[(sizes_t > 0) & ~torch.tensor(clip_first)]] = False
-            frames = {name: (torch.cat(v) if len(v) > 1 else v[0]).to(self.dtype) for name, v in raw.items()}
+            frames = {name: v.to(self.dtype) for name, v in raw.items()}
             fps_rows = torch.repeat_interleave(torch.tensor(fps, dtype=self.dtype), sizes_t)
             derived = derive_features(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first,
                               self.trajectory_joints.get(k, 0))

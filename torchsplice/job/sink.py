@@ -78,7 +78,7 @@ class OutputWriter:
             self.bank_of.setdefault((key, fps), []).append(b)
 
     def add_banks(self, banks: list[dict]) -> None:
-        """Store an alignment store's banks of source clips (:func:`~torchsplice.job.sources.output_banks`)."""
+        """Store an alignment store's banks of source clips (:func:`~torchsplice.job.merge.output_banks`)."""
         for bank in banks:
             b = self.db.add_bank(bank["rotations"], bank["translations"], bank["lengths"], bank["names"], bank["keys"],
                                  bank["fps"], bank["tables"])
@@ -90,20 +90,32 @@ class OutputWriter:
         """A part's clips as their parts (an alignment store): source keys become bank rows."""
         from ..store.assembly import KIND_CODES
 
+        import numpy as np
+
         p, fps = part.parts, float(part.fps[0])
-        bank, lo, ac = [], [], []
-        for lk, ak in zip(p["locomotion"], p["action"]):
-            both = [b for b in self.bank_of.get((lk, fps), []) if (b, ak, fps) in self.banks]
-            if not both:
-                raise DatabaseError(f"{self.db.path}: no bank of the output holds the source clips {lk} and {ak}")
-            bank.append(both[0])
-            lo.append(self.banks[(both[0], lk, fps)])
-            ac.append(self.banks[(both[0], ak, fps)])
+        keys = {}  # each source clip looked up once: its (bank, row) where one bank holds it, else None
+        for k in set(p["locomotion"]) | set(p["action"]):
+            held = self.bank_of.get((k, fps), [])
+            keys[k] = (held[0], self.banks[(held[0], k, fps)]) if len(held) == 1 else None
+        if all(keys[k] is not None for k in keys):
+            lo_b, lo = np.array([keys[k] for k in p["locomotion"]], np.int64).reshape(-1, 2).T
+            ac_b, ac = np.array([keys[k] for k in p["action"]], np.int64).reshape(-1, 2).T
+            bank = lo_b if np.array_equal(lo_b, ac_b) else None
+        else:
+            bank = None
+        if bank is None:  # a clip in several banks (groups of other specs), or a pair across banks
+            found = []
+            for lk, ak in zip(p["locomotion"], p["action"]):
+                both = [b for b in self.bank_of.get((lk, fps), []) if (b, ak, fps) in self.banks]
+                if not both:
+                    raise DatabaseError(f"{self.db.path}: no bank of the output holds the source clips {lk} and {ak}")
+                found.append((both[0], self.banks[(both[0], lk, fps)], self.banks[(both[0], ak, fps)]))
+            bank, lo, ac = np.array(found, np.int64).reshape(-1, 3).T
         parts = {"assembly_kind": [KIND_CODES[k] for k in p["kind"]], "assembly_bank": bank,
                  "assembly_locomotion": lo, "assembly_action": ac,
                  **{f"assembly_{k}": p[k] for k in ("crop", "method", "timing", "window", "loop_start", "loop_end",
                                                      "acting")}}
-        self.db.append_parts(part.skeleton, part.lengths, part.names, part.fps, curve=p["curve"], pelvis=p["pelvis"],
+        self.db.append_parts(part.skeleton, part.lengths, part.names, part.fps, curve=p.get("curve"), pelvis=p.get("pelvis"),
                              parts=parts, spec=DatasetSpec.from_json(part.spec), sources=part.sources, roles="spliced",
                              labels=part.labels, extra=part.extra, frame_extra={"action_frame": part.action_frame})
 

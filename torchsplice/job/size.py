@@ -58,7 +58,7 @@ def frame_bytes(joints: int, joint_translations: bool, compression) -> float:
             + (12 * joints * f["translations"] if joint_translations else 0.0))
 
 
-PART_BYTES = {"timewarp": 0.9 * (8 + 16 + 4), "standing": 0.9 * 4}
+PART_BYTES = {"timewarp": 0.9 * (8 + 16 + 4), "standing": 0.9 * 4}  # measured: 0.9 of raw under LZF
 """An alignment store's bytes on disk per spliced frame (``--store alignment``): the curve
 (float64) and the pelvis's rotation (float32) of a timewarp clip, and the action frame, under
 LZF; a standing clip's frames take only their action frame."""

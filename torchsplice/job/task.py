@@ -88,7 +88,7 @@ class Part:
     clip ``kind`` (see :data:`torchsplice.store.assembly.KIND_CODES`), ``locomotion`` and
     ``action`` (the clips' keys, see :mod:`torchsplice.job.sources`), ``crop``, ``method``,
     ``timing``, ``window``, ``loop_start``, ``loop_end``, ``acting``; per frame ``curve``
-    (float64) and ``pelvis`` (``(N, 4)`` float32, or ``None`` for standing clips)."""
+    (float64) and ``pelvis`` (``(N, 4)`` float32), both ``None`` for standing clips."""
 
     task: str
     skeleton: object
@@ -170,7 +170,7 @@ class Part:
         extra.update(meta["extra"])
         parts = None
         if "parts" in meta:
-            parts = {**meta["parts"], "pelvis": None,
+            parts = {**meta["parts"], "curve": None, "pelvis": None,
                      **{k[6:]: a for k, a in arrays.items() if k.startswith("parts.")}}
         return cls(task=meta["task"], skeleton=skeleton, spec=meta["spec"], names=meta["names"], lengths=arrays["lengths"],
                    fps=arrays["fps"], rotations=arrays["rotations"], translations=arrays["translations"],
@@ -260,7 +260,7 @@ def _parts(plan: Plan, config: JobConfig, task: Task, keys, batch, ok: np.ndarra
             "timing": np.full(C, TIMING_CODES[config.timing] if standing else -1, np.int64),
             "window": np.asarray(p["window"], np.int64)[ok], "loop_start": loops[:, 0].copy(),
             "loop_end": loops[:, 1].copy(), "acting": np.array(acting, np.int64),
-            "curve": np.array(p["curve"], np.float64),
+            "curve": None if standing else np.array(p["curve"], np.float64),  # a standing clip's follows from its timing
             "pelvis": None if standing else np.asarray(p["pelvis"], np.float32)}
 
 

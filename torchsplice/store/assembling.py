@@ -24,8 +24,11 @@ class Assembling:
 
     @property
     def store(self) -> str:
-        """``"alignment"`` or ``"motion"`` (see the module docstring)."""
-        return store_kind(self.h5.attrs)
+        """``"alignment"`` or ``"motion"`` (see :mod:`torchsplice.store.assembly`), read once per open."""
+        kind = getattr(self, "_store_kind", None)
+        if kind is None:
+            kind = self._store_kind = store_kind(self.h5.attrs)
+        return kind
 
     def _assembly(self) -> Assembly:
         have = getattr(self, "_assembly_cache", None)
@@ -126,8 +129,9 @@ class Assembling:
     def append_parts(self, skeleton, lengths, names, fps, *, curve, pelvis, parts: dict, spec=None, sources="",
                      roles="", labels=None, extra: dict | None = None, frame_extra: dict | None = None) -> None:
         """Add spliced clips of one skeleton as their parts: per frame ``curve (N,)`` and
-        ``pelvis (N, 4)`` (``None`` for standing clips), per clip the :data:`PART_COLUMNS` in
-        ``parts`` (``C`` values each); other arguments as :meth:`append_packed`'s."""
+        ``pelvis (N, 4)`` (``None`` for standing clips: their frames follow from their timing),
+        per clip the :data:`PART_COLUMNS` in ``parts`` (``C`` values each); other arguments as
+        :meth:`append_packed`'s."""
         self._writable()
         if self.store != ALIGNMENT:
             raise DatabaseError(f"{self.path}: is a motion store; it cannot take clips as parts (write their motions)")
@@ -139,7 +143,9 @@ class Assembling:
             return
         index = self._new_names(names)
         frame_extra = dict(frame_extra or {})
-        arrays = {"assembly_curve": np.asarray(curve, np.float64).reshape(N)}
+        arrays = {}
+        if curve is not None:
+            arrays["assembly_curve"] = np.asarray(curve, np.float64).reshape(N)
         if pelvis is not None:
             arrays["assembly_pelvis"] = np.asarray(pelvis, np.float32).reshape(N, 4)
         for name in self.frame_columns:

@@ -22,8 +22,8 @@ Layout, besides :mod:`torchsplice.store.schema`'s (root attribute ``store="align
         keys                (C_b,) str   the job's key of each source clip
         fps                 (C_b,) float64
         attrs: tables (JSON: upper, pelvis, standing_upper, spine, arms, blend; joint indices)
-    /skeletons/<k>/assembly_curve   (N_k,) float64   per spliced frame: the action frame it
-                                                     plays (timewarp clips: counted from the crop)
+    /skeletons/<k>/assembly_curve   (N_k,) float64   per frame of a timewarp clip: the action
+                                                     frame it plays, counted from the crop
     /skeletons/<k>/assembly_pelvis  (N_k, 4) float32 per spliced frame: the pelvis's local
                                                      rotation (timewarp clips)
     /clips/assembly_kind    -1: frames stored in rotations/... as in a motion store (methods whose
