@@ -207,3 +207,25 @@ def test_entry_point_plugin(plugin_dir, tmp_path):
                        env=_env([plugin_dir, tmp_path]))
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["splice,naive,cpmc,shifted_upper"]
+
+
+def test_a_plug_in_methods_motions_are_kept_whole_in_an_alignment_store(toy, plugin_dir, sample_db, tmp_path):
+    """A plug-in's result is a motion, not parts: an alignment store keeps its frames beside the
+    built-in methods' parts, and reads them as the motion store does."""
+    from torchsplice.job import splice_all
+
+    sys.path.insert(0, str(plugin_dir))
+    try:
+        out = {}
+        for store in ("motion", "alignment"):
+            out[store] = tmp_path / f"{store}.h5"
+            splice_all(sample_db, out[store], store=store, methods="splice,shifted_upper", workers=1, index=False)
+    finally:
+        sys.path.remove(str(plugin_dir))
+    with MotionDatabase.open(out["alignment"]) as a, MotionDatabase.open(out["motion"]) as m:
+        kinds = a.h5["clips/assembly_kind"][()]
+        methods = a.table()["method"]
+        assert set(kinds[methods == "shifted_upper"].tolist()) == {-1} and set(kinds[methods == "splice"].tolist()) == {1}
+        assert a.names == m.names
+        for x, y in zip(a.read_many(range(len(a))), m.read_many(range(len(m)))):
+            assert torch.equal(x.rotations, y.rotations) and torch.equal(x.root_translation, y.root_translation)

@@ -110,6 +110,39 @@ def clip_split(sources: Sequence[str], assigned: dict[str, str]) -> str | None:
     return splits.pop() if len(splits) == 1 else None
 
 
+def streamed_splits(slices, ratios: Sequence[float] = DEFAULT_RATIOS, seed: int = 0) -> Sequence[str]:
+    """:func:`table_splits` of a clip table given as ``slices`` (an iterable of column dicts of
+    consecutive rows: ``name``, ``role``, ``labels`` as JSON text, ``locomotion`` and ``action``
+    where the table has them), in memory bounded by the source clips, not the rows: ``(C,)`` the
+    same splits (``""``: none)."""
+    import json
+
+    import numpy as np
+
+    ratios, seed = parse_ratios(ratios), parse_seed(seed)
+    ids: dict[str, int] = {}
+    rows_a, rows_l, fixed = [], [], {}
+    for cols in slices:
+        for r, (name, role, text) in enumerate(zip(cols["name"], cols["role"], cols["labels"])):
+            info = {"labels": json.loads(text or "{}"),
+                    **{c: str(cols[c][r]) for c in ("locomotion", "action") if c in cols}}
+            a, l = clip_sources(str(name), str(role), info)
+            for k, f in a + l:
+                if f:
+                    fixed[k] = f
+            rows_a.append(ids.setdefault(a[0][0], len(ids)) if a else -1)
+            rows_l.append(ids.setdefault(l[0][0], len(ids)) if l else -1)
+    a, l = np.array(rows_a, np.int64), np.array(rows_l, np.int64)
+    keys = list(ids)
+    assigned = split_sources([[keys[i] for i in np.unique(a[a >= 0])], [keys[i] for i in np.unique(l[l >= 0])]],
+                             ratios, seed, fixed)
+    code = np.array([SPLITS.index(assigned[k]) if k in assigned else -1 for k in keys] + [-2], np.int64)
+    sa, sl = code[a], code[l]  # -2: no such source
+    out = np.where((sa == -2) | (sl == -2) | (sa == sl), np.where(sa == -2, sl, sa), -1)
+    names = np.array([*SPLITS, ""], dtype=object)
+    return names[np.where(out < 0, len(SPLITS), out)]
+
+
 def table_splits(table, ratios: Sequence[float] = DEFAULT_RATIOS, seed: int = 0) -> list[str]:
     """Every clip's split (``""``: its sources are in different splits) of a database's clip
     ``table`` (:class:`~torchsplice.store.table.ClipTable`): sources split once over the whole

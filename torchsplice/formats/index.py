@@ -94,19 +94,52 @@ def index_files(database, names: Sequence[str] | None, files: Sequence[Path], ta
     return texts
 
 
+CHUNK_ROWS = 50_000
+"""Rows of a database's index made and written at a time (:func:`write_database_index`)."""
+
+
+def _slice_rows(columns: list[str], cols: dict, splits, file: str):
+    """The index rows of a slice of the clip table (:meth:`~torchsplice.store.database.MotionDatabase.table_slice`),
+    as :func:`index_files` makes them from ``summary()``: the same keys, order and values."""
+    from ..store.table import decode_labels, json_value
+
+    for i in range(len(cols["name"])):
+        length, fps = int(cols["length"][i]), float(cols["fps"][i])
+        yield {"file": file, "clip": str(cols["name"][i]), "split": splits[i], "frames": length, "fps": fps,
+               "duration_s": round(float(length / fps), 3), "role": str(cols["role"][i]),
+               "labels": decode_labels(file, cols["labels"][i], cols["name"][i]), "skeleton": int(cols["skeleton"][i]),
+               "source": str(cols["source"][i]), **{n: json_value(cols[n][i]) for n in columns}}
+
+
 def write_database_index(database, split_ratios=None, split_seed: int | None = None) -> Path:
     """Write ``NAME.index.csv`` beside the database ``database`` (every clip's row, in the
-    database's order; see the module docstring), atomically; returns its path. An OS error (a
-    full disk) is one line naming the index and saying the database itself is complete."""
+    database's order; see the module docstring), atomically; returns its path. The rows are made
+    and written :data:`CHUNK_ROWS` at a time, so memory stays bounded for millions of clips. An
+    OS error (a full disk) is one line naming the index and saying the database itself is complete."""
     from ..core.errors import TorchspliceError
+    from ..data.splits import DEFAULT_RATIOS, parse_seed, streamed_splits
     from ..store.atomic import atomic_path
+    from ..store.database import MotionDatabase
 
     database = Path(database)
     targets = index_targets(database, folder_export=False)
-    text = index_files(database, None, [database], targets, split_ratios, split_seed)[targets["index"]]
     try:
-        with atomic_path(targets["index"]) as tmp:
-            tmp.write_text(text)
+        with atomic_path(targets["index"]) as tmp, MotionDatabase.open(database) as db, \
+                open(tmp, "w", newline="") as f:
+            C = len(db)
+            slices = lambda: (db.table_slice(s, min(s + CHUNK_ROWS, C)) for s in range(0, C, CHUNK_ROWS))  # noqa: E731
+            splits = streamed_splits(slices(), DEFAULT_RATIOS if split_ratios is None else split_ratios,
+                                     0 if split_seed is None else parse_seed(split_seed))
+            writer = None
+            for s, cols in zip(range(0, C, CHUNK_ROWS), slices()):
+                chunk = list(_slice_rows(list(db.columns), cols, splits[s:s + CHUNK_ROWS], database.name))
+                if writer is None:
+                    writer = csv.DictWriter(f, list(chunk[0]), lineterminator="\n")
+                    writer.writeheader()
+                writer.writerows({k: json.dumps(v, sort_keys=True) if isinstance(v, dict) else v for k, v in r.items()}
+                                 for r in chunk)
+            if writer is None:
+                f.write("file,clip,split\n")
     except TorchspliceError as exc:
         raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written: "
                                "torchsplice.formats.index.write_database_index writes it)") from None

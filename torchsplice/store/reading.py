@@ -294,6 +294,17 @@ class Reading:
         self._clip_table = ClipTable.from_columns(columns, self.columns, self.path)
         return self._clip_table
 
+    @reads
+    def table_slice(self, lo: int, hi: int) -> dict[str, np.ndarray]:
+        """Clip-table rows ``lo:hi``, every column (the declared extra ones too; text decoded,
+        labels as their JSON text), read from the file without the whole table: for readers of
+        millions of clips that go through them a slice at a time."""
+        self.flush()
+        self._table_written()
+        c = self.h5[CLIPS]
+        return {k: (c[k].asstr()[lo:hi] if h5py.check_string_dtype(c[k].dtype) else c[k][lo:hi])
+                for k in [*COLUMNS, *self.columns]}
+
     def __contains__(self, clip) -> bool:
         """Whether the database holds a clip named ``clip``."""
         return isinstance(clip, str) and clip in self._index_map()
