@@ -454,14 +454,26 @@ def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_d
 def test_a_full_disk_while_writing_the_jobs_index_says_the_output_is_complete(sample_db, tmp_path, capsys, monkeypatch):
     import errno
 
-    real = Path.write_text
+    real = Path.open
 
-    def full(self, *a, **k):
-        if ".index.csv" in self.name:
+    class Full:  # a file on a full disk: every write fails
+        def __init__(self, f):
+            self.f = f
+
+        def write(self, text):
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real(self, *a, **k)
 
-    monkeypatch.setattr(Path, "write_text", full)
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+    def full(self, mode="r", *a, **k):
+        f = real(self, mode, *a, **k)
+        return Full(f) if ".index.csv" in self.name and "w" in mode else f
+
+    monkeypatch.setattr(Path, "open", full)
     out = tmp_path / "sp.h5"
     rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "jog", "--workers", "1", "-q")
     line = error_line(err)

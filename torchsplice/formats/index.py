@@ -125,7 +125,7 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
     targets = index_targets(database, folder_export=False)
     try:
         with atomic_path(targets["index"]) as tmp, MotionDatabase.open(database) as db, \
-                open(tmp, "w", newline="") as f:
+                Path(tmp).open("w", newline="") as f:
             C = len(db)
             slices = lambda: (db.table_slice(s, min(s + CHUNK_ROWS, C)) for s in range(0, C, CHUNK_ROWS))  # noqa: E731
             splits = streamed_splits(slices(), DEFAULT_RATIOS if split_ratios is None else split_ratios,

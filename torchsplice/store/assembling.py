@@ -15,7 +15,29 @@ from .reading import FrameArray
 from .schema import CLIPS, FRAME_ARRAYS, STR, skeleton_path
 from .writing import io_failure
 
-__all__ = ["Assembling"]
+__all__ = ["Assembling", "AssembledArray"]
+
+
+class AssembledArray(FrameArray):
+    """A frame array of an alignment store (``rotations``, ``root_translation`` or
+    ``translations``): :class:`FrameArray`'s interface, the rows assembled from the parts when
+    read (see :mod:`torchsplice.store.assembly`). The last ranges' frames are kept, so reading
+    the three arrays of the same rows assembles them once."""
+
+    def __init__(self, db, skeleton: int, name: str):
+        super().__init__(db.h5[skeleton_path(skeleton)][name])
+        self._db, self._k, self._name = db, skeleton, name
+
+    def __getitem__(self, rows: slice) -> np.ndarray:
+        lo, hi, _ = rows.indices(len(self))
+        return self.gather(np.array([lo]), np.array([max(hi - lo, 0)]))
+
+    def gather(self, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        key = (self._k, np.asarray(starts).tobytes(), np.asarray(lengths).tobytes())
+        last = getattr(self._db, "_last_assembled", None)
+        if last is None or last[0] != key:
+            last = self._db._last_assembled = (key, self._db.assembled(self._k, starts, lengths))
+        return last[1][self._name]
 
 
 class Assembling:
@@ -73,6 +95,10 @@ class Assembling:
         for n in self.frame_columns:
             out[n] = torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device)
         return out
+
+    def assembled_array(self, k: int, name: str) -> "AssembledArray":
+        """The frame array ``name`` of skeleton ``k`` of an alignment store (see :class:`AssembledArray`)."""
+        return AssembledArray(self, k, name)
 
     def whole_frames(self, k: int) -> dict[str, np.ndarray]:
         """Every row of skeleton ``k``'s frame arrays and per-frame columns, as a motion store

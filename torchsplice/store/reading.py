@@ -29,7 +29,7 @@ from ..specs import DatasetSpec, detect_spec
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, SKELETONS, cap, short, skeleton_path
 from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
 
-__all__ = ["Reading", "ClipBatch", "FrameArray", "AssembledArray", "reads", "virtual_files"]
+__all__ = ["Reading", "ClipBatch", "FrameArray", "reads", "virtual_files"]
 
 
 @dataclass
@@ -143,28 +143,6 @@ class FrameArray:
         ds = self._ds
         return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
                              f"({short(exc)})")
-
-
-class AssembledArray(FrameArray):
-    """A frame array of an alignment store (``rotations``, ``root_translation`` or
-    ``translations``): :class:`FrameArray`'s interface, the rows assembled from the parts when
-    read (see :mod:`torchsplice.store.assembly`). The last ranges' frames are kept, so reading
-    the three arrays of the same rows assembles them once."""
-
-    def __init__(self, db, skeleton: int, name: str):
-        super().__init__(db.h5[skeleton_path(skeleton)][name])
-        self._db, self._k, self._name = db, skeleton, name
-
-    def __getitem__(self, rows: slice) -> np.ndarray:
-        lo, hi, _ = rows.indices(len(self))
-        return self.gather(np.array([lo]), np.array([max(hi - lo, 0)]))
-
-    def gather(self, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        key = (self._k, np.asarray(starts).tobytes(), np.asarray(lengths).tobytes())
-        last = getattr(self._db, "_last_assembled", None)
-        if last is None or last[0] != key:
-            last = self._db._last_assembled = (key, self._db.assembled(self._k, starts, lengths))
-        return last[1][self._name]
 
 
 def virtual_files(path: Path) -> set[Path]:
@@ -346,7 +324,7 @@ class Reading:
         if name not in (*FRAME_ARRAYS, *self.frame_columns) or name not in g:
             raise DatabaseError(f"{self.path}: skeleton {skeleton} stores no per-frame array {name!r}")
         if name in FRAME_ARRAYS and self.store == "alignment":
-            return AssembledArray(self, skeleton, name)
+            return self.assembled_array(skeleton, name)
         return FrameArray(g[name])
 
     @reads
