@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 import re
-import signal
 import subprocess
 import sys
 import tempfile
@@ -38,39 +37,12 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _job(db: Path, out: Path, store: str, locos: str, actions: str, kill_at=None, extra=()) -> dict:
-    """``splice-all`` in a fresh process: wall seconds, peak memory (MB) of it and its workers; killed
-    with SIGKILL once its staged output holds ``kill_at`` of its tasks."""
-    import json
+    """``splice-all`` in a fresh process (:func:`benchmark._mix_job`: wall seconds, peak memory,
+    killed with SIGKILL once its staged output holds ``kill_at`` of its tasks)."""
+    from benchmark import _mix_job
 
-    from benchmark import _tree_rss_mb
-    from torchsplice.store.database import MotionDatabase
-
-    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions", locos,
-           "--actions", actions, "--store", store, "-q", "--no-index", "--force", *extra]
-    work = out.with_name(f".{out.name}.parts")
-    t0 = time.perf_counter()
-    log = tempfile.TemporaryFile("w+")
-    p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True, cwd=REPO)
-    peak, total, killed = 0.0, None, False
-    while p.poll() is None:
-        peak = max(peak, _tree_rss_mb(p.pid))
-        if kill_at is not None and not killed:
-            if total is None and (work / "plan.json").exists():
-                try:
-                    total = len(json.loads((work / "plan.json").read_text())["tasks"])
-                except ValueError:
-                    pass
-            held = (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)
-            if total and held >= kill_at * total:
-                p.send_signal(signal.SIGKILL)
-                killed = True
-        time.sleep(0.02)
-    dt = time.perf_counter() - t0
-    p.wait()
-    log.seek(0)
-    if p.returncode != 0 and not killed:
-        raise SystemExit(f"job failed: {log.read()[-2000:]}")
-    return {"seconds": dt, "peak_mb": peak, "killed": killed}
+    return _mix_job(db, out, actions, extra=("--store", store, "-q", "--no-index", "--force", *extra), kill_at=kill_at,
+                    locomotions=locos)
 
 
 def _same_reads(a: Path, b: Path) -> tuple[int, int]:

@@ -443,7 +443,7 @@ def _folder_bytes(folder: Path, skip: Path) -> int:
     return total
 
 
-def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None) -> dict:
+def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None, locomotions: str | None = None) -> dict:
     """``splice-all`` of the normal-style locomotions x ``actions`` in a fresh process: wall
     seconds, the job's own splicing seconds (``compute``: from its summary, start-up and planning
     left out), peak memory of the process and its workers (MB), peak bytes of the output folder
@@ -451,7 +451,8 @@ def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None
     ``kill_at`` of the plan's tasks (then ``killed`` is true)."""
     from torchsplice.store.database import MotionDatabase
 
-    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions", MIX_LOCOMOTIONS,
+    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions",
+           locomotions or MIX_LOCOMOTIONS,
            "--actions", actions, *extra]
     work = out.with_name(f".{out.name}.parts")
     t0 = time.perf_counter()

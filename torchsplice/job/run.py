@@ -154,7 +154,8 @@ class SpliceJob:
         summary.seconds = time.perf_counter() - t0
         return summary
 
-    def _expected(self, plan: Plan, sources: Sources) -> OutputSize:
+    def _expected(self, plan: Plan, sources: Sources, store: str | None = None) -> OutputSize:
+        """The output's expected size (``store``: as that store; default the job's)."""
         copied = None
         if self.config.copy_sources:
             copied = []
@@ -162,20 +163,11 @@ class SpliceJob:
                 t = db.clip_table()
                 copied += [(int(t.length[r]), db.skeletons[int(t.skeleton[r])]) for r in rows]
         return estimate_output(plan, lambda g: source_skeleton(plan, g, sources)[0], self.config.compression, copied,
-                               store=self.config.store)
+                               store=store or self.config.store)
 
     def _expected_alignment(self, plan: Plan, sources: Sources) -> OutputSize | None:
         """What ``--store alignment`` would take, for a job of motions (``None`` for an alignment store)."""
-        if self.config.store == "alignment":
-            return None
-        from dataclasses import replace
-
-        mine = self.config
-        try:
-            self.config = replace(mine, store="alignment")
-            return self._expected(plan, sources)
-        finally:
-            self.config = mine
+        return None if self.config.store == "alignment" else self._expected(plan, sources, store="alignment")
 
     def _check_room(self, plan: Plan, sources: Sources) -> tuple[OutputSize, int | None]:
         """The output's expected size and the free space; refuses, before any work, a job whose

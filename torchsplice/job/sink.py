@@ -98,8 +98,11 @@ class OutputWriter:
             held = self.bank_of.get((k, fps), [])
             keys[k] = (held[0], self.banks[(held[0], k, fps)]) if len(held) == 1 else None
         if all(keys[k] is not None for k in keys):
-            lo_b, lo = np.array([keys[k] for k in p["locomotion"]], np.int64).reshape(-1, 2).T
-            ac_b, ac = np.array([keys[k] for k in p["action"]], np.int64).reshape(-1, 2).T
+            def rows(names):  # (bank, row) of each clip, by its distinct names
+                distinct, which = np.unique(np.asarray(names, dtype=str), return_inverse=True)
+                return np.array([keys[str(k)] for k in distinct], np.int64).reshape(-1, 2)[which.reshape(-1)].T
+
+            (lo_b, lo), (ac_b, ac) = rows(p["locomotion"]), rows(p["action"])
             bank = lo_b if np.array_equal(lo_b, ac_b) else None
         else:
             bank = None

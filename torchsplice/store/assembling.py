@@ -200,8 +200,4 @@ class Assembling:
             except Exception:
                 pass
             raise
-        for n in names:
-            index[n] = len(index)
-        if self._names is not None:
-            self._names += names
-        self._flushed += C
+        self._added(index, names)

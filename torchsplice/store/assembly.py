@@ -203,27 +203,35 @@ class Assembly:
             self.by_skeleton[k] = (self.start[rows], rows)
         return self.by_skeleton[k]
 
+    def locate(self, db, k: int, starts, lengths) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(starts, lengths, clip, first)``: frame ranges of skeleton ``k`` as int64 arrays, the
+        clip (table row) holding each and the clip frame it starts at; a range that is not within
+        one clip is one :class:`DatabaseError` line."""
+        starts = np.asarray(starts, np.int64).reshape(-1)
+        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        first_frames, rows = self.clips_of(k)
+        at = np.searchsorted(first_frames, starts, side="right") - 1
+        clip = rows[np.maximum(at, 0)]
+        first = starts - self.start[clip]
+        bad = (at < 0) | (first + lengths > self.length[clip])
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise DatabaseError(f"{db.path}: frames {int(starts[i])}:{int(starts[i] + lengths[i])} of skeleton {k} are not "
+                                "within one clip of this alignment store")
+        return starts, lengths, clip, first
+
     def frames(self, db, k: int, starts: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
         """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s frame arrays (each range
         within one clip), concatenated: ``rotations``, ``root_translation`` and ``translations``
         (where the skeleton stores them), as the store's dtype."""
         from ..cpu.assemble import assemble_standing, assemble_timewarp
 
-        starts = np.asarray(starts, np.int64).reshape(-1)
-        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        starts, lengths, clip, first = self.locate(db, k, starts, lengths)
         g = db.h5[skeleton_path(k)]
         J = g["rotations"].shape[1]
         dtype = g["rotations"].dtype
         N = int(lengths.sum())
         out_start = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
-        first_frames, rows = self.clips_of(k)
-        at = np.searchsorted(first_frames, starts, side="right") - 1
-        clip = rows[np.maximum(at, 0)]
-        first = starts - self.start[clip]
-        if len(starts) and ((at < 0).any() or (first + lengths > self.length[clip]).any()):
-            i = int(np.flatnonzero((at < 0) | (first + lengths > self.length[clip]))[0])
-            raise DatabaseError(f"{db.path}: frames {int(starts[i])}:{int(starts[i] + lengths[i])} of skeleton {k} are not "
-                                "within one clip of this alignment store")
         orot = np.empty((N, J, 4), dtype)
         otrans = np.empty((N, J, 3), dtype)
         p = {n: v[clip] for n, v in self.parts.items()}
@@ -273,16 +281,9 @@ class Assembly:
 
         from .assembly_torch import as_tensor, standing_frames, timewarp_frames
 
-        starts = np.asarray(starts, np.int64).reshape(-1)
-        lengths = np.asarray(lengths, np.int64).reshape(-1)
+        starts, lengths, clip, first = self.locate(db, k, starts, lengths)
         g = db.h5[skeleton_path(k)]
         J, N = g["rotations"].shape[1], int(lengths.sum())
-        first_frames, rows = self.clips_of(k)
-        at = np.searchsorted(first_frames, starts, side="right") - 1
-        clip = rows[np.maximum(at, 0)]
-        first = starts - self.start[clip]
-        if len(starts) and ((at < 0).any() or (first + lengths > self.length[clip]).any()):
-            raise DatabaseError(f"{db.path}: frames asked of skeleton {k} are not within one clip of this alignment store")
         p = {n: v[clip] for n, v in self.parts.items()}
         kind = np.repeat(p["assembly_kind"], lengths)
         owner = np.repeat(np.arange(len(starts)), lengths)  # the range of each result frame

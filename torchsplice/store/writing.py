@@ -341,11 +341,7 @@ class Writing:
             if isinstance(exc, (TypeError, ValueError)):
                 raise DatabaseError(f"{self.path}: cannot store these clips: {exc}") from None
             raise
-        for n in names:
-            index[n] = len(index)
-        if self._names is not None:
-            self._names += names
-        self._flushed += C
+        self._added(index, names)
 
     @guarded
     def append_virtual(self, source: Path, skeleton: Skeleton, lengths, names, fps, spec=None, sources="", roles="",
@@ -375,6 +371,14 @@ class Writing:
         rel = os.path.relpath(Path(refer_as or source).resolve(), Path(self._target).resolve().parent)
         self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
         parts.append((rel, N))
+
+    def _added(self, index: dict, names: list[str]) -> None:
+        """Note ``names``, just written as rows, in the name index and the name list."""
+        for n in names:
+            index[n] = len(index)
+        if self._names is not None:
+            self._names += names
+        self._flushed += len(names)
 
     def _new_names(self, names: list[str]) -> dict:
         """The name index, once ``names`` are checked as new, distinct and printable."""
@@ -416,11 +420,7 @@ class Writing:
         rows = self._rows(names, lengths, fps, sources, roles, labels, extra)
         rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
         self._store_rows(rows)
-        for n in names:
-            index[n] = len(index)
-        if self._names is not None:
-            self._names += names
-        self._flushed += C
+        self._added(index, names)
 
     def _build_virtual(self) -> None:
         """Replace the empty frame datasets of virtual skeletons by virtual datasets over their sources."""
