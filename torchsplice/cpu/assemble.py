@@ -29,16 +29,10 @@ import math
 import numpy as np
 from numba import njit
 
-from .curve import split_time
+from .curve import lerp, split_time
 from .quat import qconj, qload, qmul, qnormalize, qslerp, qstore
 
 __all__ = ["timewarp_rows", "standing_rows", "standing_times", "assemble_timewarp", "assemble_standing"]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _lerp(a, b, w):
-    """``a + w (b - a)``, and ``a`` itself at ``w = 0`` (its sign of zero kept)."""
-    return a if w == 0.0 else a + w * (b - a)
 
 
 @njit(cache=True, nogil=True)
@@ -61,7 +55,7 @@ def timewarp_rows(rot, trans, ls, as_, n_act, upper, pelvis, curve, prot, n, oro
             elif upper[j]:
                 qstore(orot, t, j, qslerp(qload(rot, as_ + i0, j), qload(rot, as_ + i1, j), w))
                 for c in range(3):
-                    otrans[t, j, c] = _lerp(trans[as_ + i0, j, c], trans[as_ + i1, j, c], w)
+                    otrans[t, j, c] = lerp(trans[as_ + i0, j, c], trans[as_ + i1, j, c], w)
             else:
                 for c in range(4):
                     orot[t, j, c] = rot[ls + t, j, c]

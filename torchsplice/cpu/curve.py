@@ -21,7 +21,7 @@ from numba import njit
 
 from .quat import qload, qslerp, qstore
 
-__all__ = ["knots", "basis4", "fit_curve", "split_time", "resample_clip"]
+__all__ = ["knots", "basis4", "fit_curve", "lerp", "split_time", "resample_clip"]
 
 
 @njit(cache=True, nogil=True)
@@ -164,6 +164,12 @@ def fit_curve(cells, length, knot_spacing, smoothing, curve):
     return i_last + 1
 
 
+@njit(cache=True, nogil=True, inline="always")
+def lerp(a, b, w):
+    """``a + w (b - a)``, and ``a`` itself at ``w = 0`` (its sign of zero kept)."""
+    return a if w == 0.0 else a + w * (b - a)
+
+
 @njit(cache=True, nogil=True)
 def split_time(x, n):
     """Frames ``i0``, ``i1`` and weight ``w`` to sample a clip of ``n`` frames at fractional frame
@@ -184,5 +190,4 @@ def resample_clip(rot, trans, start, n, times, T, joints, out_rot, out_trans):
         for j in joints:
             qstore(out_rot, t, j, qslerp(qload(rot, start + i0, j), qload(rot, start + i1, j), w))
             for c in range(3):
-                a = trans[start + i0, j, c]
-                out_trans[t, j, c] = a + w * (trans[start + i1, j, c] - a)
+                out_trans[t, j, c] = lerp(trans[start + i0, j, c], trans[start + i1, j, c], w)

@@ -230,7 +230,10 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, t
     for t in range(T):
         for c in range(4):
             opel[t, c] = prot[t, c]
-    timewarp_rows(rot, trans, ls, as_ + crop, n_c, upper, pelvis, curve, prot, T, orot, otrans)
+    # the frames of timewarp_rows(rot, trans, ls, as_ + crop, n_c, upper, pelvis, curve, prot, ...), which reads
+    # assemble from the parts: its upper body is the action resampled above (resample_clip: the same slerp and
+    # lerp at the same curve), so it is taken from there rather than slerped twice
+    _assemble(rot, trans, ls, arot, atrans, T, np.arange(J), upper, pelvis, prot, orot, otrans)
     return 0, crop, plen, cost, T, angle
 
 
