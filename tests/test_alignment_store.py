@@ -280,6 +280,35 @@ def test_the_stores_codes_are_the_kernels():
     assert assembly.METHOD_CODES == METHOD_CODES and assembly.TIMING_CODES == TIMING_CODES
 
 
+def test_the_arc_table_gives_qslerps_bits():
+    """Reads look the slerps' angles up (cpu.assemble.arc_table); the result is qslerp's, bit for
+    bit, on opposite hemispheres, equal and nearly equal neighbours, and at the curve's ends."""
+    from torchsplice.cpu.assemble import arc_table, timewarp_rows
+
+    rng = np.random.default_rng(3)
+    N, J = 400, 5   # rows 0..39 the action, every row the locomotion
+    rot = rng.normal(size=(N, J, 4))
+    rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+    rot[5:9] = rot[4]                       # equal neighbours (theta 0)
+    rot[12] = -rot[11]                      # the same rotation, opposite sign (a flip, theta 0)
+    rot[20] = rot[19] + 1e-9                # nearly equal (the linear branch)
+    rot[20] /= np.linalg.norm(rot[20], axis=-1, keepdims=True)
+    rot[25:] *= np.where(rng.random((N - 25, J, 1)) < 0.5, -1.0, 1.0)  # random hemispheres
+    n_act = 40
+    trans = rng.normal(size=(N, J, 3))
+    upper = np.array([False, True, True, False, True])
+    T = 300
+    curve = np.concatenate([np.linspace(-2.0, n_act + 2.0, T - 3), [0.0, n_act - 1.0, 11.5]])
+    prot = rng.normal(size=(T, 4))
+    outs = []
+    for arc in (np.empty((0, J, 2)), arc_table(rot, upper)):
+        orot, otrans = np.empty((T, J, 4)), np.empty((T, J, 3))
+        timewarp_rows(rot, trans, arc, 0, 0, n_act, upper, 0, curve, prot, T, orot, otrans)
+        outs.append((orot, otrans))
+    assert outs[0][0].tobytes() == outs[1][0].tobytes() and outs[0][1].tobytes() == outs[1][1].tobytes()
+    assert np.isfinite(outs[1][0]).all()
+
+
 BANDAI = ("dataset-1_walk_normal_001", "dataset-2_walk_normal_008", "dataset-2_walk-turn-left_active_025",
           "dataset-1_bow_normal_001", "dataset-2_wave-left-hand_normal_001", "dataset-2_raise-up-both-hands_normal_001")
 

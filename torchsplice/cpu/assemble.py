@@ -30,20 +30,39 @@ import numpy as np
 from numba import njit
 
 from .curve import lerp, split_time
-from .quat import qconj, qload, qmul, qnormalize, qslerp, qstore
+from .quat import qarc, qconj, qload, qmul, qnormalize, qslerp, qslerp_arc, qstore
 
-__all__ = ["timewarp_rows", "standing_rows", "standing_times", "assemble_timewarp", "assemble_standing"]
+__all__ = ["arc_table", "timewarp_rows", "standing_rows", "standing_times", "assemble_timewarp", "assemble_standing"]
 
 
 @njit(cache=True, nogil=True)
-def timewarp_rows(rot, trans, ls, as_, n_act, upper, pelvis, curve, prot, n, orot, otrans):
+def arc_table(rot, joints):
+    """``(N, J, 2)`` float64: :func:`~torchsplice.cpu.quat.qarc` of rows ``r`` and ``r + 1`` of
+    ``rot (N, J, 4)`` for each joint where ``joints (J,)`` is true (zeros elsewhere and on the
+    last row). A timewarp clip samples its action between neighbouring frames, so a reader that
+    assembles many clips of the same bank looks these up instead of computing an ``acos`` and a
+    ``sin`` per joint and frame; the slerp it then computes is the same, bit for bit."""
+    N, J = rot.shape[0], rot.shape[1]
+    out = np.zeros((N, J, 2))
+    for r in range(N - 1):
+        for j in range(J):
+            if joints[j]:
+                out[r, j, 0], out[r, j, 1] = qarc(qload(rot, r, j), qload(rot, r + 1, j))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def timewarp_rows(rot, trans, arc, ls, as_, n_act, upper, pelvis, curve, prot, n, orot, otrans):
     """``n`` result frames of a timewarp clip into rows ``0 .. n - 1`` of ``orot``/``otrans``.
 
     ``ls``: the bank row of the locomotion's first frame wanted; ``as_``: the bank row of the
     action's frame 0 after its crop, ``n_act`` its frames from there; ``curve (n,)``: the
     action frame (from ``as_``) of each result frame; ``prot (n, 4)``: the pelvis's rotation.
+    ``arc``: :func:`arc_table` of ``rot`` on the ``upper`` joints, or an empty ``(0, J, 2)``
+    array to compute the slerps' angles here (the same bits either way).
     """
     J = rot.shape[1]
+    table = arc.shape[0] > 0
     for t in range(n):
         i0, i1, w = split_time(curve[t], n_act)
         for j in range(J):
@@ -53,7 +72,11 @@ def timewarp_rows(rot, trans, ls, as_, n_act, upper, pelvis, curve, prot, n, oro
                 for c in range(3):
                     otrans[t, j, c] = trans[ls + t, j, c]
             elif upper[j]:
-                qstore(orot, t, j, qslerp(qload(rot, as_ + i0, j), qload(rot, as_ + i1, j), w))
+                p, q = qload(rot, as_ + i0, j), qload(rot, as_ + i1, j)
+                if table:  # w > 0 only where i1 = i0 + 1: the pair the table holds at row as_ + i0
+                    qstore(orot, t, j, qslerp_arc(p, q, w, arc[as_ + i0, j, 0], arc[as_ + i0, j, 1]))
+                else:
+                    qstore(orot, t, j, qslerp(p, q, w))
                 for c in range(3):
                     otrans[t, j, c] = lerp(trans[as_ + i0, j, c], trans[as_ + i1, j, c], w)
             else:
@@ -213,8 +236,8 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
 
 
 @njit(cache=True, nogil=True)
-def assemble_timewarp(rot, trans, starts, lengths, loco, act, crop, upper, pelvis, curve, prot, first, count, out_start,
-                      orot, otrans):
+def assemble_timewarp(rot, trans, arc, starts, lengths, loco, act, crop, upper, pelvis, curve, prot, first, count,
+                      out_start, orot, otrans):
     """Timewarp clips ``b``: result frames ``first[b] .. first[b] + count[b] - 1`` of
     the pair (bank clips ``loco[b]``, ``act[b]``, the action cropped by ``crop[b]``) into rows
     ``out_start[b] ..`` of ``orot``/``otrans``; ``curve``/``prot`` hold those frames' parts in
@@ -222,7 +245,7 @@ def assemble_timewarp(rot, trans, starts, lengths, loco, act, crop, upper, pelvi
     for b in range(loco.shape[0]):
         o, n = out_start[b], count[b]
         a = act[b]
-        timewarp_rows(rot, trans, starts[loco[b]] + first[b], starts[a] + crop[b], lengths[a] - crop[b], upper, pelvis,
+        timewarp_rows(rot, trans, arc, starts[loco[b]] + first[b], starts[a] + crop[b], lengths[a] - crop[b], upper, pelvis,
                       curve[o:o + n], prot[o:o + n], n, orot[o:o + n], otrans[o:o + n])
 
 

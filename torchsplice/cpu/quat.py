@@ -11,7 +11,7 @@ import math
 
 from numba import njit
 
-__all__ = ["qmul", "qconj", "qrot", "qnormalize", "qcanonical", "qslerp", "rotmat_to_q", "qload", "qstore"]
+__all__ = ["qmul", "qconj", "qrot", "qnormalize", "qcanonical", "qslerp", "qarc", "qslerp_arc", "rotmat_to_q", "qload", "qstore"]
 
 
 @njit(cache=True, inline="always")
@@ -73,23 +73,44 @@ def qcanonical(q):
 
 
 @njit(cache=True, inline="always")
-def qslerp(p, q, t):
-    """Slerp along the shorter arc as :func:`~torchsplice.core.rotations.quat_slerp` (``t = 0``
-    gives ``p`` exactly; nearly equal rotations use normalised linear interpolation)."""
-    if t == 0.0:
-        return p
+def qarc(p, q):
+    """``(theta, s)`` of the slerp from ``p`` to ``q`` along the shorter arc: the angle between
+    them in 4D (``acos |p . q|``) and its sine, the sine's sign negative (``-s``, ``-0.0`` kept)
+    where ``q`` is flipped to ``-q``. What :func:`qslerp` computes once per pair; a reader that
+    samples the same pair many times takes it from a table (:func:`torchsplice.cpu.assemble.arc_table`)."""
     d = p[0] * q[0] + p[1] * q[1] + p[2] * q[2] + p[3] * q[3]
-    if d < 0:
-        q = (-q[0], -q[1], -q[2], -q[3])
+    flip = d < 0
+    if flip:
         d = -d
     d = min(d, 1.0)
     theta = math.acos(d)
     s = math.sin(theta)
+    return theta, (-s if flip else s)
+
+
+@njit(cache=True, inline="always")
+def qslerp_arc(p, q, t, theta, s):
+    """:func:`qslerp` of ``p``, ``q`` at ``t`` with their :func:`qarc` given: the same bits."""
+    if t == 0.0:
+        return p
+    if math.copysign(1.0, s) < 0:
+        q = (-q[0], -q[1], -q[2], -q[3])
+        s = -s
     if s < 1e-6:
         wp, wq = 1.0 - t, t
     else:
         wp, wq = math.sin((1.0 - t) * theta) / s, math.sin(t * theta) / s
     return qnormalize((wp * p[0] + wq * q[0], wp * p[1] + wq * q[1], wp * p[2] + wq * q[2], wp * p[3] + wq * q[3]))
+
+
+@njit(cache=True, inline="always")
+def qslerp(p, q, t):
+    """Slerp along the shorter arc as :func:`~torchsplice.core.rotations.quat_slerp` (``t = 0``
+    gives ``p`` exactly; nearly equal rotations use normalised linear interpolation)."""
+    if t == 0.0:
+        return p
+    theta, s = qarc(p, q)
+    return qslerp_arc(p, q, t, theta, s)
 
 
 @njit(cache=True)

@@ -230,7 +230,7 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, t
     for t in range(T):
         for c in range(4):
             opel[t, c] = prot[t, c]
-    # the frames of timewarp_rows(rot, trans, ls, as_ + crop, n_c, upper, pelvis, curve, prot, ...), which reads
+    # the frames of timewarp_rows(rot, trans, arc, ls, as_ + crop, n_c, upper, pelvis, curve, prot, ...), which reads
     # assemble from the parts: its upper body is the action resampled above (resample_clip: the same slerp and
     # lerp at the same curve), so it is taken from there rather than slerped twice
     _assemble(rot, trans, ls, arot, atrans, T, np.arange(J), upper, pelvis, prot, orot, otrans)
@@ -250,7 +250,7 @@ def _naive_one(bank, starts, lengths, loco, act, joints, curve, orot, otrans, op
         curve[t] = t
         for c in range(4):
             opel[t, c] = rot[src + t, pelvis, c]
-    timewarp_rows(rot, trans, ls, as_, lengths[act], upper, pelvis, curve, opel, T, orot, otrans)
+    timewarp_rows(rot, trans, np.empty((0, rot.shape[1], 2)), ls, as_, lengths[act], upper, pelvis, curve, opel, T, orot, otrans)
     return T
 
 

@@ -36,7 +36,8 @@ class AssembledArray(FrameArray):
         key = (self._k, np.asarray(starts).tobytes(), np.asarray(lengths).tobytes())
         last = getattr(self._db, "_last_assembled", None)
         if last is None or last[0] != key:
-            last = self._db._last_assembled = (key, self._db.assembled(self._k, starts, lengths))
+            # the motion arrays only: a per-frame column is read as it is stored, and only when asked
+            last = self._db._last_assembled = (key, self._db._assembly().frames(self._db, self._k, starts, lengths))
         return last[1][self._name]
 
 
@@ -63,7 +64,10 @@ class Assembling:
     def frame_rows(self, k: int, name: str, starts, lengths) -> np.ndarray:
         """Stored rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s dataset ``name``,
         concatenated (a damaged chunk: one line naming the file)."""
-        return FrameArray(self.h5[skeleton_path(k)][name]).gather(np.asarray(starts, np.int64), np.asarray(lengths, np.int64))
+        arrays = self.__dict__.setdefault("_frame_row_arrays", {})  # h5py's lookups cost more than small reads
+        if (k, name) not in arrays or self.mode != "r":  # a file being written may still replace its arrays
+            arrays[(k, name)] = FrameArray(self.h5[skeleton_path(k)][name])
+        return arrays[(k, name)].gather(np.asarray(starts, np.int64), np.asarray(lengths, np.int64))
 
     def assembled(self, k: int, starts, lengths) -> dict[str, np.ndarray]:
         """Frames of skeleton ``k`` (rows ``starts[i] : starts[i] + lengths[i]``, each within one

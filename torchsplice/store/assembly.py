@@ -203,6 +203,14 @@ class Assembly:
             self.by_skeleton[k] = (self.start[rows], rows)
         return self.by_skeleton[k]
 
+    def skeleton_arrays(self, db, k: int) -> tuple[int, np.dtype, bool]:
+        """``(J, dtype, has_translations)`` of skeleton ``k``'s frame arrays, looked up once."""
+        have = self.__dict__.setdefault("_skeleton_arrays", {})
+        if k not in have:
+            g = db.h5[skeleton_path(k)]
+            have[k] = (g["rotations"].shape[1], g["rotations"].dtype, "translations" in g)
+        return have[k]
+
     def locate(self, db, k: int, starts, lengths) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(starts, lengths, clip, first)``: frame ranges of skeleton ``k`` as int64 arrays, the
         clip (table row) holding each and the clip frame it starts at; a range that is not within
@@ -224,12 +232,10 @@ class Assembly:
         """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s frame arrays (each range
         within one clip), concatenated: ``rotations``, ``root_translation`` and ``translations``
         (where the skeleton stores them), as the store's dtype."""
-        from ..cpu.assemble import assemble_standing, assemble_timewarp
+        from ..cpu.assemble import arc_table, assemble_standing, assemble_timewarp
 
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
-        g = db.h5[skeleton_path(k)]
-        J = g["rotations"].shape[1]
-        dtype = g["rotations"].dtype
+        J, dtype, has_translations = self.skeleton_arrays(db, k)
         N = int(lengths.sum())
         out_start = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
         orot = np.empty((N, J, 4), dtype)
@@ -242,7 +248,7 @@ class Assembly:
             at_rows = np.repeat(o - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
             orot[at_rows] = db.frame_rows(k, "rotations", s, n)
             otrans[at_rows, 0] = db.frame_rows(k, "root_translation", s, n)
-            if "translations" in g:
+            if has_translations:
                 otrans[at_rows, 1:] = db.frame_rows(k, "translations", s, n)[:, 1:]
         timewarp = kind == 1
         curve = prot = None
@@ -259,7 +265,9 @@ class Assembly:
             args = (bank["rot"], bank["trans"], bank["starts"], bank["lengths"])
             m = timewarp & (p["assembly_bank"] == b)
             if m.any():
-                assemble_timewarp(*args, p["assembly_locomotion"][m], p["assembly_action"][m], p["assembly_crop"][m],
+                if "arc" not in bank:  # the slerps' angles between neighbouring frames, once per bank
+                    bank["arc"] = arc_table(bank["rot"], t["upper"])
+                assemble_timewarp(bank["rot"], bank["trans"], bank["arc"], *args[2:], p["assembly_locomotion"][m], p["assembly_action"][m], p["assembly_crop"][m],
                                   t["upper"], t["pelvis"], curve, prot, first[m], lengths[m], out_start[m], orot, otrans)
             m = (kind == 2) & (p["assembly_bank"] == b)
             if m.any():
@@ -270,7 +278,7 @@ class Assembly:
                                   t["spine"], t["arms"], t["blend"], first[m], lengths[m], out_start[m], orot, otrans,
                                   np.empty(N))
         out = {"rotations": orot, "root_translation": np.ascontiguousarray(otrans[:, 0])}
-        if "translations" in g:
+        if has_translations:
             out["translations"] = otrans
         return out
 
