@@ -132,6 +132,9 @@ def main() -> None:
         result["driver_killed"] = {"cut": cut, "finished": finished(outdir / "driver.h5")}
         result["driver"] = finish(job(db, outdir / "driver.h5", quiet=False))
 
+        # 6. the job writing an alignment store (parts from the cluster's workers, banks from the driver)
+        result["alignment"] = finish(job(db, outdir / "alignment.h5", "--store", "alignment"))
+
         # 5. SIGTERM and SIGINT mid-job: the job stops soon, with the exit code of its signal
         for sig in (signal.SIGTERM, signal.SIGINT):
             out = outdir / f"signal-{sig.name}.h5"

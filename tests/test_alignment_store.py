@@ -178,6 +178,57 @@ def test_the_dataset_reads_an_alignment_store_as_a_motion_store(sample_jobs):
                 assert _bits(x[f]) == _bits(y[f]), (i, f)
 
 
+def _device_batches(path, device, feats, num_workers=0, **kw):
+    """``(batch assembled in the collate step on device, the same items collated as usual)``."""
+    from torch.utils.data import DataLoader
+
+    from torchsplice.data import MotionDataset, collate_motion
+
+    ds = MotionDataset(path, features=feats, assemble_on=device, **kw)
+    plain = MotionDataset(path, features=feats, **kw)
+    loader = DataLoader(ds, batch_size=7, collate_fn=ds.collate, num_workers=num_workers)
+    for b, batch in enumerate(loader):
+        yield batch, collate_motion(plain.__getitems__(range(7 * b, min(7 * b + 7, len(plain)))))
+
+
+@pytest.mark.parametrize("num_workers", [0, 2])
+def test_a_dataset_assembles_whole_batches_in_its_collate_step(sample_jobs, num_workers):
+    motion, alignment = sample_jobs
+    feats = ["rotations", "positions", "velocities", "action_frame"]
+    for path, tol in ((alignment, 1e-5), (motion, 0.0)):   # parts assembled by torch; frames read as they are
+        for kw in ({}, {"window": 16, "stride": 9}):
+            n = 0
+            for got, want in _device_batches(path, "cpu", feats, num_workers, **kw):
+                assert got["name"] == want["name"] and torch.equal(got["mask"], want["mask"])
+                for f in feats:
+                    scale = 1.0 if f == "rotations" else float(want[f].abs().nan_to_num().max()) + 1.0
+                    err = (got[f] - want[f]).abs().nan_to_num().max()
+                    assert float(err) <= tol * scale * (30 if f == "velocities" else 1), (path.name, f, float(err))
+                    assert torch.equal(got[f].isnan(), want[f].isnan())
+                n += len(got["name"])
+            assert n > 0
+
+
+def test_a_gpu_collate_in_a_worker_process_is_one_line(sample_jobs, monkeypatch):
+    from torchsplice.data import DatasetError, MotionDataset
+
+    ds = MotionDataset(sample_jobs[1], assemble_on="cuda")
+    items = ds.__getitems__([0, 1])
+    assert all("rotations" not in it for it in items)
+    monkeypatch.setattr(torch.utils.data, "get_worker_info", lambda: object())
+    with pytest.raises(DatasetError, match="num_workers=0"):
+        ds.collate(items)
+    with pytest.raises(ValueError, match="choose one"):
+        MotionDataset(sample_jobs[1], assemble_on="cpu", preload=True)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_a_dataset_assembles_its_batches_on_the_gpu(sample_jobs):
+    for got, want in _device_batches(sample_jobs[1], "cuda", ["rotations", "positions"]):
+        assert got["rotations"].device.type == "cuda" and got["mask"].device.type == "cuda"
+        assert float((got["positions"].cpu() - want["positions"]).abs().max()) <= 1e-4
+
+
 def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
     motion, alignment = sample_jobs
     out = tmp_path / "materialized.h5"

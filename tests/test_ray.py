@@ -103,6 +103,14 @@ def test_a_killed_driver_resumes_from_the_finished_tasks(scenarios):
     assert_same(tmp / "driver.h5", want, "resumed run")
 
 
+def test_a_ray_run_writes_an_alignment_store_that_reads_as_the_local_motion_store(scenarios):
+    res, tmp, want = scenarios
+    assert res["alignment"]["code"] == 0, res["alignment"]["stderr"]
+    with MotionDatabase.open(tmp / "alignment.h5") as db:
+        assert db.store == "alignment"
+    assert_same(tmp / "alignment.h5", want, "alignment-store run")
+
+
 @pytest.mark.parametrize("sig, code, word", [("SIGTERM", 143, "terminated"), ("SIGINT", 130, "interrupted")])
 def test_a_signal_stops_a_ray_job_soon_with_its_exit_code(scenarios, sig, code, word):
     """Ray re-raises a signal met in its calls as a plain KeyboardInterrupt and installs its own

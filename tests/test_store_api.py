@@ -117,3 +117,26 @@ def test_virtual_clips_are_checked_like_packed_ones(tmp_path):
     with pytest.raises(DatabaseError, match="no extra column 'nope' was declared"):
         with MotionDatabase.create(out, overwrite=True) as db:
             db.append_virtual(tmp_path / "src.h5", a, [10], ["x"], 30.0, extra={"nope": [1]})
+
+
+def test_a_resumable_databases_table_is_written_in_blocks_as_it_was_appended(tmp_path, monkeypatch):
+    """The clip table of a resumable database (the job's output) goes from its row log into the
+    file a block of rows at a time at close; several blocks give the table one block gives."""
+    from torchsplice.store.writing import Writing
+
+    a = chain_skeleton(3)
+    tables = []
+    original = Writing._write_logged_rows
+    for block in (2, 1 << 17):
+        monkeypatch.setattr(Writing, "_write_logged_rows", lambda self, b=block: original(self, b))
+        path = tmp_path / f"resumable-{block}.h5"
+        with MotionDatabase.create(path, staging=tmp_path / f".stage-{block}", columns={"cost": "float"}) as db:
+            for i in range(7):
+                db.append(random_clip(a, 3 + i, f"clip{i}", i, labels={"i": i}), extra={"cost": 0.5 * i})
+                db.checkpoint({"step": i})
+        with MotionDatabase.open(path) as db:
+            tables.append(db.table())
+    assert tables[0]["name"].tolist() == [f"clip{i}" for i in range(7)]
+    for col in tables[1]:
+        x, y = np.asarray(tables[0][col]), np.asarray(tables[1][col])
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), col

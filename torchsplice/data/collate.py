@@ -19,9 +19,10 @@ def collate_motion(items: Sequence[dict]) -> dict:
     become ``(B, T, ...)`` with ``T`` the longest length; shorter items are padded by
     repeating their last frame. Other tensors are stacked as ``(B, ...)``.
 
-    Returns a dict with the stacked features and:
+    Returns a dict with the stacked features (on the items' device) and:
 
-    - ``lengths``: ``(B,)`` int64 real frames per item; ``mask``: ``(B, T)`` bool, True on real frames;
+    - ``lengths``: ``(B,)`` int64 real frames per item; ``mask``: ``(B, T)`` bool, True on real
+      frames (both on the features' device);
     - ``fps``: ``(B,)`` float64;
     - ``name``, ``index``, ``start``, ``skeleton``: lists (and any other non-tensor key as a list,
       e.g. ``labels``: a list of dicts).
@@ -37,6 +38,7 @@ def collate_motion(items: Sequence[dict]) -> dict:
     T = int(lengths.max())
     B = len(items)
     out: dict[str, Any] = {}
+    device = next((v.device for v in items[0].values() if isinstance(v, torch.Tensor) and v.dim() >= 1), None)
     for key in items[0]:
         if key in ("length", "lengths", "mask"):
             continue
@@ -56,7 +58,7 @@ def collate_motion(items: Sequence[dict]) -> dict:
                         f"{items[0].get('name', '?')!r} (T, {', '.join(map(str, shape))}) ({other}clips on skeletons of "
                         "other joints); batch them with DataLoader(ds, batch_sampler=ds.batch_sampler(B), "
                         "collate_fn=collate_motion), or filter with where={'skeleton': K}")
-            x = torch.empty((B, T, *shape), dtype=values[0].dtype)
+            x = torch.empty((B, T, *shape), dtype=values[0].dtype, device=values[0].device)
             for b, v in enumerate(values):
                 n = v.shape[0]
                 x[b, :n] = v
@@ -70,6 +72,6 @@ def collate_motion(items: Sequence[dict]) -> dict:
                 out[key] = torch.stack(values)
             except RuntimeError as exc:
                 raise ValueError(f"cannot batch {key!r}: {exc}") from None
-    out["lengths"] = lengths
-    out["mask"] = torch.arange(T)[None, :] < lengths[:, None]
+    out["lengths"] = lengths.to(device) if device is not None else lengths
+    out["mask"] = torch.arange(T, device=out["lengths"].device)[None, :] < out["lengths"][:, None]
     return out

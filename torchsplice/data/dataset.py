@@ -155,6 +155,14 @@ class MotionDataset(Dataset):
             so that no action or locomotion of the test split is trained on. Sources are split
             over the whole database, so a clip's split is the same whatever else is selected,
             and the same as the HumanML3D export gives it with the same ratios and seed.
+        assemble_on: a device (``"cuda"``, ``"cpu"``) on which :meth:`collate` makes each
+            batch's features at once: a batch fetch (``__getitems__``, what ``DataLoader`` calls)
+            then gives the items' metadata only, and ``DataLoader(ds, batch_size=B,
+            collate_fn=ds.collate)`` reads the batch's frames, or an alignment store's parts
+            (a few bytes per frame), assembles them there with torch
+            (:meth:`~torchsplice.store.database.MotionDatabase.assembled_on`) and derives the
+            features there. On a GPU the collate runs in the loading process, so use
+            ``num_workers=0`` (a worker is refused in one line). ``ds[i]`` is unchanged.
 
     Items (``ds[i]``): a dict with each feature as a ``(T, ...)`` tensor and ``name`` (str),
     ``length`` (int, ``T``), ``fps`` (float), ``index`` (the clip's row in the database),
@@ -179,8 +187,13 @@ class MotionDataset(Dataset):
                  window: int | None = None, stride: int | None = None,
                  features: Sequence[str] = ("rotations", "root_translation"),
                  dtype: torch.dtype = torch.float32, preload: bool = False, select: str | Sequence[str] | None = None,
-                 split: str | None = None, split_ratios: Sequence[float] = (0.8, 0.1, 0.1), split_seed: int = 0):
+                 split: str | None = None, split_ratios: Sequence[float] = (0.8, 0.1, 0.1), split_seed: int = 0,
+                 assemble_on: str | torch.device | None = None):
         self.path = Path(path)
+        self.assemble_on = None if assemble_on is None else str(torch.device(assemble_on))
+        if self.assemble_on is not None and preload:
+            raise ValueError("assemble_on makes each batch's features in the collate step; preload=True makes them all "
+                             "here: choose one")
         if isinstance(features, str):
             features = (features,)
         self.features = tuple(dict.fromkeys(features))
@@ -364,12 +377,14 @@ class MotionDataset(Dataset):
         """The features of frames ``start:start+n`` of selected clip ``c`` (``0 <= c < num_clips``)."""
         return self._fetch([(c, start, n)])[0]
 
-    def _fetch(self, parts: Sequence[tuple[int, int, int]]) -> list[dict[str, torch.Tensor]]:
+    def _fetch(self, parts: Sequence[tuple[int, int, int]], device: torch.device | None = None
+               ) -> list[dict[str, torch.Tensor]]:
         """Features of several ``(clip, start, n)`` frame ranges; one feature computation per skeleton.
 
         Each range reads just its rows from the file (and the row before it when velocities
         are asked and it does not start its clip); the rows of all ranges on one skeleton are
-        then concatenated so that forward kinematics runs once over all of them.
+        then concatenated so that forward kinematics runs once over all of them. With a
+        ``device``, the rows are assembled and the features computed there.
         """
         if self.preload:
             out = []
@@ -394,8 +409,11 @@ class MotionDataset(Dataset):
                 clip_first.append(start == 0)
             # every range of the skeleton in one read per array (an alignment store assembles them at once)
             los_a, sizes_a = np.array(los, np.int64), np.array(sizes, np.int64)
-            raw = {name: torch.from_numpy(np.ascontiguousarray(self._dataset(k, name).gather(los_a, sizes_a)))
-                   for name in self._raw[k]}
+            if device is None:
+                raw = {name: torch.from_numpy(np.ascontiguousarray(self._dataset(k, name).gather(los_a, sizes_a)))
+                       for name in self._raw[k]}
+            else:
+                raw = self._database().assembled_on(k, los_a, sizes_a, device, self._raw[k])
             sizes_t = torch.tensor(sizes, dtype=torch.int64)
             seg_first = torch.zeros(int(sizes_t.sum()), dtype=torch.bool)
             offsets = torch.cumsum(sizes_t, 0) - sizes_t
@@ -404,6 +422,8 @@ class MotionDataset(Dataset):
             clip_first_rows[offsets[(sizes_t > 0) & ~torch.tensor(clip_first)]] = False
             frames = {name: v.to(self.dtype) for name, v in raw.items()}
             fps_rows = torch.repeat_interleave(torch.tensor(fps, dtype=self.dtype), sizes_t)
+            if device is not None:
+                fps_rows, clip_first_rows, seg_first = (x.to(device) for x in (fps_rows, clip_first_rows, seg_first))
             derived = derive_features(frames, self.features, self.skeletons[k], fps_rows, clip_first_rows, seg_first,
                               self.trajectory_joints.get(k, 0))
             for p, o, size, ctx in zip(members, offsets.tolist(), sizes, ctxs):
@@ -429,7 +449,26 @@ class MotionDataset(Dataset):
         runs once per batch instead of once per item; the items equal ``self[i]`` exactly.
         """
         where = [self._locate(i) for i in indices]
+        if self.assemble_on is not None:  # the features come in collate(), for the whole batch on the device
+            return [self._item(c, start, n, {"_range": (c, start, n)}) for c, start, n in where]
         return [self._item(c, start, n, f) for (c, start, n), f in zip(where, self._fetch(where))]
+
+    def collate(self, items: Sequence[dict]) -> dict:
+        """The ``collate_fn`` for this dataset: :func:`collate_motion` of the items, whose features
+        are first made for the whole batch on ``assemble_on`` when the dataset has one (see the
+        class docstring); the batch's tensors are then on that device."""
+        pending = [it for it in items if "_range" in it]
+        if pending:
+            device = torch.device(self.assemble_on)
+            if device.type != "cpu" and torch.utils.data.get_worker_info() is not None:
+                raise DatasetError(f"{self.path}: assemble_on={self.assemble_on!r} makes each batch on the device in the "
+                                   "collate step, which a DataLoader worker process cannot: use num_workers=0 (its "
+                                   "reads are an alignment store's parts, a few bytes per frame)")
+            made = self._fetch([it["_range"] for it in pending], device)
+            for it, f in zip(pending, made):
+                del it["_range"]
+                it.update(f)
+        return collate_motion(list(items))
 
     def batch_sampler(self, batch_size: int, shuffle: bool = False, seed: int = 0, drop_last: bool = False):
         """A ``DataLoader`` ``batch_sampler`` whose batches each hold items of one skeleton

@@ -83,21 +83,25 @@ class Assembling:
             out[n] = self.frame_rows(k, n, starts, lengths)
         return out
 
-    def assembled_on(self, k: int, starts, lengths, device) -> dict:
+    def assembled_on(self, k: int, starts, lengths, device, names=None) -> dict:
         """:meth:`assembled` as float32 tensors on ``device``: an alignment store's clips
         assembled there by torch (:mod:`torchsplice.store.assembly_torch`; equal to the compiled
-        kernels' frames to float32's rounding), a motion store's frames read and moved there."""
+        kernels' frames to float32's rounding), a motion store's frames read and moved there.
+        ``names``: the frame arrays and per-frame columns wanted (default: all)."""
         import torch
 
         starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
+        g = self.h5[skeleton_path(k)]
+        arrays = [n for n in FRAME_ARRAYS if n in g and (names is None or n in names)]
         if self.store == ALIGNMENT:
-            out = self._assembly().frames_on(self, k, starts, lengths, device)
+            out = self._assembly().frames_on(self, k, starts, lengths, device) if arrays else {}
         else:
-            g = self.h5[skeleton_path(k)]
             out = {n: torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device, dtype=torch.float32)
-                   for n in FRAME_ARRAYS if n in g}
+                   for n in arrays}
+        out = {n: out[n] for n in arrays}
         for n in self.frame_columns:
-            out[n] = torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device)
+            if names is None or n in names:
+                out[n] = torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device)
         return out
 
     def assembled_array(self, k: int, name: str) -> "AssembledArray":

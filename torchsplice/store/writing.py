@@ -516,13 +516,31 @@ class Writing:
                 pass
             raise
 
-    def _write_logged_rows(self) -> None:
-        """A resumable database's logged rows into its clips datasets (at :meth:`close`), a
-        column at a time."""
+    def _write_logged_rows(self, block_rows: int = 1 << 17) -> None:
+        """A resumable database's logged rows into its clips datasets (at :meth:`close`), about
+        ``block_rows`` rows at a time, so that a table of millions of clips never sits in
+        memory whole (its strings are Python objects until they are written)."""
         c = self.h5[CLIPS]
-        records = list(self._row_log.records())
-        for name in c:
-            values = [r[name] for r in records]
-            column = np.concatenate(values) if values else column_array(self._declared, name, [])
-            c[name].resize(len(column), axis=0)
-            c[name][:] = column
+        names = list(c)
+        for name in names:
+            c[name].resize(0, axis=0)
+        written, block = 0, []
+
+        def write() -> int:
+            n = 0
+            for name in names:
+                column = np.concatenate([r[name] for r in block])
+                n = len(column)
+                c[name].resize(written + n, axis=0)
+                c[name][written:] = column
+            block.clear()
+            return n
+
+        pending = 0
+        for record in self._row_log.records():
+            block.append(record)
+            pending += len(record[names[0]])
+            if pending >= block_rows:
+                written, pending = written + write(), 0
+        if block:
+            written += write()
