@@ -76,6 +76,16 @@ def test_motion_stream_batches_are_the_same_with_workers_and_on_either_store(sto
     assert [b["name"] for b in s] != [b["name"] for b in inline]
 
 
+def test_a_stream_assembles_its_batches_on_the_device_it_is_given(stores):
+    kw = dict(batch_size=7, chunk=8, seed=3, window=16, stride=8)
+    on_device = list(MotionStream(stores["alignment"], assemble_on="cpu", **kw))
+    plain = list(MotionStream(stores["alignment"], **kw))
+    assert len(on_device) == len(plain) > 3
+    for a, b in zip(on_device, plain):
+        assert a["name"] == b["name"] and torch.equal(a["mask"], b["mask"])
+        assert float((a["rotations_6d"] - b["rotations_6d"]).abs().max()) <= 1e-5  # torch's assembly, float32
+
+
 def test_a_resumed_stream_gives_the_rest_of_the_epoch(stores):
     whole = list(MotionStream(stores["alignment"], batch_size=5, chunk=4, seed=11))
     s = MotionStream(stores["alignment"], batch_size=5, chunk=4, seed=11)

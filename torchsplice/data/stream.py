@@ -138,9 +138,10 @@ class MotionStream(ChunkedStream):
     """:class:`~torchsplice.data.MotionDataset` items streamed in batches (see the module docstring).
 
     ``path`` and the keyword arguments ``features``, ``window``, ``stride``, ``select``, ``where``,
-    ``split``, ``split_ratios``, ``split_seed``, ``dtype`` are :class:`MotionDataset`'s; a batch is
-    :func:`~torchsplice.data.collate_motion` of its items (``mask``, ``lengths``, each feature padded),
-    plus ``batch`` and ``epoch``. Batches never mix skeletons of different topologies.
+    ``split``, ``split_ratios``, ``split_seed``, ``dtype`` and ``assemble_on`` are
+    :class:`MotionDataset`'s; a batch is :func:`~torchsplice.data.collate_motion` of its items
+    (``mask``, ``lengths``, each feature padded; made on ``assemble_on`` where given, see
+    :meth:`MotionDataset.collate`), plus ``batch`` and ``epoch``. Batches never mix skeletons of different topologies.
     """
 
     def __init__(self, path, batch_size: int = 32, *, features: Sequence[str] = ("rotations_6d", "velocities"),
@@ -157,6 +158,4 @@ class MotionStream(ChunkedStream):
         return self.dataset.item_topologies()
 
     def _batch(self, units: list[int]) -> dict:
-        from .collate import collate_motion
-
-        return collate_motion(self.dataset.__getitems__(units))
+        return self.dataset.collate(self.dataset.__getitems__(units))
