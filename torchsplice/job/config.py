@@ -147,9 +147,6 @@ class JobConfig:
             near = difflib.get_close_matches(str(c.store), STORES, n=1)
             raise TorchspliceError(f"unknown store {c.store!r}" + (f"; did you mean {near[0]!r}?" if near else "")
                                    + f" (choose {' or '.join(STORES)})")
-        if c.store == "alignment" and c.layout == "virtual":
-            raise TorchspliceError("{store} alignment writes one self-contained file; it does not take {layout} virtual",
-                                   options=("store", "layout"))
         if c.layout == "virtual" and c.copy_sources:
             raise TorchspliceError("{copy_sources} needs {layout} copy: a virtual output holds only the spliced clips",
                                    options=("copy_sources", "layout"))

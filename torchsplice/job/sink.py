@@ -86,8 +86,9 @@ class OutputWriter:
                 self.banks[(b, str(k), float(bank["fps"]))] = r
                 self.bank_of.setdefault((str(k), float(bank["fps"])), []).append(b)
 
-    def _append_parts(self, part: Part) -> None:
-        """A part's clips as their parts (an alignment store): source keys become bank rows."""
+    def _append_parts(self, part: Part, virtual: tuple | None = None) -> None:
+        """A part's clips as their parts (an alignment store): source keys become bank rows.
+        ``virtual``: ``(source, refer_as)`` of the shard holding their per-frame parts."""
         from ..store.assembly import KIND_CODES
 
         import numpy as np
@@ -120,7 +121,8 @@ class OutputWriter:
                                                      "acting")}}
         self.db.append_parts(part.skeleton, part.lengths, part.names, part.fps, curve=p.get("curve"), pelvis=p.get("pelvis"),
                              parts=parts, spec=DatasetSpec.from_json(part.spec), sources=part.sources, roles="spliced",
-                             labels=part.labels, extra=part.extra, frame_extra={"action_frame": part.action_frame})
+                             labels=part.labels, extra=part.extra, frame_extra={"action_frame": part.action_frame},
+                             virtual=virtual)
 
     def counts(self) -> dict:
         """What the closing summary reports so far (kept in each checkpoint)."""
@@ -157,6 +159,16 @@ class OutputWriter:
         """Append a shard's clips: from ``part`` when it is still in memory, else from the file;
         with ``virtual``, only the shard's table (its frames stay in the shard, which the output
         refers to as ``refer_as``, where it will be once the output is complete)."""
+        if virtual and self.db.store == "alignment":  # its table rows from the part, its frames from the shard
+            self._count(part.extra["flags"], part.skipped, part.extra["timing"])
+            if part.names and part.parts is not None:
+                self._append_parts(part, virtual=(path, refer_as))
+            elif part.names:
+                self.db.append_virtual(path, part.skeleton, part.lengths, part.names, part.fps,
+                                       spec=DatasetSpec.from_json(part.spec), refer_as=refer_as, sources=part.sources,
+                                       roles="spliced", labels=part.labels, extra=part.extra)
+            self.clips += len(part.names)
+            return
         if part is not None and not virtual:
             if self.expect_plan is not None and part.plan and part.plan != self.expect_plan:
                 raise DatabaseError(f"{path}: this shard belongs to another plan of the job; rerun with {{restart}}",
@@ -263,22 +275,51 @@ class AlignmentSink(HDF5Sink):
     """The sink of an alignment store: its output is an alignment store (:class:`HDF5Sink`'s
     output with ``store="alignment"``), and its shards (``--shard`` runs) are the tasks' parts
     as :meth:`Part.save` writes them (a task's parts are kilobytes; their source clips are the
-    output's banks, which the merge writes once)."""
+    output's banks, which the merge writes once). For a ``virtual`` output a shard is also an
+    HDF5 file of the clips' per-frame parts (:meth:`MotionDatabase.append_frame_source`),
+    ``part-ID.h5``, written after the part beside it (``part-ID.shard``, which gives the
+    output its table rows), that the output's frame datasets read as virtual datasets."""
+
+    def __init__(self, virtual: bool = False):
+        self.virtual = virtual
 
     def shard_name(self, task_id: str) -> str:
-        return f"part-{task_id}.shard"
+        return f"part-{task_id}.h5" if self.virtual else f"part-{task_id}.shard"
+
+    @staticmethod
+    def _part_file(path: Path) -> Path:
+        return Path(path).with_suffix(".shard")
 
     def write_shard(self, part: Part, path: Path, compression) -> None:
-        part.save(path)
+        if not self.virtual:
+            part.save(path)
+            return
+        part.save(self._part_file(path))  # first: a shard file whole means its part is there
+        import numpy as np
+
+        arrays = {"action_frame": np.asarray(part.action_frame, np.float32)}
+        if part.parts is not None:
+            for name, key in (("assembly_curve", "curve"), ("assembly_pelvis", "pelvis")):
+                if part.parts.get(key) is not None:
+                    arrays[name] = part.parts[key]
+        else:
+            arrays.update(rotations=part.rotations, root_translation=part.translations[:, 0],
+                          translations=part.translations)
+        with MotionDatabase.create(path, overwrite=True, columns=OUTPUT_COLUMNS, frame_columns=FRAME_COLUMNS,
+                                   compression=compression, chunk_frames=256, store="alignment",
+                                   attrs={"task": part.task, "plan": part.plan}) as db:
+            db.append_frame_source(part.skeleton, DatasetSpec.from_json(part.spec), arrays)
 
     def shard_skipped(self, path: Path) -> dict:
-        return Part.header(path)["meta"]["skipped"]
+        return Part.header(self._part_file(path))["meta"]["skipped"]
 
     def load_shard(self, path: Path, skeleton) -> Part:
-        return Part.load(path, skeleton())
+        return Part.load(self._part_file(path), skeleton())
 
 
 def make_sink(config) -> Sink:
     """The sink of a job of ``config`` (the one place the job, its workers and the merge get it):
     an :class:`AlignmentSink` for ``store="alignment"``, an :class:`HDF5Sink` otherwise."""
-    return AlignmentSink() if getattr(config, "store", "motion") == "alignment" else HDF5Sink()
+    if getattr(config, "store", "motion") == "alignment":
+        return AlignmentSink(virtual=getattr(config, "layout", "copy") == "virtual")
+    return HDF5Sink()

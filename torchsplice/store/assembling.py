@@ -161,11 +161,14 @@ class Assembling:
         return out
 
     def append_parts(self, skeleton, lengths, names, fps, *, curve, pelvis, parts: dict, spec=None, sources="",
-                     roles="", labels=None, extra: dict | None = None, frame_extra: dict | None = None) -> None:
+                     roles="", labels=None, extra: dict | None = None, frame_extra: dict | None = None,
+                     virtual: tuple | None = None) -> None:
         """Add spliced clips of one skeleton as their parts: per frame ``curve (N,)`` and
         ``pelvis (N, 4)`` (``None`` for standing clips: their frames follow from their timing),
         per clip the :data:`PART_COLUMNS` in ``parts`` (``C`` values each); other arguments as
-        :meth:`append_packed`'s."""
+        :meth:`append_packed`'s. ``virtual=(source, refer_as)``: the per-frame parts are in the
+        file ``source`` (:meth:`append_frame_source`), read through virtual datasets as
+        :meth:`append_virtual` reads frames; only the table rows are written here."""
         self._writable()
         if self.store != ALIGNMENT:
             raise DatabaseError(f"{self.path}: is a motion store; it cannot take clips as parts (write their motions)")
@@ -187,6 +190,13 @@ class Assembling:
             arrays[name] = np.full(N, np.nan, np.float32) if v is None else np.asarray(v, np.float32).reshape(N)
         rows = self._rows(names, lengths, fps, sources, roles, labels, {**(extra or {}), **parts})
         k = self.add_skeleton(skeleton, spec)
+        if virtual is not None:
+            n0 = self._virtual_rows(k)
+            rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
+            self._store_rows(rows)
+            self._virtual[k].append((self._virtual_source(*virtual), N))
+            self._added(index, names)
+            return
         self._no_virtual(k)
         g = self.h5[skeleton_path(k)]
         self._reserve(sum(a.nbytes for a in arrays.values()) + 300 * C)

@@ -364,13 +364,37 @@ class Writing:
         if C == 0:
             return
         k = self.add_skeleton(skeleton, spec)
+        n0 = self._virtual_rows(k)
+        self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
+        self._virtual[k].append((self._virtual_source(source, refer_as), N))
+
+    def _virtual_rows(self, k: int) -> int:
+        """The frames skeleton ``k`` reads through virtual datasets so far (it may hold no real ones)."""
         if self.h5[f"{skeleton_path(k)}/rotations"].shape[0]:
             raise DatabaseError(f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones")
-        parts = self._virtual.setdefault(k, [])
-        n0 = sum(n for _, n in parts)
-        rel = os.path.relpath(Path(refer_as or source).resolve(), Path(self._target).resolve().parent)
-        self._append_rows(k, n0, lengths, names, fps, sources, roles, labels, extra or {})
-        parts.append((rel, N))
+        return sum(n for _, n in self._virtual.setdefault(k, []))
+
+    def _virtual_source(self, source: Path, refer_as: Path | None) -> str:
+        """How this file refers to a virtual source: its path relative to this file's folder."""
+        return os.path.relpath(Path(refer_as or source).resolve(), Path(self._target).resolve().parent)
+
+    @guarded
+    def append_frame_source(self, skeleton: Skeleton, spec, arrays: dict) -> None:
+        """Rows of the skeleton's group that hold only per-frame ``arrays`` (name -> ``(N, ...)``,
+        those the group stores; every other per-frame dataset gets ``N`` unwritten rows) and no
+        clips: the frames of a shard that a virtual alignment store reads (:meth:`append_parts`
+        with ``virtual=``), whose table rows are the output's own."""
+        self._writable()
+        self.flush()
+        k = self.add_skeleton(skeleton, spec)
+        g = self.h5[skeleton_path(k)]
+        arrays = {n: a for n, a in arrays.items() if n in g}
+        n0 = g["rotations"].shape[0]
+        N = len(next(iter(arrays.values()))) if arrays else 0
+        self._reserve(sum(np.asarray(a).nbytes for a in arrays.values()))
+        grow_rows(g, n0 + N)
+        for name, a in arrays.items():
+            g[name][n0:] = a
 
     def _added(self, index: dict, names: list[str]) -> None:
         """Note ``names``, just written as rows, in the name index and the name list."""
@@ -427,7 +451,7 @@ class Writing:
         for k, parts in self._virtual.items():
             g = self.h5[skeleton_path(k)]
             total = sum(n for _, n in parts)
-            for name in [n for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g]:
+            for name in [n for n in (*FRAME_ARRAYS, *FRAME_PARTS, *self.frame_columns) if n in g]:
                 ds = g[name]
                 shape, dtype = (total,) + ds.shape[1:], ds.dtype
                 layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
