@@ -152,9 +152,13 @@ def test_an_output_that_is_an_input_is_refused_whatever_force_says(sample_db, tm
     shutil.copy(bandai[0], walk)
     before = db.read_bytes(), walk.read_bytes()
     for argv in (["splice-all", db, "-o", db, "--force"], ["splice-all", db, "-o", link, "--force"],
-                 ["splice-all", sample_db, "--actions-db", db, "-o", db, "--force"]):
+                 ["splice-all", sample_db, "--actions-db", db, "-o", db, "--force"],
+                 ["splice-all", sample_db, "--target", f"{db}:0", "-o", db, "--force"],
+                 ["splice-all", sample_db, "--target", str(link), "-o", db, "--force"]):
         rc, _, err = run(capsys, *argv)
         assert rc == 2 and "is also the job's input" in error_line(err)
+    assert "--target" in error_line(err)
+    assert db.read_bytes() == before[0]
     for argv in (["evaluate", db, "-o", db, "--force"], ["import", walk, "-o", walk, "--force"]):
         rc, _, err = run(capsys, *argv)
         assert rc == 2 and "must end in" in error_line(err)

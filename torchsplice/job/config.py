@@ -164,10 +164,11 @@ class JobConfig:
         from ..splice.backends import resolve_backend
 
         resolve_backend(c.backend, c.device)  # a clear error for an unknown one, or one that cannot run there
+        target_file = None
         if c.target is not None:
             from ..retarget.targets import resolve_target
 
-            resolve_target(str(c.target))  # a clear error now for a target that is not one
+            target_file = resolve_target(str(c.target)).path  # a clear error now for a target that is not one
             c = replace(c, target=str(c.target))
         if c.workers is not None and c.workers < 1:
             raise TorchspliceError(f"{{workers}} must be at least 1, got {c.workers}", options=("workers",))
@@ -185,9 +186,10 @@ class JobConfig:
             raise TorchspliceError(f"{out}: is a folder; give the output a file name ending in .h5")
         if not out.parent.is_dir():
             raise TorchspliceError(f"{out}: folder {out.parent} does not exist")
-        for source in (c.database, c.actions_db):
-            if source is not None and same_file(out, source):
-                raise TorchspliceError(f"{out}: is also the job's input; write the output to another file")
+        for source, what in ((c.database, "database"), (c.actions_db, "{actions_db}"), (target_file, "{target}")):
+            if source is not None and same_file(out, source):  # --force never replaces an input
+                raise TorchspliceError(f"{out}: is also the job's input ({what}); write the output to another file",
+                                       options=("actions_db", "target"))
         return c
 
     @property
