@@ -127,6 +127,43 @@ def test_markup_in_names_stays_plain_text_in_the_report(markup_job, tmp_path, ca
             assert len(re.findall(r"(?<!\\)\|", row)) == want, row
 
 
+FORMULAS = ("=cmd|' /C calc'!A0", "+1+1", "-2+3", "@SUM(1)", "=HYPERLINK(\"http://x\")")
+
+
+def test_a_name_that_starts_like_a_formula_is_text_in_every_csv(tmp_path, capsys):
+    """CSV formula injection: index.csv (job, export, HumanML3D), info --csv and evaluate --csv
+    write a cell starting with = + - @ with a leading apostrophe; numbers stay numbers."""
+    import csv
+
+    from torchsplice.core.names import spreadsheet_cell
+
+    assert [spreadsheet_cell(v) for v in ("=1", "-x", "\tx", "walk", -0.5, 3)] == ["'=1", "'-x", "'\tx", "walk", -0.5, 3]
+    spec = load_spec("sample")
+    db, out = tmp_path / "db.h5", tmp_path / "out.h5"
+    with MotionDatabase.create(db) as w:
+        for k, m in enumerate(sample_motions()):
+            w.append(replace(m, name=FORMULAS[k] if k < len(FORMULAS) else m.name), spec=spec)
+    assert main(["splice-all", str(db), "-o", str(out), "--method", "naive", "-q"]) == 0
+    assert main(["info", str(out), "--csv", str(tmp_path / "info.csv")]) == 0
+    assert main(["evaluate", str(out), "-o", str(tmp_path / "r.md"), "--no-pictures", "--csv", str(tmp_path / "ev.csv")]) == 0
+    assert main(["export", str(out), "--all", "--format", "humanml3d", "-o", str(tmp_path / "h3d"), "-q"]) == 0
+    capsys.readouterr()
+    files = [out.with_name("out.index.csv"), tmp_path / "info.csv", tmp_path / "ev.csv", tmp_path / "h3d" / "index.csv"]
+    def formula(c):  # what a spreadsheet would evaluate: a formula start that is not a number
+        try:
+            float(c)
+            return False
+        except ValueError:
+            return c.startswith(("=", "+", "-", "@"))
+
+    for f in files:
+        rows = list(csv.reader(open(f)))
+        cells = [c for r in rows[1:] for c in r]
+        assert not any(formula(c) for c in cells), (f.name, [c for c in cells if formula(c)][:3])
+        assert any(c.startswith("'") and c[1:] in FORMULAS for c in cells) or any(
+            any(x in c for x in FORMULAS) for c in cells), f.name  # the names are there, as text
+
+
 def test_report_escaping_known_answers():
     from torchsplice.evaluation.report import md
 

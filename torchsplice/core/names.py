@@ -7,14 +7,16 @@ no *control character*: C0 (U+0000-U+001F, newline and tab included), DEL, C1 (U
 lone surrogates, and the bidirectional overrides and isolates (U+202A-U+202E, U+2066-U+2069)
 that reorder what a reader sees. Printed raw, they move the cursor, clear the screen, set the
 window title or forge output lines. Every writer refuses them (:func:`control_character`);
-:func:`printable` escapes them where text from elsewhere is shown.
+:func:`printable` escapes them where text from elsewhere is shown. In a CSV file a name that
+starts like a formula (``=``, ``+``, ``-``, ``@``) would run as one in a spreadsheet:
+:func:`spreadsheet_cell` writes it so that spreadsheets read it as text.
 """
 
 from __future__ import annotations
 
 import re
 
-__all__ = ["CONTROL", "control_character", "printable", "quoted"]
+__all__ = ["CONTROL", "control_character", "printable", "quoted", "spreadsheet_cell"]
 
 CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
 """The characters a name must not hold (see the module docstring)."""
@@ -38,3 +40,17 @@ def quoted(text: str, limit: int = 60) -> str:
     """``repr(text)``, cut to about ``limit`` characters with an ellipsis (for error messages)."""
     r = repr(text)
     return r if len(r) <= limit else r[: limit - 4] + "..." + r[-1]
+
+
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+"""What a CSV cell may not start with and stay text in Excel, LibreOffice or Google Sheets."""
+
+
+def spreadsheet_cell(value):
+    """A CSV cell's value that spreadsheets read as text: a string starting with ``=``, ``+``,
+    ``-``, ``@``, a tab or a carriage return gets a leading apostrophe (OWASP's advice against
+    CSV formula injection: ``=cmd|calc!A0`` becomes ``'=cmd|calc!A0``); other values as they are
+    (numbers stay numbers, so ``-0.5`` is still a number)."""
+    if isinstance(value, str) and value.startswith(FORMULA_STARTS):
+        return "'" + value
+    return value

@@ -257,6 +257,8 @@ def _write_rows(tables, path, units, aggregates, per_clip) -> None:
     """Every clip's row as CSV and/or JSON (``tables``: their paths or ``None``), atomically."""
     import csv as csv_module
     import io
+
+    from ..core.names import spreadsheet_cell
     import json as json_module
     import math
 
@@ -270,7 +272,7 @@ def _write_rows(tables, path, units, aggregates, per_clip) -> None:
         w = csv_module.DictWriter(out, columns, lineterminator="\n")
         w.writeheader()
         for c in per_clip:
-            w.writerow({k: "" if clean(v) is None else v for k, v in c.items()})
+            w.writerow({k: "" if clean(v) is None else spreadsheet_cell(v) for k, v in c.items()})
         with atomic_path(csv_path) as tmp:
             Path(tmp).write_text(out.getvalue())
     if json_path is not None:

@@ -48,6 +48,7 @@ from functools import cached_property
 from pathlib import Path
 
 from ..core.errors import SpecError, TorchspliceError
+from ..core.names import spreadsheet_cell
 from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
 from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_ratios, parse_seed, table_splits
 
@@ -229,7 +230,7 @@ class HumanML3DExporter(Exporter):
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(INDEX_COLUMNS)
         for r in rows:
-            writer.writerow([r[c] for c in INDEX_COLUMNS])
+            writer.writerow([spreadsheet_cell(r[c]) for c in INDEX_COLUMNS])
         yield ("text", None, out.getvalue())
 
     def _clips(self, items=None, db=None):

@@ -35,6 +35,8 @@ import json
 from pathlib import Path
 from typing import Sequence
 
+from ..core.names import spreadsheet_cell
+
 __all__ = ["INDEX_NAME", "index_targets", "index_files", "rows_csv", "write_database_index",
            "refresh_database_index"]
 
@@ -53,6 +55,12 @@ def index_targets(out, folder_export: bool) -> dict[str, Path]:
     return {"index": out.with_name(out.stem + ".index.csv")}
 
 
+def csv_row(row: dict) -> dict:
+    """A row as CSV cells: dicts as JSON, strings that start like a formula kept text
+    (:func:`~torchsplice.core.names.spreadsheet_cell`)."""
+    return {k: spreadsheet_cell(json.dumps(v, sort_keys=True) if isinstance(v, dict) else v) for k, v in row.items()}
+
+
 def rows_csv(rows: Sequence[dict]) -> str:
     """Rows as CSV text: every key of any row a column (first seen first), dicts as JSON."""
     out = io.StringIO()
@@ -60,7 +68,7 @@ def rows_csv(rows: Sequence[dict]) -> str:
     w = csv.DictWriter(out, columns, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: json.dumps(v, sort_keys=True) if isinstance(v, dict) else v for k, v in r.items()})
+        w.writerow(csv_row(r))
     return out.getvalue()
 
 
@@ -136,8 +144,7 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
                 if writer is None:
                     writer = csv.DictWriter(f, list(chunk[0]), lineterminator="\n")
                     writer.writeheader()
-                writer.writerows({k: json.dumps(v, sort_keys=True) if isinstance(v, dict) else v for k, v in r.items()}
-                                 for r in chunk)
+                writer.writerows(csv_row(r) for r in chunk)
             if writer is None:
                 f.write("file,clip,split\n")
     except TorchspliceError as exc:
