@@ -495,3 +495,13 @@ def test_a_window_longer_than_every_clip_is_refused_in_one_line(plain_db, motion
     assert len(MotionDataset(plain_db, window=longest)) >= 1  # the longest clip still gives one window
     with pytest.raises(DatasetError, match=f"no selected clip is as long as window={longest + 1} frames .*has {longest}\\)"):
         MotionDataset(plain_db, window=longest + 1)
+
+
+def test_split_ratios_that_are_not_finite_numbers_are_one_line():
+    from torchsplice.core.errors import TorchspliceError
+    from torchsplice.data.splits import parse_ratios
+
+    assert parse_ratios("0.8,0.1,0.1") == (0.8, 0.1, 0.1)
+    for bad in ("nan,1,1", "nan,nan,nan", (float("nan"), 0.5, 0.5), "inf,-inf,1", "0.9,0.1,nan"):
+        with pytest.raises(TorchspliceError, match="three numbers"):
+            parse_ratios(bad)

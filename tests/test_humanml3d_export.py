@@ -282,6 +282,8 @@ def test_bad_input_is_one_line_and_leaves_nothing(spliced, tmp_path, capsys):
             (["--captions", tmp_path / "none.json"], "none.json: no such captions file"),
             (["--window", "0.01"], "--window must be a length in seconds"),
             (["--split-ratios", "0.5,0.6"], "--split-ratios must be three numbers"),
+            (["--split-ratios", "nan,1,1"], "--split-ratios must be three numbers"),
+            (["--split-ratios", "inf,-inf,1"], "--split-ratios must be three numbers"),
             (["--paraphrases", "0"], "--paraphrases must be a whole number")):
         out = tmp_path / "o"
         rc, _, err = run(capsys, "export", spliced, "--all", "-o", out, "--format", "humanml3d", *args)

@@ -18,6 +18,8 @@ kind where there are enough.
 
 from __future__ import annotations
 
+import math
+
 import random
 from typing import Sequence
 
@@ -37,7 +39,9 @@ def parse_ratios(value) -> tuple[float, float, float]:
         items = [float(v) for v in (value.replace(":", ",").split(",") if isinstance(value, str) else value)]
     except (TypeError, ValueError):
         items = []
-    if len(items) != 3 or min(items) < 0 or items[0] <= 0 or abs(sum(items) - 1.0) > 1e-6:
+    # every comparison with NaN is false: a ratio is checked to be a finite number first
+    if len(items) != 3 or not all(math.isfinite(v) for v in items) or min(items) < 0 or items[0] <= 0 \
+            or abs(sum(items) - 1.0) > 1e-6:
         raise TorchspliceError(f"{{split_ratios}} must be three numbers train,val,test that sum to 1 (such as "
                                f"0.8,0.1,0.1), got {value!r}", options=("split_ratios",))
     return items[0], items[1], items[2]
