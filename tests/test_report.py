@@ -110,6 +110,23 @@ def test_report_on_the_sample_ranks_splice_above_naive(sample_job, tmp_path, cap
     assert "| splice | 25 |" in text and "| naive | 25 |" in text and "walk_curve+carry_box" in text
 
 
+def test_figures_that_are_not_finite_print_as_a_dash(sample_job, tmp_path, capsys):
+    """A result with huge values (a plug-in's translations of 1e30) leaves aggregates that are
+    not finite: evaluate prints them as '-' and finishes, no traceback."""
+    import h5py
+
+    huge = tmp_path / "huge.h5"
+    shutil.copy(sample_job, huge)
+    with h5py.File(huge, "r+") as f:
+        rt = f["skeletons/0/root_translation"]
+        sign = np.where(np.arange(rt.shape[0]) % 2 == 0, 1.0, -1.0)[:, None]
+        rt[...] = (sign * np.full(rt.shape, 3e38)).astype(rt.dtype)  # steps of 6e38: past float32's range
+    rc = main(["evaluate", str(huge), "-o", str(tmp_path / "r.md"), "--no-pictures"])
+    cap = capsys.readouterr()
+    assert rc == 0 and "Traceback" not in cap.err, cap.err
+    assert "foot skate - " in cap.out and "splice: 25 clips" in cap.out
+
+
 def test_report_needs_a_spliced_database(tmp_path):
     db = tmp_path / "s.h5"
     assert main(["sample", "-o", str(db), "-q"]) == 0

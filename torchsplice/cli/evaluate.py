@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from .base import Command, register_command
 from .common import add_output_flags, declared, locked, output, positive_int, progress
 
@@ -49,11 +51,14 @@ class Evaluate(Command):
             with MotionDatabase.open(args.database) as db:
                 u = db.attrs.get("units") or "units"
             u = "units" if u in ("mixed", "unknown") else u
+            def fig(v) -> str:  # a figure that is missing or not finite (a result's huge values) prints as -
+                return f"{v:.2f}" if isinstance(v, (int, float)) and math.isfinite(v) else "-"
+
             for method, a in agg.items():
-                gt = (f", ground-truth error {a['gt_error']:.2f} {u} over {a['gt_pairs']} pairs"
-                      if a["gt_error"] is not None else "")
-                print(f"{method}: {a['clips']} clips, foot skate {a['foot_skate']:.2f} {u}/s, "
-                      f"posture kept {a['posture']:.2f} {u}{gt}")
+                gt = (f", ground-truth error {fig(a['gt_error'])} {u} over {a['gt_pairs']} pairs"
+                      if a.get("gt_error") is not None else "")
+                print(f"{method}: {a['clips']} clips, foot skate {fig(a.get('foot_skate'))} {u}/s, "
+                      f"posture kept {fig(a.get('posture'))} {u}{gt}")
             print(f"wrote {out}" + "".join(f", {t}" for t in tables if t is not None))
         return 0
 
