@@ -27,6 +27,7 @@ import torch
 
 from cli_helpers import error_line, run
 from torchsplice.cli import main
+from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.captions import gerund, mirror_caption, parse_caption_line
 from torchsplice.formats.exporters import export_clips
 from torchsplice.evaluation.humanml3d import folder_properties
@@ -435,6 +436,52 @@ def test_part_captions_go_to_the_windows_they_overlap_in_their_time(spliced, tmp
             assert late == [f"a person waves late#a/DET person/NOUN wave/VERB late/ADV#{round(a, 4)}#{round(b, 4)}"], (r, late)
         else:
             assert not late, r
+
+
+def _foreign_dataset(folder):
+    """A HumanML3D folder as the dataset ships it (no torchsplice index): what --force must not touch."""
+    files = {}
+    for sub, suffix in (("new_joint_vecs", ".npy"), ("new_joints", ".npy"), ("texts", ".txt")):
+        (folder / sub).mkdir(parents=True, exist_ok=True)
+        for i in ("005000", "M005000", "000000"):
+            f = folder / sub / f"{i}{suffix}"
+            if suffix == ".npy":
+                np.save(f, np.full((3, 4), float(len(files))))
+            else:
+                f.write_text(f"a person walks#{len(files)}")
+            files[f] = f.read_bytes()
+    for name in ("Mean.npy", "Std.npy"):
+        np.save(folder / name, np.ones(263))
+        files[folder / name] = (folder / name).read_bytes()
+    for name in ("all.txt", "train.txt"):
+        (folder / name).write_text("005000\nM005000\n000000\n")
+        files[folder / name] = (folder / name).read_bytes()
+    return files
+
+
+def test_force_never_removes_or_replaces_a_dataset_no_torchsplice_export_wrote(spliced, tmp_path, capsys):
+    """A real HumanML3D folder (or one whose index.csv is not torchsplice's) is refused in one
+    line with --force, every file as it was; an earlier export merged into a foreign folder
+    removes with --force only the files its own index lists."""
+    out = tmp_path / "HumanML3D"
+    files = _foreign_dataset(out)
+    for index in (None, "name,split\nx,train\n"):
+        if index is not None:
+            (out / "index.csv").write_text(index)
+            files[out / "index.csv"] = (out / "index.csv").read_bytes()
+        rc, _, err = run(capsys, "export", spliced, "--all", "--format", "humanml3d", "-o", out, "--force")
+        assert rc == 2 and "no torchsplice export wrote" in error_line(err) and "--force" in error_line(err), err
+        assert all(f.read_bytes() == b for f, b in files.items())
+        with pytest.raises(TorchspliceError, match="overwrite replaces only"):
+            export_clips(spliced, out=out, format="humanml3d", overwrite=True)
+    # a torchsplice export beside foreign files: --force removes its own files only
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    export_clips(spliced, out=mixed, format="humanml3d")
+    theirs = mixed / "new_joint_vecs" / "M005000.npy"
+    np.save(theirs, np.zeros(3))
+    export_clips(spliced, ["walk_straight+wave"], out=mixed, format="humanml3d", overwrite=True)
+    assert theirs.exists() and sorted(f.stem for f in (mixed / "new_joint_vecs").iterdir()) == ["000000", "M005000"]
 
 
 def test_an_export_with_force_into_an_earlier_one_leaves_none_of_its_files(spliced, tmp_path):

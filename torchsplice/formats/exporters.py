@@ -172,9 +172,17 @@ class Exporter:
         return None
 
     def owned(self, folder: Path) -> list[Path]:
-        """A folder format's files an earlier export of it left in ``folder`` (its per-clip files):
-        an export that overwrites removes those it did not write again, once it is installed."""
+        """A folder format's files an earlier torchsplice export of it left in ``folder`` (its
+        per-clip files, as that export's own record lists them): an export that overwrites
+        removes those it did not write again, once it is installed. Never a file that no
+        torchsplice export wrote."""
         return []
+
+    def foreign(self, folder: Path) -> str | None:
+        """Why ``folder`` must not be overwritten by this folder format: it holds the format's
+        files but no earlier torchsplice export wrote them (a dataset of the format from
+        elsewhere, which ``overwrite`` would destroy); ``None`` when it may be."""
+        return None
 
     def check(self) -> None:
         """What must hold before any file is made (e.g. statistics over every clip); one-line errors."""
@@ -355,7 +363,12 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
     indexed = {}
     if index and layout is None and (exporter.single_file or not single):
         indexed = _index_targets(out, files, not single, database, overwrite)
+    if layout is not None and overwrite and Path(out).is_dir() and (why := exporter.foreign(Path(out))) is not None:
+        raise TorchspliceError(f"{out}: {why}; {{overwrite}} replaces only what an earlier torchsplice export of the folder "
+                               "wrote: export into a new folder", options=("overwrite",))
     exporter.check()
+    # an earlier export's files, as its own record lists them, read before this export replaces that record
+    earlier = exporter.owned(Path(out)) if layout is not None and overwrite and Path(out).is_dir() else []
     from .staging import staged_files
 
     result = ExportResult(exporter.name, out, files, names)
@@ -393,9 +406,9 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
                     stage(target).write_text(text)
                 except OSError as exc:
                     raise TorchspliceError(os_error_message(target, exc)) from None
-    if layout is not None and overwrite:  # an earlier export's files this one did not write again
+    if earlier:  # an earlier export's files this one did not write again
         written = set(files)
-        for stale in exporter.owned(Path(out)):
+        for stale in earlier:
             if stale not in written:
                 try:
                     stale.unlink()

@@ -121,10 +121,37 @@ class HumanML3DExporter(Exporter):
             files += [f"new_joint_vecs/{item['id']}.npy", f"new_joints/{item['id']}.npy", f"texts/{item['id']}.txt"]
         return files + ["Mean.npy", "Std.npy"] + [f"{s}.txt" for s in (*SPLITS, "train_val", "all")] + ["index.csv"]
 
+    @staticmethod
+    def earlier_ids(folder: Path) -> list[str] | None:
+        """The IDs an earlier torchsplice export wrote to ``folder``, from its ``index.csv`` (whose
+        header is :data:`INDEX_COLUMNS`); ``None`` when no torchsplice export wrote there."""
+        try:
+            with open(Path(folder) / "index.csv", newline="") as f:
+                rows = csv.reader(f)
+                if tuple(next(rows, ())) != INDEX_COLUMNS:
+                    return None
+                return [r[0] for r in rows if r]
+        except (OSError, UnicodeDecodeError, csv.Error):
+            return None
+
     def owned(self, folder: Path) -> list[Path]:
-        return [f for sub, suffix in (("new_joint_vecs", ".npy"), ("new_joints", ".npy"), ("texts", ".txt"))
-                for f in sorted((folder / sub).glob(f"*{suffix}")) if not f.name.startswith(".")] + [
-                f for f in sorted(folder.glob("*-[0-9][0-9][0-9][0-9][0-9][0-9].tar"))]
+        ids = self.earlier_ids(folder)
+        if ids is None:  # no torchsplice export's record: nothing here is ours to remove
+            return []
+        files = [folder / sub / f"{i}{suffix}" for i in ids
+                 for sub, suffix in (("new_joint_vecs", ".npy"), ("new_joints", ".npy"), ("texts", ".txt"))]
+        return [f for f in files if f.is_file()] + sorted(
+            f for s in (*SPLITS, "nosplit") for f in folder.glob(f"{s}-[0-9][0-9][0-9][0-9][0-9][0-9].tar"))
+
+    def foreign(self, folder: Path) -> str | None:
+        if self.earlier_ids(folder) is not None:
+            return None
+        found = [n for n in ("new_joint_vecs", "new_joints", "texts", "Mean.npy", "Std.npy", "all.txt", "train.txt",
+                             "index.csv") if (folder / n).exists()]
+        if not found:
+            return None
+        return (f"holds a HumanML3D-style dataset ({', '.join(found[:3])}{', ...' if len(found) > 3 else ''}) that no "
+                "torchsplice export wrote (its index.csv is not one)")
 
     # -- checks before any file ---------------------------------------------------------------
     @cached_property
