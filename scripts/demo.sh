@@ -19,6 +19,6 @@ torchsplice render out/spliced.h5 jog carry_box jog+carry_box.naive jog+carry_bo
     -o out/preview.png --frames 6 --force
 torchsplice plot-alignment out/sample.h5 --locomotion walk_curve --action carry_box -o out/alignment.png --force
 torchsplice view out/spliced.h5 -o out/viewer.html --force
-echo "output: $(pwd)/out/spliced.h5 (read it with torchsplice.data.MotionDataset; every clip's metrics and split in out/spliced.index.csv); pictures: out/preview.png, out/alignment.png; open out/viewer.html in a browser"
+echo "output: $(pwd)/out/spliced.h5 (read it with torchsplice.data.MotionDataset; every clip's metrics and split in out/spliced.h5.index.csv); pictures: out/preview.png, out/alignment.png; open out/viewer.html in a browser"
 echo "out/preview.png: a jog, a box-carrying walk, their naive splice, the method's splice, and the splice with the naive"
 echo "  one drawn over it in grey: the splice keeps the carrier's backward lean, the naive one stands straighter"

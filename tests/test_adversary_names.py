@@ -148,7 +148,7 @@ def test_a_name_that_starts_like_a_formula_is_text_in_every_csv(tmp_path, capsys
     assert main(["evaluate", str(out), "-o", str(tmp_path / "r.md"), "--no-pictures", "--csv", str(tmp_path / "ev.csv")]) == 0
     assert main(["export", str(out), "--all", "--format", "humanml3d", "-o", str(tmp_path / "h3d"), "-q"]) == 0
     capsys.readouterr()
-    files = [out.with_name("out.index.csv"), tmp_path / "info.csv", tmp_path / "ev.csv", tmp_path / "h3d" / "index.csv"]
+    files = [out.with_name("out.h5.index.csv"), tmp_path / "info.csv", tmp_path / "ev.csv", tmp_path / "h3d" / "index.csv"]
     def formula(c):  # what a spreadsheet would evaluate: a formula start that is not a number
         try:
             float(c)

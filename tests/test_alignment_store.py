@@ -260,7 +260,7 @@ def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
     motion, alignment = sample_jobs
     out = tmp_path / "materialized.h5"
     rc, stdout, _ = run(capsys, "materialize", alignment, "-o", out, "-q")
-    assert rc == 0 and out.is_file() and (tmp_path / "materialized.index.csv").is_file()
+    assert rc == 0 and out.is_file() and (tmp_path / "materialized.h5.index.csv").is_file()
     with MotionDatabase.open(out) as db:
         assert db.store == "motion" and "assembly_curve" not in db.h5["skeletons/0"]
     for x, y in ((out, motion),):

@@ -362,7 +362,7 @@ def test_11_the_demo_draws_the_pair_where_the_naive_splice_loses_the_actions_pos
 def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip(sample_db, tmp_path, capsys):
     """A BVH folder: index.csv (each file's clip, split and metrics, in export order) and
     train/val/test.txt, the splits the dataset gives (no locomotion or action in two splits); a
-    packed file: NAME.index.csv beside it; one clip or --no-index: none; a bad ratio: nothing."""
+    packed file: NAME.npz.index.csv beside it; one clip or --no-index: none; a bad ratio: nothing."""
     import csv
 
     spliced = tmp_path / "sp.h5"
@@ -393,7 +393,7 @@ def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip
     assert f"index.csv, train/val/test {len(by['train'])}/{len(by['val'])}/{len(by['test'])}" in text
     rc, _, err = run(capsys, "export", spliced, "method:naive", "--packed", "-o", tmp_path / "naive.npz")
     assert rc == 0, err
-    packed = list(csv.DictReader(open(tmp_path / "naive.index.csv")))
+    packed = list(csv.DictReader(open(tmp_path / "naive.npz.index.csv")))
     assert {r["file"] for r in packed} == {"naive.npz"} and all(r["method"] == "naive" for r in packed)
     assert run(capsys, "export", spliced, "--all", "-o", tmp_path / "plain", "--no-index")[0] == 0
     assert not list((tmp_path / "plain").glob("*.csv")) and not list((tmp_path / "plain").glob("*.txt"))
@@ -407,11 +407,31 @@ def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip
         with pytest.raises(TorchspliceError, match="split_seed must be a whole number, got 'x'"):
             export_clips(spliced, None, out=tmp_path / "bad", split_seed="x", index=index)
     packed_one = export_clips(spliced, names[:1], out=tmp_path / "one.npz", packed=True)  # a packed file, even of one
-    assert [p.name for p in packed_one.index_files] == ["one.index.csv"]
+    assert [p.name for p in packed_one.index_files] == ["one.npz.index.csv"]
+
+
+def test_indexes_are_named_after_their_whole_output_and_never_meet(sample_db, tmp_path, capsys):
+    """a.h5 and a.hdf5, t.npz and t.h5, out.h5 and out.npz: each output's index is its own, and
+    no command writes, replaces or removes another output's."""
+    from torchsplice.formats.exporters import export_clips
+    from torchsplice.job import splice_all
+
+    splice_all(sample_db, tmp_path / "a.h5", locomotions="jog", workers=1)
+    first = (tmp_path / "a.h5.index.csv").read_bytes()
+    splice_all(sample_db, tmp_path / "a.hdf5", locomotions="walk_curve", workers=1)
+    assert (tmp_path / "a.h5.index.csv").read_bytes() == first and (tmp_path / "a.hdf5.index.csv").is_file()
+    export_clips(sample_db, out=tmp_path / "t.npz", format="npz", packed=True)
+    packed = (tmp_path / "t.npz.index.csv").read_bytes()
+    splice_all(sample_db, tmp_path / "t.h5", locomotions="jog", workers=1, index=False)
+    splice_all(sample_db, tmp_path / "t.h5", locomotions="jog", workers=1, overwrite=True)
+    assert (tmp_path / "t.npz.index.csv").read_bytes() == packed and (tmp_path / "t.h5.index.csv").is_file()
+    rc, _, err = run(capsys, "export", tmp_path / "a.h5", "--all", "--packed", "-o", tmp_path / "a.npz", "-q")
+    assert rc == 0, err
+    assert (tmp_path / "a.npz.index.csv").is_file() and (tmp_path / "a.h5.index.csv").read_bytes() == first
 
 
 def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_db, tmp_path, capsys):
-    """``splice-all`` writes ``OUT.index.csv`` beside its output (every clip's cost, flags,
+    """``splice-all`` writes ``OUT.h5.index.csv`` beside its output (every clip's cost, flags,
     coverage, labels and split by source clip, as the exports' index and ``info --csv``), and
     so does ``merge`` after sliced runs; ``--no-index`` (``index=False``) writes none."""
     import csv
@@ -422,8 +442,8 @@ def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_d
     out = tmp_path / "sp.h5"
     rc, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--workers", "1", "--method", "splice,naive")
     assert rc == 0, err
-    assert "every clip's metrics and split in sp.index.csv" in text
-    rows = list(csv.DictReader(open(tmp_path / "sp.index.csv")))
+    assert "every clip's metrics and split in sp.h5.index.csv" in text
+    rows = list(csv.DictReader(open(tmp_path / "sp.h5.index.csv")))
     with MotionDatabase.open(out) as d:
         table = d.clip_table()
         names, cost = list(table.names), [float(c) for c in table.extra["cost"]]
@@ -439,14 +459,14 @@ def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_d
     assert sorted(p.name for p in tmp_path.glob("plain*")) == ["plain.h5"]
     rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--workers", "1", "--locomotions", "jog", "--force",
                      "--no-index", "-q")
-    assert rc == 0 and not (tmp_path / "sp.index.csv").exists(), err  # an earlier run's index is not left beside it
+    assert rc == 0 and not (tmp_path / "sp.h5.index.csv").exists(), err  # an earlier run's index is not left beside it
     for k in (1, 2):
         assert run(capsys, "splice-all", sample_db, "-o", tmp_path / "sliced.h5", "--locomotions", "jog", "--workers", "1",
                    "--shard", f"{k}/2", "-q")[0] == 0
-    assert not (tmp_path / "sliced.index.csv").exists()  # a slice writes no output, so no index
+    assert not (tmp_path / "sliced.h5.index.csv").exists()  # a slice writes no output, so no index
     rc, text, err = run(capsys, "merge", tmp_path / "sliced.h5")
-    assert rc == 0 and "sliced.index.csv" in text, err
-    merged = list(csv.DictReader(open(tmp_path / "sliced.index.csv")))
+    assert rc == 0 and "sliced.h5.index.csv" in text, err
+    merged = list(csv.DictReader(open(tmp_path / "sliced.h5.index.csv")))
     with MotionDatabase.open(tmp_path / "sliced.h5") as d:
         assert [r["clip"] for r in merged] == list(d.names)
 
@@ -477,5 +497,5 @@ def test_a_full_disk_while_writing_the_jobs_index_says_the_output_is_complete(sa
     out = tmp_path / "sp.h5"
     rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "jog", "--workers", "1", "-q")
     line = error_line(err)
-    assert rc != 0 and "sp.index.csv" in line and "no space left" in line.lower() and "sp.h5 itself is complete" in line
+    assert rc != 0 and "sp.h5.index.csv" in line and "no space left" in line.lower() and "sp.h5 itself is complete" in line
     assert out.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["sp.h5"]  # no temporary left

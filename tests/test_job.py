@@ -451,7 +451,7 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     assert m, done.stdout
     assert kept_pairs <= int(m.group(1)) <= 25  # what the output held, and the shards finished since
     assert not work.exists()
-    assert sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.index.csv"]  # nothing else left behind
+    assert sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.h5.index.csv"]  # nothing else left behind
     names = [c["name"] for c in clips(out)]
     assert len(names) == len(set(names)) == 25
     assert_same_file(out, batch2_out)
@@ -738,7 +738,7 @@ def test_existing_output_needs_force(sample_db, tmp_path, capsys):
     code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--locomotions", "jog", "-q", "--force")
     assert code == 0, err
     assert len(clips(out)) == 5
-    assert_left_nothing(tmp_path, "o.h5", "o.index.csv")
+    assert_left_nothing(tmp_path, "o.h5", "o.h5.index.csv")
 
 
 def test_missing_output_folder(sample_db, tmp_path, capsys):

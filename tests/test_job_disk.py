@@ -159,7 +159,7 @@ def test_the_peak_disk_of_a_job_is_about_its_output(bandai_db, tmp_path):
     final = out.stat().st_size
     assert peak <= 1.3 * final, (peak, final, len(at_peak), sorted(at_peak.items(), key=lambda kv: -kv[1])[:6])
     assert 0 < banks  # the workers mapped the driver's clips
-    assert listing(tmp_path) == ["out.h5", "out.index.csv"]
+    assert listing(tmp_path) == ["out.h5", "out.h5.index.csv"]
 
 
 # ------------------------------------------------------------------------------ killed and resumed
@@ -202,5 +202,5 @@ def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(ba
     assert done.returncode == 0, done.stderr
     m = re.search(r"spliced clips \((\d+) pairs from an earlier run\)", done.stdout)
     assert m and int(m.group(1)) >= 4 * merged[-1], done.stdout  # what the output held was not spliced again
-    assert not work.exists() and sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.index.csv"]
+    assert not work.exists() and sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.h5.index.csv"]
     assert_same_file(out, reference)

@@ -292,7 +292,7 @@ def test_full_disk_gives_one_line_removes_the_partial_file_and_a_rerun_resumes(s
         assert a.names == b.names
         pa, pb = a.packed(0), b.packed(0)
         assert all(np.array_equal(pa[k], pb[k], equal_nan=True) for k in pb)
-    assert sorted(p.name for p in small_disk.iterdir()) == ["out.h5", "out.index.csv"]
+    assert sorted(p.name for p in small_disk.iterdir()) == ["out.h5", "out.h5.index.csv"]
 
 
 def test_full_disk_simulated(sample_db, tmp_path, capsys, monkeypatch):

@@ -71,7 +71,7 @@ class SpliceAll(Command):
         s.add_argument("--copy-sources", action="store_true", default=job_default("copy_sources"),
                        help="copy the source clips into the output too")
         s.add_argument("--no-index", dest="index", action="store_false", default=job_default("index"),
-                       help="write no OUT.index.csv beside the output (by default: every clip's cost, flags, coverage, "
+                       help="write no OUT.h5.index.csv beside the output (by default: every clip's cost, flags, coverage, "
                             "labels and split by source clip, as info --csv and the exports give them)")
         s.add_argument("--max-length-ratio", type=positive_float, default=job_default("max_length_ratio"), metavar="R",
                        help="skip pairs whose longer clip lasts more than R times the shorter (e.g. 3); long takes are "
@@ -158,7 +158,7 @@ class Merge(Command):
     def add_arguments(self, s) -> None:
         s.add_argument("output", help="the output the job was run with (-o of splice-all)")
         s.add_argument("--no-index", dest="index", action="store_false", default=declared(MERGE, "merge_job.index"),
-                       help="write no OUT.index.csv beside the output")
+                       help="write no OUT.h5.index.csv beside the output")
         add_output_flags(s, force_help="overwrite an existing output")
 
     def run(self, args) -> int:
@@ -182,7 +182,7 @@ class Materialize(Command):
         s.add_argument("database", help="the alignment store (.h5)")
         s.add_argument("-o", "--output", required=True, help="the motion store to write (.h5)")
         s.add_argument("--no-index", dest="index", action="store_false", default=declared(MATERIALIZE, "materialize.index"),
-                       help="write no OUT.index.csv beside the output")
+                       help="write no OUT.h5.index.csv beside the output")
         add_output_flags(s, force_help="overwrite an existing output")
 
     def run(self, args) -> int:

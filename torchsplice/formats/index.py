@@ -7,7 +7,7 @@ leak: every action appears with every locomotion, so a random split of the resul
 same action in train and in test. So an export of several clips to a folder (any format whose
 export is one file per clip), and every packed file, also writes:
 
-- ``index.csv`` (in the export's folder; beside a packed file ``NAME.index.csv``): one row per
+- ``index.csv`` (in the export's folder; beside a packed file ``NAME.npz.index.csv``): one row per
   exported clip, in export order: ``file`` (the file's name in the folder; the packed file's,
   for every row of a packed export), ``clip``, ``split``, then every column ``torchsplice info
   --csv`` writes (frames, fps, duration_s, role, skeleton, source, the clip table's columns;
@@ -16,7 +16,7 @@ export is one file per clip), and every packed file, also writes:
   a line.
 
 ``splice-all`` (and ``merge``) write the same index beside the job's output database,
-``NAME.index.csv`` (:func:`write_database_index`), whose ``file`` is the database's name.
+``NAME.h5.index.csv`` (:func:`write_database_index`), whose ``file`` is the database's name.
 
 Splits are by source clip (:mod:`torchsplice.data.splits`: seeded, ``split_ratios`` of the
 source clips in train, val and test, a result in a split only when all its sources are; the
@@ -37,11 +37,11 @@ from typing import Sequence
 
 from ..core.names import spreadsheet_cell
 
-__all__ = ["INDEX_NAME", "index_targets", "index_files", "rows_csv", "write_database_index",
+__all__ = ["INDEX_NAME", "index_path", "index_targets", "index_files", "rows_csv", "write_database_index",
            "refresh_database_index"]
 
 INDEX_NAME = "index.csv"
-"""The index's name in an export's folder (beside a packed file: ``NAME.index.csv``)."""
+"""The index's name in an export's folder (beside a file: :func:`index_path`)."""
 
 
 def index_targets(out, folder_export: bool) -> dict[str, Path]:
@@ -52,7 +52,15 @@ def index_targets(out, folder_export: bool) -> dict[str, Path]:
     out = Path(out)
     if folder_export:
         return {"index": out / INDEX_NAME, **{s: out / f"{s}.txt" for s in SPLITS}}
-    return {"index": out.with_name(out.stem + ".index.csv")}
+    return {"index": index_path(out)}
+
+
+def index_path(output) -> Path:
+    """The index beside a file ``output`` (a database or a packed export): named after the whole
+    name, ``spliced.h5.index.csv`` beside ``spliced.h5``, so that the indexes of ``a.h5``,
+    ``a.hdf5`` and ``a.npz`` never meet and each command touches only its own output's."""
+    output = Path(output)
+    return output.with_name(output.name + ".index.csv")
 
 
 def csv_row(row: dict) -> dict:
@@ -120,7 +128,7 @@ def _slice_rows(columns: list[str], cols: dict, splits, file: str):
 
 
 def write_database_index(database, split_ratios=None, split_seed: int | None = None) -> Path:
-    """Write ``NAME.index.csv`` beside the database ``database`` (every clip's row, in the
+    """Write ``NAME.h5.index.csv`` beside the database ``database`` (every clip's row, in the
     database's order; see the module docstring), atomically; returns its path. The rows are made
     and written :data:`CHUNK_ROWS` at a time, so memory stays bounded for millions of clips. An
     OS error (a full disk) is one line naming the index and saying the database itself is complete."""
@@ -154,7 +162,7 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
 
 
 def refresh_database_index(database, write: bool = True) -> Path | None:
-    """After a database ``database`` was (re)written: remove any earlier ``NAME.index.csv``
+    """After a database ``database`` was (re)written: remove any earlier ``NAME.h5.index.csv``
     beside it (an earlier run's, with its splits and costs), then with ``write`` write its own
     (:func:`write_database_index`); returns the index written, or ``None``."""
     old = index_targets(database, folder_export=False)["index"]

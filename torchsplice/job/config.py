@@ -64,7 +64,7 @@ class JobConfig:
             beside the output (:mod:`torchsplice.job.target`); ``None``: each pair on its
             locomotion's skeleton.
         copy_sources: copy the selected source clips into the output too.
-        index: write ``NAME.index.csv`` beside the output when it is complete: every clip's row
+        index: write ``NAME.h5.index.csv`` beside the output when it is complete: every clip's row
             of ``torchsplice info --csv`` (cost, alignment_distance, flags, coverage, role,
             locomotion, action, labels ...) and its split by source clip
             (:func:`torchsplice.formats.index.write_database_index`). Not part of the plan: a

@@ -24,7 +24,7 @@ BATCH_FRAMES = 1 << 16
 
 def materialize(source, output, overwrite: bool = False, progress: bool = False, index: bool = True) -> int:
     """Write the motion store of the alignment store ``source`` to ``output`` (and, with
-    ``index``, ``NAME.index.csv`` beside it, as the job does); returns the number of clips."""
+    ``index``, ``NAME.h5.index.csv`` beside it, as the job does); returns the number of clips."""
     from ..store.atomic import same_file
 
     source, output = Path(source), Path(output)

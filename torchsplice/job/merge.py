@@ -37,7 +37,7 @@ log = logging.getLogger("torchsplice.job")
 def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None,
               index: bool = True) -> JobSummary:
     """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs), and
-    with ``index`` its ``NAME.index.csv`` beside it (as the job does: see ``JobConfig.index``).
+    with ``index`` its ``NAME.h5.index.csv`` beside it (as the job does: see ``JobConfig.index``).
 
     Resumable as the job is: a merge killed midway goes on from its last checkpoint."""
     output = Path(output)

@@ -306,7 +306,7 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
       match; ``None``: the spec's roles), ``actions_db``, ``max_length_ratio``;
     - splicing: ``methods`` (``"splice,naive"`` or a sequence; plug-ins included),
       ``force_locomotion``, ``timing``, ``acting_limbs``, ``max_run``, ``posture``, ``device``;
-    - output: ``copy_sources``, ``compression``, ``layout``, ``index`` (``NAME.index.csv`` beside it);
+    - output: ``copy_sources``, ``compression``, ``layout``, ``index`` (``NAME.h5.index.csv`` beside it);
     - running: ``engine`` (``"local"`` or ``"ray"``), ``workers``, ``ray_address``,
       ``memory_budget_mb``, ``batch_pairs``.
 
