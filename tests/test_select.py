@@ -47,6 +47,24 @@ def test_name_globs_are_case_sensitive_and_whole_name(table):
         names(table, "walk")  # a glob matches the whole name, not a part of it
 
 
+def test_a_name_holding_a_comma_or_colon_is_reached_exactly_and_bracketed(tmp_path):
+    """An exact name matches before any splitting; inside a longer selector its , and : are
+    bracketed (names_or_selector does so for the commands' clip arguments)."""
+    from torchsplice.store.select import names_or_selector
+
+    rows = ["x,y", "x", "y", "a:b", "role:odd", "walk_1"]
+    C = len(rows)
+    t = ClipTable.from_columns({
+        "name": np.array(rows), "source": np.array([""] * C), "role": np.array(["action"] * C),
+        "labels": np.array([""] * C), "skeleton": np.zeros(C, np.int32), "start": np.arange(C, dtype=np.int64) * 10,
+        "length": np.full(C, 10, np.int64), "fps": np.full(C, 30.0)}, {}, "db.h5")
+    assert names(t, "x,y") == ["x,y"] and names(t, "a:b") == ["a:b"] and names(t, "role:odd") == ["role:odd"]
+    assert names(t, "x[,]y,walk_*") == ["x,y", "walk_1"] and names(t, "a[:]b,x") == ["x", "a:b"]
+    assert names(t, "x,walk_*") == ["x", "walk_1"]  # not a name: alternatives, as before
+    listed, selector = names_or_selector(t, ["x,y", "walk_*", "a:b"])
+    assert listed is None and names(t, selector) == ["x,y", "a:b", "walk_1"]
+
+
 def test_role_selects_exact_role(table):
     assert names(table, "role:locomotion") == ["walk_normal", "walk-turn-left_normal"]
     assert names(table, "role:both") == ["walk-turn-right_proud", "run_Proud"]

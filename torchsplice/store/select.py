@@ -11,6 +11,10 @@ A selector is a comma-separated list of alternatives, any of which selects a cli
   (``method:naive``, ``flags:*poor_alignment*``, ``flags:`` for the clips without a flag);
 - anything else: a shell-style glob on the clip name (``'*walk*'``), case-sensitive.
 
+A selector that is exactly a clip's name selects that clip, before any splitting, so a name
+holding ``,`` or ``:`` (a BVH file named ``x,y.bvh``) is reached as it is; inside a longer
+selector, bracket the character (``'x[,]y,walk_*'``): a comma in brackets does not separate.
+
 Several selectors (a repeated command-line flag, or a list) must all select a clip:
 ``--locomotions role:locomotion --locomotions 'label:style=normal'`` takes the normal-style
 locomotions, ``--locomotions '*walk*,*run*'`` takes walks and runs.
@@ -37,7 +41,7 @@ def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, st
     """The alternatives of one selector as ``(kind, key, pattern)``: kind ``role``, ``label``,
     ``skeleton``, ``column`` (one of ``columns``, the table's text columns) or ``name``."""
     alts = []
-    for part in (p.strip() for p in text.split(",")):
+    for part in (p.strip() for p in re.split(r",(?![^\[]*\])", text)):  # a comma in [...] is a character
         if not part:
             raise TorchspliceError(f"empty alternative in selector {text!r}")
         prefix = part.split(":", 1)[0] if ":" in part else ""
@@ -119,7 +123,11 @@ def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, so
     roles, skeletons = np.asarray(table.role, dtype=str), np.asarray(table.skeleton)
     columns = {k: v for k, v in table.extra.items() if table.kinds.get(k) == "str"}
     keep = np.ones(len(names), dtype=bool)
+    known = set(names)
     for text in selectors:
+        if text in known:  # a clip's exact name, before any splitting (it may hold "," or ":")
+            keep &= np.asarray(names, dtype=object) == text
+            continue
         alts = parse_selector(text, tuple(columns))
         hit = np.zeros(len(names), dtype=bool)
         for alt in alts:
@@ -155,5 +163,5 @@ def names_or_selector(table: ClipTable, items: Sequence[str]) -> tuple[list[str]
     plain = [i for i in items if i not in known and not looks_like_selector(i)]
     if plain:  # meant as a name: the database's own "no clip named" (with similar names)
         return plain, None
-    escaped = [re.sub(r"([*?\[])", r"[\1]", i) if i in known else i for i in items]
+    escaped = [re.sub(r"([*?\[,:])", r"[\1]", i) if i in known else i for i in items]
     return None, ",".join(escaped)
