@@ -779,11 +779,14 @@ def test_written_hierarchy_of_a_breadth_first_skeleton(tmp_path):
     rot = torch.nn.functional.normalize(torch.randn(T, 5, 4, generator=g, dtype=torch.float64), dim=-1)
     m = Motion(sk, rot, torch.randn(T, 3, generator=g, dtype=torch.float64), 30.0, name="bfs")
     out = tmp_path / "bfs.bvh"
-    # BVH nesting cannot keep this joint order: refuse clearly rather than reorder silently
-    assert not sk.is_depth_first
-    with pytest.raises(MotionError, match="depth-first"):
-        write_bvh(m, out)
-    assert not out.exists()
+    # BVH nests each subtree: the file holds the joints depth-first, the same joints by name
+    assert not sk.is_depth_first and sk.depth_first_order() == [0, 1, 3, 2, 4]
+    write_bvh(m, out)
+    back = read_bvh(out, dtype=torch.float64)
+    assert back.skeleton.names == ("Root", "A", "A1", "B", "B1") and back.skeleton.is_depth_first
+    at = [back.skeleton.names.index(n) for n in sk.names]
+    assert torch.allclose(back.global_positions()[:, at], m.global_positions(), atol=1e-5)
+    assert torch.allclose(back.skeleton.end_site_offsets, sk.end_site_offsets)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1114,3 +1117,24 @@ def test_line_numbers_count_only_cr_and_lf(tmp_path):
     _read_same_as_base(write(tmp_path, text, "ff.bvh"))
     err = _bvh_error(tmp_path, text.replace("2 4 6 20 40 60", "2 4 6 20 40 x"))
     _check(err, LINE["f2"], "non-numeric")
+
+
+def test_smpl22_clips_export_to_bvh_and_read_back_by_joint_name(sample_db, tmp_path):
+    """SMPL's joint order is not depth-first (its spine comes after both legs): the BVH holds the
+    joints depth-first, and reads back with every joint where it was (to float32's rounding)."""
+    from torchsplice.formats.exporters import export_clips
+    from torchsplice.retarget.clips import retarget_clips
+    from torchsplice.store.database import MotionDatabase
+
+    smpl = tmp_path / "smpl.h5"
+    retarget_clips(sample_db, ["walk_straight", "carry_box"], to="smpl22", out=smpl)
+    export_clips(smpl, out=tmp_path / "bvh", format="bvh")
+    with MotionDatabase.open(smpl) as db:
+        for name in db.names:
+            m = db.read(name, dtype=torch.float64)
+            assert not m.skeleton.is_depth_first
+            back = read_bvh(tmp_path / "bvh" / f"{name}.bvh", dtype=torch.float64)
+            at = [back.skeleton.names.index(n) for n in m.skeleton.names]
+            assert back.skeleton.is_depth_first and sorted(back.skeleton.names) == sorted(m.skeleton.names)
+            err = (back.global_positions()[:, at] - m.global_positions()).abs().max()
+            assert float(err) < 1e-4 * m.skeleton.size(), (name, float(err))

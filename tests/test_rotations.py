@@ -83,6 +83,21 @@ def test_euler_round_trip_random_rotations_and_gimbal_lock(order, dtype):
     assert quat_angle(ql, euler_to_quat(quat_to_euler(ql, order), order)).max() < (1e-3 if dtype == torch.float32 else 1e-7)
 
 
+@pytest.mark.parametrize("order", EULER_ORDERS)
+def test_euler_angles_near_the_lock_of_float32_rotations_give_the_rotation_back(order):
+    """A rotation stored as float32 within 1e-7 of gimbal lock (a constant -90 degree joint):
+    its float64 matrix's first angle is noise; the three angles still give the rotation back."""
+    g = torch.Generator().manual_seed(7)
+    angles = torch.tensor([[12.0, -90.0, 31.0], [-40.0, 90.0, 5.0], [3.0, -89.99999, 2.0]], dtype=torch.float64)
+    angles = torch.cat([angles, torch.rand(50, 3, generator=g, dtype=torch.float64) * 60 - 30
+                        + torch.tensor([0.0, 90.0, 0.0], dtype=torch.float64) * torch.sign(torch.rand(50, 1) - 0.5)])
+    angles[3:, 1] = angles[3:, 1].clamp(-90, 90)
+    q = euler_to_quat(angles, order).float().double()  # through float32, as a database stores it
+    m = quat_to_rotmat(q)
+    back = euler_to_rotmat(rotmat_to_euler(m, order), order)
+    assert (back - m).abs().max() < 1e-6
+
+
 @pytest.mark.parametrize("dtype,tol", DTYPES)
 def test_axis_angle_round_trip_including_tiny_angles(dtype, tol):
     aa = torch.randn(200, 3, dtype=dtype, generator=torch.Generator().manual_seed(5))

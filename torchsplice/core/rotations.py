@@ -235,7 +235,11 @@ def rotmat_to_euler(m: torch.Tensor, order: str, degrees: bool = True) -> torch.
     """``(..., 3, 3)`` rotation matrices to ``(..., 3)`` Euler angles in BVH ``order``.
 
     The middle angle lies in ``[-90, 90]`` degrees. At gimbal lock (middle angle +-90) the
-    third angle is set to zero and the first carries the whole remaining rotation.
+    third angle is set to zero and the first carries the whole remaining rotation. Near it the
+    first angle is ill-conditioned (it comes from entries of the size of the middle angle's
+    cosine, which a float32 rotation gets only to 1e-7), so the third is taken from what the
+    first two leave of ``m``: the three angles give ``m`` back to rounding, however close to the
+    lock (a constant -90 degree spine of a rig retargeted onto SMPL, say).
     """
     if m.shape[-2:] != (3, 3):
         raise ValueError(f"m must have shape (..., 3, 3), got {tuple(m.shape)}")
@@ -249,7 +253,11 @@ def rotmat_to_euler(m: torch.Tensor, order: str, degrees: bool = True) -> torch.
     c = torch.atan2(-s * m[..., i, j], m[..., i, i])
     lock = cos_b < (1e-9 if m.dtype == torch.float64 else 1e-5)
     a = torch.where(lock, torch.atan2(s * m[..., k, j], m[..., j, j]), a)
-    c = torch.where(lock, torch.zeros_like(c), c)
+    near = cos_b < 1e-3  # the third angle from the residual R_k(c) = (R_i(a) R_j(b))^T m
+    if bool(near.any()):
+        ab = euler_to_rotmat(torch.stack((a, b, torch.zeros_like(a)), dim=-1), order, degrees=False)
+        rest = ab.transpose(-1, -2) @ m
+        c = torch.where(near, torch.atan2(-s * rest[..., i, j], rest[..., i, i]), c)
     out = torch.stack((a, b, c), dim=-1)
     return out * (180.0 / math.pi) if degrees else out
 

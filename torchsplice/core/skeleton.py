@@ -176,6 +176,29 @@ class Skeleton:
             last[p] = max(last[p], last[j])
         return all(last[j] - j + 1 == count[j] for j in range(self.num_joints))
 
+    def depth_first_order(self) -> list[int]:
+        """The joints in BVH's nesting order: each joint followed by its subtree, children in
+        index order (``list(range(J))`` when :attr:`is_depth_first`)."""
+        kids = [[] for _ in range(self.num_joints)]
+        for j, p in enumerate(self.parents):
+            if p >= 0:
+                kids[p].append(j)
+        order, todo = [], [0]
+        while todo:  # iterative: a chain of thousands of joints must not hit the recursion limit
+            j = todo.pop()
+            order.append(j)
+            todo.extend(reversed(kids[j]))
+        return order
+
+    def reordered(self, order: list[int]) -> "Skeleton":
+        """This skeleton with its joints in ``order`` (a permutation keeping joint 0 first and
+        every parent before its children): new joint ``i`` is old joint ``order[i]``."""
+        new = {old: i for i, old in enumerate(order)}
+        return Skeleton(tuple(self.names[j] for j in order),
+                        tuple(-1 if self.parents[j] < 0 else new[self.parents[j]] for j in order),
+                        self.offsets[list(order)], tuple(self.channels[j] for j in order),
+                        tuple(new[p] for p in self.end_site_parents), self.end_site_offsets)
+
     @functools.cached_property
     def _size(self) -> float:
         return self._compute_size()

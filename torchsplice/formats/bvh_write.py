@@ -4,6 +4,7 @@ The file is written under a temporary name and renamed into place."""
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import os
@@ -36,13 +37,18 @@ def _hierarchy_text(sk: Skeleton) -> str:
     first_end = [min(ends[j], default=len(sk.end_site_parents)) for j in range(J)]  # per subtree
     for j in range(J - 1, 0, -1):
         first_end[sk.parents[j]] = min(first_end[sk.parents[j]], first_end[j])
-    items = [[] for _ in range(J)]  # per joint: (sort key, kind, index)
+    kids = [[] for _ in range(J)]
     for j, p in enumerate(sk.parents):
         if p >= 0:
-            items[p].append((first_end[j], 1, j))
+            kids[p].append(j)
+    items = [[] for _ in range(J)]  # per joint: (kind, index), child joints in index order (the channels')
     for j in range(J):
-        items[j] += [(e, 0, e) for e in ends[j]]
-        items[j].sort()
+        pending = sorted(ends[j])
+        for k in kids[j]:  # an End Site read before a child's subtree is written before it
+            while pending and pending[0] < first_end[k]:
+                items[j].append((0, pending.pop(0)))
+            items[j].append((1, k))
+        items[j] += [(0, e) for e in pending]
     out = ["HIERARCHY"]
     offsets, end_offsets = sk.offsets.tolist(), sk.end_site_offsets.tolist()
     # iterative depth-first walk (a chain of thousands of joints must not hit the recursion limit):
@@ -64,7 +70,7 @@ def _hierarchy_text(sk: Skeleton) -> str:
         if sk.channels[j]:
             out.append(f"{ind}\tCHANNELS {len(sk.channels[j])} " + " ".join(sk.channels[j]))
         todo.append(("close", j, depth))
-        todo.extend(("open" if kind == 1 else "end", k, depth + 1) for _, kind, k in reversed(items[j]))
+        todo.extend(("open" if kind == 1 else "end", k, depth + 1) for kind, k in reversed(items[j]))
     return "\n".join(out)
 
 
@@ -109,17 +115,21 @@ def _frame_columns(motion: Motion) -> np.ndarray:
 def format_bvh(motion: Motion) -> str:
     """The clip as BVH text (channel layout and Euler orders from its skeleton).
 
-    The skeleton must be in depth-first order (every skeleton read from BVH is), since BVH
-    nesting cannot express any other joint order. Raises :class:`MotionError` (one line naming
-    the clip) for what :func:`read_bvh` would refuse: non-finite values (naming the first bad
-    frame), values beyond 1e12, fps outside 1 to 1,000, joint names that would not read back.
+    BVH nests each joint's subtree inside it, so a skeleton whose joints are in another order
+    (SMPL's, whose spine comes after both legs) is written in depth-first order
+    (:meth:`Skeleton.depth_first_order`): the file's joints are the same, by name, in the order
+    a BVH reader gives them. Raises :class:`MotionError` (one line naming the clip) for what
+    :func:`read_bvh` would refuse: non-finite values (naming the first bad frame), values beyond
+    1e12, fps outside 1 to 1,000, joint names that would not read back.
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"format_bvh: motion must be a Motion, got {type(motion).__name__}")
     _check_writable(motion)
     if not motion.skeleton.is_depth_first:
-        raise MotionError(f"clip {quoted(motion.name)}: skeleton joints are not in depth-first order, "
-                          "which BVH cannot keep")
+        order = motion.skeleton.depth_first_order()
+        motion = dataclasses.replace(
+            motion, skeleton=motion.skeleton.reordered(order), rotations=motion.rotations[:, order],
+            translations=None if motion.translations is None else motion.translations[:, order])
     data = _frame_columns(motion)
     bad = ~np.isfinite(data) | (np.abs(np.nan_to_num(data)) > MAX_ABS_VALUE)
     if bad.any():
