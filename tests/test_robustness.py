@@ -516,3 +516,33 @@ def test_a_training_dataset_over_a_damaged_chunk_raises_one_clear_error(sample_d
     with pytest.raises(DatabaseError, match="damaged database: cannot read /skeletons/0/rotations"):
         ds = MotionDataset(db, preload=preload)
         ds[0]
+
+
+@pytest.mark.parametrize("command", ["retarget", "mirror", "import"])
+def test_a_killed_writers_partial_file_is_removed_by_the_next_write_of_that_output(sample_db, tmp_path, capsys, command):
+    """A SIGKILLed retarget, mirror or import leaves ``.OUT.h5.partial-HOST-PID``; the next
+    command writing that output removes it (its process is dead), and never a live process's,
+    another host's or another output's."""
+    import socket
+
+    from torchsplice.store.lock import temp_path
+
+    out = tmp_path / "out.h5"
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    host = socket.gethostname()
+    stale = out.with_name(f".out.h5.partial-{host}-{dead.pid}")
+    alive = out.with_name(f".out.h5.partial-{host}-{os.getppid()}")
+    remote = out.with_name(".out.h5.partial-elsewhere-1")
+    other = out.with_name(f".other.h5.partial-{host}-{dead.pid}")
+    for f in (stale, alive, remote, other):
+        f.write_bytes(b"left by a killed writer")
+    assert temp_path(out).name.startswith(".out.h5.partial-")
+    bvh = tmp_path / "walk.bvh"
+    assert run(capsys, "export", sample_db, "walk_straight", "-o", bvh, "-q")[0] == 0
+    argv = {"retarget": ["retarget", sample_db, "walk_straight", "--to", "smpl22", "-o", out, "-q"],
+            "mirror": ["mirror", sample_db, "walk_straight", "-o", out, "-q"],
+            "import": ["import", bvh, "-o", out, "-q"]}[command]
+    rc, _, err = run(capsys, *argv)
+    assert rc == 0, err
+    assert not stale.exists() and alive.exists() and remote.exists() and other.exists()

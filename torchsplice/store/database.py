@@ -35,7 +35,7 @@ from ..core.errors import DatabaseError, OutputExistsError
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .checks import check_header
-from .lock import check_name_length, output_lock, temp_path
+from .lock import check_name_length, output_lock, remove_stale_temporaries, temp_path
 from .assembling import Assembling
 from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES, store_kind
 from .reading import ClipBatch, Reading, virtual_files
@@ -130,6 +130,8 @@ class MotionDatabase(Reading, Writing, Assembling):
         if path.exists() and not overwrite:
             lock.release()
             raise OutputExistsError(f"{path}: already exists")
+        # what a killed earlier writer of this output left (a SIGKILLed import, retarget or mirror)
+        remove_stale_temporaries(path.parent, of=path)
         tmp = Path(staging) if staging is not None else temp_path(path)
         try:
             if staging is not None:

@@ -11,6 +11,7 @@ process cannot be checked from here), even where ``flock`` does not reach across
 from __future__ import annotations
 
 import fcntl
+import glob
 import hashlib
 import json
 import os
@@ -62,15 +63,16 @@ def check_name_length(path) -> None:
 _TEMP = re.compile(r"\.(?P<kind>partial|staged)-(?P<host>.+)-(?P<pid>\d+)$")
 
 
-def remove_stale_temporaries(folder: Path, kind: str = "partial") -> None:
+def remove_stale_temporaries(folder: Path, kind: str = "partial", of: Path | None = None) -> None:
     """Delete temporary files (``.NAME.KIND-HOST-PID``, ``kind`` ``"partial"`` or
-    ``"staged"``) of dead processes on this host in ``folder``; those of other hosts are left
-    alone (their processes cannot be checked from here)."""
+    ``"staged"``) of dead processes on this host in ``folder`` (``of``: only those of that
+    output); those of other hosts are left alone (their processes cannot be checked from here)."""
     folder = Path(folder)
     if not folder.is_dir():
         return
     me = socket.gethostname()
-    for f in folder.glob(f".*.{kind}-*"):
+    pattern = f".*.{kind}-*" if of is None else glob.escape(temp_path(of, kind).name[:-len(host_pid())]) + "*"
+    for f in folder.glob(pattern):
         m = _TEMP.search(f.name)
         if m and m["kind"] == kind and m["host"] == me and not pid_alive(int(m["pid"])):
             f.unlink(missing_ok=True)
