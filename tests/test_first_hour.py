@@ -104,6 +104,21 @@ def test_9_a_mistyped_command_or_choice_gets_did_you_mean(capsys):
     assert "did you mean" not in capsys.readouterr().err
 
 
+def test_a_mistyped_flag_gets_did_you_mean_and_its_commands_help(capsys):
+    for argv, flag, command in ((["splice-all", "a.h5", "-o", "b.h5", "--wrokers", "2"], "--workers", "splice-all"),
+                                (["info", "a.h5", "--jsno"], "--json", "info"),
+                                (["export", "a.h5", "--all", "-o", "x", "--pakced"], "--packed", "export")):
+        with pytest.raises(SystemExit) as exit_:
+            main(argv)
+        err = capsys.readouterr().err
+        assert exit_.value.code == 2 and len(err.strip().splitlines()) == 1, err
+        assert f"did you mean '{flag}'?" in err and f"(see torchsplice {command} --help)" in err, err
+    with pytest.raises(SystemExit):
+        main(["info", "a.h5", "--zzzzzzzz"])
+    err = capsys.readouterr().err
+    assert "unrecognized arguments: --zzzzzzzz" in err and "did you mean" not in err
+
+
 def test_9_a_skeleton_mismatch_names_a_clip_of_each_skeleton(mixed, tmp_path, capsys):
     rc, _, err = run(capsys, "export", mixed, "--all", "--packed", "-o", tmp_path / "all.npz")
     line = error_line(err)

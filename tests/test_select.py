@@ -65,6 +65,13 @@ def test_a_name_holding_a_comma_or_colon_is_reached_exactly_and_bracketed(tmp_pa
     assert listed is None and names(t, selector) == ["x,y", "a:b", "walk_1"]
 
 
+def test_a_selector_written_with_an_equals_sign_gets_the_colon_form_as_a_hint(table):
+    with pytest.raises(TorchspliceError, match=r"did you mean 'role:locomotion'\?"):
+        names(table, "role=locomotion")
+    with pytest.raises(TorchspliceError, match=r"did you mean 'label:style=normal'\?"):
+        names(table, "style=normal")
+
+
 def test_role_selects_exact_role(table):
     assert names(table, "role:locomotion") == ["walk_normal", "walk-turn-left_normal"]
     assert names(table, "role:both") == ["walk-turn-right_proud", "run_Proud"]

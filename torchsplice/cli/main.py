@@ -81,6 +81,26 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return p
 
 
+def _unknown_flags(parser, args, extra: list[str]) -> None:
+    """Exit 2 with one line naming the arguments the command does not take, with the closest
+    of its own flags for a mistyped one (``--wrokers``: did you mean ``--workers``?)."""
+    import difflib
+
+    name = getattr(args, "command", None)
+    sub = next((a.choices[name] for a in parser._actions if isinstance(a, argparse._SubParsersAction)
+                and name in a.choices), None)
+    flags = [o for a in (sub or parser)._actions for o in a.option_strings if o.startswith("--")]
+    hint = ""
+    for item in extra:
+        if item.startswith("-"):
+            close = difflib.get_close_matches(item.split("=", 1)[0], flags, n=1, cutoff=0.6)
+            if close:
+                hint = f"; did you mean {close[0]!r}?"
+                break
+    prog = sub.prog if sub is not None else parser.prog
+    parser.exit(2, f"torchsplice: error: unrecognized arguments: {' '.join(extra)}{hint} (see {prog} --help)\n")
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` for the command line: ``torchsplice: warning: ...``, one line."""
     print(f"torchsplice: warning: {one_line(message, limit=1000)}", file=file or sys.stderr)
@@ -105,7 +125,9 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser(only=_command_in(argv))  # only that command's options: a quicker start
     except TorchspliceError as exc:
         return _fail(exc)
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # a mistyped flag: said against the command's own flags, pointing at its help
+        _unknown_flags(parser, args, extra)
     args.argv = argv
     if getattr(args, "output", None) == "":  # an empty name would mean the current folder
         print("torchsplice: error: the output name is empty; name a file or folder", file=sys.stderr)

@@ -134,13 +134,24 @@ def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, so
             hit |= _mask(alt, names, roles, labels, skeletons, columns)
         if not hit.any():
             raise TorchspliceError(f"{what} {text!r} selects no clip of {source} "
-                                   f"({_what_there_is(alts, names, roles, labels, skeletons, columns)})",
-                                   options=_option(what))
+                                   f"({_what_there_is(alts, names, roles, labels, skeletons, columns)})"
+                                   + _colon_hint(text, columns), options=_option(what))
         keep &= hit
     if not keep.any():
         raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
                                options=_option(what))
     return np.flatnonzero(keep).tolist()
+
+
+def _colon_hint(text: str, columns) -> str:
+    """``"; did you mean 'role:locomotion'?"`` for a selector written ``role=locomotion`` (a
+    prefix of the language followed by ``=`` instead of ``:``), else ``""``."""
+    m = re.match(r"^\s*([A-Za-z_]+)\s*=\s*(.*)$", text)
+    if m and (m.group(1) in ("role", "skeleton") or m.group(1) in columns):
+        return f"; did you mean {m.group(1) + ':' + m.group(2)!r}?"
+    if m and m.group(1) not in ("label",):
+        return f"; did you mean {'label:' + m.group(1) + '=' + m.group(2)!r}?"
+    return ""
 
 
 def looks_like_selector(text: str) -> bool:
