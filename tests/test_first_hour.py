@@ -514,3 +514,15 @@ def test_a_full_disk_while_writing_the_jobs_index_says_the_output_is_complete(sa
     line = error_line(err)
     assert rc != 0 and "sp.h5.index.csv" in line and "no space left" in line.lower() and "sp.h5 itself is complete" in line
     assert out.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["sp.h5"]  # no temporary left
+
+
+def test_a_wrong_spec_on_a_folder_is_said_once_with_the_count_and_the_spec_auto_picks(mocap_dir, tmp_path, capsys):
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    takes = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("*walk*.bvh"))[:6]
+    for f in takes:
+        (folder / f.name).symlink_to(f)
+    rc, _, err = run(capsys, "import", folder, "--spec", "lafan1", "-o", tmp_path / "x.h5")
+    lines = [ln for ln in err.splitlines() if ln.startswith("skipped")]
+    assert rc == 2 and len(lines) == 1, err
+    assert lines[0].startswith(f"skipped {len(takes)} files (") and "--spec auto picks 'bandai_namco' for them" in lines[0]

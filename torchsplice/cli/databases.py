@@ -87,8 +87,16 @@ class Import(Command):
         from ..formats.importer import NothingImportedError, import_bvh
 
         def skipped_lines(skipped):
+            groups: dict[str, list[str]] = {}  # one line per reason: a wrong --spec on a folder is one mistake
             for f, why in skipped:
-                print(f"skipped {at(f, why)}", file=sys.stderr)
+                groups.setdefault(why, []).append(f)
+            for why, files in groups.items():
+                if len(files) == 1:
+                    print(f"skipped {at(files[0], why)}", file=sys.stderr)
+                    continue
+                shown = ", ".join(Path(f).name for f in files[:2]) + (", ..." if len(files) > 2 else "")
+                print(f"skipped {len(files)} files ({shown} in {Path(files[0]).parent}): {why}"
+                      + _auto_spec_hint(args.spec, files[0], why), file=sys.stderr)
 
         try:
             report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
@@ -115,6 +123,21 @@ class Import(Command):
         if report.skipped:
             print(f"{len(report.skipped)} input(s) skipped, {len(report.imported)} imported", file=sys.stderr)
         return 1 if report.skipped else 0
+
+
+def _auto_spec_hint(spec, path, why: str) -> str:
+    """``"; --spec auto picks 'bandai_namco' for them"`` when files were skipped because the
+    ``--spec`` asked for does not fit them and a shipped spec does, else ``""``."""
+    if spec in (None, "auto") or ".toml" not in why and "spec" not in why:
+        return ""
+    try:
+        from ..formats.bvh import read_bvh
+        from ..specs import detect_spec
+
+        picked = detect_spec(read_bvh(path).skeleton, Path(path).name)
+    except Exception:  # only a hint: the skip's own reason stands
+        return ""
+    return f"; --spec auto picks {picked.name!r} for them" if picked.name != spec else ""
 
 
 def _labels_text(labels: dict, limit: int = 60) -> str:
