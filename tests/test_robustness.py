@@ -546,3 +546,22 @@ def test_a_killed_writers_partial_file_is_removed_by_the_next_write_of_that_outp
     rc, _, err = run(capsys, *argv)
     assert rc == 0, err
     assert not stale.exists() and alive.exists() and remote.exists() and other.exists()
+
+
+def test_a_ctrl_c_that_a_library_swallows_still_stops_the_job_as_an_interrupt():
+    """Ctrl-C raised inside a weak reference's callback is printed and lost by Python (the Ray
+    driver met it so); the handler records it, and the job's check between tasks raises it."""
+    from torchsplice.cli.common import on_sigint, on_sigterm, stop_code, stopped
+    from torchsplice.core.stop import Terminated, check_stop, clear_stop
+
+    for handler, exc_type, code, word in ((on_sigint, KeyboardInterrupt, 130, "interrupted"),
+                                          (on_sigterm, Terminated, 143, "terminated")):
+        clear_stop()
+        with pytest.raises(exc_type):
+            handler(None, None)
+        with pytest.raises(exc_type) as got:  # what was swallowed comes back here
+            check_stop()
+        assert (got.type is Terminated) == (exc_type is Terminated)
+        assert stop_code(got.value) == code and stopped(got.value) == word
+    clear_stop()
+    check_stop()  # nothing asked: nothing raised

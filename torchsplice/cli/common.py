@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..core.errors import OutputExistsError, TorchspliceError
-from ..core.stop import Terminated, ask_stop, stop_asked
+from ..core.stop import Terminated, ask_stop, stop_kind
 from .declared import declared
 
 __all__ = ["cli_message", "flag", "output", "locked", "say", "n", "at", "one_line", "progress", "command_line",
@@ -191,12 +191,17 @@ def add_output_flags(s, force_help: str = "overwrite an existing file", quiet_he
 # interrupts
 # --------------------------------------------------------------------------------------------
 def on_sigterm(signum, frame):
-    ask_stop()  # seen by the job between tasks even if a library swallows the exception below
+    ask_stop("terminate")  # seen by the job between tasks even if a library swallows the exception below
     raise Terminated()
 
 
+def on_sigint(signum, frame):
+    ask_stop("interrupt")  # Ctrl-C inside a finalizer or a weak reference's callback is printed and lost
+    raise KeyboardInterrupt()
+
+
 def _terminated(exc: BaseException) -> bool:
-    return isinstance(exc, Terminated) or stop_asked()
+    return isinstance(exc, Terminated) or stop_kind() == "terminate"
 
 
 def stopped(exc: BaseException) -> str:

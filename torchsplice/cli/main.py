@@ -17,7 +17,7 @@ from ..core.errors import TorchspliceError
 from ..core.version import __version__
 from .base import CliParser, registered_commands
 from ..core.stop import clear_stop
-from .common import cli_message, on_sigterm, one_line, stop_code, stopped
+from .common import cli_message, on_sigint, on_sigterm, one_line, stop_code, stopped
 
 __all__ = ["main", "build_parser", "COMMAND_MODULES"]
 
@@ -143,6 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         clear_stop()
         previous = signal.signal(signal.SIGTERM, on_sigterm)  # stop as Ctrl-C does: outputs discarded, work kept
+        previous_int = signal.getsignal(signal.SIGINT)
+        if previous_int is signal.default_int_handler:  # not when the caller chose otherwise (ignored, its own)
+            signal.signal(signal.SIGINT, on_sigint)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning  # the library's warnings as one line each
@@ -157,4 +160,5 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGINT, previous_int)
             clear_stop()  # this command's stop: not the next in-process caller's
