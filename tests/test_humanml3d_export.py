@@ -81,8 +81,10 @@ def test_the_folder_holds_the_formats_files(folder):
     assert np.load(folder / "Mean.npy").shape == (263,) and np.load(folder / "Std.npy").shape == (263,)
     assert np.load(folder / "Mean.npy").dtype == np.float32
     all_ids = (folder / "all.txt").read_text().split()
-    assert all_ids == ids
+    assert all_ids == [r["id"] for r in index if r["split"]]  # HumanML3D's all.txt: the splits' union
     train, val = (folder / "train.txt").read_text().split(), (folder / "val.txt").read_text().split()
+    test = (folder / "test.txt").read_text().split()
+    assert sorted(all_ids) == sorted(train + val + test) and len(set(train + val + test)) == len(train + val + test)
     assert (folder / "train_val.txt").read_text().split() == train + val
     assert not [p for p in folder.rglob(".*")]  # nothing staged is left
 
@@ -492,6 +494,20 @@ def test_an_export_with_force_into_an_earlier_one_leaves_none_of_its_files(splic
     export_clips(spliced, ["walk_straight+wave", "jog+punch"], out=out, format="humanml3d", overwrite=True)
     for sub in ("new_joint_vecs", "new_joints", "texts"):
         assert sorted(f.stem for f in (out / sub).iterdir()) == ["000000", "000001"], sub
-    assert (out / "all.txt").read_text().split() == ["000000", "000001"] and (out / "notes.md").read_text() == "mine"
+    assert (out / "all.txt").read_text().split() == [r["id"] for r in _index(out) if r["split"]]
+    assert (out / "notes.md").read_text() == "mine"
     rows = np.concatenate([np.load(f) for f in sorted((out / "new_joint_vecs").glob("*.npy"))]).astype(np.float64)
     assert np.allclose(np.load(out / "Mean.npy"), rows.mean(0), rtol=1e-5, atol=1e-6)
+
+
+def test_the_summary_says_why_results_are_in_no_split_and_in_no_list(spliced, tmp_path):
+    result = export_clips(spliced, ["walk_straight+wave"], out=tmp_path / "one", format="humanml3d",
+                          split_ratios=(0.5, 0.0, 0.5), split_seed=1)
+    rows = _index(tmp_path / "one")
+    if rows[0]["split"]:  # this seed put both sources in one split: another does not
+        result = export_clips(spliced, ["walk_straight+wave"], out=tmp_path / "two", format="humanml3d",
+                              split_ratios=(0.5, 0.0, 0.5), split_seed=2)
+        rows = _index(tmp_path / "two")
+    assert rows[0]["split"] == "" and (result.output / "all.txt").read_text() == ""
+    assert "1 in no split, so in no list, all.txt included" in result.summary
+    assert "--split-ratios 1,0,0 puts every result in train" in result.summary

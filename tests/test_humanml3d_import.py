@@ -182,3 +182,26 @@ def test_two_folders_with_the_same_ids_share_a_database_by_a_name_prefix(exporte
     assert mirrored["mirror_of"] == "again_000003"
     rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "x.h5", "--name-prefix", "a:b")
     assert rc == 2 and "--name-prefix 'a:b' must be text without control characters, commas or colons" in err
+
+
+def test_an_id_in_two_split_lists_is_one_line_and_the_unlisted_motions_land_with_no_split(exported, tmp_path, capsys):
+    """An ID in train.txt and test.txt is not silently put in test: it is skipped in one line
+    naming both lists. A motion that no list names (an exported result in no split) is
+    imported, with no split."""
+    import shutil
+
+    folder = tmp_path / "twice"
+    shutil.copytree(exported, folder)
+    train = (folder / "train.txt").read_text().split()
+    (folder / "test.txt").write_text((folder / "test.txt").read_text() + train[0] + "\n")
+    listed = set((folder / "all.txt").read_text().split())
+    unlisted = sorted(f.stem for f in (folder / "new_joint_vecs").glob("*.npy") if f.stem not in listed)
+    assert unlisted  # the sample's export has results in no split
+    rc, _, err = run(capsys, "import", folder, "-o", tmp_path / "t.h5", "-q")
+    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
+    assert rc == 1 and len(lines) == 1 and f"{train[0]}.npy" in lines[0] and "train.txt and test.txt" in lines[0], err
+    with MotionDatabase.open(tmp_path / "t.h5") as db:
+        assert train[0] not in db.names and set(unlisted) <= set(db.names)
+        t = db.clip_table()
+        split = {n: dict(l).get("split", "") for n, l in zip(t.names, t.labels)}
+    assert all(split[u] == "" for u in unlisted) and split[train[1]] == "train"

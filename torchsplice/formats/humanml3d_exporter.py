@@ -250,7 +250,7 @@ class HumanML3DExporter(Exporter):
         yield ("npy", None, std.numpy().astype(np.float32))
         ids = {s: [r["id"] for r in rows if r["split"] == s] for s in SPLITS}
         ids["train_val"] = ids["train"] + ids["val"]
-        ids["all"] = [r["id"] for r in rows]
+        ids["all"] = [r["id"] for r in rows if r["split"]]  # as HumanML3D's: the splits' union, no other ID
         for s in (*SPLITS, "train_val", "all"):
             yield ("text", None, "".join(i + "\n" for i in ids[s]))
         out = io.StringIO()
@@ -395,7 +395,9 @@ class HumanML3DExporter(Exporter):
             notes.append(f"{len(plan['short'])} clip{'s' if len(plan['short']) != 1 else ''} under {MIN_FRAMES} frames "
                          "left out")
         if unsplit:
-            notes.append(f"{unsplit} in no split (their sources are in different splits)")
+            notes.append(f"{unsplit} in no split, so in no list, all.txt included (a result is in a split when its "
+                         "locomotion and its action both are, and theirs differ; --split-ratios 1,0,0 puts every "
+                         "result in train)")
         if undescribed:
             notes.append(f"{undescribed} whose labels no phrase table describes (captioned 'moves': give them captions)")
         if long:

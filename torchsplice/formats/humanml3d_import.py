@@ -2,7 +2,8 @@
 
 A HumanML3D folder (the format's own, or one :mod:`.humanml3d_exporter` wrote) holds
 ``new_joint_vecs/ID.npy`` (``(N, 263)`` features), ``texts/ID.txt`` and the split lists. Each
-ID (those of ``all.txt`` where it exists, else every ``new_joint_vecs/*.npy``) becomes a clip
+ID (those of ``all.txt`` in its order, then every other ``new_joint_vecs/*.npy``: a torchsplice
+export lists a result in no split in no list) becomes a clip
 named ``ID`` of ``N`` frames at 20 fps on the built-in SMPL body (:mod:`torchsplice.specs.smpl`,
 metres, Y up, spec ``smpl22``; a mirrored copy, whose left and right bones have swapped lengths,
 on its mirror image, ``smpl22_skeleton(mirrored=True)``, chosen by the bone lengths):
@@ -52,9 +53,9 @@ def is_humanml3d_folder(path) -> bool:
 
 
 def humanml3d_ids(folder) -> tuple[list[str], dict[str, str], list[tuple[str, str]]]:
-    """``(ids, split of each id, skipped)``: the motions to read (``all.txt``'s, else every
-    ``new_joint_vecs/*.npy``, in order), the split lists' memberships, and ``(file, why)`` for
-    an ID a list names without a motion."""
+    """``(ids, split of each id, skipped)``: the motions to read (``all.txt``'s in its order,
+    then every other ``new_joint_vecs/*.npy``, sorted), the split lists' memberships, and
+    ``(file, why)`` for an ID a list names without a motion."""
     folder = Path(folder)
     vecs = folder / "new_joint_vecs"
     present = {f.stem for f in vecs.glob("*.npy")}
@@ -69,7 +70,17 @@ def humanml3d_ids(folder) -> tuple[list[str], dict[str, str], list[tuple[str, st
         for i in ids:
             if i not in present:
                 skipped.append((str(folder / f"{name}.txt"), f"lists {i!r}, which has no motion (new_joint_vecs/{i}.npy)"))
-    ids = [i for i in listed["all"] if i in present] if "all" in listed else sorted(present)
+    ids = [i for i in listed.get("all", []) if i in present]
+    ids += sorted(present - set(ids))
+    lists: dict[str, list[str]] = {}
+    for s in SPLIT_FILES:
+        for i in dict.fromkeys(listed.get(s, [])):
+            lists.setdefault(i, []).append(s)
+    twice = {i: ls for i, ls in lists.items() if len(ls) > 1 and i in present}
+    for i, ls in twice.items():  # which split it is in cannot be told: said, not guessed
+        skipped.append((str(vecs / f"{i}.npy"), f"listed in {' and '.join(f'{s}.txt' for s in ls)}: in which split it is "
+                                                 "cannot be told (list it in one)"))
+    ids = [i for i in ids if i not in twice]
     return list(dict.fromkeys(ids)), split, skipped
 
 
