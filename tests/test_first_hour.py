@@ -161,6 +161,9 @@ def test_3_export_and_info_take_the_selection_language(sample_db, tmp_path, caps
                      "-o", tmp_path / "naive_waves")
     names = sorted(f.stem for f in (tmp_path / "naive_waves").glob("*.bvh"))
     assert rc == 0 and len(names) == 5 and all(n.endswith("+wave.naive") for n in names), names
+    rc, out, err = run(capsys, "export", spliced, "--select", "method:naive", "--select", "action:wave",
+                       "-o", tmp_path / "select_alone")  # --select alone, as retarget and mirror take it
+    assert rc == 0 and sorted(f.stem for f in (tmp_path / "select_alone").glob("*.bvh")) == names, err
     rc, _, _ = run(capsys, "export", spliced, "walk_curve+wave", "jog+*", "-o", tmp_path / "mix", "--format", "npz")
     assert rc == 0 and len(list((tmp_path / "mix").glob("*.npz"))) == 1 + 10  # one named, jog's ten by a glob
     rc, _, err = run(capsys, "export", spliced, "nothing*", "-o", tmp_path / "none")

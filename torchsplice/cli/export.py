@@ -86,9 +86,10 @@ class Export(Command):
     def run(self, args) -> int:
         from ..formats.exporters import export_clips
 
-        if args.all == bool(args.clips):
-            raise TorchspliceError("name the clips to export, or pass --all (not both)" if args.all else
-                                   "name the clips to export (as `torchsplice info` lists them), or pass --all")
+        if args.all and args.clips:
+            raise TorchspliceError("name the clips to export, or pass --all (not both)")
+        if not (args.all or args.clips or args.select):  # --select alone: the clips it selects, as retarget takes it
+            raise TorchspliceError("name the clips to export (as `torchsplice info` lists them), or pass --all or --select")
         skeletons = None
         if args.skeleton is not None:
             try:
@@ -96,7 +97,7 @@ class Export(Command):
             except ValueError:
                 raise TorchspliceError(f"--skeleton: expected skeleton ids such as 0 or 0,1, got {args.skeleton!r}") from None
         clips, select = None, list(args.select or [])
-        if not args.all:
+        if args.clips:
             from ..store.database import MotionDatabase
             from ..store.select import names_or_selector
 
