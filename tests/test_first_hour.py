@@ -529,3 +529,17 @@ def test_a_wrong_spec_on_a_folder_is_said_once_with_the_count_and_the_spec_auto_
     lines = [ln for ln in err.splitlines() if ln.startswith("skipped")]
     assert rc == 2 and len(lines) == 1, err
     assert lines[0].startswith(f"skipped {len(takes)} files (") and "--spec auto picks 'bandai_namco' for them" in lines[0]
+
+
+def test_one_of_anything_is_said_in_the_singular(sample_db, tmp_path, capsys):
+    args = ["splice-all", sample_db, "--locomotions", "jog", "--actions", "wave", "--method", "naive", "--workers", "1"]
+    rc, out, err = run(capsys, *args, "-o", tmp_path / "one.h5", "--dry-run")
+    assert rc == 0 and "1 spliced clip in 1 task" in out, out + err
+    rc, out, err = run(capsys, *args, "-o", tmp_path / "one.h5")
+    assert rc == 0 and "1 spliced clip in" in out and "1 spliced clips" not in out, out + err
+    for argv, words in ((["export", tmp_path / "one.h5", "--all", "--packed", "-o", tmp_path / "one.npz"], "1 clip packed"),
+                        (["export", tmp_path / "one.h5", "--all", "-o", tmp_path / "bvh"], "jog+wave.naive, 150 frames"),
+                        (["export", tmp_path / "one.h5", "--all", "--format", "humanml3d", "-o", tmp_path / "h"],
+                         "1 clip as HumanML3D, 1 motion")):
+        rc, out, err = run(capsys, *argv)
+        assert rc == 0 and words in out, out + err

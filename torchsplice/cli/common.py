@@ -112,7 +112,9 @@ def say(args, msg: str) -> None:
 
 def n(count: int, word: str) -> str:
     """``"1 clip"``, ``"2 clips"``: a count with its noun, plural unless one."""
-    return f"{count} {word}{'' if count == 1 else 's'}"
+    from ..core.names import counted
+
+    return counted(count, word)
 
 
 def at(path, why: str) -> str:

@@ -190,7 +190,7 @@ class Materialize(Command):
 
         n = materialize(args.database, args.output, overwrite=args.force, progress=not args.quiet, index=args.index)
         if not args.quiet:
-            print(f"wrote {args.output}: {n} clips")
+            print(f"wrote {args.output}: {n} clip{'s' if n != 1 else ''}")
         return 0
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["CONTROL", "control_character", "printable", "quoted", "spreadsheet_cell"]
+__all__ = ["CONTROL", "control_character", "printable", "quoted", "spreadsheet_cell", "counted"]
 
 CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
 """The characters a name must not hold (see the module docstring)."""
@@ -54,3 +54,9 @@ def spreadsheet_cell(value):
     if isinstance(value, str) and value.startswith(FORMULA_STARTS):
         return "'" + value
     return value
+
+
+def counted(count: int, word: str) -> str:
+    """``"1 clip"``, ``"2 clips"``: a count with its noun, plural unless one (what every
+    message that counts says)."""
+    return f"{count} {word}{'' if count == 1 else 's'}"

@@ -211,7 +211,8 @@ class Exporter:
         """One line saying what ``result`` holds (the command line prints it after ``wrote``)."""
         if len(result.names) == 1 and len(result.files) == 1 and result.fps:
             return f"{result.files[0]}: {result.names[0]}, {result.frames} frames at {result.fps[0]:g} fps"
-        return f"{result.output}: {len(result.names)} clips as {self.title}, {result.frames} frames"
+        n = len(result.names)
+        return f"{result.output}: {n} clip{'s' if n != 1 else ''} as {self.title}, {result.frames} frames"
 
 
 # --------------------------------------------------------------------------------------------

@@ -48,7 +48,7 @@ from functools import cached_property
 from pathlib import Path
 
 from ..core.errors import SpecError, TorchspliceError
-from ..core.names import spreadsheet_cell
+from ..core.names import counted, spreadsheet_cell
 from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
 from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_ratios, parse_seed, table_splits
 
@@ -404,7 +404,7 @@ class HumanML3DExporter(Exporter):
             notes.append(f"{long} of {MDM_MAX_ROWS} frames or more, which MDM and MoMask drop (cut them with a window)")
         if short:
             notes.append(f"{short} under {MDM_MIN_ROWS} frames, which MDM and MoMask drop")
-        return (f"{result.output}: {len(plan['clips'])} clips as HumanML3D, {len(items)} motions"
+        return (f"{result.output}: {counted(len(plan['clips']), 'clip')} as HumanML3D, {counted(len(items), 'motion')}"
                 f"{' with mirrors' if self.options['mirror'] else ''}, {result.frames} frames at 20 fps; "
                 f"train/val/test {split['train']}/{split['val']}/{split['test']}"
                 + (f"; {'; '.join(notes)}" if notes else ""))

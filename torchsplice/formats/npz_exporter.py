@@ -71,7 +71,7 @@ class NpzExporter(Exporter):
         features = self.options["features"]
         n = len(result.names)
         if self.single_file:
-            return (f"{result.files[0]}: {n} clips packed, {result.frames} frames"
+            return (f"{result.files[0]}: {n} clip{'s' if n != 1 else ''} packed, {result.frames} frames"
                     + (f", features {features} with statistics" if features else ""))
         where = result.files[0] if len(result.files) == 1 else Path(result.output)
         return (f"{where}: {n} clip{'s' if n != 1 else ''} as .npz, {result.frames} frames"

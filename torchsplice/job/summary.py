@@ -7,6 +7,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..core.names import counted
 from .size import OutputSize, format_bytes
 from .plan import SKELETONS_DIFFER
 
@@ -61,7 +62,7 @@ class JobSummary:
         rate = (self.spliced - self.resumed) / self.compute_seconds if self.compute_seconds > 0 else float("nan")
         where = f" with {self.engine}" if self.engine else ""
         if self.dry_run:
-            out = [f"would write {self.output}: {self.pairs} spliced clips in {self.tasks} tasks"
+            out = [f"would write {self.output}: {counted(self.pairs, 'spliced clip')} in {counted(self.tasks, 'task')}"
                    + (f" ({self.pairs - self.standing} time-aligned, {self.standing} standing actions)" if self.standing else "")
                    + f"; {self._room()}"]
         elif self.shard is not None:
@@ -72,9 +73,9 @@ class JobSummary:
         else:
             done = f" merged from the shards in {self.seconds:.1f} s" if self.merge else \
                 f" in {self.seconds:.1f} s ({rate:,.0f} splices/s){where}"
-            out = [f"wrote {self.output}: {self.spliced} spliced clips"
+            out = [f"wrote {self.output}: {counted(self.spliced, 'spliced clip')}"
                    + (f" ({self.resumed} pairs from an earlier run)" if self.resumed else "")
-                   + (f" + {self.copied} source clips" if self.copied else "") + done]
+                   + (f" + {counted(self.copied, 'source clip')}" if self.copied else "") + done]
         standing = {t: n for t, n in self.timings.items() if t != "timewarp"}
         if standing:
             out.append(f"  {self.timings.get('timewarp', 0)} time-aligned (timewarp), "
@@ -103,7 +104,7 @@ class JobSummary:
         if self.flagged:
             from .task import FLAG_CODES
 
-            out.append(f"flagged {self.flagged_clips} clips (their 'flags' column; 'flag_details' says why, clip by clip):")
+            out.append(f"flagged {counted(self.flagged_clips, 'clip')} (their 'flags' column; 'flag_details' says why, clip by clip):")
             out += [f"  {n} x {code}: {FLAG_CODES.get(code, '')}".rstrip(": ")
                     for code, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
         return out
