@@ -96,6 +96,9 @@ def _damaged(exported: Path, tmp_path: Path) -> Path:
     (bad / "texts" / "000003.txt").unlink()                                           # no text
     (bad / "texts" / "000004.txt").write_text("a person walks#a/DET person walk/VERB#0.0#0.0\n")  # malformed
     (bad / "new_joint_vecs" / "000005.npy").unlink()                                  # listed, no motion
+    huge = np.load(bad / "new_joint_vecs" / "000007.npy")
+    huge[3, 1] = 1e30                                                                 # a root velocity of 1e30
+    np.save(bad / "new_joint_vecs" / "000007.npy", huge)
     (bad / "new_joint_vecs" / "000006.npy").write_bytes(b"not numpy")
     return bad
 
@@ -112,13 +115,15 @@ def test_bad_motions_are_one_line_each_and_the_others_land(exported, tmp_path, c
         "000003.txt": "missing",
         "000004.txt": "token 'person' is not word/POS",
         "000006.npy": "not a NumPy array file",
+        "000007.npy": "an absurd value (beyond 1e+12) at frame 3",
     }
     for f, words in expect.items():
         assert any(f in ln and words in ln for ln in lines), (f, err)
     assert any("all.txt" in ln and "'000005'" in ln and "no motion" in ln for ln in lines), err
     with MotionDatabase.open(db) as d:
         names = set(d.names)
-    assert {"000000", "000007", "M000001"} <= names and not names & {"000001", "000002", "000003", "000004", "000006"}
+    assert {"000000", "000008", "M000001"} <= names and not names & {"000001", "000002", "000003", "000004", "000006",
+                                                                   "000007"}
 
 
 def test_the_format_option_and_its_errors(exported, tmp_path, capsys):

@@ -160,6 +160,11 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
         bad = int(np.argwhere(~np.isfinite(data))[0][0]) if np.issubdtype(data.dtype, np.floating) else 0
         raise TorchspliceError(f"{f}: not finite (NaN or infinity) at frame {bad}" if np.issubdtype(data.dtype, np.floating)
                                else f"{f}: features of type {data.dtype}, not floating point")
+    from .bvh_limits import MAX_ABS_VALUE
+
+    huge = np.abs(data) > MAX_ABS_VALUE  # as BVH import refuses: no motion has such values
+    if huge.any():
+        raise TorchspliceError(f"{f}: an absurd value (beyond {MAX_ABS_VALUE:g}) at frame {int(np.argwhere(huge)[0][0])}")
     text = folder / "texts" / f"{id}.txt"
     try:
         lines = [ln for ln in text.read_text(encoding="utf-8").splitlines() if ln.strip()]
@@ -172,6 +177,10 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
     for k, line in enumerate(lines, 1):
         parse_caption_line(line, f"{text}: line {k}")
     positions = features_to_positions(torch.from_numpy(data.astype(np.float64)))
+    far = ~torch.isfinite(positions) | (positions.abs() > MAX_ABS_VALUE)  # velocities summed past the limit
+    if bool(far.any()):
+        raise TorchspliceError(f"{f}: its root velocities integrate beyond {MAX_ABS_VALUE:g} by frame "
+                               f"{int(far.nonzero()[0, 0])}")
     m = positions_to_motion(positions, name=id)
     m.role = "both"
     m.labels = {"captions": "\n".join(ln.strip() for ln in lines)}
