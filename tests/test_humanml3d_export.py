@@ -511,3 +511,22 @@ def test_the_summary_says_why_results_are_in_no_split_and_in_no_list(spliced, tm
     assert rows[0]["split"] == "" and (result.output / "all.txt").read_text() == ""
     assert "1 in no split, so in no list, all.txt included" in result.summary
     assert "--split-ratios 1,0,0 puts every result in train" in result.summary
+
+
+def test_export_mirror_does_not_mirror_the_mirrors_of_a_mirrored_database(sample_db, tmp_path):
+    """A database made by ``torchsplice mirror`` holds originals and their images: --mirror makes
+    a copy only of a clip that is not an image and whose image is not exported too."""
+    from torchsplice.retarget.mirror import mirror_clips
+    from torchsplice.store.database import MotionDatabase
+
+    mirrored = tmp_path / "m.h5"
+    mirror_clips(sample_db, ["walk_straight", "jog"], out=mirrored)
+    with MotionDatabase.open(mirrored) as db:
+        names = list(db.names)
+    assert sorted(names) == ["jog", "jog.mirror", "walk_straight", "walk_straight.mirror"]
+    result = export_clips(mirrored, out=tmp_path / "h", format="humanml3d", mirror=True)
+    assert not [r for r in _index(tmp_path / "h") if r["mirrored"] == "1"]  # every clip is or has an image
+    assert "4 clips not mirrored again" in result.summary
+    # only the originals exported: their images are not, so they are mirrored
+    export_clips(mirrored, ["walk_straight", "jog"], out=tmp_path / "o", format="humanml3d", mirror=True)
+    assert sorted(r["clip"] for r in _index(tmp_path / "o") if r["mirrored"] == "1") == ["jog", "walk_straight"]

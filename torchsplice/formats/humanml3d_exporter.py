@@ -394,6 +394,9 @@ class HumanML3DExporter(Exporter):
         if plan["short"]:
             notes.append(f"{len(plan['short'])} clip{'s' if len(plan['short']) != 1 else ''} under {MIN_FRAMES} frames "
                          "left out")
+        if plan.get("not_mirrored"):
+            notes.append(f"{counted(len(plan['not_mirrored']), 'clip')} not mirrored again (a mirror image already, "
+                         "or its image is exported too)")
         if unsplit:
             notes.append(f"{unsplit} in no split, so in no list, all.txt included (a result is in a split when its "
                          "locomotion and its action both are, and theirs differ; --split-ratios 1,0,0 puts every "
@@ -482,6 +485,12 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
             info[col] = str(table.extra[col][r]) if col in table.extra else ""
         infos[r] = info
     splits = table_splits(table, ratios, seed)  # over the whole database: a selection keeps its clips' splits
+    # a clip that is a mirror image (torchsplice mirror's, labelled mirror_of) or whose image is exported
+    # too is not mirrored again: its mirrored copy is already there
+    exported = {table.names[r] for r in clips}
+    imaged = {str(infos[r]["labels"].get("mirror_of")) for r in clips if infos[r]["labels"].get("mirror_of")}
+    mirrored_already = {table.names[r] for r in clips if infos[r]["labels"].get("mirror_of")
+                        or table.names[r] in imaged or f"{table.names[r]}.mirror" in exported}
     items, n = [], 0
     size = None if window is None else max(MIN_FRAMES, int(round(window * 20.0)))
     for r in clips:
@@ -505,10 +514,11 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
                     "retargeted_from": labels.get("retargeted_from", labels.get("action.retargeted_from", "")),
                     "described": 1}
             items.append({**base, "id": f"{n:06d}", "mirrored": 0})
-            if mirror:
+            if mirror and name not in mirrored_already:
                 items.append({**base, "id": f"M{n:06d}", "mirrored": 1})
             n += 1
-    return {"items": items, "clips": [table.names[r] for r in clips], "short": short, "skeleton_of": skeleton_of}
+    return {"items": items, "clips": [table.names[r] for r in clips], "short": short, "skeleton_of": skeleton_of,
+            "not_mirrored": sorted(mirrored_already) if mirror else []}
 
 
 register_exporter(HumanML3DExporter)
