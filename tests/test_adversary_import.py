@@ -73,3 +73,23 @@ def test_pairs_across_units_of_one_topology_are_not_spliced(tmp_path):
         assert a.num_frames == b.num_frames
         err = (a.global_positions() - b.global_positions()).norm(dim=-1)
         assert float(err.mean()) < 0.01, float(err.mean())  # metres: within a centimetre on average
+
+
+def test_a_named_pipe_named_like_a_bvh_file_is_one_line_never_read(tmp_path, capsys):
+    """A FIFO would block the import forever: given by name or found in a folder, it is
+    skipped in one line and the other files land."""
+    import os
+
+    from torchsplice.cli import main as cli
+    from torchsplice.formats.bvh import write_bvh
+    from torchsplice.sample import sample_motions
+
+    folder = tmp_path / "takes"
+    folder.mkdir()
+    write_bvh(sample_motions()[0], folder / "ok.bvh")
+    os.mkfifo(folder / "pipe.bvh")
+    assert cli(["import", str(folder), "-o", str(tmp_path / "a.h5"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "pipe.bvh: not a regular file" in err and "Traceback" not in err
+    assert cli(["import", str(folder / "pipe.bvh"), "-o", str(tmp_path / "b.h5"), "-q"]) == 2
+    assert "pipe.bvh: not a regular file" in capsys.readouterr().err

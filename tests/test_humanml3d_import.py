@@ -17,6 +17,7 @@ import torch
 
 from cli_helpers import run
 from torchsplice.cli import main
+from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.exporters import export_clips
 from torchsplice.formats.humanml3d_import import positions_to_motion
 from torchsplice.store.database import MotionDatabase
@@ -210,3 +211,43 @@ def test_an_id_in_two_split_lists_is_one_line_and_the_unlisted_motions_land_with
         t = db.clip_table()
         split = {n: dict(l).get("split", "") for n, l in zip(t.names, t.labels)}
     assert all(split[u] == "" for u in unlisted) and split[train[1]] == "train"
+
+
+def test_fifos_links_out_of_the_folder_and_endless_files_are_one_line_each_never_read(exported, tmp_path, capsys):
+    """A FIFO named like a motion or a caption file would block the import forever, a symlink
+    out of the folder would pull a file from elsewhere into the captions, /dev/zero would eat
+    the memory: each is skipped in one line, and the other motions land."""
+    import os
+    import shutil
+
+    folder = tmp_path / "hostile"
+    shutil.copytree(exported, folder)
+    (folder / "new_joint_vecs" / "000001.npy").unlink()
+    os.mkfifo(folder / "new_joint_vecs" / "000001.npy")
+    (folder / "texts" / "000002.txt").unlink()
+    os.mkfifo(folder / "texts" / "000002.txt")
+    secret = tmp_path / "secret.txt"
+    secret.write_text("a person walks#a/DET person/NOUN walk/VERB#0.0#0.0\n")
+    (folder / "texts" / "000003.txt").unlink()
+    (folder / "texts" / "000003.txt").symlink_to(secret)
+    (folder / "texts" / "000004.txt").unlink()
+    (folder / "texts" / "000004.txt").symlink_to("/dev/zero")
+    rc, _, err = run(capsys, "import", folder, "-o", tmp_path / "h.h5", "-q")
+    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
+    for name, words in (("000001.npy", "named pipe (FIFO)"), ("000002.txt", "named pipe (FIFO)"),
+                        ("000003.txt", "leads out of"), ("000004.txt", "not a regular file")):
+        assert any(name in ln and words in ln for ln in lines), (name, err)
+    assert rc == 1 and "Traceback" not in err
+    with MotionDatabase.open(tmp_path / "h.h5") as db:
+        names = set(db.names)
+        assert "000000" in names and not names & {"000001", "000002", "000003", "000004"}
+        assert all("secret" not in str(db.clip_info(n)["labels"]) for n in names)
+    zero = tmp_path / "zero.json"
+    zero.symlink_to("/dev/zero")
+    from torchsplice.formats.captions import read_captions
+
+    with pytest.raises(TorchspliceError, match="not a regular file|more than"):
+        read_captions(zero)
+    os.mkfifo(tmp_path / "fifo.json")
+    with pytest.raises(TorchspliceError, match="named pipe"):
+        read_captions(tmp_path / "fifo.json")

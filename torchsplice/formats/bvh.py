@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 import re
 import warnings
 from pathlib import Path
@@ -139,6 +140,9 @@ def read_bvh(path, dtype: torch.dtype = torch.float32, name: str | None = None) 
         raise TypeError(f"read_bvh: path must be a str or os.PathLike, got {type(path).__name__}")
     path = Path(path)
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):  # a FIFO would block forever, a device never end
+            raise _error(path, "not a regular file (a named pipe, device or folder); not read")
         raw = path.read_bytes()
     except OSError as exc:
         raise _error(path, f"cannot read file ({exc.strerror or exc})") from None

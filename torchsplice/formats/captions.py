@@ -266,12 +266,14 @@ def read_captions(path) -> dict[str, list[Caption]]:
     """A user's captions per source clip: a JSON object ``{"clip name": ["caption", ...]}``, each
     caption a HumanML3D line (``caption#tokens#start#end``) or ``word/POS`` words. One-line
     errors naming the file."""
+    from .plain_files import read_capped_text
+
     path = Path(path)
+    if not (path.exists() or path.is_symlink()):
+        raise TorchspliceError(f"{path}: no such captions file")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise TorchspliceError(f"{path}: no such captions file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = json.loads(read_capped_text(path, limit=64 << 20))  # not a FIFO, not /dev/zero
+    except json.JSONDecodeError as exc:
         raise TorchspliceError(f"{path}: not a JSON captions file ({' '.join(str(exc).split())})") from None
     if not isinstance(data, dict):
         raise TorchspliceError(f"{path}: expected an object mapping clip names to lists of captions")

@@ -39,6 +39,7 @@ from ..core.rotations import quat_between, quat_apply, quat_conj, quat_mul, rotm
 from ..specs.smpl import SMPL22_PARENTS, smpl22_skeleton
 from .captions import parse_caption_line
 from .humanml3d_features import FEATURES, FPS, features_to_positions
+from .plain_files import MAX_ARRAY_BYTES, checked_file, read_capped_text
 
 __all__ = ["is_humanml3d_folder", "humanml3d_ids", "read_humanml3d_motion", "positions_to_motion", "SPLIT_FILES"]
 
@@ -60,12 +61,17 @@ def humanml3d_ids(folder) -> tuple[list[str], dict[str, str], list[tuple[str, st
     vecs = folder / "new_joint_vecs"
     present = {f.stem for f in vecs.glob("*.npy")}
     listed: dict[str, list[str]] = {}
+    skipped: list[tuple[str, str]] = []
     for name in (*SPLIT_FILES, "all"):
         f = folder / f"{name}.txt"
-        if f.is_file():
-            listed[name] = [ln.strip() for ln in f.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
+        if f.exists() or f.is_symlink():
+            try:
+                text = read_capped_text(f, inside=folder)
+            except TorchspliceError as exc:  # a list that cannot be read: said, the motions still land
+                skipped.append((str(f), str(exc).removeprefix(f"{f}: ")))
+                continue
+            listed[name] = [ln.strip() for ln in text.splitlines() if ln.strip()]
     split = {i: s for s in SPLIT_FILES for i in listed.get(s, [])}
-    skipped = []
     for name, ids in listed.items():
         for i in ids:
             if i not in present:
@@ -145,6 +151,7 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
 
     folder = Path(folder)
     f = folder / "new_joint_vecs" / f"{id}.npy"
+    checked_file(f, inside=folder, limit=MAX_ARRAY_BYTES)  # no FIFO, device or symlink out of the folder
     try:
         data = np.load(f, allow_pickle=False)
     except (OSError, ValueError, EOFError) as exc:
@@ -166,12 +173,9 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
     if huge.any():
         raise TorchspliceError(f"{f}: an absurd value (beyond {MAX_ABS_VALUE:g}) at frame {int(np.argwhere(huge)[0][0])}")
     text = folder / "texts" / f"{id}.txt"
-    try:
-        lines = [ln for ln in text.read_text(encoding="utf-8").splitlines() if ln.strip()]
-    except FileNotFoundError:
-        raise TorchspliceError(f"{text}: missing (every motion has its captions in texts/ID.txt)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TorchspliceError(f"{text}: cannot read its captions ({' '.join(str(exc).split())})") from None
+    if not (text.exists() or text.is_symlink()):
+        raise TorchspliceError(f"{text}: missing (every motion has its captions in texts/ID.txt)")
+    lines = [ln for ln in read_capped_text(text, inside=folder, limit=1 << 20).splitlines() if ln.strip()]
     if not lines:
         raise TorchspliceError(f"{text}: holds no caption")
     for k, line in enumerate(lines, 1):

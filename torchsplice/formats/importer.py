@@ -109,12 +109,17 @@ def collect_bvh(paths: Iterable) -> tuple[list[Path], list[tuple[str, str]]]:
     files, missing = [], []
     for p in map(Path, paths):
         if p.is_dir():
-            found = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() == ".bvh")
+            named = sorted(f for f in p.rglob("*") if f.suffix.lower() == ".bvh" and not f.is_dir())
+            found = [f for f in named if f.is_file()]
+            missing += [(str(f), "not a regular file (a named pipe or a device); not read") for f in named
+                        if not f.is_file() and f.exists()]
             if not found:
                 missing.append((str(p), "folder holds no .bvh files"))
             files += found
         elif p.is_file():
             files.append(p)
+        elif p.exists():  # a named pipe or a device: reading it would block or never end
+            missing.append((str(p), "not a regular file (a named pipe or a device); not read"))
         else:
             missing.append((str(p), "no such file or folder"))
     seen, unique = set(), []
