@@ -94,3 +94,23 @@ def test_errors_keep_their_structure_across_processes():
         assert back.hint == exc.hint and back.options == exc.options
     assert cli_message(UnfinishedJobError("the job is in the way")) == "the job is in the way (pass --restart to discard it)"
     assert cli_message(ValueError("plain")) == "plain"
+
+
+def test_progress_in_a_log_is_a_line_every_so_often_and_one_at_the_end():
+    """Not on a terminal, progress is lines (a bar would be hidden): every ``every`` seconds and
+    at the end, with the count, the share, the rate and the time left; short work prints none."""
+    import io
+
+    from torchsplice.core.progress import LogProgress
+
+    out = io.StringIO()
+    bar = LogProgress(range(4), total=4, desc="export bvh", unit="file", file=out, every=0.0)
+    assert list(bar) == [0, 1, 2, 3]
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("export bvh: 1/4 files (25%)") and "left" in lines[0]
+    assert lines[-1].startswith("export bvh: 4/4 files (100%)") and "done in" in lines[-1] and len(lines) == 5
+    quiet = io.StringIO()
+    short = LogProgress(total=3, desc="import", file=quiet, every=3600.0)
+    short.update(3)
+    short.close()
+    assert quiet.getvalue() == ""

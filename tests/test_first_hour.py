@@ -543,3 +543,15 @@ def test_one_of_anything_is_said_in_the_singular(sample_db, tmp_path, capsys):
                          "1 clip as HumanML3D, 1 motion")):
         rc, out, err = run(capsys, *argv)
         assert rc == 0 and words in out, out + err
+
+
+def test_long_commands_print_progress_lines_to_a_log(sample_db, tmp_path, capsys, monkeypatch):
+    """Not on a terminal (a pipe, a log, capsys here), export and splice-all print progress
+    lines (every 30 s; here every update) instead of nothing; --quiet prints none."""
+    monkeypatch.setenv("TORCHSPLICE_PROGRESS_SECONDS", "0")
+    rc, _, err = run(capsys, "export", sample_db, "--all", "-o", tmp_path / "bvh")
+    assert rc == 0 and "export bvh: 10/10 files (100%)" in err, err
+    rc, _, err = run(capsys, "splice-all", sample_db, "-o", tmp_path / "s.h5", "--locomotions", "jog", "--workers", "1")
+    assert rc == 0 and "splice-all: " in err and "splices (100%)" in err, err
+    rc, _, err = run(capsys, "export", sample_db, "--all", "-o", tmp_path / "q", "-q")
+    assert rc == 0 and "export bvh" not in err

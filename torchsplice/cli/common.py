@@ -53,11 +53,11 @@ def cli_message(exc: BaseException) -> str:
 
 
 def progress(iterable, total: int, desc: str, quiet: bool, unit: str = "file"):
-    """A tqdm progress bar on stderr (hidden with --quiet or when stderr is not a terminal)."""
-    from tqdm import tqdm
+    """Progress on stderr, hidden with --quiet: tqdm's bar on a terminal, a line every 30 s in a
+    log or a pipe (:func:`torchsplice.core.progress.progress_bar`)."""
+    from ..core.progress import progress_bar
 
-    return tqdm(iterable, total=total, desc=desc, unit=unit, disable=True if quiet else None,
-                file=sys.stderr, dynamic_ncols=True)
+    return progress_bar(iterable, total=total, desc=desc, unit=unit, show=not quiet)
 
 
 def _outputs(kind: str) -> tuple[tuple[str, ...], str]:

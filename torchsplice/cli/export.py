@@ -9,7 +9,7 @@ formats (``--format``) are the registry's, so a ``--plugin`` module's format is 
 from __future__ import annotations
 
 from .base import Command, register_command
-from .common import add_output_flags, command_line, declared, say
+from .common import add_output_flags, command_line, declared, progress, say
 from ..core.errors import TorchspliceError
 
 EXPORTERS = "torchsplice.formats.exporters"
@@ -108,7 +108,8 @@ class Export(Command):
                               overwrite=args.force, skeletons=skeletons, command=command_line(args),
                               packed=args.packed, features=args.features, captions=args.captions, mirror=args.mirror,
                               window=args.window, split_ratios=args.split_ratios, split_seed=args.split_seed,
-                              paraphrases=args.paraphrases, shards=args.shards, index=args.index)
+                              paraphrases=args.paraphrases, shards=args.shards, index=args.index,
+                              progress=lambda it, total, desc: progress(it, total, desc, args.quiet))
         say(args, f"wrote {result.summary}")
         return 0
 

@@ -305,7 +305,8 @@ def choose_exporter(format: str | None, output, options: dict) -> type[Exporter]
 # --------------------------------------------------------------------------------------------
 def export_clips(database, clips: Sequence[str] | None = None, *, out, format: str | None = None,
                  overwrite: bool = False, skeletons: Iterable[int] | None = None, command: str = "",
-                 select: str | Sequence[str] | None = None, index: bool = True, **options) -> ExportResult:
+                 select: str | Sequence[str] | None = None, index: bool = True, progress=None,
+                 **options) -> ExportResult:
     """Write clips of a database as files of a registered format, all or nothing.
 
     Args:
@@ -318,6 +319,8 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         overwrite: replace existing files.
         skeletons: keep only clips on these database skeletons (ids; ``None``: any).
         command: what the output's lock records as its holder.
+        progress: ``progress(iterable, total, desc)`` wrapping the files as they are written (the
+            command line's bar, or its log lines), or ``None``.
         select: selectors of the job's and the dataset's selection language (one string or a
             list, all of which a clip must pass; :mod:`torchsplice.store.select`), e.g.
             ``"role:spliced"`` or ``["method:naive", "label:action.style=elderly"]``; with
@@ -377,7 +380,7 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         items = exporter.items()
         try:
             count = 0
-            for item in items:
+            for item in (items if progress is None else progress(items, len(files), f"export {exporter.name}")):
                 if count == len(files):
                     raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave more files than the "
                                            f"{len(files)} of this export")

@@ -76,6 +76,6 @@ def materialize(source, output, overwrite: bool = False, progress: bool = False,
 
 
 def _bar(total: int, progress: bool):
-    from tqdm import tqdm
+    from ..core.progress import progress_bar
 
-    return tqdm(total=total, desc="materialize", unit="clip", disable=not progress, dynamic_ncols=True)
+    return progress_bar(total=total, desc="materialize", unit="clip", show=bool(progress))

@@ -150,7 +150,7 @@ def reason_lines(skipped: dict[str, int], say) -> list[str]:
 
 
 def progress_bar(total: int, initial: int, show: bool):
-    from tqdm import tqdm
+    """The job's progress: a bar on a terminal, a line every 30 s in a log (:mod:`torchsplice.core.progress`)."""
+    from ..core.progress import progress_bar as bar
 
-    return tqdm(total=total, initial=initial, unit="splice", desc="splice-all", disable=True if not show else None,
-                file=sys.stderr, dynamic_ncols=True, smoothing=0.1)
+    return bar(total=total, desc="splice-all", unit="splice", initial=initial, show=show, smoothing=0.1)
