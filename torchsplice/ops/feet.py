@@ -63,6 +63,15 @@ _STILL = 1e-6
 """A foot whose target is within this many leg lengths of where it is keeps its leg's rotations as
 they are (a clip retargeted onto its own skeleton comes back unchanged, not re-solved)."""
 
+_NEARLY_STRAIGHT = 0.05
+"""A knee this many thigh lengths or less off the hip-ankle line (bent about 5 degrees or less)
+takes its bend side from the foot's forward direction (:func:`two_bone_ik`)."""
+
+_SLIGHTLY_BENT = 0.25
+"""... and one bent backwards (against the foot's forward direction) by up to this many thigh
+lengths off the line (about 15 degrees), which a knee does not do: a deeper bend keeps its side
+(a kneeling leg whose foot points back, a kick with the toes pointed)."""
+
 _REACH = 0.9995
 """The fraction of a leg's full length that IK stretches it to (a straight knee is singular)."""
 
@@ -76,13 +85,20 @@ def _unit(v: torch.Tensor) -> torch.Tensor:
 
 
 def two_bone_ik(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, target: torch.Tensor,
-                g_hip: torch.Tensor, g_knee: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                g_hip: torch.Tensor, g_knee: torch.Tensor, forward: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor]:
     """New world rotations ``(N, 4)`` of a hip and its knee that bring the ankle (the knee's
     child) from ``ankle`` to ``target`` (positions ``(N, 3)``; ``g_hip``, ``g_knee`` the current
     world rotations ``(N, 4)``). The knee stays on the side it bends to; a target out of reach is
     approached along the same line (the leg straightens to :data:`_REACH`, or stays as
     straight as it is), one too close along
-    it as far as the bones allow."""
+    it as far as the bones allow.
+
+    ``forward`` ``(N, 3)``: the way the knee bends (the foot's forward direction, ankle to toe).
+    A knee nearly straight (bent less than :data:`_NEARLY_STRAIGHT` of its thigh's length off
+    the line), or slightly past straight (:data:`_SLIGHTLY_BENT`), gives no side of its own
+    (rounding decides it, and the leg would bend backwards as it shortens): it bends towards
+    ``forward`` there."""
     a = _norm(knee - hip)[:, None]
     b = _norm(ankle - knee)[:, None]
     to = target - hip
@@ -95,6 +111,12 @@ def two_bone_ik(hip: torch.Tensor, knee: torch.Tensor, ankle: torch.Tensor, targ
     # a straight leg: no side to keep, so it bends to a fixed side perpendicular to the line
     fallback = torch.linalg.cross(u, torch.roll(u, 1, dims=-1), dim=-1)
     n = _unit(torch.where(straight, fallback, pole))
+    if forward is not None:  # nearly straight or past straight: the knee bends forward, as knees do
+        fwd = forward - (forward * u).sum(-1, keepdim=True) * u
+        usable = _norm(fwd)[:, None] > 1e-6 * _norm(forward).clamp_min(1e-12)[:, None]
+        side = _norm(pole)[:, None]
+        unsure = (side <= _NEARLY_STRAIGHT * a) | (((pole * fwd).sum(-1, keepdim=True) < 0) & (side <= _SLIGHTLY_BENT * a))
+        n = torch.where(usable & unsure, _unit(fwd), n)
     x = (a * a - b * b + d * d) / (2 * d)
     new_knee = hip + u * x + n * (a * a - x * x).clamp_min(0).sqrt()
     new_ankle = hip + u * d
@@ -372,8 +394,11 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
             moved_joints = list(range(sk.num_joints))
         pos[:, moved_joints] += shift[:, None]  # rotations unchanged: the joints below move with it
     out = rot.clone()
-    for (hip, knee, ankle, _), target in zip(legs, targets):
-        q_hip, q_knee = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, glob[:, hip], glob[:, knee])
+    for (hip, knee, ankle, toe), target in zip(legs, targets):
+        # the way the knee bends: the foot's forward (ankle to toe), else the source knee's side
+        forward = pos[:, toe] - pos[:, ankle] if toe is not None else None
+        q_hip, q_knee = two_bone_ik(pos[:, hip], pos[:, knee], pos[:, ankle], target, glob[:, hip], glob[:, knee],
+                                    forward)
         parent = parents[hip]
         moved = (_norm(target - pos[:, ankle]) > _STILL * size)[:, None]  # else exactly as it was
         new = quat_mul(quat_conj(glob[:, parent]), q_hip) if parent >= 0 else q_hip
