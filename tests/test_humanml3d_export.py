@@ -530,3 +530,22 @@ def test_export_mirror_does_not_mirror_the_mirrors_of_a_mirrored_database(sample
     # only the originals exported: their images are not, so they are mirrored
     export_clips(mirrored, ["walk_straight", "jog"], out=tmp_path / "o", format="humanml3d", mirror=True)
     assert sorted(r["clip"] for r in _index(tmp_path / "o") if r["mirrored"] == "1") == ["jog", "walk_straight"]
+
+
+def test_user_captions_with_inflected_verbs_are_refused_and_unknown_keys_are_reported(spliced, tmp_path, capsys):
+    """``waves/VERB`` became "wavesing": a verb that reads as inflected is one line; a key naming
+    no clip is said in the summary, not silently unused; the shipped example reads."""
+    from torchsplice.formats.captions import read_captions
+
+    bad = tmp_path / "bad.json"
+    for word in ("waves", "waved", "waving"):
+        bad.write_text(json.dumps({"wave": [f"a/DET person/NOUN {word}/VERB"]}))
+        rc, _, err = run(capsys, "export", spliced, "--all", "--format", "humanml3d", "--captions", bad, "-o", tmp_path / "x")
+        assert rc == 2 and f"verb {word!r} reads as inflected" in error_line(err) and "waves=wave/VERB" in err, err
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"walk_straight": ["a/DET person/NOUN strolls=stroll/VERB"], "nope": ["a/DET man/NOUN"]}))
+    result = export_clips(spliced, out=tmp_path / "h", format="humanml3d", captions=good)
+    assert "captions for 1 clip the database does not hold, not used: 'nope'" in result.summary
+    texts = " ".join(p.read_text() for p in (tmp_path / "h" / "texts").glob("*.txt"))
+    assert "strolls" in texts and "strollsing" not in texts
+    assert read_captions(Path(__file__).resolve().parents[1] / "datasets_spec" / "captions_example.json")

@@ -159,14 +159,12 @@ def _bash_block(after_heading: str) -> list[list[str]]:
 def test_the_humanml3d_commands_and_the_loader_snippet_run_as_written(spliced, tmp_path, monkeypatch, capsys):
     """The "Train a text-to-motion model on it" commands on the Bandai Namco splices, then its
     Python snippet reading the folder as MDM does."""
-    import json
-
     heading = "## Train a text-to-motion model on it"
     commands = _bash_block(heading)
     assert [c[:2] for c in commands] == [["torchsplice", "export"], ["torchsplice", "export"], ["torchsplice", "import"]]
     shutil.copy(spliced / "spliced.h5", tmp_path / "spliced.h5")
-    (tmp_path / "my_captions.json").write_text(json.dumps(
-        {"dataset-1_walk_old_001": ["an/DET old/ADJ man/NOUN shuffles=shuffle/VERB along/ADV"]}))
+    (tmp_path / "datasets_spec").mkdir()  # the README's commands run from the repository's root
+    shutil.copy(README.parent / "datasets_spec" / "captions_example.json", tmp_path / "datasets_spec")
     monkeypatch.chdir(tmp_path)
     for c in commands:
         assert main(c[1:] + ["-q"]) == 0, c
@@ -175,7 +173,11 @@ def test_the_humanml3d_commands_and_the_loader_snippet_run_as_written(spliced, t
 
     with MotionDatabase.open(tmp_path / "spliced.h5") as d:
         count = len(d)
-    assert len((tmp_path / "HumanML3D" / "all.txt").read_text().split()) == 2 * count  # each splice and its mirror
+    import csv
+
+    rows = list(csv.DictReader(open(tmp_path / "HumanML3D" / "index.csv")))
+    assert len(rows) == 2 * count  # each splice and its mirror
+    assert (tmp_path / "HumanML3D" / "all.txt").read_text().split() == [r["id"] for r in rows if r["split"]]
     with MotionDatabase.open(tmp_path / "humanml3d.h5") as d:
         assert len(d) == 2 * count and d.skeleton_info(0).spec_name == "smpl22"
     texts = " ".join(p.read_text() for p in (tmp_path / "HumanML3D_windows" / "texts").glob("*.txt"))
@@ -237,7 +239,6 @@ READER_BANDAI = [
     "dataset-1_punch_normal_001", "dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025",
     "dataset-2_walk_elderly_006", "dataset-2_wave-right-hand_normal_001",
 ]
-READER_CAPTIONS = {"dataset-1_walk_old_001": ["an/DET old/ADJ man/NOUN shuffles=shuffle/VERB along/ADV"]}
 
 #: README lines the walkthrough does not run, each with why (every one must still be in the README)
 NOT_RUN = {
@@ -304,8 +305,7 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
     shutil.copytree(mocap_dir / "cmu_graphics_lab", clone / "cmu", ignore=shutil.ignore_patterns("*.md", "LICENSE"))
     shutil.copytree(mocap_dir / "lafan1_via_pypi_bvhtools", clone / "lafan1",
                     ignore=shutil.ignore_patterns("*.md", "LICENSE"))
-    (clone / "my_captions.json").write_text(json.dumps(READER_CAPTIONS))
-    (clone / ".git" / "info" / "exclude").write_text("/path/\n/bandai_namco/\n/cmu/\n/lafan1/\n/my_captions.json\n")
+    (clone / ".git" / "info" / "exclude").write_text("/path/\n/bandai_namco/\n/cmu/\n/lafan1/\n")
 
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
                TORCHSPLICE_MOCAP=str(mocap_dir))

@@ -284,7 +284,29 @@ def read_captions(path) -> dict[str, list[Caption]]:
         if not isinstance(items, list) or not items or not all(isinstance(i, str) for i in items):
             raise TorchspliceError(f"{path}: {name!r}: expected a list of captions (text)")
         out[name] = [parse_caption_line(i, f"{path}: {name!r}") for i in items]
+        for caption in out[name]:
+            for lemma, pos in caption.tokens:
+                if pos == "VERB" and _inflected(lemma):
+                    raise TorchspliceError(
+                        f"{path}: {name!r}: verb {lemma!r} reads as inflected; the composer inflects verbs itself "
+                        "(walks while waving), so give a verb as its base form: the word as written, then its base "
+                        "form (waves=wave/VERB), or the base form alone (wave/VERB)")
     return out
+
+
+_BASE_ING = {"bring", "sing", "swing", "ring", "sting", "fling", "cling", "spring", "string", "wring", "sling", "wing"}
+
+
+def _inflected(lemma: str) -> bool:
+    """Whether a verb's given base form reads as an inflected one (``waves``, ``walked``,
+    ``walking``), which the composer would inflect again (``wavesing``)."""
+    w = lemma.lower()
+    if len(w) >= 5 and w.endswith("ing") and w not in _BASE_ING:
+        return True
+    if len(w) >= 5 and w.endswith("ed") and w[-3] not in "ea":
+        return True
+    return len(w) >= 4 and w.endswith("s") and w[-2] not in "suia"
+
 
 
 def own_captions(labels: dict, where: str) -> list[Caption]:

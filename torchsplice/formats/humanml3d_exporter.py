@@ -156,9 +156,19 @@ class HumanML3DExporter(Exporter):
     # -- checks before any file ---------------------------------------------------------------
     @cached_property
     def _user_captions(self) -> dict:
+        """The ``--captions`` file's captions; the keys that name no clip of the database (nor a
+        source clip of its results) are kept in ``self.unknown_captions`` for the summary."""
+        from ..store.database import MotionDatabase
         from .captions import read_captions
 
-        return read_captions(self.options["captions"]) if self.options["captions"] is not None else {}
+        if self.options["captions"] is None:
+            return {}
+        given = read_captions(self.options["captions"])
+        with MotionDatabase.open(self.database) as db:
+            t = db.clip_table()
+            known = set(t.names) | {str(v) for col in ("locomotion", "action") if col in t.extra for v in t.extra[col]}
+        self.unknown_captions = [k for k in given if k not in known]
+        return given
 
     @cached_property
     def _movers(self) -> dict:
@@ -394,6 +404,10 @@ class HumanML3DExporter(Exporter):
         if plan["short"]:
             notes.append(f"{len(plan['short'])} clip{'s' if len(plan['short']) != 1 else ''} under {MIN_FRAMES} frames "
                          "left out")
+        unknown = getattr(self, "unknown_captions", [])
+        if unknown:
+            notes.append(f"captions for {counted(len(unknown), 'clip')} the database does not hold, not used: "
+                         f"{', '.join(repr(k) for k in unknown[:3])}{', ...' if len(unknown) > 3 else ''}")
         if plan.get("not_mirrored"):
             notes.append(f"{counted(len(plan['not_mirrored']), 'clip')} not mirrored again (a mirror image already, "
                          "or its image is exported too)")
