@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Iterable, Iterator, Sequence
 
 from ..core.errors import TorchspliceError
+from ..core.names import counted
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..store.database import MotionDatabase
@@ -211,8 +212,7 @@ class Exporter:
         """One line saying what ``result`` holds (the command line prints it after ``wrote``)."""
         if len(result.names) == 1 and len(result.files) == 1 and result.fps:
             return f"{result.files[0]}: {result.names[0]}, {result.frames} frames at {result.fps[0]:g} fps"
-        n = len(result.names)
-        return f"{result.output}: {n} clip{'s' if n != 1 else ''} as {self.title}, {result.frames} frames"
+        return f"{result.output}: {counted(len(result.names), 'clip')} as {self.title}, {result.frames} frames"
 
 
 # --------------------------------------------------------------------------------------------
@@ -319,8 +319,7 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         overwrite: replace existing files.
         skeletons: keep only clips on these database skeletons (ids; ``None``: any).
         command: what the output's lock records as its holder.
-        progress: ``progress(iterable, total, desc)`` wrapping the files as they are written (the
-            command line's bar, or its log lines), or ``None``.
+        progress: ``progress(iterable, total, desc)`` wrapping the files as written, or ``None``.
         select: selectors of the job's and the dataset's selection language (one string or a
             list, all of which a clip must pass; :mod:`torchsplice.store.select`), e.g.
             ``"role:spliced"`` or ``["method:naive", "label:action.style=elderly"]``; with
@@ -364,12 +363,11 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
         parse_ratios(options["split_ratios"])  # bad ones refused before any work, index or not
     if options.get("split_seed") is not None:
         parse_seed(options["split_seed"])
-    indexed = {}
-    if index and layout is None and (exporter.single_file or not single):
-        indexed = _index_targets(out, files, not single, database, overwrite)
+    indexed = _index_targets(out, files, not single, database, overwrite) if index and layout is None and (
+        exporter.single_file or not single) else {}
     if layout is not None and overwrite and Path(out).is_dir() and (why := exporter.foreign(Path(out))) is not None:
-        raise TorchspliceError(f"{out}: {why}; {{overwrite}} replaces only what an earlier torchsplice export of the folder "
-                               "wrote: export into a new folder", options=("overwrite",))
+        raise TorchspliceError(f"{out}: {why}; {{overwrite}} replaces only what an earlier torchsplice export of the "
+                               "folder wrote: export into a new folder", options=("overwrite",))
     exporter.check()
     # an earlier export's files, as its own record lists them, read before this export replaces that record
     earlier = exporter.owned(Path(out)) if layout is not None and overwrite and Path(out).is_dir() else []
@@ -391,8 +389,7 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
                     result.fps.append(fps)
                 count += 1
         finally:
-            close = getattr(items, "close", None)
-            if close is not None:
+            if (close := getattr(items, "close", None)) is not None:
                 close()
         if count != len(files):
             raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave {count} files of the "
