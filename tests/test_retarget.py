@@ -87,6 +87,22 @@ def test_a_skeleton_without_arms_or_legs_is_refused_in_one_line_naming_what_is_m
         canonical_joints(replace(roles, hands=None), sk)
 
 
+def test_a_rig_whose_bones_all_have_zero_length_is_refused_for_that_not_for_elbows(tmp_path, capsys):
+    """A BVH whose OFFSETs are all 0 has elbows by name; what it lacks is a rest pose."""
+    from cli_helpers import error_line, run
+    from torchsplice.formats.bvh_write import write_bvh
+
+    m = sample_motions()[0]
+    flat = replace(m, skeleton=m.skeleton.with_offsets(torch.zeros_like(m.skeleton.offsets)))
+    with pytest.raises(SpecError, match="every bone has zero length") as e:
+        canonical_joints(load_spec("sample").bind(flat.skeleton), flat.skeleton, "flat.bvh")
+    assert "elbow" not in str(e.value)
+    write_bvh(flat, tmp_path / "flat.bvh")
+    rc, _, err = run(capsys, "import", tmp_path / "flat.bvh", "-o", tmp_path / "flat.h5", "--spec", "sample")
+    rc, _, err = run(capsys, "retarget", tmp_path / "flat.h5", "--all", "--to", "smpl22", "-o", tmp_path / "r.h5")
+    assert rc == 2 and "every bone has zero length" in error_line(err) and "elbow" not in error_line(err), err
+
+
 # ------------------------------------------------------------------------------------------
 # known answers
 # ------------------------------------------------------------------------------------------

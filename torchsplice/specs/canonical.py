@@ -50,7 +50,10 @@ def _elbow(skeleton, shoulder: int, wrist: int) -> int | None:
 def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton") -> dict[str, int | tuple[int, ...]]:
     """The canonical map of ``skeleton`` (bound ``roles``): canonical name -> joint index
     (``spine``: the chain, pelvis role first). Raises :class:`~torchsplice.core.errors.SpecError`
-    naming ``what`` and every required joint it lacks."""
+    naming ``what`` and every required joint it lacks, or saying that its bones have no length."""
+    if not float(skeleton.offsets.abs().max()) > 0:  # every joint at one point: none can be told apart by place
+        raise SpecError(f"{what}: every bone has zero length (all its rest OFFSETs are 0), so its joints have no "
+                        "rest pose to map onto another skeleton")
     out: dict[str, int | tuple[int, ...]] = {"pelvis": roles.root, "spine": tuple(roles.spine)}
     spine = list(roles.spine)
     if roles.head is not None:
