@@ -87,12 +87,13 @@ class Import(Command):
         from ..formats.importer import NothingImportedError, import_bvh
 
         def skipped_lines(skipped):
-            groups: dict[str, list[str]] = {}  # one line per reason: a wrong --spec on a folder is one mistake
+            groups: dict[str, list[str]] = {}  # a wrong --spec on a folder is one mistake: one line for its files
             for f, why in skipped:
                 groups.setdefault(why, []).append(f)
             for why, files in groups.items():
-                if len(files) == 1:
-                    print(f"skipped {at(files[0], why)}", file=sys.stderr)
+                if len(files) == 1 or not _spec_misfit(args.spec, why):  # any other bad file: its own line
+                    for f in files:
+                        print(f"skipped {at(f, why)}", file=sys.stderr)
                     continue
                 shown = ", ".join(Path(f).name for f in files[:2]) + (", ..." if len(files) > 2 else "")
                 print(f"skipped {len(files)} files ({shown} in {Path(files[0]).parent}): {why}"
@@ -125,10 +126,15 @@ class Import(Command):
         return 1 if report.skipped else 0
 
 
+def _spec_misfit(spec, why: str) -> bool:
+    """Whether a file was skipped because the ``--spec`` asked for does not fit it."""
+    return spec not in (None, "auto") and (".toml" in why or "spec" in why)
+
+
 def _auto_spec_hint(spec, path, why: str) -> str:
     """``"; --spec auto picks 'bandai_namco' for them"`` when files were skipped because the
     ``--spec`` asked for does not fit them and a shipped spec does, else ``""``."""
-    if spec in (None, "auto") or ".toml" not in why and "spec" not in why:
+    if not _spec_misfit(spec, why):
         return ""
     try:
         from ..formats.bvh import read_bvh

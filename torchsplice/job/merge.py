@@ -249,11 +249,13 @@ class OutputMerge:
             raise TorchspliceError(f"{c.output}: task {self.tasks[self.next].id} has no shard; rerun to finish the job")
         self.checkpoint()
         self.close()
+        check_stop()  # a signal that a library swallowed while the last tasks joined: stop before the output is whole
         if c.copy_sources:
             self.out.copy_sources(source_rows(self.plan, sources))
         self.out.set_spliced(self.out.clips)
         replaced = MotionDatabase.virtual_files(c.output)  # the frames of the output this one replaces (a virtual one's)
         mine = run_shards(c, self.plan)
+        check_stop()  # ... or while the sources were copied: the output is not put in place
         if c.layout == "virtual":
             shards.install_shards(self.shard_dir, mine, [self.sink.shard_name(t.id) for t in self.tasks])
         self.out.close()  # the new output is in place: the old one's shards are its no more
