@@ -48,8 +48,11 @@ def alive_nodes() -> int:
 
 def job(db: str, out: Path, *extra, quiet: bool = True) -> subprocess.Popen:
     flags = JOB if quiet else [f for f in JOB if f != "-q"]
+    # Ctrl-C as a terminal delivers it: a harness started in the background (nohup, &) has SIGINT
+    # ignored, which its children would inherit
     return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", db, "-o", str(out), "--engine", "ray",
                              "--ray-address", f"127.0.0.1:{PORT}", *flags, *extra],
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0"))  # a checkpoint after each task
 
