@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -203,26 +202,12 @@ def _bench_streaming(store: Path, tmp: Path) -> None:
 
 def _bench_default_job(db: Path) -> None:
     """The default job on a whole dataset, alignment store."""
-    from benchmark import _folder_bytes, _tree_rss_mb
+    from benchmark import _watched_job
 
     with tempfile.TemporaryDirectory(dir=db.parent) as tmp:
         out = Path(tmp) / "default.h5"
-        work = out.with_name(f".{out.name}.parts")
-        cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--store", "alignment"]
-        t0 = time.perf_counter()
-        log = tempfile.TemporaryFile("w+")
-        p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True, cwd=REPO)
-        peak = peak_one = bank = 0.0
-        while p.poll() is None:
-            peak = max(peak, _tree_rss_mb(p.pid))
-            peak_one = max(peak_one, _tree_rss_mb(p.pid, largest=True))
-            bank = max(bank, sum(_folder_bytes(b, db) for b in work.glob("bank-*")) / 2**20)
-            time.sleep(0.2)
-        dt = time.perf_counter() - t0
-        log.seek(0)
-        said = log.read()
-        if p.returncode != 0:
-            raise SystemExit(f"the default job failed: {said[-2000:]}")
+        r = _watched_job(db, out, ("--store", "alignment"))
+        said, dt, peak, peak_one, bank = r["said"], r["seconds"], r["peak_mb"], r["peak_one"], r["peak_bank"] / 2**20
         size = sum(f.stat().st_size for f in Path(tmp).iterdir())
         first = said.strip().splitlines()[0] if said.strip() else ""
         print(f"store   the default job on {db}: {first}")

@@ -444,16 +444,21 @@ def _folder_bytes(folder: Path, skip: Path) -> int:
 
 
 def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None, locomotions: str | None = None) -> dict:
-    """``splice-all`` of the normal-style locomotions x ``actions`` in a fresh process: wall
-    seconds, the job's own splicing seconds (``compute``: from its summary, start-up and planning
-    left out), peak memory of the process and its workers (MB), peak bytes of the output folder
-    (the input database left out) and of the clip banks in it, sampled every 20 ms; killed once the output holds
-    ``kill_at`` of the plan's tasks (then ``killed`` is true)."""
+    """``splice-all`` of the normal-style locomotions (or ``locomotions``) x ``actions`` in a
+    fresh process: :func:`_watched_job`'s figures."""
+    args = ("--locomotions", locomotions or MIX_LOCOMOTIONS, "--actions", actions, *extra)
+    return _watched_job(db, out, args, kill_at, env)
+
+
+def _watched_job(db: Path, out: Path, args=(), kill_at=None, env=None) -> dict:
+    """``splice-all DB -o OUT ARGS`` in a fresh process: wall seconds, the job's own splicing
+    seconds (``compute``: from its summary, start-up and planning left out), peak memory of the
+    process and its workers (MB) and of its largest process, peak bytes of the output folder (the
+    input database left out) and of the clip banks in it, sampled every 20 ms, and what it said;
+    killed once the output holds ``kill_at`` of the plan's tasks (then ``killed`` is true)."""
     from torchsplice.store.database import MotionDatabase
 
-    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--locomotions",
-           locomotions or MIX_LOCOMOTIONS,
-           "--actions", actions, *extra]
+    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), *args]
     work = out.with_name(f".{out.name}.parts")
     t0 = time.perf_counter()
     said_to = tempfile.TemporaryFile("w+")  # files, not pipes: a long job's progress cannot fill them and stall it
@@ -484,7 +489,8 @@ def _mix_job(db: Path, out: Path, actions: str, extra=(), kill_at=None, env=None
         raise SystemExit(f"job failed: {said[-2000:]}")
     compute = re.search(r"spliced clips.* in ([0-9.]+) s \(", said)
     on_disk = re.search(r"^\s*(\S+ \S+ on disk \(expected [^)]*\))", said, re.M)
-    return {"on_disk": on_disk.group(1) if on_disk else "", "seconds": dt, "peak_mb": peak_mb, "peak_one": peak_one, "peak_disk": peak_disk, "peak_bank": peak_bank, "killed": killed,
+    return {"on_disk": on_disk.group(1) if on_disk else "", "seconds": dt, "peak_mb": peak_mb, "peak_one": peak_one,
+            "peak_disk": peak_disk, "peak_bank": peak_bank, "killed": killed, "said": said,
             "compute": float(compute.group(1)) if compute else float("nan")}
 
 

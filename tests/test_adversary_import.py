@@ -90,6 +90,6 @@ def test_a_named_pipe_named_like_a_bvh_file_is_one_line_never_read(tmp_path, cap
     os.mkfifo(folder / "pipe.bvh")
     assert cli(["import", str(folder), "-o", str(tmp_path / "a.h5"), "-q"]) == 1
     err = capsys.readouterr().err
-    assert "pipe.bvh: not a regular file" in err and "Traceback" not in err
+    assert "pipe.bvh: is a named pipe (FIFO), not a regular file" in err and "Traceback" not in err
     assert cli(["import", str(folder / "pipe.bvh"), "-o", str(tmp_path / "b.h5"), "-q"]) == 2
-    assert "pipe.bvh: not a regular file" in capsys.readouterr().err
+    assert "pipe.bvh: is a named pipe (FIFO), not a regular file" in capsys.readouterr().err

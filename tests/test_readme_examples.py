@@ -285,7 +285,6 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
     blocks by python, both from the repository root), each exiting 0; afterwards nothing the README
     wrote is left untracked in the repository (git status), what it wrote is what it names (the
     outputs .gitignore keeps out of commits), and no command left a work file behind."""
-    import json
     import subprocess
     import sys
 

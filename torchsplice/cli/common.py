@@ -11,10 +11,10 @@ from __future__ import annotations
 import argparse
 import contextlib
 import shlex
-import sys
 from pathlib import Path
 
 from ..core.errors import OutputExistsError, TorchspliceError
+from ..core.names import counted as n  # "1 clip", "2 clips"
 from ..core.stop import Terminated, ask_stop, stop_kind
 from .declared import declared
 
@@ -108,13 +108,6 @@ def locked(out: Path, args):
 def say(args, msg: str) -> None:
     if not getattr(args, "quiet", False):
         print(msg)
-
-
-def n(count: int, word: str) -> str:
-    """``"1 clip"``, ``"2 clips"``: a count with its noun, plural unless one."""
-    from ..core.names import counted
-
-    return counted(count, word)
 
 
 def at(path, why: str) -> str:

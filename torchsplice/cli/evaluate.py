@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from .base import Command, register_command
-from .common import add_output_flags, declared, locked, output, positive_int, progress
+from .common import add_output_flags, declared, locked, n, output, positive_int, progress
 
 REPORT = "torchsplice.evaluation.report"
 
@@ -51,13 +51,14 @@ class Evaluate(Command):
             with MotionDatabase.open(args.database) as db:
                 u = db.attrs.get("units") or "units"
             u = "units" if u in ("mixed", "unknown") else u
+
             def fig(v) -> str:  # a figure that is missing or not finite (a result's huge values) prints as -
                 return f"{v:.2f}" if isinstance(v, (int, float)) and math.isfinite(v) else "-"
 
             for method, a in agg.items():
                 gt = (f", ground-truth error {fig(a['gt_error'])} {u} over {a['gt_pairs']} pairs"
                       if a.get("gt_error") is not None else "")
-                print(f"{method}: {a['clips']} clip{'s' if a['clips'] != 1 else ''}, foot skate {fig(a.get('foot_skate'))} {u}/s, "
+                print(f"{method}: {n(a['clips'], 'clip')}, foot skate {fig(a.get('foot_skate'))} {u}/s, "
                       f"posture kept {fig(a.get('posture'))} {u}{gt}")
             print(f"wrote {out}" + "".join(f", {t}" for t in tables if t is not None))
         return 0

@@ -15,6 +15,7 @@ from .common import (JOB, add_output_flags, command_line, declared, device, flag
                      stop_code, stopped)
 from .splice import add_splice_options, job_default, methods
 from ..core.errors import TorchspliceError
+from ..core.names import counted
 
 MERGE = "torchsplice.job.merge"  # merge_job: the options of merge
 MATERIALIZE = "torchsplice.job.materialize"  # materialize: the options of materialize
@@ -190,7 +191,7 @@ class Materialize(Command):
 
         n = materialize(args.database, args.output, overwrite=args.force, progress=not args.quiet, index=args.index)
         if not args.quiet:
-            print(f"wrote {args.output}: {n} clip{'s' if n != 1 else ''}")
+            print(f"wrote {args.output}: {counted(n, 'clip')}")
         return 0
 
 

@@ -230,9 +230,9 @@ def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, t
     for t in range(T):
         for c in range(4):
             opel[t, c] = prot[t, c]
-    # the frames of timewarp_rows(rot, trans, arc, ls, as_ + crop, n_c, upper, pelvis, curve, prot, ...), which reads
-    # assemble from the parts: its upper body is the action resampled above (resample_clip: the same slerp and
-    # lerp at the same curve), so it is taken from there rather than slerped twice
+    # the frames timewarp_rows(rot, trans, arc, ls, as_ + crop, n_c, upper, pelvis, curve, prot, ...) assembles
+    # from these parts when an alignment store is read: the upper body is the action resampled above
+    # (resample_clip: the same slerp and lerp at the same curve), taken from there rather than slerped twice
     _assemble(rot, trans, ls, arot, atrans, T, np.arange(J), upper, pelvis, prot, orot, otrans)
     return 0, crop, plen, cost, T, angle
 

@@ -19,7 +19,6 @@ kind where there are enough.
 from __future__ import annotations
 
 import math
-
 import random
 from typing import Sequence
 

@@ -257,10 +257,10 @@ def _write_rows(tables, path, units, aggregates, per_clip) -> None:
     """Every clip's row as CSV and/or JSON (``tables``: their paths or ``None``), atomically."""
     import csv as csv_module
     import io
-
-    from ..core.names import spreadsheet_cell
     import json as json_module
     import math
+
+    from ..core.names import spreadsheet_cell
 
     def clean(v):
         return None if isinstance(v, float) and not math.isfinite(v) else v

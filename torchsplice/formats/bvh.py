@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import math
 import os
-import stat
 import re
 import warnings
 from pathlib import Path
@@ -50,6 +49,7 @@ from ..core.names import CONTROL, quoted
 from ..core.rotations import euler_to_quat
 from ..core.skeleton import POSITION_CHANNELS, ROTATION_CHANNELS, Skeleton, channel_columns
 from .bvh_limits import MAX_ABS_VALUE, MAX_FRAME_TIME, MAX_JOINTS, MIN_FRAME_TIME
+from .plain_files import not_regular
 
 __all__ = ["read_bvh", "parse_bvh", "write_bvh", "format_bvh", "BVHWarning"]
 
@@ -140,9 +140,8 @@ def read_bvh(path, dtype: torch.dtype = torch.float32, name: str | None = None) 
         raise TypeError(f"read_bvh: path must be a str or os.PathLike, got {type(path).__name__}")
     path = Path(path)
     try:
-        st = os.stat(path)
-        if not stat.S_ISREG(st.st_mode):  # a FIFO would block forever, a device never end
-            raise _error(path, "not a regular file (a named pipe, device or folder); not read")
+        if (kind := not_regular(os.stat(path).st_mode)) is not None:  # a FIFO would block forever
+            raise _error(path, f"is {kind}, not a regular file; not read")
         raw = path.read_bytes()
     except OSError as exc:
         raise _error(path, f"cannot read file ({exc.strerror or exc})") from None

@@ -308,7 +308,6 @@ def _inflected(lemma: str) -> bool:
     return len(w) >= 4 and w.endswith("s") and w[-2] not in "suia"
 
 
-
 def own_captions(labels: dict, where: str) -> list[Caption]:
     """The captions a clip's ``labels`` hold (:data:`CAPTION_LABEL`, one line each)."""
     text = labels.get(CAPTION_LABEL, "")

@@ -156,19 +156,22 @@ class HumanML3DExporter(Exporter):
     # -- checks before any file ---------------------------------------------------------------
     @cached_property
     def _user_captions(self) -> dict:
-        """The ``--captions`` file's captions; the keys that name no clip of the database (nor a
-        source clip of its results) are kept in ``self.unknown_captions`` for the summary."""
-        from ..store.database import MotionDatabase
         from .captions import read_captions
 
-        if self.options["captions"] is None:
-            return {}
-        given = read_captions(self.options["captions"])
+        return read_captions(self.options["captions"]) if self.options["captions"] is not None else {}
+
+    @cached_property
+    def _unknown_captions(self) -> list[str]:
+        """The ``--captions`` keys that name no clip of the database, nor a source clip of its
+        results (said in the summary, not silently unused)."""
+        from ..store.database import MotionDatabase
+
+        if not self._user_captions:
+            return []
         with MotionDatabase.open(self.database) as db:
             t = db.clip_table()
-            known = set(t.names) | {str(v) for col in ("locomotion", "action") if col in t.extra for v in t.extra[col]}
-        self.unknown_captions = [k for k in given if k not in known]
-        return given
+        known = set(t.names) | {str(v) for col in ("locomotion", "action") if col in t.extra for v in t.extra[col]}
+        return [k for k in self._user_captions if k not in known]
 
     @cached_property
     def _movers(self) -> dict:
@@ -404,7 +407,7 @@ class HumanML3DExporter(Exporter):
         if plan["short"]:
             notes.append(f"{len(plan['short'])} clip{'s' if len(plan['short']) != 1 else ''} under {MIN_FRAMES} frames "
                          "left out")
-        unknown = getattr(self, "unknown_captions", [])
+        unknown = self._unknown_captions
         if unknown:
             notes.append(f"captions for {counted(len(unknown), 'clip')} the database does not hold, not used: "
                          f"{', '.join(repr(k) for k in unknown[:3])}{', ...' if len(unknown) > 3 else ''}")

@@ -37,6 +37,7 @@ from ..core.errors import TorchspliceError
 from ..core.motion import Motion
 from ..core.rotations import quat_between, quat_apply, quat_conj, quat_mul, rotmat_to_quat
 from ..specs.smpl import SMPL22_PARENTS, smpl22_skeleton
+from .bvh_limits import MAX_ABS_VALUE
 from .captions import parse_caption_line
 from .humanml3d_features import FEATURES, FPS, features_to_positions
 from .plain_files import MAX_ARRAY_BYTES, checked_file, read_capped_text
@@ -71,17 +72,17 @@ def humanml3d_ids(folder) -> tuple[list[str], dict[str, str], list[tuple[str, st
                 skipped.append((str(f), str(exc).removeprefix(f"{f}: ")))
                 continue
             listed[name] = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    split = {i: s for s in SPLIT_FILES for i in listed.get(s, [])}
+    lists: dict[str, list[str]] = {}  # id -> the split lists naming it
+    for s in SPLIT_FILES:
+        for i in dict.fromkeys(listed.get(s, [])):
+            lists.setdefault(i, []).append(s)
+    split = {i: ls[0] for i, ls in lists.items() if len(ls) == 1}
     for name, ids in listed.items():
         for i in ids:
             if i not in present:
                 skipped.append((str(folder / f"{name}.txt"), f"lists {i!r}, which has no motion (new_joint_vecs/{i}.npy)"))
     ids = [i for i in listed.get("all", []) if i in present]
     ids += sorted(present - set(ids))
-    lists: dict[str, list[str]] = {}
-    for s in SPLIT_FILES:
-        for i in dict.fromkeys(listed.get(s, [])):
-            lists.setdefault(i, []).append(s)
     twice = {i: ls for i, ls in lists.items() if len(ls) > 1 and i in present}
     for i, ls in twice.items():  # which split it is in cannot be told: said, not guessed
         skipped.append((str(vecs / f"{i}.npy"), f"listed in {' and '.join(f'{s}.txt' for s in ls)}: in which split it is "
@@ -167,8 +168,6 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
         bad = int(np.argwhere(~np.isfinite(data))[0][0]) if np.issubdtype(data.dtype, np.floating) else 0
         raise TorchspliceError(f"{f}: not finite (NaN or infinity) at frame {bad}" if np.issubdtype(data.dtype, np.floating)
                                else f"{f}: features of type {data.dtype}, not floating point")
-    from .bvh_limits import MAX_ABS_VALUE
-
     huge = np.abs(data) > MAX_ABS_VALUE  # as BVH import refuses: no motion has such values
     if huge.any():
         raise TorchspliceError(f"{f}: an absurd value (beyond {MAX_ABS_VALUE:g}) at frame {int(np.argwhere(huge)[0][0])}")

@@ -103,6 +103,13 @@ class NothingImportedError(TorchspliceError):
         self.report = report
 
 
+def _not_regular(path: Path) -> str:
+    """Why a file that exists is not read (a named pipe, a device)."""
+    from .plain_files import not_regular
+
+    return f"is {not_regular(path.stat().st_mode)}, not a regular file; not read"
+
+
 def collect_bvh(paths: Iterable) -> tuple[list[Path], list[tuple[str, str]]]:
     """The ``.bvh`` files under ``paths`` (files, and folders searched recursively), each once,
     in order; and ``(path, why)`` for each path that holds none."""
@@ -111,15 +118,14 @@ def collect_bvh(paths: Iterable) -> tuple[list[Path], list[tuple[str, str]]]:
         if p.is_dir():
             named = sorted(f for f in p.rglob("*") if f.suffix.lower() == ".bvh" and not f.is_dir())
             found = [f for f in named if f.is_file()]
-            missing += [(str(f), "not a regular file (a named pipe or a device); not read") for f in named
-                        if not f.is_file() and f.exists()]
+            missing += [(str(f), _not_regular(f)) for f in named if not f.is_file() and f.exists()]
             if not found:
                 missing.append((str(p), "folder holds no .bvh files"))
             files += found
         elif p.is_file():
             files.append(p)
         elif p.exists():  # a named pipe or a device: reading it would block or never end
-            missing.append((str(p), "not a regular file (a named pipe or a device); not read"))
+            missing.append((str(p), _not_regular(p)))
         else:
             missing.append((str(p), "no such file or folder"))
     seen, unique = set(), []

@@ -138,9 +138,9 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
     from ..store.database import MotionDatabase
 
     database = Path(database)
-    targets = index_targets(database, folder_export=False)
+    target = index_path(database)
     try:
-        with atomic_path(targets["index"]) as tmp, MotionDatabase.open(database) as db, \
+        with atomic_path(target) as tmp, MotionDatabase.open(database) as db, \
                 Path(tmp).open("w", newline="") as f:
             C = len(db)
             slices = lambda: (db.table_slice(s, min(s + CHUNK_ROWS, C)) for s in range(0, C, CHUNK_ROWS))  # noqa: E731
@@ -158,14 +158,14 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
     except TorchspliceError as exc:
         raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written: "
                                "torchsplice.formats.index.write_database_index writes it)") from None
-    return targets["index"]
+    return target
 
 
 def refresh_database_index(database, write: bool = True) -> Path | None:
     """After a database ``database`` was (re)written: remove any earlier ``NAME.h5.index.csv``
     beside it (an earlier run's, with its splits and costs), then with ``write`` write its own
     (:func:`write_database_index`); returns the index written, or ``None``."""
-    old = index_targets(database, folder_export=False)["index"]
+    old = index_path(database)
     try:
         old.unlink(missing_ok=True)
     except OSError:

@@ -8,6 +8,7 @@ from __future__ import annotations
 from functools import cached_property
 from pathlib import Path
 
+from ..core.names import counted
 from .exporters import Exporter, ExportOption, ExportResult, register_exporter
 from .npz_features import FEATURE_SETS
 
@@ -71,10 +72,10 @@ class NpzExporter(Exporter):
         features = self.options["features"]
         n = len(result.names)
         if self.single_file:
-            return (f"{result.files[0]}: {n} clip{'s' if n != 1 else ''} packed, {result.frames} frames"
+            return (f"{result.files[0]}: {counted(n, 'clip')} packed, {result.frames} frames"
                     + (f", features {features} with statistics" if features else ""))
         where = result.files[0] if len(result.files) == 1 else Path(result.output)
-        return (f"{where}: {n} clip{'s' if n != 1 else ''} as .npz, {result.frames} frames"
+        return (f"{where}: {counted(n, 'clip')} as .npz, {result.frames} frames"
                 + (f", features {features} with statistics over all of them" if features else ""))
 
 

@@ -14,12 +14,20 @@ from pathlib import Path
 
 from ..core.errors import TorchspliceError
 
-__all__ = ["MAX_TEXT_BYTES", "MAX_ARRAY_BYTES", "checked_file", "read_capped_text"]
+__all__ = ["MAX_TEXT_BYTES", "MAX_ARRAY_BYTES", "not_regular", "checked_file", "read_capped_text"]
 
 MAX_TEXT_BYTES = 256 << 20
 """The largest text file read (a split list of millions of IDs is tens of megabytes)."""
 MAX_ARRAY_BYTES = 1 << 30
 """The largest ``.npy`` motion read (a (N, 263) float32 motion of an hour at 20 fps is 76 MB)."""
+
+
+def not_regular(mode: int) -> str | None:
+    """What a file of ``st_mode`` ``mode`` is when it is not a regular file (``"a named pipe
+    (FIFO)"``...), else ``None``: what a reader must not open (it would block, or never end)."""
+    if stat.S_ISREG(mode):
+        return None
+    return "a named pipe (FIFO)" if stat.S_ISFIFO(mode) else "a folder" if stat.S_ISDIR(mode) else "a device or socket"
 
 
 def checked_file(path, inside=None, limit: int | None = None) -> Path:
@@ -33,9 +41,7 @@ def checked_file(path, inside=None, limit: int | None = None) -> Path:
         raise TorchspliceError(f"{path}: missing") from None
     except OSError as exc:
         raise TorchspliceError(f"{path}: cannot be read ({' '.join(str(exc).split())})") from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a named pipe (FIFO)" if stat.S_ISFIFO(st.st_mode) else "a folder" if stat.S_ISDIR(st.st_mode)
-                else "a device or socket")
+    if (kind := not_regular(st.st_mode)) is not None:
         raise TorchspliceError(f"{path}: is {kind}, not a regular file; not read")
     if inside is not None:
         root = Path(inside).resolve()

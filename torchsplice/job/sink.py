@@ -159,23 +159,19 @@ class OutputWriter:
         """Append a shard's clips: from ``part`` when it is still in memory, else from the file;
         with ``virtual``, only the shard's table (its frames stay in the shard, which the output
         refers to as ``refer_as``, where it will be once the output is complete)."""
-        if virtual and self.db.store == "alignment":  # its table rows from the part, its frames from the shard
-            self._count(part.extra["flags"], part.skipped, part.extra["timing"])
-            if part.names and part.parts is not None:
-                self._append_parts(part, virtual=(path, refer_as))
-            elif part.names:
-                self.db.append_virtual(path, part.skeleton, part.lengths, part.names, part.fps,
-                                       spec=DatasetSpec.from_json(part.spec), refer_as=refer_as, sources=part.sources,
-                                       roles="spliced", labels=part.labels, extra=part.extra)
-            self.clips += len(part.names)
-            return
-        if part is not None and not virtual:
+        # a part in memory; for a virtual alignment store, its table rows (its frames stay in the shard)
+        if part is not None and (not virtual or self.db.store == "alignment"):
             if self.expect_plan is not None and part.plan and part.plan != self.expect_plan:
                 raise DatabaseError(f"{path}: this shard belongs to another plan of the job; rerun with {{restart}}",
                                     options=("restart",))
             self._count(part.extra["flags"], part.skipped, part.extra["timing"])
             if part.names and part.parts is not None:
-                self._append_parts(part)
+                self._append_parts(part, virtual=(path, refer_as) if virtual else None)
+                self.clips += len(part.names)
+            elif part.names and virtual:
+                self.db.append_virtual(path, part.skeleton, part.lengths, part.names, part.fps,
+                                       spec=DatasetSpec.from_json(part.spec), refer_as=refer_as, sources=part.sources,
+                                       roles="spliced", labels=part.labels, extra=part.extra)
                 self.clips += len(part.names)
             elif part.names:
                 self.db.append_packed(part.skeleton, part.rotations, part.translations[:, 0], part.translations,

@@ -178,6 +178,12 @@ class Assembling:
         C, N = len(names), int(lengths.sum())
         if C == 0:
             return
+        if virtual is not None:  # table rows only, as append_virtual writes them
+            k = self.add_skeleton(skeleton, spec)
+            self._append_rows(k, self._virtual_rows(k), lengths, names, fps, sources, roles, labels,
+                              {**(extra or {}), **parts})
+            self._virtual[k].append((self._virtual_source(*virtual), N))
+            return
         index = self._new_names(names)
         frame_extra = dict(frame_extra or {})
         arrays = {}
@@ -190,13 +196,6 @@ class Assembling:
             arrays[name] = np.full(N, np.nan, np.float32) if v is None else np.asarray(v, np.float32).reshape(N)
         rows = self._rows(names, lengths, fps, sources, roles, labels, {**(extra or {}), **parts})
         k = self.add_skeleton(skeleton, spec)
-        if virtual is not None:
-            n0 = self._virtual_rows(k)
-            rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
-            self._store_rows(rows)
-            self._virtual[k].append((self._virtual_source(*virtual), N))
-            self._added(index, names)
-            return
         self._no_virtual(k)
         g = self.h5[skeleton_path(k)]
         self._reserve(sum(a.nbytes for a in arrays.values()) + 300 * C)

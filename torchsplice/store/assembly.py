@@ -267,8 +267,9 @@ class Assembly:
             if m.any():
                 if "arc" not in bank:  # the slerps' angles between neighbouring frames, once per bank
                     bank["arc"] = arc_table(bank["rot"], t["upper"])
-                assemble_timewarp(bank["rot"], bank["trans"], bank["arc"], *args[2:], p["assembly_locomotion"][m], p["assembly_action"][m], p["assembly_crop"][m],
-                                  t["upper"], t["pelvis"], curve, prot, first[m], lengths[m], out_start[m], orot, otrans)
+                assemble_timewarp(args[0], args[1], bank["arc"], *args[2:], p["assembly_locomotion"][m],
+                                  p["assembly_action"][m], p["assembly_crop"][m], t["upper"], t["pelvis"], curve, prot,
+                                  first[m], lengths[m], out_start[m], orot, otrans)
             m = (kind == 2) & (p["assembly_bank"] == b)
             if m.any():
                 acting = np.stack([(p["assembly_acting"][m] & 1) > 0, (p["assembly_acting"][m] & 2) > 0], axis=1)
@@ -290,8 +291,8 @@ class Assembly:
         from .assembly_torch import as_tensor, standing_frames, timewarp_frames
 
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
-        g = db.h5[skeleton_path(k)]
-        J, N = g["rotations"].shape[1], int(lengths.sum())
+        J, _, has_translations = self.skeleton_arrays(db, k)
+        N = int(lengths.sum())
         p = {n: v[clip] for n, v in self.parts.items()}
         kind = np.repeat(p["assembly_kind"], lengths)
         owner = np.repeat(np.arange(len(starts)), lengths)  # the range of each result frame
@@ -304,7 +305,7 @@ class Assembly:
             at_rows = as_tensor(np.flatnonzero(stored), device)
             orot[at_rows] = as_tensor(db.frame_rows(k, "rotations", s, n), device, torch.float32)
             otrans[at_rows, 0] = as_tensor(db.frame_rows(k, "root_translation", s, n), device, torch.float32)
-            if "translations" in g:
+            if has_translations:
                 otrans[at_rows, 1:] = as_tensor(db.frame_rows(k, "translations", s, n)[:, 1:], device, torch.float32)
         cache = self.__dict__.setdefault("_device_banks", {})
         for b in sorted(set(p["assembly_bank"][p["assembly_kind"] > 0].tolist())):
@@ -350,6 +351,6 @@ class Assembly:
                                         tb["arms"], int(tb["blend"]))
                 orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
         out = {"rotations": orot, "root_translation": otrans[:, 0].contiguous()}
-        if "translations" in g:
+        if has_translations:
             out["translations"] = otrans
         return out

@@ -149,7 +149,7 @@ def _colon_hint(text: str, columns) -> str:
     m = re.match(r"^\s*([A-Za-z_]+)\s*=\s*(.*)$", text)
     if m and (m.group(1) in ("role", "skeleton") or m.group(1) in columns):
         return f"; did you mean {m.group(1) + ':' + m.group(2)!r}?"
-    if m and m.group(1) not in ("label",):
+    if m and m.group(1) != "label":
         return f"; did you mean {'label:' + m.group(1) + '=' + m.group(2)!r}?"
     return ""
 
