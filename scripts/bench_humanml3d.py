@@ -11,6 +11,8 @@ Prints, with the issue's targets in brackets:
   joint's 5th percentile [within 1 cm of 0], features derived again from new_joints [5e-3, away
   from the clip's end; at 20, 40 and 60 frames], contacts agreeing [99%]
 - round trip: a HumanML3D import of that export against its positions                [1e-4 m]
+- import: motions/s of ``import`` of that export (a database written), beside reading the
+  motions one at a time; then the real clips' export again with ``--mirror``: motions/s
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ sys.path.insert(0, str(REPO))
 from torchsplice.formats.exporters import export_clips  # noqa: E402
 from torchsplice.formats.humanml3d_exporter import HumanML3DExporter  # noqa: E402
 from torchsplice.evaluation.humanml3d import folder_properties  # noqa: E402
-from torchsplice.formats.humanml3d_import import read_humanml3d_motion  # noqa: E402
+from torchsplice.formats.humanml3d_import import read_humanml3d_motion, read_humanml3d_motions  # noqa: E402
 from torchsplice.specs import load_spec  # noqa: E402
 from torchsplice.store.database import MotionDatabase  # noqa: E402
 
@@ -114,11 +116,32 @@ def bench_humanml3d(files: list[Path], clips: int = 2000) -> None:
               f"features derived again {w['derived20']:.1e} / {w['derived40']:.1e} / {w['derived60']:.1e} at 20 / 40 / 60 "
               f"frames from the end [5e-3]; contacts {w['contacts'] * 100:.1f}% [99%]")
         worst = 0.0
-        for f in sorted((out / "new_joint_vecs").glob("*.npy")):
-            m = read_humanml3d_motion(out, f.stem)
-            joints = torch.from_numpy(np.load(out / "new_joints" / f.name)).double()
+        ids = sorted(f.stem for f in (out / "new_joint_vecs").glob("*.npy"))
+        for i in ids:
+            m = read_humanml3d_motion(out, i)
+            joints = torch.from_numpy(np.load(out / "new_joints" / f"{i}.npy")).double()
             worst = max(worst, float((m.global_positions() - joints).abs().max()))
         print(f"humanml3d round trip: import of the export against its positions {worst:.1e} m [1e-4]")
+        t = time.perf_counter()
+        for i in ids:  # one at a time (as import read them before): the peer of its batches
+            read_humanml3d_motion(out, i)
+        alone = time.perf_counter() - t
+        t = time.perf_counter()
+        read_humanml3d_motions([(out, i, None) for i in ids])
+        together = time.perf_counter() - t
+        t = time.perf_counter()
+        import_bvh([out], tmp / "back.h5", format="humanml3d")
+        rate = len(ids) / (time.perf_counter() - t)
+        print(f"humanml3d import of {len(ids)} motions (the real clips' export, database written): {rate:,.0f} motions/s, "
+              f"{1e3 / rate:.1f} ms a motion; reading them in batches {len(ids) / together:,.0f} motions/s against "
+              f"{len(ids) / alone:,.0f} one at a time = {alone / together:.1f}x")
+        shutil.rmtree(out)
+        t = time.perf_counter()
+        result = export_clips(real, out=out, format="humanml3d", window=9.8, mirror=True)
+        dt = time.perf_counter() - t
+        written = len(list((out / "new_joint_vecs").glob("*.npy")))
+        print(f"humanml3d export --mirror of the {n} real clips: {written / dt:,.1f} motions/s written "
+              f"({n / dt:,.1f} source clips/s); {result.summary}")
 
 
 def bench_packed_memory(sizes=(1000, 4000, 10000)) -> None:

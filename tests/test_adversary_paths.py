@@ -109,16 +109,16 @@ def test_temporary_names_carry_host_and_pid_and_fit(tmp_path):
     assert Path(long).parent == tmp_path
 
 
-@pytest.mark.parametrize("split", ["1e-300", "0", "-5", "nan", "inf", "0.5"])
-def test_split_windows_shorter_than_a_second_are_refused(tmp_path, capsys, split):
+@pytest.mark.parametrize("window", ["1e-300", "0", "-5", "nan", "inf", "0.5"])
+def test_windows_shorter_than_a_second_are_refused(tmp_path, capsys, window):
     from torchsplice.formats.bvh import write_bvh
     from torchsplice.sample import sample_motions
 
     write_bvh(sample_motions()[0], tmp_path / "walk.bvh")
     code, _, err = run(capsys, "import", tmp_path / "walk.bvh", "-o", tmp_path / "db.h5", "--spec", "sample",
-                       "--split", split)
+                       "--window", window)
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
-    assert "--split" in err and ("at least 1 s" in err or "must be a positive number" in err), err
+    assert "--window" in err and ("at least 1 s" in err or "must be a positive number" in err), err
     assert not (tmp_path / "db.h5").exists()
 
 

@@ -58,8 +58,8 @@ def expected() -> dict:
     return {
         ("import", "spec"): (param(import_bvh, "spec"), None),
         ("import", "units"): (param(import_bvh, "units"), None),
-        ("import", "split"): (param(import_bvh, "split"), None),
-        ("import", "split_overlap"): (param(import_bvh, "split_overlap"), None),
+        ("import", "window"): (param(import_bvh, "window"), None),
+        ("import", "window_overlap"): (param(import_bvh, "window_overlap"), None),
         ("import", "float64"): (param(import_bvh, "float64"), None),
         ("import", "append"): (param(import_bvh, "append"), None),
         ("import", "format"): (param(import_bvh, "format"), IMPORT_FORMATS),
@@ -117,6 +117,8 @@ def test_every_choice_and_default_is_the_librarys():
         for a in s._actions:
             if isinstance(a, argparse._HelpAction) or not a.option_strings:
                 continue
+            if a.help == argparse.SUPPRESS and a.default == argparse.SUPPRESS:
+                continue  # an unlisted earlier name of a listed option (import --split): no default of its own
             key = (command, a.dest)
             if key in EXPECTED:
                 default, choices = EXPECTED[key]

@@ -61,7 +61,7 @@ def test_7_windows_of_one_take_are_not_spliced_onto_each_other(sample_db, tmp_pa
     bvh = tmp_path / "bvh"
     assert main(["export", str(sample_db), "walk_straight", "jog", "-o", str(bvh), "-q"]) == 0
     db = tmp_path / "win.h5"
-    assert main(["import", str(bvh), "-o", str(db), "--split", "2", "--split-overlap", "0.5", "-q"]) == 0
+    assert main(["import", str(bvh), "-o", str(db), "--window", "2", "--window-overlap", "0.5", "-q"]) == 0
     out = tmp_path / "sp.h5"
     rc, stdout, _ = run(capsys, "splice-all", db, "-o", out, "--locomotions", "walk_straight*", "--actions",
                         "walk_straight*,jog*")

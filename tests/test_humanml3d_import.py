@@ -19,7 +19,7 @@ from cli_helpers import run
 from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.exporters import export_clips
-from torchsplice.formats.humanml3d_import import positions_to_motion
+from torchsplice.formats.humanml3d_import import positions_to_motion, read_humanml3d_motion, read_humanml3d_motions
 from torchsplice.store.database import MotionDatabase
 
 
@@ -52,6 +52,32 @@ def test_importing_an_export_gives_back_its_positions_and_captions(exported, tmp
         splits = {r["id"]: r["split"] for r in csv.DictReader(open(exported / "index.csv"))}
         for name in d.names:
             assert d.clip_info(name)["labels"].get("split", "") == splits[name]
+
+
+def test_motions_read_together_are_bit_for_bit_those_read_one_at_a_time(exported, tmp_path, monkeypatch):
+    """``import`` turns positions into rotations for a batch of motions at once: the same bits as
+    one motion at a time, a mirrored copy still on the mirrored body, whatever the batch size."""
+    import torchsplice.formats.importer as importer
+    from torchsplice.specs.smpl import smpl22_skeleton
+
+    ids = sorted(f.stem for f in (exported / "new_joint_vecs").glob("*.npy"))
+    together = read_humanml3d_motions([(exported, i, None) for i in ids] + [(exported, "missing", None)])
+    assert isinstance(together[-1], TorchspliceError) and "missing" in str(together[-1])
+    mirrored = smpl22_skeleton(mirrored=True).offsets
+    for i, got in zip(ids, together):
+        alone = read_humanml3d_motion(exported, i)
+        assert torch.equal(got.rotations, alone.rotations) and torch.equal(got.root_translation, alone.root_translation)
+        assert torch.equal(got.skeleton.offsets, alone.skeleton.offsets) and got.labels == alone.labels
+        assert torch.equal(got.skeleton.offsets, mirrored) == i.startswith("M"), i
+    dbs = []
+    for batch in (7, importer.HUMANML3D_BATCH):
+        monkeypatch.setattr(importer, "HUMANML3D_BATCH", batch)
+        dbs.append(tmp_path / f"b{batch}.h5")
+        importer.import_bvh([exported], dbs[-1], format="humanml3d")
+    with MotionDatabase.open(dbs[0]) as a, MotionDatabase.open(dbs[1]) as b:
+        assert a.names == b.names and len(a) == len(ids)
+        for name in a.names:
+            assert torch.equal(a.read(name).rotations, b.read(name).rotations), name
 
 
 def test_positions_back_from_a_motion_are_exact_on_the_standard_body():

@@ -62,8 +62,8 @@ def test_guessed_roles_and_append(mocap_dir, inputs, tmp_path):
 def test_same_database_as_the_command_line(inputs, tmp_path):
     files, bad = inputs
     a, b = tmp_path / "api.h5", tmp_path / "cli.h5"
-    import_bvh([*files, bad], a, split=2.0, split_overlap=0.5)
-    assert main(["import", *map(str, files), str(bad), "-o", str(b), "--split", "2", "--split-overlap", "0.5", "-q"]) == 1
+    import_bvh([*files, bad], a, window=2.0, window_overlap=0.5)
+    assert main(["import", *map(str, files), str(bad), "-o", str(b), "--window", "2", "--window-overlap", "0.5", "-q"]) == 1
     with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
         names = []
         fa.visit(names.append)

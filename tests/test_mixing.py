@@ -32,7 +32,7 @@ def mixed_db(mocap_dir, tmp_path_factory):
     bandai = [mocap_dir / BANDAI / f"{n}.bvh" for n in (*LOCOS[:2], *ACTIONS[:2])]
     assert main([*map(str, ["import", *bandai, mocap_dir / "cmu_graphics_lab", "-o", out, "--units", "cm", "-q"])]) == 0
     assert main([*map(str, ["import", mocap_dir / "lafan1_via_pypi_bvhtools", "-o", out, "--append", "--units", "cm",
-                            "--split", "4", "-q"])]) == 0
+                            "--window", "4", "-q"])]) == 0
     with MotionDatabase.open(out, mode="a") as db:
         spec = load_spec("sample")
         for m in sample_motions():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -74,13 +75,18 @@ class Import(Command):
         s.add_argument("--name-prefix", default=declared(IMPORTER, "import_bvh.name_prefix"), metavar="PREFIX",
                        help="put PREFIX before every clip's name, so that sources with the same file names (two "
                             "HumanML3D folders) share a database")
-        s.add_argument("--split", type=positive_float, default=declared(IMPORTER, "import_bvh.split"), metavar="SECONDS",
+        s.add_argument("--window", type=positive_float, default=declared(IMPORTER, "import_bvh.window"), metavar="SECONDS",
                        help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, "
                             "...; labels split_from and split_frame say where each came from), so that long takes "
-                            "splice in reasonable time and memory")
-        overlap = declared(IMPORTER, "import_bvh.split_overlap")
-        s.add_argument("--split-overlap", type=float, default=overlap, metavar="SECONDS",
+                            "splice in reasonable time and memory (train/val/test splits are the exports' "
+                            "--split-ratios)")
+        overlap = declared(IMPORTER, "import_bvh.window_overlap")
+        s.add_argument("--window-overlap", type=float, default=overlap, metavar="SECONDS",
                        help=f"overlap of consecutive windows (default {overlap:g} s)")
+        # the earlier names, kept working for scripts that use them (unlisted: "split" is train/val/test)
+        s.add_argument("--split", dest="window", type=positive_float, default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        s.add_argument("--split-overlap", dest="window_overlap", type=float, default=argparse.SUPPRESS,
+                       help=argparse.SUPPRESS)
         add_output_flags(s, quiet_help="no progress bar or summary")
 
     def run(self, args) -> int:
@@ -101,7 +107,7 @@ class Import(Command):
 
         try:
             report = import_bvh(args.paths, args.output, spec=args.spec, append=args.append, overwrite=args.force,
-                                float64=args.float64, split=args.split, split_overlap=args.split_overlap,
+                                float64=args.float64, window=args.window, window_overlap=args.window_overlap,
                                 units=args.units, progress=lambda it, total, desc: progress(it, total, desc, args.quiet),
                                 format=args.format, file_units=args.file_units, name_prefix=args.name_prefix)
         except NothingImportedError as exc:
@@ -116,7 +122,7 @@ class Import(Command):
         files = f" from {n(len(report.imported), 'file')}" if added != len(report.imported) else ""
         say(args, f"imported {n(added, 'clip')}{files} ({report.frames} frames) into {args.output} "
                   f"({n(report.clips, 'clip')} in all)"
-                  + (f"; {n(len(cut), 'long take')} cut into {sum(c.windows for c in cut)} windows of {args.split:g} s"
+                  + (f"; {n(len(cut), 'long take')} cut into {sum(c.windows for c in cut)} windows of {args.window:g} s"
                      if cut else ""))
         for f, why in report.warnings:
             print(f"warning: {at(f, why)}", file=sys.stderr)

@@ -10,6 +10,10 @@ Conventions, used everywhere in torchsplice:
   appear in a BVH file, and means ``R = R_Z(a0) @ R_X(a1) @ R_Y(a2)`` (intrinsic rotations, the
   first listed axis outermost). Angles are ``(..., 3)`` tensors in that same order, in degrees
   unless ``degrees=False``.
+- **Up axes** (x, y or z: 0, 1, 2; a spec's ``up_axis``): Y-up is the reference. A Z-up world is
+  the Y-up one turned +90 degrees about X (Y goes to Z, Z to -Y: the usual Z-up / Y-up exchange),
+  an X-up world the Y-up one turned -90 degrees about Z (Y goes to X, X to -Y); a clip changes up
+  axis by :func:`up_axis_turn`.
 - Any number of leading batch dimensions is accepted; float32 and float64 both work; shapes
   that do not fit raise ``ValueError``.
 """
@@ -42,6 +46,7 @@ __all__ = [
     "random_quat",
     "quat_to_6d",
     "rotation_6d_to_rotmat",
+    "up_axis_turn",
 ]
 
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
@@ -318,3 +323,19 @@ def rotation_6d_to_rotmat(d: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
     b2 = b2 / b2.norm(dim=-1, keepdim=True).clamp_min(eps)
     b3 = torch.linalg.cross(b1, b2, dim=-1)
     return torch.stack((b1, b2, b3), dim=-1)
+
+
+_FROM_Y_UP = {0: (math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5)), 1: (1.0, 0.0, 0.0, 0.0),
+              2: (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)}
+"""Per up axis, the turn taking a Y-up world to it (see the module docstring)."""
+
+
+def up_axis_turn(source: int, target: int, dtype=torch.float64) -> torch.Tensor:
+    """``(4,)`` the turn taking a world whose up axis is ``source`` (0, 1, 2: x, y, z) to one
+    whose up axis is ``target``: it takes ``source``'s unit vector onto ``target``'s, and turning
+    ``a`` to ``b`` then ``b`` to ``c`` is turning ``a`` to ``c`` (the identity when they are equal)."""
+    if source not in _FROM_Y_UP or target not in _FROM_Y_UP:
+        raise ValueError(f"up axes are 0, 1 or 2 (x, y, z), not {source!r} and {target!r}")
+    to = torch.tensor(_FROM_Y_UP[int(target)], dtype=dtype)
+    back = quat_conj(torch.tensor(_FROM_Y_UP[int(source)], dtype=dtype))
+    return quat_canonical(quat_mul(to, back))

@@ -299,7 +299,8 @@ def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, 
     act = sources.get(name)
     where = sources.where(name)
     ka = where.clip_info(name)["skeleton"]
-    if not needs_retargeting(act.skeleton, where.skeleton_info(ka).units or "", result.skeleton, units):
+    mine = where.skeleton_info(ka)
+    if not needs_retargeting(act.skeleton, mine.units or "", result.skeleton, units, mine.up_axis or "", spec.up_axis):
         return act
     own = clip_spec(where, name)
     target = RetargetTarget(f"{Path(path).name}:{k}", result.skeleton, spec)

@@ -1,8 +1,9 @@
 """Measures of retargeting: how faithfully a clip played on another skeleton keeps its motion.
 
 Conventions: positions in each skeleton's own units, converted to centimetres where figures
-of two rigs are compared (their specs' units); the up axis of the specs (Y for every shipped
-one); angles in degrees. Every measure is batched over frames.
+of two rigs are compared (their specs' units); each spec's up axis (Y for every shipped one;
+a source's world turned onto the target's where they differ); angles in degrees. Every
+measure is batched over frames.
 
 - :func:`round_trip_errors`: a clip retargeted onto another skeleton and back, the mean distance
   of its mapped joints from where they were, over the character's height.
@@ -59,6 +60,7 @@ def bone_angles(motion, result, rmap: RetargetMap, target_roles) -> dict[str, fl
     direction in ``result`` and its source bone's in ``motion`` (bones of no length in either
     rig are left out)."""
     pa, pb = motion.global_positions().double(), result.global_positions().double()
+    pa = quat_apply(rmap.turn.expand(*pa.shape[:-1], 4), pa)  # onto the target's up axis
     ct = canonical_joints(target_roles, rmap.target)
     out = {}
     rest_s, _ = rmap.source.rest_positions()
@@ -81,7 +83,7 @@ def feet_figures(motion, result, rmap: RetargetMap, source_roles, target_roles, 
     scale_cm = rmap.scale * cm_target / cm_source  # target cm per source cm
     src = float(foot_skate_stats([motion], source_roles).speed[0]) * cm_source * scale_cm
     got = float(foot_skate_stats([result], target_roles).speed[0]) * cm_target
-    up = source_roles.up_axis
+    up, up_t = source_roles.up_axis, target_roles.up_axis
     pa, pb = motion.global_positions().double(), result.global_positions().double()
     lower = 0.0
     for k, (ankle, toe) in enumerate(rmap.source_legs):
@@ -92,7 +94,7 @@ def feet_figures(motion, result, rmap: RetargetMap, source_roles, target_roles, 
             rest_s = float(contact_heights(pa, [js], leg, float(motion.fps), up)[0])
             rest_t = float(target_heights[k, col]) if target_heights is not None else rest_s * rmap.scale
             sink_s = (rest_s - float(pa[:, js, up].min())) * cm_source * scale_cm
-            sink_t = (rest_t - float(pb[:, jt, up].min())) * cm_target
+            sink_t = (rest_t - float(pb[:, jt, up_t].min())) * cm_target
             lower = max(lower, sink_t - sink_s)
     return {"skate_source": src, "skate": got, "lower": lower}
 

@@ -175,7 +175,8 @@ class HumanML3DExporter(Exporter):
 
     @cached_property
     def _movers(self) -> dict:
-        """Per skeleton id: ``None`` (on the SMPL body already) or its retargeting map onto it."""
+        """Per skeleton id: ``None`` (on the SMPL body already, in metres, Y up) or its retargeting
+        map onto it (which turns another up axis onto Y)."""
         from ..ops.retarget import retarget_map
         from ..specs import load_spec
         from ..specs.smpl import SMPL22, SMPL22_NAMES, SMPL22_PARENTS, smpl22_skeleton
@@ -187,7 +188,8 @@ class HumanML3DExporter(Exporter):
         with MotionDatabase.open(self.database) as db:
             for k in sorted({item["skeleton"] for item in self._plan["items"]}):
                 sk, info = db.skeletons[k], db.skeleton_info(k)
-                if tuple(sk.names) == SMPL22_NAMES and tuple(sk.parents) == SMPL22_PARENTS and info.units in ("m", ""):
+                if tuple(sk.names) == SMPL22_NAMES and tuple(sk.parents) == SMPL22_PARENTS and info.units in ("m", "") \
+                        and info.up_axis in ("y", ""):
                     movers[k] = None
                     continue
                 try:

@@ -42,7 +42,8 @@ from .captions import parse_caption_line
 from .humanml3d_features import FEATURES, FPS, features_to_positions
 from .plain_files import MAX_ARRAY_BYTES, checked_file, read_capped_text
 
-__all__ = ["is_humanml3d_folder", "humanml3d_ids", "read_humanml3d_motion", "positions_to_motion", "SPLIT_FILES"]
+__all__ = ["is_humanml3d_folder", "humanml3d_ids", "read_humanml3d_motion", "read_humanml3d_motions", "positions_to_motion",
+           "positions_to_motions", "SPLIT_FILES"]
 
 SPLIT_FILES = ("train", "val", "test")
 _FRAMES = ((0, (1, 2), 3), (9, (13, 14), 12))  # (joint, (left, right), up): the pelvis and the chest
@@ -94,16 +95,31 @@ def humanml3d_ids(folder) -> tuple[list[str], dict[str, str], list[tuple[str, st
 def positions_to_motion(positions: torch.Tensor, name: str = "clip", fps: float = FPS) -> Motion:
     """A :class:`~torchsplice.core.motion.Motion` on the SMPL body from its joint positions
     ``(T, 22, 3)`` in metres (HumanML3D's joint order): see the module docstring. Float64."""
-    p = positions.to(torch.float64)
-    if p.dim() != 3 or p.shape[1:] != (22, 3):
-        raise ValueError(f"positions must be (T, 22, 3), got {tuple(p.shape)}")
-    lengths = torch.stack([(p[:, j] - p[:, parent]).norm(dim=-1).mean() for j, parent in enumerate(SMPL22_PARENTS)
-                           if parent >= 0])
-    bodies = [smpl22_skeleton(), smpl22_skeleton(mirrored=True)]
-    misfit = [float(((b.offsets[1:].norm(dim=-1) - lengths) ** 2).sum()) for b in bodies]
-    sk = bodies[misfit.index(min(misfit))]  # a mirrored copy stands on the mirrored body
-    rest = sk.offsets
+    return positions_to_motions([positions], [name], fps)[0]
+
+
+def positions_to_motions(positions, names, fps: float = FPS) -> list[Motion]:
+    """:func:`positions_to_motion` of each of ``positions`` (``(T_i, 22, 3)`` each, named by
+    ``names``), computed together: the clips' frames are concatenated, so that the loops over
+    joints run once for them all (the same numbers as one clip at a time)."""
+    ps = [x.to(torch.float64) for x in positions]
+    for x in ps:
+        if x.dim() != 3 or x.shape[1:] != (22, 3):
+            raise ValueError(f"positions must be (T, 22, 3), got {tuple(x.shape)}")
+    if not ps:
+        return []
+    lengths = torch.tensor([x.shape[0] for x in ps])
+    p = torch.cat(ps)
     T = p.shape[0]
+    parents = torch.tensor(SMPL22_PARENTS[1:])
+    clip_of = torch.repeat_interleave(torch.arange(len(ps)), lengths)
+    # each clip's mean bone lengths choose its body: a mirrored copy stands on the mirrored one
+    lengths_of = torch.zeros(len(ps), 21, dtype=torch.float64).index_add_(0, clip_of, (p[:, 1:] - p[:, parents]).norm(dim=-1))
+    lengths_of = lengths_of / lengths.to(torch.float64)[:, None]
+    bodies = [smpl22_skeleton(), smpl22_skeleton(mirrored=True)]
+    misfit = torch.stack([((b.offsets[1:].norm(dim=-1) - lengths_of) ** 2).sum(-1) for b in bodies], dim=1)
+    body_of = misfit.argmin(dim=1)  # the first where both fit alike
+    rest = torch.stack([b.offsets for b in bodies])[body_of[clip_of]]  # (T, 22, 3)
     children: dict[int, list[int]] = {}
     for j, parent in enumerate(SMPL22_PARENTS):
         if parent >= 0:
@@ -111,24 +127,23 @@ def positions_to_motion(positions: torch.Tensor, name: str = "clip", fps: float 
     G = torch.zeros(T, 22, 4, dtype=torch.float64)
     G[..., 0] = 1.0
     framed = {j: (lr, up) for j, lr, up in _FRAMES}
-    for j, parent in enumerate(SMPL22_PARENTS):
+    for j, parent in enumerate(SMPL22_PARENTS):  # the loop over joints, every frame of every clip at once
         if j in framed:
             (left, right), up = framed[j]
             G[:, j] = _two_directions(p[:, left] - p[:, right], p[:, up] - p[:, j],
-                                      rest[left] - rest[right], rest[up])
+                                      rest[:, left] - rest[:, right], rest[:, up])
         elif len(children.get(j, [])) == 1:
             c = children[j][0]
             bone = p[:, c] - p[:, j]
             bone = bone / bone.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-            at_rest = quat_apply(G[:, parent], (rest[c] / rest[c].norm()).expand(T, 3))
+            at_rest = quat_apply(G[:, parent], rest[:, c] / rest[:, c].norm(dim=-1, keepdim=True))
             G[:, j] = quat_mul(quat_between(at_rest, bone), G[:, parent])
         else:  # an end (feet, head, wrists): as its parent
             G[:, j] = G[:, parent]
     local = G.clone()
-    for j, parent in enumerate(SMPL22_PARENTS):
-        if parent >= 0:
-            local[:, j] = quat_mul(quat_conj(G[:, parent]), G[:, j])
-    return Motion(skeleton=sk, rotations=local, root_translation=p[:, 0].clone(), fps=float(fps), name=name)
+    local[:, 1:] = quat_mul(quat_conj(G[:, parents]), G[:, 1:])
+    return [Motion(skeleton=bodies[int(b)], rotations=r, root_translation=x[:, 0].clone(), fps=float(fps), name=n)
+            for b, r, x, n in zip(body_of, local.split(lengths.tolist()), p.split(lengths.tolist()), names)]
 
 
 def _two_directions(across: torch.Tensor, up: torch.Tensor, rest_across: torch.Tensor,
@@ -148,9 +163,46 @@ def _two_directions(across: torch.Tensor, up: torch.Tensor, rest_across: torch.T
 def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
     """The motion ``id`` of the HumanML3D ``folder`` as a clip (see the module docstring);
     :class:`~torchsplice.core.errors.TorchspliceError` naming the file for one that cannot be used."""
+    got = read_humanml3d_motions([(folder, id, split)])[0]
+    if isinstance(got, BaseException):
+        raise got
+    return got
+
+
+def read_humanml3d_motions(items) -> list:
+    """:func:`read_humanml3d_motion` of each ``(folder, id, split)`` of ``items``, the rotations of
+    them all computed together (:func:`positions_to_motions`): per item its clip, or the
+    :class:`~torchsplice.core.errors.TorchspliceError` that says why it cannot be used (or the
+    error a bug met on it raised, so that the caller reports it with its file)."""
+    out: list = []
+    read = []
+    for folder, id, split in items:
+        try:
+            positions, lines = _checked(Path(folder), id)
+        except (KeyboardInterrupt, MemoryError):
+            raise
+        except Exception as exc:
+            out.append(exc)
+            continue
+        out.append(None)
+        read.append((len(out) - 1, Path(folder), id, split, positions, lines))
+    motions = positions_to_motions([r[4] for r in read], [r[2] for r in read])
+    for (k, folder, id, split, _, lines), m in zip(read, motions):
+        m.role = "both"
+        m.labels = {"captions": "\n".join(ln.strip() for ln in lines)}
+        if split:
+            m.labels["split"] = split
+        if id.startswith("M") and (folder / "new_joint_vecs" / f"{id[1:]}.npy").is_file():
+            m.labels["mirror_of"] = id[1:]  # one source with its original, for splits
+        out[k] = m
+    return out
+
+
+def _checked(folder: Path, id: str) -> tuple[torch.Tensor, list[str]]:
+    """The joint positions ``(N, 22, 3)`` of motion ``id`` and its caption lines, every check
+    made (a :class:`~torchsplice.core.errors.TorchspliceError` naming the file)."""
     import numpy as np
 
-    folder = Path(folder)
     f = folder / "new_joint_vecs" / f"{id}.npy"
     checked_file(f, inside=folder, limit=MAX_ARRAY_BYTES)  # no FIFO, device or symlink out of the folder
     try:
@@ -184,11 +236,4 @@ def read_humanml3d_motion(folder, id: str, split: str | None = None) -> Motion:
     if bool(far.any()):
         raise TorchspliceError(f"{f}: its root velocities integrate beyond {MAX_ABS_VALUE:g} by frame "
                                f"{int(far.nonzero()[0, 0])}")
-    m = positions_to_motion(positions, name=id)
-    m.role = "both"
-    m.labels = {"captions": "\n".join(ln.strip() for ln in lines)}
-    if split:
-        m.labels["split"] = split
-    if id.startswith("M") and (folder / "new_joint_vecs" / f"{id[1:]}.npy").is_file():
-        m.labels["mirror_of"] = id[1:]  # one source with its original, for splits
-    return m
+    return positions, lines

@@ -10,7 +10,7 @@ function, :func:`import_bvh`, returning an :class:`ImportReport`.
 Folders are searched recursively for ``.bvh`` files; each file is read (lengths in the file's
 units, quaternions WXYZ), checked, matched to a dataset spec (``spec="auto"``: per file), bound
 to its skeleton, given its role and labels from its name, optionally cut into windows
-(``split``), and appended. A file that cannot be used is skipped with a one-line reason; the
+(``window``), and appended. A file that cannot be used is skipped with a one-line reason; the
 database is written atomically (appending works on a copy that replaces the file at the end).
 """
 
@@ -68,7 +68,7 @@ class ImportReport:
         warnings: ``(path, message)`` of readable files with something odd (trailing lines).
         guessed: the skeletons whose roles were guessed.
         clips: clips in the database afterwards (all of them, when appending).
-        split: the window length asked for (seconds), or ``None``.
+        window: the window length asked for (seconds), or ``None``.
     """
 
     output: Path
@@ -77,7 +77,7 @@ class ImportReport:
     warnings: list[tuple[str, str]] = field(default_factory=list)
     guessed: list[GuessedSkeleton] = field(default_factory=list)
     clips: int = 0
-    split: float | None = None
+    window: float | None = None
 
     @property
     def frames(self) -> int:
@@ -137,8 +137,8 @@ def collect_bvh(paths: Iterable) -> tuple[list[Path], list[tuple[str, str]]]:
     return unique, missing
 
 
-MIN_SPLIT_SECONDS = 1.0
-"""The shortest window ``split`` cuts takes into (splicing needs at least a stride)."""
+MIN_WINDOW_SECONDS = 1.0
+"""The shortest window ``window`` cuts takes into (splicing needs at least a stride)."""
 
 
 def one_line(message, path=None, limit: int = 300) -> str:
@@ -167,6 +167,34 @@ class _HumanML3DItem:
         return str(self.folder / "new_joint_vecs" / f"{self.id}.npy")
 
 
+HUMANML3D_BATCH = 256
+"""HumanML3D motions read and turned into rotations together by ``import``."""
+
+
+class _HumanML3DReader:
+    """The motions of ``items`` (:class:`_HumanML3DItem`), read :data:`HUMANML3D_BATCH` at a time
+    as the import reaches them (:func:`~.humanml3d_import.read_humanml3d_motions`): :meth:`motion`
+    gives an item's clip or raises what it met, each item once."""
+
+    def __init__(self, items):
+        self.items = list(items)
+        self.place = {id(f): k for k, f in enumerate(self.items)}
+        self.ready: dict[int, object] = {}
+
+    def motion(self, item):
+        from .humanml3d_import import read_humanml3d_motions
+
+        k = self.place[id(item)]
+        if k not in self.ready:
+            batch = self.items[k:k + HUMANML3D_BATCH]
+            got = read_humanml3d_motions([(f.folder, f.id, f.split) for f in batch])
+            self.ready.update(zip(range(k, k + len(batch)), got))
+        got = self.ready.pop(k)
+        if isinstance(got, BaseException):
+            raise got
+        return got
+
+
 def collect_inputs(paths: Iterable, format: str = "auto") -> tuple[list, list[tuple[str, str]]]:
     """What to import from ``paths``: BVH files (:func:`collect_bvh`) and the motions of HumanML3D
     folders (:mod:`.humanml3d_import`), in order; and ``(path, why)`` for what holds none."""
@@ -191,7 +219,7 @@ def collect_inputs(paths: Iterable, format: str = "auto") -> tuple[list, list[tu
 
 
 def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overwrite: bool = False,
-               float64: bool = False, split: float | None = None, split_overlap: float = 1.0,
+               float64: bool = False, window: float | None = None, window_overlap: float = 1.0,
                units: str | None = None, progress: Callable | None = None, format: str = "auto",
                file_units: str | None = None, name_prefix: str = "") -> ImportReport:
     """Import BVH files and folders (and HumanML3D folders) into the database ``output`` (see
@@ -207,8 +235,9 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
         append: add to the existing database ``output`` instead of making a new one.
         overwrite: replace an existing ``output`` (a new database only).
         float64: store frames in float64 (default float32).
-        split: cut takes longer than 1.25 x ``split`` seconds into windows of ``split`` seconds
-            overlapping by ``split_overlap`` (named ``NAME#000``, ...).
+        window: cut takes longer than 1.25 x ``window`` seconds into windows of ``window``
+            seconds overlapping by ``window_overlap`` (named ``NAME#000``, ...; not a train/val/test
+            split, which the exports and ``MotionDataset`` make by source clip).
         units: convert every clip's lengths from its spec's units to these (``"cm"``, ``"m"``,
             ... see :mod:`torchsplice.ops.units`), so that datasets share one database;
             ``None`` keeps the files' own units.
@@ -233,7 +262,6 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     from ..specs.smpl import SMPL22
     from ..store.atomic import check_output
     from .bvh import read_bvh
-    from .humanml3d_import import read_humanml3d_motion
     from ..store.database import MotionDatabase
     from ..ops.units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
@@ -260,16 +288,16 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     else:
         out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=[f for f in files if isinstance(f, Path)],
                            overwrite=overwrite)
-    report = ImportReport(output=out, skipped=skipped, split=split)
+    report = ImportReport(output=out, skipped=skipped, window=window)
     if not files:
         raise NothingImportedError("no HumanML3D motions to import" if format == "humanml3d" else "no BVH files to import",
                                    report)
-    if split is not None and not (math.isfinite(split) and split >= MIN_SPLIT_SECONDS):
-        raise TorchspliceError(f"{{split}} ({split:g} s) must be at least {MIN_SPLIT_SECONDS:g} s: a window is a clip "
-                               "to splice", options=("split",))
-    if split is not None and not 0 <= split_overlap < split:
-        raise TorchspliceError(f"{{split_overlap}} ({split_overlap:g} s) must be at least 0 and shorter than "
-                               f"{{split}} ({split:g} s)", options=("split_overlap", "split"))
+    if window is not None and not (math.isfinite(window) and window >= MIN_WINDOW_SECONDS):
+        raise TorchspliceError(f"{{window}} ({window:g} s) must be at least {MIN_WINDOW_SECONDS:g} s: a window is a clip "
+                               "to splice", options=("window",))
+    if window is not None and not 0 <= window_overlap < window:
+        raise TorchspliceError(f"{{window_overlap}} ({window_overlap:g} s) must be at least 0 and shorter than "
+                               f"{{window}} ({window:g} s)", options=("window_overlap", "window"))
     fixed = None if isinstance(spec, str) and spec == "auto" else spec if isinstance(spec, DatasetSpec) else load_spec(spec)
     if append:
         db = MotionDatabase.open(out, mode="a")
@@ -278,6 +306,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     dtype = torch.float64 if float64 else torch.float32
     origin: dict[str, Path] = {}
     todo = progress(files, len(files), "import") if progress is not None else files
+    humanml3d = _HumanML3DReader(f for f in files if isinstance(f, _HumanML3DItem))
     with db:
         for f in todo:
             try:
@@ -285,7 +314,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                     bad = control_character(f.id)
                     if bad:
                         raise TorchspliceError(f"clip name {f.id!r} (the file's name) contains {bad}; rename the file")
-                    m = read_humanml3d_motion(f.folder, f.id, f.split).to(dtype)
+                    m = humanml3d.motion(f).to(dtype)
                     s = load_spec(SMPL22)
                     if units is not None:
                         m, s = convert_units(m, s, units)
@@ -314,7 +343,7 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                         m.labels["mirror_of"] = name_prefix + m.labels["mirror_of"]
                 if m.name in origin:
                     raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
-                pieces = m.windows(split, split_overlap) if split else [m]
+                pieces = m.windows(window, window_overlap) if window else [m]
                 taken = [p.name for p in pieces if p.name in db]
                 if taken:  # appending: this file is skipped, the others land
                     raise TorchspliceError(f"clip name {taken[0]!r} is already in the database")

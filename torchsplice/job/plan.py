@@ -226,11 +226,12 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     described = (_describe_skeletons(loco_db, None), _describe_skeletons(act_db, None if same else c.actions_db),
                  _skeleton_units(loco_db), _skeleton_units(act_db))
     if not same:
-        for k in ("units", "up_axis") if not c.retarget else ("up_axis",):  # retargeting converts units
+        for k in ("units", "up_axis") if not c.retarget else ():  # retargeting converts units and up axes
             a, b = str(loco_db.attrs.get(k) or ""), str(act_db.attrs.get(k) or "")
             if a and b and a != b and "mixed" not in (a, b):
-                raise TorchspliceError(f"{c.actions_db}: {k} {b!r} differs from {c.database}'s {a!r}; "
-                                       "splice clips of one unit and up axis")
+                raise TorchspliceError(f"{c.actions_db}: {k.replace('_', ' ')} {b!r} differs from {c.database}'s {a!r}; "
+                                       "splice clips of one unit and up axis, or let retargeting convert them "
+                                       "(drop --no-retarget)")
     specs = {}
     for k in sorted({int(tl.skeleton[i]) for i in locos}):
         specs[k] = loco_db.spec(k)  # the stored spec, else one detected
@@ -399,8 +400,9 @@ def plan_action_key(p: Pair, same: bool) -> str:
 
 def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, sk_a, described) -> dict:
     """``(locomotion skeleton, action skeleton) -> None`` (one skeleton: same joints, units and up
-    axis), the locomotion skeleton's id (the actions are retargeted onto it), or the reason its
-    pairs are not formed (text beginning :data:`SKELETONS_DIFFER` or ``units differ``), by
+    axis), the locomotion skeleton's id (the actions are retargeted onto it, turned onto its up
+    axis), or the reason its
+    pairs are not formed (text beginning :data:`SKELETONS_DIFFER`, ``units differ`` or ``up axes differ``), by
     :func:`torchsplice.retarget.clips.needs_retargeting`. Each retargeting map is built here,
     once per process (a skeleton that is not a humanoid says what it lacks)."""
     from ..retarget.clips import needs_retargeting  # loaded by jobs that may retarget, not by every worker
@@ -410,17 +412,16 @@ def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, 
         for y in kas:
             (ul, upl), (ua, upa) = described[2][x], described[3][y]
             topology = sk_l[x].same_topology(sk_a[y])
-            if not needs_retargeting(sk_a[y], ua, sk_l[x], ul) and not (upl and upa and upl != upa):
+            if not needs_retargeting(sk_a[y], ua, sk_l[x], ul, upa, upl):
                 out[x, y] = None
                 continue
-            if topology:  # one topology, two units
-                why = (f"units differ: locomotions on {described[0][x]} in {'/'.join(v or '?' for v in described[2][x])} "
+            if topology:  # one topology, two units or up axes
+                what = "units differ" if ul and ua and ul != ua else "up axes differ"
+                why = (f"{what}: locomotions on {described[0][x]} in {'/'.join(v or '?' for v in described[2][x])} "
                        f"x actions on {described[1][y]} in {'/'.join(v or '?' for v in described[3][y])}")
             else:
                 why = f"{SKELETONS_DIFFER}locomotions on {described[0][x]} x actions on {described[1][y]}"
-            if upl and upa and upl != upa:
-                out[x, y] = f"{why} (up axes {upl} and {upa})"
-            elif not c.retarget:
+            if not c.retarget:
                 out[x, y] = f"{why} ({{retarget}} is off)"
             else:
                 try:

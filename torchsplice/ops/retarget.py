@@ -1,7 +1,9 @@
 """Retargeting: a clip of one humanoid skeleton played on another, analytically.
 
 Conventions: quaternions unit WXYZ, local to the parent; lengths in each skeleton's own units;
-the up axis of the source's spec (Y for every shipped one). Both skeletons' rest poses are their
+each skeleton's up axis that of its spec (Y for every shipped one): a result has the target's,
+the source's world turned onto it by :func:`~torchsplice.core.rotations.up_axis_turn` (a Z-up
+clip played on a Y-up rig stands up, and walks where the usual Z-up to Y-up exchange puts it). Both skeletons' rest poses are their
 BVH zero poses (every local rotation the identity), whatever shape that is (T-pose, A-pose, or
 Bandai Namco's and LAFAN1's poses).
 
@@ -16,7 +18,8 @@ The method, with global rotations ``G`` and the joint map ``m`` (target joint ->
   aligned by two directions (across the hips or shoulders, and up), so their turn about the
   spine is kept. A joint with no bone to align (or unmapped) takes its nearest mapped
   ancestor's ``A``.
-- **Globals.** ``G_t(j) = G_s(m(j)) A(j)^-1``: with both rest poses at identity globals this
+- **Globals.** ``G_t(j) = U G_s(m(j)) A(j)^-1`` (``U`` the turn between the up axes, the
+  identity when they agree; ``G_t(j) = G_s(m(j)) A(j)^-1`` below): with both rest poses at identity globals this
   is ``G_s(t) G_s(ref)^-1 G_t(rest)``, ``ref`` being the source posed into the target's rest
   shape, so each mapped target bone points where its source bone points. An unmapped target
   joint (an extra spine or neck joint, a finger) holds its rest pose: its local rotation is
@@ -43,7 +46,7 @@ import torch
 from ..core.errors import MotionError
 from ..core.fk import forward_kinematics
 from ..core.motion import Motion
-from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize, rotmat_to_quat
+from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize, rotmat_to_quat, up_axis_turn
 from ..core.skeleton import Skeleton
 from ..specs.canonical import canonical_bones, canonical_joints, canonical_legs
 from ..specs.canonical import leg_length as canonical_leg_length
@@ -65,7 +68,9 @@ class RetargetMap:
         held: target joints held at their rest pose (no source joint).
         folded: source joints with no target joint (their motion goes to their mapped ancestors).
         pelvis: ``(target, source)`` pelvis joints; scale: target leg length / source leg length.
-        up_axis: 0, 1 or 2.
+        up_axis: the target's up axis, 0, 1 or 2 (the results' and the feet's).
+        turn: ``(4,)`` float64, the turn from the source's up axis to the target's
+            (:func:`~torchsplice.core.rotations.up_axis_turn`), applied to the source's world.
         legs: per leg (left, right) the target's ``(hip, knee, ankle, toe or None)``.
         source_legs: per leg the source's ``(ankle, toe or None)``; source_leg: its leg length.
     """
@@ -82,6 +87,7 @@ class RetargetMap:
     legs: tuple[tuple[int, int, int, int | None], ...]
     source_legs: tuple[tuple[int, int | None], ...]
     source_leg: float
+    turn: torch.Tensor
 
 
 def _unit(v: torch.Tensor) -> torch.Tensor:
@@ -192,7 +198,8 @@ def retarget_map(source: Skeleton, source_roles: SkeletonRoles, target: Skeleton
     source_legs = tuple((a, t if l_t is not None else None)
                         for (_, _, a, t), (_, _, _, l_t) in zip(canonical_legs(cs), canonical_legs(ct)))
     return RetargetMap(source, target, pairs, align, held, folded, (int(ct["pelvis"]), int(cs["pelvis"])), scale,
-                       int(source_roles.up_axis), legs, source_legs, source_leg)
+                       int(target_roles.up_axis), legs, source_legs, source_leg,
+                       up_axis_turn(int(source_roles.up_axis), int(target_roles.up_axis)))
 
 
 def retarget_motion(motion: Motion, rmap: RetargetMap, fix_feet: bool = True,
@@ -232,6 +239,9 @@ def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
         raise MotionError("clips of one skeleton either all have joint translations or none do")
     trans = cat([m.translations for m in motions]) if all(has_trans) else None
     pos, glob = forward_kinematics(rot, cat([m.root_translation for m in motions]), src.offsets, src.parents, trans)
+    if float(rmap.turn[0]) < 1.0:  # the source's world turned onto the target's up axis
+        pos = quat_apply(rmap.turn.expand_as(glob), pos)
+        glob = quat_mul(rmap.turn.expand_as(glob), glob)
     T, J = rot.shape[0], tgt.num_joints
     g_t = torch.zeros(T, J, 4, dtype=torch.float64)
     local = torch.zeros(T, J, 4, dtype=torch.float64)

@@ -56,11 +56,12 @@ def map_notes(rmap: RetargetMap) -> dict[str, list[str]]:
     return {"held": [rmap.target.names[j] for j in rmap.held], "folded": [rmap.source.names[j] for j in rmap.folded]}
 
 
-def needs_retargeting(skeleton, units: str, onto, onto_units: str) -> bool:
-    """Whether clips on ``skeleton`` (stored in ``units``) must be retargeted to splice with
-    clips on ``onto``: other joints, or other units where both are recorded. The one rule of
-    ``splice-all``, ``splice``, ``plot-alignment`` and ``evaluate``."""
-    return not skeleton.same_topology(onto) or bool(units and onto_units and units != onto_units)
+def needs_retargeting(skeleton, units: str, onto, onto_units: str, up: str = "", onto_up: str = "") -> bool:
+    """Whether clips on ``skeleton`` (stored in ``units``, up axis ``up``) must be retargeted to
+    splice with clips on ``onto``: other joints, or other units or up axes where both are
+    recorded. The one rule of ``splice-all``, ``splice``, ``plot-alignment`` and ``evaluate``."""
+    return (not skeleton.same_topology(onto) or bool(units and onto_units and units != onto_units)
+            or bool(up and onto_up and up != onto_up))
 
 
 def onto_skeleton(db, path, clips, skeleton: int, fix_feet: bool = True) -> list | None:
@@ -68,8 +69,9 @@ def onto_skeleton(db, path, clips, skeleton: int, fix_feet: bool = True) -> list
     skeleton ``skeleton`` when :func:`needs_retargeting` says so, as ``splice-all`` does; ``None``
     when they are on it already."""
     k = db.clip_info(clips[0].name)["skeleton"]
-    if not needs_retargeting(db.skeletons[k], db.skeleton_info(k).units or "", db.skeletons[skeleton],
-                             db.skeleton_info(skeleton).units or ""):
+    mine, onto = db.skeleton_info(k), db.skeleton_info(skeleton)
+    if not needs_retargeting(db.skeletons[k], mine.units or "", db.skeletons[skeleton], onto.units or "",
+                             mine.up_axis or "", onto.up_axis or ""):
         return None
     spec = db.spec(k)
     return Retargeter(db.skeletons[k], spec, source_label(path, k, spec.name), database_target(db, path, skeleton),
