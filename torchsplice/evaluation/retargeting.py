@@ -25,7 +25,7 @@ from ..core.rotations import quat_apply, quat_conj
 from ..core.fk import forward_kinematics
 from ..ops.feet import contact_heights
 from ..ops.retarget import RetargetMap, character_height, retarget_motions
-from ..specs import UNITS
+from ..ops.units import centimetres as units_centimetres
 from ..specs.canonical import canonical_bones, canonical_joints
 from .metrics import foot_skate_stats
 
@@ -34,8 +34,7 @@ __all__ = ["round_trip_errors", "bone_angles", "feet_figures", "wrist_spread", "
 
 def centimetres(spec) -> float:
     """Centimetres per unit of a spec's units (NaN when unknown)."""
-    f = UNITS.get(spec.units)
-    return float("nan") if f is None else f * 100
+    return units_centimetres(spec.units)
 
 
 def round_trip_errors(motions, there: RetargetMap, back: RetargetMap, roles, fix_feet: bool = False,

@@ -35,7 +35,7 @@ from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
-PLAN_VERSION = 5
+PLAN_VERSION = 6
 MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
@@ -98,9 +98,12 @@ class PlanClip:
     fps: float
     labels: dict = field(default_factory=dict)
     acting: list[str] | None = None
+    penetration: float = 0.0
+    penetration_depth: float = 0.0
 
     def to_dict(self) -> dict:
-        out = {"name": self.name, "frames": self.frames, "fps": self.fps, "labels": self.labels}
+        out = {"name": self.name, "frames": self.frames, "fps": self.fps, "labels": self.labels,
+               "penetration": self.penetration, "penetration_depth": self.penetration_depth}
         if self.acting is not None:
             out["acting"] = list(self.acting)
         return out
@@ -281,6 +284,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
 
     pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
     _acting(c, sources, groups, clips, sk_l, {plan_action_key(p, same) for p in pairs if p.mode == "standing"})
+    _penetrations(sources, groups, clips, sk_l)
     if not pairs:
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
         raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
@@ -375,6 +379,32 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
                                      motions[idx[0]].skeleton)
                 for i, (limbs, measure) in zip(idx, found):
                     clips[chunk[i]].acting = list(limbs)
+
+
+def _penetrations(sources: Sources, groups: list[Group], clips: dict, sk_l) -> None:
+    """Record in ``clips`` how each clip puts a hand inside its body, on its group's body
+    (:func:`~torchsplice.ops.plausibility.penetration_packed`), 64 clips at a time."""
+    import torch
+
+    from ..core.fk import forward_kinematics
+    from ..ops.body import body_of
+    from ..ops.plausibility import penetration_packed
+    from ..ops.units import centimetres
+
+    for g in groups:
+        skeleton = sk_l[g.skeleton]
+        body = body_of(skeleton, g.roles(skeleton))
+        cm = centimetres(DatasetSpec.from_json(g.spec).units)
+        for b in range(0, len(g.clips), 64):
+            chunk = g.clips[b:b + 64]
+            motions = [sources.motion(k) for k in chunk]
+            positions = torch.cat([forward_kinematics(m.rotations.double(), m.root_translation.double(),
+                                                      m.skeleton.offsets, m.skeleton.parents,
+                                                      None if m.translations is None else m.translations.double())[0]
+                                   for m in motions])
+            share, depth = penetration_packed(positions, [m.num_frames for m in motions], body)
+            for k, sh, d in zip(chunk, share.tolist(), depth.tolist()):
+                clips[k].penetration, clips[k].penetration_depth = sh, d * cm
 
 
 def _skeleton_units(db) -> dict[int, tuple[str, str]]:

@@ -30,7 +30,7 @@ from .plan import Plan, Task
 from .sources import Sources
 
 __all__ = ["Part", "run_task", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT", "poor_alignment", "FLAG_SEPARATOR",
-           "FLAG_CODES", "alignment_distance"]
+           "FLAG_CODES", "alignment_distance", "SELF_PENETRATION", "self_penetration"]
 
 log = logging.getLogger("torchsplice.job")
 
@@ -39,16 +39,24 @@ OUTPUT_COLUMNS = {
     "flag_details": "str", "locomotion_id": "int", "action_id": "int", "crop": "int",
     "cost": "float", "alignment_distance": "float", "posture_deg": "float", "pelvis_correction_deg": "float",
     "coverage": "float", "timing": "str", "acting": "str",
+    "penetration": "float", "penetration_depth": "float", "penetration_locomotion": "float",
+    "penetration_depth_locomotion": "float", "penetration_action": "float", "penetration_depth_action": "float",
 }
 FLAG_CODES = {
     "poor_alignment": "the lower bodies align poorly (alignment_distance above 0.10 leg lengths): other locomotion "
                       "types, or a long take of several activities",
     "locomotion_not_locomoting": "the locomotion does not locomote (spliced with force_locomotion)",
     "action_not_locomoting": "the action does not locomote (spliced through the timewarp with force_locomotion)",
+    "self_penetration": "a hand or forearm is inside the body (torso, pelvis, head or legs) on a larger share of the "
+                        "frames than in either source (penetration above both sources' by more than 0.05)",
 }
 """The codes of the ``flags`` column (comma-separated, sorted; ``""``: none) and what each means;
 the figures behind them are columns of their own (``alignment_distance``), and ``flag_details``
 says each flag in words with its figures and clip names."""
+SELF_PENETRATION = 0.05
+"""Flag a result whose hand is inside its body (:func:`~torchsplice.ops.plausibility.penetration`)
+on a share of its frames larger than both its sources' by more than this: a box held against
+the belly, which the action does, is not a defect."""
 FRAME_COLUMNS = ("action_frame",)
 POOR_ALIGNMENT = 0.10
 """Flag a pair whose aligned lower-body landmarks lie further apart than this, on average, in
@@ -70,6 +78,15 @@ def poor_alignment(cost: float, leg: float) -> str:
     if dist <= POOR_ALIGNMENT:
         return ""
     return f"poor alignment (mean landmark distance {dist:.2f} leg lengths, above {POOR_ALIGNMENT:g})"
+
+
+def self_penetration(share: float, locomotion: float, action: float, depth: float) -> str:
+    """The flag's words for a result with a hand inside its body on ``share`` of its frames (its
+    sources ``locomotion`` and ``action``), ``depth`` cm deep at worst; ``""`` when fine."""
+    if not share > max(locomotion, action) + SELF_PENETRATION:
+        return ""
+    return (f"a hand inside the body on {share:.0%} of the frames (locomotion {locomotion:.0%}, action {action:.0%}), "
+            f"up to {depth:.1f} cm deep")
 
 
 FLAG_SEPARATOR = " | "
@@ -224,14 +241,28 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
         log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
+    inside = _penetration(backend, group, skeleton, roles, frames, rot, trans)
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
-                 frames, rot, trans, curve, corr, crop, cost, posture)
+                 frames, rot, trans, curve, corr, crop, cost, posture, inside)
     part.parts = _parts(plan, config, task, [keys[b] for b in kept], batch, ok, standing)
     if part.parts is not None:  # the clips are their parts: no frames to carry
         part.rotations, part.translations = rot[:0], trans[:0]
     part.skipped = skipped
     part.plan = plan.digest()
     return part
+
+
+def _penetration(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> tuple:
+    """``(share, depth in cm)`` per result of how it puts a hand inside its body, from its packed
+    frames (:meth:`~torchsplice.splice.backends.Backend.inside_body`)."""
+    from ..ops.body import body_of
+    from ..ops.units import centimetres
+    from ..specs import DatasetSpec
+
+    if not len(frames):
+        return np.zeros(0), np.zeros(0)
+    share, depth = backend.inside_body(rot, trans, frames, skeleton, body_of(skeleton, roles))
+    return share, depth * centimetres(DatasetSpec.from_json(group.spec).units)
 
 
 PART_KEYS = ("kind", "locomotion", "action")
@@ -271,9 +302,9 @@ def _float32(x) -> np.ndarray:
 
 
 def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleton, frames, rot, trans, curve, corr,
-          crop, cost, posture) -> Part:
+          crop, cost, posture, inside) -> Part:
     """A task's output columns, computed at once (``curve`` and ``crop`` at the locomotion's rate,
-    ``corr`` and ``posture`` in degrees)."""
+    ``corr`` and ``posture`` in degrees, ``inside`` the results' penetration share and depth)."""
     method, fps = task.method, group.fps
     lnames = [plan.clips[k[0]].name for k in keys]
     anames = [plan.clips[k[1]].name for k in keys]
@@ -287,8 +318,12 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         else np.zeros(len(keys))  # alignment_distance, for every pair at once
     poor = distance > POOR_ALIGNMENT
     unmoving = np.array([k[0] in plan.flags or (not standing and k[1] in plan.flags) for k in keys], dtype=bool)
+    share, depth = inside
+    of_loco = np.array([plan.clips[k[0]].penetration for k in keys], dtype=np.float64)
+    of_action = np.array([plan.clips[k[1]].penetration for k in keys], dtype=np.float64)
+    into = share > np.maximum(of_loco, of_action) + SELF_PENETRATION
     flags, details = [""] * len(keys), [""] * len(keys)
-    for b in np.flatnonzero(poor | unmoving).tolist():  # words only for the pairs flagged
+    for b in np.flatnonzero(poor | unmoving | into).tolist():  # words only for the pairs flagged
         k, codes, words = keys[b], [], []
         for key, name, code in ((k[0], lnames[b], "locomotion_not_locomoting"),
                                 (k[1], anames[b], "action_not_locomoting"))[:1 if standing else 2]:
@@ -298,6 +333,9 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         if poor[b]:
             codes.append("poor_alignment")
             words.append(poor_alignment(float(cost[b]), group.leg))
+        if into[b]:
+            codes.append("self_penetration")
+            words.append(self_penetration(float(share[b]), float(of_loco[b]), float(of_action[b]), float(depth[b])))
         flags[b], details[b] = ",".join(sorted(codes)), FLAG_SEPARATOR.join(words)
     named = get_method(method).clip_name
     extra = {
@@ -310,6 +348,11 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
         "timing": [config.timing if standing else "timewarp"] * len(keys),
         "acting": [",".join((plan.clips[k[1]].acting or ())) if standing else "" for k in keys],
+        "penetration": share, "penetration_depth": depth,
+        "penetration_locomotion": of_loco,
+        "penetration_depth_locomotion": np.array([plan.clips[k[0]].penetration_depth for k in keys], dtype=np.float64),
+        "penetration_action": of_action,
+        "penetration_depth_action": np.array([plan.clips[k[1]].penetration_depth for k in keys], dtype=np.float64),
     }
     return Part(
         task=task.id, skeleton=skeleton, spec=group.spec,

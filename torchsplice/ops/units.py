@@ -21,7 +21,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import UNITS, DatasetSpec
 
-__all__ = ["UNITS", "CONVERTIBLE_UNITS", "HUMAN_SIZE_M", "unit_factor", "scale_skeleton", "scale_motion", "convert_units",
+__all__ = ["UNITS", "CONVERTIBLE_UNITS", "HUMAN_SIZE_M", "unit_factor", "centimetres", "scale_skeleton", "scale_motion", "convert_units",
            "implausible_size"]
 
 CONVERTIBLE_UNITS = tuple(u for u, f in UNITS.items() if f is not None)
@@ -48,6 +48,13 @@ def implausible_size(skeleton: Skeleton, units: str) -> str | None:
         return None
     return (f"the skeleton measures {size:.3g} {units} across ({metres:.3g} m), not a human's size: are the file's units "
             f"{units}? (a spec that states its units, or converting them at import, sets them right)")
+
+
+def centimetres(units: str) -> float:
+    """Centimetres in one unit of ``units`` (a spec's), NaN where they are unknown: what
+    figures stated in centimetres are converted by."""
+    f = UNITS.get(units)
+    return float("nan") if f is None else f * 100.0
 
 
 def unit_factor(source: str, target: str, where: str = "") -> float:

@@ -150,6 +150,23 @@ class Backend:
         default), padded: what the locomotion check reads."""
         raise NotImplementedError
 
+    def inside_body(self, rotations, translations, lengths, skeleton, body) -> tuple:
+        """``(share, depth)`` per result of how it puts a hand inside its ``body``
+        (:func:`~torchsplice.ops.plausibility.penetration_packed`; depth in the skeleton's units)
+        from its packed frames: ``rotations (N, J, 4)``, ``translations (N, J, 3)`` (row 0 the
+        root), ``lengths (B,)``. By torch here; a backend may compute the same figures its way."""
+        import numpy as np
+        import torch
+
+        from ...core.fk import forward_kinematics
+        from ...ops.plausibility import penetration_packed
+
+        t = torch.as_tensor(np.asarray(translations, dtype=np.float64))
+        positions, _ = forward_kinematics(torch.as_tensor(np.asarray(rotations, dtype=np.float64)), t[:, 0],
+                                          skeleton.offsets, skeleton.parents, t)
+        share, depth = penetration_packed(positions, np.asarray(lengths, dtype=np.int64), body)
+        return share.numpy(), depth.numpy()
+
     def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps: float, options) -> tuple[list, list]:
         """The locomotion checks (:func:`~torchsplice.splice.locomotion.check_locomotion`) of
         prepared clips ``loco_rows`` and ``action_rows``; by default one padded batch of both."""

@@ -45,6 +45,13 @@ def warm_up(quiet: bool = False) -> float:
     from ...align.timewarp import timewarp
 
     timewarp(torch.rand(2, 8, 9), max_run=3)
+    from ...ops.body import body_of
+
+    m = clips[0]
+    trans = m.skeleton.offsets.expand(m.num_frames, -1, -1).clone()
+    trans[:, 0] = m.root_translation
+    CompiledBackend().inside_body(m.rotations.float().numpy(), trans.float().numpy(), [m.num_frames], m.skeleton,
+                                  body_of(m.skeleton, roles))
     return time.perf_counter() - t0
 
 
@@ -98,6 +105,21 @@ class CompiledBackend(Backend):
         B = len(out.frames)
         return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, out.correction, out.crop,
                             out.cost, out.posture, [np.zeros((0, 2), np.int64)] * B, {}, parts=_parts(out))
+
+    def inside_body(self, rotations, translations, lengths, skeleton, body):
+        from ...cpu.body import inside_clips
+        from ...cpu.fk import joint_closure
+
+        lengths = np.asarray(lengths, dtype=np.int64)
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        ends = body.end_joints.numpy()
+        share, depth = np.zeros(len(lengths)), np.zeros(len(lengths))
+        inside_clips(np.ascontiguousarray(rotations), np.ascontiguousarray(translations),
+                     np.asarray(skeleton.parents, dtype=np.int64), joint_closure(skeleton.parents, np.unique(ends)),
+                     ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
+                     np.asarray(body.probes, dtype=np.int64), np.asarray(body.obstacles, dtype=np.int64),
+                     float(body.margin), starts, lengths, share, depth)
+        return share, depth
 
     def assembly_bank(self, prepared):
         b = prepared

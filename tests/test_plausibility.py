@@ -1,0 +1,236 @@
+"""Plausibility: a body of capsules around any humanoid skeleton, and what a person would reject
+(:mod:`torchsplice.ops.body`, :mod:`torchsplice.ops.plausibility`), measured on every result.
+
+Known answers: the closed-form segment distance against brute force; a clip built with a hand
+inside the chest (inside on exactly those frames, as deep as the torso's radius) and the clean
+clip (never); a foot sliding at known speeds against GMD's skate rule worked by hand; a seam
+of known size in the upper body; the body built on every shipped rig. On a real job (Bandai
+Namco runs, dashes and turns x raised hands and waves), every result's columns equal the
+figures of its stored frames and of its sources, and the flag says so exactly where the result
+exceeds both sources.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import MOCAP, _require_mocap
+from torchsplice.core.fk import forward_kinematics
+from torchsplice.ops.body import CAPSULES, INSIDE_MARGIN, body_of, capsule_ends, inside_depth, segment_distance
+from torchsplice.ops.plausibility import GMD_FPS, jerk, penetration, penetration_packed, skate_ratio
+from torchsplice.sample import sample_motions
+from torchsplice.specs import load_spec
+from torchsplice.specs.canonical import canonical_joints
+from torchsplice.specs.smpl import smpl22_skeleton
+from torchsplice.store.database import MotionDatabase
+
+
+def test_the_segment_distance_is_the_brute_force_minimum():
+    g = torch.Generator().manual_seed(3)
+    P = torch.randn(600, 4, 3, generator=g, dtype=torch.float64)
+    P[:50, 1] = P[:50, 0]  # a point against a segment
+    P[50:100, 3] = P[50:100, 2]  # a segment against a point
+    P[100:150, 3] = P[100:150, 2] + 0.6 * (P[100:150, 1] - P[100:150, 0])  # parallel
+    P[150:200, 1], P[150:200, 3] = P[150:200, 0], P[150:200, 2]  # two points
+    got = segment_distance(P[:, 0], P[:, 1], P[:, 2], P[:, 3])
+    s = torch.linspace(0, 1, 801, dtype=torch.float64)
+    a = P[:, None, 0] + s[None, :, None] * (P[:, None, 1] - P[:, None, 0])
+    b = P[:, None, 2] + s[None, :, None] * (P[:, None, 3] - P[:, None, 2])
+    brute = (a[:, :, None] - b[:, None, :]).norm(dim=-1).flatten(1).amin(1)
+    scale = (P[:, 1] - P[:, 0]).norm(dim=-1) + (P[:, 3] - P[:, 2]).norm(dim=-1)
+    assert bool((got <= brute + 1e-12).all())  # never above a distance that is reached
+    assert bool((brute - got <= 1e-3 * scale + 1e-12).all())  # within the grid's step
+    assert float(segment_distance(*torch.tensor([[0, 0, 0], [1, 0, 0], [0.5, -1, 2], [0.5, 1, 2]],
+                                                dtype=torch.float64))) == pytest.approx(2.0)
+
+
+def _sample():
+    m = sample_motions()[0].to(torch.float64)
+    return m, load_spec("sample").bind(m.skeleton)
+
+
+def test_the_body_of_smpl22_has_the_stated_sizes():
+    sk = smpl22_skeleton()
+    body = body_of(sk, load_spec("smpl22").bind(sk))
+    legs = (0.3936 + 0.4324 + 0.3902 + 0.4256) / 2  # hip to knee to ankle, both legs (smpl.py's bone table)
+    spine = 0.1316 + 0.1432 + 0.0574 + 0.2194 + 0.1030  # pelvis, spine1, spine2, spine3, neck, head
+    assert body.height == pytest.approx(legs + spine)
+    sizes = body.sizes()
+    for name, (*_, share) in CAPSULES.items():
+        assert sizes[name] == pytest.approx(share * body.height)
+    assert sizes["torso_l"] == pytest.approx(0.100, abs=1e-3) and sizes["forearm_r"] == pytest.approx(0.037, abs=1e-3)
+    assert body.margin == pytest.approx(INSIDE_MARGIN * body.height)
+
+
+def test_a_hand_put_inside_the_chest_is_inside_there_only_and_as_deep_as_the_torso():
+    m, roles = _sample()
+    body = body_of(m.skeleton, roles)
+    clean = m.global_positions()
+    T = clean.shape[0]
+    share, depth = penetration(clean[None], torch.tensor([T]), body)
+    assert float(share) == 0.0 and float(depth) == 0.0  # the clean clip
+    j = canonical_joints(roles, m.skeleton)
+    a, b = capsule_ends(clean, body)
+    torso = list(CAPSULES).index("torso_r")
+    mid = (a[:, torso] + b[:, torso]) / 2  # the torso's axis, halfway up
+    forward = torch.zeros(T, 3, dtype=torch.float64)
+    forward[:, 2] = 1.0  # any direction across the axis: the hand lies on it
+    bad = clean.clone()
+    frames = torch.arange(40, 52)
+    bad[frames, j["wrist_r"]] = mid[frames]
+    bad[frames, j["elbow_r"]] = mid[frames] + 0.3 * body.height * forward[frames]
+    share, depth = penetration(bad[None], torch.tensor([T]), body)
+    assert float(share) == pytest.approx(len(frames) / T)
+    assert float(depth) == pytest.approx(float(body.radii[torso]), rel=1e-9)  # the axis crosses the torso's axis
+    inside = inside_depth(bad, body).flatten(1).amax(1) > body.margin
+    assert inside.nonzero().flatten().tolist() == frames.tolist()
+    # packed along frames, with the clean clip beside it: the same figures
+    share2, depth2 = penetration_packed(torch.cat([clean, bad]), [T, T], body)
+    assert share2.tolist() == [0.0, pytest.approx(len(frames) / T)] and float(depth2[1]) == pytest.approx(float(depth))
+
+
+@pytest.mark.realdata
+def test_the_body_is_built_on_every_shipped_rig_and_clean_captures_seldom_touch_it(tmp_path):
+    from torchsplice.formats.importer import import_bvh
+
+    _require_mocap()
+    db = tmp_path / "rigs.h5"
+    import_bvh([MOCAP / "cmu_graphics_lab", MOCAP / "lafan1_via_pypi_bvhtools",
+                MOCAP / "bandai_namco_research_motiondataset" / "dataset-1_walk_normal_001.bvh",
+                MOCAP / "bandai_namco_research_motiondataset" / "dataset-1_run_normal_001.bvh"], db)
+    m, roles = _sample()
+    rigs = {"sample": (m.skeleton, roles), "smpl22": (smpl22_skeleton(), load_spec("smpl22").bind(smpl22_skeleton()))}
+    shares = []
+    with MotionDatabase.open(db) as d:
+        for k, sk in enumerate(d.skeletons):
+            rigs[d.skeleton_info(k).spec_name + str(k)] = (sk, d.spec(k).bind(sk))
+        for name in d.names:
+            c = d.read(name, dtype=torch.float64)
+            k = d.clip_info(name)["skeleton"]
+            share, _ = penetration(c.global_positions()[None], torch.tensor([c.num_frames]), body_of(*rigs[
+                d.skeleton_info(k).spec_name + str(k)]))
+            shares.append(float(share))
+    assert {"cmu0", "cmu_max1", "lafan12", "bandai_namco3"} <= set(rigs) or len(rigs) >= 6, rigs.keys()
+    for name, (sk, r) in rigs.items():
+        body = body_of(sk, r)
+        assert body.height > 0 and bool((body.radii > 0).all()), name
+    # CMU's 131_* hold hands against the body (a real contact); walks and runs do not
+    assert sum(s > 0.05 for s in shares) <= 2, shares
+
+
+def _feet(T: int, fps: float, speed: float, height: float = 0.0) -> torch.Tensor:
+    """A two-joint 'body': a foot sliding along X at ``speed`` m/s, ``height`` m up, and the other
+    foot standing still on the floor (y = 0, the clip's lowest point); ``(1, T, 2, 3)``."""
+    p = torch.zeros(1, T, 2, 3, dtype=torch.float64)
+    p[0, :, 0, 0] = torch.arange(T, dtype=torch.float64) * speed / fps
+    p[0, :, 0, 1] = height
+    return p
+
+
+@pytest.mark.parametrize("fps", [20.0, 30.0, 60.0])
+def test_gmds_skate_ratio_of_a_foot_sliding_at_known_speeds(fps):
+    T = int(3 * fps) + 1  # 3 s: 60 steps at 20 fps
+    ratio = lambda p: float(skate_ratio(p, torch.tensor([T]), torch.tensor([fps]), [0], 1, 1.0))  # noqa: E731
+    assert ratio(_feet(T, fps, 1.0)) == 1.0  # every step: averaged over 5 steps even at the ends (0.6 m/s there)
+    assert ratio(_feet(T, fps, 0.4)) == 0.0  # below 0.5 m/s
+    steps = int(3 * GMD_FPS)
+    assert ratio(_feet(T, fps, 0.7)) == pytest.approx((steps - 2) / steps)  # the first and last steps average 0.42 m/s
+    assert ratio(_feet(T, fps, 1.0, height=0.06)) == 0.0  # 6 cm up: not in contact
+    cm = _feet(T, fps, 1.0) * 100  # in centimetres: the same answer
+    assert float(skate_ratio(cm, torch.tensor([T]), torch.tensor([fps]), [0], 1, 100.0)) == 1.0
+
+
+def test_a_seam_of_known_size_shows_in_the_jerk():
+    T, fps, s = 60, 30.0, 0.05
+    pos = torch.zeros(1, T, 3, 3, dtype=torch.float64)  # a chest (joint 0) and two hands, standing still
+    pos[0, :, 1] = torch.tensor([0.3, 0.0, 0.0], dtype=torch.float64)
+    pos[0, :, 2] = torch.tensor([-0.3, 0.0, 0.0], dtype=torch.float64)
+    rot = torch.zeros(1, T, 4, dtype=torch.float64)
+    rot[..., 0] = 1.0
+    lengths = torch.tensor([T])
+    assert float(jerk(pos, rot, lengths, torch.tensor([fps]), [1, 2], 0)) < 1e-6  # still: rounding only
+    pos[0, 30:, 1, 1] += s  # one hand jumps by s at frame 30 (a seam), the other does not
+    got = float(jerk(pos, rot, lengths, torch.tensor([fps]), [1, 2], 0))
+    # the third differences across a step of s are s, -2s and s: the largest 2s, halved by the still hand
+    assert got == pytest.approx(2 * s * fps ** 3 / 2)
+    # turning the whole body (chest included) changes nothing: the hands are read in the chest's frame
+    turn = torch.tensor([np.cos(0.4), 0.0, np.sin(0.4), 0.0], dtype=torch.float64)
+    from torchsplice.core.rotations import quat_apply
+
+    turned = quat_apply(turn.expand(1, T, 3, 4), pos)
+    assert float(jerk(turned, turn.expand(1, T, 4).clone(), lengths, torch.tensor([fps]), [1, 2], 0)) == pytest.approx(got)
+
+
+@pytest.fixture(scope="module")
+def runs_with_raised_hands(tmp_path_factory):
+    """Bandai Namco runs, dashes and turning walks x raised hands, waves and calls, spliced."""
+    from torchsplice.formats.importer import import_bvh
+    from torchsplice.job.run import splice_all
+
+    _require_mocap()
+    folder = tmp_path_factory.mktemp("pen")
+    db = folder / "bn.h5"
+    import_bvh([MOCAP / "bandai_namco_research_motiondataset"], db, spec="bandai_namco")
+    out = folder / "out.h5"
+    splice_all(db, out, locomotions=["*run*,*dash*,*turn*"], actions=["*wave*,*raise*,*bye*,*call*,*guide*"],
+               workers=1)
+    return db, out
+
+
+@pytest.mark.realdata
+def test_every_results_columns_are_its_frames_figures_and_its_sources(runs_with_raised_hands):
+    db, out = runs_with_raised_hands
+    with MotionDatabase.open(out) as o, MotionDatabase.open(db) as src:
+        t = o.clip_table()
+        names = list(t.name)
+        k = int(t.skeleton[0])
+        sk = o.skeletons[k]
+        body = body_of(sk, o.spec(k).bind(sk))
+        clips = [o.read(n, dtype=torch.float64) for n in names]
+        positions = torch.cat([c.global_positions() for c in clips])
+        share, depth = penetration_packed(positions, [c.num_frames for c in clips], body)
+        e = t.extra
+        assert np.allclose(np.asarray(e["penetration"]), share.numpy(), atol=1.5 / 70)  # float32 frames: a frame at most
+        inside = np.asarray(e["penetration"]) > 0
+        assert inside.any() and np.allclose(np.asarray(e["penetration_depth"])[inside], depth.numpy()[inside], atol=0.05)
+        of = {}
+        for name in src.names:
+            c = src.read(name, dtype=torch.float64)
+            s, d = penetration(c.global_positions()[None], torch.tensor([c.num_frames]), body)
+            of[name] = (float(s), float(d))
+        loco = np.array([of[n][0] for n in t.extra["locomotion"]])
+        act = np.array([of[n][0] for n in t.extra["action"]])
+        assert np.allclose(np.asarray(e["penetration_locomotion"]), loco) and np.allclose(np.asarray(e["penetration_action"]), act)
+        flagged = np.array(["self_penetration" in f for f in e["flags"]])
+        expect = np.asarray(e["penetration"]) > np.maximum(loco, act) + 0.05
+        assert flagged.any() and (flagged == expect).all()
+        for f, words in zip(e["flags"], e["flag_details"]):
+            assert ("self_penetration" in f) == ("a hand inside the body on" in words)
+
+
+@pytest.mark.realdata
+def test_the_compiled_body_test_gives_the_torch_figures(runs_with_raised_hands):
+    """The compiled splicer's kernel (:mod:`torchsplice.cpu.body`) against the backends' torch
+    default, on every result of the real job (some of them with a hand inside the body)."""
+    from torchsplice.splice.backends import Backend
+    from torchsplice.splice.backends.compiled import CompiledBackend
+
+    _, out = runs_with_raised_hands
+    with MotionDatabase.open(out) as o:
+        clips = [o.read(n) for n in o.names]
+        sk = o.skeletons[0]
+        body = body_of(sk, o.spec(0).bind(sk))
+    rot = torch.cat([c.rotations for c in clips]).numpy()
+    trans = torch.cat([c.translations if c.translations is not None else
+                       torch.cat([c.root_translation[:, None], sk.offsets[1:].float().expand(c.num_frames, -1, -1)], 1)
+                       for c in clips]).numpy()
+    trans[:, 0] = torch.cat([c.root_translation for c in clips]).numpy()
+    lengths = [c.num_frames for c in clips]
+    want = Backend.inside_body(CompiledBackend(), rot, trans, lengths, sk, body)  # the torch default
+    got = CompiledBackend().inside_body(rot, trans, lengths, sk, body)
+    assert (want[0] > 0).sum() >= 10
+    assert np.array_equal(got[0], want[0]) and np.allclose(got[1], want[1], atol=1e-9)

@@ -1,0 +1,109 @@
+"""Compiled test of a hand inside the body (:mod:`torchsplice.ops.body`) on clips packed along frames.
+
+The same figures as :func:`torchsplice.ops.plausibility.penetration_packed`: per clip the share
+of frames in which a probe capsule's axis is deeper than ``margin`` inside an obstacle capsule
+(``radius - axis distance``), and the deepest it goes. One clip per thread; per frame, FK of
+the joints the capsules need (``joints``, ascending and closed under parents) then each probe
+against each obstacle, the segment distance in closed form. Shapes: rotations ``(N, J, 4)``
+(unit WXYZ, local), translations ``(N, J, 3)`` (row 0 the root's world position, the others
+offsets or animated translations); capsule ends ``end_a``, ``end_b``, ``end_w`` ``(2C,)``: end
+``k`` is ``pos[end_a[k]] (1 - end_w[k]) + pos[end_b[k]] end_w[k]``, capsule ``c`` its ends
+``2c`` and ``2c + 1``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .quat import qload, qmul, qrot
+
+__all__ = ["inside_clips"]
+
+
+@njit(cache=True, inline="always")
+def _dot(a0, a1, a2, b0, b1, b2):
+    return a0 * b0 + a1 * b1 + a2 * b2
+
+
+@njit(cache=True, nogil=True)
+def _segment_distance(e, i, k):
+    """Distance between segments ``e[2i] e[2i+1]`` and ``e[2k] e[2k+1]`` (rows of ``(2C, 3)`` ``e``)."""
+    d1 = (e[2 * i + 1, 0] - e[2 * i, 0], e[2 * i + 1, 1] - e[2 * i, 1], e[2 * i + 1, 2] - e[2 * i, 2])
+    d2 = (e[2 * k + 1, 0] - e[2 * k, 0], e[2 * k + 1, 1] - e[2 * k, 1], e[2 * k + 1, 2] - e[2 * k, 2])
+    r = (e[2 * i, 0] - e[2 * k, 0], e[2 * i, 1] - e[2 * k, 1], e[2 * i, 2] - e[2 * k, 2])
+    a = _dot(d1[0], d1[1], d1[2], d1[0], d1[1], d1[2])
+    ee = _dot(d2[0], d2[1], d2[2], d2[0], d2[1], d2[2])
+    b = _dot(d1[0], d1[1], d1[2], d2[0], d2[1], d2[2])
+    c = _dot(d1[0], d1[1], d1[2], r[0], r[1], r[2])
+    f = _dot(d2[0], d2[1], d2[2], r[0], r[1], r[2])
+    eps = 1e-12 * max(a + ee, 1e-300)
+    s = 0.0
+    t = 0.0
+    if a > eps and ee > eps:
+        denom = a * ee - b * b
+        if denom > eps * (a + ee):
+            s = min(max((b * f - c * ee) / denom, 0.0), 1.0)
+    elif a > eps:
+        s = min(max(-c / a, 0.0), 1.0)
+    if ee > eps:
+        t = (b * s + f) / ee
+        if t < 0.0:
+            t = 0.0
+            if a > eps:
+                s = min(max(-c / a, 0.0), 1.0)
+        elif t > 1.0:
+            t = 1.0
+            if a > eps:
+                s = min(max((b - c) / a, 0.0), 1.0)
+    g0 = r[0] + d1[0] * s - d2[0] * t
+    g1 = r[1] + d1[1] * s - d2[1] * t
+    g2 = r[2] + d1[2] * s - d2[2] * t
+    return math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+
+
+@njit(cache=True, parallel=True)
+def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, margin, starts, lengths,
+                 share, depth):
+    """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``share[c]`` and ``depth[c]``
+    (see the module docstring)."""
+    J = rot.shape[1]
+    K = end_a.shape[0]
+    for c in prange(starts.shape[0]):
+        pos = np.zeros((J, 3))
+        grot = np.zeros((J, 4))
+        ends = np.empty((K, 3))
+        inside = 0
+        deepest = 0.0
+        for t in range(starts[c], starts[c] + lengths[c]):
+            for j in joints:
+                p = parents[j]
+                q = qload(rot, t, j)
+                if p < 0:
+                    grot[j, 0], grot[j, 1], grot[j, 2], grot[j, 3] = q
+                    pos[j, 0], pos[j, 1], pos[j, 2] = trans[t, j, 0], trans[t, j, 1], trans[t, j, 2]
+                else:
+                    gp = (grot[p, 0], grot[p, 1], grot[p, 2], grot[p, 3])
+                    grot[j, 0], grot[j, 1], grot[j, 2], grot[j, 3] = qmul(gp, q)
+                    o = qrot(gp, (trans[t, j, 0], trans[t, j, 1], trans[t, j, 2]))
+                    pos[j, 0] = pos[p, 0] + o[0]
+                    pos[j, 1] = pos[p, 1] + o[1]
+                    pos[j, 2] = pos[p, 2] + o[2]
+            for k in range(K):
+                w = end_w[k]
+                for x in range(3):
+                    ends[k, x] = pos[end_a[k], x] * (1.0 - w) + pos[end_b[k], x] * w
+            best = -math.inf
+            for i in probes:
+                for o_ in obstacles:
+                    d = radii[o_] - _segment_distance(ends, i, o_)
+                    if d > best:
+                        best = d
+            if best > margin:
+                inside += 1
+                if best > deepest:
+                    deepest = best
+        share[c] = inside / max(lengths[c], 1)
+        depth[c] = deepest
