@@ -12,14 +12,11 @@ exceeds both sources.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import torch
 
 from conftest import MOCAP, _require_mocap
-from torchsplice.core.fk import forward_kinematics
 from torchsplice.ops.body import CAPSULES, INSIDE_MARGIN, body_of, capsule_ends, inside_depth, segment_distance
 from torchsplice.ops.plausibility import GMD_FPS, jerk, penetration, penetration_packed, skate_ratio
 from torchsplice.sample import sample_motions
