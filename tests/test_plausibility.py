@@ -231,3 +231,25 @@ def test_the_compiled_body_test_gives_the_torch_figures(runs_with_raised_hands):
     got = CompiledBackend().inside_body(rot, trans, lengths, sk, body)
     assert (want[0] > 0).sum() >= 10
     assert np.array_equal(got[0], want[0]) and np.allclose(got[1], want[1], atol=1e-9)
+
+
+@pytest.mark.realdata
+def test_evaluate_reports_the_figures_per_method_against_the_sources(runs_with_raised_hands, tmp_path):
+    from torchsplice.evaluation.report import evaluate_database
+
+    _, out = runs_with_raised_hands
+    report = tmp_path / "report.md"
+    evaluate_database(out, report, pictures=False)
+    text = report.read_text()
+    with MotionDatabase.open(out) as o:
+        e = o.clip_table().extra
+        share = np.asarray(e["penetration"])
+        beyond = share - np.maximum(np.asarray(e["penetration_locomotion"]), np.asarray(e["penetration_action"]))
+    section = text.split("## Plausibility: a hand inside the body")[1]
+    row = next(ln for ln in section.splitlines() if ln.startswith("| splice |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[1] == str(len(share))
+    assert cells[2] == f"{100 * (share > 0).mean():.1f}%" and cells[3] == f"{100 * (beyond > 0.05).mean():.1f}%"
+    worst = np.argmax(beyond)
+    with MotionDatabase.open(out) as o:
+        assert "Most beyond their sources" in text and o.names[worst] in text.split("Most beyond their sources")[1]

@@ -39,6 +39,7 @@ from ..specs import DatasetSpec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
+from .plausibility import plausibility_rows, plausibility_section
 from .standing import standing_measures
 from ..viz.sources import SourceClips as _Sources, source_databases as _source_dbs
 
@@ -238,6 +239,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
                 "loco_type": locomotion_type(locos[n]),
                 **stand.get(n, {"timing": "timewarp"}),
                 **moves.get(n, {}),
+                **plausibility_rows(t, i),
             })
     captured = [sources.get(n) for n in sorted(captured_names)]
     lo, hi = _captured_phase_band(captured, roles)
@@ -534,6 +536,7 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
     lines += _ground_truth_section(per_clip, methods, units)
     lines += _standing_section(per_clip, methods, units, phase_band)
     lines += _retarget_section(per_clip, methods, units)
+    lines += plausibility_section(per_clip, methods, md)
     if figures:
         lines += ["## Pictures", ""]
         lines += [f"**{md(title)}**\n\n![{md(title)}](<{file}>)\n" for title, file in figures]

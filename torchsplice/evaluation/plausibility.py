@@ -1,0 +1,69 @@
+"""The evaluation report's section on plausibility: how often a result puts a hand inside its body.
+
+Read from the job's columns (``penetration`` and its sources' figures,
+:func:`torchsplice.ops.plausibility.penetration`), per method, against the sources: so that a
+method that makes the problem (or the naive splice, which has it too) shows beside the others.
+Outputs written before the columns existed get no section.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["PLAUSIBILITY_COLUMNS", "plausibility_rows", "plausibility_section", "WORST"]
+
+PLAUSIBILITY_COLUMNS = ("penetration", "penetration_depth", "penetration_locomotion", "penetration_action")
+"""The columns a clip's row takes from the output's table (when it has them)."""
+WORST = 5
+"""Clips the section names per method, those beyond their sources the most."""
+
+
+def plausibility_rows(t, i: int) -> dict:
+    """The plausibility figures of row ``i`` of the clip table ``t`` (empty when it has none)."""
+    if not all(c in t for c in PLAUSIBILITY_COLUMNS):
+        return {}
+    return {c: float(t[c][i]) for c in PLAUSIBILITY_COLUMNS}
+
+
+def _quantile(values: list[float], q: float) -> float:
+    if not values:
+        return math.nan
+    s = sorted(values)
+    return s[min(len(s) - 1, max(0, math.ceil(q * len(s)) - 1))]
+
+
+def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[str]:
+    """Markdown lines of the section (none when the clips have no figures); ``md`` escapes text."""
+    if not per_clip or "penetration" not in per_clip[0]:
+        return []
+    lines = ["## Plausibility: a hand inside the body", "",
+             "| method | clips | a frame inside | beyond both sources by 0.05 (flagged) | frames inside, mean / 95th pct. | "
+             "depth at worst, 95th pct. (cm) | the locomotions' frames inside, mean | the actions', mean |",
+             "|---|---|---|---|---|---|---|---|"]
+    worst_lines: list[str] = []
+    for m in methods:
+        cs = [c for c in per_clip if c["method"] == m]
+        if not cs:
+            continue
+        shares = [c["penetration"] for c in cs]
+        beyond = [c["penetration"] - max(c["penetration_locomotion"], c["penetration_action"]) for c in cs]
+        inside = [c for c in cs if c["penetration"] > 0]
+        lines.append(f"| {md(m)} | {len(cs)} | {100 * len(inside) / len(cs):.1f}% | "
+                     f"{100 * sum(b > 0.05 for b in beyond) / len(cs):.1f}% | {100 * sum(shares) / len(cs):.2f}% / "
+                     f"{100 * _quantile(shares, 0.95):.1f}% | {_quantile([c['penetration_depth'] for c in inside], 0.95):.1f} | "
+                     f"{100 * sum(c['penetration_locomotion'] for c in cs) / len(cs):.2f}% | "
+                     f"{100 * sum(c['penetration_action'] for c in cs) / len(cs):.2f}% |")
+        ranked = sorted(zip(beyond, cs), key=lambda x: -x[0])[:WORST]
+        named = [f"{md(c['name'])} ({100 * c['penetration']:.0f}% of frames, {c['penetration_depth']:.1f} cm; sources "
+                 f"{100 * c['penetration_locomotion']:.0f}% / {100 * c['penetration_action']:.0f}%)"
+                 for b, c in ranked if b > 0]
+        if named:
+            worst_lines.append(f"- {md(m)}: " + "; ".join(named))
+    lines += ["", "A frame counts when a forearm's axis (the hand included) lies more than 0.02 of the character's "
+              "height (3 cm on SMPL-22) inside the torso, pelvis, head, a thigh or a shin of the skeleton's body of "
+              "capsules; depth is measured from the capsule's surface. The sources' figures are the locomotion's "
+              "and the action's own (the action as spliced): a result is judged against what its sources already "
+              "do. Lower is better.", ""]
+    if worst_lines:
+        lines += ["Most beyond their sources:", "", *worst_lines, ""]
+    return lines
