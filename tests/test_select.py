@@ -196,6 +196,30 @@ def test_column_and_skeleton_selectors_on_a_spliced_database(spliced_db):
         pick("mthod:naive")
 
 
+def test_number_columns_are_compared_with_numbers(spliced_db):
+    """``COLUMN<VALUE`` and its kin on the number columns (``alignment_distance``, ``cost``,
+    ``penetration``...): the brute-force comparison; NaN selects nothing; a name that is not a
+    number column, or a value that is not a number, is one line naming the selector."""
+    from torchsplice.store import MotionDatabase
+
+    with MotionDatabase.open(spliced_db) as db:
+        t = db.clip_table()
+    dist = np.asarray(t.extra["alignment_distance"], dtype=np.float64)
+    pick = lambda *s: [t.names[i] for i in select_clips(t, list(s), "select", "db")]  # noqa: E731
+    cut = float(np.median(dist[np.isfinite(dist)]))
+    assert pick(f"alignment_distance<{cut!r}") == _brute(t, lambda i: dist[i] < cut) != []
+    assert pick(f"alignment_distance >= {cut!r}") == _brute(t, lambda i: dist[i] >= cut) != []
+    assert pick(f"alignment_distance<={cut!r},method:naive") == _brute(t, lambda i: dist[i] <= cut or
+                                                                       t.extra["method"][i] == "naive")
+    assert pick("penetration<=0") == _brute(t, lambda i: t.extra["penetration"][i] <= 0) != []
+    with pytest.raises(TorchspliceError, match=r"selects no clip of db \(its alignment_distance values: .* to .*\)"):
+        pick("alignment_distance>1e9")
+    with pytest.raises(TorchspliceError, match=r"'alignment_distanse' is not a number column \(number columns: .*cost"):
+        pick("alignment_distanse<1")
+    with pytest.raises(TorchspliceError, match=r"'x1' is not a number"):
+        pick("cost>x1")
+
+
 def test_the_job_the_dataset_and_the_exports_select_the_same_clips(spliced_db, tmp_path):
     from torchsplice.data import MotionDataset
     from torchsplice.formats.exporters import export_clips

@@ -9,6 +9,9 @@ A selector is a comma-separated list of alternatives, any of which selects a cli
 - ``COLUMN:VALUE``: a text column the database declares (a spliced database's ``method``,
   ``flags``, ``timing``, ``locomotion``, ``action``...), ``VALUE`` a shell-style glob
   (``method:naive``, ``flags:*poor_alignment*``, ``flags:`` for the clips without a flag);
+- ``COLUMN<VALUE``, ``<=``, ``>``, ``>=``: a number column the database declares (a spliced
+  database's ``penetration``, ``alignment_distance``, ``cost``...) against a number
+  (``'penetration<0.01'``, ``'alignment_distance<=0.1'``; NaN selects nothing);
 - anything else: a shell-style glob on the clip name (``'*walk*'``), case-sensitive.
 
 A selector that is exactly a clip's name selects that clip, before any splitting, so a name
@@ -37,15 +40,30 @@ from .table import ClipTable
 __all__ = ["select_clips", "parse_selector", "names_or_selector", "looks_like_selector"]
 
 
-def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, str, str]]:
+_COMPARISON = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)\s*(<=|>=|<|>)\s*(\S+)$")
+_OPERATORS = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal}
+
+
+def parse_selector(text: str, columns: Sequence[str] = (), numbers: Sequence[str] = ()) -> list[tuple[str, str, str]]:
     """The alternatives of one selector as ``(kind, key, pattern)``: kind ``role``, ``label``,
-    ``skeleton``, ``column`` (one of ``columns``, the table's text columns) or ``name``."""
+    ``skeleton``, ``column`` (one of ``columns``, the table's text columns), ``number`` (one of
+    ``numbers``, its number columns; ``pattern`` the operator and the number) or ``name``."""
     alts = []
     for part in (p.strip() for p in re.split(r",(?![^\[]*\])", text)):  # a comma in [...] is a character
         if not part:
             raise TorchspliceError(f"empty alternative in selector {text!r}")
         prefix = part.split(":", 1)[0] if ":" in part else ""
-        if part.startswith("role:"):
+        compared = _COMPARISON.match(part)
+        if compared and compared.group(1) in numbers:
+            try:
+                float(compared.group(3))
+            except ValueError:
+                raise TorchspliceError(f"selector {part!r}: {compared.group(3)!r} is not a number") from None
+            alts.append(("number", compared.group(1), f"{compared.group(2)} {compared.group(3)}"))
+        elif compared and numbers:
+            raise TorchspliceError(f"selector {part!r}: {compared.group(1)!r} is not a number column (number columns: "
+                                   f"{', '.join(numbers)})")
+        elif part.startswith("role:"):
             alts.append(("role", "", part[5:]))
         elif part.startswith("skeleton:"):
             if not part[9:].strip().isdigit():
@@ -70,6 +88,10 @@ def parse_selector(text: str, columns: Sequence[str] = ()) -> list[tuple[str, st
 def _mask(alt, names, roles: np.ndarray, labels: list[dict], skeletons: np.ndarray, columns: dict) -> np.ndarray:
     """``(C,)`` bool: the clips one alternative ``(kind, key, pattern)`` selects."""
     kind, key, pattern = alt
+    if kind == "number":
+        op, value = pattern.split(" ")
+        with np.errstate(invalid="ignore"):
+            return _OPERATORS[op](np.asarray(columns[key], dtype=np.float64), float(value))
     if kind == "role":
         return roles == pattern
     if kind == "skeleton":
@@ -92,6 +114,11 @@ def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict],
     """For an error: the database's roles, label keys, skeletons, column values or first clip
     names, as the selector asked."""
     kinds = {kind for kind, _, _ in alts}
+    if kinds == {"number"} and columns and len({key for _, key, _ in alts}) == 1:
+        key = alts[0][1]
+        values = np.asarray(columns[key], dtype=np.float64)
+        values = values[np.isfinite(values)]
+        return f"its {key} values: " + (f"{values.min():g} to {values.max():g}" if len(values) else "none")
     if kinds == {"skeleton"} and skeletons is not None:
         return "its skeletons: " + (", ".join(str(k) for k in sorted({int(k) for k in skeletons})) or "none")
     if kinds == {"column"} and columns and len({key for _, key, _ in alts}) == 1:
@@ -122,20 +149,23 @@ def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, so
     names, labels = table.names, table.labels
     roles, skeletons = np.asarray(table.role, dtype=str), np.asarray(table.skeleton)
     columns = {k: v for k, v in table.extra.items() if table.kinds.get(k) == "str"}
+    numbers = tuple(k for k in table.extra if table.kinds.get(k) in ("float", "int"))
+    columns.update({k: table.extra[k] for k in numbers})
     keep = np.ones(len(names), dtype=bool)
     known = set(names)
     for text in selectors:
         if text in known:  # a clip's exact name, before any splitting (it may hold "," or ":")
             keep &= np.asarray(names, dtype=object) == text
             continue
-        alts = parse_selector(text, tuple(columns))
+        alts = parse_selector(text, tuple(k for k in columns if k not in numbers), numbers)
         hit = np.zeros(len(names), dtype=bool)
         for alt in alts:
             hit |= _mask(alt, names, roles, labels, skeletons, columns)
         if not hit.any():
             raise TorchspliceError(f"{what} {text!r} selects no clip of {source} "
                                    f"({_what_there_is(alts, names, roles, labels, skeletons, columns)})"
-                                   + _colon_hint(text, columns), options=_option(what))
+                                   + _colon_hint(text, [k for k in columns if k not in numbers]),
+                                   options=_option(what))
         keep &= hit
     if not keep.any():
         raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
@@ -157,7 +187,7 @@ def _colon_hint(text: str, columns) -> str:
 def looks_like_selector(text: str) -> bool:
     """Whether a command's clip argument reads as a selector (a glob, a ``PREFIX:`` or
     alternatives) rather than a plain clip name."""
-    return re.search(r"[*?\[,:]", text) is not None
+    return re.search(r"[*?\[,:<>]", text) is not None
 
 
 def names_or_selector(table: ClipTable, items: Sequence[str]) -> tuple[list[str] | None, str | None]:
