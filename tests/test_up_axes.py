@@ -172,6 +172,6 @@ def test_splice_all_retargets_actions_on_another_up_axis_or_says_why_not(twins, 
     assert a.keys() == b.keys()
     for name in a:  # the Z-up actions turned back onto Y: the same upper bodies, to within the feet's fix
         assert float((a[name] - b[name]).norm(dim=-1).max()) < 0.02 * float(a[name][..., 1].max()), name
-    with pytest.raises(TorchspliceError, match=r"z.h5: up axis 'z' differs from .*y.h5's 'y'.*--no-retarget"):
+    with pytest.raises(TorchspliceError, match=r"z.h5: up axis 'z' differs from .*y.h5's 'y'.*retarget is off"):
         splice_all(y, tmp_path / "off.h5", actions_db=z, methods="splice", retarget=False)
     assert not (tmp_path / "off.h5").exists()

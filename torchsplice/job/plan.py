@@ -234,7 +234,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
             if a and b and a != b and "mixed" not in (a, b):
                 raise TorchspliceError(f"{c.actions_db}: {k.replace('_', ' ')} {b!r} differs from {c.database}'s {a!r}; "
                                        "splice clips of one unit and up axis, or let retargeting convert them "
-                                       "(drop --no-retarget)")
+                                       "({retarget} is off)", options=("retarget",))
     specs = {}
     for k in sorted({int(tl.skeleton[i]) for i in locos}):
         specs[k] = loco_db.spec(k)  # the stored spec, else one detected
