@@ -70,9 +70,10 @@ OBSTACLES = ("torso_l", "torso_r", "pelvis", "head", "thigh_l", "thigh_r", "shin
 """The body parts a probe may not enter."""
 INSIDE_MARGIN = 0.02
 """How deep (in heights along the bones: 3 cm on SMPL-22) a probe's axis must be inside an
-obstacle to count as inside it: a hand resting on the body, or brushing past it, is not. On
-every real clip of ``../shared/mocap`` (109), 11 then have a frame with a hand inside the torso,
-pelvis or a thigh, most of them hands held against the belly or hips."""
+obstacle to count as inside it: a hand resting on the body, or brushing past it, is not. Of
+the 109 real clips of ``../shared/mocap``, 9 then have a frame with a hand inside the torso,
+pelvis or a thigh, most of them hands held against the belly or hips (CMU's 131, a Bandai Namco
+walk that clasps them in front)."""
 
 
 @dataclass(frozen=True)
