@@ -20,14 +20,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from .sources import clip_key
+from .task import OUTPUT_COLUMNS
 
 __all__ = ["OutputSize", "estimate_output", "STORED", "TABLE_BYTES_PER_CLIP", "format_bytes"]
 
 TABLE_BYTES_PER_CLIP = 1300
 """Bytes of clip table per clip (its strings included), measured at 1,220 on Bandai Namco."""
 
-FILE_BYTES = 1 << 20
-"""Bytes of a database beyond its clips' frames and table (HDF5's structures)."""
+COLUMN_BYTES = 36_000
+"""Bytes an output column takes beyond its clips' values (its dataset's first chunk: measured
+at 35,200 for a float column)."""
+FILE_BYTES = (1 << 20) + (len(OUTPUT_COLUMNS) - 17) * COLUMN_BYTES
+"""Bytes of a database beyond its clips' frames and table (HDF5's structures): measured at 1 MiB
+when the output had 17 columns; each further column adds :data:`COLUMN_BYTES`."""
 
 CHUNK_FRAMES = 256
 """Frames per chunk of an output (see :class:`~torchsplice.job.sink.HDF5Sink`): each skeleton's
