@@ -224,7 +224,8 @@ def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_pa
     assert main(["evaluate", str(out), "-o", str(report), "-q"]) == 0
     capsys.readouterr()
     text = report.read_text()
-    section = text[text.index("## Standing actions"):text.index("## Pictures")]
+    start = text.index("## Standing actions")
+    section = text[start:text.index("\n## ", start)]  # up to the next section
     rows = {ln.split("|")[1].strip(): [x.strip() for x in ln.split("|")[2:-1]]
             for ln in section.splitlines() if ln.startswith("| ") and not ln.startswith("| method")}
     assert set(rows) == {"splice", "naive", "cpmc"} and all(r[0] == "9" for r in rows.values())
