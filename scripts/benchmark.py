@@ -340,9 +340,7 @@ def _body_test_share(output: Path, job_seconds: float) -> None:
         sk = o.skeletons[0]
         body = body_of(sk, o.spec(0).bind(sk))
     rot = np.concatenate([c.rotations.numpy() for c in clips])
-    trans = np.concatenate([(c.translations if c.translations is not None else torch.cat(
-        [c.root_translation[:, None], sk.offsets[1:].float().expand(c.num_frames, -1, -1)], 1)).numpy() for c in clips])
-    trans[:, 0] = np.concatenate([c.root_translation.numpy() for c in clips])
+    trans = np.concatenate([c.local_translations().numpy() for c in clips])
     backend = get_backend("compiled")
     best = best_of(lambda: backend.inside_body(rot, trans, [c.num_frames for c in clips], sk, body), repeats=3)
     print(f"job     the hand-in-body test of its {len(clips):,} results: {best:.3f} s = {100 * best / job_seconds:.1f}% of "

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 __all__ = ["PLAUSIBILITY_COLUMNS", "plausibility_rows", "plausibility_section", "WORST"]
 
 PLAUSIBILITY_COLUMNS = ("penetration", "penetration_depth", "penetration_locomotion", "penetration_action")
@@ -26,10 +28,8 @@ def plausibility_rows(t, i: int) -> dict:
 
 
 def _quantile(values: list[float], q: float) -> float:
-    if not values:
-        return math.nan
-    s = sorted(values)
-    return s[min(len(s) - 1, max(0, math.ceil(q * len(s)) - 1))]
+    """The ``q`` quantile of ``values`` (one of them), NaN for none."""
+    return float(np.quantile(values, q, method="inverted_cdf")) if values else math.nan
 
 
 def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[str]:

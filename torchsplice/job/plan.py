@@ -284,7 +284,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
 
     pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
     _acting(c, sources, groups, clips, sk_l, {plan_action_key(p, same) for p in pairs if p.mode == "standing"})
-    _penetrations(sources, groups, clips, sk_l)
+    _penetrations(c, sources, groups, clips, sk_l)
     if not pairs:
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
         raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
@@ -381,16 +381,14 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
                     clips[chunk[i]].acting = list(limbs)
 
 
-def _penetrations(sources: Sources, groups: list[Group], clips: dict, sk_l) -> None:
-    """Record in ``clips`` how each clip puts a hand inside its body, on its group's body
-    (:func:`~torchsplice.ops.plausibility.penetration_packed`), 64 clips at a time."""
-    import torch
-
-    from ..core.fk import forward_kinematics
+def _penetrations(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l) -> None:
+    """Record in ``clips`` how each clip puts a hand inside its body, on its group's body, by the
+    job's backend as its results are (:meth:`~torchsplice.splice.backends.Backend.inside_body`),
+    64 clips at a time."""
     from ..ops.body import body_of
-    from ..ops.plausibility import penetration_packed
     from ..ops.units import centimetres
 
+    backend = config.splice_backend()
     for g in groups:
         skeleton = sk_l[g.skeleton]
         body = body_of(skeleton, g.roles(skeleton))
@@ -398,11 +396,9 @@ def _penetrations(sources: Sources, groups: list[Group], clips: dict, sk_l) -> N
         for b in range(0, len(g.clips), 64):
             chunk = g.clips[b:b + 64]
             motions = [sources.motion(k) for k in chunk]
-            positions = torch.cat([forward_kinematics(m.rotations.double(), m.root_translation.double(),
-                                                      m.skeleton.offsets, m.skeleton.parents,
-                                                      None if m.translations is None else m.translations.double())[0]
-                                   for m in motions])
-            share, depth = penetration_packed(positions, [m.num_frames for m in motions], body)
+            rot = np.concatenate([m.rotations.detach().cpu().numpy() for m in motions]).astype(np.float32)
+            trans = np.concatenate([m.local_translations().detach().cpu().numpy() for m in motions]).astype(np.float32)
+            share, depth = backend.inside_body(rot, trans, [m.num_frames for m in motions], skeleton, body)
             for k, sh, d in zip(chunk, share.tolist(), depth.tolist()):
                 clips[k].penetration, clips[k].penetration_depth = sh, d * cm
 

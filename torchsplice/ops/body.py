@@ -82,19 +82,16 @@ class Body:
 
     Attributes:
         names: the capsules' names (:data:`CAPSULES` order).
-        ends: ``(2C, J)`` float64: row ``2c`` blends the joints into capsule ``c``'s first end,
-            row ``2c + 1`` into its second (:func:`capsule_ends`).
         radii: ``(C,)`` float64, in the skeleton's units.
         height: the height along the bones they are shares of (the skeleton's units).
         probes, obstacles: indices into ``names`` of :data:`PROBES` and :data:`OBSTACLES`.
         margin: :data:`INSIDE_MARGIN` in the skeleton's units.
-        end_joints, end_shares: ``(2C, 2)`` joint indices and ``(2C,)`` shares: end ``k`` is
-            ``pos[a] + share (pos[b] - pos[a])``, what :attr:`ends` holds as a matrix (for kernels
-            that read joints by index).
+        end_joints, end_shares: ``(2C, 2)`` joint indices ``(a, b)`` and ``(2C,)`` shares: end
+            ``k`` is ``pos[a] + share (pos[b] - pos[a])``, capsule ``c`` ends ``2c`` and ``2c + 1``
+            (:func:`capsule_ends`).
     """
 
     names: tuple[str, ...]
-    ends: torch.Tensor
     radii: torch.Tensor
     height: float
     probes: tuple[int, ...]
@@ -121,24 +118,22 @@ def body_of(skeleton: Skeleton, roles: SkeletonRoles, what: str = "the skeleton"
         spine.append(joints["head"])
     height = leg_length(skeleton, canonical_legs(joints)) + sum(
         float((rest[b] - rest[a]).norm()) for a, b in zip(spine, spine[1:]))
-    ends = torch.zeros(2 * len(CAPSULES), skeleton.num_joints, dtype=torch.float64)
     end_joints = torch.zeros(2 * len(CAPSULES), 2, dtype=torch.long)
     end_shares = torch.zeros(2 * len(CAPSULES), dtype=torch.float64)
     for c, (first, second, _) in enumerate(CAPSULES.values()):
         for e, (a, b, share) in enumerate((first, second)):
-            ends[2 * c + e, joints[a]] += 1.0 - share
-            ends[2 * c + e, joints[b]] += share
             end_joints[2 * c + e] = torch.tensor([joints[a], joints[b]])
             end_shares[2 * c + e] = share
     names = tuple(CAPSULES)
     radii = torch.tensor([r for *_, r in CAPSULES.values()], dtype=torch.float64) * height
-    return Body(names, ends, radii, height, tuple(names.index(n) for n in PROBES),
+    return Body(names, radii, height, tuple(names.index(n) for n in PROBES),
                 tuple(names.index(n) for n in OBSTACLES), INSIDE_MARGIN * height, end_joints, end_shares)
 
 
 def capsule_ends(positions: torch.Tensor, body: Body) -> tuple[torch.Tensor, torch.Tensor]:
     """Both ends ``(..., C, 3)`` of every capsule of ``body`` at joint positions ``(..., J, 3)``."""
-    e = torch.einsum("kj,...jc->...kc", body.ends.to(positions.dtype), positions)
+    a, b = positions[..., body.end_joints[:, 0], :], positions[..., body.end_joints[:, 1], :]
+    e = a + body.end_shares.to(positions.dtype)[:, None] * (b - a)
     return e[..., 0::2, :], e[..., 1::2, :]
 
 

@@ -37,19 +37,15 @@ def penetration(positions: torch.Tensor, lengths: torch.Tensor, body: Body) -> t
     """``(share, depth)`` per clip ``(B,)``: the share of its frames in which a probe's axis (a
     forearm with its hand) is inside an obstacle's capsule deeper than the body's margin
     (:func:`~.body.inside_depth`), and the deepest it goes then (the skeleton's units, from the
-    capsule's surface; 0 where never inside)."""
-    B, T = positions.shape[:2]
-    deepest = inside_depth(positions, body).flatten(-2).amax(-1)  # (B, T)
-    valid = _valid(lengths, T)
-    inside = (deepest > body.margin) & valid
-    share = inside.sum(1).to(positions.dtype) / lengths.clamp_min(1).to(positions.dtype)
-    depth = torch.where(inside, deepest, torch.zeros_like(deepest)).amax(1)
-    return share, depth
+    capsule's surface; 0 where never inside). Padded clips; :func:`penetration_packed` is the
+    same of clips packed along frames."""
+    return penetration_packed(positions[_valid(lengths, positions.shape[1])], lengths, body)
 
 
 def penetration_packed(positions: torch.Tensor, lengths, body: Body) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`penetration` of clips packed along frames: ``positions`` ``(N, J, 3)``, the clips'
-    frames one after another, ``lengths`` ``(B,)`` summing to ``N``."""
+    frames one after another, ``lengths`` ``(B,)`` summing to ``N``. One segment reduction
+    per figure, no loop over clips or frames."""
     lengths = torch.as_tensor(lengths, dtype=torch.long)
     B = len(lengths)
     clip = torch.repeat_interleave(torch.arange(B), lengths)

@@ -48,10 +48,8 @@ def warm_up(quiet: bool = False) -> float:
     from ...ops.body import body_of
 
     m = clips[0]
-    trans = m.skeleton.offsets.expand(m.num_frames, -1, -1).clone()
-    trans[:, 0] = m.root_translation
-    CompiledBackend().inside_body(m.rotations.float().numpy(), trans.float().numpy(), [m.num_frames], m.skeleton,
-                                  body_of(m.skeleton, roles))
+    CompiledBackend().inside_body(m.rotations.float().numpy(), m.local_translations().float().numpy(), [m.num_frames],
+                                  m.skeleton, body_of(m.skeleton, roles))
     return time.perf_counter() - t0
 
 
