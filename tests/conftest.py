@@ -68,3 +68,21 @@ def sample_db(tmp_path_factory):
     db = tmp_path_factory.mktemp("sample") / "sample.h5"
     assert main(["sample", "-o", str(db), "-q"]) == 0
     return db
+
+
+@pytest.fixture(scope="session")
+def runs_with_raised_hands(tmp_path_factory):
+    """Bandai Namco runs, dashes and turning walks x raised hands, waves and calls, spliced as
+    they come (``raw``, ``keep_hands_out=False``) and with the arms kept out of the body
+    (``out``, the default), both motion stores: ``(database, raw, out)``."""
+    from torchsplice.formats.importer import import_bvh
+    from torchsplice.job.run import splice_all
+
+    _require_mocap()
+    folder = tmp_path_factory.mktemp("hands")
+    db = folder / "bn.h5"
+    import_bvh([MOCAP / "bandai_namco_research_motiondataset"], db, spec="bandai_namco")
+    select = dict(locomotions=["*run*,*dash*,*turn*"], actions=["*wave*,*raise*,*bye*,*call*,*guide*"], workers=1)
+    splice_all(db, folder / "raw.h5", keep_hands_out=False, **select)
+    splice_all(db, folder / "out.h5", **select)
+    return db, folder / "raw.h5", folder / "out.h5"

@@ -93,6 +93,7 @@ def expected() -> dict:
         ("splice-all", "actions_db"): (JOB["actions_db"], None),
         ("splice-all", "retarget"): (JOB["retarget"], None),
         ("splice-all", "fix_feet"): (JOB["fix_feet"], None),
+        ("splice-all", "keep_hands_out"): (JOB["keep_hands_out"], None),
         ("splice-all", "target"): (JOB["target"], None),
         ("splice-all", "layout"): (JOB["layout"], LAYOUTS),
         ("splice-all", "store"): (JOB["store"], STORES),

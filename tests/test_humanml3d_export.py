@@ -89,6 +89,36 @@ def test_the_folder_holds_the_formats_files(folder):
     assert not [p for p in folder.rglob(".*")]  # nothing staged is left
 
 
+def test_the_index_carries_each_clips_checks_from_the_database(spliced, folder):
+    from torchsplice.formats.humanml3d_exporter import CHECK_COLUMNS
+    from torchsplice.store.database import MotionDatabase
+
+    with MotionDatabase.open(spliced) as db:
+        t = db.clip_table()
+        of = {n: {c: t.extra[c][i] for c in CHECK_COLUMNS} for i, n in enumerate(t.name)}
+    index = _index(folder)
+    assert set(CHECK_COLUMNS) <= set(index[0])
+    for r in index:
+        want = of[r["clip"]]
+        assert r["flags"] == str(want["flags"]) and int(r["corrected_frames"]) == int(want["corrected_frames"])
+        for c in ("penetration", "penetration_depth"):
+            assert float(r[c]) == pytest.approx(float(want[c]), rel=1e-5, abs=1e-9)
+
+
+def test_an_earlier_versions_index_is_still_the_exports_own(spliced, tmp_path):
+    from torchsplice.formats.humanml3d_exporter import INDEX_COLUMNS, HumanML3DExporter
+
+    out = tmp_path / "h"
+    export_clips(spliced, ["walk_straight+wave"], out=out, format="humanml3d")
+    lines = (out / "index.csv").read_text().splitlines()
+    old = [",".join(r.split(",")[:16]) for r in lines]  # the 16 columns before the checks
+    assert lines[0].split(",") == list(INDEX_COLUMNS) and old[0].split(",") == list(INDEX_COLUMNS[:16])
+    (out / "index.csv").write_text("\n".join(old) + "\n")
+    assert HumanML3DExporter.earlier_ids(out) == ["000000"]
+    (out / "index.csv").write_text("id,clip,something\n000000,x,1\n")
+    assert HumanML3DExporter.earlier_ids(out) is None
+
+
 def test_exported_motions_have_the_formats_properties(folder):
     worst = _check_motions(folder)
     assert worst["recover"] < 1e-5, worst

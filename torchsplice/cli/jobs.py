@@ -102,6 +102,11 @@ class SpliceAll(Command):
                             "rotations raw; fast, read by h5py), lzf (everything), gzip (smallest, read by every "
                             "HDF5 tool, several times slower to write) or none")
         add_splice_options(s, "job")
+        s.add_argument("--no-keep-hands-out", dest="keep_hands_out", action="store_false",
+                       default=job_default("keep_hands_out"),
+                       help="write each splice as it comes, even where it puts a hand or forearm inside the body "
+                            "deeper than its sources do (by default the arm is moved out by IK on the shoulder and "
+                            "elbow, and the corrected_frames column counts the frames changed)")
         s.add_argument("--restart", action="store_true", help="discard an unfinished earlier run instead of resuming it")
         s.add_argument("--dry-run", action="store_true",
                        help="plan only: say how many pairs would be spliced and skipped, the output's expected size and "
@@ -129,7 +134,8 @@ class SpliceAll(Command):
             locomotions=args.locomotions, actions=args.actions, methods=args.method, memory_budget_mb=args.memory_budget,
             batch_pairs=args.batch_size, force_locomotion=args.force_locomotion, copy_sources=args.copy_sources,
             max_run=args.max_run, max_length_ratio=args.max_length_ratio, timing=args.timing,
-            acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, device=device(args.device),
+            acting_limbs=args.acting_limbs, posture=not args.no_posture, twist=args.twist, keep_hands_out=args.keep_hands_out,
+            device=device(args.device),
             compression=args.compression, layout=args.layout, store=args.store, engine=args.engine, workers=args.workers,
             ray_address=args.ray_address, backend=args.backend, retarget=args.retarget, fix_feet=args.fix_feet,
             target=args.target, index=args.index,

@@ -24,12 +24,23 @@ def plausibility_rows(t, i: int) -> dict:
     """The plausibility figures of row ``i`` of the clip table ``t`` (empty when it has none)."""
     if not all(c in t for c in PLAUSIBILITY_COLUMNS):
         return {}
-    return {c: float(t[c][i]) for c in PLAUSIBILITY_COLUMNS}
+    out = {c: float(t[c][i]) for c in PLAUSIBILITY_COLUMNS}
+    if "corrected_frames" in t:  # outputs written before the correction have none
+        out["corrected_frames"] = max(int(t["corrected_frames"][i]), 0)
+    return out
 
 
 def _quantile(values: list[float], q: float) -> float:
     """The ``q`` quantile of ``values`` (one of them), NaN for none."""
     return float(np.quantile(values, q, method="inverted_cdf")) if values else math.nan
+
+
+def _corrected(cs: list[dict]) -> str:
+    """The clips and frames whose arms were moved out of the body, or "-" where not recorded."""
+    if not all("corrected_frames" in c for c in cs):
+        return "-"
+    moved = [c["corrected_frames"] for c in cs]
+    return f"{sum(m > 0 for m in moved)}, {sum(moved)}"
 
 
 def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[str]:
@@ -38,8 +49,9 @@ def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[s
         return []
     lines = ["## Plausibility: a hand inside the body", "",
              "| method | clips | a frame inside | beyond both sources by 0.05 (flagged) | frames inside, mean / 95th pct. | "
-             "depth at worst, 95th pct. (cm) | the locomotions' frames inside, mean | the actions', mean |",
-             "|---|---|---|---|---|---|---|---|"]
+             "depth at worst, 95th pct. (cm) | the locomotions' frames inside, mean | the actions', mean | "
+             "arms moved out of the body: clips, frames |",
+             "|---|---|---|---|---|---|---|---|---|"]
     worst_lines: list[str] = []
     for m in methods:
         cs = [c for c in per_clip if c["method"] == m]
@@ -52,7 +64,7 @@ def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[s
                      f"{100 * sum(b > 0.05 for b in beyond) / len(cs):.1f}% | {100 * sum(shares) / len(cs):.2f}% / "
                      f"{100 * _quantile(shares, 0.95):.1f}% | {_quantile([c['penetration_depth'] for c in inside], 0.95):.1f} | "
                      f"{100 * sum(c['penetration_locomotion'] for c in cs) / len(cs):.2f}% | "
-                     f"{100 * sum(c['penetration_action'] for c in cs) / len(cs):.2f}% |")
+                     f"{100 * sum(c['penetration_action'] for c in cs) / len(cs):.2f}% | {_corrected(cs)} |")
         ranked = sorted(zip(beyond, cs), key=lambda x: -x[0])[:WORST]
         named = [f"{md(c['name'])} ({100 * c['penetration']:.0f}% of frames, {c['penetration_depth']:.1f} cm; sources "
                  f"{100 * c['penetration_locomotion']:.0f}% / {100 * c['penetration_action']:.0f}%)"
@@ -63,7 +75,9 @@ def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[s
               "height (3 cm on SMPL-22) inside the torso, pelvis, head, a thigh or a shin of the skeleton's body of "
               "capsules; depth is measured from the capsule's surface. The sources' figures are the locomotion's "
               "and the action's own (the action as spliced): a result is judged against what its sources already "
-              "do. Lower is better.", ""]
+              "do. Lower is better. Unless the job ran with --no-keep-hands-out, an arm whose forearm went "
+              "deeper than its sources' was moved out by IK (torchsplice.ops.hands), and the figures are those "
+              "of the corrected result.", ""]
     if worst_lines:
         lines += ["Most beyond their sources:", "", *worst_lines, ""]
     return lines

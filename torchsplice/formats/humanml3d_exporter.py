@@ -14,7 +14,10 @@ The folder::
                                   role, locomotion, action, method, database (exported),
                                   locomotion_db and action_db (a spliced clip's sources'
                                   databases, from its run record), retargeted_from, described
-                                  (0: its locomotion or its action was not said)
+                                  (0: its locomotion or its action was not said), and the
+                                  clip's flags, penetration, penetration_depth (cm) and
+                                  corrected_frames (a hand inside the body; empty where the
+                                  database has no such columns)
 
 Each clip goes onto the SMPL body's 22 joints (``smpl22``: HumanML3D's joint order, metres, its
 standard bone lengths) by the analytic retargeting of :mod:`torchsplice.ops.retarget` with the
@@ -44,6 +47,8 @@ from __future__ import annotations
 import csv
 import io
 import math
+
+import numpy as np
 from functools import cached_property
 from pathlib import Path
 
@@ -52,15 +57,21 @@ from ..core.names import counted, spreadsheet_cell
 from .exporters import READ_BATCH, Exporter, ExportOption, ExportResult, register_exporter
 from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_ratios, parse_seed, table_splits
 
-__all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MIN_ROWS", "MDM_MAX_ROWS", "INDEX_COLUMNS"]
+__all__ = ["HumanML3DExporter", "MIN_FRAMES", "MDM_MIN_ROWS", "MDM_MAX_ROWS", "INDEX_COLUMNS", "CHECK_COLUMNS"]
 
 MIN_FRAMES = 3
 """Frames (at 20 fps) a clip needs to be exported."""
 MDM_MIN_ROWS, MDM_MAX_ROWS = 40, 200
 """MDM's and MoMask's loaders keep motions of 40 to 199 feature rows (and crop to 196);
 ``window`` cuts longer clips, and is itself at least 40 frames long."""
+CHECK_COLUMNS = ("flags", "penetration", "penetration_depth", "corrected_frames")
+"""The source database's columns of what a person would reject (:mod:`torchsplice.job.task`'s
+``flags``; a hand inside the body, its depth in cm and the frames corrected for it), copied
+into ``index.csv`` (empty where the database has none)."""
 INDEX_COLUMNS = ("id", "clip", "start_s", "end_s", "rows", "mirrored", "split", "role", "locomotion", "action",
-                 "method", "database", "locomotion_db", "action_db", "retargeted_from", "described")
+                 "method", "database", "locomotion_db", "action_db", "retargeted_from", "described", *CHECK_COLUMNS)
+EARLIER_INDEX_COLUMNS = (INDEX_COLUMNS[:16],)
+"""Headers of ``index.csv`` that earlier versions wrote (their exports are still recognised)."""
 
 
 class HumanML3DExporter(Exporter):
@@ -128,7 +139,7 @@ class HumanML3DExporter(Exporter):
         try:
             with open(Path(folder) / "index.csv", newline="") as f:
                 rows = csv.reader(f)
-                if tuple(next(rows, ())) != INDEX_COLUMNS:
+                if tuple(next(rows, ())) not in (INDEX_COLUMNS, *EARLIER_INDEX_COLUMNS):
                     return None
                 return [r[0] for r in rows if r]
         except (OSError, UnicodeDecodeError, csv.Error):
@@ -502,6 +513,10 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
         info = {"labels": table.labels[r]}
         for col in ("locomotion", "action", "method"):
             info[col] = str(table.extra[col][r]) if col in table.extra else ""
+        for col in CHECK_COLUMNS:
+            v = table.extra[col][r] if col in table.extra else ""
+            info[col] = "" if isinstance(v, (float, np.floating)) and not np.isfinite(v) else (
+                f"{v:.6g}" if isinstance(v, (float, np.floating)) else str(v))
         infos[r] = info
     splits = table_splits(table, ratios, seed)  # over the whole database: a selection keeps its clips' splits
     # a clip that is a mirror image (torchsplice mirror's, labelled mirror_of) or whose image is exported
@@ -531,7 +546,7 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
                     "locomotion_db": sources[0] if role == "spliced" else "",
                     "action_db": sources[1] if role == "spliced" else "",
                     "retargeted_from": labels.get("retargeted_from", labels.get("action.retargeted_from", "")),
-                    "described": 1}
+                    "described": 1, **{c: info[c] for c in CHECK_COLUMNS}}
             items.append({**base, "id": f"{n:06d}", "mirrored": 0})
             if mirror and name not in mirrored_already:
                 items.append({**base, "id": f"M{n:06d}", "mirrored": 1})

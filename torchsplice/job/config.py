@@ -70,6 +70,10 @@ class JobConfig:
             (:func:`torchsplice.formats.index.write_database_index`). Not part of the plan: a
             resumed run may change it.
         max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
+        keep_hands_out: where a result puts a hand or forearm inside its body deeper than its
+            sources do, move the arm out by two-bone IK on the shoulder and elbow, smoothly in
+            time (:mod:`torchsplice.ops.hands`); the ``corrected_frames`` column counts the
+            frames changed. ``False`` writes the splice as it comes.
         compression: the output's compression (see :meth:`MotionDatabase.create`): ``"auto"``
             (LZF on everything but rotations: fast, read by h5py), ``"lzf"``, ``"gzip"`` (read by
             every HDF5 tool, several times slower to write) or ``None``.
@@ -114,6 +118,7 @@ class JobConfig:
     max_run: int = 3
     posture: bool = True
     twist: float = 0.0
+    keep_hands_out: bool = True
     compression: str | None = "auto"
     layout: str = "copy"
     store: str = "motion"
@@ -245,6 +250,7 @@ class JobConfig:
         return {"backend": self.resolved_backend(),
             "locomotions": list(self.locomotions), "actions": list(self.actions), "methods": list(self.methods),
             "force_locomotion": self.force_locomotion, "max_run": self.max_run, "posture": self.posture,
+            "keep_hands_out": self.keep_hands_out,
             "copy_sources": self.copy_sources, "compression": self.compression, "layout": self.layout,
             **({"store": self.store} if self.store != "motion" else {}),  # plans of motion stores stay valid
             **({"max_length_ratio": self.max_length_ratio} if self.max_length_ratio is not None else {}),
@@ -273,7 +279,7 @@ def _check_types(c: JobConfig) -> None:
         v = getattr(c, name)
         if not isinstance(v, tuple) or not all(isinstance(x, str) for x in v):
             raise bad(name, "a string or a sequence of strings", v)
-    for name in ("force_locomotion", "copy_sources", "index", "posture", "retarget", "fix_feet"):
+    for name in ("force_locomotion", "copy_sources", "index", "posture", "retarget", "fix_feet", "keep_hands_out"):
         if not isinstance(getattr(c, name), (bool, np.bool_)):
             raise bad(name, "True or False", getattr(c, name))
     for name, lo, optional in (("max_run", 1, False), ("memory_budget_mb", 1, False), ("batch_pairs", 1, True),

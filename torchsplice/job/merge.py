@@ -359,10 +359,18 @@ def output_banks(plan: Plan, sources: Sources, config: JobConfig) -> list[dict]:
         tables = {"upper": arrays["upper"], "pelvis": arrays["pelvis"],
                   "standing_upper": [int(j) for j in np.flatnonzero(st.upper)], "spine": [int(j) for j in st.spine],
                   "arms": [[int(j) for j in np.flatnonzero(st.arms[a])] for a in range(len(LIMBS))],
-                  "blend": int(st.blend)}
+                  "blend": int(st.blend), "moved": _moved_joints(skeleton, roles)}
         out.append({"rotations": arrays["rotations"], "translations": arrays["translations"],
                     "lengths": arrays["lengths"], "names": names, "keys": keys, "fps": g.fps, "tables": tables})
     return out
+
+
+def _moved_joints(skeleton, roles) -> list[int]:
+    """The joints whose rotations keeping hands out of the body replaces (``assembly_arms``)."""
+    from ..ops.body import body_of
+    from ..ops.hands import arms_of
+
+    return [int(j) for j in arms_of(skeleton, roles, body_of(skeleton, roles)).moved]
 
 
 def source_skeleton(plan: Plan, g: int, sources: Sources):

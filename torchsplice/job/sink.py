@@ -120,7 +120,7 @@ class OutputWriter:
                  **{f"assembly_{k}": p[k] for k in ("crop", "method", "timing", "window", "loop_start", "loop_end",
                                                      "acting")}}
         self.db.append_parts(part.skeleton, part.lengths, part.names, part.fps, curve=p.get("curve"), pelvis=p.get("pelvis"),
-                             parts=parts, spec=DatasetSpec.from_json(part.spec), sources=part.sources, roles="spliced",
+                             arms=part.dense_arms(), parts=parts, spec=DatasetSpec.from_json(part.spec), sources=part.sources, roles="spliced",
                              labels=part.labels, extra=part.extra, frame_extra={"action_frame": part.action_frame},
                              virtual=virtual)
 
@@ -298,6 +298,8 @@ class AlignmentSink(HDF5Sink):
             for name, key in (("assembly_curve", "curve"), ("assembly_pelvis", "pelvis")):
                 if part.parts.get(key) is not None:
                     arrays[name] = part.parts[key]
+            if (arms := part.dense_arms()) is not None:
+                arrays["assembly_arms"] = arms
         else:
             arrays.update(rotations=part.rotations, root_translation=part.translations[:, 0],
                           translations=part.translations)

@@ -41,6 +41,7 @@ OUTPUT_COLUMNS = {
     "coverage": "float", "timing": "str", "acting": "str",
     "penetration": "float", "penetration_depth": "float", "penetration_locomotion": "float",
     "penetration_depth_locomotion": "float", "penetration_action": "float", "penetration_depth_action": "float",
+    "corrected_frames": "int",
 }
 FLAG_CODES = {
     "poor_alignment": "the lower bodies align poorly (alignment_distance above 0.10 leg lengths): other locomotion "
@@ -105,7 +106,9 @@ class Part:
     clip ``kind`` (see :data:`torchsplice.store.assembly.KIND_CODES`), ``locomotion`` and
     ``action`` (the clips' keys, see :mod:`torchsplice.job.sources`), ``crop``, ``method``,
     ``timing``, ``window``, ``loop_start``, ``loop_end``, ``acting``; per frame ``curve``
-    (float64) and ``pelvis`` (``(N, 4)`` float32), both ``None`` for standing clips."""
+    (float64) and ``pelvis`` (``(N, 4)`` float32), both ``None`` for standing clips; the arms
+    moved out of the body (:func:`_keep_hands_out`), ``arms_rows`` ``(M,)`` the frames changed
+    and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' rotations (:meth:`dense_arms`)."""
 
     task: str
     skeleton: object
@@ -121,6 +124,15 @@ class Part:
     skipped: dict = field(default_factory=dict)
     plan: str = ""  # the digest of the plan it was made for
     parts: dict | None = None
+
+    def dense_arms(self) -> np.ndarray | None:
+        """An alignment store's ``assembly_arms`` of the part's frames ``(N, 4, 4)`` float32: the
+        moved arms' rotations where a frame's were changed, zeros (no rotation) elsewhere."""
+        if self.parts is None or self.parts.get("arms") is None or not len(self.parts["arms"]):
+            return None
+        out = np.zeros((int(np.sum(self.lengths)), 4, 4), np.float32)
+        out[np.asarray(self.parts["arms_rows"], np.int64)] = self.parts["arms"]
+        return out
 
     @property
     def sources(self) -> list[str]:
@@ -242,9 +254,18 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         skipped[why] = skipped.get(why, 0) + 1
         log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
     inside = _penetration(backend, group, skeleton, roles, frames, rot, trans)
-    part = _pack(plan, group, config, task, [pairs[b] for b in kept], [keys[b] for b in kept], skeleton,
+    kept_keys = [keys[b] for b in kept]
+    corrected, arms = np.zeros(len(kept), np.int64), None
+    if config.keep_hands_out:
+        rot, corrected, arms = _keep_hands_out(backend, plan, group, skeleton, roles, kept_keys, frames, rot, trans,
+                                               inside)
+    part = _pack(plan, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture, inside)
-    part.parts = _parts(plan, config, task, [keys[b] for b in kept], batch, ok, standing)
+    part.extra["corrected_frames"] = corrected
+    part.parts = _parts(plan, config, task, kept_keys, batch, ok, standing)
+    if part.parts is not None:
+        part.parts["arms_rows"], part.parts["arms"] = arms if arms is not None else (
+            np.zeros(0, np.int64), np.zeros((0, 4, 4), np.float32))
     if part.parts is not None:  # the clips are their parts: no frames to carry
         part.rotations, part.translations = rot[:0], trans[:0]
     part.skipped = skipped
@@ -263,6 +284,48 @@ def _penetration(backend, group, skeleton, roles, frames, rot: np.ndarray, trans
         return np.zeros(0), np.zeros(0)
     share, depth = backend.inside_body(rot, trans, frames, skeleton, body_of(skeleton, roles))
     return share, depth * centimetres(DatasetSpec.from_json(group.spec).units)
+
+
+def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np.ndarray, trans: np.ndarray,
+                    inside: tuple) -> tuple:
+    """Move the arms of the results whose hand goes deeper inside the body than either source's
+    does, or that the ``self_penetration`` flag would report (then out of the body altogether)
+    (:meth:`~torchsplice.splice.backends.Backend.keep_hands_out`), in ``rot``, and their ``inside``
+    figures anew. ``(rot, corrected frames per result, (rows, arms))``: ``rows`` the packed
+    frames changed and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' new rotations
+    (:attr:`~torchsplice.ops.hands.Arms.moved`), what an alignment store keeps of them."""
+    from ..ops.body import body_of
+    from ..ops.hands import arms_of
+    from ..ops.units import centimetres
+    from ..specs import DatasetSpec
+
+    share, depth = inside
+    corrected = np.zeros(len(frames), np.int64)
+    allowed = np.array([max(plan.clips[k[0]].penetration_depth, plan.clips[k[1]].penetration_depth) for k in keys],
+                       dtype=np.float64)  # cm, as depth
+    # a result the flag would report (inside on more of its frames than its sources) may keep nothing
+    often = np.array([max(plan.clips[k[0]].penetration, plan.clips[k[1]].penetration) for k in keys], dtype=np.float64)
+    allowed[share > often + SELF_PENETRATION] = 0.0
+    todo = np.flatnonzero((share > 0) & (depth > allowed))
+    if not len(todo):
+        return rot, corrected, None
+    cm = centimetres(DatasetSpec.from_json(group.spec).units)
+    frames = np.asarray(frames, np.int64)
+    starts = np.cumsum(frames) - frames
+    n = frames[todo]
+    rows = np.repeat(starts[todo] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+    body = body_of(skeleton, roles)
+    arms = arms_of(skeleton, roles, body)
+    new, count = backend.keep_hands_out(np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows]), n,
+                                        float(group.fps), skeleton, body, arms, allowed[todo] / cm)
+    moved = list(arms.moved)
+    changed = (new[:, moved] != rot[rows][:, moved]).any(axis=(1, 2))
+    rot = np.array(rot, copy=True) if not rot.flags.writeable else rot
+    rot[rows] = new
+    corrected[todo] = count
+    s2, d2 = backend.inside_body(new, trans[rows], n, skeleton, body)
+    share[todo], depth[todo] = s2, d2 * cm
+    return rot, corrected, (rows[changed], new[changed][:, moved])
 
 
 PART_KEYS = ("kind", "locomotion", "action")

@@ -44,8 +44,8 @@ from ..core.skeleton import Skeleton
 from ..specs.canonical import canonical_joints, canonical_legs, leg_length
 from ..specs.roles import SkeletonRoles
 
-__all__ = ["CAPSULES", "PROBES", "OBSTACLES", "INSIDE_MARGIN", "Body", "body_of", "capsule_ends", "segment_distance",
-           "inside_depth"]
+__all__ = ["CAPSULES", "PROBES", "OBSTACLES", "INSIDE_MARGIN", "Body", "body_of", "capsule_ends", "segment_closest",
+           "segment_distance", "inside_depth"]
 
 CAPSULES = {  # name: ((joint a, joint b, share from a to b) for each end, radius in character heights)
     "torso_l": (("pelvis", "hip_l", 0.5), ("chest", "shoulder_l", 0.4), 0.068),
@@ -137,11 +137,11 @@ def capsule_ends(positions: torch.Tensor, body: Body) -> tuple[torch.Tensor, tor
     return e[..., 0::2, :], e[..., 1::2, :]
 
 
-def segment_distance(p0: torch.Tensor, p1: torch.Tensor, q0: torch.Tensor, q1: torch.Tensor) -> torch.Tensor:
-    """``(...)`` the shortest distance between segments ``p0 p1`` and ``q0 q1`` (``(..., 3)``,
-    broadcast), in closed form: the closest points of the two lines, each parameter clamped to
-    its segment and the other's then chosen again for it (parallel and zero-length segments
-    included)."""
+def segment_closest(p0: torch.Tensor, p1: torch.Tensor, q0: torch.Tensor, q1: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(s, t)`` ``(...)``: where segments ``p0 p1`` and ``q0 q1`` (``(..., 3)``, broadcast) come
+    closest, as shares along each (``p0 + s (p1 - p0)``, ``q0 + t (q1 - q0)``), in closed form:
+    the closest points of the two lines, each parameter clamped to its segment and the other's
+    then chosen again for it (parallel and zero-length segments included)."""
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
     a, e, b = (d1 * d1).sum(-1), (d2 * d2).sum(-1), (d1 * d2).sum(-1)
     c, f = (d1 * r).sum(-1), (d2 * r).sum(-1)
@@ -154,8 +154,14 @@ def segment_distance(p0: torch.Tensor, p1: torch.Tensor, q0: torch.Tensor, q1: t
     t = torch.where(pe, (b * s + f) / torch.where(pe, e, one), 0.0)
     s = torch.where(pa & (t < 0.0), (-c / torch.where(pa, a, one)).clamp(0.0, 1.0), s)
     s = torch.where(pa & (t > 1.0), ((b - c) / torch.where(pa, a, one)).clamp(0.0, 1.0), s)
-    t = t.clamp(0.0, 1.0)
-    return ((p0 + d1 * s[..., None]) - (q0 + d2 * t[..., None])).norm(dim=-1)
+    return s, t.clamp(0.0, 1.0)
+
+
+def segment_distance(p0: torch.Tensor, p1: torch.Tensor, q0: torch.Tensor, q1: torch.Tensor) -> torch.Tensor:
+    """``(...)`` the shortest distance between segments ``p0 p1`` and ``q0 q1`` (``(..., 3)``,
+    broadcast), at :func:`segment_closest`'s points."""
+    s, t = segment_closest(p0, p1, q0, q1)
+    return ((p0 + (p1 - p0) * s[..., None]) - (q0 + (q1 - q0) * t[..., None])).norm(dim=-1)
 
 
 def inside_depth(positions: torch.Tensor, body: Body) -> torch.Tensor:

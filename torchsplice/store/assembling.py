@@ -160,11 +160,12 @@ class Assembling:
                 out[(b, str(key), float(fps))] = r
         return out
 
-    def append_parts(self, skeleton, lengths, names, fps, *, curve, pelvis, parts: dict, spec=None, sources="",
+    def append_parts(self, skeleton, lengths, names, fps, *, curve, pelvis, parts: dict, arms=None, spec=None, sources="",
                      roles="", labels=None, extra: dict | None = None, frame_extra: dict | None = None,
                      virtual: tuple | None = None) -> None:
         """Add spliced clips of one skeleton as their parts: per frame ``curve (N,)`` and
         ``pelvis (N, 4)`` (``None`` for standing clips: their frames follow from their timing),
+        ``arms (N, 4, 4)`` (the arms moved out of the body, zeros where not; ``None``: none),
         per clip the :data:`PART_COLUMNS` in ``parts`` (``C`` values each); other arguments as
         :meth:`append_packed`'s. ``virtual=(source, refer_as)``: the per-frame parts are in the
         file ``source`` (:meth:`append_frame_source`), read through virtual datasets as
@@ -191,6 +192,8 @@ class Assembling:
             arrays["assembly_curve"] = np.asarray(curve, np.float64).reshape(N)
         if pelvis is not None:
             arrays["assembly_pelvis"] = np.asarray(pelvis, np.float32).reshape(N, 4)
+        if arms is not None:
+            arrays["assembly_arms"] = np.asarray(arms, np.float32).reshape(N, 4, 4)
         for name in self.frame_columns:
             v = frame_extra.get(name)
             arrays[name] = np.full(N, np.nan, np.float32) if v is None else np.asarray(v, np.float32).reshape(N)

@@ -21,11 +21,18 @@ Layout, besides :mod:`torchsplice.store.schema`'s (root attribute ``store="align
                                          skeleton: "NAME (retargeted)")
         keys                (C_b,) str   the job's key of each source clip
         fps                 (C_b,) float64
-        attrs: tables (JSON: upper, pelvis, standing_upper, spine, arms, blend; joint indices)
+        attrs: tables (JSON: upper, pelvis, standing_upper, spine, arms, blend, moved; joint indices)
     /skeletons/<k>/assembly_curve   (N_k,) float64   per frame of a timewarp clip: the action
                                                      frame it plays, counted from the crop
     /skeletons/<k>/assembly_pelvis  (N_k, 4) float32 per spliced frame: the pelvis's local
                                                      rotation (timewarp clips)
+    /skeletons/<k>/assembly_arms    (N_k, 4, 4) float32 per spliced frame whose arms were moved
+                                                     out of the body (torchsplice.ops.hands): the
+                                                     local rotations of the bank table "moved"'s
+                                                     joints (left shoulder, left elbow, right
+                                                     shoulder, right elbow), which replace the
+                                                     assembled ones; zeros where none were moved
+                                                     (optional: stores without it move none)
     /clips/assembly_kind    -1: frames stored in rotations/... as in a motion store (methods whose
                             result is not an alignment: cpmc through the timewarp, plug-ins;
                             copied source clips);
@@ -62,8 +69,13 @@ PART_COLUMNS = {name: "int" for name in (
     "assembly_kind", "assembly_bank", "assembly_locomotion", "assembly_action", "assembly_crop", "assembly_method",
     "assembly_timing", "assembly_window", "assembly_loop_start", "assembly_loop_end", "assembly_acting")}
 """The per-clip parts (hidden clip columns of an alignment store)."""
-FRAME_PARTS = {"assembly_curve": ((), np.float64), "assembly_pelvis": ((4,), np.float32)}
+FRAME_PARTS = {"assembly_curve": ((), np.float64), "assembly_pelvis": ((4,), np.float32),
+               "assembly_arms": ((4, 4), np.float32)}
 """The per-frame parts: name -> (shape of a row, dtype)."""
+OPTIONAL_PARTS = ("assembly_arms",)
+MOVED_COLUMN = "corrected_frames"
+"""The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
+"""Per-frame parts a store written before them lacks (read as nothing to apply)."""
 METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
 """``assembly_method``: the built-in methods (as :data:`torchsplice.cpu.splice.METHOD_CODES`)."""
 TIMING_CODES = {"loop": 0, "hold": 1, "fit": 2}
@@ -77,7 +89,9 @@ STORE_README = (
     "(row i of /clips, frames start:start+length of /skeletons/<k>) of assembly_kind 1 plays, at frame t, the root "
     "and lower body of bank clip assembly_locomotion frame t, the pelvis rotation assembly_pelvis[t], and the upper "
     "body of bank clip assembly_action slerped at frame assembly_crop + assembly_curve[t] (translations linearly); "
-    "kind 2 (standing actions) and the exact joint sets are in torchsplice's torchsplice/cpu/assemble.py; kind -1 "
+    "kind 2 (standing actions) and the exact joint sets are in torchsplice's torchsplice/cpu/assemble.py; where "
+    "a frame's row of /skeletons/<k>/assembly_arms (4,4) is not zeros, it replaces the local rotations of the "
+    "bank's tables' \"moved\" joints (shoulders and elbows moved out of the body); kind -1 "
     "clips hold their frames in /skeletons/<k>/rotations etc. `torchsplice materialize IN -o OUT` writes every "
     "motion as an ordinary database; torchsplice's MotionDatabase reads either transparently.")
 
@@ -124,7 +138,8 @@ def check_assembly(h5: h5py.File, skeletons: list, frames: list[int]) -> None:
     for k, (sk, N) in enumerate(zip(skeletons, frames)):
         g = h5[skeleton_path(k)]
         for name, (shape, _) in FRAME_PARTS.items():
-            checked_dataset(g, name, skeleton_path(k), (N, *shape), "f")
+            if name in g or name not in OPTIONAL_PARTS:
+                checked_dataset(g, name, skeleton_path(k), (N, *shape), "f")
     c = h5[CLIPS]
     if c["name"].shape[0] == 0:
         return
@@ -170,8 +185,11 @@ def _tables(raw: dict, J: int) -> dict:
     spine = np.asarray(raw["spine"], np.int64).reshape(-1)
     if ((spine < 0) | (spine >= J)).any():
         raise IndexError(f"spine joint out of {J}")
+    moved = np.asarray(raw.get("moved", ()), np.int64).reshape(-1)
+    if len(moved) not in (0, 4) or ((moved < 0) | (moved >= J)).any():
+        raise IndexError(f"moved joints {moved.tolist()} (4 of {J} joints)")
     return {"upper": mask(raw["upper"]), "pelvis": pelvis, "standing_upper": mask(raw["standing_upper"]),
-            "spine": spine, "arms": arms, "blend": int(raw["blend"])}
+            "spine": spine, "arms": arms, "blend": int(raw["blend"]), "moved": moved}
 
 
 class Assembly:
@@ -190,6 +208,8 @@ class Assembly:
                 "tables": _tables(json.loads(g.attrs["tables"]), rot.shape[1])})
         c = h5[CLIPS]
         self.parts = {n: c[n][()].astype(np.int64) for n in PART_COLUMNS}
+        # the clips whose arms were moved out of the body (their assembly_arms rows are read)
+        self.moved = c[MOVED_COLUMN][()].astype(np.int64) > 0 if MOVED_COLUMN in c else None
         self.skeleton = c["skeleton"][()].astype(np.int64)
         self.start = c["start"][()].astype(np.int64)
         self.length = c["length"][()].astype(np.int64)
@@ -278,10 +298,35 @@ class Assembly:
                                   p["assembly_timing"][m], p["assembly_window"][m], loops, acting, t["standing_upper"],
                                   t["spine"], t["arms"], t["blend"], first[m], lengths[m], out_start[m], orot, otrans,
                                   np.empty(N))
+        moved = self.moved_arms(db, k, starts, lengths, clip, out_start)
+        if moved is not None:
+            rows, joints, arms = moved
+            orot[rows[:, None], joints] = arms
         out = {"rotations": orot, "root_translation": np.ascontiguousarray(otrans[:, 0])}
         if has_translations:
             out["translations"] = otrans
         return out
+
+    def moved_arms(self, db, k: int, starts, lengths, clip, out_start) -> tuple | None:
+        """``(rows, joints, rotations)``: the assembled frames (rows of the ranges concatenated,
+        ``(M,)``) whose arms were moved out of the body, each one's ``joints`` ``(M, 4)`` and
+        their local rotations ``(M, 4, 4)`` (float32) that replace the assembled ones; ``None``
+        where no clip of the ranges has any."""
+        if self.moved is None or "assembly_arms" not in db.h5[skeleton_path(k)]:
+            return None
+        which = np.flatnonzero(self.moved[clip] & (self.parts["assembly_kind"][clip] > 0))
+        if not len(which):
+            return None
+        n = lengths[which]
+        arms = db.frame_rows(k, "assembly_arms", starts[which], n)
+        rows = np.repeat(out_start[which] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+        keep = (arms != 0).any(axis=(1, 2))
+        bank = np.repeat(self.parts["assembly_bank"][clip[which]], n)[keep]
+        table = np.array([t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)],
+                         np.int64).reshape(-1, 4)
+        joints = table[bank]
+        known = (joints >= 0).all(axis=1)
+        return rows[keep][known], joints[known], arms[keep][known]
 
     def frames_on(self, db, k: int, starts: np.ndarray, lengths: np.ndarray, device) -> dict:
         """:meth:`frames` assembled by torch on ``device`` (:mod:`.assembly_torch`): float32
@@ -350,6 +395,10 @@ class Assembly:
                                         per(p["assembly_loop_end"][cl]), per(acting), tb["standing_upper"], tb["spine"],
                                         tb["arms"], int(tb["blend"]))
                 orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
+        moved = self.moved_arms(db, k, starts, lengths, clip, np.cumsum(lengths) - lengths)
+        if moved is not None:
+            rows, joints, arms = moved
+            orot[as_tensor(rows, device)[:, None], as_tensor(joints, device)] = as_tensor(arms, device, torch.float32)
         out = {"rotations": orot, "root_translation": otrans[:, 0].contiguous()}
         if has_translations:
             out["translations"] = otrans

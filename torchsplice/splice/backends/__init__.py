@@ -167,6 +167,22 @@ class Backend:
         share, depth = penetration_packed(positions, np.asarray(lengths, dtype=np.int64), body)
         return share.numpy(), depth.numpy()
 
+    def keep_hands_out(self, rotations, translations, lengths, fps: float, skeleton, body, arms, allowed) -> tuple:
+        """``(rotations, corrected)``: packed result frames (as :meth:`inside_body` takes them)
+        with the arms moved out of ``body`` where a forearm goes deeper than ``allowed`` ``(B,)``
+        (the skeleton's units), and the frames changed per result
+        (:func:`~torchsplice.ops.hands.keep_hands_out`). By torch here; a backend may do the same
+        its way."""
+        import numpy as np
+        import torch
+
+        from ...ops.hands import keep_hands_out
+
+        out, corrected = keep_hands_out(torch.as_tensor(np.asarray(rotations)), torch.as_tensor(np.asarray(translations)),
+                                        np.asarray(lengths, np.int64), fps, skeleton, body, arms,
+                                        torch.as_tensor(np.asarray(allowed, np.float64)))
+        return out.numpy(), corrected.numpy()
+
     def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps: float, options) -> tuple[list, list]:
         """The locomotion checks (:func:`~torchsplice.splice.locomotion.check_locomotion`) of
         prepared clips ``loco_rows`` and ``action_rows``; by default one padded batch of both."""

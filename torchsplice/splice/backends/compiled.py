@@ -46,10 +46,14 @@ def warm_up(quiet: bool = False) -> float:
 
     timewarp(torch.rand(2, 8, 9), max_run=3)
     from ...ops.body import body_of
+    from ...ops.hands import arms_of
 
     m = clips[0]
-    CompiledBackend().inside_body(m.rotations.float().numpy(), m.local_translations().float().numpy(), [m.num_frames],
-                                  m.skeleton, body_of(m.skeleton, roles))
+    body = body_of(m.skeleton, roles)
+    rot, trans = m.rotations.float().numpy(), m.local_translations().float().numpy()
+    CompiledBackend().inside_body(rot, trans, [m.num_frames], m.skeleton, body)
+    CompiledBackend().keep_hands_out(rot, trans, [m.num_frames], m.fps, m.skeleton, body, arms_of(m.skeleton, roles, body),
+                                     [0.0])
     return time.perf_counter() - t0
 
 
@@ -118,6 +122,30 @@ class CompiledBackend(Backend):
                      np.asarray(body.probes, dtype=np.int64), np.asarray(body.obstacles, dtype=np.int64),
                      float(body.margin), starts, lengths, share, depth)
         return share, depth
+
+    def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed):
+        from ...cpu.fk import joint_closure
+        from ...cpu.hands import hands_out_clips
+        from ...ops.hands import CLEARANCE, ITERATIONS, RAMP, SLACK
+
+        lengths = np.asarray(lengths, dtype=np.int64)
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        ends = body.end_joints.numpy()
+        parents = np.asarray(skeleton.parents, dtype=np.int64)
+        need = np.unique(np.concatenate([ends.reshape(-1), [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]]))
+        rotations = np.ascontiguousarray(rotations)
+        out = rotations.copy()
+        corrected = np.zeros(len(lengths), np.int64)
+        target = np.maximum(np.asarray(allowed, np.float64), CLEARANCE * body.margin) * np.ones(len(lengths))
+        w = np.maximum(np.round(RAMP * np.asarray(fps, np.float64) * np.ones(len(lengths))), 1).astype(np.int64)
+        hands_out_clips(rotations, np.ascontiguousarray(translations), parents, joint_closure(skeleton.parents, need),
+                        ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
+                        np.asarray(arms.probes, np.int64), np.asarray(body.obstacles, np.int64), int(arms.chest),
+                        np.asarray(arms.shoulder, np.int64), np.asarray(arms.elbow, np.int64),
+                        np.asarray(arms.wrist, np.int64), parents[list(arms.shoulder)].copy(),
+                        parents[list(arms.elbow)].copy(), starts, lengths, target, w, float(SLACK * body.margin),
+                        int(ITERATIONS), out, corrected)
+        return out, corrected
 
     def assembly_bank(self, prepared):
         b = prepared

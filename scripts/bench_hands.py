@@ -1,0 +1,186 @@
+"""The ``hands`` section of scripts/benchmark.py: hands kept out of the body (issue targets in
+brackets), on real Bandai Namco clips.
+
+Two jobs, each run as a user runs it (``torchsplice splice-all`` in a fresh process), with the
+correction (the default) and without it (``--no-keep-hands-out``), alternating, best of two:
+- ``hands``: runs, dashes and turning walks x raised hands, waves and calls (the pairs where an
+  idle arm swings into a turned torso);
+- ``default``: the default job (normal-style locomotions x every action).
+
+For each it prints:
+- clips with a hand inside the body where neither source has one, before and after  [<= 3%]
+- results flagged ``self_penetration``, and the clips and frames corrected
+- the feet: the largest change of any joint but the shoulders and elbows, and of the root [0]
+- the acting arm's range in the chest's frame against the action's (5th percentile and
+  worst), and the corrected clips' against the uncorrected                     [>= 0.8x]
+- the idle arm's swing (its wrist's range in the chest's frame) against the locomotion's,
+  on standing actions with one acting arm (5th percentile)                   [>= 0.5x]
+- the cost: the job's pairs/s with the correction against without, and the figures and the
+  correction timed alone on the results (one core), as a share of the job's time   [<= 10%]
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from torchsplice.core.fk import forward_kinematics  # noqa: E402
+from torchsplice.core.rotations import quat_apply, quat_conj  # noqa: E402
+from torchsplice.ops.body import body_of  # noqa: E402
+from torchsplice.ops.hands import arms_of  # noqa: E402
+from torchsplice.job.task import SELF_PENETRATION  # noqa: E402
+from torchsplice.ops.units import centimetres  # noqa: E402
+from torchsplice.store.database import MotionDatabase  # noqa: E402
+
+JOBS = {"hands": ["--locomotions", "*run*,*dash*,*turn*", "--actions", "*wave*,*raise*,*bye*,*call*,*guide*"],
+        "default": []}
+LIMBS = ("left_arm", "right_arm")
+
+
+def _job(db: Path, out: Path, args, correct: bool) -> float:
+    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), "--force", "--restart", "-q",
+           *args, *([] if correct else ["--no-keep-hands-out"])]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
+    if r.returncode != 0:
+        raise SystemExit(f"job failed: {r.stderr[-2000:]}")
+    return time.perf_counter() - t0
+
+
+def _wrist_ranges(clip, arms) -> torch.Tensor:
+    """``(2,)`` each wrist's range in the chest's frame (the diagonal of its box)."""
+    t = clip.local_translations()
+    pos, grot = forward_kinematics(clip.rotations, t[:, 0], clip.skeleton.offsets, clip.skeleton.parents, t)
+    rel = quat_apply(quat_conj(grot[:, arms.chest, None]).expand(-1, 2, 4), pos[:, list(arms.wrist)] - pos[:, arms.chest, None])
+    return (rel.amax(0) - rel.amin(0)).norm(dim=-1)
+
+
+def _figures(db: Path, raw: Path, out: Path, t_raw: float, t_out: float) -> None:
+    with MotionDatabase.open(raw) as r, MotionDatabase.open(out) as o, MotionDatabase.open(db) as src:
+        e0, e1 = r.clip_table().extra, o.clip_table().extra
+        names = list(o.names)
+        n = len(names)
+        neither = (np.asarray(e1["penetration_locomotion"]) == 0) & (np.asarray(e1["penetration_action"]) == 0)
+        before = ((np.asarray(e0["penetration"]) > 0) & neither).mean()
+        after = ((np.asarray(e1["penetration"]) > 0) & neither).mean()
+        flags = [sum("self_penetration" in f for f in e["flags"]) for e in (e0, e1)]
+        corrected = np.asarray(e1["corrected_frames"])
+        print(f"hands   {n} results: a hand inside where neither source has one {100 * before:.1f}% -> "
+              f"{100 * after:.1f}%  [<= 3%]; flagged self_penetration {flags[0]} -> {flags[1]}; "
+              f"{int((corrected > 0).sum())} clips corrected, {int(corrected.sum())} frames")
+        sk = o.skeletons[0]
+        roles = o.spec(0).bind(sk)
+        body = body_of(sk, roles)
+        arms = arms_of(sk, roles, body)
+        others = [j for j in range(sk.num_joints) if j not in arms.moved]
+        feet, kept, acting, idle, ranges = 0.0, [], [], [], {}
+
+        def source_range(name):
+            if name not in ranges:
+                ranges[name] = _wrist_ranges(src.read(name), arms)
+            return ranges[name]
+
+        for b, name in enumerate(names):
+            a, c = r.read(name), o.read(name)
+            feet = max(feet, float((a.rotations[:, others] - c.rotations[:, others]).abs().max()),
+                       float((a.root_translation - c.root_translation).abs().max()))
+            got = _wrist_ranges(c, arms)
+            if corrected[b]:
+                kept.append(float((got / _wrist_ranges(a, arms).clamp_min(1e-9)).min()))
+            act = [i for i, limb in enumerate(LIMBS) if limb in str(e1["acting"][b]).split(",")]
+            if str(e1["timing"][b]) == "timewarp":
+                act = [0, 1]
+            if len(act) < 2 and act:
+                i = 1 - act[0]
+                idle.append(float(got[i] / source_range(str(e1["locomotion"][b]))[i].clamp_min(1e-9)))
+            for i in act:
+                acting.append(float(got[i] / source_range(str(e1["action"][b]))[i].clamp_min(1e-9)))
+        print(f"hands   feet and lower body: largest change {feet:.3g}  [0]")
+        if kept:
+            print(f"hands   corrected clips' arm range against uncorrected: worst {min(kept):.2f}x, "
+                  f"5th percentile {np.percentile(kept, 5):.2f}x  [>= 0.8x]")
+        if acting:
+            print(f"hands   acting arm's range against the action's: 5th percentile {np.percentile(acting, 5):.2f}x, "
+                  f"median {np.median(acting):.2f}x, {100 * np.mean(np.array(acting) >= 0.8):.0f}% at >= 0.8x  [>= 0.8x]")
+        if idle:
+            print(f"hands   idle arm's swing against the locomotion's: 5th percentile {np.percentile(idle, 5):.2f}x, "
+                  f"median {np.median(idle):.2f}x, {100 * np.mean(np.array(idle) >= 0.5):.0f}% at >= 0.5x  [>= 0.5x]")
+        _cost(r, e0, names, body, arms, sk, t_raw, t_out)
+
+
+def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
+    """The figures and the correction timed alone on the uncorrected results, as the job runs them
+    (the compiled kernels on one thread, as in each of the job's workers)."""
+    from torchsplice.cpu import get_threads, set_threads
+    from torchsplice.splice.backends import get_backend
+
+    threads = get_threads()
+    set_threads(1)
+
+    clips = [r.read(n) for n in names]
+    rot = np.concatenate([c.rotations.numpy() for c in clips])
+    trans = np.concatenate([c.local_translations().numpy() for c in clips])
+    lengths = np.array([c.num_frames for c in clips])
+    backend = get_backend("compiled")
+    share, depth = np.asarray(e0["penetration"]), np.asarray(e0["penetration_depth"])
+    allowed = np.maximum(np.asarray(e0["penetration_depth_locomotion"]), np.asarray(e0["penetration_depth_action"]))
+    often = np.maximum(np.asarray(e0["penetration_locomotion"]), np.asarray(e0["penetration_action"]))
+    allowed[share > often + SELF_PENETRATION] = 0.0  # as the job: what the flag would report may keep nothing
+    todo = np.flatnonzero((share > 0) & (depth > allowed))
+    starts = np.cumsum(lengths) - lengths
+    rows = np.concatenate([np.arange(starts[b], starts[b] + lengths[b]) for b in todo]) if len(todo) else np.zeros(0, int)
+    per_cm = centimetres(r.spec(0).units)
+
+    def once():
+        backend.inside_body(rot, trans, lengths, sk, body)
+        if len(todo):
+            new, _ = backend.keep_hands_out(rot[rows], trans[rows], lengths[todo], float(clips[0].fps), sk, body, arms,
+                                            allowed[todo] / per_cm)
+            backend.inside_body(new, trans[rows], lengths[todo], sk, body)
+
+    once()
+    best = min(_timed(once) for _ in range(3))
+    set_threads(threads)
+    print(f"hands   cost: the job with the correction {len(names) / t_out:,.0f} pairs/s against {len(names) / t_raw:,.0f} "
+          f"without ({100 * (t_out / t_raw - 1):+.1f}% time, whole process); the figures and the correction alone "
+          f"{best:.3f} s on one core = {100 * best / t_out:.1f}% of the job's {t_out:.2f} s  [<= 10%]")
+
+
+def _timed(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def bench_hands(mocap: Path, db: Path | None = None) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        if db is None:
+            folder = mocap / "bandai_namco_research_motiondataset"
+            if not folder.is_dir():
+                print(f"hands   skipped: no Bandai Namco clips at {folder}")
+                return
+            db = Path(tmp) / "bn.h5"
+            subprocess.run([sys.executable, "-m", "torchsplice", "import", str(folder), "-o", str(db), "--spec",
+                            "bandai_namco", "-q"], check=True, cwd=REPO)
+        for label, args in JOBS.items():
+            raw, out = Path(tmp) / f"{label}_raw.h5", Path(tmp) / f"{label}.h5"
+            times = {True: [], False: []}
+            for _ in range(2):
+                for correct in (False, True):
+                    times[correct].append(_job(db, out if correct else raw, args, correct))
+            print(f"hands   job '{label}' ({' '.join(args) or 'the default selections'}):")
+            _figures(db, raw, out, min(times[False]), min(times[True]))
+
+
+if __name__ == "__main__":
+    bench_hands(Path(sys.argv[1]) if len(sys.argv) > 1 else REPO.parent / "shared" / "mocap",
+                Path(sys.argv[2]) if len(sys.argv) > 2 else None)

@@ -1,0 +1,255 @@
+"""Keep hands out of the body: move an arm whose hand or forearm enters the body, by the least change.
+
+A spliced clip's arms come from the action, its torso from the splice's pelvis and posture
+correction and its legs from the locomotion, so a hand the action kept clear of its own body
+can end up inside the result's torso or thigh (an idle arm swinging into a turned torso). This
+moves it out:
+
+1. The body's capsules (:mod:`.body`) give, per frame and arm, how deep the forearm's axis
+   (with the hand) enters each obstacle beyond what the clip may keep (``allowed``, its sources'
+   own deepest, and at least half :data:`~.body.INSIDE_MARGIN`), and the way out: the capsule's
+   normal at the closest point.
+2. That push, as a move of the wrist, is taken into the chest's frame, spread in time (each
+   frame takes the largest push within :data:`RAMP` seconds, then a triangle of that
+   half-width smooths it; no pop where the correction starts or ends) and added to the wrist's
+   displacement so far.
+3. Two-bone IK on the shoulder and elbow puts the wrist at its place in the chest's frame plus
+   that displacement: the elbow bends in its own plane to the new reach, then the shoulder
+   swings the arm by the shortest arc. The hand keeps its rotation relative to the forearm.
+
+Steps 1 to 3 run :data:`ITERATIONS` times, always from the clip's own arms, so the result is
+the smallest displacement found; frames with no displacement keep their rotations bit for bit,
+and nothing but the shoulders' and elbows' rotations changes (the root, the legs and the feet
+are untouched). An idle arm keeps its swing where it stays clear of the body.
+
+Conventions: clips packed along frames, local rotations ``(N, J, 4)`` unit WXYZ and local
+translations ``(N, J, 3)`` (row 0 the root's position), ``lengths (B,)``, ``fps (B,)``;
+``allowed (B,)`` in the skeleton's units. Work is in float64, the result in the input's dtype.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from ..core.fk import forward_kinematics
+from ..core.rotations import axis_angle_to_quat, quat_apply, quat_between, quat_conj, quat_mul
+from ..core.skeleton import Skeleton
+from ..specs.canonical import canonical_joints
+from ..specs.roles import SkeletonRoles
+from .body import Body, capsule_ends, segment_closest
+
+__all__ = ["RAMP", "ITERATIONS", "CLEARANCE", "SLACK", "Arms", "arms_of", "keep_hands_out", "spread_in_time",
+           "arm_ik"]
+
+RAMP = 0.15
+"""Seconds over which a correction ramps in and out (the half-width of its spread in time)."""
+ITERATIONS = 24
+"""Passes of push, spread and IK (each from the clip's own arms)."""
+CLEARANCE = 0.5
+"""How deep a forearm may stay in an obstacle, at least, as a share of the body's margin (a
+frame counts as inside beyond the margin): the correction acts beyond half the margin."""
+SLACK = 0.25
+"""How far short of that depth (or of the clip's ``allowed``) a push aims, as a share of the
+margin, so that a few passes reach it rather than creep towards it."""
+
+
+@dataclass(frozen=True)
+class Arms:
+    """The joints the correction reads and moves (indices into the skeleton): ``chest`` (the
+    joint the arms hang from), and per side ``(left, right)`` the ``shoulder``, ``elbow`` and
+    ``wrist``; ``probes`` the body's forearm capsules of each side."""
+
+    chest: int
+    shoulder: tuple[int, int]
+    elbow: tuple[int, int]
+    wrist: tuple[int, int]
+    probes: tuple[int, int]
+
+    @property
+    def moved(self) -> tuple[int, int, int, int]:
+        """The joints whose rotations change: left shoulder, left elbow, right shoulder, right elbow."""
+        return self.shoulder[0], self.elbow[0], self.shoulder[1], self.elbow[1]
+
+
+def arms_of(skeleton: Skeleton, roles: SkeletonRoles, body: Body, what: str = "the skeleton") -> Arms:
+    """The :class:`Arms` of ``skeleton`` (bound ``roles``; ``body`` its :func:`~.body.body_of`)."""
+    j = canonical_joints(roles, skeleton, what)
+    chest = skeleton.parents[j["clavicle_l"] if "clavicle_l" in j else j["shoulder_l"]]
+    return Arms(chest, (j["shoulder_l"], j["shoulder_r"]), (j["elbow_l"], j["elbow_r"]), (j["wrist_l"], j["wrist_r"]),
+                (body.names.index("forearm_l"), body.names.index("forearm_r")))
+
+
+def _frames(lengths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Per packed frame: its clip, its clip's first frame and one past its last."""
+    clip = torch.repeat_interleave(torch.arange(len(lengths)), lengths)
+    end = torch.cumsum(lengths, 0)
+    return clip, (end - lengths)[clip], end[clip]
+
+
+def spread_in_time(push: torch.Tensor, lengths: torch.Tensor, fps: torch.Tensor, ramp: float = RAMP) -> torch.Tensor:
+    """``push`` ``(N, A, 3)`` (clips packed along frames) spread in time within each clip: every
+    frame takes the largest vector (by length, per ``A``) within ``w = round(ramp fps)`` frames
+    of it, then a triangle of half-width ``w`` (weights ``w + 1 - |d|``, renormalised at a clip's
+    ends) averages those. Zero far from any push; a lone push becomes a ramp ``2 w`` frames wide
+    each side, reaching its full size where pushes are ``w`` frames deep or more."""
+    N = push.shape[0]
+    if N == 0:
+        return push.clone()
+    clip, first, end = _frames(lengths)
+    w = torch.round(ramp * torch.as_tensor(fps, dtype=torch.float64)).long().clamp_min(1)[clip]  # (N,)
+    W = int(w.max())
+    d = torch.arange(-W, W + 1)
+    at = torch.arange(N)[:, None] + d[None, :]
+    inside = (at >= first[:, None]) & (at < end[:, None]) & (d.abs()[None, :] <= w[:, None])  # (N, 2W + 1)
+    at = torch.where(inside, at, torch.arange(N)[:, None])
+    size = torch.where(inside[..., None], (push * push).sum(-1)[at], -1.0)  # (N, 2W + 1, A)
+    best = at.gather(1, size.argmax(1))  # (N, A): the frame of the largest push near each
+    widest = push[best, torch.arange(push.shape[1])[None, :]]  # (N, A, 3)
+    weight = torch.where(inside, (w[:, None] + 1 - d.abs()[None, :]).to(push.dtype), 0.0)
+    return (widest[at] * weight[..., None, None]).sum(1) / weight.sum(1)[:, None, None]
+
+
+def _normalized(v: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
+    n = _length(v)[..., None]
+    f = fallback / _length(fallback)[..., None].clamp_min(1e-300)
+    return torch.where(n > 1e-12, v / n.clamp_min(1e-300), f)
+
+
+def arm_ik(S: torch.Tensor, E: torch.Tensor, W: torch.Tensor, T: torch.Tensor,
+                chest_rot: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Two-bone IK: ``(q1, q2, E', W')`` for shoulder, elbow and wrist at ``S``, ``E``, ``W`` and
+    the wrist's target ``T`` (``(..., 3)``): the elbow's turn in the world about itself, in the
+    plane of the arm, to the target's reach (clamped to what the bones can reach), then the
+    whole arm's shortest turn about the shoulder onto the target, and where they put the
+    elbow and wrist. The bones keep their lengths; a reachable target is met. ``chest_rot``
+    ``(..., 4)``: the chest's rotation, whose X axis is the elbow's hinge when the arm is
+    straight. (Unlike the legs' :func:`~.feet.two_bone_ik`, which keeps a knee no straighter
+    than it is, an arm may straighten: pushing a forearm out of the body often needs that.)"""
+    upper, lower = E - S, W - E
+    l1, l2 = _length(upper), _length(lower)
+    reach = _length(T - S).clamp((l1 - l2).abs() + 1e-6 * (l1 + l2), l1 + l2 - 1e-6 * (l1 + l2))
+    now = torch.acos(((-upper * lower).sum(-1) / (l1 * l2).clamp_min(1e-300)).clamp(-1.0, 1.0))
+    want = torch.acos(((l1 ** 2 + l2 ** 2 - reach ** 2) / (2 * l1 * l2).clamp_min(1e-300)).clamp(-1.0, 1.0))
+    side = quat_apply(chest_rot, torch.tensor([1.0, 0.0, 0.0], dtype=S.dtype).expand_as(S))
+    axis = _normalized(torch.linalg.cross(-upper, lower, dim=-1), torch.linalg.cross(-upper, side, dim=-1))
+    q1 = axis_angle_to_quat(axis * (want - now)[..., None])
+    W1 = E + quat_apply(q1, lower)
+    q2 = quat_between(_normalized(W1 - S, upper), _normalized(T - S, upper))
+    return q1, q2, S + quat_apply(q2, upper), S + quat_apply(q2, W1 - S)
+
+
+def _length(v: torch.Tensor) -> torch.Tensor:
+    return (v * v).sum(-1).sqrt()  # faster than torch's norm on rows of three
+
+
+def _probe_ends(pos: torch.Tensor, E: torch.Tensor, W: torch.Tensor, body: Body, arms: Arms) -> tuple:
+    """Both ends ``(n, 2, 1, 3)`` of each arm's probe capsule with its elbow and wrist at ``E``,
+    ``W`` ``(n, 2, 3)`` (the other joints at ``pos``)."""
+    ends = []
+    for e in (0, 1):
+        side = []
+        for k, probe in enumerate(arms.probes):
+            a, b = body.end_joints[2 * probe + e].tolist()
+            point = lambda j: E[:, k] if j == arms.elbow[k] else W[:, k] if j == arms.wrist[k] else pos[:, j]  # noqa: E731
+            share = float(body.end_shares[2 * probe + e])
+            side.append(point(a) + share * (point(b) - point(a)) if share else point(a))
+        ends.append(torch.stack(side, 1)[:, :, None])
+    return ends[0], ends[1]
+
+
+def _push(pos, E, W, oa, ob, radii, target, slack: float, body: Body, arms: Arms) -> torch.Tensor:
+    """``(n, 2, 3)`` per frame and arm, the move of the wrist (world) that takes the forearm's
+    axis, where it is deeper than ``target`` ``(n,)`` in an obstacle, out to ``slack`` less
+    deep than that, with the elbow and wrist at ``E``, ``W`` ``(n, 2, 3)``; zero where it is
+    out already."""
+    pa, pb = _probe_ends(pos, E, W, body, arms)
+    s, t = segment_closest(pa, pb, oa, ob)
+    cp, co = pa + (pb - pa) * s[..., None], oa + (ob - oa) * t[..., None]
+    excess = radii - _length(cp - co) - target[:, None, None]  # (n, 2, O)
+    excess = torch.where(excess > 0, excess + slack, 0.0)  # beyond the target: out to slack below it
+    if not bool((excess > 0).any()):
+        return torch.zeros_like(E)
+    away = _normalized(cp - co, cp - (oa + ob) / 2)
+    lever = (_length(pb - pa) / _length(W - E).clamp_min(1e-300)[..., None] * s).clamp(0.5, 2.0)
+    return (away * (excess / lever)[..., None]).sum(2)
+
+
+def _near(flag: torch.Tensor, radius: torch.Tensor, first: torch.Tensor, end: torch.Tensor) -> torch.Tensor:
+    """``(N,)`` the packed frames within ``radius`` ``(N,)`` frames of a flagged one of their clip."""
+    i = torch.arange(len(flag))
+    before = torch.cummax(torch.where(flag, i, -1), 0).values
+    after = torch.flip(torch.cummin(torch.flip(torch.where(flag, i, len(flag)), [0]), 0).values, [0])
+    return ((before >= first) & (i - before <= radius)) | ((after < end) & (after - i <= radius))
+
+
+def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths, fps, skeleton: Skeleton, body: Body,
+                   arms: Arms, allowed) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(rotations, corrected)``: the clips' rotations ``(N, J, 4)`` with each arm moved out of
+    the body where its forearm enters an obstacle deeper than the clip's ``allowed`` (see the
+    module docstring), and per clip ``(B,)`` how many frames changed. The passes run on the
+    frames near a hand inside only (those a correction can reach), with the same result."""
+    lengths = torch.as_tensor(lengths, dtype=torch.long)
+    B = len(lengths)
+    fps = torch.as_tensor(fps, dtype=torch.float64).expand(B)
+    allowed = torch.as_tensor(allowed, dtype=torch.float64).expand(B)
+    out = rotations.clone()
+    none = torch.zeros(B, dtype=torch.long)
+    if rotations.shape[0] == 0:
+        return out, none
+    rot = rotations.to(torch.float64)
+    trans = translations.to(torch.float64)
+    pos, grot = forward_kinematics(rot, trans[:, 0], skeleton.offsets.to(torch.float64), skeleton.parents, trans)
+    clip, first, end = _frames(lengths)
+    target = torch.maximum(allowed, torch.tensor(CLEARANCE * body.margin, dtype=torch.float64))[clip]  # (N,)
+    a, b = capsule_ends(pos, body)
+    obstacles = list(body.obstacles)
+    radii = body.radii.to(torch.float64)[obstacles]
+    el, wr = list(arms.elbow), list(arms.wrist)
+    slack = SLACK * body.margin
+    push = _push(pos, pos[:, el], pos[:, wr], a[:, None, obstacles], b[:, None, obstacles], radii, target, slack, body,
+                 arms)
+    inside = (push != 0).any(-1).any(-1)
+    if not bool(inside.any()):
+        return out, none
+    # the frames a correction can reach: each pass spreads a push 2 w frames, and reads w beyond
+    w = torch.round(RAMP * fps).long().clamp_min(1)[clip]
+    keep = torch.nonzero(_near(inside, (2 * ITERATIONS + 1) * w + 1, first, end)).flatten()
+    f, c = keep, clip[keep]
+    run = torch.ones(len(f), dtype=torch.bool)
+    run[1:] = (f[1:] != f[:-1] + 1) | (c[1:] != c[:-1])
+    seg = torch.cumsum(run.long(), 0) - 1
+    seg_lengths = torch.bincount(seg)
+    seg_clip = c[run]
+    pos, grot, target = pos[f], grot[f], target[f]
+    n = len(f)
+    S, E0, W0 = pos[:, list(arms.shoulder)], pos[:, el], pos[:, wr]  # (n, 2, 3)
+    chest = grot[:, arms.chest, None].expand(n, 2, 4)
+    oa, ob = a[f][:, None, obstacles], b[f][:, None, obstacles]  # (n, 1, O, 3): they do not move with the arms
+    D = torch.zeros(n, 2, 3, dtype=torch.float64)  # the wrists' displacement, chest's frame
+    E, W = E0.clone(), W0.clone()
+    q1 = torch.zeros(n, 2, 4, dtype=torch.float64)
+    q1[..., 0] = 1.0
+    q2 = q1.clone()
+    for k in range(ITERATIONS):
+        if k == 0:
+            p = push[f]
+        else:  # a frame no pass has moved was out already, and is still
+            m = torch.nonzero((D != 0).any(-1).any(-1)).flatten()
+            p = torch.zeros_like(D)
+            p[m] = _push(pos[m], E[m], W[m], oa[m], ob[m], radii, target[m], slack, body, arms)
+        if not bool((p != 0).any()):
+            break
+        D = D + spread_in_time(quat_apply(quat_conj(chest), p), seg_lengths, fps[seg_clip])
+        m = torch.nonzero((D != 0).any(-1).any(-1)).flatten()
+        q1[m], q2[m], E[m], W[m] = arm_ik(S[m], E0[m], W0[m], W0[m] + quat_apply(chest[m], D[m]), chest[m])
+    changed = (D != 0).any(-1)  # (n, 2)
+    parents = skeleton.parents
+    for k, (s_, e_) in enumerate(zip(arms.shoulder, arms.elbow)):
+        new_s = quat_mul(quat_conj(grot[:, parents[s_]]), quat_mul(q2[:, k], grot[:, s_]))
+        new_e = quat_mul(quat_conj(grot[:, parents[e_]]), quat_mul(q1[:, k], grot[:, e_]))
+        m = changed[:, k, None]
+        out[f, s_] = torch.where(m, new_s.to(out.dtype), out[f, s_])
+        out[f, e_] = torch.where(m, new_e.to(out.dtype), out[f, e_])
+    return out, none.index_add(0, c, changed.any(-1).long())
