@@ -15,8 +15,9 @@ For each it prints:
   worst), and the corrected clips' against the uncorrected                     [>= 0.8x]
 - the idle arm's swing (its wrist's range in the chest's frame) against the locomotion's,
   on standing actions with one acting arm (5th percentile)                   [>= 0.5x]
-- the cost: the job's pairs/s with the correction against without, and the figures and the
-  correction timed alone on the results (one core), as a share of the job's time   [<= 10%]
+- the cost: the job's pairs/s with the correction against without, and the figures (the body
+  test, foot skate, floor, jerk) and the correction timed alone on the results (one core), as
+  a share of the job's time                                                          [<= 10%]
 """
 
 from __future__ import annotations
@@ -37,7 +38,9 @@ from torchsplice.core.fk import forward_kinematics  # noqa: E402
 from torchsplice.core.rotations import quat_apply, quat_conj  # noqa: E402
 from torchsplice.ops.body import body_of  # noqa: E402
 from torchsplice.ops.hands import arms_of  # noqa: E402
+from torchsplice.job.source_figures import scales  # noqa: E402
 from torchsplice.job.task import SELF_PENETRATION  # noqa: E402
+from torchsplice.ops.plausibility import figure_joints  # noqa: E402
 from torchsplice.ops.units import centimetres  # noqa: E402
 from torchsplice.store.database import MotionDatabase  # noqa: E402
 
@@ -140,8 +143,12 @@ def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     rows = np.concatenate([np.arange(starts[b], starts[b] + lengths[b]) for b in todo]) if len(todo) else np.zeros(0, int)
     per_cm = centimetres(r.spec(0).units)
 
+    joints = figure_joints(sk, r.spec(0).bind(sk))
+    up, per_metre, _ = scales(r.spec_json(0))
+
     def once():
         backend.inside_body(rot, trans, lengths, sk, body)
+        backend.figures(rot, trans, lengths, float(clips[0].fps), sk, joints, up, per_metre)
         if len(todo):
             new, _ = backend.keep_hands_out(rot[rows], trans[rows], lengths[todo], float(clips[0].fps), sk, body, arms,
                                             allowed[todo] / per_cm)

@@ -131,14 +131,30 @@ def _feet(T: int, fps: float, speed: float, height: float = 0.0) -> torch.Tensor
 @pytest.mark.parametrize("fps", [20.0, 30.0, 60.0])
 def test_gmds_skate_ratio_of_a_foot_sliding_at_known_speeds(fps):
     T = int(3 * fps) + 1  # 3 s: 60 steps at 20 fps
-    ratio = lambda p: float(skate_ratio(p, torch.tensor([T]), torch.tensor([fps]), [0], 1, 1.0))  # noqa: E731
+    ratio = lambda p: float(skate_ratio(p, torch.tensor([T]), torch.tensor([fps]), [0, 1], 1, 1.0))  # noqa: E731
     assert ratio(_feet(T, fps, 1.0)) == 1.0  # every step: averaged over 5 steps even at the ends (0.6 m/s there)
     assert ratio(_feet(T, fps, 0.4)) == 0.0  # below 0.5 m/s
     steps = int(3 * GMD_FPS)
     assert ratio(_feet(T, fps, 0.7)) == pytest.approx((steps - 2) / steps)  # the first and last steps average 0.42 m/s
     assert ratio(_feet(T, fps, 1.0, height=0.06)) == 0.0  # 6 cm up: not in contact
     cm = _feet(T, fps, 1.0) * 100  # in centimetres: the same answer
-    assert float(skate_ratio(cm, torch.tensor([T]), torch.tensor([fps]), [0], 1, 100.0)) == 1.0
+    assert float(skate_ratio(cm, torch.tensor([T]), torch.tensor([fps]), [0, 1], 1, 100.0)) == 1.0
+
+
+@pytest.mark.parametrize("fps", [20.0, 30.0, 60.0])
+def test_foot_slide_and_floor_of_feet_at_known_speeds_and_heights(fps):
+    from torchsplice.ops.plausibility import floor_height, foot_slide
+
+    T = int(3 * fps) + 1
+    lengths, rate = torch.tensor([T]), torch.tensor([fps])
+    # one foot slides at 1 m/s, the other stands: both in contact on every step, a mean of 0.5 m/s
+    assert float(foot_slide(_feet(T, fps, 1.0), lengths, rate, [0, 1], 1, 1.0)) == pytest.approx(0.5)
+    assert float(foot_slide(_feet(T, fps, 1.0, height=0.06), lengths, rate, [0, 1], 1, 1.0)) == 0.0  # 6 cm up: not in contact
+    assert float(foot_slide(_feet(T, fps, 1.0) * 100, lengths, rate, [0, 1], 1, 100.0)) == pytest.approx(50.0)  # cm/s
+    lowered = _feet(T, fps, 0.0)
+    lowered[..., 1] -= 0.03  # the whole clip 3 cm under the ground
+    assert float(floor_height(lowered, lengths, [0, 1], 1)) == pytest.approx(-0.03)
+    assert float(floor_height(_feet(T, fps, 0.0, height=0.06), lengths, [0], 1)) == pytest.approx(0.06)
 
 
 def test_a_seam_of_known_size_shows_in_the_jerk():
@@ -234,3 +250,39 @@ def test_evaluate_reports_the_figures_per_method_against_the_sources(runs_with_r
     worst = np.argmax(beyond)
     with MotionDatabase.open(out) as o:
         assert "Most beyond their sources" in text and o.names[worst] in text.split("Most beyond their sources")[1]
+
+
+@pytest.mark.realdata
+def test_the_figures_columns_are_the_frames_figures_and_the_compiled_ones_the_torch_ones(runs_with_raised_hands):
+    """``foot_skate``, ``foot_slide``, ``floor`` and ``jerk`` of every result are those of its
+    stored frames (:func:`~torchsplice.ops.plausibility.clip_figures`, torch), ``jerk_action``
+    the action's own; the compiled kernel (:mod:`torchsplice.cpu.figures`) gives the torch
+    figures."""
+    from torchsplice.ops.plausibility import clip_figures, figure_joints
+    from torchsplice.splice.backends import Backend
+    from torchsplice.splice.backends.compiled import CompiledBackend
+
+    db, _, out = runs_with_raised_hands
+    with MotionDatabase.open(out) as o, MotionDatabase.open(db) as src:
+        t = o.clip_table()
+        sk = o.skeletons[0]
+        joints = figure_joints(sk, o.spec(0).bind(sk))
+        clips = [o.read(n, dtype=torch.float64) for n in t.name]
+        actions = {n: src.read(n, dtype=torch.float64) for n in set(t.extra["action"])}
+    e = t.extra
+    rot = torch.cat([c.rotations for c in clips]).numpy()
+    trans = torch.cat([c.local_translations() for c in clips]).numpy()
+    lengths = [c.num_frames for c in clips]
+    got = CompiledBackend().figures(rot, trans, lengths, clips[0].fps, sk, joints, 1, 100.0)  # Bandai Namco: cm, Y up
+    want = Backend.figures(CompiledBackend(), rot, trans, lengths, clips[0].fps, sk, joints, 1, 100.0)
+    for k in ("foot_skate", "foot_slide", "floor", "jerk"):
+        assert np.allclose(got[k], want[k], rtol=1e-9, atol=1e-9), k
+        assert np.allclose(np.asarray(e[k]), want[k], rtol=1e-4, atol=1e-3), k  # the job's frames, float32
+    assert (np.asarray(e["foot_skate"]) > 0).any() and (np.asarray(e["jerk"]) > 0).all()
+    a = actions[str(e["action"][0])]
+    t0 = a.local_translations()
+    from torchsplice.core.fk import forward_kinematics
+
+    pos, grot = forward_kinematics(a.rotations, t0[:, 0], sk.offsets.double(), sk.parents, t0)
+    own = clip_figures(pos[None], grot[None], torch.tensor([a.num_frames]), a.fps, joints, 1, 100.0)["jerk"]
+    assert float(e["jerk_action"][0]) == pytest.approx(float(own), rel=1e-3)

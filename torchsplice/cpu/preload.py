@@ -17,6 +17,7 @@ def preload(dtype=np.float32) -> None:
     from . import splice as splice_mod
     from . import standing as standing_mod
     from .body import inside_clips
+    from .figures import figures_clips
     from .hands import hands_out_clips
     from .fk import fk_clips
 
@@ -36,6 +37,7 @@ def preload(dtype=np.float32) -> None:
                                       out, out, v8, i8, i8),
         standing_mod.loop_points_batch: (f8, f8, i8, i8, i8, m8, 0, i8, i8, 0, np.zeros((1, 2), np.int64)),
         inside_clips: (out, out, i8, i8, i8, i8, v8, v8, i8, i8, 0.0, i8, i8, v8, v8),
+        figures_clips: (out, out, i8, i8, i8, i8, 0, 0, 0.0, 0.0, 0.0, 0.0, 0, i8, i8, v8, v8, v8, v8, v8),
         hands_out_clips: (out, out, i8, i8, i8, i8, v8, v8, i8, i8, 0, i8, i8, i8, i8, i8, i8, i8, v8, i8, 0.0, 0, out,
                           i8),
     }

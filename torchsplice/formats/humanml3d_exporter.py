@@ -15,9 +15,9 @@ The folder::
                                   locomotion_db and action_db (a spliced clip's sources'
                                   databases, from its run record), retargeted_from, described
                                   (0: its locomotion or its action was not said), and the
-                                  clip's flags, penetration, penetration_depth (cm) and
-                                  corrected_frames (a hand inside the body; empty where the
-                                  database has no such columns)
+                                  clip's flags, penetration, penetration_depth (cm),
+                                  corrected_frames, foot_skate, jerk and jerk_action (empty
+                                  where the database has no such columns)
 
 Each clip goes onto the SMPL body's 22 joints (``smpl22``: HumanML3D's joint order, metres, its
 standard bone lengths) by the analytic retargeting of :mod:`torchsplice.ops.retarget` with the
@@ -64,10 +64,11 @@ MIN_FRAMES = 3
 MDM_MIN_ROWS, MDM_MAX_ROWS = 40, 200
 """MDM's and MoMask's loaders keep motions of 40 to 199 feature rows (and crop to 196);
 ``window`` cuts longer clips, and is itself at least 40 frames long."""
-CHECK_COLUMNS = ("flags", "penetration", "penetration_depth", "corrected_frames")
+CHECK_COLUMNS = ("flags", "penetration", "penetration_depth", "corrected_frames", "foot_skate", "jerk", "jerk_action")
 """The source database's columns of what a person would reject (:mod:`torchsplice.job.task`'s
-``flags``; a hand inside the body, its depth in cm and the frames corrected for it), copied
-into ``index.csv`` (empty where the database has none)."""
+``flags``; a hand inside the body, its depth in cm and the frames corrected for it; GMD's
+foot skate ratio; the upper body's jerk and the action's, m/s^3), copied into ``index.csv``
+(empty where the database has none)."""
 INDEX_COLUMNS = ("id", "clip", "start_s", "end_s", "rows", "mirrored", "split", "role", "locomotion", "action",
                  "method", "database", "locomotion_db", "action_db", "retargeted_from", "described", *CHECK_COLUMNS)
 EARLIER_INDEX_COLUMNS = (INDEX_COLUMNS[:16],)

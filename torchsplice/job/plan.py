@@ -31,11 +31,12 @@ from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
 from ..store.select import select_clips
+from .source_figures import source_figures
 from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
-PLAN_VERSION = 6
+PLAN_VERSION = 7
 MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
@@ -91,7 +92,8 @@ class Group:
 @dataclass
 class PlanClip:
     """A source clip of the plan, as the tasks need it without reading it: its name, frames,
-    frame rate, labels and, for a standing action, the arms it acts with (``None``: not found)."""
+    frame rate, labels and, for a standing action, the arms it acts with (``None``: not found);
+    the figures its results are judged against (:mod:`.source_figures`)."""
 
     name: str
     frames: int
@@ -100,10 +102,11 @@ class PlanClip:
     acting: list[str] | None = None
     penetration: float = 0.0
     penetration_depth: float = 0.0
+    jerk: float = 0.0
 
     def to_dict(self) -> dict:
         out = {"name": self.name, "frames": self.frames, "fps": self.fps, "labels": self.labels,
-               "penetration": self.penetration, "penetration_depth": self.penetration_depth}
+               "penetration": self.penetration, "penetration_depth": self.penetration_depth, "jerk": self.jerk}
         if self.acting is not None:
             out["acting"] = list(self.acting)
         return out
@@ -284,7 +287,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
 
     pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
     _acting(c, sources, groups, clips, sk_l, {plan_action_key(p, same) for p in pairs if p.mode == "standing"})
-    _penetrations(c, sources, groups, clips, sk_l)
+    source_figures(c, sources, groups, clips, sk_l)
     if not pairs:
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
         raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
@@ -379,28 +382,6 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
                                      motions[idx[0]].skeleton)
                 for i, (limbs, measure) in zip(idx, found):
                     clips[chunk[i]].acting = list(limbs)
-
-
-def _penetrations(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l) -> None:
-    """Record in ``clips`` how each clip puts a hand inside its body, on its group's body, by the
-    job's backend as its results are (:meth:`~torchsplice.splice.backends.Backend.inside_body`),
-    64 clips at a time."""
-    from ..ops.body import body_of
-    from ..ops.units import centimetres
-
-    backend = config.splice_backend()
-    for g in groups:
-        skeleton = sk_l[g.skeleton]
-        body = body_of(skeleton, g.roles(skeleton))
-        cm = centimetres(DatasetSpec.from_json(g.spec).units)
-        for b in range(0, len(g.clips), 64):
-            chunk = g.clips[b:b + 64]
-            motions = [sources.motion(k) for k in chunk]
-            rot = np.concatenate([m.rotations.detach().cpu().numpy() for m in motions]).astype(np.float32)
-            trans = np.concatenate([m.local_translations().detach().cpu().numpy() for m in motions]).astype(np.float32)
-            share, depth = backend.inside_body(rot, trans, [m.num_frames for m in motions], skeleton, body)
-            for k, sh, d in zip(chunk, share.tolist(), depth.tolist()):
-                clips[k].penetration, clips[k].penetration_depth = sh, d * cm
 
 
 def _skeleton_units(db) -> dict[int, tuple[str, str]]:

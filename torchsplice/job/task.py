@@ -41,7 +41,8 @@ OUTPUT_COLUMNS = {
     "coverage": "float", "timing": "str", "acting": "str",
     "penetration": "float", "penetration_depth": "float", "penetration_locomotion": "float",
     "penetration_depth_locomotion": "float", "penetration_action": "float", "penetration_depth_action": "float",
-    "corrected_frames": "int",
+    "corrected_frames": "int", "foot_skate": "float", "foot_slide": "float", "floor": "float", "jerk": "float",
+    "jerk_action": "float",
 }
 FLAG_CODES = {
     "poor_alignment": "the lower bodies align poorly (alignment_distance above 0.10 leg lengths): other locomotion "
@@ -262,6 +263,8 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture, inside)
     part.extra["corrected_frames"] = corrected
+    part.extra.update(_figures(backend, group, skeleton, roles, frames, rot, trans))
+    part.extra["jerk_action"] = np.array([plan.clips[k[1]].jerk for k in kept_keys], dtype=np.float64)
     part.parts = _parts(plan, config, task, kept_keys, batch, ok, standing)
     if part.parts is not None:
         part.parts["arms_rows"], part.parts["arms"] = arms if arms is not None else (
@@ -284,6 +287,20 @@ def _penetration(backend, group, skeleton, roles, frames, rot: np.ndarray, trans
         return np.zeros(0), np.zeros(0)
     share, depth = backend.inside_body(rot, trans, frames, skeleton, body_of(skeleton, roles))
     return share, depth * centimetres(DatasetSpec.from_json(group.spec).units)
+
+
+def _figures(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> dict:
+    """The results' ``foot_skate``, ``foot_slide`` (cm/s), ``floor`` (cm) and ``jerk`` (m/s^3)
+    from their packed frames (:meth:`~torchsplice.splice.backends.Backend.figures`); NaN where
+    the skeleton's units are unknown."""
+    from ..ops.plausibility import figure_joints
+    from .source_figures import scales
+
+    up, per_metre, _ = scales(group.spec)
+    names = ("foot_skate", "foot_slide", "floor", "jerk")
+    if not len(frames) or not np.isfinite(per_metre):
+        return {k: np.full(len(frames), np.nan if len(frames) else 0.0) for k in names}
+    return backend.figures(rot, trans, frames, float(group.fps), skeleton, figure_joints(skeleton, roles), up, per_metre)
 
 
 def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np.ndarray, trans: np.ndarray,

@@ -167,6 +167,29 @@ class Backend:
         share, depth = penetration_packed(positions, np.asarray(lengths, dtype=np.int64), body)
         return share.numpy(), depth.numpy()
 
+    def figures(self, rotations, translations, lengths, fps, skeleton, joints, up_axis: int, per_metre: float) -> dict:
+        """The job's figures of what a person would reject, per result, from its packed frames (as
+        :meth:`inside_body` takes them): ``foot_skate``, ``foot_slide`` (cm/s), ``floor`` (cm) and
+        ``jerk`` (m/s^3) ``(B,)`` numpy (:func:`~torchsplice.ops.plausibility.clip_figures`;
+        ``joints`` its :func:`~torchsplice.ops.plausibility.figure_joints`). By torch here, one
+        padded batch; a backend may compute the same its way."""
+        import numpy as np
+        import torch
+
+        from ...core.fk import forward_kinematics
+        from ...ops.plausibility import clip_figures
+
+        lengths = np.asarray(lengths, np.int64)
+        B, T = len(lengths), int(lengths.max()) if len(lengths) else 0
+        starts = np.cumsum(lengths) - lengths
+        rows = np.minimum(starts[:, None] + np.arange(T)[None, :], starts[:, None] + np.maximum(lengths - 1, 0)[:, None])
+        t = torch.as_tensor(np.asarray(translations, np.float64)[rows])
+        pos, grot = forward_kinematics(torch.as_tensor(np.asarray(rotations, np.float64)[rows]), t[..., 0, :],
+                                       skeleton.offsets.to(torch.float64), skeleton.parents, t)
+        out = clip_figures(pos, grot, torch.as_tensor(lengths), torch.as_tensor(np.asarray(fps, np.float64)).expand(B),
+                           joints, up_axis, per_metre)
+        return {k: v.numpy() for k, v in out.items()}
+
     def keep_hands_out(self, rotations, translations, lengths, fps: float, skeleton, body, arms, allowed) -> tuple:
         """``(rotations, corrected)``: packed result frames (as :meth:`inside_body` takes them)
         with the arms moved out of ``body`` where a forearm goes deeper than ``allowed`` ``(B,)``

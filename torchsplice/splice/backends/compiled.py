@@ -54,6 +54,9 @@ def warm_up(quiet: bool = False) -> float:
     CompiledBackend().inside_body(rot, trans, [m.num_frames], m.skeleton, body)
     CompiledBackend().keep_hands_out(rot, trans, [m.num_frames], m.fps, m.skeleton, body, arms_of(m.skeleton, roles, body),
                                      [0.0])
+    from ...ops.plausibility import figure_joints
+
+    CompiledBackend().figures(rot, trans, [m.num_frames], m.fps, m.skeleton, figure_joints(m.skeleton, roles), 1, 1.0)
     return time.perf_counter() - t0
 
 
@@ -122,6 +125,26 @@ class CompiledBackend(Backend):
                      np.asarray(body.probes, dtype=np.int64), np.asarray(body.obstacles, dtype=np.int64),
                      float(body.margin), starts, lengths, share, depth)
         return share, depth
+
+    def figures(self, rotations, translations, lengths, fps, skeleton, joints, up_axis, per_metre):
+        from ...cpu.figures import GMD, figures_clips
+        from ...cpu.fk import joint_closure
+
+        lengths = np.asarray(lengths, dtype=np.int64)
+        B = len(lengths)
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        feet, upper, chest = joints
+        out = {k: np.zeros(B) for k in ("foot_skate", "foot_slide", "floor", "jerk")}
+        figures_clips(np.ascontiguousarray(rotations), np.ascontiguousarray(translations),
+                      np.asarray(skeleton.parents, dtype=np.int64),
+                      joint_closure(skeleton.parents, np.unique([*feet, *upper, chest])), np.asarray(feet, np.int64),
+                      np.asarray(upper, np.int64), int(chest), int(up_axis), float(per_metre), *GMD, starts, lengths,
+                      np.asarray(fps, np.float64) * np.ones(B), out["foot_skate"], out["foot_slide"], out["floor"],
+                      out["jerk"])
+        out["foot_slide"] *= 100.0 / per_metre
+        out["floor"] *= 100.0 / per_metre
+        out["jerk"] /= per_metre
+        return out
 
     def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed):
         from ...cpu.fk import joint_closure
