@@ -43,6 +43,14 @@ def test_arm_ik_meets_a_reachable_target_and_keeps_the_bones():
     # the turns are what moves the bones: the elbow's about itself, then all about the shoulder
     assert torch.allclose(E2, S + quat_apply(q2, E - S), atol=1e-12)
     assert torch.allclose(W2, S + quat_apply(q2, E - S + quat_apply(q1, W - E)), atol=1e-12)
+    # a straight arm (no plane of its own), along the chest's X axis or not, bends to meet a target
+    for along in ([1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.6, -0.8, 0.0]):
+        u = torch.tensor(along, dtype=torch.float64)
+        S1, E1, W1 = torch.zeros(3, dtype=torch.float64), 0.3 * u, 0.55 * u
+        T1 = S1 + 0.4 * torch.nn.functional.normalize(u + torch.tensor([0.0, 0.0, 0.5], dtype=torch.float64), dim=0)
+        _, _, E2s, W2s = arm_ik(S1, E1, W1, T1, chest[0])
+        assert torch.allclose(W2s, T1, atol=1e-9), along
+        assert float((E2s - S1).norm()) == pytest.approx(0.3) and float((W2s - E2s).norm()) == pytest.approx(0.25)
     # out of reach: the arm points at the target, straight
     far = S + direction * (l1 + l2 + 1.0)[:, None]
     _, _, E3, W3 = arm_ik(S, E, W, far, chest)
@@ -168,6 +176,15 @@ def test_a_clean_clip_and_a_clip_allowed_as_deep_come_back_as_they_were():
     assert counts.tolist() == [0, int(count)]
     float32, _ = keep_hands_out(rot.float(), trans.float(), [T], m.fps, m.skeleton, body, arms, 0.0)
     assert float32.dtype == torch.float32
+    # no clips: nothing to do, by either backend
+    from torchsplice.splice.backends import Backend
+    from torchsplice.splice.backends.compiled import CompiledBackend
+
+    for run in (CompiledBackend().keep_hands_out, lambda *a: Backend.keep_hands_out(CompiledBackend(), *a)):
+        none, counts = run(rot[:0].float().numpy(), trans[:0].float().numpy(), [], m.fps, m.skeleton, body, arms, [])
+        assert none.shape == (0, *rot.shape[1:]) and len(counts) == 0
+    got = spread_in_time(torch.zeros(5, 2, 3, dtype=torch.float64), torch.tensor([5]), 30.0)  # a scalar rate
+    assert got.shape == (5, 2, 3) and bool((got == 0).all())
 
 
 def _wrists_in_chest(clip, arms) -> torch.Tensor:
@@ -275,3 +292,35 @@ def test_evaluate_says_how_many_arms_were_moved(runs_with_raised_hands, tmp_path
     with MotionDatabase.open(out) as o:
         corrected = np.asarray(o.clip_table().extra["corrected_frames"])
     assert row.rstrip(" |").endswith(f"{int((corrected > 0).sum())}, {int(corrected.sum())}")
+
+
+@pytest.mark.realdata
+def test_hands_are_kept_out_on_a_database_whose_units_are_unknown(runs_with_raised_hands, tmp_path):
+    """The correction works in the skeleton's units: unknown units (a guessed spec's) leave the
+    centimetre columns NaN, not the arms inside."""
+    import json
+    import shutil
+
+    import h5py
+
+    from torchsplice.job.run import splice_all
+
+    db, _, out = runs_with_raised_hands
+    unknown = tmp_path / "unknown.h5"
+    shutil.copy(db, unknown)
+    with h5py.File(unknown, "r+") as f:
+        for k in f["skeletons"]:
+            g = f["skeletons"][k]
+            spec = json.loads(g.attrs["spec"])
+            spec["dataset"]["units"] = "unknown"
+            g.attrs["spec"], g.attrs["units"] = json.dumps(spec), "unknown"
+    got = tmp_path / "out.h5"
+    splice_all(unknown, got, locomotions=["*run*,*dash*,*turn*"], actions=["*wave*,*raise*,*bye*,*call*,*guide*"],
+               workers=1)
+    with MotionDatabase.open(got) as g, MotionDatabase.open(out) as o:
+        e, want = g.clip_table().extra, o.clip_table().extra
+        assert g.spec(0).units == "unknown"
+        assert np.array_equal(np.asarray(e["corrected_frames"]), np.asarray(want["corrected_frames"]))
+        assert np.asarray(e["corrected_frames"]).sum() > 0
+        assert np.array_equal(np.asarray(e["penetration"]), np.asarray(want["penetration"]))
+        assert np.isnan(np.asarray(e["penetration_depth"])).all() and np.isnan(np.asarray(e["jerk"])).all()

@@ -4,7 +4,8 @@ The same figures as :func:`torchsplice.ops.plausibility.penetration_packed`: per
 of frames in which a probe capsule's axis is deeper than ``margin`` inside an obstacle capsule
 (``radius - axis distance``), and the deepest it goes. One clip per thread; per frame, FK of
 the joints the capsules need (``joints``, ascending and closed under parents) then each probe
-against each obstacle, the segment distance in closed form. Shapes: rotations ``(N, J, 4)``
+against each obstacle, the segment distance in closed form (skipped for a pair whose midpoints
+are too far apart for it to count). Shapes: rotations ``(N, J, 4)``
 (unit WXYZ, local), translations ``(N, J, 3)`` (row 0 the root's world position, the others
 offsets or animated translations); capsule ends ``end_a``, ``end_b``, ``end_w`` ``(2C,)``: end
 ``k`` is ``pos[end_a[k]] (1 - end_w[k]) + pos[end_b[k]] end_w[k]``, capsule ``c`` its ends
@@ -26,6 +27,23 @@ __all__ = ["inside_clips"]
 @njit(cache=True, inline="always")
 def _dot(a0, a1, a2, b0, b1, b2):
     return a0 * b0 + a1 * b1 + a2 * b2
+
+
+@njit(cache=True, inline="always")
+def _half(e, i):
+    """Half the length of segment ``e[2i] e[2i+1]``."""
+    a0, a1, a2 = e[2 * i + 1, 0] - e[2 * i, 0], e[2 * i + 1, 1] - e[2 * i, 1], e[2 * i + 1, 2] - e[2 * i, 2]
+    return 0.5 * math.sqrt(_dot(a0, a1, a2, a0, a1, a2))
+
+
+@njit(cache=True, inline="always")
+def _apart(e, i, k):
+    """A lower bound on the distance between segments ``i`` and ``k`` of ``e``: their midpoints'
+    distance less both half-lengths (a pair surely further than a capsule's reach is skipped)."""
+    m0 = 0.5 * (e[2 * i, 0] + e[2 * i + 1, 0] - e[2 * k, 0] - e[2 * k + 1, 0])
+    m1 = 0.5 * (e[2 * i, 1] + e[2 * i + 1, 1] - e[2 * k, 1] - e[2 * k + 1, 1])
+    m2 = 0.5 * (e[2 * i, 2] + e[2 * i + 1, 2] - e[2 * k, 2] - e[2 * k + 1, 2])
+    return math.sqrt(_dot(m0, m1, m2, m0, m1, m2)) - _half(e, i) - _half(e, k)
 
 
 @njit(cache=True, nogil=True)
@@ -98,6 +116,8 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
             best = -math.inf
             for i in probes:
                 for o_ in obstacles:
+                    if _apart(ends, i, o_) >= radii[o_] - margin:  # cannot count: not measured
+                        continue
                     d = radii[o_] - _segment_distance(ends, i, o_)
                     if d > best:
                         best = d

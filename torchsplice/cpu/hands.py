@@ -119,6 +119,19 @@ def _axis_angle(v):
     return (math.cos(half), v[0] * s, v[1] * s, v[2] * s)
 
 
+@njit(cache=True, inline="always")
+def _hinge(upper, chest):
+    """:func:`torchsplice.ops.hands._hinge`: the chest's X axis less its part along the upper arm
+    (its Z axis where the arm lies along X)."""
+    unit = _scale(upper, 1.0 / max(_length(upper), 1e-300))
+    side = qrot(chest, (1.0, 0.0, 0.0))
+    side = _sub(side, _scale(unit, _dot(side, unit)))
+    if _length(side) > 1e-6:
+        return side
+    side = qrot(chest, (0.0, 0.0, 1.0))
+    return _sub(side, _scale(unit, _dot(side, unit)))
+
+
 @njit(cache=True, nogil=True)
 def _arm_ik(S, E, W, T, chest):
     """:func:`torchsplice.ops.hands.arm_ik` of one arm: ``(q1, q2, E', W')``."""
@@ -127,9 +140,8 @@ def _arm_ik(S, E, W, T, chest):
     reach = min(max(_length(_sub(T, S)), abs(l1 - l2) + 1e-6 * (l1 + l2)), l1 + l2 - 1e-6 * (l1 + l2))
     now = math.acos(min(max(-_dot(upper, lower) / max(l1 * l2, 1e-300), -1.0), 1.0))
     want = math.acos(min(max((l1 * l1 + l2 * l2 - reach * reach) / max(2.0 * l1 * l2, 1e-300), -1.0), 1.0))
-    side = qrot(chest, (1.0, 0.0, 0.0))
     minus = _scale(upper, -1.0)
-    axis = _normalized(_cross(minus, lower), _cross(minus, side))
+    axis = _normalized(_cross(minus, lower), _hinge(upper, chest))
     q1 = _axis_angle(_scale(axis, want - now))
     W1 = _add(E, qrot(q1, lower))
     q2 = _between(_normalized(_sub(W1, S), upper), _normalized(_sub(T, S), upper))

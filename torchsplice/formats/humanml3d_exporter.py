@@ -516,8 +516,10 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
             info[col] = str(table.extra[col][r]) if col in table.extra else ""
         for col in CHECK_COLUMNS:
             v = table.extra[col][r] if col in table.extra else ""
-            info[col] = "" if isinstance(v, (float, np.floating)) and not np.isfinite(v) else (
-                f"{v:.6g}" if isinstance(v, (float, np.floating)) else str(v))
+            if isinstance(v, (float, np.floating)):
+                info[col] = f"{v:.6g}" if np.isfinite(v) else ""
+            else:  # an int column's empty value is -1 (a copied source clip's)
+                info[col] = "" if isinstance(v, (int, np.integer)) and v < 0 else str(v)
         infos[r] = info
     splits = table_splits(table, ratios, seed)  # over the whole database: a selection keeps its clips' splits
     # a clip that is a mirror image (torchsplice mirror's, labelled mirror_of) or whose image is exported

@@ -1,6 +1,7 @@
 """The plan's figures of its source clips, against which each result is judged: how a clip puts
-a hand inside its body (``penetration``, ``penetration_depth`` in cm) and the jerk of its upper
-body (m/s^3), computed once per clip at plan time by the job's backend, as the results' are.
+a hand inside its body (``penetration``, ``penetration_depth`` in the skeleton's units: the
+columns convert it to cm) and the jerk of its upper body (m/s^3), computed once per clip at
+plan time by the job's backend, as the results' are.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def source_figures(config, sources, groups, clips: dict, sk_l) -> None:
         roles = g.roles(skeleton)
         body = body_of(skeleton, roles)
         joints = figure_joints(skeleton, roles)
-        up, per_metre, cm = scales(g.spec)
+        up, per_metre, _ = scales(g.spec)
         for b in range(0, len(g.clips), 64):
             chunk = g.clips[b:b + 64]
             motions = [sources.motion(k) for k in chunk]
@@ -48,5 +49,5 @@ def source_figures(config, sources, groups, clips: dict, sk_l) -> None:
             jerk = backend.figures(rot, trans, lengths, [m.fps for m in motions], skeleton, joints, up,
                                    per_metre if math.isfinite(per_metre) else 1.0)["jerk"]
             for k, sh, d, j in zip(chunk, share.tolist(), depth.tolist(), jerk.tolist()):
-                clips[k].penetration, clips[k].penetration_depth = sh, d * cm
+                clips[k].penetration, clips[k].penetration_depth = sh, d  # the skeleton's units
                 clips[k].jerk = j if math.isfinite(per_metre) else math.nan

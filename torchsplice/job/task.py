@@ -21,6 +21,8 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
+from ..ops.units import centimetres
+from ..specs import DatasetSpec
 from ..store.lock import temp_path
 from ..splice.api import spliced_labels
 from ..splice.clips import resample_motion
@@ -260,6 +262,8 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     if config.keep_hands_out:
         rot, corrected, arms = _keep_hands_out(backend, plan, group, skeleton, roles, kept_keys, frames, rot, trans,
                                                inside)
+    cm = centimetres(DatasetSpec.from_json(group.spec).units)
+    inside = (inside[0], inside[1] * cm)
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture, inside)
     part.extra["corrected_frames"] = corrected
@@ -277,16 +281,13 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
 
 
 def _penetration(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> tuple:
-    """``(share, depth in cm)`` per result of how it puts a hand inside its body, from its packed
-    frames (:meth:`~torchsplice.splice.backends.Backend.inside_body`)."""
+    """``(share, depth)`` per result of how it puts a hand inside its body (depth in the
+    skeleton's units), from its packed frames (:meth:`~torchsplice.splice.backends.Backend.inside_body`)."""
     from ..ops.body import body_of
-    from ..ops.units import centimetres
-    from ..specs import DatasetSpec
 
     if not len(frames):
         return np.zeros(0), np.zeros(0)
-    share, depth = backend.inside_body(rot, trans, frames, skeleton, body_of(skeleton, roles))
-    return share, depth * centimetres(DatasetSpec.from_json(group.spec).units)
+    return backend.inside_body(rot, trans, frames, skeleton, body_of(skeleton, roles))
 
 
 def _figures(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> dict:
@@ -306,27 +307,25 @@ def _figures(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np
 def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np.ndarray, trans: np.ndarray,
                     inside: tuple) -> tuple:
     """Move the arms of the results whose hand goes deeper inside the body than either source's
-    does, or that the ``self_penetration`` flag would report (then out of the body altogether)
+    does, or that the ``self_penetration`` flag would report (then out to a quarter of the
+    body's margin, whatever the sources do)
     (:meth:`~torchsplice.splice.backends.Backend.keep_hands_out`), in ``rot``, and their ``inside``
     figures anew. ``(rot, corrected frames per result, (rows, arms))``: ``rows`` the packed
     frames changed and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' new rotations
     (:attr:`~torchsplice.ops.hands.Arms.moved`), what an alignment store keeps of them."""
     from ..ops.body import body_of
     from ..ops.hands import arms_of
-    from ..ops.units import centimetres
-    from ..specs import DatasetSpec
 
-    share, depth = inside
+    share, depth = inside  # depth in the skeleton's units, as the plan's
     corrected = np.zeros(len(frames), np.int64)
     allowed = np.array([max(plan.clips[k[0]].penetration_depth, plan.clips[k[1]].penetration_depth) for k in keys],
-                       dtype=np.float64)  # cm, as depth
+                       dtype=np.float64)
     # a result the flag would report (inside on more of its frames than its sources) may keep nothing
     often = np.array([max(plan.clips[k[0]].penetration, plan.clips[k[1]].penetration) for k in keys], dtype=np.float64)
     allowed[share > often + SELF_PENETRATION] = 0.0
     todo = np.flatnonzero((share > 0) & (depth > allowed))
     if not len(todo):
         return rot, corrected, None
-    cm = centimetres(DatasetSpec.from_json(group.spec).units)
     frames = np.asarray(frames, np.int64)
     starts = np.cumsum(frames) - frames
     n = frames[todo]
@@ -334,14 +333,14 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np
     body = body_of(skeleton, roles)
     arms = arms_of(skeleton, roles, body)
     new, count = backend.keep_hands_out(np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows]), n,
-                                        float(group.fps), skeleton, body, arms, allowed[todo] / cm)
+                                        float(group.fps), skeleton, body, arms, allowed[todo])
     moved = list(arms.moved)
     changed = (new[:, moved] != rot[rows][:, moved]).any(axis=(1, 2))
     rot = np.array(rot, copy=True) if not rot.flags.writeable else rot
     rot[rows] = new
     corrected[todo] = count
     s2, d2 = backend.inside_body(new, trans[rows], n, skeleton, body)
-    share[todo], depth[todo] = s2, d2 * cm
+    share[todo], depth[todo] = s2, d2
     return rot, corrected, (rows[changed], new[changed][:, moved])
 
 
@@ -399,6 +398,7 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     poor = distance > POOR_ALIGNMENT
     unmoving = np.array([k[0] in plan.flags or (not standing and k[1] in plan.flags) for k in keys], dtype=bool)
     share, depth = inside
+    cm = centimetres(DatasetSpec.from_json(group.spec).units)  # the plan's depths are in the skeleton's units
     of_loco = np.array([plan.clips[k[0]].penetration for k in keys], dtype=np.float64)
     of_action = np.array([plan.clips[k[1]].penetration for k in keys], dtype=np.float64)
     into = share > np.maximum(of_loco, of_action) + SELF_PENETRATION
@@ -430,9 +430,9 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         "acting": [",".join((plan.clips[k[1]].acting or ())) if standing else "" for k in keys],
         "penetration": share, "penetration_depth": depth,
         "penetration_locomotion": of_loco,
-        "penetration_depth_locomotion": np.array([plan.clips[k[0]].penetration_depth for k in keys], dtype=np.float64),
+        "penetration_depth_locomotion": cm * np.array([plan.clips[k[0]].penetration_depth for k in keys], dtype=np.float64),
         "penetration_action": of_action,
-        "penetration_depth_action": np.array([plan.clips[k[1]].penetration_depth for k in keys], dtype=np.float64),
+        "penetration_depth_action": cm * np.array([plan.clips[k[1]].penetration_depth for k in keys], dtype=np.float64),
     }
     return Part(
         task=task.id, skeleton=skeleton, spec=group.spec,

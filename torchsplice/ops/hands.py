@@ -17,8 +17,9 @@ moves it out:
    that displacement: the elbow bends in its own plane to the new reach, then the shoulder
    swings the arm by the shortest arc. The hand keeps its rotation relative to the forearm.
 
-Steps 1 to 3 run :data:`ITERATIONS` times, always from the clip's own arms, so the result is
-the smallest displacement found; frames with no displacement keep their rotations bit for bit,
+Steps 1 to 3 run up to :data:`ITERATIONS` times (until no push is left), each solving the IK
+from the clip's own arms with the displacement summed so far; frames with no displacement keep
+their rotations bit for bit,
 and nothing but the shoulders' and elbows' rotations changes (the root, the legs and the feet
 are untouched). An idle arm keeps its swing where it stays clear of the body.
 
@@ -98,7 +99,8 @@ def spread_in_time(push: torch.Tensor, lengths: torch.Tensor, fps: torch.Tensor,
     if N == 0:
         return push.clone()
     clip, first, end = _frames(lengths)
-    w = torch.round(ramp * torch.as_tensor(fps, dtype=torch.float64)).long().clamp_min(1)[clip]  # (N,)
+    fps = torch.as_tensor(fps, dtype=torch.float64).expand(len(lengths))
+    w = torch.round(ramp * fps).long().clamp_min(1)[clip]  # (N,)
     W = int(w.max())
     d = torch.arange(-W, W + 1)
     at = torch.arange(N)[:, None] + d[None, :]
@@ -117,6 +119,18 @@ def _normalized(v: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
     return torch.where(n > 1e-12, v / n.clamp_min(1e-300), f)
 
 
+def _hinge(upper: torch.Tensor, chest_rot: torch.Tensor) -> torch.Tensor:
+    """The elbow's hinge for a straight arm: the chest's X axis, less its part along the upper
+    arm (the chest's Z axis where the arm lies along X)."""
+    unit = upper / _length(upper)[..., None].clamp_min(1e-300)
+    out = None
+    for axis in ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)):
+        side = quat_apply(chest_rot, torch.tensor(axis, dtype=upper.dtype).expand_as(upper))
+        side = side - (side * unit).sum(-1, keepdim=True) * unit
+        out = side if out is None else torch.where((_length(out) > 1e-6)[..., None], out, side)
+    return out
+
+
 def arm_ik(S: torch.Tensor, E: torch.Tensor, W: torch.Tensor, T: torch.Tensor,
                 chest_rot: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Two-bone IK: ``(q1, q2, E', W')`` for shoulder, elbow and wrist at ``S``, ``E``, ``W`` and
@@ -124,16 +138,15 @@ def arm_ik(S: torch.Tensor, E: torch.Tensor, W: torch.Tensor, T: torch.Tensor,
     plane of the arm, to the target's reach (clamped to what the bones can reach), then the
     whole arm's shortest turn about the shoulder onto the target, and where they put the
     elbow and wrist. The bones keep their lengths; a reachable target is met. ``chest_rot``
-    ``(..., 4)``: the chest's rotation, whose X axis is the elbow's hinge when the arm is
-    straight. (Unlike the legs' :func:`~.feet.two_bone_ik`, which keeps a knee no straighter
+    ``(..., 4)``: the chest's rotation, whose X axis (less its part along the upper arm; its Z
+    axis where the arm lies along X) is the elbow's hinge when the arm is straight. (Unlike the legs' :func:`~.feet.two_bone_ik`, which keeps a knee no straighter
     than it is, an arm may straighten: pushing a forearm out of the body often needs that.)"""
     upper, lower = E - S, W - E
     l1, l2 = _length(upper), _length(lower)
     reach = _length(T - S).clamp((l1 - l2).abs() + 1e-6 * (l1 + l2), l1 + l2 - 1e-6 * (l1 + l2))
     now = torch.acos(((-upper * lower).sum(-1) / (l1 * l2).clamp_min(1e-300)).clamp(-1.0, 1.0))
     want = torch.acos(((l1 ** 2 + l2 ** 2 - reach ** 2) / (2 * l1 * l2).clamp_min(1e-300)).clamp(-1.0, 1.0))
-    side = quat_apply(chest_rot, torch.tensor([1.0, 0.0, 0.0], dtype=S.dtype).expand_as(S))
-    axis = _normalized(torch.linalg.cross(-upper, lower, dim=-1), torch.linalg.cross(-upper, side, dim=-1))
+    axis = _normalized(torch.linalg.cross(-upper, lower, dim=-1), _hinge(upper, chest_rot))
     q1 = axis_angle_to_quat(axis * (want - now)[..., None])
     W1 = E + quat_apply(q1, lower)
     q2 = quat_between(_normalized(W1 - S, upper), _normalized(T - S, upper))
@@ -242,8 +255,9 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
         if not bool((p != 0).any()):
             break
         D = D + spread_in_time(quat_apply(quat_conj(chest), p), seg_lengths, fps[seg_clip])
-        m = torch.nonzero((D != 0).any(-1).any(-1)).flatten()
-        q1[m], q2[m], E[m], W[m] = arm_ik(S[m], E0[m], W0[m], W0[m] + quat_apply(chest[m], D[m]), chest[m])
+        r, k = torch.nonzero((D != 0).any(-1), as_tuple=True)  # each arm that has moved
+        q1[r, k], q2[r, k], E[r, k], W[r, k] = arm_ik(S[r, k], E0[r, k], W0[r, k], W0[r, k] + quat_apply(chest[r, k], D[r, k]),
+                                                      chest[r, k])
     changed = (D != 0).any(-1)  # (n, 2)
     parents = skeleton.parents
     for k, (s_, e_) in enumerate(zip(arms.shoulder, arms.elbow)):

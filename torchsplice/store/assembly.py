@@ -73,9 +73,9 @@ FRAME_PARTS = {"assembly_curve": ((), np.float64), "assembly_pelvis": ((4,), np.
                "assembly_arms": ((4, 4), np.float32)}
 """The per-frame parts: name -> (shape of a row, dtype)."""
 OPTIONAL_PARTS = ("assembly_arms",)
+"""Per-frame parts a store written before them lacks (read as nothing to apply)."""
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
-"""Per-frame parts a store written before them lacks (read as nothing to apply)."""
 METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
 """``assembly_method``: the built-in methods (as :data:`torchsplice.cpu.splice.METHOD_CODES`)."""
 TIMING_CODES = {"loop": 0, "hold": 1, "fit": 2}

@@ -116,9 +116,11 @@ class CompiledBackend(Backend):
         from ...cpu.fk import joint_closure
 
         lengths = np.asarray(lengths, dtype=np.int64)
-        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        starts = (np.cumsum(lengths) - lengths).astype(np.int64)
         ends = body.end_joints.numpy()
         share, depth = np.zeros(len(lengths)), np.zeros(len(lengths))
+        if not len(lengths):
+            return share, depth
         inside_clips(np.ascontiguousarray(rotations), np.ascontiguousarray(translations),
                      np.asarray(skeleton.parents, dtype=np.int64), joint_closure(skeleton.parents, np.unique(ends)),
                      ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
@@ -132,9 +134,11 @@ class CompiledBackend(Backend):
 
         lengths = np.asarray(lengths, dtype=np.int64)
         B = len(lengths)
-        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        starts = (np.cumsum(lengths) - lengths).astype(np.int64)
         feet, upper, chest = joints
         out = {k: np.zeros(B) for k in ("foot_skate", "foot_slide", "floor", "jerk")}
+        if not B:
+            return out
         figures_clips(np.ascontiguousarray(rotations), np.ascontiguousarray(translations),
                       np.asarray(skeleton.parents, dtype=np.int64),
                       joint_closure(skeleton.parents, np.unique([*feet, *upper, chest])), np.asarray(feet, np.int64),
@@ -152,7 +156,9 @@ class CompiledBackend(Backend):
         from ...ops.hands import CLEARANCE, ITERATIONS, RAMP, SLACK
 
         lengths = np.asarray(lengths, dtype=np.int64)
-        starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        starts = (np.cumsum(lengths) - lengths).astype(np.int64)
+        if not len(lengths):
+            return np.array(rotations, copy=True), np.zeros(0, np.int64)
         ends = body.end_joints.numpy()
         parents = np.asarray(skeleton.parents, dtype=np.int64)
         need = np.unique(np.concatenate([ends.reshape(-1), [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]]))
