@@ -22,6 +22,7 @@ For each it prints:
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -157,9 +158,11 @@ def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     once()
     best = min(_timed(once) for _ in range(3))
     set_threads(threads)
+    workers = os.cpu_count() or 1  # the job's default: a worker per core, each computing its tasks' figures
     print(f"hands   cost: the job with the correction {len(names) / t_out:,.0f} pairs/s against {len(names) / t_raw:,.0f} "
           f"without ({100 * (t_out / t_raw - 1):+.1f}% time, whole process); the figures and the correction alone "
-          f"{best:.3f} s on one core = {100 * best / t_out:.1f}% of the job's {t_out:.2f} s  [<= 10%]")
+          f"{best:.3f} s on one core, over the job's {workers} workers {100 * best / workers / t_out:.1f}% of its "
+          f"{t_out:.2f} s ({100 * best / t_out:.1f}% were they on one)  [<= 10%]")
 
 
 def _timed(fn) -> float:

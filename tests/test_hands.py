@@ -225,6 +225,10 @@ def test_the_job_keeps_hands_out_where_neither_source_has_one_in(runs_with_raise
                 w0, w1 = _wrists_in_chest(a, arms), _wrists_in_chest(b, arms)
                 ranges.append(((w1.amax(0) - w1.amin(0)).norm(dim=-1) / (w0.amax(0) - w0.amin(0)).norm(dim=-1)))
         assert corrected.sum() > 0
+        from torchsplice.store.select import select_clips
+
+        picked = select_clips(to, "corrected_frames>0", "clips", str(out))  # the selection language takes the column
+        assert picked == np.flatnonzero(corrected > 0).tolist()
         ranges = torch.stack(ranges)
         assert float(ranges.min()) >= 0.8  # each arm's range in the chest's frame is kept
 
