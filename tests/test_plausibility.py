@@ -286,3 +286,24 @@ def test_the_figures_columns_are_the_frames_figures_and_the_compiled_ones_the_to
     pos, grot = forward_kinematics(a.rotations, t0[:, 0], sk.offsets.double(), sk.parents, t0)
     own = clip_figures(pos[None], grot[None], torch.tensor([a.num_frames]), a.fps, joints, 1, 100.0)["jerk"]
     assert float(e["jerk_action"][0]) == pytest.approx(float(own), rel=1e-3)
+
+
+@pytest.mark.realdata
+def test_evaluate_draws_the_results_most_beyond_their_sources_across_the_contact(runs_with_raised_hands, tmp_path):
+    from torchsplice.evaluation.plausibility import PICTURED
+    from torchsplice.evaluation.report import evaluate_database
+
+    _, raw, _ = runs_with_raised_hands  # as spliced: hands inside to draw
+    report = tmp_path / "report.md"
+    evaluate_database(raw, report, pictures=True, examples=0)
+    text = report.read_text()
+    with MotionDatabase.open(raw) as o:
+        e = o.clip_table().extra
+        beyond = np.asarray(e["penetration"]) - np.maximum(np.asarray(e["penetration_locomotion"]),
+                                                           np.asarray(e["penetration_action"]))
+        worst = [o.names[i] for i in np.argsort(-beyond)[:PICTURED]]
+    drawn = [ln for ln in text.split("## Pictures")[1].splitlines() if "_inside.png" in ln]
+    assert len(drawn) == PICTURED
+    for name, line in zip(worst, drawn):
+        assert name in line and "deepest at" in line
+        assert (tmp_path / line.split("(<")[1].split(">)")[0]).stat().st_size > 10_000  # a real picture

@@ -12,12 +12,17 @@ import math
 
 import numpy as np
 
-__all__ = ["PLAUSIBILITY_COLUMNS", "plausibility_rows", "plausibility_section", "WORST"]
+__all__ = ["PLAUSIBILITY_COLUMNS", "plausibility_rows", "plausibility_section", "plausibility_pictures", "WORST",
+           "PICTURED"]
 
 PLAUSIBILITY_COLUMNS = ("penetration", "penetration_depth", "penetration_locomotion", "penetration_action")
 """The columns a clip's row takes from the output's table (when it has them)."""
 WORST = 5
 """Clips the section names per method, those beyond their sources the most."""
+PICTURED = 2
+"""Of those, the clips drawn per method (:func:`plausibility_pictures`)."""
+SPAN = 0.5
+"""Seconds drawn each side of the frame where a hand goes deepest."""
 
 
 def plausibility_rows(t, i: int) -> dict:
@@ -81,3 +86,64 @@ def plausibility_section(per_clip: list[dict], methods: list[str], md) -> list[s
     if worst_lines:
         lines += ["Most beyond their sources:", "", *worst_lines, ""]
     return lines
+
+
+def _beyond(c: dict) -> float:
+    return c["penetration"] - max(c["penetration_locomotion"], c["penetration_action"])
+
+
+def plausibility_pictures(db, per_clip: list[dict], methods: list[str], folder, relative_to) -> list[tuple[str, str]]:
+    """Filmstrips of the results most beyond their sources (:data:`PICTURED` per method), each
+    the second around the frame where a hand goes deepest, seen from a camera across the
+    contact (looking along neither the hand's way out nor the body, so the gap or the overlap
+    shows): ``(caption, path relative to relative_to)`` pairs; none where no clip is beyond."""
+    from pathlib import Path
+
+    import torch
+
+    from ..formats.exporters import clip_filenames
+    from ..ops.body import body_of, capsule_ends, inside_depth, segment_closest
+    from ..viz.render import canonical_axes, render
+
+    if not per_clip or "penetration" not in per_clip[0]:
+        return []
+    chosen = []
+    for m in methods:
+        ranked = sorted((c for c in per_clip if c["method"] == m and _beyond(c) > 0), key=lambda c: -_beyond(c))
+        chosen += ranked[:PICTURED]
+    out = []
+    for c, stem in zip(chosen, clip_filenames([c["name"] for c in chosen], "")):
+        clip = db.read(c["name"], dtype=torch.float64)
+        k = int(db.clip_info(c["name"])["skeleton"])
+        spec = db.spec(k)
+        body = body_of(clip.skeleton, spec.bind(clip.skeleton), c["name"])
+        pos = clip.global_positions()
+        depth = inside_depth(pos, body)  # (T, P, O)
+        t = int(depth.flatten(1).amax(1).argmax())
+        p, o = divmod(int(depth[t].argmax()), len(body.obstacles))
+        a, b = capsule_ends(pos[t], body)
+        pi, oi = body.probes[p], body.obstacles[o]
+        s, u = segment_closest(a[pi], b[pi], a[oi], b[oi])
+        normal = (a[pi] + s * (b[pi] - a[pi])) - (a[oi] + u * (b[oi] - a[oi]))
+        up = "xyz".index(spec.up_axis)
+        e1, e2, _ = (float(normal[i]) for i in canonical_axes(up))
+        azimuth = math.degrees(math.atan2(e2, e1)) + 90.0  # the way out runs across the picture
+        half = max(1, int(round(SPAN * clip.fps)))
+        even = min(half, t, clip.num_frames - 1 - t)  # the deepest frame in the middle picture where it can be
+        half = even if even >= 2 else half
+        lo, hi = max(0, t - half), min(clip.num_frames, t + half + 1)
+        png = Path(folder) / f"{stem}_inside.png"
+        deepest = float(depth[t, p, o]) * _cm(spec.units)
+        where = "the middle picture" if t - lo == hi - 1 - t else f"picture frame {t - lo}"
+        title = (f"{c['name']}: {body.names[pi]} in {body.names[oi]}, clip frames {lo}-{hi - 1}, deepest at {t} "
+                 f"({where}, {deepest:.1f} cm)")
+        render([clip.slice(lo, hi)], png, titles=[title], frames=5, up_axis=up, camera="world", azimuth=azimuth,
+               elevation=10.0)
+        out.append((f"{c['method']}: {title}", str(png.relative_to(relative_to))))
+    return out
+
+
+def _cm(units: str) -> float:
+    from ..ops.units import centimetres
+
+    return centimetres(units)

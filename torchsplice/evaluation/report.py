@@ -39,7 +39,7 @@ from ..specs import DatasetSpec
 from ..splice.clips import clips_to_tensors, resample_motion
 from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
-from .plausibility import plausibility_rows, plausibility_section
+from .plausibility import plausibility_pictures, plausibility_rows, plausibility_section
 from .standing import standing_measures
 from ..viz.sources import SourceClips as _Sources, source_databases as _source_dbs
 
@@ -248,6 +248,8 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
         c["abs_phase"] = abs(c["phase"])
     aggregates = _aggregate(per_clip, methods)
     figures = _pictures(db, sources, spec, per_clip, output, examples, moved) if pictures else []
+    if pictures:  # the results with a hand furthest inside the body beyond their sources
+        figures += plausibility_pictures(db, per_clip, methods, output.with_name(output.stem + "_files"), output.parent)
     text = _markdown(path, spec, units, methods, aggregates, per_clip, (lo, hi), figures, max_rows, len(captured))
     with atomic_path(output) as tmp:
         Path(tmp).write_text(text)
