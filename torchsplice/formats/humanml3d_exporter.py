@@ -47,8 +47,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-
-import numpy as np
 from functools import cached_property
 from pathlib import Path
 
@@ -515,11 +513,7 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
         for col in ("locomotion", "action", "method"):
             info[col] = str(table.extra[col][r]) if col in table.extra else ""
         for col in CHECK_COLUMNS:
-            v = table.extra[col][r] if col in table.extra else ""
-            if isinstance(v, (float, np.floating)):
-                info[col] = f"{v:.6g}" if np.isfinite(v) else ""
-            else:  # an int column's empty value is -1 (a copied source clip's)
-                info[col] = "" if isinstance(v, (int, np.integer)) and v < 0 else str(v)
+            info[col] = _cell(table.extra[col][r] if col in table.extra else "")
         infos[r] = info
     splits = table_splits(table, ratios, seed)  # over the whole database: a selection keeps its clips' splits
     # a clip that is a mirror image (torchsplice mirror's, labelled mirror_of) or whose image is exported
@@ -556,6 +550,16 @@ def _plan_items(table, rows: list[int], window: float | None, mirror: bool, rati
             n += 1
     return {"items": items, "clips": [table.names[r] for r in clips], "short": short, "skeleton_of": skeleton_of,
             "not_mirrored": sorted(mirrored_already) if mirror else []}
+
+
+def _cell(v) -> str:
+    """A check column's value in ``index.csv``: floats to 6 digits, empty for NaN and for an int
+    column's empty value (-1, a copied source clip's)."""
+    import numpy as np  # not at import: ``torchsplice --help`` lists this exporter without NumPy
+
+    if isinstance(v, (float, np.floating)):
+        return f"{v:.6g}" if np.isfinite(v) else ""
+    return "" if isinstance(v, (int, np.integer)) and v < 0 else str(v)
 
 
 register_exporter(HumanML3DExporter)
