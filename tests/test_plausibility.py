@@ -307,3 +307,51 @@ def test_evaluate_draws_the_results_most_beyond_their_sources_across_the_contact
     for name, line in zip(worst, drawn):
         assert name in line and "deepest at" in line
         assert (tmp_path / line.split("(<")[1].split(">)")[0]).stat().st_size > 10_000  # a real picture
+
+
+def _gmd_by_hand(joints: np.ndarray) -> float:
+    """GMD's skate ratio of one HumanML3D ``new_joints`` motion ``(T, 22, 3)`` (20 fps, metres,
+    Y up, the floor at 0), step by step as its definition reads: SMPL's feet (joints 10 and 11),
+    horizontal speed per step, its mean over the 5 steps centred on it (zeros beyond the clip),
+    contact below 5 cm in both frames, skating when in contact and both speeds exceed 0.5 m/s;
+    the share of steps in which either foot skates."""
+    T = joints.shape[0]
+    steps = T - 1
+    skating = 0
+    for k in range(steps):
+        hit = False
+        for f in (10, 11):
+            def speed(i):
+                return float(np.hypot(*(joints[i + 1, f, [0, 2]] - joints[i, f, [0, 2]]))) * 20.0 if 0 <= i < steps else 0.0
+            mean = sum(speed(i) for i in range(k - 2, k + 3)) / 5.0
+            touch = joints[k, f, 1] < 0.05 and joints[k + 1, f, 1] < 0.05
+            hit |= bool(touch and speed(k) > 0.5 and mean > 0.5)
+        skating += hit
+    return skating / steps
+
+
+@pytest.mark.realdata
+def test_gmds_skate_ratio_on_humanml3d_motions_is_its_definition_worked_step_by_step(tmp_path):
+    """On HumanML3D motions (real Bandai Namco runs and walks exported as HumanML3D: SMPL's 22
+    joints at 20 fps, the floor at 0, as HumanML3D's own sample is), :func:`skate_ratio` is GMD's
+    definition worked by hand, on every motion whose feet are its lowest joints (where the
+    clip's lowest foot point, this measure's floor, is HumanML3D's)."""
+    from torchsplice.formats.exporters import export_clips
+    from torchsplice.formats.importer import import_bvh
+
+    _require_mocap()
+    folder = MOCAP / "bandai_namco_research_motiondataset"
+    files = sorted(folder.glob("dataset-1_run_*.bvh"))[:4] + sorted(folder.glob("dataset-1_walk_*.bvh"))[:4]
+    db = tmp_path / "bn.h5"
+    import_bvh(files, db, spec="bandai_namco")
+    out = tmp_path / "h3"
+    export_clips(db, out=out, format="humanml3d")
+    compared = 0
+    for f in sorted((out / "new_joints").glob("*.npy")):
+        j = np.load(f).astype(np.float64)
+        if abs(j[:, [10, 11], 1].min() - j[..., 1].min()) > 1e-9:
+            continue  # another joint is lower: HumanML3D's floor is not the feet's
+        got = float(skate_ratio(torch.from_numpy(j)[None], torch.tensor([len(j)]), torch.tensor([20.0]), [10, 11], 1, 1.0))
+        assert got == pytest.approx(_gmd_by_hand(j), abs=1e-12), f.name
+        compared += 1
+    assert compared >= 6
