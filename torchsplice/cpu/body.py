@@ -20,66 +20,18 @@ import numpy as np
 from numba import njit, prange
 
 from .quat import qload, qmul, qrot
+from .vec import add, length, row, scale, segment_distance, sub
 
 __all__ = ["inside_clips"]
 
 
-@njit(cache=True, inline="always")
-def _dot(a0, a1, a2, b0, b1, b2):
-    return a0 * b0 + a1 * b1 + a2 * b2
-
-
-@njit(cache=True, inline="always")
-def _half(e, i):
-    """Half the length of segment ``e[2i] e[2i+1]``."""
-    a0, a1, a2 = e[2 * i + 1, 0] - e[2 * i, 0], e[2 * i + 1, 1] - e[2 * i, 1], e[2 * i + 1, 2] - e[2 * i, 2]
-    return 0.5 * math.sqrt(_dot(a0, a1, a2, a0, a1, a2))
-
-
-@njit(cache=True, inline="always")
-def _apart(e, i, k):
-    """A lower bound on the distance between segments ``i`` and ``k`` of ``e``: their midpoints'
-    distance less both half-lengths (a pair surely further than a capsule's reach is skipped)."""
-    m0 = 0.5 * (e[2 * i, 0] + e[2 * i + 1, 0] - e[2 * k, 0] - e[2 * k + 1, 0])
-    m1 = 0.5 * (e[2 * i, 1] + e[2 * i + 1, 1] - e[2 * k, 1] - e[2 * k + 1, 1])
-    m2 = 0.5 * (e[2 * i, 2] + e[2 * i + 1, 2] - e[2 * k, 2] - e[2 * k + 1, 2])
-    return math.sqrt(_dot(m0, m1, m2, m0, m1, m2)) - _half(e, i) - _half(e, k)
-
-
 @njit(cache=True, nogil=True)
-def _segment_distance(e, i, k):
-    """Distance between segments ``e[2i] e[2i+1]`` and ``e[2k] e[2k+1]`` (rows of ``(2C, 3)`` ``e``)."""
-    d1 = (e[2 * i + 1, 0] - e[2 * i, 0], e[2 * i + 1, 1] - e[2 * i, 1], e[2 * i + 1, 2] - e[2 * i, 2])
-    d2 = (e[2 * k + 1, 0] - e[2 * k, 0], e[2 * k + 1, 1] - e[2 * k, 1], e[2 * k + 1, 2] - e[2 * k, 2])
-    r = (e[2 * i, 0] - e[2 * k, 0], e[2 * i, 1] - e[2 * k, 1], e[2 * i, 2] - e[2 * k, 2])
-    a = _dot(d1[0], d1[1], d1[2], d1[0], d1[1], d1[2])
-    ee = _dot(d2[0], d2[1], d2[2], d2[0], d2[1], d2[2])
-    b = _dot(d1[0], d1[1], d1[2], d2[0], d2[1], d2[2])
-    c = _dot(d1[0], d1[1], d1[2], r[0], r[1], r[2])
-    f = _dot(d2[0], d2[1], d2[2], r[0], r[1], r[2])
-    eps = 1e-12 * max(a + ee, 1e-300)
-    s = 0.0
-    t = 0.0
-    if a > eps and ee > eps:
-        denom = a * ee - b * b
-        if denom > eps * (a + ee):
-            s = min(max((b * f - c * ee) / denom, 0.0), 1.0)
-    elif a > eps:
-        s = min(max(-c / a, 0.0), 1.0)
-    if ee > eps:
-        t = (b * s + f) / ee
-        if t < 0.0:
-            t = 0.0
-            if a > eps:
-                s = min(max(-c / a, 0.0), 1.0)
-        elif t > 1.0:
-            t = 1.0
-            if a > eps:
-                s = min(max((b - c) / a, 0.0), 1.0)
-    g0 = r[0] + d1[0] * s - d2[0] * t
-    g1 = r[1] + d1[1] * s - d2[1] * t
-    g2 = r[2] + d1[2] * s - d2[2] * t
-    return math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+def _apart(e, i, k):
+    """A lower bound on the distance between segments ``i`` and ``k`` of ``e`` (rows ``2i, 2i+1``):
+    their midpoints' distance less both half-lengths (a pair surely further than a capsule's
+    reach is skipped)."""
+    a0, a1, b0, b1 = row(e, 2 * i), row(e, 2 * i + 1), row(e, 2 * k), row(e, 2 * k + 1)
+    return length(scale(sub(add(a0, a1), add(b0, b1)), 0.5)) - 0.5 * length(sub(a1, a0)) - 0.5 * length(sub(b1, b0))
 
 
 @njit(cache=True, parallel=True)
@@ -118,7 +70,8 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
                 for o_ in obstacles:
                     if _apart(ends, i, o_) >= radii[o_] - margin:  # cannot count: not measured
                         continue
-                    d = radii[o_] - _segment_distance(ends, i, o_)
+                    d = radii[o_] - segment_distance(row(ends, 2 * i), row(ends, 2 * i + 1), row(ends, 2 * o_),
+                                                     row(ends, 2 * o_ + 1))
                     if d > best:
                         best = d
             if best > margin:

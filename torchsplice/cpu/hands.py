@@ -21,74 +21,10 @@ import numpy as np
 from numba import njit, prange
 
 from .quat import qconj, qload, qmul, qrot
+from .vec import add as _add, cross as _cross, dot as _dot, length as _length, normalized as _normalized
+from .vec import row as _vec, scale as _scale, segment_closest as _closest, sub as _sub
 
 __all__ = ["hands_out_clips"]
-
-
-@njit(cache=True, inline="always")
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True, inline="always")
-def _sub(a, b):
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-@njit(cache=True, inline="always")
-def _add(a, b):
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-
-
-@njit(cache=True, inline="always")
-def _scale(a, s):
-    return (a[0] * s, a[1] * s, a[2] * s)
-
-
-@njit(cache=True, inline="always")
-def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-@njit(cache=True, inline="always")
-def _length(a):
-    return math.sqrt(_dot(a, a))
-
-
-@njit(cache=True, inline="always")
-def _normalized(v, fallback):
-    n = _length(v)
-    if n > 1e-12:
-        return _scale(v, 1.0 / n)
-    return _scale(fallback, 1.0 / max(_length(fallback), 1e-300))
-
-
-@njit(cache=True, inline="always")
-def _vec(a, i):
-    return (a[i, 0], a[i, 1], a[i, 2])
-
-
-@njit(cache=True, nogil=True)
-def _closest(p0, p1, q0, q1):
-    """``(s, t)`` of :func:`torchsplice.ops.body.segment_closest`, the same branches."""
-    d1, d2, r = _sub(p1, p0), _sub(q1, q0), _sub(p0, q0)
-    a, e, b = _dot(d1, d1), _dot(d2, d2), _dot(d1, d2)
-    c, f = _dot(d1, r), _dot(d2, r)
-    eps = 1e-12 * max(a + e, 1e-300)
-    pa, pe = a > eps, e > eps
-    denom = a * e - b * b
-    s = 0.0
-    if pa and pe and denom > eps * (a + e):
-        s = (b * f - c * e) / denom
-    if pa and not pe:
-        s = -c / a
-    s = min(max(s, 0.0), 1.0)
-    t = (b * s + f) / e if pe else 0.0
-    if pa and t < 0.0:
-        s = min(max(-c / a, 0.0), 1.0)
-    if pa and t > 1.0:
-        s = min(max((b - c) / a, 0.0), 1.0)
-    return s, min(max(t, 0.0), 1.0)
 
 
 @njit(cache=True, inline="always")

@@ -256,12 +256,15 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
         log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
-    inside = _penetration(backend, group, skeleton, roles, frames, rot, trans)
+    from ..ops.body import body_of
+
+    body = body_of(skeleton, roles)
+    inside = _penetration(backend, body, skeleton, frames, rot, trans)
     kept_keys = [keys[b] for b in kept]
     corrected, arms = np.zeros(len(kept), np.int64), None
     if config.keep_hands_out:
-        rot, corrected, arms = _keep_hands_out(backend, plan, group, skeleton, roles, kept_keys, frames, rot, trans,
-                                               inside)
+        rot, corrected, arms = _keep_hands_out(backend, plan, group, skeleton, roles, body, kept_keys, frames, rot,
+                                               trans, inside)
     cm = centimetres(DatasetSpec.from_json(group.spec).units)
     inside = (inside[0], inside[1] * cm)
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
@@ -280,14 +283,12 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     return part
 
 
-def _penetration(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> tuple:
-    """``(share, depth)`` per result of how it puts a hand inside its body (depth in the
+def _penetration(backend, body, skeleton, frames, rot: np.ndarray, trans: np.ndarray) -> tuple:
+    """``(share, depth)`` per result of how it puts a hand inside ``body`` (depth in the
     skeleton's units), from its packed frames (:meth:`~torchsplice.splice.backends.Backend.inside_body`)."""
-    from ..ops.body import body_of
-
     if not len(frames):
         return np.zeros(0), np.zeros(0)
-    return backend.inside_body(rot, trans, frames, skeleton, body_of(skeleton, roles))
+    return backend.inside_body(rot, trans, frames, skeleton, body)
 
 
 def _figures(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> dict:
@@ -304,7 +305,7 @@ def _figures(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np
     return backend.figures(rot, trans, frames, float(group.fps), skeleton, figure_joints(skeleton, roles), up, per_metre)
 
 
-def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np.ndarray, trans: np.ndarray,
+def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, rot: np.ndarray, trans: np.ndarray,
                     inside: tuple) -> tuple:
     """Move the arms of the results whose hand goes deeper inside the body than either source's
     does, or that the ``self_penetration`` flag would report (then out to a quarter of the
@@ -313,7 +314,6 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np
     figures anew. ``(rot, corrected frames per result, (rows, arms))``: ``rows`` the packed
     frames changed and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' new rotations
     (:attr:`~torchsplice.ops.hands.Arms.moved`), what an alignment store keeps of them."""
-    from ..ops.body import body_of
     from ..ops.hands import arms_of
 
     share, depth = inside  # depth in the skeleton's units, as the plan's
@@ -330,7 +330,6 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, keys, frames, rot: np
     starts = np.cumsum(frames) - frames
     n = frames[todo]
     rows = np.repeat(starts[todo] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
-    body = body_of(skeleton, roles)
     arms = arms_of(skeleton, roles, body)
     new, count = backend.keep_hands_out(np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows]), n,
                                         float(group.fps), skeleton, body, arms, allowed[todo])
