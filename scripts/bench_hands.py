@@ -22,7 +22,10 @@ For each it prints:
 
 from __future__ import annotations
 
+import json
 import os
+import random
+import re
 import subprocess
 import sys
 import tempfile
@@ -45,9 +48,49 @@ from torchsplice.ops.plausibility import figure_joints  # noqa: E402
 from torchsplice.ops.units import centimetres  # noqa: E402
 from torchsplice.store.database import MotionDatabase  # noqa: E402
 
-JOBS = {"hands": ["--locomotions", "*run*,*dash*,*turn*", "--actions", "*wave*,*raise*,*bye*,*call*,*guide*"],
-        "default": []}
+HANDS_JOB = ["--locomotions", "*run*,*dash*,*turn*", "--actions", "*wave*,*raise*,*bye*,*call*,*guide*"]
+JOBS = {"hands": HANDS_JOB, "default": []}
 LIMBS = ("left_arm", "right_arm")
+
+
+# Held-back pairs: takes of the whole dataset that ../shared/mocap does not hold, so that nothing
+# tuned on the shipped clips is measured on them.
+HELD_LOCOMOTIONS = ("run", "dash", "walk-turn-left", "walk-turn-right")
+HELD_ACTIONS = ("wave-", "raise-up-", "bye", "byebye", "guide")
+HELD_SAMPLE = 40  # locomotions and actions each, drawn with a fixed seed: 1,600 pairs
+GT_TAKES = 3  # the lowest-numbered held-back takes of each content and style in the ground-truth job
+_TAKE = re.compile(r"^dataset-(\d+)_(.+?)_([^_]+)_(\d+)$")
+
+
+def held_back(whole: Path, mocap: Path) -> list[Path]:
+    """The Bandai Namco takes under ``whole`` (the whole dataset's BVH files) that are not among
+    ``mocap``'s, by file name."""
+    shipped = {p.name for p in mocap.rglob("*.bvh")} if mocap.is_dir() else set()
+    return sorted(p for p in whole.rglob("*.bvh") if p.name not in shipped and _TAKE.match(p.stem))
+
+
+def _content(p: Path) -> str:
+    return _TAKE.match(p.stem)[2]
+
+
+def hands_sample(files: list[Path], k: int = HELD_SAMPLE, seed: int = 0) -> list[Path]:
+    """``k`` runs, dashes and turning walks and ``k`` standing arm actions (waves, raised hands,
+    byes, guides) drawn from ``files`` with a fixed seed."""
+    rng = random.Random(seed)
+    locos = [p for p in files if _content(p) in HELD_LOCOMOTIONS]
+    acts = [p for p in files if _content(p).startswith(HELD_ACTIONS)]
+    return sorted(rng.sample(locos, min(k, len(locos))) + rng.sample(acts, min(k, len(acts))))
+
+
+def ground_truth_sample(files: list[Path], takes: int = GT_TAKES) -> list[Path]:
+    """The ground-truth sets among ``files``: per dataset, content (straight walks and the
+    locomotions) and style, the ``takes`` lowest-numbered takes."""
+    groups: dict[tuple, list[Path]] = {}
+    for p in files:
+        m = _TAKE.match(p.stem)
+        if m[2] == "walk" or m[2] in HELD_LOCOMOTIONS or m[2].startswith("walk-"):
+            groups.setdefault(m.groups()[:3], []).append(p)
+    return sorted(p for g in groups.values() for p in sorted(g, key=lambda p: int(_TAKE.match(p.stem)[4]))[:takes])
 
 
 def _job(db: Path, out: Path, args, correct: bool) -> float:
@@ -68,7 +111,7 @@ def _wrist_ranges(clip, arms) -> torch.Tensor:
     return (rel.amax(0) - rel.amin(0)).norm(dim=-1)
 
 
-def _figures(db: Path, raw: Path, out: Path, t_raw: float, t_out: float) -> None:
+def _figures(db: Path, raw: Path, out: Path, t_raw: float, t_out: float, cost: bool = True) -> None:
     with MotionDatabase.open(raw) as r, MotionDatabase.open(out) as o, MotionDatabase.open(db) as src:
         e0, e1 = r.clip_table().extra, o.clip_table().extra
         names = list(o.names)
@@ -118,7 +161,8 @@ def _figures(db: Path, raw: Path, out: Path, t_raw: float, t_out: float) -> None
         if idle:
             print(f"hands   idle arm's swing against the locomotion's: 5th percentile {np.percentile(idle, 5):.2f}x, "
                   f"median {np.median(idle):.2f}x, {100 * np.mean(np.array(idle) >= 0.5):.0f}% at >= 0.5x  [>= 0.5x]")
-        _cost(r, e0, names, body, arms, sk, t_raw, t_out)
+        if cost:
+            _cost(r, e0, names, body, arms, sk, t_raw, t_out)
 
 
 def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
@@ -171,26 +215,94 @@ def _timed(fn) -> float:
     return time.perf_counter() - t0
 
 
-def bench_hands(mocap: Path, db: Path | None = None) -> None:
+def _import(files: list[Path], db: Path) -> Path:
+    folder = db.with_suffix("")
+    folder.mkdir()
+    for f in files:
+        (folder / f.name).symlink_to(f.resolve())
+    subprocess.run([sys.executable, "-m", "torchsplice", "import", str(folder), "-o", str(db), "--spec", "bandai_namco",
+                    "-q"], check=True, cwd=REPO)
+    return db
+
+
+def _runs(db: Path, tmp: Path, label: str, args, repeats: int) -> tuple[Path, Path, float, float]:
+    raw, out = tmp / f"{label}_raw.h5", tmp / f"{label}.h5"
+    times = {True: [], False: []}
+    for _ in range(repeats):
+        for correct in (False, True):
+            times[correct].append(_job(db, out if correct else raw, args, correct))
+    return raw, out, min(times[False]), min(times[True])
+
+
+GT_JOB = ["--method", "splice", "--force-locomotion", "--locomotions", "label:style=normal",
+          "--locomotions", "label:content=walk-*,label:content=run,label:content=dash", "--actions", "label:content=walk"]
+
+
+def _ground_truth(files: list[Path], tmp: Path) -> None:
+    """The ground-truth error on held-back takes (a style's straight walk spliced onto a
+    normal-style turn or run, against the style captured turning or running), with the
+    correction and without."""
+    db = _import(ground_truth_sample(files), tmp / "gt_sources.h5")
+    raw, out, _, _ = _runs(db, tmp, "gt", GT_JOB, 1)
+    got = {}
+    for label, path in (("without", raw), ("with", out)):
+        report = tmp / f"gt_{label}.json"
+        subprocess.run([sys.executable, "-m", "torchsplice", "evaluate", str(path), "-o", str(tmp / f"gt_{label}.md"),
+                        "--no-pictures", "--json", str(report), "-q", "--force"], check=True, cwd=REPO)
+        doc = json.loads(report.read_text())
+        got[label] = ({c["name"]: c["gt_error"] for c in doc["clips"] if c["gt_error"] is not None},
+                      doc["aggregates"]["splice"]["gt_by_type"], doc["units"])
+    (before, types, units), (after, types_after, _) = got["without"], got["with"]
+    with MotionDatabase.open(out) as o:
+        e = o.clip_table().extra
+        moved = {str(n) for n, k in zip(o.names, np.asarray(e["corrected_frames"])) if k > 0}
+    changed = sorted(n for n in after if n in moved)
+    worse = [after[n] - before[n] for n in changed]
+    by_type = ", ".join(f"{t} {types[t]['mean']:.2f} -> {types_after[t]['mean']:.2f}" for t in sorted(types))
+    print(f"hands   held-back ground truth: {len(after)} triples; error {np.mean(list(before.values())):.2f} -> "
+          f"{np.mean(list(after.values())):.2f} {units} with the correction [<= 3.92 cm] ({by_type}); "
+          f"{len(changed)} triples corrected"
+          + (f", their error changed by {np.mean(worse):+.2f} on average, {max(worse):+.2f} at worst" if changed else ""))
+
+
+def bench_hands(mocap: Path, db: Path | None = None, whole: Path | None = None) -> None:
+    """The two jobs on ``mocap``'s Bandai Namco clips; with ``whole`` (a folder of the whole
+    dataset's BVH files), also the held-back pairs and the held-back ground truth."""
     with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
         if db is None:
             folder = mocap / "bandai_namco_research_motiondataset"
             if not folder.is_dir():
                 print(f"hands   skipped: no Bandai Namco clips at {folder}")
                 return
-            db = Path(tmp) / "bn.h5"
+            db = tmp / "bn.h5"
             subprocess.run([sys.executable, "-m", "torchsplice", "import", str(folder), "-o", str(db), "--spec",
                             "bandai_namco", "-q"], check=True, cwd=REPO)
         for label, args in JOBS.items():
-            raw, out = Path(tmp) / f"{label}_raw.h5", Path(tmp) / f"{label}.h5"
-            times = {True: [], False: []}
-            for _ in range(2):
-                for correct in (False, True):
-                    times[correct].append(_job(db, out if correct else raw, args, correct))
+            raw, out, t_raw, t_out = _runs(db, tmp, label, args, 2)
             print(f"hands   job '{label}' ({' '.join(args) or 'the default selections'}):")
-            _figures(db, raw, out, min(times[False]), min(times[True]))
+            _figures(db, raw, out, t_raw, t_out)
+        if whole is None:
+            return
+        files = held_back(whole, mocap)
+        print(f"hands   held back: {len(files)} takes of {whole} not in {mocap}")
+        sample = _import(hands_sample(files), tmp / "held_sources.h5")
+        raw, out, t_raw, t_out = _runs(sample, tmp, "held", HANDS_JOB, 1)
+        print(f"hands   held-back pairs: {HELD_SAMPLE} runs, dashes and turns x {HELD_SAMPLE} raised hands, waves, "
+              "byes and guides, drawn with seed 0:")
+        _figures(sample, raw, out, t_raw, t_out, cost=False)
+        _ground_truth(files, tmp)
 
 
 if __name__ == "__main__":
-    bench_hands(Path(sys.argv[1]) if len(sys.argv) > 1 else REPO.parent / "shared" / "mocap",
-                Path(sys.argv[2]) if len(sys.argv) > 2 else None)
+    import argparse
+
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("mocap", type=Path, nargs="?", default=REPO.parent / "shared" / "mocap")
+    p.add_argument("--db", type=Path, default=None, help="the Bandai Namco clips of mocap, already imported")
+    p.add_argument("--held-back", type=Path, default=None, help="the whole Bandai Namco dataset's BVH folder")
+    p.add_argument("--skip-jobs", action="store_true", help="only the held-back measures")
+    a = p.parse_args()
+    if a.skip_jobs:
+        JOBS.clear()  # the held-back measures alone
+    bench_hands(a.mocap, a.db, a.held_back)

@@ -1,7 +1,7 @@
 """Keeping hands out of the body (:mod:`torchsplice.ops.hands`), and the job's correction.
 
 Known answers: two-bone IK meets a reachable target with the bones' lengths kept; the spread in
-time of a lone push is the dilated triangle worked by hand, and stays within its clip; an arm
+time of a lone push is the dilated Hann window worked by hand, and stays within its clip; an arm
 swung through the chest comes out of it, smoothly, with nothing else changed and frames beyond
 the correction's reach bit for bit; a clean clip, and a clip allowed as deep, come back as they
 were. On a real job (Bandai Namco runs, dashes and turns x raised hands and waves), the
@@ -11,6 +11,8 @@ lower body exactly, keeps the arms' range, and an alignment store assembles the 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -18,48 +20,114 @@ import torch
 from torchsplice.core.fk import forward_kinematics
 from torchsplice.core.rotations import quat_angle, quat_apply, quat_between, quat_conj, quat_mul, quat_slerp
 from torchsplice.ops.body import body_of, capsule_ends
-from torchsplice.ops.hands import ITERATIONS, RAMP, arms_of, keep_hands_out, spread_in_time, arm_ik
+from torchsplice.ops.hands import (ITERATIONS, RAMP, arm_ik, arms_of, chest_hinge, elbow_hinges, hinge_axes,
+                                   keep_hands_out, spread_in_time)
 from torchsplice.ops.plausibility import penetration_packed
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.store.database import MotionDatabase
 
 
-def test_arm_ik_meets_a_reachable_target_and_keeps_the_bones():
+def test_arm_ik_points_at_the_target_keeps_the_bones_and_changes_the_reach_smoothly():
     g = torch.Generator().manual_seed(5)
     n = 400
     S = torch.randn(n, 3, generator=g, dtype=torch.float64)
     E = S + torch.randn(n, 3, generator=g, dtype=torch.float64) * 0.3
     W = E + torch.randn(n, 3, generator=g, dtype=torch.float64) * 0.3
     l1, l2 = (E - S).norm(dim=-1), (W - E).norm(dim=-1)
+    d0 = (W - S).norm(dim=-1)
+    flexion = torch.pi - torch.acos(((S - E) * (W - E)).sum(-1) / (l1 * l2))
     direction = torch.nn.functional.normalize(torch.randn(n, 3, generator=g, dtype=torch.float64), dim=-1)
     share = torch.rand(n, generator=g, dtype=torch.float64)
-    reach = (l1 - l2).abs() + (0.05 + 0.9 * share) * (l1 + l2 - (l1 - l2).abs())  # strictly reachable
+    reach = (l1 - l2).abs() + (0.05 + 0.9 * share) * (l1 + l2 - (l1 - l2).abs())
     T = S + direction * reach[:, None]
-    chest = torch.tensor([1.0, 0, 0, 0], dtype=torch.float64).expand(n, 4)
-    q1, q2, E2, W2 = arm_ik(S, E, W, T, chest)
-    assert torch.allclose(W2, T, atol=1e-9)
+    plane = torch.linalg.cross(S - E, W - E, dim=-1)  # the arm's own hinge: its forearm turns in its plane
+    q1, q2, E2, W2 = arm_ik(S, E, W, T, plane)
+    assert torch.allclose(torch.nn.functional.normalize(W2 - S, dim=-1), direction, atol=1e-9)
     assert torch.allclose((E2 - S).norm(dim=-1), l1, atol=1e-12) and torch.allclose((W2 - E2).norm(dim=-1), l2, atol=1e-12)
     # the turns are what moves the bones: the elbow's about itself, then all about the shoulder
     assert torch.allclose(E2, S + quat_apply(q2, E - S), atol=1e-12)
     assert torch.allclose(W2, S + quat_apply(q2, E - S + quat_apply(q1, W - E)), atol=1e-12)
-    # a straight arm (no plane of its own), along the chest's X axis or not, bends to meet a target
+    # the reach moves towards the target's, never past it, and stays short of straight and folded
+    got, change = (W2 - S).norm(dim=-1), reach - d0
+    assert bool(((got - d0) * change >= 0).all()) and bool(((got - d0).abs() <= change.abs() + 1e-12).all())
+    assert bool((got < l1 + l2).all()) and bool((got > (l1 - l2).abs()).all())
+    # a bent arm follows a small change of reach to first order; a target at the arm's own reach
+    # (moved across the shoulder's sphere) is met; the arm's own wrist gives back the arm
+    bent = flexion > 1.0
+    small = S + direction * (d0 + 1e-4)[:, None]
+    _, _, _, W4 = arm_ik(S, E, W, small, plane)
+    assert torch.allclose((W4 - S).norm(dim=-1)[bent], d0[bent] + 1e-4, atol=3e-6)
+    sphere = S + direction * d0[:, None]
+    _, _, _, W5 = arm_ik(S, E, W, sphere, plane)
+    assert torch.allclose(W5, sphere, atol=1e-9)
+    _, _, E6, W6 = arm_ik(S, E, W, W, plane)
+    assert torch.allclose(E6, E, atol=1e-12) and torch.allclose(W6, W, atol=1e-12)
+    # a straight arm (no plane of its own), along the chest's X axis or not, swings onto the
+    # target's direction and stays straight: bending it would jolt the elbow
+    chest = torch.tensor([1.0, 0, 0, 0], dtype=torch.float64)
     for along in ([1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.6, -0.8, 0.0]):
         u = torch.tensor(along, dtype=torch.float64)
         S1, E1, W1 = torch.zeros(3, dtype=torch.float64), 0.3 * u, 0.55 * u
-        T1 = S1 + 0.4 * torch.nn.functional.normalize(u + torch.tensor([0.0, 0.0, 0.5], dtype=torch.float64), dim=0)
-        _, _, E2s, W2s = arm_ik(S1, E1, W1, T1, chest[0])
-        assert torch.allclose(W2s, T1, atol=1e-9), along
-        assert float((E2s - S1).norm()) == pytest.approx(0.3) and float((W2s - E2s).norm()) == pytest.approx(0.25)
-    # out of reach: the arm points at the target, straight
+        aim = torch.nn.functional.normalize(u + torch.tensor([0.0, 0.0, 0.5], dtype=torch.float64), dim=0)
+        _, _, E2s, W2s = arm_ik(S1, E1, W1, S1 + 0.4 * aim, chest_hinge(E1 - S1, chest))
+        assert torch.allclose(W2s, 0.55 * aim, atol=1e-9) and torch.allclose(E2s, 0.3 * aim, atol=1e-9), along
+    # far out of reach: the arm points at the target, stretched towards straight
     far = S + direction * (l1 + l2 + 1.0)[:, None]
-    _, _, E3, W3 = arm_ik(S, E, W, far, chest)
-    assert torch.allclose((W3 - S).norm(dim=-1), l1 + l2, rtol=1e-5)
-    assert torch.allclose(torch.nn.functional.normalize(W3 - S, dim=-1), direction, atol=1e-6)
+    _, _, E3, W3 = arm_ik(S, E, W, far, plane)
+    assert torch.allclose(torch.nn.functional.normalize(W3 - S, dim=-1), direction, atol=1e-9)
+    stretched = (W3 - S).norm(dim=-1)
+    assert bool((stretched >= d0 - 1e-12).all()) and bool((stretched <= l1 + l2 + 1e-12).all())
 
 
-def _triangle(N: int, w: int, pushed: range, lo: int = 0, hi: int | None = None) -> torch.Tensor:
-    """The spread worked by hand: 1 on the frames within ``w`` of a pushed one, then a triangle of
+def _bending_arm(flexion: torch.Tensor, seed: int = 3):
+    """An arm whose upper arm turns at random and whose elbow bends by ``flexion`` (radians,
+    ``(N,)``; 0 straight, below 0 overstretched) about the upper arm's local Z axis: ``(S, E, W,
+    upper_rot)``."""
+    g = torch.Generator().manual_seed(seed)
+    N = len(flexion)
+    upper_rot = quat_slerp(torch.tensor([1.0, 0, 0, 0], dtype=torch.float64).expand(N, 4),
+                           torch.nn.functional.normalize(torch.randn(4, generator=g, dtype=torch.float64), dim=0).expand(N, 4),
+                           torch.linspace(0, 1, N, dtype=torch.float64))
+    x = torch.tensor([1.0, 0, 0], dtype=torch.float64)
+    z = torch.tensor([0.0, 0, 1], dtype=torch.float64)
+    bend = torch.cat([torch.cos(flexion / 2)[:, None], (z * torch.sin(flexion / 2)[:, None])], -1)
+    S = torch.zeros(N, 3, dtype=torch.float64)
+    E = S + quat_apply(upper_rot, 0.3 * x.expand(N, 3))
+    W = E + quat_apply(quat_mul(upper_rot, bend), 0.25 * x.expand(N, 3))
+    return S, E, W, upper_rot
+
+
+def test_the_clips_elbow_hinge_is_recovered_and_the_ik_bends_about_it_smoothly_through_straight():
+    # known answer: an elbow bending about the upper arm's local Z has that hinge, whatever the
+    # upper arm does; the plane normal -upper x lower points along -Z for flexion about +Z
+    flexion = 0.55 + 0.65 * torch.cos(torch.linspace(0, 2 * torch.pi, 71, dtype=torch.float64))  # -0.1 to 1.2, smooth
+    S, E, W, upper_rot = _bending_arm(flexion)
+    h = elbow_hinges((E - S)[:, None], (W - E)[:, None], upper_rot[:, None], torch.tensor([len(flexion)]))
+    assert torch.allclose(torch.nn.functional.normalize(h[0, 0], dim=0), torch.tensor([0.0, 0, -1], dtype=torch.float64),
+                          atol=1e-12)
+    straight = elbow_hinges((E - S)[:, None], (E - S)[:, None], upper_rot[:, None], torch.tensor([len(flexion)]))
+    assert float(straight.abs().max()) == 0.0  # an arm straight on every frame has none: the chest's is used
+    chest = torch.tensor([1.0, 0, 0, 0], dtype=torch.float64).expand(len(flexion), 4)
+    axes = hinge_axes(h[0, 0].expand(len(flexion), 3), upper_rot, E - S, chest)
+    # the wrist held 10 cm out to the side of where it is: a smooth target through the straight frames
+    T = W + torch.tensor([0.0, 0.1, 0.0], dtype=torch.float64)
+    q1, q2, E2, W2 = arm_ik(S, E, W, T, axes)
+    assert torch.allclose(torch.nn.functional.normalize(W2 - S, dim=-1), torch.nn.functional.normalize(T - S, dim=-1),
+                          atol=1e-9)
+    step = (E2[1:] - E2[:-1]).norm(dim=-1)
+    assert float(step.max()) < 3 * float((E[1:] - E[:-1]).norm(dim=-1).max()) + 0.01  # no flip of the elbow
+    # the elbow stays on its hinge: it bends, it does not twist out of the hinge's plane
+    twist = quat_apply(quat_conj(quat_mul(q2, upper_rot)), torch.linalg.cross(E2 - S, W2 - E2, dim=-1))
+    assert float(twist[:, :2].abs().max()) < 1e-9
+    # through the straight frames the elbow moves as smoothly as elsewhere: no kink where it straightens
+    bend2 = (E2[2:] - 2 * E2[1:-1] + E2[:-2]).norm(dim=-1)
+    straight_frames = (flexion.abs() < 0.1)[1:-1]
+    assert float(bend2[straight_frames].max()) <= 1.5 * float(bend2[~straight_frames].max())
+
+
+def _hann(N: int, w: int, pushed: range, lo: int = 0, hi: int | None = None) -> torch.Tensor:
+    """The spread worked by hand: 1 on the frames within ``w`` of a pushed one, then a Hann window of
     half-width ``w`` over the clip's frames ``lo:hi``."""
     hi = N if hi is None else hi
     dilated = [1.0 if any(abs(f - p) <= w for p in pushed) and lo <= f < hi else 0.0 for f in range(N)]
@@ -68,13 +136,14 @@ def _triangle(N: int, w: int, pushed: range, lo: int = 0, hi: int | None = None)
         num = den = 0.0
         for d in range(-w, w + 1):
             if lo <= f + d < hi:
-                num += (w + 1 - abs(d)) * dilated[f + d]
-                den += w + 1 - abs(d)
+                weight = 1 + math.cos(math.pi * d / (w + 1))
+                num += weight * dilated[f + d]
+                den += weight
         out.append(num / den if lo <= f < hi else 0.0)
     return torch.tensor(out, dtype=torch.float64)
 
 
-def test_a_lone_push_spreads_into_the_worked_triangle_within_its_clip():
+def test_a_lone_push_spreads_into_the_worked_hann_window_within_its_clip():
     fps = 20.0
     w = round(RAMP * fps)
     assert w == 3
@@ -82,7 +151,7 @@ def test_a_lone_push_spreads_into_the_worked_triangle_within_its_clip():
     push = torch.zeros(N, 1, 3, dtype=torch.float64)
     push[20, 0] = torch.tensor([0.0, 2.0, 0.0])
     got = spread_in_time(push, torch.tensor([N]), torch.tensor([fps]))
-    want = _triangle(N, w, range(20, 21))
+    want = _hann(N, w, range(20, 21))
     assert torch.allclose(got[:, 0, 1], 2 * want, atol=1e-12) and float(got[:, 0, [0, 2]].abs().max()) == 0.0
     assert float(got[20, 0, 1]) == 2.0 and bool((got[:20 - 2 * w, 0].abs() == 0).all())
     assert bool((got[20 + 2 * w + 1:, 0] == 0).all())
@@ -90,7 +159,7 @@ def test_a_lone_push_spreads_into_the_worked_triangle_within_its_clip():
     push = torch.zeros(30, 1, 3, dtype=torch.float64)
     push[14, 0, 0] = 1.0
     got = spread_in_time(push, torch.tensor([15, 15]), torch.tensor([fps, fps]))
-    assert torch.allclose(got[:, 0, 0], _triangle(30, w, range(14, 15), 0, 15), atol=1e-12)
+    assert torch.allclose(got[:, 0, 0], _hann(30, w, range(14, 15), 0, 15), atol=1e-12)
     assert float(got[14, 0, 0]) == 1.0 and bool((got[15:] == 0).all())
     # the larger push wins where two are near, per arm
     push = torch.zeros(20, 2, 3, dtype=torch.float64)

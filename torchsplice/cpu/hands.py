@@ -4,8 +4,10 @@ The same passes as :func:`torchsplice.ops.hands.keep_hands_out`, one clip per th
 FK of the joints needed (``joints``, ascending and closed under parents); then ``iterations``
 passes of the push out of every obstacle (closed-form closest points of the forearm's axis and
 each obstacle's), taken into the chest's frame, spread in time (the largest push within ``w``
-frames, then a triangle of half-width ``w``) and added to the wrists' displacement, and
-two-bone IK of shoulder and elbow onto it. Shapes: rotations ``(N, J, 4)`` (unit WXYZ,
+frames, then a Hann window of half-width ``w``) and added to the wrists' displacement, and
+two-bone IK of shoulder and elbow onto it, about each elbow's hinge (the clip's mean plane
+normal in the upper arm's frame; none, and the chest's, where its mean is ``hinge_min`` or
+shorter), its reach's change damped by ``flex`` as there. Shapes: rotations ``(N, J, 4)`` (unit WXYZ,
 local; ``out`` the same, written only at the moved joints of changed frames), translations
 ``(N, J, 3)`` (row 0 the root's position); capsule ends ``end_a``, ``end_b``, ``end_w``
 ``(2C,)`` as :mod:`.body`'s; per arm (left, right) ``sh``, ``el``, ``wr`` and their parents
@@ -55,10 +57,10 @@ def _axis_angle(v):
     return (math.cos(half), v[0] * s, v[1] * s, v[2] * s)
 
 
-@njit(cache=True, inline="always")
-def _hinge(upper, chest):
-    """:func:`torchsplice.ops.hands._hinge`: the chest's X axis less its part along the upper arm
-    (its Z axis where the arm lies along X)."""
+@njit(cache=True, nogil=True)
+def _chest_hinge(upper, chest):
+    """:func:`torchsplice.ops.hands.chest_hinge`: the chest's X axis less its part along the upper
+    arm (its Z axis where the arm lies along X)."""
     unit = _scale(upper, 1.0 / max(_length(upper), 1e-300))
     side = qrot(chest, (1.0, 0.0, 0.0))
     side = _sub(side, _scale(unit, _dot(side, unit)))
@@ -69,16 +71,27 @@ def _hinge(upper, chest):
 
 
 @njit(cache=True, nogil=True)
-def _arm_ik(S, E, W, T, chest):
+def _arm_ik(S, E, W, T, hinge, flex):
     """:func:`torchsplice.ops.hands.arm_ik` of one arm: ``(q1, q2, E', W')``."""
     upper, lower = _sub(E, S), _sub(W, E)
-    l1, l2 = _length(upper), _length(lower)
-    reach = min(max(_length(_sub(T, S)), abs(l1 - l2) + 1e-6 * (l1 + l2)), l1 + l2 - 1e-6 * (l1 + l2))
-    now = math.acos(min(max(-_dot(upper, lower) / max(l1 * l2, 1e-300), -1.0), 1.0))
-    want = math.acos(min(max((l1 * l1 + l2 * l2 - reach * reach) / max(2.0 * l1 * l2, 1e-300), -1.0), 1.0))
-    minus = _scale(upper, -1.0)
-    axis = _normalized(_cross(minus, lower), _hinge(upper, chest))
-    q1 = _axis_angle(_scale(axis, want - now))
+    l1 = _length(upper)
+    u = _scale(upper, 1.0 / max(l1, 1e-300))
+    a = _sub(hinge, _scale(u, _dot(hinge, u)))
+    a = _scale(a, 1.0 / max(_length(a), 1e-300))
+    flat = _sub(lower, _scale(a, _dot(lower, a)))
+    lf, l2 = _length(flat), _length(lower)
+    now = math.atan2(-_dot(_cross(u, flat), a), _dot(flat, u))
+    d0 = _length(_sub(W, S))
+    top = math.sqrt(l1 * l1 + l2 * l2 + 2.0 * l1 * lf)
+    bottom = math.sqrt(max(l1 * l1 + l2 * l2 - 2.0 * l1 * lf, 0.0))
+    e = (_length(_sub(T, S)) - d0) * (1.0 - math.exp(-(now / flex) ** 2))
+    room = max(top - d0 if e > 0.0 else d0 - bottom, 1e-12 * (l1 + l2))
+    sign = 1.0 if e > 0.0 else -1.0 if e < 0.0 else 0.0
+    reach = d0 + sign * room * -math.expm1(-abs(e) / room)
+    want = math.acos(min(max((reach * reach - l1 * l1 - l2 * l2) / max(2.0 * l1 * lf, 1e-300), -1.0), 1.0))
+    if now < 0.0:
+        want = -want
+    q1 = _axis_angle(_scale(a, now - want))
     W1 = _add(E, qrot(q1, lower))
     q2 = _between(_normalized(_sub(W1, S), upper), _normalized(_sub(T, S), upper))
     return q1, q2, _add(S, qrot(q2, upper)), _add(S, qrot(q2, _sub(W1, S)))
@@ -113,7 +126,7 @@ def _push(pos, t, E, W, k, ends, end_a, end_b, end_w, radii, probe, obstacles, t
 
 @njit(cache=True, parallel=True)
 def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, chest, sh, el, wr, psh,
-                    pel, starts, lengths, target, w, slack, iterations, out, corrected):
+                    pel, starts, lengths, target, w, slack, iterations, hinge_min, flex, out, corrected):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``out`` and ``corrected[c]``
     (see the module docstring)."""
     J = rot.shape[1]
@@ -149,6 +162,19 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
                 for x in range(3):
                     E[t, k, x] = pos[t, el[k], x]
                     W[t, k, x] = pos[t, wr[k], x]
+        H = np.zeros((2, 3))  # the clip's elbow hinges, in the upper arms' frames (ops.hands.elbow_hinges)
+        for k in range(2):
+            for t in range(n):
+                up = _sub(_vec(E[t], k), _vec(pos[t], sh[k]))
+                lo = _sub(_vec(W[t], k), _vec(E[t], k))
+                nrm = _scale(_cross(_scale(up, -1.0), lo), 1.0 / max(_length(up) * _length(lo), 1e-300))
+                loc = qrot(qconj(qload(grot, t, sh[k])), nrm)
+                for x in range(3):
+                    H[k, x] += loc[x]
+            for x in range(3):
+                H[k, x] /= max(n, 1)
+            if _length(_vec(H, k)) <= hinge_min:
+                H[k, 0] = H[k, 1] = H[k, 2] = 0.0
         moved = np.zeros(n, np.bool_)
         for it in range(iterations):
             any_push = False
@@ -177,11 +203,11 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
                             best, size = g, s2
                     for x in range(3):
                         widest[t, k, x] = P[best, k, x]
-            for t in range(n):  # ... then a triangle of half-width w
+            for t in range(n):  # ... then a Hann window of half-width w
                 for k in range(2):
                     num0 = num1 = num2 = den = 0.0
                     for f in range(max(t - wc, 0), min(t + wc, n - 1) + 1):
-                        weight = wc + 1.0 - abs(f - t)
+                        weight = 1.0 + math.cos(math.pi * (f - t) / (wc + 1.0))
                         num0 += weight * widest[f, k, 0]
                         num1 += weight * widest[f, k, 1]
                         num2 += weight * widest[f, k, 2]
@@ -198,7 +224,13 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
                     d = qrot(ch, (D[t, k, 0], D[t, k, 1], D[t, k, 2]))
                     S0 = _vec(pos[t], sh[k])
                     W0 = _vec(pos[t], wr[k])
-                    q1, q2, e2, w2 = _arm_ik(S0, _vec(pos[t], el[k]), W0, _add(W0, d), ch)
+                    E0 = _vec(pos[t], el[k])
+                    hk = _vec(H, k)
+                    if hk[0] != 0.0 or hk[1] != 0.0 or hk[2] != 0.0:
+                        hinge = qrot(qload(grot, t, sh[k]), hk)
+                    else:
+                        hinge = _chest_hinge(_sub(E0, S0), ch)
+                    q1, q2, e2, w2 = _arm_ik(S0, E0, W0, _add(W0, d), hinge, flex)
                     for x in range(4):
                         Q[t, k, x], Q[t, k, 4 + x] = q1[x], q2[x]
                     for x in range(3):

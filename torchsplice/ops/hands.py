@@ -10,12 +10,14 @@ moves it out:
    own deepest, and at least half :data:`~.body.INSIDE_MARGIN`), and the way out: the capsule's
    normal at the closest point.
 2. That push, as a move of the wrist, is taken into the chest's frame, spread in time (each
-   frame takes the largest push within :data:`RAMP` seconds, then a triangle of that
+   frame takes the largest push within :data:`RAMP` seconds, then a Hann window of that
    half-width smooths it; no pop where the correction starts or ends) and added to the wrist's
    displacement so far.
 3. Two-bone IK on the shoulder and elbow puts the wrist at its place in the chest's frame plus
-   that displacement: the elbow bends in its own plane to the new reach, then the shoulder
-   swings the arm by the shortest arc. The hand keeps its rotation relative to the forearm.
+   that displacement: the elbow bends about its hinge to the new reach, then the shoulder
+   swings the arm by the shortest arc. The hinge is the clip's own, fixed in the upper arm
+   (:func:`elbow_hinges`), so the elbow moves smoothly through frames where the arm is
+   straight. The hand keeps its rotation relative to the forearm.
 
 Steps 1 to 3 run up to :data:`ITERATIONS` times (until no push is left), each solving the IK
 from the clip's own arms with the displacement summed so far; frames with no displacement keep
@@ -41,8 +43,8 @@ from ..specs.canonical import canonical_joints
 from ..specs.roles import SkeletonRoles
 from .body import Body, capsule_ends, segment_closest
 
-__all__ = ["RAMP", "ITERATIONS", "CLEARANCE", "SLACK", "Arms", "arms_of", "keep_hands_out", "spread_in_time",
-           "arm_ik"]
+__all__ = ["RAMP", "ITERATIONS", "CLEARANCE", "SLACK", "FLEX", "HINGE_MIN", "Arms", "arms_of", "keep_hands_out",
+           "spread_in_time", "arm_ik", "elbow_hinges", "hinge_axes", "chest_hinge"]
 
 RAMP = 0.15
 """Seconds over which a correction ramps in and out (the half-width of its spread in time)."""
@@ -54,6 +56,12 @@ frame counts as inside beyond the margin): the correction acts beyond half the m
 SLACK = 0.25
 """How far short of that depth (or of the clip's ``allowed``) a push aims, as a share of the
 margin, so that a few passes reach it rather than creep towards it."""
+FLEX = 0.5
+"""Radians of elbow flexion (0 straight) below which the IK changes an arm's reach less and
+swings it more (see :func:`arm_ik`)."""
+HINGE_MIN = 1e-3
+"""A clip's mean elbow-plane normal (:func:`elbow_hinges`) shorter than this gives no hinge: its
+arm is straight (bent less than about 0.06 degrees) on average."""
 
 
 @dataclass(frozen=True)
@@ -92,7 +100,7 @@ def _frames(lengths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Te
 def spread_in_time(push: torch.Tensor, lengths: torch.Tensor, fps: torch.Tensor, ramp: float = RAMP) -> torch.Tensor:
     """``push`` ``(N, A, 3)`` (clips packed along frames) spread in time within each clip: every
     frame takes the largest vector (by length, per ``A``) within ``w = round(ramp fps)`` frames
-    of it, then a triangle of half-width ``w`` (weights ``w + 1 - |d|``, renormalised at a clip's
+    of it, then a Hann window of half-width ``w`` (weights ``1 + cos(pi d / (w + 1))``, renormalised at a clip's
     ends) averages those. Zero far from any push; a lone push becomes a ramp ``2 w`` frames wide
     each side, reaching its full size where pushes are ``w`` frames deep or more."""
     N = push.shape[0]
@@ -109,7 +117,7 @@ def spread_in_time(push: torch.Tensor, lengths: torch.Tensor, fps: torch.Tensor,
     size = torch.where(inside[..., None], (push * push).sum(-1)[at], -1.0)  # (N, 2W + 1, A)
     best = at.gather(1, size.argmax(1))  # (N, A): the frame of the largest push near each
     widest = push[best, torch.arange(push.shape[1])[None, :]]  # (N, A, 3)
-    weight = torch.where(inside, (w[:, None] + 1 - d.abs()[None, :]).to(push.dtype), 0.0)
+    weight = torch.where(inside, 1.0 + torch.cos(torch.pi * d[None, :] / (w[:, None] + 1.0)), 0.0).to(push.dtype)
     return (widest[at] * weight[..., None, None]).sum(1) / weight.sum(1)[:, None, None]
 
 
@@ -119,9 +127,9 @@ def _normalized(v: torch.Tensor, fallback: torch.Tensor) -> torch.Tensor:
     return torch.where(n > 1e-12, v / n.clamp_min(1e-300), f)
 
 
-def _hinge(upper: torch.Tensor, chest_rot: torch.Tensor) -> torch.Tensor:
-    """The elbow's hinge for a straight arm: the chest's X axis, less its part along the upper
-    arm (the chest's Z axis where the arm lies along X)."""
+def chest_hinge(upper: torch.Tensor, chest_rot: torch.Tensor) -> torch.Tensor:
+    """An elbow's hinge where the clip gives none (its arm straight on every frame): the chest's
+    X axis, less its part along the upper arm (the chest's Z axis where the arm lies along X)."""
     unit = upper / _length(upper)[..., None].clamp_min(1e-300)
     out = None
     for axis in ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)):
@@ -131,23 +139,70 @@ def _hinge(upper: torch.Tensor, chest_rot: torch.Tensor) -> torch.Tensor:
     return out
 
 
+def elbow_hinges(upper: torch.Tensor, lower: torch.Tensor, upper_rot: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+    """``(B, 2, 3)`` each clip's elbow hinge per arm, in its upper arm's frame: the mean over
+    the clip's frames of the arm's plane normal ``(-upper x lower) / (l1 l2)`` (a bent frame
+    weighs by the sine of its bend, a straight one nothing), taken into the frame of the upper
+    arm's joint (``upper_rot`` ``(N, 2, 4)``, its global rotation); zero where the arm is
+    straight on every frame. ``upper``, ``lower`` ``(N, 2, 3)``, clips packed along frames.
+
+    A human elbow is a hinge fixed in the upper arm, so this axis is the same on every frame of
+    a clip; the IK bends about it (turned with the upper arm) instead of about each frame's own
+    plane, which has no direction where the arm is straight and would flip the elbow there."""
+    normal = torch.linalg.cross(-upper, lower, dim=-1) / (_length(upper) * _length(lower)).clamp_min(1e-300)[..., None]
+    local = quat_apply(quat_conj(upper_rot), normal)
+    clip = torch.repeat_interleave(torch.arange(len(lengths)), lengths)
+    total = torch.zeros(len(lengths), *upper.shape[1:], dtype=upper.dtype).index_add(0, clip, local)
+    mean = total / lengths.clamp_min(1)[:, None, None].to(upper.dtype)
+    return torch.where((_length(mean) > HINGE_MIN)[..., None], mean, 0.0)
+
+
+def hinge_axes(hinges: torch.Tensor, upper_rot: torch.Tensor, upper: torch.Tensor, chest_rot: torch.Tensor) -> torch.Tensor:
+    """``(..., 3)`` the elbow's hinge in the world per frame: a clip's :func:`elbow_hinges` row
+    ``hinges`` turned by the upper arm's rotation ``upper_rot`` ``(..., 4)``, or
+    :func:`chest_hinge` where the clip has none."""
+    turned = quat_apply(upper_rot, hinges)
+    return torch.where((_length(hinges) > 0)[..., None], turned, chest_hinge(upper, chest_rot))
+
+
 def arm_ik(S: torch.Tensor, E: torch.Tensor, W: torch.Tensor, T: torch.Tensor,
-                chest_rot: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+           hinge: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Two-bone IK: ``(q1, q2, E', W')`` for shoulder, elbow and wrist at ``S``, ``E``, ``W`` and
-    the wrist's target ``T`` (``(..., 3)``): the elbow's turn in the world about itself, in the
-    plane of the arm, to the target's reach (clamped to what the bones can reach), then the
-    whole arm's shortest turn about the shoulder onto the target, and where they put the
-    elbow and wrist. The bones keep their lengths; a reachable target is met. ``chest_rot``
-    ``(..., 4)``: the chest's rotation, whose X axis (less its part along the upper arm; its Z
-    axis where the arm lies along X) is the elbow's hinge when the arm is straight. (Unlike the legs' :func:`~.feet.two_bone_ik`, which keeps a knee no straighter
-    than it is, an arm may straighten: pushing a forearm out of the body often needs that.)"""
+    the wrist's target ``T`` (``(..., 3)``): the elbow's turn about its hinge (``hinge``
+    ``(..., 3)``, less its part along the upper arm; it points along ``-upper x lower`` of the
+    arm bent) to a new reach, then the whole arm's shortest turn about the shoulder onto the
+    target's direction, and where they put the elbow and wrist. The bones keep their lengths.
+
+    The forearm's flexion is its angle about the hinge from the upper arm's line: positive bent,
+    zero straight, below zero overstretched, so it runs smoothly through a straight arm, which
+    has no plane of its own; the new flexion keeps its side.
+    The reach changes by the target's, ``d - d0``, times ``1 - exp(-(flexion / FLEX)^2)`` (all
+    of it for an arm bent more than about 2 ``FLEX``, nothing for a straight one, which swings
+    instead: bending a straight arm moves the elbow as the square root of the change, a jolt),
+    and saturates smoothly short of the reach the bones allow (``h (1 - exp(-e / h))`` for an
+    extension ``e`` with headroom ``h``, likewise for a fold), so the elbow never snaps straight.
+    A target the arm already reaches gives back the arm; one moved across the shoulder's
+    sphere (at the arm's own reach) is met. (Unlike the legs' :func:`~.feet.two_bone_ik`, which
+    keeps a knee no straighter than it is, an arm may straighten: pushing a forearm out of the
+    body often needs that.)"""
     upper, lower = E - S, W - E
-    l1, l2 = _length(upper), _length(lower)
-    reach = _length(T - S).clamp((l1 - l2).abs() + 1e-6 * (l1 + l2), l1 + l2 - 1e-6 * (l1 + l2))
-    now = torch.acos(((-upper * lower).sum(-1) / (l1 * l2).clamp_min(1e-300)).clamp(-1.0, 1.0))
-    want = torch.acos(((l1 ** 2 + l2 ** 2 - reach ** 2) / (2 * l1 * l2).clamp_min(1e-300)).clamp(-1.0, 1.0))
-    axis = _normalized(torch.linalg.cross(-upper, lower, dim=-1), _hinge(upper, chest_rot))
-    q1 = axis_angle_to_quat(axis * (want - now)[..., None])
+    l1 = _length(upper)
+    u = upper / l1.clamp_min(1e-300)[..., None]
+    a = hinge - (hinge * u).sum(-1, keepdim=True) * u
+    a = a / _length(a).clamp_min(1e-300)[..., None]
+    flat = lower - (lower * a).sum(-1, keepdim=True) * a  # the forearm in the hinge's plane
+    lf, l2 = _length(flat), _length(lower)
+    now = torch.atan2(-(torch.linalg.cross(u, flat, dim=-1) * a).sum(-1), (flat * u).sum(-1))
+    d0 = _length(W - S)
+    # what the forearm's turn about the hinge can reach: from folded to straight
+    top = (l1 ** 2 + l2 ** 2 + 2 * l1 * lf).sqrt()
+    bottom = (l1 ** 2 + l2 ** 2 - 2 * l1 * lf).clamp_min(0.0).sqrt()
+    e = (_length(T - S) - d0) * (1.0 - torch.exp(-(now / FLEX) ** 2))
+    room = torch.where(e > 0, top - d0, d0 - bottom).clamp_min(1e-12 * (l1 + l2))
+    reach = d0 + torch.sign(e) * room * -torch.expm1(-e.abs() / room)
+    want = torch.acos(((reach ** 2 - l1 ** 2 - l2 ** 2) / (2 * l1 * lf).clamp_min(1e-300)).clamp(-1.0, 1.0))
+    want = torch.where(now < 0, -want, want)  # an overstretched arm stays on its side: no kink through straight
+    q1 = axis_angle_to_quat(a * (now - want)[..., None])
     W1 = E + quat_apply(q1, lower)
     q2 = quat_between(_normalized(W1 - S, upper), _normalized(T - S, upper))
     return q1, q2, S + quat_apply(q2, upper), S + quat_apply(q2, W1 - S)
@@ -215,11 +270,12 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
     trans = translations.to(torch.float64)
     pos, grot = forward_kinematics(rot, trans[:, 0], skeleton.offsets.to(torch.float64), skeleton.parents, trans)
     clip, first, end = _frames(lengths)
+    sh, el, wr = list(arms.shoulder), list(arms.elbow), list(arms.wrist)
+    hinges = elbow_hinges(pos[:, el] - pos[:, sh], pos[:, wr] - pos[:, el], grot[:, sh], lengths)  # (B, 2, 3)
     target = torch.maximum(allowed, torch.tensor(CLEARANCE * body.margin, dtype=torch.float64))[clip]  # (N,)
     a, b = capsule_ends(pos, body)
     obstacles = list(body.obstacles)
     radii = body.radii.to(torch.float64)[obstacles]
-    el, wr = list(arms.elbow), list(arms.wrist)
     slack = SLACK * body.margin
     push = _push(pos, pos[:, el], pos[:, wr], a[:, None, obstacles], b[:, None, obstacles], radii, target, slack, body,
                  arms)
@@ -237,8 +293,9 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
     seg_clip = c[run]
     pos, grot, target = pos[f], grot[f], target[f]
     n = len(f)
-    S, E0, W0 = pos[:, list(arms.shoulder)], pos[:, el], pos[:, wr]  # (n, 2, 3)
+    S, E0, W0 = pos[:, sh], pos[:, el], pos[:, wr]  # (n, 2, 3)
     chest = grot[:, arms.chest, None].expand(n, 2, 4)
+    hinge = hinge_axes(hinges[c], grot[:, sh], E0 - S, chest)  # (n, 2, 3)
     oa, ob = a[f][:, None, obstacles], b[f][:, None, obstacles]  # (n, 1, O, 3): they do not move with the arms
     D = torch.zeros(n, 2, 3, dtype=torch.float64)  # the wrists' displacement, chest's frame
     E, W = E0.clone(), W0.clone()
@@ -257,7 +314,7 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
         D = D + spread_in_time(quat_apply(quat_conj(chest), p), seg_lengths, fps[seg_clip])
         r, k = torch.nonzero((D != 0).any(-1), as_tuple=True)  # each arm that has moved
         q1[r, k], q2[r, k], E[r, k], W[r, k] = arm_ik(S[r, k], E0[r, k], W0[r, k], W0[r, k] + quat_apply(chest[r, k], D[r, k]),
-                                                      chest[r, k])
+                                                      hinge[r, k])
     changed = (D != 0).any(-1)  # (n, 2)
     parents = skeleton.parents
     for k, (s_, e_) in enumerate(zip(arms.shoulder, arms.elbow)):

@@ -153,7 +153,7 @@ class CompiledBackend(Backend):
     def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed):
         from ...cpu.fk import joint_closure
         from ...cpu.hands import hands_out_clips
-        from ...ops.hands import CLEARANCE, ITERATIONS, RAMP, SLACK
+        from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, SLACK
 
         lengths = np.asarray(lengths, dtype=np.int64)
         starts = (np.cumsum(lengths) - lengths).astype(np.int64)
@@ -173,7 +173,7 @@ class CompiledBackend(Backend):
                         np.asarray(arms.shoulder, np.int64), np.asarray(arms.elbow, np.int64),
                         np.asarray(arms.wrist, np.int64), parents[list(arms.shoulder)].copy(),
                         parents[list(arms.elbow)].copy(), starts, lengths, target, w, float(SLACK * body.margin),
-                        int(ITERATIONS), out, corrected)
+                        int(ITERATIONS), float(HINGE_MIN), float(FLEX), out, corrected)
         return out, corrected
 
     def assembly_bank(self, prepared):
