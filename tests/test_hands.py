@@ -1,6 +1,10 @@
 """Keeping hands out of the body (:mod:`torchsplice.ops.hands`), and the job's correction.
 
-Known answers: two-bone IK meets a reachable target with the bones' lengths kept; the spread in
+Known answers: two-bone IK points the arm at its target with the bones' lengths kept, meets a
+target at the arm's own reach, gives back the arm for its own wrist, moves the reach towards the
+target's and never past it or snapped straight; an elbow's hinge is recovered from a clip
+whose arm bends about a fixed axis, and the IK moves the elbow as smoothly through a straight
+arm as elsewhere; the spread in
 time of a lone push is the dilated Hann window worked by hand, and stays within its clip; an arm
 swung through the chest comes out of it, smoothly, with nothing else changed and frames beyond
 the correction's reach bit for bit; a clean clip, and a clip allowed as deep, come back as they

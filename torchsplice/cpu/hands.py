@@ -176,8 +176,11 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
             if _length(_vec(H, k)) <= hinge_min:
                 H[k, 0] = H[k, 1] = H[k, 2] = 0.0
         moved = np.zeros(n, np.bool_)
+        hann = np.empty(2 * wc + 1)  # the spread's weights by offset d = -w..w
+        for d in range(2 * wc + 1):
+            hann[d] = 1.0 + math.cos(math.pi * (d - wc) / (wc + 1.0))
         for it in range(iterations):
-            any_push = False
+            lo, hi = n, -1  # the frames pushed in this pass
             for t in range(n):
                 for k in range(2):
                     for x in range(3):
@@ -189,12 +192,15 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
                     v = _push(pos, t, E, W, k, ends, end_a, end_b, end_w, radii, probes[k], obstacles, target[c], slack,
                               el[k], wr[k])
                     if v[0] != 0.0 or v[1] != 0.0 or v[2] != 0.0:
-                        any_push = True
+                        lo, hi = min(lo, t), max(hi, t)
                         v = qrot(inv, v)
                         P[t, k, 0], P[t, k, 1], P[t, k, 2] = v
-            if not any_push:
+            if hi < 0:
                 break
-            for t in range(n):  # the spread in time: the largest push within w ...
+            # a push reaches w frames by the largest-push step and w more by the window: only the
+            # frames within 2 w of one change (the rest would add zeros)
+            a0, a1 = max(lo - wc, 0), min(hi + wc, n - 1)
+            for t in range(a0, a1 + 1):  # the spread in time: the largest push within w ...
                 for k in range(2):
                     best, size = t, -1.0
                     for g in range(max(t - wc, 0), min(t + wc, n - 1) + 1):
@@ -203,19 +209,22 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
                             best, size = g, s2
                     for x in range(3):
                         widest[t, k, x] = P[best, k, x]
-            for t in range(n):  # ... then a Hann window of half-width w
+            b0, b1 = max(lo - 2 * wc, 0), min(hi + 2 * wc, n - 1)
+            for t in range(b0, b1 + 1):  # ... then a Hann window of half-width w
+                den = 0.0
+                for f in range(max(t - wc, 0), min(t + wc, n - 1) + 1):
+                    den += hann[f - t + wc]
                 for k in range(2):
-                    num0 = num1 = num2 = den = 0.0
-                    for f in range(max(t - wc, 0), min(t + wc, n - 1) + 1):
-                        weight = 1.0 + math.cos(math.pi * (f - t) / (wc + 1.0))
+                    num0 = num1 = num2 = 0.0
+                    for f in range(max(t - wc, a0), min(t + wc, a1) + 1):
+                        weight = hann[f - t + wc]
                         num0 += weight * widest[f, k, 0]
                         num1 += weight * widest[f, k, 1]
                         num2 += weight * widest[f, k, 2]
-                        den += weight
                     D[t, k, 0] += num0 / den
                     D[t, k, 1] += num1 / den
                     D[t, k, 2] += num2 / den
-            for t in range(n):
+            for t in range(b0, b1 + 1):  # the IK where the displacement changed
                 ch = qload(grot, t, chest)
                 for k in range(2):
                     if D[t, k, 0] == 0.0 and D[t, k, 1] == 0.0 and D[t, k, 2] == 0.0:

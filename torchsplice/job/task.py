@@ -331,16 +331,17 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     n = frames[todo]
     rows = np.repeat(starts[todo] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
     arms = arms_of(skeleton, roles, body)
-    new, count = backend.keep_hands_out(np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows]), n,
-                                        float(group.fps), skeleton, body, arms, allowed[todo])
+    before, their_trans = np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows])
+    new, count = backend.keep_hands_out(before, their_trans, n, float(group.fps), skeleton, body, arms, allowed[todo])
     moved = list(arms.moved)
-    changed = (new[:, moved] != rot[rows][:, moved]).any(axis=(1, 2))
+    changed = (new[:, moved] != before[:, moved]).any(axis=(1, 2))
+    arms_now = new[changed][:, moved]  # only these rotations differ from the splice's
     rot = np.array(rot, copy=True) if not rot.flags.writeable else rot
-    rot[rows] = new
+    rot[rows[changed][:, None], moved] = arms_now
     corrected[todo] = count
-    s2, d2 = backend.inside_body(new, trans[rows], n, skeleton, body)
+    s2, d2 = backend.inside_body(new, their_trans, n, skeleton, body)
     share[todo], depth[todo] = s2, d2
-    return rot, corrected, (rows[changed], new[changed][:, moved])
+    return rot, corrected, (rows[changed], arms_now)
 
 
 PART_KEYS = ("kind", "locomotion", "action")
