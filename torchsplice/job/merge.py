@@ -409,7 +409,8 @@ def summarise_output(summary: JobSummary, out, merge: OutputMerge) -> None:
 def source_rows(plan: Plan, sources: Sources) -> list:
     """``(database, rows)`` of the source clips a ``copy_sources`` output holds: locomotions
     first, then actions and references (one database when both are one file)."""
-    return [(sources.db("L"), sorted({p.loco for p in plan.pairs})),
-            (sources.db("A"), sorted({p.action for p in plan.pairs}
-                                     | {p.reference for p in plan.pairs if p.reference is not None
-                                        and get_method(p.method).needs_reference}))]
+    pairs = plan.pairs
+    needs = np.array([get_method(m).needs_reference for m in pairs.methods], dtype=bool)[pairs.column("method")]
+    refs = pairs.column("reference")[needs & (pairs.column("reference") >= 0)]
+    return [(sources.db("L"), np.unique(pairs.column("loco")).tolist()),
+            (sources.db("A"), np.unique(np.concatenate([pairs.column("action"), refs])).tolist())]

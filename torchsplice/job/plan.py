@@ -7,7 +7,8 @@ references, lists the pairs (method by method, each locomotion against each acti
 reason for every skipped one, and cuts the pairs into tasks: consecutive blocks of one method
 and one locomotion group (skeleton and frame rate), each with a stable id. The plan is saved
 as JSON in the job's work folder, so every worker, a resume and ``torchsplice merge`` see
-exactly the same plan.
+exactly the same plan. The pairs are held as int32 columns (:class:`~torchsplice.job.pairs.PairTable`),
+formed and cut into tasks by array operations: a plan of 3.1 M pairs takes 71 MB, not 0.7 GB.
 """
 
 from __future__ import annotations
@@ -30,32 +31,19 @@ from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
+from .pairs import MODES, Pair, PairTable  # noqa: F401 (Pair: re-exported)
 from ..store.select import select_clips
 from .source_figures import source_figures
 from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
-PLAN_VERSION = 7
+PLAN_VERSION = 8
 MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
 such reason names the two skeletons (``skeletons differ: locomotions on skeleton 0 (bandai_namco,
 22 joints) x actions on skeleton 2 (cmu, 31 joints)``), so the summary counts them by skeleton."""
-
-
-@dataclass
-class Pair:
-    """One planned pair: rows in the locomotion and action databases, method, reference row;
-    ``target``: the locomotion skeleton the action (and reference) are retargeted onto, ``None``
-    when they are on it already."""
-
-    method: str
-    loco: int
-    action: int
-    reference: int | None = None
-    mode: str = "timewarp"  # "timewarp" (time-aligned) or "standing" (an action that does not locomote)
-    target: int | None = None
 
 
 @dataclass
@@ -118,7 +106,7 @@ class Plan:
     to its :class:`PlanClip`; ``flags`` a key to why the clip does not locomote (for forced clips)."""
 
     key: dict
-    pairs: list[Pair]
+    pairs: PairTable
     tasks: list[Task]
     groups: list[Group]
     skipped: dict[str, int]
@@ -128,17 +116,14 @@ class Plan:
     version: int = PLAN_VERSION
 
     def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
-        def act(row):
-            key = clip_key("A", row, same_db)
-            return key if p.target is None else retargeted_key(key, p.target)
-
-        return (clip_key("L", p.loco, same_db), act(p.action),
-                act(p.reference) if p.reference is not None and get_method(p.method).needs_reference else None)
+        ref = p.reference is not None and get_method(p.method).needs_reference
+        return (clip_key("L", p.loco, same_db), action_key(p.action, p.target, same_db),
+                action_key(p.reference, p.target, same_db) if ref else None)
 
     @property
     def retargeted(self) -> int:
         """Pairs whose action (and reference) are retargeted onto the locomotion's skeleton."""
-        return sum(p.target is not None for p in self.pairs)
+        return int(np.count_nonzero(self.pairs.column("target") >= 0))
 
     @property
     def same_db(self) -> bool:
@@ -156,7 +141,7 @@ class Plan:
                            "groups": [asdict(g) for g in self.groups],
                            "clips": {k: c.to_dict() for k, c in self.clips.items()},
                            "tasks": [asdict(t) for t in self.tasks],
-                           "pairs": [[p.method, p.loco, p.action, p.reference, p.mode, p.target] for p in self.pairs]},
+                           "pairs": self.pairs.to_dict()},
                           sort_keys=True, separators=(",", ":"))
 
     @classmethod
@@ -167,7 +152,7 @@ class Plan:
         if d.get("version") != PLAN_VERSION:
             raise UnfinishedJobError(f"the unfinished job's plan has version {d.get('version')}, this torchsplice writes "
                                      f"{PLAN_VERSION}: finish it with the torchsplice that started it")
-        return cls(key=d["key"], pairs=[Pair(*p) for p in d["pairs"]], tasks=[Task(**t) for t in d["tasks"]],
+        return cls(key=d["key"], pairs=PairTable.from_dict(d["pairs"]), tasks=[Task(**t) for t in d["tasks"]],
                    groups=[Group(**g) for g in d["groups"]], skipped=d["skipped"],
                    clips={k: PlanClip(**c) for k, c in d["clips"].items()}, flags=d["flags"],
                    sizing=d["sizing"], version=d["version"])
@@ -271,7 +256,6 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
         roles = specs[k].bind(sk_l[k])
         groups.append(Group(k, fps, list(dict.fromkeys(keys)), specs[k].to_json(), leg_length(sk_l[k], roles)))
     sources.share_banks(groups)
-    group_of = {(g.skeleton, g.fps): n for n, g in enumerate(groups)}
     tables = {"L": tl, "A": ta}
     clips = {}
     for g in groups:
@@ -286,24 +270,17 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
     pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
-    _acting(c, sources, groups, clips, sk_l, {plan_action_key(p, same) for p in pairs if p.mode == "standing"})
+    _acting(c, sources, groups, clips, sk_l, _standing_action_keys(pairs, same))
     source_figures(c, sources, groups, clips, sk_l)
-    if not pairs:
+    if not len(pairs):
         reasons = "; ".join(f"{n} x {w}" for w, n in skipped.items())
         raise TorchspliceError(f"no pair to splice: every selected pair was skipped ({reasons})")
-    size = _task_size(c, pairs, clips, groups, same, tl, ta)
-    tasks: list[Task] = []
-    start = 0
-    for n in range(1, len(pairs) + 1):
-        p0 = pairs[start]
-        g0 = group_of[(int(tl.skeleton[p0.loco]), float(tl.fps[p0.loco]))]
-        end = n == len(pairs)
-        if not end:
-            p = pairs[n]
-            g = group_of[(int(tl.skeleton[p.loco]), float(tl.fps[p.loco]))]
-        if end or n - start >= size or p.method != p0.method or g != g0 or p.mode != p0.mode:
-            tasks.append(Task(f"{len(tasks):06d}", p0.method, g0, start, n, p0.mode))
-            start = n
+    size = _task_size(c, pairs, groups, tl, ta)
+    group_of = {(g.skeleton, g.fps): n for n, g in enumerate(groups)}
+    loco = pairs.column("loco")
+    rows, at = np.unique(loco, return_inverse=True)
+    group = np.array([group_of[(int(tl.skeleton[r]), float(tl.fps[r]))] for r in rows.tolist()], dtype=np.int64)[at]
+    tasks = _cut_tasks(pairs, group, size)
     flags = {k: chk.reason for k, chk in checks.items() if not chk.locomoting}
     key = plan_key(c)
     key["task_pairs"] = size
@@ -334,8 +311,7 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
         native = sorted((k for k in g.clips if clips[k].fps == g.fps and k not in out), key=lambda k: clips[k].frames)
         if backend.prepares_once:
             bank, index = sources.bank(n, g.clips, g.fps, roles, options, backend)
-            for b in range(0, len(native), 256):
-                chunk = native[b:b + 256]
+            for chunk in _padded_chunks(native, [clips[k].frames for k in native]):
                 out.update(zip(chunk, backend.locomotion_checks(bank, [index[k] for k in chunk], [], roles, g.fps,
                                                                 options)[0]))
         rest: dict[float, list[str]] = {}
@@ -349,6 +325,22 @@ def _locomotion_checks(config: JobConfig, sources: Sources, groups: list[Group],
                 for k, chk in zip(chunk, check_locomotion(clips_to_tensors(motions, motions[0].skeleton), roles, rate)):
                     out[k] = chk
     return out
+
+
+def _padded_chunks(keys: list[str], frames: list[int], budget: int = 65_536, most: int = 256) -> list[list[str]]:
+    """``keys`` (in order of length, ``frames`` each) cut into consecutive chunks of at most
+    ``most`` clips whose padded batch (clips x the longest) holds at most ``budget`` frames (a
+    longer clip alone): checked in one batch each, so that long takes never pad 256 clips to
+    their length."""
+    chunks: list[list[str]] = []
+    for k, n in zip(keys, frames):
+        if chunks and len(chunks[-1]) < most and (len(chunks[-1]) + 1) * max(n, longest) <= budget:
+            chunks[-1].append(k)
+            longest = max(n, longest)
+        else:
+            chunks.append([k])
+            longest = n
+    return chunks
 
 
 def _mode(c: JobConfig, checks: dict, action_key: str, method: str) -> str:
@@ -399,10 +391,11 @@ def _describe_skeletons(db, path) -> dict[int, str]:
     return out
 
 
-def plan_action_key(p: Pair, same: bool) -> str:
-    """The key of a pair's action clip as its group holds it (retargeted onto ``p.target``, if set)."""
-    key = clip_key("A", p.action, same)
-    return key if p.target is None else retargeted_key(key, p.target)
+def action_key(action: int, target: int | None, same: bool) -> str:
+    """The key of an action clip (row ``action``) as its group holds it: retargeted onto
+    skeleton ``target``, if set."""
+    key = clip_key("A", action, same)
+    return key if target is None else retargeted_key(key, target)
 
 
 def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, sk_a, described) -> dict:
@@ -451,7 +444,7 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, re
     L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
     nl, na = len(L), len(A)
     reasons: list[str] = []
-    grid = np.zeros((nl, na), dtype=np.int64)  # 1 + the index of each pair's reason in reasons; 0: none
+    grid = np.zeros((nl, na), dtype=np.int32)  # 1 + the index of each pair's reason in reasons; 0: none
 
     def code(text: str) -> int:
         reasons.append(text)
@@ -483,7 +476,7 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, re
     kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
     xs, ys = np.unique(kl).tolist(), np.unique(ka).tolist()
     by_pair = np.zeros((max(xs) + 1, max(ys) + 1), dtype=np.int64)
-    target = np.full(by_pair.shape, -1, dtype=np.int64)  # the skeleton an action is retargeted onto; -1: none
+    target = np.full(by_pair.shape, -1, dtype=np.int32)  # the skeleton an action is retargeted onto; -1: none
     for x in xs:
         for y in ys:
             kind = kinds[x, y]
@@ -532,9 +525,11 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, re
                     if check is not None and not check.locomoting else None)
         put(per_clip(L, still)[:, None])
     base = grid.copy()
-    pairs: list[Pair] = []
+    ref_of = np.array([-1 if refs.get(j) is None else refs[j] for j in A.tolist()], dtype=np.int32)
+    L32, A32 = L.astype(np.int32), A.astype(np.int32)
+    blocks: list[dict] = []
     skipped: dict[str, int] = {}
-    for method in c.methods:
+    for m, method in enumerate(c.methods):
         grid[:] = base
         standing = np.array([_mode(c, checks, key_a[int(j)], method) == "standing" for j in A], dtype=bool)
         if get_method(method).needs_reference:
@@ -548,19 +543,43 @@ def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, re
             skipped[reasons[r]] = skipped.get(reasons[r], 0) + int(per[r + 1])
         for mode, want in (("timewarp", ~standing), ("standing", standing)):
             rows, cols = np.nonzero((grid == 0) & want[None, :])
-            for i, j, t in zip(L[rows].tolist(), A[cols].tolist(), pair_target[rows, cols].tolist()):
-                pairs.append(Pair(method, i, j, refs.get(j) if mode == "timewarp" else None, mode, None if t < 0 else t))
-    return pairs, skipped
+            blocks.append({"method": np.full(len(rows), m, np.int32), "loco": L32[rows], "action": A32[cols],
+                           "reference": ref_of[cols] if mode == "timewarp" else np.full(len(rows), -1, np.int32),
+                           "mode": np.full(len(rows), MODES.index(mode), np.int32), "target": pair_target[rows, cols]})
+            del rows, cols
+    return PairTable.concat(c.methods, blocks), skipped
 
 
-def _task_size(c: JobConfig, pairs, clips, groups, same, tl, ta) -> int:
+def _standing_action_keys(pairs: PairTable, same: bool) -> set[str]:
+    """The keys of the actions of the standing pairs (each as its group holds it)."""
+    on = pairs.column("mode") == MODES.index("standing")
+    both = np.unique(np.stack([pairs.column("action")[on], pairs.column("target")[on]], axis=1), axis=0)
+    return {action_key(a, None if t < 0 else t, same) for a, t in both.tolist()}
+
+
+def _cut_tasks(pairs: PairTable, group: np.ndarray, size: int) -> list[Task]:
+    """The plan's tasks: runs of pairs of one method, locomotion group (``group``, ``(N,)``) and
+    mode, each run cut into blocks of ``size`` pairs, numbered in order."""
+    method, mode = pairs.column("method"), pairs.column("mode")
+    change = np.nonzero((method[1:] != method[:-1]) | (group[1:] != group[:-1]) | (mode[1:] != mode[:-1]))[0] + 1
+    edges = np.concatenate([[0], change, [len(pairs)]]).tolist()
+    tasks: list[Task] = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        for start in range(a, b, size):
+            tasks.append(Task(f"{len(tasks):06d}", pairs.methods[int(method[a])], int(group[a]), start,
+                              min(start + size, b), MODES[int(mode[a])]))
+    return tasks
+
+
+def _task_size(c: JobConfig, pairs: PairTable, groups, tl, ta) -> int:
     """Pairs per task: ``batch_pairs``, or what fits the memory budget (one worker's alignment
     tables for the longest pair, and a task's results)."""
     if c.batch_pairs is not None:
         return max(1, int(c.batch_pairs))
-    t_l = max(int(tl.length[p.loco]) for p in pairs)
+    locos, acts = np.unique(pairs.column("loco")), np.unique(pairs.column("action"))
+    t_l = int(np.asarray(tl.length, dtype=np.int64)[locos].max())
     fps = max(g.fps for g in groups)
-    t_a = max(int(ta.length[p.action] * fps / float(ta.fps[p.action])) + 1 for p in pairs)
+    t_a = max(int(ta.length[j] * fps / float(ta.fps[j])) + 1 for j in acts.tolist())
     J = 64  # a generous joint count: the budget is a bound, not an estimate
     if c.splice_backend().prepares_once:  # the compiled splicer: one pair's tables per thread, float64
         left = c.memory_budget_mb * 2**20 - 11 * t_l * t_a

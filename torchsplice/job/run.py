@@ -144,7 +144,7 @@ class SpliceJob:
         try:
             plan = make_plan(c, sources)
             summary = JobSummary(output=c.output, pairs=len(plan.pairs), skipped=dict(plan.skipped), tasks=len(plan.tasks),
-                                 dry_run=True, standing=sum(p.mode == "standing" for p in plan.pairs),
+                                 dry_run=True, standing=plan.pairs.count("standing"),
                                  retargeted=plan.retargeted)
             summary.expected = self._expected(plan, sources)
             summary.alignment = self._expected_alignment(plan, sources)

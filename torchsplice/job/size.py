@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .plan import action_key
 from .sources import clip_key
 from .task import OUTPUT_COLUMNS
 
@@ -86,6 +87,20 @@ def _alignment_bytes(plan, skeleton_of, info) -> float:
     return total
 
 
+def _pair_frames(plan, info) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pair of ``plan``, each ``(N,)`` float64: its locomotion's frames, its action's frames
+    and the action's frame rate (as its group holds the action), looked up once per clip."""
+    pairs, same = plan.pairs, plan.same_db
+    rows, at = np.unique(pairs.column("loco"), return_inverse=True)
+    loco = np.array([info[clip_key("L", r, same)][0] for r in rows.tolist()], dtype=np.float64)[at]
+    target = pairs.column("target").astype(np.int64)
+    k = int(target.max(initial=-1)) + 2  # one code per (action, target)
+    codes, at = np.unique(pairs.column("action").astype(np.int64) * k + target + 1, return_inverse=True)
+    act = np.array([info[action_key(c // k, None if c % k == 0 else c % k - 1, same)] for c in codes.tolist()],
+                   dtype=np.float64).reshape(-1, 2)[at]
+    return loco, act[:, 0], act[:, 1]
+
+
 def estimate_output(plan, skeleton_of, compression, copied: list | None = None, store: str = "motion") -> OutputSize:
     """The expected size of ``plan``'s output. ``skeleton_of(group)`` gives a locomotion group's
     :class:`~torchsplice.core.skeleton.Skeleton`; ``copied`` lists ``(frames, skeleton)`` of
@@ -101,21 +116,17 @@ def estimate_output(plan, skeleton_of, compression, copied: list | None = None, 
     for g in {t.group for t in plan.tasks}:  # the last, partly filled chunk of each skeleton's frames
         sk = skeleton_of(g)
         total += CHUNK_FRAMES * frame_bytes(sk.num_joints, sk.has_joint_translations, None)
+    loco_frames, act_frames, act_fps = _pair_frames(plan, info)
     for t in plan.tasks:
         g = plan.groups[t.group]
-        pairs = plan.pairs[t.start:t.stop]
-        lf = np.array([info[clip_key("L", p.loco, plan.same_db)][0] for p in pairs], dtype=np.float64)
-        if t.mode == "standing":
-            n = lf
-        else:
-            act = [info[plan.pair_keys(p, plan.same_db)[1]] for p in pairs]
-            n = np.minimum(lf, np.array([f * g.fps / rate for f, rate in act]))
+        lf = loco_frames[t.start:t.stop]
+        n = lf if t.mode == "standing" else np.minimum(lf, act_frames[t.start:t.stop] * g.fps / act_fps[t.start:t.stop])
         count = int(n.sum())
         sk = skeleton_of(t.group)
         frames += count
-        clips += len(pairs)
+        clips += t.size
         if store == "alignment" and (t.mode == "standing" or t.method in ("splice", "naive")):
-            total += count * PART_BYTES["standing" if t.mode == "standing" else "timewarp"] + len(pairs) * PART_TABLE_BYTES
+            total += count * PART_BYTES["standing" if t.mode == "standing" else "timewarp"] + t.size * PART_TABLE_BYTES
         else:
             total += count * frame_bytes(sk.num_joints, sk.has_joint_translations, compression)
     for n, sk in copied or ():
