@@ -62,7 +62,7 @@ def rigs_of(files: list[Path]) -> dict[str, Rig]:
     for f in files:
         m = read_bvh(f, dtype=torch.float64)
         spec = detect_spec(m.skeleton, f.name)
-        for key, (ms, _) in groups.items():
+        for ms, _ in groups.values():
             if ms[0].skeleton.matches(m.skeleton):
                 ms.append(m)
                 break

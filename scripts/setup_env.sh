@@ -52,7 +52,7 @@ if [ "$_install" = 1 ]; then
   echo "$_sum $_extras" > "$_stamp"
 fi
 # compile the CPU splicer's kernels once per version of their sources (numba caches them)
-_kernels="$(cat "$_root"/torchsplice/cpu/*.py | cksum)"
+_kernels="$(cat "$_root"/torchsplice/cpu/*.py "$_root"/torchsplice/core/quat_formulas.py | cksum)"
 if [ ! -f "$_root/.venv/.torchsplice-kernels" ] || [ "$(cat "$_root/.venv/.torchsplice-kernels")" != "$_kernels" ]; then
   python -m torchsplice.warmup
   echo "$_kernels" > "$_root/.venv/.torchsplice-kernels"

@@ -569,7 +569,7 @@ def test_fit_curve_in_a_batch_and_paths_that_do_not_advance():
         cells[b, : p.shape[0]] = p
     length = torch.tensor([p.shape[0] for p in paths])
     want, frames = fit_alignment_curve(cells, length, 7.5, 1e-2)
-    for b, p in enumerate(paths):
+    for b, _path in enumerate(paths):
         curve = np.empty(200)
         n = fit_curve(cells[b].numpy(), int(length[b]), 7.5, 1e-2, curve)
         assert n == int(frames[b]) and float(np.abs(curve[:n] - want[b, :n].numpy()).max()) <= 1e-9

@@ -410,7 +410,7 @@ def test_collate_refuses_mixed_skeletons(two_skeleton_db):
     with pytest.raises(ValueError, match="clips on skeletons of other joints"):
         collate_motion([ds[0], ds[1]])
     with pytest.raises(DatasetError, match="skeletons"):
-        ds.skeleton
+        ds.skeleton  # noqa: B018
     assert MotionDataset(two_skeleton_db, where={"skeleton": 1}).skeleton.names == ("A", "B", "C")
 
 

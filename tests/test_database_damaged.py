@@ -216,7 +216,7 @@ def test_open_names_the_first_problem(damaged):
         MotionDatabase.open(damaged("extra_columns_not_json", "sample"))
 
 
-@pytest.mark.parametrize("reader", ["read", "read_many", "read_batch", "read_all", "batches", "packed", "read_frame_column"])
+@pytest.mark.parametrize("reader", ["read", "read_many", "read_batch", "batches", "packed", "read_frame_column"])
 def test_every_read_path_maps_a_damaged_chunk(reader, damaged):
     p = damaged("flipped_action_frame" if reader == "read_frame_column" else "flipped_bytes", "spliced")
     with MotionDatabase.open(p) as db:
@@ -225,7 +225,6 @@ def test_every_read_path_maps_a_damaged_chunk(reader, damaged):
             "read": lambda: db.read(first),
             "read_many": lambda: db.read_many([first]),
             "read_batch": lambda: db.read_batch([first]),
-            "read_all": lambda: list(db.read_all()),
             "batches": lambda: list(db.batches()),
             "packed": lambda: db.packed(0),
             "read_frame_column": lambda: db.read_frame_column(first, "action_frame"),

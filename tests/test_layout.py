@@ -31,7 +31,7 @@ LAYERS = [
     ["splice", "formats"],              # methods and backends; file formats in and out
     ["viz", "retarget"],                # pictures and the viewer; retargeting clips of a database
     ["evaluation", "job"],              # metrics and reports; the n x m job
-    ["cli", "io"],                      # the command line; the names torchsplice.io gave before
+    ["cli"],                            # the command line
     [""],                               # the top-level modules: the package, __main__, warmup
 ]
 LAYER = {pkg: n for n, pkgs in enumerate(LAYERS) for pkg in pkgs}

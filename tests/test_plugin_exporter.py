@@ -20,9 +20,9 @@ from cli_helpers import error_line, run
 from conftest import REPO
 
 INDEX = ["index.csv", "test.txt", "train.txt", "val.txt"]  # beside every export of several clips
-from torchsplice.core.errors import OutputExistsError, TorchspliceError
-from torchsplice.formats.exporters import available_exporters, export_clips, get_exporter
-from torchsplice.store.database import MotionDatabase
+from torchsplice.core.errors import OutputExistsError, TorchspliceError  # noqa: E402
+from torchsplice.formats.exporters import available_exporters, export_clips, get_exporter  # noqa: E402
+from torchsplice.store.database import MotionDatabase  # noqa: E402
 
 
 def read_csv(path: Path) -> list[list[float]]:

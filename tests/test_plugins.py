@@ -21,7 +21,7 @@ from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.store.database import MotionDatabase
 from torchsplice.splice import SpliceOptions, splice, splice_pairs
-from torchsplice.splice.registry import (BUILTIN_METHODS, Method, MethodOutput, available_methods, get_method,
+from torchsplice.splice.registry import (BUILTIN_METHODS, Method, available_methods, get_method,
                                          load_plugins, plugin_modules, register_method)
 
 OFFSET = 5

@@ -93,7 +93,9 @@ def test_a_rig_whose_bones_all_have_zero_length_is_refused_for_that_not_for_elbo
     from torchsplice.formats.bvh_write import write_bvh
 
     m = sample_motions()[0]
-    flat = replace(m, skeleton=m.skeleton.with_offsets(torch.zeros_like(m.skeleton.offsets)))
+    sk = m.skeleton
+    flat = replace(m, skeleton=Skeleton(sk.names, sk.parents, torch.zeros_like(sk.offsets), sk.channels,
+                                        sk.end_site_parents, sk.end_site_offsets))
     with pytest.raises(SpecError, match="every bone has zero length") as e:
         canonical_joints(load_spec("sample").bind(flat.skeleton), flat.skeleton, "flat.bvh")
     assert "elbow" not in str(e.value)

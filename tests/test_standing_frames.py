@@ -99,7 +99,7 @@ def test_loop_points_are_the_closest_windows_around_the_main_motion(real):
     first, last = motion_core(hands_in_chest(A, roles, sk), A.lengths, acting_mask(limbs, len(acts)))
     chest = standing_tables(roles, sk, 30.0)
     W = chest.window
-    for b, act in enumerate(acts):
+    for b in range(len(acts)):
         s, e, n = int(start[b]), int(end[b]), int(A.lengths[b])
         assert s <= int(first[b]) and e >= int(last[b]) and e + W <= n and s < e, (STANDING[b], s, e)
         # brute force: no admissible pair of windows is closer

@@ -21,20 +21,20 @@ from .core.version import __version__
 _os.environ.setdefault("MKL_CBWR", "AUTO")
 
 __all__ = [
-    "__version__", "Motion", "Skeleton", "forward_kinematics",
+    "__version__", "import_bvh", "splice", "splice_all", "export_clips", "MotionDatabase", "MotionDataset",
+    "Motion", "Skeleton", "forward_kinematics",
     "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError",
 ]
 
-_LAZY = {
-    "Motion": "core.motion", "Skeleton": "core.skeleton", "forward_kinematics": "core.fk",
-    "TorchspliceError": "core.errors", "BVHError": "core.errors", "DatabaseError": "core.errors",
-    "SpecError": "core.errors", "MotionError": "core.errors",
-}
+from .core.lazy import lazy_names  # noqa: E402 (after the environment is set)
 
+# The main verbs, then the core types. ``splice`` is the package torchsplice.splice, callable as
+# torchsplice.splice.api.splice (see torchsplice/splice/__init__.py).
+__getattr__, __dir__ = lazy_names(__name__, {
+    "import_bvh": ".formats.importer", "splice": ".splice", "splice_all": ".job.run", "export_clips": ".formats.exporters",
+    "MotionDatabase": ".store.database", "MotionDataset": ".data.dataset",
+    "Motion": ".core.motion", "Skeleton": ".core.skeleton", "forward_kinematics": ".core.fk",
+    "TorchspliceError": ".core.errors", "BVHError": ".core.errors", "DatabaseError": ".core.errors",
+    "SpecError": ".core.errors", "MotionError": ".core.errors",
+})
 
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -20,8 +20,19 @@ Errors are structured, so that the library never names command-line flags:
 
 from __future__ import annotations
 
-__all__ = ["TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError", "OutputExistsError",
-           "NotLocomotingError", "UnfinishedJobError", "HINTS", "SPELLINGS", "render_message"]
+__all__ = [
+    "TorchspliceError",
+    "BVHError",
+    "DatabaseError",
+    "SpecError",
+    "MotionError",
+    "OutputExistsError",
+    "NotLocomotingError",
+    "UnfinishedJobError",
+    "HINTS",
+    "SPELLINGS",
+    "render_message",
+]
 
 HINTS = {
     "overwrite": "pass overwrite=True to replace it",

@@ -13,35 +13,11 @@ from typing import Sequence
 
 import torch
 
+from .quat_formulas import qmul as _qmul, qrot as _qrot
 from .rotations import quat_apply
 from .skeleton import hierarchy_levels
 
 __all__ = ["forward_kinematics", "end_site_positions"]
-
-
-def _qmul(p, q):
-    """Hamilton product of quaternions given as (w, x, y, z) component tensors."""
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    )
-
-
-def _qrot(q, v):
-    """Rotate vectors (x, y, z) by unit quaternions (w, x, y, z), component tensors."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    # t = 2 * cross(q.xyz, v); v' = v + w * t + cross(q.xyz, t)
-    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
-    return (
-        vx + w * tx + (y * tz - z * ty),
-        vy + w * ty + (z * tx - x * tz),
-        vz + w * tz + (x * ty - y * tx),
-    )
 
 
 def forward_kinematics(
@@ -87,8 +63,8 @@ def forward_kinematics(
         t = translations.reshape(N, J, 3).permute(2, 1, 0).contiguous()  # (3, J, N)
     else:
         t = offsets.to(rotations)[:, :, None].permute(1, 0, 2).expand(3, J, N)
-    gq = [None] * J  # per joint: tuple of 4 (N,) tensors
-    gp = [None] * J
+    gq: list[tuple] = [()] * J  # per joint: tuple of 4 (N,) tensors
+    gp: list[tuple] = [()] * J  # per joint: tuple of 3 (N,) tensors
     gq[0] = tuple(q[:, 0])
     gp[0] = tuple(root_translation.reshape(N, 3).t())
     for level in hierarchy_levels(tuple(int(p) for p in parents))[1:]:

@@ -55,9 +55,13 @@ class Motion:
         if self.rotations.shape != (T, J, 4):
             raise MotionError(f"clip {self.name!r}: rotations must be (T, {J}, 4), got {tuple(self.rotations.shape)}")
         if self.root_translation.shape != (T, 3):
-            raise MotionError(f"clip {self.name!r}: root_translation must be ({T}, 3), got {tuple(self.root_translation.shape)}")
+            raise MotionError(
+                f"clip {self.name!r}: root_translation must be ({T}, 3), got {tuple(self.root_translation.shape)}"
+            )
         if self.translations is not None and self.translations.shape != (T, J, 3):
-            raise MotionError(f"clip {self.name!r}: translations must be ({T}, {J}, 3), got {tuple(self.translations.shape)}")
+            raise MotionError(
+                f"clip {self.name!r}: translations must be ({T}, {J}, 3), got {tuple(self.translations.shape)}"
+            )
         if not self.fps > 0:
             raise MotionError(f"clip {self.name!r}: fps must be positive, got {self.fps}")
         self.fps = float(self.fps)
@@ -137,13 +141,22 @@ class Motion:
         out = []
         for k, s in enumerate(starts):
             w = self.slice(s, s + n)
-            out.append(replace(w, name=f"{self.name}#{k:03d}",
-                               labels={**self.labels, "split_from": self.name, "split_frame": str(s)}))
+            out.append(
+                replace(
+                    w,
+                    name=f"{self.name}#{k:03d}",
+                    labels={**self.labels, "split_from": self.name, "split_frame": str(s)},
+                )
+            )
         return out
 
     def check_finite(self) -> "Motion":
         """Raise :class:`MotionError` naming the clip and frame if any value is NaN or infinite."""
-        for what, t in (("rotation", self.rotations), ("root translation", self.root_translation), ("translation", self.translations)):
+        for what, t in (
+            ("rotation", self.rotations),
+            ("root translation", self.root_translation),
+            ("translation", self.translations),
+        ):
             if t is None:
                 continue
             bad = ~torch.isfinite(t.reshape(t.shape[0], -1)).all(dim=1)
@@ -157,8 +170,11 @@ class Motion:
         from ..core.fk import forward_kinematics
 
         pos, _ = forward_kinematics(
-            self.rotations, self.root_translation, self.skeleton.offsets.to(self.rotations),
-            self.skeleton.parents, self.translations,
+            self.rotations,
+            self.root_translation,
+            self.skeleton.offsets.to(self.rotations),
+            self.skeleton.parents,
+            self.translations,
         )
         return pos
 

@@ -31,9 +31,15 @@ def control_character(name: str) -> str | None:
 def printable(text: str, limit: int | None = None) -> str:
     """``text`` with every control character written as a Python escape (``\\x1b``, ``\\n``,
     ``\\u202e``), cut to ``limit`` characters with ``...`` when given: safe to print."""
-    out = CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii")
-                      if ord(m.group()) < 0xD800 or ord(m.group()) > 0xDFFF else f"\\u{ord(m.group()):04x}", str(text))
-    return out if limit is None or len(out) <= limit else out[:max(0, limit - 3)] + "..."
+    out = CONTROL.sub(
+        lambda m: (
+            m.group().encode("unicode_escape").decode("ascii")
+            if ord(m.group()) < 0xD800 or ord(m.group()) > 0xDFFF
+            else f"\\u{ord(m.group()):04x}"
+        ),
+        str(text),
+    )
+    return out if limit is None or len(out) <= limit else out[: max(0, limit - 3)] + "..."
 
 
 def quoted(text: str, limit: int = 60) -> str:

@@ -38,8 +38,16 @@ class LogProgress:
     """tqdm's interface as far as torchsplice uses it (iterate, ``update``,
     ``set_postfix_str``, ``close``), as a line every :data:`LOG_SECONDS` on ``file``."""
 
-    def __init__(self, iterable=None, total: int | None = None, desc: str = "", unit: str = "it", initial: int = 0,
-                 file=None, every: float | None = None):
+    def __init__(
+        self,
+        iterable=None,
+        total: int | None = None,
+        desc: str = "",
+        unit: str = "it",
+        initial: int = 0,
+        file=None,
+        every: float | None = None,
+    ):
         self.iterable, self.total, self.desc, self.unit = iterable, total, desc, unit
         self.n, self.start_n = initial, initial
         self.file = file if file is not None else sys.stderr
@@ -68,8 +76,9 @@ class LogProgress:
         done = self.n - self.start_n
         rate = done / elapsed if elapsed > 0 else 0.0
         unit = self.unit if (self.total or self.n) == 1 else f"{self.unit}s"
-        text = f"{self.desc}: {self.n:,}" + (f"/{self.total:,} {unit} ({100.0 * self.n / self.total:.0f}%)"
-                                               if self.total else f" {unit}")
+        text = f"{self.desc}: {self.n:,}" + (
+            f"/{self.total:,} {unit} ({100.0 * self.n / self.total:.0f}%)" if self.total else f" {unit}"
+        )
         text += f", {rate:,.1f}/s" if rate else ""
         if self.total and rate and self.n < self.total:
             text += f", about {_duration((self.total - self.n) / rate)} left"
@@ -93,8 +102,15 @@ class LogProgress:
             print(self.line(), file=self.file, flush=True)
 
 
-def progress_bar(iterable=None, total: int | None = None, desc: str = "", unit: str = "it", initial: int = 0,
-                 show: bool = True, **tqdm_options):
+def progress_bar(
+    iterable=None,
+    total: int | None = None,
+    desc: str = "",
+    unit: str = "it",
+    initial: int = 0,
+    show: bool = True,
+    **tqdm_options,
+):
     """tqdm's bar on stderr when it is a terminal, a :class:`LogProgress` otherwise; nothing
     (a disabled bar) without ``show``."""
     from tqdm import tqdm
@@ -102,6 +118,14 @@ def progress_bar(iterable=None, total: int | None = None, desc: str = "", unit: 
     if not show:
         return tqdm(iterable, total=total, desc=desc, unit=unit, initial=initial, disable=True)
     if sys.stderr.isatty():
-        return tqdm(iterable, total=total, desc=desc, unit=unit, initial=initial, file=sys.stderr,
-                    dynamic_ncols=True, **tqdm_options)
+        return tqdm(
+            iterable,
+            total=total,
+            desc=desc,
+            unit=unit,
+            initial=initial,
+            file=sys.stderr,
+            dynamic_ncols=True,
+            **tqdm_options,
+        )
     return LogProgress(iterable, total=total, desc=desc, unit=unit, initial=initial)

@@ -24,6 +24,8 @@ import math
 
 import torch
 
+from .quat_formulas import qmul
+
 __all__ = [
     "EULER_ORDERS",
     "quat_between",
@@ -97,17 +99,7 @@ def quat_mul(p: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
     """
     _check_last(p, 4, "p")
     _check_last(q, 4, "q")
-    pw, px, py, pz = p.unbind(-1)
-    qw, qx, qy, qz = q.unbind(-1)
-    return torch.stack(
-        (
-            pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-        ),
-        dim=-1,
-    )
+    return torch.stack(qmul(p.unbind(-1), q.unbind(-1)), dim=-1)
 
 
 def quat_apply(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
@@ -130,9 +122,15 @@ def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
     wx, wy, wz = w * x, w * y, w * z
     m = torch.stack(
         (
-            1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
-            2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
-            2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
+            1 - 2 * (yy + zz),
+            2 * (xy - wz),
+            2 * (xz + wy),
+            2 * (xy + wz),
+            1 - 2 * (xx + zz),
+            2 * (yz - wx),
+            2 * (xz - wy),
+            2 * (yz + wx),
+            1 - 2 * (xx + yy),
         ),
         dim=-1,
     )
@@ -151,9 +149,7 @@ def rotmat_to_quat(m: torch.Tensor) -> torch.Tensor:
     m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
     m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
     # 4*w^2, 4*x^2, 4*y^2, 4*z^2
-    sq = torch.stack(
-        (1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), dim=-1
-    )
+    sq = torch.stack((1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), dim=-1)
     # each row: 4*c*(w, x, y, z) for the component c chosen
     cand = torch.stack(
         (
@@ -325,8 +321,11 @@ def rotation_6d_to_rotmat(d: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
     return torch.stack((b1, b2, b3), dim=-1)
 
 
-_FROM_Y_UP = {0: (math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5)), 1: (1.0, 0.0, 0.0, 0.0),
-              2: (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)}
+_FROM_Y_UP = {
+    0: (math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5)),
+    1: (1.0, 0.0, 0.0, 0.0),
+    2: (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0),
+}
 """Per up axis, the turn taking a Y-up world to it (see the module docstring)."""
 
 

@@ -86,8 +86,10 @@ class Skeleton:
             raise ValueError("joint 0 must be the only root (parent -1)")
         far = [j for j, p in enumerate(self.parents) if p >= J]
         if far:
-            raise ValueError(f"joint {self.names[far[0]]!r} has parent {self.parents[far[0]]}, "
-                             f"but the skeleton has joints 0..{J - 1}")
+            raise ValueError(
+                f"joint {self.names[far[0]]!r} has parent {self.parents[far[0]]}, "
+                f"but the skeleton has joints 0..{J - 1}"
+            )
         hierarchy_levels(self.parents)  # validates the order
         for name, ch in zip(self.names, self.channels):
             bad = [c for c in ch if c not in ROTATION_CHANNELS + POSITION_CHANNELS]
@@ -113,9 +115,7 @@ class Skeleton:
         try:
             return self.names.index(name)
         except ValueError:
-            raise MotionError(
-                f"unknown joint {name!r}; the skeleton has: {', '.join(self.names)}"
-            ) from None
+            raise MotionError(f"unknown joint {name!r}; the skeleton has: {', '.join(self.names)}") from None
 
     def indices(self, names) -> list[int]:
         """Indices of several joints, in the order given."""
@@ -163,7 +163,11 @@ class Skeleton:
         pos = torch.zeros(self.num_joints, 3, dtype=torch.float64)
         for j, p in enumerate(self.parents):
             pos[j] = self.offsets[j] + (pos[p] if p >= 0 else 0.0)
-        ends = self.end_site_offsets + pos[list(self.end_site_parents)] if self.end_site_parents else torch.zeros(0, 3, dtype=torch.float64)
+        ends = (
+            self.end_site_offsets + pos[list(self.end_site_parents)]
+            if self.end_site_parents
+            else torch.zeros(0, 3, dtype=torch.float64)
+        )
         return pos, ends
 
     @property
@@ -179,7 +183,7 @@ class Skeleton:
     def depth_first_order(self) -> list[int]:
         """The joints in BVH's nesting order: each joint followed by its subtree, children in
         index order (``list(range(J))`` when :attr:`is_depth_first`)."""
-        kids = [[] for _ in range(self.num_joints)]
+        kids: list[list[int]] = [[] for _ in range(self.num_joints)]
         for j, p in enumerate(self.parents):
             if p >= 0:
                 kids[p].append(j)
@@ -194,10 +198,14 @@ class Skeleton:
         """This skeleton with its joints in ``order`` (a permutation keeping joint 0 first and
         every parent before its children): new joint ``i`` is old joint ``order[i]``."""
         new = {old: i for i, old in enumerate(order)}
-        return Skeleton(tuple(self.names[j] for j in order),
-                        tuple(-1 if self.parents[j] < 0 else new[self.parents[j]] for j in order),
-                        self.offsets[list(order)], tuple(self.channels[j] for j in order),
-                        tuple(new[p] for p in self.end_site_parents), self.end_site_offsets)
+        return Skeleton(
+            tuple(self.names[j] for j in order),
+            tuple(-1 if self.parents[j] < 0 else new[self.parents[j]] for j in order),
+            self.offsets[list(order)],
+            tuple(self.channels[j] for j in order),
+            tuple(new[p] for p in self.end_site_parents),
+            self.end_site_offsets,
+        )
 
     @functools.cached_property
     def _size(self) -> float:
@@ -296,8 +304,10 @@ class Skeleton:
             return f"joint {self.names[j]!r} has different channels"
         if not self.matches(other):
             if not self._same_scale(other):
-                return (f"sizes differ ({self.size():.4g} against {other.size():.4g} file units: other units, or another "
-                        "body)")
+                return (
+                    f"sizes differ ({self.size():.4g} against {other.size():.4g} file units: other units, or another "
+                    "body)"
+                )
             d = self._static_offset_error(other)
             j = int(d.argmax())
             if float(d[j]) > 1e-4 * max(self.size(), 1e-9):
@@ -307,16 +317,14 @@ class Skeleton:
                 if mine != theirs:
                     return f"End Sites differ ({mine} against {theirs})"
                 e = next(i for i, (a, b) in enumerate(zip(self.end_site_parents, other.end_site_parents)) if a != b)
-                return f"End Sites differ (End Site {e} hangs from joint {self.names[self.end_site_parents[e]]!r} " \
-                       f"against {other.names[other.end_site_parents[e]]!r})"
+                return (
+                    f"End Sites differ (End Site {e} hangs from joint {self.names[self.end_site_parents[e]]!r} "
+                    f"against {other.names[other.end_site_parents[e]]!r})"
+                )
             d = self._end_site_error(other)
             e = int(d.argmax())
             return f"End Site offsets differ (the End Site of joint {self.names[self.end_site_parents[e]]!r} by {float(d[e]):.4g})"
         return None
-
-    def with_offsets(self, offsets: torch.Tensor) -> "Skeleton":
-        """A copy with other rest offsets, ``(J, 3)``."""
-        return Skeleton(self.names, self.parents, offsets, self.channels, self.end_site_parents, self.end_site_offsets)
 
     def __repr__(self) -> str:
         return f"Skeleton({self.num_joints} joints, root {self.names[0]!r}, {len(self.end_site_parents)} end sites)"

@@ -35,10 +35,12 @@ __all__ = ["available", "set_threads", "get_threads", "cache_dir", "warm"]
 
 
 def _kernel_hash() -> str:
-    """A hash of every kernel source here: numba re-validates a cached function against its
+    """A hash of every kernel source here and of the formulas they compile from core
+    (:mod:`torchsplice.core.quat_formulas`): numba re-validates a cached function against its
     own file only, so a change in a function it calls from another file would go unseen."""
     h = hashlib.sha256()
-    for f in sorted(Path(__file__).parent.glob("*.py")):
+    here = Path(__file__).parent
+    for f in [*sorted(here.glob("*.py")), here.parent / "core" / "quat_formulas.py"]:
         h.update(f.name.encode() + f.read_bytes())
     return h.hexdigest()[:16]
 

@@ -1,7 +1,8 @@
 """Scalar quaternion algebra for compiled kernels (numba), on 4-tuples ``(w, x, y, z)``.
 
 Same conventions and formulas as :mod:`torchsplice.core.rotations`: unit quaternions in WXYZ
-order (scalar first), ``qmul(p, q)`` applies ``q`` first, ``qrot(q, v)`` rotates a 3-tuple.
+order (scalar first), ``qmul(p, q)`` applies ``q`` first, ``qrot(q, v)`` rotates a 3-tuple;
+those two are :mod:`torchsplice.core.quat_formulas` itself, compiled.
 Tuples stay in registers, so these helpers cost nothing beyond their arithmetic.
 """
 
@@ -10,6 +11,8 @@ from __future__ import annotations
 import math
 
 from numba import njit
+
+from ..core import quat_formulas as formulas
 
 __all__ = ["qmul", "qconj", "qrot", "qnormalize", "qcanonical", "qslerp", "qarc", "qslerp_arc", "rotmat_to_q", "qload", "qstore"]
 
@@ -29,17 +32,8 @@ def qstore(a, t, j, q):
     a[t, j, 3] = q[3]
 
 
-@njit(cache=True, inline="always")
-def qmul(p, q):
-    """Hamilton product ``p * q``."""
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    )
+qmul = njit(cache=True, inline="always")(formulas.qmul)
+"""Hamilton product ``p * q`` (:func:`torchsplice.core.quat_formulas.qmul`, compiled)."""
 
 
 @njit(cache=True, inline="always")
@@ -48,13 +42,8 @@ def qconj(q):
     return (q[0], -q[1], -q[2], -q[3])
 
 
-@njit(cache=True, inline="always")
-def qrot(q, v):
-    """Rotate the 3-tuple ``v`` by unit ``q``: ``t = 2 xyz x v; v + w t + xyz x t``."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
+qrot = njit(cache=True, inline="always")(formulas.qrot)
+"""The 3-tuple ``v`` rotated by unit ``q`` (:func:`torchsplice.core.quat_formulas.qrot`, compiled)."""
 
 
 @njit(cache=True, inline="always")

@@ -13,13 +13,8 @@ command line read) loads without torch.
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "SkeletonBatchSampler", "MotionStream", "ChunkedStream"]
 
-_LAZY = {"MotionDataset": "dataset", "collate_motion": "collate", "DatasetError": "errors",
-         "SkeletonBatchSampler": "sampler", "MotionStream": "stream", "ChunkedStream": "stream"}
+from ..core.lazy import lazy_names
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__ = lazy_names(__name__, {
+    "MotionDataset": ".dataset", "collate_motion": ".collate", "DatasetError": ".errors",
+    "SkeletonBatchSampler": ".sampler", "MotionStream": ".stream", "ChunkedStream": ".stream"})

@@ -75,13 +75,6 @@ class BVHWarning(UserWarning):
         self.path, self.line, self.problem = path, line, problem
 
 
-def _name_list(names, shown: int = 4) -> str:
-    """At most ``shown`` quoted names, then ``and N more``."""
-    names = list(names)
-    text = ", ".join(quoted(n, 40) for n in names[:shown])
-    return text if len(names) <= shown else f"{text} and {len(names) - shown} more"
-
-
 def _error(path, problem: str, line: int | None = None) -> BVHError:
     """A :class:`BVHError` whose problem is one line of bounded length."""
     problem = " ".join(str(problem).splitlines())

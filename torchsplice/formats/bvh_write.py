@@ -91,7 +91,7 @@ def _frame_columns(motion: Motion) -> np.ndarray:
     cols, n = channel_columns([list(c) for c in sk.channels])
     out = np.zeros((T, n))
     identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=torch.float64)
-    for j, ch in enumerate(sk.channels):
+    for j in range(len(sk.channels)):
         order = sk.rotation_order(j)
         if order:
             eul = rotmat_to_euler(quat_to_rotmat(rot[:, j]), order).numpy()

@@ -247,7 +247,7 @@ class HumanML3DExporter(Exporter):
         stats = FeatureStats()
         rows = []
         if self._plan["shards"]:
-            for name, items in self._plan["shards"].items():
+            for items in self._plan["shards"].values():
                 written = {"frames": 0}
 
                 def members(items=items, written=written):  # computed as the tar is written

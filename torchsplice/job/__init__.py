@@ -14,20 +14,12 @@ options (:class:`JobConfig` fields) and returns the :class:`JobSummary`::
     summary = splice_all("bandai.h5", "spliced.h5", locomotions="role:locomotion", methods="splice,naive")
 """
 
-import importlib
+from ..core.lazy import lazy_names
 
 __all__ = ["splice_all", "JobConfig", "job_config", "JobSummary", "SpliceJob", "merge_job", "select_clips",
            "parse_selector"]
 
-_WHERE = {"JobConfig": ".config", "job_config": ".config", "JobSummary": ".summary", "SpliceJob": ".run",
-          "merge_job": ".merge", "splice_all": ".run", "parse_selector": "..store.select", "select_clips": "..store.select"}
-
-
-def __getattr__(name: str):
-    """The job's names, imported when first used: the command line reads the engine registry
-    (:mod:`.engines`) without importing torch."""
-    if name in _WHERE:
-        value = getattr(importlib.import_module(_WHERE[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# imported when first used: the command line reads the engine registry (.engines) without torch
+__getattr__, __dir__ = lazy_names(__name__, {
+    "JobConfig": ".config", "job_config": ".config", "JobSummary": ".summary", "SpliceJob": ".run",
+    "merge_job": ".merge", "splice_all": ".run", "parse_selector": "..store.select", "select_clips": "..store.select"})

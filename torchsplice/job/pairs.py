@@ -4,7 +4,9 @@ A job plans one pair per (method, locomotion, action) it splices: the default jo
 Bandai Namco dataset plans 3.1 M of them. As Python objects they took 0.7 GB in the driver and
 again in every worker that read the plan. :class:`PairTable` holds them as six ``int32`` columns
 (24 bytes a pair), writes them into the plan's JSON as base64 of their little-endian bytes, and
-gives :class:`Pair` objects only for the slice a task splices.
+gives :class:`Pair` objects only for the slice a task splices. :func:`form_pairs` forms them:
+each skip reason decided once per clip (or skeleton pair) and combined over the locomotions x
+actions grid by array operations.
 
 Columns, each ``(N,)`` ``int32``, in the plan's order:
 
@@ -23,7 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Pair", "PairTable", "MODES", "COLUMNS"]
+from ..splice import SpliceOptions
+from ..splice.registry import get_method
+from .config import JobConfig
+from .sources import clip_key, retargeted_parts
+
+__all__ = ["Pair", "PairTable", "MODES", "COLUMNS", "MIN_SECONDS", "form_pairs"]
+
+MIN_SECONDS = SpliceOptions().min_seconds
 
 MODES = ("timewarp", "standing")
 """A pair's mode: ``"timewarp"`` (time-aligned) or ``"standing"`` (an action that does not locomote)."""
@@ -129,3 +138,129 @@ class PairTable:
                 raise ValueError(f"pairs: column {k} holds {len(raw)} bytes, not 4 x {n}")
             cols[k] = np.frombuffer(raw, dtype="<i4")
         return cls(d["methods"], cols)
+
+
+def form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, refs):
+    """Every (method, locomotion, action) of the selections: the pairs to splice, method by method,
+    time-aligned ones first, each locomotion against each action; and, for the rest, the
+    number of pairs per skip reason. Each reason is decided once per clip, per skeleton pair or
+    per clip pair, and combined over the ``L x A`` grid by array operations; the first reason
+    wins, in this order: a clip onto itself (or a window onto another window of its take),
+    skeletons (``kinds``, :func:`_skeleton_pairs`:
+    pairs on other skeletons are retargeted where they can be), too short, length ratio,
+    damaged, not locomoting, no reference."""
+    L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
+    nl, na = len(L), len(A)
+    reasons: list[str] = []
+    grid = np.zeros((nl, na), dtype=np.int32)  # 1 + the index of each pair's reason in reasons; 0: none
+
+    def code(text: str) -> int:
+        reasons.append(text)
+        return len(reasons)
+
+    def put(codes) -> None:
+        """Give the pairs not skipped yet the reason codes ``codes`` (broadcast to the grid; 0: none)."""
+        np.copyto(grid, np.broadcast_to(codes, grid.shape), where=grid == 0)
+
+    def per_clip(rows, why) -> np.ndarray:
+        """Codes ``(len(rows),)``: ``why(row)`` gives a clip's reason text, or ``None``."""
+        out = np.zeros(len(rows), dtype=np.int64)
+        for n, r in enumerate(rows.tolist()):
+            text = why(r)
+            if text is not None:
+                out[n] = code(text)
+        return out
+
+    if same:
+        put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
+        # windows of one take (import --split: label split_from) are one performance, like a clip itself
+        takes: dict[str, int] = {}
+        tk_l = np.array([takes.setdefault(tl.labels[r].get("split_from", ""), len(takes)) if tl.labels[r].get("split_from")
+                         else -1 for r in L.tolist()], dtype=np.int64)
+        tk_a = np.array([takes.setdefault(ta.labels[r].get("split_from", ""), len(takes)) if ta.labels[r].get("split_from")
+                         else -2 for r in A.tolist()], dtype=np.int64)
+        if takes:
+            put(np.where(tk_l[:, None] == tk_a[None, :], code("windows of one take are not spliced onto each other"), 0))
+    kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
+    xs, ys = np.unique(kl).tolist(), np.unique(ka).tolist()
+    by_pair = np.zeros((max(xs) + 1, max(ys) + 1), dtype=np.int64)
+    target = np.full(by_pair.shape, -1, dtype=np.int32)  # the skeleton an action is retargeted onto; -1: none
+    for x in xs:
+        for y in ys:
+            kind = kinds[x, y]
+            if isinstance(kind, str):
+                by_pair[x, y] = code(kind)
+            elif kind is not None:
+                target[x, y] = kind
+    put(by_pair[kl[:, None], ka[None, :]])
+    pair_target = target[kl[:, None], ka[None, :]]
+    def too_short(table):
+        def why(r):
+            need = max(4, int(MIN_SECONDS * float(table.fps[r])))
+            n = int(table.length[r])
+            return f"{table.name[r]} is too short to splice ({n} frames, at least {need})" if n < need else None
+        return why
+
+    put(per_clip(L, too_short(tl))[:, None])
+    put(per_clip(A, too_short(ta))[None, :])
+    if c.max_length_ratio is not None:
+        dl = np.asarray(tl.length, dtype=np.float64)[L] / np.asarray(tl.fps, dtype=np.float64)[L]
+        da = np.asarray(ta.length, dtype=np.float64)[A] / np.asarray(ta.fps, dtype=np.float64)[A]
+        apart = np.maximum(dl[:, None], da[None, :]) > c.max_length_ratio * np.minimum(dl[:, None], da[None, :])
+        put(np.where(apart, code(f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"), 0))
+    key_l = {int(i): clip_key("L", i, same) for i in L}
+    # an action's checks: of its own clip, else of it retargeted (the first group's)
+    moved: dict[str, str] = {}
+    for k in sorted(checks):
+        parts = retargeted_parts(k)
+        if parts is not None:
+            moved.setdefault(parts[1], k)
+    key_a = {j: key if key in checks else moved.get(key, key) for j, key in
+             ((j, clip_key("A", j, same)) for j in A.tolist())}
+
+    def damaged(table, keys):
+        def why(r):
+            check = checks.get(keys[r])
+            return f"{table.name[r]} {check.reason}" if check is not None and not check.finite else None
+        return why
+
+    put(per_clip(L, damaged(tl, key_l))[:, None])
+    put(per_clip(A, damaged(ta, key_a))[None, :])
+    if not c.force_locomotion:
+        def still(r):
+            check = checks.get(key_l[r])
+            return (f"{tl.name[r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
+                    if check is not None and not check.locomoting else None)
+        put(per_clip(L, still)[:, None])
+    base = grid.copy()
+    ref_of = np.array([-1 if refs.get(j) is None else refs[j] for j in A.tolist()], dtype=np.int32)
+    L32, A32 = L.astype(np.int32), A.astype(np.int32)
+    blocks: list[dict] = []
+    skipped: dict[str, int] = {}
+    for m, method in enumerate(c.methods):
+        grid[:] = base
+        standing = np.array([_mode(c, checks, key_a[int(j)], method) == "standing" for j in A], dtype=bool)
+        if get_method(method).needs_reference:
+            noref = np.zeros(na, dtype=np.int64)
+            for n, j in enumerate(A.tolist()):
+                if refs.get(j) is None and not standing[n]:
+                    noref[n] = code(f"no plain-locomotion reference for {ta.name[j]} ({method})")
+            put(noref[None, :])
+        per = np.bincount(grid.reshape(-1), minlength=len(reasons) + 1)
+        for r in np.nonzero(per[1:])[0].tolist():
+            skipped[reasons[r]] = skipped.get(reasons[r], 0) + int(per[r + 1])
+        for mode, want in (("timewarp", ~standing), ("standing", standing)):
+            rows, cols = np.nonzero((grid == 0) & want[None, :])
+            blocks.append({"method": np.full(len(rows), m, np.int32), "loco": L32[rows], "action": A32[cols],
+                           "reference": ref_of[cols] if mode == "timewarp" else np.full(len(rows), -1, np.int32),
+                           "mode": np.full(len(rows), MODES.index(mode), np.int32), "target": pair_target[rows, cols]})
+            del rows, cols
+    return PairTable.concat(c.methods, blocks), skipped
+
+
+def _mode(c: JobConfig, checks: dict, action_key: str, method: str) -> str:
+    """``"standing"`` for an action that does not locomote (unless forced through the timewarp,
+    or the method has no standing variant: its own function then takes the pair)."""
+    check = checks.get(action_key)
+    standing = check is not None and not check.locomoting and not c.force_locomotion
+    return "standing" if standing and get_method(method).standing is not None else "timewarp"

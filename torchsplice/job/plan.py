@@ -25,13 +25,12 @@ from ..core.version import __version__
 from ..core.errors import TorchspliceError, UnfinishedJobError
 from ..store.lock import temp_path
 from ..specs import DatasetSpec, SkeletonRoles
-from ..splice import SpliceOptions
 from ..splice.clips import clips_to_tensors
 from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
 from ..splice.registry import get_method
 from .config import JobConfig
-from .pairs import MODES, Pair, PairTable  # noqa: F401 (Pair: re-exported)
+from .pairs import MIN_SECONDS, MODES, Pair, PairTable, form_pairs  # noqa: F401 (re-exported)
 from ..store.select import select_clips
 from .source_figures import source_figures
 from .sources import Sources, clip_key, retargeted_key, retargeted_parts
@@ -39,7 +38,6 @@ from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 __all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
 PLAN_VERSION = 8
-MIN_SECONDS = SpliceOptions().min_seconds
 SKELETONS_DIFFER = "skeletons differ: "
 """How the skip reasons of pairs not formed because their clips' skeletons differ begin: each
 such reason names the two skeletons (``skeletons differ: locomotions on skeleton 0 (bandai_namco,
@@ -130,19 +128,25 @@ class Plan:
         return self.key["actions_db"] is None
 
     def digest(self) -> str:
-        """A hash of the whole plan: two runs with the same digest write the same output (computed once)."""
+        """A hash of the whole plan: two runs with the same digest write the same output
+        (computed once, over :meth:`to_json`'s text as it is made, never holding it whole)."""
         if getattr(self, "_digest", None) is None:
-            self._digest = hashlib.sha256(self.to_json().encode()).hexdigest()
+            h = hashlib.sha256()
+            for chunk in self._json_chunks():
+                h.update(chunk.encode())
+            self._digest = h.hexdigest()
         return self._digest
 
+    def _json_chunks(self):
+        """:meth:`to_json`'s text, in the pieces ``json`` makes it in (each pair column one piece)."""
+        return json.JSONEncoder(sort_keys=True, separators=(",", ":")).iterencode(
+            {"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
+             "sizing": self.sizing, "groups": [asdict(g) for g in self.groups],
+             "clips": {k: c.to_dict() for k, c in self.clips.items()}, "tasks": [asdict(t) for t in self.tasks],
+             "pairs": self.pairs.to_dict()})
+
     def to_json(self) -> str:
-        return json.dumps({"version": self.version, "key": self.key, "skipped": self.skipped, "flags": self.flags,
-                           "sizing": self.sizing,
-                           "groups": [asdict(g) for g in self.groups],
-                           "clips": {k: c.to_dict() for k, c in self.clips.items()},
-                           "tasks": [asdict(t) for t in self.tasks],
-                           "pairs": self.pairs.to_dict()},
-                          sort_keys=True, separators=(",", ":"))
+        return "".join(self._json_chunks())
 
     @classmethod
     def from_json(cls, text: str) -> "Plan":
@@ -165,9 +169,15 @@ class Plan:
 
     def save(self, path: Path) -> None:
         """Write the plan atomically (a plan written at the same moment by another process of the
-        same job holds the same text)."""
+        same job holds the same text), a piece at a time, hashing it on the way (:meth:`digest`)."""
         tmp = temp_path(path)
-        tmp.write_text(self.to_json())
+        h = hashlib.sha256()
+        with open(tmp, "wb") as f:
+            for chunk in self._json_chunks():
+                data = chunk.encode()
+                h.update(data)
+                f.write(data)
+        self._digest = h.hexdigest()
         os.replace(tmp, path)
 
     @classmethod
@@ -269,7 +279,7 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
             clips[key] = PlanClip(str(t.name[int(row)]), int(t.length[int(row)]), float(t.fps[int(row)]), labels)
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
-    pairs, skipped = _form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
+    pairs, skipped = form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
     _acting(c, sources, groups, clips, sk_l, _standing_action_keys(pairs, same))
     source_figures(c, sources, groups, clips, sk_l)
     if not len(pairs):
@@ -333,22 +343,15 @@ def _padded_chunks(keys: list[str], frames: list[int], budget: int = 65_536, mos
     longer clip alone): checked in one batch each, so that long takes never pad 256 clips to
     their length."""
     chunks: list[list[str]] = []
+    longest = 0  # of the last chunk
     for k, n in zip(keys, frames):
-        if chunks and len(chunks[-1]) < most and (len(chunks[-1]) + 1) * max(n, longest) <= budget:
+        longest = max(n, longest)
+        if chunks and len(chunks[-1]) < most and (len(chunks[-1]) + 1) * longest <= budget:
             chunks[-1].append(k)
-            longest = max(n, longest)
         else:
             chunks.append([k])
             longest = n
     return chunks
-
-
-def _mode(c: JobConfig, checks: dict, action_key: str, method: str) -> str:
-    """``"standing"`` for an action that does not locomote (unless forced through the timewarp,
-    or the method has no standing variant: its own function then takes the pair)."""
-    check = checks.get(action_key)
-    standing = check is not None and not check.locomoting and not c.force_locomotion
-    return "standing" if standing and get_method(method).standing is not None else "timewarp"
 
 
 def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l, keys: set[str]) -> None:
@@ -356,7 +359,7 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
     clip from its own frames, or ``config.acting_limbs``)."""
     from ..splice.standing import acting_limbs
 
-    for n, g in enumerate(groups):
+    for g in groups:
         todo = sorted((k for k in g.clips if k in keys and clips[k].acting is None), key=lambda k: clips[k].frames)
         if config.acting_limbs is not None:
             for k in todo:
@@ -369,10 +372,10 @@ def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dic
             by_rate: dict[float, list[int]] = {}
             for m_i, m in enumerate(motions):
                 by_rate.setdefault(m.fps, []).append(m_i)
-            for rate, idx in by_rate.items():
+            for idx in by_rate.values():
                 found = acting_limbs(clips_to_tensors([motions[i] for i in idx], motions[idx[0]].skeleton), roles,
                                      motions[idx[0]].skeleton)
-                for i, (limbs, measure) in zip(idx, found):
+                for i, (limbs, _measure) in zip(idx, found):
                     clips[chunk[i]].acting = list(limbs)
 
 
@@ -430,124 +433,6 @@ def _skeleton_pairs(c: JobConfig, sources: Sources, same: bool, kls, kas, sk_l, 
                 except TorchspliceError as exc:
                     out[x, y] = f"{why}, not retargeted: {exc}"
     return out
-
-
-def _form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, refs):
-    """Every (method, locomotion, action) of the selections: the pairs to splice, method by method,
-    time-aligned ones first, each locomotion against each action; and, for the rest, the
-    number of pairs per skip reason. Each reason is decided once per clip, per skeleton pair or
-    per clip pair, and combined over the ``L x A`` grid by array operations; the first reason
-    wins, in this order: a clip onto itself (or a window onto another window of its take),
-    skeletons (``kinds``, :func:`_skeleton_pairs`:
-    pairs on other skeletons are retargeted where they can be), too short, length ratio,
-    damaged, not locomoting, no reference."""
-    L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
-    nl, na = len(L), len(A)
-    reasons: list[str] = []
-    grid = np.zeros((nl, na), dtype=np.int32)  # 1 + the index of each pair's reason in reasons; 0: none
-
-    def code(text: str) -> int:
-        reasons.append(text)
-        return len(reasons)
-
-    def put(codes) -> None:
-        """Give the pairs not skipped yet the reason codes ``codes`` (broadcast to the grid; 0: none)."""
-        np.copyto(grid, np.broadcast_to(codes, grid.shape), where=grid == 0)
-
-    def per_clip(rows, why) -> np.ndarray:
-        """Codes ``(len(rows),)``: ``why(row)`` gives a clip's reason text, or ``None``."""
-        out = np.zeros(len(rows), dtype=np.int64)
-        for n, r in enumerate(rows.tolist()):
-            text = why(r)
-            if text is not None:
-                out[n] = code(text)
-        return out
-
-    if same:
-        put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
-        # windows of one take (import --split: label split_from) are one performance, like a clip itself
-        takes: dict[str, int] = {}
-        tk_l = np.array([takes.setdefault(tl.labels[r].get("split_from", ""), len(takes)) if tl.labels[r].get("split_from")
-                         else -1 for r in L.tolist()], dtype=np.int64)
-        tk_a = np.array([takes.setdefault(ta.labels[r].get("split_from", ""), len(takes)) if ta.labels[r].get("split_from")
-                         else -2 for r in A.tolist()], dtype=np.int64)
-        if takes:
-            put(np.where(tk_l[:, None] == tk_a[None, :], code("windows of one take are not spliced onto each other"), 0))
-    kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
-    xs, ys = np.unique(kl).tolist(), np.unique(ka).tolist()
-    by_pair = np.zeros((max(xs) + 1, max(ys) + 1), dtype=np.int64)
-    target = np.full(by_pair.shape, -1, dtype=np.int32)  # the skeleton an action is retargeted onto; -1: none
-    for x in xs:
-        for y in ys:
-            kind = kinds[x, y]
-            if isinstance(kind, str):
-                by_pair[x, y] = code(kind)
-            elif kind is not None:
-                target[x, y] = kind
-    put(by_pair[kl[:, None], ka[None, :]])
-    pair_target = target[kl[:, None], ka[None, :]]
-    def too_short(table):
-        def why(r):
-            need = max(4, int(MIN_SECONDS * float(table.fps[r])))
-            n = int(table.length[r])
-            return f"{table.name[r]} is too short to splice ({n} frames, at least {need})" if n < need else None
-        return why
-
-    put(per_clip(L, too_short(tl))[:, None])
-    put(per_clip(A, too_short(ta))[None, :])
-    if c.max_length_ratio is not None:
-        dl = np.asarray(tl.length, dtype=np.float64)[L] / np.asarray(tl.fps, dtype=np.float64)[L]
-        da = np.asarray(ta.length, dtype=np.float64)[A] / np.asarray(ta.fps, dtype=np.float64)[A]
-        apart = np.maximum(dl[:, None], da[None, :]) > c.max_length_ratio * np.minimum(dl[:, None], da[None, :])
-        put(np.where(apart, code(f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"), 0))
-    key_l = {int(i): clip_key("L", i, same) for i in L}
-    # an action's checks: of its own clip, else of it retargeted (the first group's)
-    moved: dict[str, str] = {}
-    for k in sorted(checks):
-        parts = retargeted_parts(k)
-        if parts is not None:
-            moved.setdefault(parts[1], k)
-    key_a = {j: key if key in checks else moved.get(key, key) for j, key in
-             ((j, clip_key("A", j, same)) for j in A.tolist())}
-
-    def damaged(table, keys):
-        def why(r):
-            check = checks.get(keys[r])
-            return f"{table.name[r]} {check.reason}" if check is not None and not check.finite else None
-        return why
-
-    put(per_clip(L, damaged(tl, key_l))[:, None])
-    put(per_clip(A, damaged(ta, key_a))[None, :])
-    if not c.force_locomotion:
-        def still(r):
-            check = checks.get(key_l[r])
-            return (f"{tl.name[r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
-                    if check is not None and not check.locomoting else None)
-        put(per_clip(L, still)[:, None])
-    base = grid.copy()
-    ref_of = np.array([-1 if refs.get(j) is None else refs[j] for j in A.tolist()], dtype=np.int32)
-    L32, A32 = L.astype(np.int32), A.astype(np.int32)
-    blocks: list[dict] = []
-    skipped: dict[str, int] = {}
-    for m, method in enumerate(c.methods):
-        grid[:] = base
-        standing = np.array([_mode(c, checks, key_a[int(j)], method) == "standing" for j in A], dtype=bool)
-        if get_method(method).needs_reference:
-            noref = np.zeros(na, dtype=np.int64)
-            for n, j in enumerate(A.tolist()):
-                if refs.get(j) is None and not standing[n]:
-                    noref[n] = code(f"no plain-locomotion reference for {ta.name[j]} ({method})")
-            put(noref[None, :])
-        per = np.bincount(grid.reshape(-1), minlength=len(reasons) + 1)
-        for r in np.nonzero(per[1:])[0].tolist():
-            skipped[reasons[r]] = skipped.get(reasons[r], 0) + int(per[r + 1])
-        for mode, want in (("timewarp", ~standing), ("standing", standing)):
-            rows, cols = np.nonzero((grid == 0) & want[None, :])
-            blocks.append({"method": np.full(len(rows), m, np.int32), "loco": L32[rows], "action": A32[cols],
-                           "reference": ref_of[cols] if mode == "timewarp" else np.full(len(rows), -1, np.int32),
-                           "mode": np.full(len(rows), MODES.index(mode), np.int32), "target": pair_target[rows, cols]})
-            del rows, cols
-    return PairTable.concat(c.methods, blocks), skipped
 
 
 def _standing_action_keys(pairs: PairTable, same: bool) -> set[str]:

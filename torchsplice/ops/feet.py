@@ -327,7 +327,7 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
     blend = np.maximum(1, np.round(BLEND_SECONDS * np.asarray(fps, dtype=np.float64))).astype(np.int64)[clip_of]
     pos_np, guide_np = pos.numpy(), guide.numpy()
     targets, helds = [], []
-    for k, ((hip, knee, ankle, toe), (s_ankle, s_toe)) in enumerate(zip(legs, source_legs)):
+    for k, ((_hip, _knee, ankle, toe), (s_ankle, s_toe)) in enumerate(zip(legs, source_legs)):
         use_toe = toe if s_toe is not None else None
         pinned, held = _pins(pos_np, guide_np, ankle, use_toe, s_ankle, s_toe, contact_of[s_ankle].numpy(),
                              contact_of[s_toe].numpy() if use_toe is not None else None, first)

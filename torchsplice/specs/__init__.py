@@ -26,5 +26,16 @@ from .roles import SkeletonRoles, bind_roles
 from .spec import DatasetSpec
 from .vocabulary import GENERIC, ROLES, UNITS
 
-__all__ = ["DatasetSpec", "RoleRule", "SkeletonRoles", "ROLES", "UNITS", "GENERIC", "load_spec", "list_specs",
-           "guess_spec", "detect_spec", "bind_roles"]
+__all__ = [
+    "DatasetSpec",
+    "RoleRule",
+    "SkeletonRoles",
+    "ROLES",
+    "UNITS",
+    "GENERIC",
+    "load_spec",
+    "list_specs",
+    "guess_spec",
+    "detect_spec",
+    "bind_roles",
+]

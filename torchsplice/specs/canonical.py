@@ -25,13 +25,46 @@ from .roles import SkeletonRoles, chain
 
 __all__ = ["CANONICAL", "REQUIRED", "canonical_joints", "canonical_bones", "canonical_legs", "leg_length"]
 
-CANONICAL = ("pelvis", "spine", "neck", "head", "clavicle_l", "clavicle_r", "shoulder_l", "shoulder_r", "elbow_l",
-             "elbow_r", "wrist_l", "wrist_r", "hip_l", "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r", "toe_l",
-             "toe_r")
+CANONICAL = (
+    "pelvis",
+    "spine",
+    "neck",
+    "head",
+    "clavicle_l",
+    "clavicle_r",
+    "shoulder_l",
+    "shoulder_r",
+    "elbow_l",
+    "elbow_r",
+    "wrist_l",
+    "wrist_r",
+    "hip_l",
+    "hip_r",
+    "knee_l",
+    "knee_r",
+    "ankle_l",
+    "ankle_r",
+    "toe_l",
+    "toe_r",
+)
 """Canonical joint names (``spine`` names the chain; the others one joint each)."""
 
-REQUIRED = ("pelvis", "spine", "shoulder_l", "shoulder_r", "elbow_l", "elbow_r", "wrist_l", "wrist_r", "hip_l",
-            "hip_r", "knee_l", "knee_r", "ankle_l", "ankle_r")
+REQUIRED = (
+    "pelvis",
+    "spine",
+    "shoulder_l",
+    "shoulder_r",
+    "elbow_l",
+    "elbow_r",
+    "wrist_l",
+    "wrist_r",
+    "hip_l",
+    "hip_r",
+    "knee_l",
+    "knee_r",
+    "ankle_l",
+    "ankle_r",
+)
 """What a skeleton must have to be retargeted (and spliced across skeletons)."""
 
 
@@ -52,8 +85,10 @@ def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton")
     (``spine``: the chain, pelvis role first). Raises :class:`~torchsplice.core.errors.SpecError`
     naming ``what`` and every required joint it lacks, or saying that its bones have no length."""
     if not float(skeleton.offsets.abs().max()) > 0:  # every joint at one point: none can be told apart by place
-        raise SpecError(f"{what}: every bone has zero length (all its rest OFFSETs are 0), so its joints have no "
-                        "rest pose to map onto another skeleton")
+        raise SpecError(
+            f"{what}: every bone has zero length (all its rest OFFSETs are 0), so its joints have no "
+            "rest pose to map onto another skeleton"
+        )
     out: dict[str, int | tuple[int, ...]] = {"pelvis": roles.root, "spine": tuple(roles.spine)}
     spine = list(roles.spine)
     if roles.head is not None:
@@ -85,8 +120,10 @@ def canonical_joints(roles: SkeletonRoles, skeleton, what: str = "the skeleton")
     if not spine:
         missing.append("spine")
     if missing:
-        raise SpecError(f"{what} cannot be retargeted: no {', '.join(missing)} (a humanoid needs hips, knees, ankles, "
-                        "a spine, shoulders, elbows and wrists)")
+        raise SpecError(
+            f"{what} cannot be retargeted: no {', '.join(missing)} (a humanoid needs hips, knees, ankles, "
+            "a spine, shoulders, elbows and wrists)"
+        )
     return {name: out[name] for name in CANONICAL if name in out}  # in canonical order
 
 

@@ -75,7 +75,7 @@ def _side_and_core(name: str) -> tuple[str | None, str]:
         return sides.pop(), core
     for word, side in (("left", "L"), ("right", "R")):
         if core.startswith(word) and len(core) > len(word):
-            return side, core[len(word):]
+            return side, core[len(word) :]
     if len(core) > 1 and core[0] in "lr" and core[1:] in _PARTS:
         return core[0].upper(), core[1:]
     return None, core
@@ -174,8 +174,9 @@ class _Guesser:
         side_word = "left" if side == "L" else "right"
         raise self.fail(f"no {side_word} {what} found (looked for joint names like {', '.join(sorted(mid))})")
 
-    def limb(self, mid: set[str], upper: set[str], lower: set[str], end: set[str], what: str,
-             end_required: bool = True):
+    def limb(
+        self, mid: set[str], upper: set[str], lower: set[str], end: set[str], what: str, end_required: bool = True
+    ):
         """``(upper, middle, lower)`` index pairs (left, right) of the legs or arms; ``lower``
         is ``None`` when it cannot be told and is not required."""
         mids = tuple(self.middle(s, mid, upper, lower, what) for s in ("L", "R"))
@@ -213,8 +214,10 @@ def cannot_guess(skeleton: Skeleton, problem: str, joints: bool = True) -> SpecE
     """The :class:`SpecError` saying that the joint roles of ``skeleton`` cannot be guessed and
     why (``problem``), listing its joints unless ``joints`` is false."""
     listed = f"; its joints: {', '.join(skeleton.names)}" if joints else ""
-    return SpecError(f"cannot guess the joint roles of this skeleton: {problem}; write a dataset "
-                     f"spec (see datasets_spec/README.md){listed}")
+    return SpecError(
+        f"cannot guess the joint roles of this skeleton: {problem}; write a dataset "
+        f"spec (see datasets_spec/README.md){listed}"
+    )
 
 
 def guess_joints(skeleton: Skeleton, up_axis: str) -> dict:
@@ -235,8 +238,9 @@ def guess_joints(skeleton: Skeleton, up_axis: str) -> dict:
         raise g.fail(f"the legs and arms do not branch apart ({skeleton.names[top]!r} is a limb joint)")
     chest = g.common_ancestor(shoulders)
     if chest == top:
-        raise g.fail(f"the arms branch from {skeleton.names[top]!r}, the same joint as the legs, so no "
-                     "joint can be the pelvis")
+        raise g.fail(
+            f"the arms branch from {skeleton.names[top]!r}, the same joint as the legs, so no joint can be the pelvis"
+        )
     pelvis = g.toward(top, chest)
     root = _trajectory_joint(skeleton, top)
     heads = [j for j, (_, core) in enumerate(g.parsed) if core in _HEAD and is_ancestor(skeleton.parents, pelvis, j)]
@@ -251,18 +255,44 @@ def guess_joints(skeleton: Skeleton, up_axis: str) -> dict:
     legs = [(hips[s], knees[s], feet[s]) + ((toes[s],) if None not in toes else ()) for s in (0, 1)]
     arms = [(shoulders[s], elbows[s]) + ((hands[s],) if hands else ()) for s in (0, 1)]
     skipped = [j for limb in legs + arms for a, b in zip(limb, limb[1:]) for j in chain(skeleton.parents, a, b)[1:-1]]
-    guessed = (("root", (n[root],)), ("pelvis", (n[pelvis],)), ("spine", names(spine)),
-               ("head", (n[head],) if head is not None else ()), ("left_leg", names(legs[0])),
-               ("right_leg", names(legs[1])), ("left_arm", names(arms[0])), ("right_arm", names(arms[1])),
-               ("skipped", names(skipped)))
+    guessed = (
+        ("root", (n[root],)),
+        ("pelvis", (n[pelvis],)),
+        ("spine", names(spine)),
+        ("head", (n[head],) if head is not None else ()),
+        ("left_leg", names(legs[0])),
+        ("right_leg", names(legs[1])),
+        ("left_arm", names(arms[0])),
+        ("right_arm", names(arms[1])),
+        ("skipped", names(skipped)),
+    )
     return dict(
-        root=n[root], pelvis=n[pelvis], spine=tuple(n[j] for j in spine),
-        hips=pair(hips), knees=pair(knees), feet=pair(feet), shoulders=pair(shoulders),
-        toes=pair(toes) if None not in toes else None, hands=pair(hands) if hands else None,
+        root=n[root],
+        pelvis=n[pelvis],
+        spine=tuple(n[j] for j in spine),
+        hips=pair(hips),
+        knees=pair(knees),
+        feet=pair(feet),
+        shoulders=pair(shoulders),
+        toes=pair(toes) if None not in toes else None,
+        hands=pair(hands) if hands else None,
         head=n[head] if head is not None else None,
-        notes=tuple(_guess_notes(skeleton, g.notes, root, top, pelvis, head, toes, dict(
-            hips=hips, knees=knees, feet=feet, shoulders=shoulders, elbows=elbows, hands=hands or (None, None)),
-            skipped, posture)),
+        notes=tuple(
+            _guess_notes(
+                skeleton,
+                g.notes,
+                root,
+                top,
+                pelvis,
+                head,
+                toes,
+                dict(
+                    hips=hips, knees=knees, feet=feet, shoulders=shoulders, elbows=elbows, hands=hands or (None, None)
+                ),
+                skipped,
+                posture,
+            )
+        ),
         guessed=guessed,
     )
 
@@ -280,16 +310,26 @@ def _trajectory_joint(sk: Skeleton, top: int) -> int:
 def _guess_notes(sk, notes, root, top, pelvis, head, toes, limbs, skipped, posture) -> list[str]:
     """What :func:`guess_joints` guessed and how, one line each."""
     n = sk.names
-    out = ["guessed from joint names and the hierarchy: " + "; ".join(
-        f"{key} {n[a]}/{n[b]}" for key, (a, b) in limbs.items() if (a, b) != (None, None))]
+    out = [
+        "guessed from joint names and the hierarchy: "
+        + "; ".join(f"{key} {n[a]}/{n[b]}" for key, (a, b) in limbs.items() if (a, b) != (None, None))
+    ]
     out += notes
-    out.append("knees and elbows found by name unless said otherwise; hips and shoulders are the joints "
-               "above them (shoulder = glenohumeral joint, not the clavicle), feet and hands the ones below, "
-               "each the joint that starts the next segment")
+    out.append(
+        "knees and elbows found by name unless said otherwise; hips and shoulders are the joints "
+        "above them (shoulder = glenohumeral joint, not the clavicle), feet and hands the ones below, "
+        "each the joint that starts the next segment"
+    )
     if skipped:
         out.append(f"twist/roll/helper bones passed over (no role): {', '.join(n[j] for j in skipped)}")
-    out.append(f"root {n[root]}: " + ("the joint where legs and arms branch" if root == top
-                                      else f"nearest animated ancestor of {n[top]}, where legs and arms branch"))
+    out.append(
+        f"root {n[root]}: "
+        + (
+            "the joint where legs and arms branch"
+            if root == top
+            else f"nearest animated ancestor of {n[top]}, where legs and arms branch"
+        )
+    )
     out.append(f"pelvis {n[pelvis]}: the first joint from {n[top]} toward the shoulders")
     out.append(f"head {n[head]}" if head is not None else "no head joint found; the spine ends where the arms branch")
     if None in toes:
@@ -299,8 +339,9 @@ def _guess_notes(sk, notes, root, top, pelvis, head, toes, limbs, skipped, postu
     return out
 
 
-def _posture(sk: Skeleton, up: int, pelvis: int, chest: int, head: int | None, hips, feet,
-             shoulders) -> tuple[str | None, str]:
+def _posture(
+    sk: Skeleton, up: int, pelvis: int, chest: int, head: int | None, hips, feet, shoulders
+) -> tuple[str | None, str]:
     """Whether the rest pose is a humanoid's, standing upright: ``(problem, note)``, ``problem``
     ``None`` when it is (or when the rest pose cannot tell), else why not (see :func:`~torchsplice.specs.guess_spec`)."""
     axis = "xyz"[up]
@@ -329,10 +370,15 @@ def _posture(sk: Skeleton, up: int, pelvis: int, chest: int, head: int | None, h
         spine = (tilt, f"the spine ({n[pelvis]} to {n[top]}) is {tilt:.0f} degrees off the up axis {axis}")
     level = spine is not None and spine[0] > _UPRIGHT
     if four or level:
-        reasons = [f"4 limbs reach the ground in the rest pose (the arms {n[shoulders[0]]}, "
-                   f"{n[shoulders[1]]} too)"] if four else []
-        reasons += [spine[1]] if level else []
+        reasons = (
+            [f"4 limbs reach the ground in the rest pose (the arms {n[shoulders[0]]}, {n[shoulders[1]]} too)"]
+            if four
+            else []
+        )
+        reasons += [spine[1]] if spine is not None and level else []
         what = "it looks like a quadruped" if four else "it does not stand upright like a humanoid"
         return f"{what}: {'; '.join(reasons)}", ""
-    return None, (f"rest pose upright: {spine[1] if spine else 'legs hanging down'}; the arms end "
-                  f"{min(gaps) / stand:.0%} of the hip height above the feet")
+    return None, (
+        f"rest pose upright: {spine[1] if spine else 'legs hanging down'}; the arms end "
+        f"{min(gaps) / stand:.0%} of the hip height above the feet"
+    )

@@ -12,7 +12,7 @@ from pathlib import Path
 try:  # Python 3.11+
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
+    import tomli as tomllib  # type: ignore[no-redef]
 
 from ..core.errors import SpecError
 from .clips import RoleRule
@@ -111,7 +111,8 @@ def spec_fields(data: dict, where: str, path: Path | None = None, from_json: boo
         from .text import parse_phrase_table
 
         parse_phrase_table(data["text"], where, fields_["name"])
-    notes, guessed = (), ()
+    notes: tuple[str, ...] = ()
+    guessed: tuple[tuple[str, tuple[str, ...]], ...] = ()
     if from_json:
         path, notes = _json_extras(data, where, fields_["name"])
         guessed = _json_guessed(data.get("guessed"), where)
@@ -148,9 +149,14 @@ def _parse_joints(t: _Table) -> dict:
         if named:
             raise t.fail(named[0], "a spec with guess = true names no joints")
         return {"guess": True}
-    out = {"root": t.get("root", str, required=True), "pelvis": t.get("pelvis", str, required=True),
-           "spine": t.names("spine", required=True), "head": t.get("head", str),
-           "upper_body": t.names("upper_body"), "lower_body": t.names("lower_body")}
+    out = {
+        "root": t.get("root", str, required=True),
+        "pelvis": t.get("pelvis", str, required=True),
+        "spine": t.names("spine", required=True),
+        "head": t.get("head", str),
+        "upper_body": t.names("upper_body"),
+        "lower_body": t.names("lower_body"),
+    }
     out.update({k: t.pair(k, required=True) for k in PAIRS})
     out.update({k: t.pair(k) for k in OPTIONAL_PAIRS})
     if not out["spine"] or out["spine"][0] != out["pelvis"]:
@@ -171,7 +177,7 @@ def _parse_clips(t: _Table) -> dict:
     if reference is not None:
         bad = [k for k, v in reference.items() if not isinstance(v, str)]
         if not reference or bad:
-            raise t.fail("reference", "must be a table of label = \"value or {label} template\" strings")
+            raise t.fail("reference", 'must be a table of label = "value or {label} template" strings')
     ground_truth = t.get("ground_truth", dict)
     if ground_truth is not None:
         ground_truth = _parse_ground_truth(ground_truth, t)
@@ -189,7 +195,9 @@ def _parse_ground_truth(table: dict, t) -> tuple:
     extra = set(table) - {"action", "locomotion", "capture", "same"}
     capture = table.get("capture")
     if extra or not isinstance(capture, dict) or not capture:
-        raise t.fail("ground_truth", "must hold a non-empty 'capture' table and optional 'action', 'locomotion' and 'same'")
+        raise t.fail(
+            "ground_truth", "must hold a non-empty 'capture' table and optional 'action', 'locomotion' and 'same'"
+        )
     same = table.get("same", [])
     if not isinstance(same, list) or not all(isinstance(k, str) for k in same):
         raise t.fail("ground_truth", "'same' must be a list of label names")
@@ -218,7 +226,7 @@ def _parse_rule(rule, i: int, where: str) -> RoleRule:
     if "names" not in rule and not labels:
         raise t.fail("names", "a rule needs names or labels (or both)")
     lt = _Table(labels, where, f"{section} labels")
-    return RoleRule(role, t.names("names") or (), tuple((k, lt.names(k, required=True)) for k in sorted(labels)))
+    return RoleRule(role, t.names("names") or (), tuple((k, lt.names(k, required=True) or ()) for k in sorted(labels)))
 
 
 def _json_extras(data: dict, where: str, name: str) -> tuple[Path | None, tuple[str, ...]]:
@@ -256,7 +264,6 @@ def _json_guessed(value, where: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
                 raise SpecError(f"{where}: guessed: {key}: expected a list of joint names, got {_describe(v)}")
             out.append((key, tuple(v)))
     return tuple(out)
-
 
 
 def _kind_name(kind: type) -> str:

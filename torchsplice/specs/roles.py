@@ -49,7 +49,6 @@ class SkeletonRoles:
     units: str
 
 
-
 # --------------------------------------------------------------------------------------------
 # binding
 # --------------------------------------------------------------------------------------------
@@ -68,24 +67,29 @@ def bind_roles(spec, sk: Skeleton) -> SkeletonRoles:
     """Indices of the joints a :class:`~torchsplice.specs.DatasetSpec` ``spec`` names in ``sk``,
     with the hierarchy checks of :meth:`DatasetSpec.bind` (whose joint names and ``where`` it
     reads; this module does not import the spec)."""
+
     def idx(key, name):
         if name not in sk.names:
-            raise SpecError(f"{spec.where}: [joints] {key} names joint {name!r}, which the skeleton "
-                            f"does not have; its joints: {', '.join(sk.names)}")
+            raise SpecError(
+                f"{spec.where}: [joints] {key} names joint {name!r}, which the skeleton "
+                f"does not have; its joints: {', '.join(sk.names)}"
+            )
         return sk.names.index(name)
 
     def pair(key):
         value = getattr(spec, key)
         return None if value is None else (idx(key, value[0]), idx(key, value[1]))
 
-    roles = dict(root=idx("root", spec.root), pelvis=idx("pelvis", spec.pelvis),
-                 spine=tuple(idx("spine", n) for n in spec.spine),
-                 head=None if spec.head is None else idx("head", spec.head),
-                 **{k: pair(k) for k in (*PAIRS, *OPTIONAL_PAIRS)})
+    roles = dict(
+        root=idx("root", spec.root),
+        pelvis=idx("pelvis", spec.pelvis),
+        spine=tuple(idx("spine", n) for n in spec.spine),
+        head=None if spec.head is None else idx("head", spec.head),
+        **{k: pair(k) for k in (*PAIRS, *OPTIONAL_PAIRS)},
+    )
     _check_hierarchy(spec, sk, roles)
     upper, lower = _body_split(spec, sk, roles["pelvis"], idx)
-    return SkeletonRoles(**roles, upper_body=upper, lower_body=lower,
-                         up_axis=AXES[spec.up_axis], units=spec.units)
+    return SkeletonRoles(**roles, upper_body=upper, lower_body=lower, up_axis=AXES[spec.up_axis], units=spec.units)
 
 
 def chain(parents: tuple[int, ...], top: int, bottom: int) -> list[int]:
@@ -122,8 +126,10 @@ def _check_hierarchy(spec, sk: Skeleton, r: dict) -> None:
     for key in ("hips", "knees", "feet"):
         for j in r[key]:
             if anc(r["pelvis"], j):
-                fail(f"{key}: {name[j]!r} lies below the pelvis {name[r['pelvis']]!r}; the pelvis must "
-                     "be an upper-body joint, not an ancestor of the legs")
+                fail(
+                    f"{key}: {name[j]!r} lies below the pelvis {name[r['pelvis']]!r}; the pelvis must "
+                    "be an upper-body joint, not an ancestor of the legs"
+                )
             if key == "hips" and not anc(r["root"], j):
                 fail(f"hips: {name[j]!r} is not below the root {name[r['root']]!r}")
     chains = [("hips", "knees"), ("knees", "feet"), ("feet", "toes"), ("shoulders", "hands")]
@@ -156,5 +162,3 @@ def _body_split(spec, sk: Skeleton, pelvis: int, idx) -> tuple[tuple[int, ...], 
     if pelvis not in upper:
         raise SpecError(f"{spec.where}: [joints] upper_body must contain the pelvis {sk.names[pelvis]!r}")
     return tuple(sorted(upper)), tuple(sorted(lower))
-
-

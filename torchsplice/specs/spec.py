@@ -136,9 +136,17 @@ class DatasetSpec:
         Raises :class:`SpecError` saying what could not be guessed.
         """
         spec = DatasetSpec(
-            name=self.name, description=self.description, up_axis=self.up_axis, units=self.units,
-            files=self.files, pattern=self.pattern, default_role=self.default_role, rules=self.rules, path=None,
-            **guess_joints(skeleton, self.up_axis))
+            name=self.name,
+            description=self.description,
+            up_axis=self.up_axis,
+            units=self.units,
+            files=self.files,
+            pattern=self.pattern,
+            default_role=self.default_role,
+            rules=self.rules,
+            path=None,
+            **guess_joints(skeleton, self.up_axis),
+        )
         try:
             spec.bind(skeleton)
         except SpecError as exc:
@@ -183,15 +191,15 @@ class DatasetSpec:
     def guess_summary(self) -> list[str]:
         """What the guess found, one short line per item (``[]`` unless :attr:`is_guessed`)::
 
-            root: root
-            pelvis: spine05
-            spine: spine05 > spine04 > spine03 > spine02 > spine01 > neck01 > neck02 > neck03
-            head: head                               (or "head: none found")
-            left leg: upperleg01.L > lowerleg01.L > foot.L > toe1-1.L
-            right leg: ...
-            left arm: upperarm01.L > lowerarm01.L > wrist.L
-            right arm: ...
-            skipped twist/roll/helper bones: upperleg02.L, ...   (only when some were)
+        root: root
+        pelvis: spine05
+        spine: spine05 > spine04 > spine03 > spine02 > spine01 > neck01 > neck02 > neck03
+        head: head                               (or "head: none found")
+        left leg: upperleg01.L > lowerleg01.L > foot.L > toe1-1.L
+        right leg: ...
+        left arm: upperarm01.L > lowerarm01.L > wrist.L
+        right arm: ...
+        skipped twist/roll/helper bones: upperleg02.L, ...   (only when some were)
         """
         lines = []
         for key, names in self.guessed:
@@ -244,11 +252,13 @@ class DatasetSpec:
         sides = {"action": action, "locomotion": locomotion}
         out = {}
         for key, template in capture:
+
             def sub(m):
                 value = sides[m.group(1)].get(m.group(2))
                 if value is None:
                     raise KeyError(m.group(0))
                 return value
+
             try:
                 out[key] = re.sub(r"\{(action|locomotion)\.([^{}]+)\}", sub, template)
             except KeyError:
@@ -287,24 +297,40 @@ class DatasetSpec:
 
 def _to_dict(spec: DatasetSpec) -> dict:
     """See :meth:`DatasetSpec.to_dict`."""
-    dataset = {"name": spec.name, "description": spec.description, "up_axis": spec.up_axis,
-               "units": spec.units, **({"files": list(spec.files)} if spec.files else {})}
+    dataset = {
+        "name": spec.name,
+        "description": spec.description,
+        "up_axis": spec.up_axis,
+        "units": spec.units,
+        **({"files": list(spec.files)} if spec.files else {}),
+    }
     if spec.guess:
         joints = {"guess": True}
     else:
         keys = ("root", "pelvis", "spine", "head", "upper_body", "lower_body", *PAIRS, *OPTIONAL_PAIRS)
         joints = {k: getattr(spec, k) for k in keys if getattr(spec, k) is not None}
         joints = {k: list(v) if isinstance(v, tuple) else v for k, v in joints.items()}
-    rules = [{"role": r.role, **({"names": list(r.names)} if r.names else {}),
-              **({"labels": {k: list(v) for k, v in r.labels}} if r.labels else {})} for r in spec.rules]
-    clips = {"default_role": spec.default_role, "role": rules}
+    rules = [
+        {
+            "role": r.role,
+            **({"names": list(r.names)} if r.names else {}),
+            **({"labels": {k: list(v) for k, v in r.labels}} if r.labels else {}),
+        }
+        for r in spec.rules
+    ]
+    clips: dict[str, object] = {"default_role": spec.default_role, "role": rules}
     if spec.pattern is not None:
         clips["pattern"] = spec.pattern
     if spec.reference is not None:
         clips["reference"] = dict(spec.reference)
     if spec.ground_truth is not None:
         act, loco, cap, same = spec.ground_truth
-        clips["ground_truth"] = {"action": dict(act), "locomotion": dict(loco), "capture": dict(cap), "same": list(same)}
+        clips["ground_truth"] = {
+            "action": dict(act),
+            "locomotion": dict(loco),
+            "capture": dict(cap),
+            "same": list(same),
+        }
     out = {"name": spec.name, "dataset": dataset, "joints": joints, "clips": clips, "notes": list(spec.notes)}
     if spec.path is not None:
         out["path"] = str(spec.path)

@@ -34,15 +34,40 @@ from pathlib import Path
 try:  # Python 3.11+
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
+    import tomli as tomllib  # type: ignore[no-redef]
 
 from ..core.errors import SpecError
 
-__all__ = ["Token", "PhraseTable", "POS_TAGS", "PARTS", "parse_phrase", "parse_phrase_table", "phrase_table",
-           "spec_phrase_table"]
+__all__ = [
+    "Token",
+    "PhraseTable",
+    "POS_TAGS",
+    "PARTS",
+    "parse_phrase",
+    "parse_phrase_table",
+    "phrase_table",
+    "spec_phrase_table",
+]
 
-POS_TAGS = ("ADJ", "ADP", "ADV", "AUX", "CCONJ", "DET", "INTJ", "NOUN", "NUM", "PART", "PRON", "PROPN", "PUNCT",
-            "SCONJ", "SYM", "VERB", "X")
+POS_TAGS = (
+    "ADJ",
+    "ADP",
+    "ADV",
+    "AUX",
+    "CCONJ",
+    "DET",
+    "INTJ",
+    "NOUN",
+    "NUM",
+    "PART",
+    "PRON",
+    "PROPN",
+    "PUNCT",
+    "SCONJ",
+    "SYM",
+    "VERB",
+    "X",
+)
 """spaCy's universal part-of-speech tags, as HumanML3D's tokens carry them."""
 
 PARTS = ("locomotion", "action", "style")
@@ -123,15 +148,17 @@ def parse_phrase_table(table, where: str, name: str) -> PhraseTable:
     for part in PARTS:
         value = table.get(part, {})
         if isinstance(value, str):
-            raise SpecError(f"{where}: [text] {part}: give the phrases as a table [text.{part}] (its key template "
-                            f"as key = {value!r} in it)")
+            raise SpecError(
+                f"{where}: [text] {part}: give the phrases as a table [text.{part}] (its key template "
+                f"as key = {value!r} in it)"
+            )
         if not isinstance(value, dict):
             raise SpecError(f"{where}: [text.{part}] must be a table, got {type(value).__name__}")
         entries = {}
         for key, items in value.items():
             if key == "key" and isinstance(items, str):
                 if not _FIELD.search(items):
-                    raise SpecError(f"{where}: [text.{part}] key: {items!r} names no label (such as \"{{content}}\")")
+                    raise SpecError(f'{where}: [text.{part}] key: {items!r} names no label (such as "{{content}}")')
                 keys[part] = items
                 continue
             if isinstance(items, str):

@@ -5,14 +5,24 @@ none of them).
 
 from __future__ import annotations
 
-__all__ = ["ROLES", "UNITS", "GENERIC", "SHIPPED_PACKAGE", "AXES", "PAIRS", "OPTIONAL_PAIRS", "SECTION_KEYS",
-           "GUESS_KEYS", "GUESS_SINGLE", "one_line"]
+__all__ = [
+    "ROLES",
+    "UNITS",
+    "GENERIC",
+    "SHIPPED_PACKAGE",
+    "AXES",
+    "PAIRS",
+    "OPTIONAL_PAIRS",
+    "SECTION_KEYS",
+    "GUESS_KEYS",
+    "GUESS_SINGLE",
+    "one_line",
+]
 
 ROLES = ("locomotion", "action", "both")
 """Clip roles: lower-body source, upper-body source, or either."""
 
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048,
-         "cmu": 0.0254 / 0.45, "unknown": None}
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048, "cmu": 0.0254 / 0.45, "unknown": None}
 """Length units a spec may name, with metres per unit (``None`` for ``"unknown"``).
 
 ``"cmu"`` is the CMU Graphics Lab unit (the ASF ``length 0.45``: 1 unit = 1/0.45 inch).
@@ -32,8 +42,7 @@ OPTIONAL_PAIRS = ("toes", "hands")
 
 SECTION_KEYS = {
     "dataset": {"name", "description", "up_axis", "units", "files"},
-    "joints": {"root", "pelvis", "spine", "head", "upper_body", "lower_body", "guess",
-               *PAIRS, *OPTIONAL_PAIRS},
+    "joints": {"root", "pelvis", "spine", "head", "upper_body", "lower_body", "guess", *PAIRS, *OPTIONAL_PAIRS},
     "clips": {"pattern", "default_role", "role", "reference", "ground_truth"},
 }
 """The keys each table of a spec file may hold."""

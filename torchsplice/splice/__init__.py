@@ -10,17 +10,26 @@ __all__ = ["TIMINGS", "AlignOptions", "SpliceOptions", "SpliceResult", "NotLocom
            "splice_pairs", "splice_standing", "Method", "MethodInput", "MethodOutput", "register_method",
            "get_method", "available_methods", "load_plugins"]
 
-_LAZY = {
-    "TIMINGS": "standing", "SpliceOptions": "options", "SpliceResult": "api", "NotLocomotingError": "api", "splice": "api",
-    "splice_pairs": "api", "splice_standing": "api", "AlignOptions": "heck",
-    "Method": "registry", "MethodInput": "registry", "MethodOutput": "registry", "register_method": "registry",
-    "get_method": "registry", "available_methods": "registry", "load_plugins": "registry",
-}
+import sys as _sys
+import types as _types
+
+from ..core.lazy import lazy_names
+
+__getattr__, __dir__ = lazy_names(__name__, {
+    "TIMINGS": ".standing", "SpliceOptions": ".options", "SpliceResult": ".api", "NotLocomotingError": ".api",
+    "splice": ".api", "splice_pairs": ".api", "splice_standing": ".api", "AlignOptions": ".heck",
+    "Method": ".registry", "MethodInput": ".registry", "MethodOutput": ".registry", "register_method": ".registry",
+    "get_method": ".registry", "available_methods": ".registry", "load_plugins": ".registry",
+})
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
+class _SplicePackage(_types.ModuleType):
+    """This package, callable as its main verb: ``from torchsplice import splice`` gives the
+    package, and ``splice(locomotion, action, spec, ...)`` is :func:`torchsplice.splice.api.splice`
+    (one name for both, as ``torchsplice.splice.registry`` and friends must stay reachable)."""
 
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    def __call__(self, *args, **kwargs):
+        return self.__getattr__("splice")(*args, **kwargs)
+
+
+_sys.modules[__name__].__class__ = _SplicePackage

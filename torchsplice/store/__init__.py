@@ -4,7 +4,7 @@ This package is the only one that opens HDF5 files or knows the paths inside the
 other layer reads and writes clips through :class:`~torchsplice.store.database.MotionDatabase`
 (its clip table typed as :class:`~torchsplice.store.table.ClipTable`, what it records with
 each skeleton as :class:`~torchsplice.store.table.SkeletonInfo`, rows of a stored per-frame
-array as :class:`~torchsplice.store.reading.FrameArray`).
+array as :class:`~torchsplice.store.frame_array.FrameArray`).
 
 Modules: :mod:`.schema` (the file's layout, described once), :mod:`.checks` (its structure,
 checked on open), :mod:`.table` (the typed clip table), :mod:`.reading` and :mod:`.writing`

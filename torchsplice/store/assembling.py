@@ -96,8 +96,10 @@ class Assembling:
         if self.store == ALIGNMENT:
             out = self._assembly().frames_on(self, k, starts, lengths, device) if arrays else {}
         else:
-            out = {n: torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device, dtype=torch.float32)
-                   for n in arrays}
+            out = {
+                n: torch.as_tensor(self.frame_rows(k, n, starts, lengths), device=device, dtype=torch.float32)
+                for n in arrays
+            }
         out = {n: out[n] for n in arrays}
         for n in self.frame_columns:
             if names is None or n in names:
@@ -141,8 +143,13 @@ class Assembling:
         b = len(banks)
         g = banks.create_group(str(b))
         for name, a in (("rotations", rot), ("translations", trans)):
-            g.create_dataset(name, data=a.astype(dt), chunks=(min(max(len(a), 1), 1024),) + a.shape[1:],
-                             compression="lzf", shuffle=True)
+            g.create_dataset(
+                name,
+                data=a.astype(dt),
+                chunks=(min(max(len(a), 1), 1024),) + a.shape[1:],
+                compression="lzf",
+                shuffle=True,
+            )
         g["starts"] = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
         g["lengths"] = lengths
         g["names"] = np.array([str(n) for n in names], dtype=object).astype(STR)
@@ -160,9 +167,25 @@ class Assembling:
                 out[(b, str(key), float(fps))] = r
         return out
 
-    def append_parts(self, skeleton, lengths, names, fps, *, curve, pelvis, parts: dict, arms=None, spec=None, sources="",
-                     roles="", labels=None, extra: dict | None = None, frame_extra: dict | None = None,
-                     virtual: tuple | None = None) -> None:
+    def append_parts(
+        self,
+        skeleton,
+        lengths,
+        names,
+        fps,
+        *,
+        curve,
+        pelvis,
+        parts: dict,
+        arms=None,
+        spec=None,
+        sources="",
+        roles="",
+        labels=None,
+        extra: dict | None = None,
+        frame_extra: dict | None = None,
+        virtual: tuple | None = None,
+    ) -> None:
         """Add spliced clips of one skeleton as their parts: per frame ``curve (N,)`` and
         ``pelvis (N, 4)`` (``None`` for standing clips: their frames follow from their timing),
         ``arms (N, 4, 4)`` (the arms moved out of the body, zeros where not; ``None``: none),
@@ -181,8 +204,9 @@ class Assembling:
             return
         if virtual is not None:  # table rows only, as append_virtual writes them
             k = self.add_skeleton(skeleton, spec)
-            self._append_rows(k, self._virtual_rows(k), lengths, names, fps, sources, roles, labels,
-                              {**(extra or {}), **parts})
+            self._append_rows(
+                k, self._virtual_rows(k), lengths, names, fps, sources, roles, labels, {**(extra or {}), **parts}
+            )
             self._virtual[k].append((self._virtual_source(*virtual), N))
             return
         index = self._new_names(names)

@@ -6,7 +6,7 @@ A motion store (every database but these) holds each clip's frames. An *alignmen
 its parts; every read assembles the motion from them with the compiled kernels of
 :mod:`torchsplice.cpu.assemble`, the same code the motion store's frames were written with,
 so a read gives the motion store's clip bit for bit. Readers (``read``, ``read_many``,
-``read_batch``, ``batches``, ``read_all``, ``packed``, ``frame_array``) see frames either way;
+``read_batch``, ``batches``, ``packed``, ``frame_array``) see frames either way;
 the database's methods for alignment stores are :class:`~torchsplice.store.assembling.Assembling`'s.
 
 Layout, besides :mod:`torchsplice.store.schema`'s (root attribute ``store="alignment"``,
@@ -58,19 +58,48 @@ import numpy as np
 from ..core.errors import DatabaseError
 from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
 
-__all__ = ["STORES", "ALIGNMENT", "MOTION", "PART_COLUMNS", "FRAME_PARTS", "KIND_CODES", "METHOD_CODES", "TIMING_CODES", "BANKS", "STORE_README",
-           "store_kind", "check_assembly", "Assembly"]
+__all__ = [
+    "STORES",
+    "ALIGNMENT",
+    "MOTION",
+    "PART_COLUMNS",
+    "FRAME_PARTS",
+    "KIND_CODES",
+    "METHOD_CODES",
+    "TIMING_CODES",
+    "BANKS",
+    "STORE_README",
+    "store_kind",
+    "check_assembly",
+    "Assembly",
+]
 
 MOTION, ALIGNMENT = "motion", "alignment"
 STORES = (MOTION, ALIGNMENT)
 """What a spliced output stores: each clip's frames, or what splicing computed (see the module docstring)."""
 BANKS = "assembly/banks"
-PART_COLUMNS = {name: "int" for name in (
-    "assembly_kind", "assembly_bank", "assembly_locomotion", "assembly_action", "assembly_crop", "assembly_method",
-    "assembly_timing", "assembly_window", "assembly_loop_start", "assembly_loop_end", "assembly_acting")}
+PART_COLUMNS = {
+    name: "int"
+    for name in (
+        "assembly_kind",
+        "assembly_bank",
+        "assembly_locomotion",
+        "assembly_action",
+        "assembly_crop",
+        "assembly_method",
+        "assembly_timing",
+        "assembly_window",
+        "assembly_loop_start",
+        "assembly_loop_end",
+        "assembly_acting",
+    )
+}
 """The per-clip parts (hidden clip columns of an alignment store)."""
-FRAME_PARTS = {"assembly_curve": ((), np.float64), "assembly_pelvis": ((4,), np.float32),
-               "assembly_arms": ((4, 4), np.float32)}
+FRAME_PARTS = {
+    "assembly_curve": ((), np.float64),
+    "assembly_pelvis": ((4,), np.float32),
+    "assembly_arms": ((4, 4), np.float32),
+}
 """The per-frame parts: name -> (shape of a row, dtype)."""
 OPTIONAL_PARTS = ("assembly_arms",)
 """Per-frame parts a store written before them lacks (read as nothing to apply)."""
@@ -93,7 +122,8 @@ STORE_README = (
     "a frame's row of /skeletons/<k>/assembly_arms (4,4) is not zeros, it replaces the local rotations of the "
     "bank's tables' \"moved\" joints (shoulders and elbows moved out of the body); kind -1 "
     "clips hold their frames in /skeletons/<k>/rotations etc. `torchsplice materialize IN -o OUT` writes every "
-    "motion as an ordinary database; torchsplice's MotionDatabase reads either transparently.")
+    "motion as an ordinary database; torchsplice's MotionDatabase reads either transparently."
+)
 
 
 def store_kind(attrs) -> str:
@@ -135,7 +165,7 @@ def check_assembly(h5: h5py.File, skeletons: list, frames: list[int]) -> None:
         sizes.append(lengths)
         counts.append(C)
         joints.append(J)
-    for k, (sk, N) in enumerate(zip(skeletons, frames)):
+    for k, N in enumerate(frames[: len(skeletons)]):
         g = h5[skeleton_path(k)]
         for name, (shape, _) in FRAME_PARTS.items():
             if name in g or name not in OPTIONAL_PARTS:
@@ -165,12 +195,15 @@ def check_assembly(h5: h5py.File, skeletons: list, frames: list[int]) -> None:
             bad |= parts & ((length > la) | (p["assembly_crop"] < 0) | (p["assembly_crop"] >= np.maximum(aa, 1)))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise Damage(f"clip {cap(c['name'].asstr()[i])}'s parts do not fit the alignment store's source clips "
-                     f"(kind {int(kind[i])}, bank {int(bank[i])})")
+        raise Damage(
+            f"clip {cap(c['name'].asstr()[i])}'s parts do not fit the alignment store's source clips "
+            f"(kind {int(kind[i])}, bank {int(bank[i])})"
+        )
 
 
 def _tables(raw: dict, J: int) -> dict:
     """A bank's joint tables as the kernels take them (checked against ``J`` joints)."""
+
     def mask(v):
         m = np.zeros(J, np.bool_)
         m[np.asarray(v, np.int64)] = True
@@ -188,8 +221,15 @@ def _tables(raw: dict, J: int) -> dict:
     moved = np.asarray(raw.get("moved", ()), np.int64).reshape(-1)
     if len(moved) not in (0, 4) or ((moved < 0) | (moved >= J)).any():
         raise IndexError(f"moved joints {moved.tolist()} (4 of {J} joints)")
-    return {"upper": mask(raw["upper"]), "pelvis": pelvis, "standing_upper": mask(raw["standing_upper"]),
-            "spine": spine, "arms": arms, "blend": int(raw["blend"]), "moved": moved}
+    return {
+        "upper": mask(raw["upper"]),
+        "pelvis": pelvis,
+        "standing_upper": mask(raw["standing_upper"]),
+        "spine": spine,
+        "arms": arms,
+        "blend": int(raw["blend"]),
+        "moved": moved,
+    }
 
 
 class Assembly:
@@ -202,10 +242,15 @@ class Assembly:
         for b in range(len(h5[BANKS])):
             g = h5[f"{BANKS}/{b}"]
             rot, trans = g["rotations"][()], g["translations"][()]
-            self.banks.append({
-                "rot": rot.astype(np.float64), "trans": trans.astype(np.float64),
-                "starts": g["starts"][()].astype(np.int64), "lengths": g["lengths"][()].astype(np.int64),
-                "tables": _tables(json.loads(g.attrs["tables"]), rot.shape[1])})
+            self.banks.append(
+                {
+                    "rot": rot.astype(np.float64),
+                    "trans": trans.astype(np.float64),
+                    "starts": g["starts"][()].astype(np.int64),
+                    "lengths": g["lengths"][()].astype(np.int64),
+                    "tables": _tables(json.loads(g.attrs["tables"]), rot.shape[1]),
+                }
+            )
         c = h5[CLIPS]
         self.parts = {n: c[n][()].astype(np.int64) for n in PART_COLUMNS}
         # the clips whose arms were moved out of the body (their assembly_arms rows are read)
@@ -244,8 +289,10 @@ class Assembly:
         bad = (at < 0) | (first + lengths > self.length[clip])
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise DatabaseError(f"{db.path}: frames {int(starts[i])}:{int(starts[i] + lengths[i])} of skeleton {k} are not "
-                                "within one clip of this alignment store")
+            raise DatabaseError(
+                f"{db.path}: frames {int(starts[i])}:{int(starts[i] + lengths[i])} of skeleton {k} are not "
+                "within one clip of this alignment store"
+            )
         return starts, lengths, clip, first
 
     def frames(self, db, k: int, starts: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
@@ -287,17 +334,48 @@ class Assembly:
             if m.any():
                 if "arc" not in bank:  # the slerps' angles between neighbouring frames, once per bank
                     bank["arc"] = arc_table(bank["rot"], t["upper"])
-                assemble_timewarp(args[0], args[1], bank["arc"], *args[2:], p["assembly_locomotion"][m],
-                                  p["assembly_action"][m], p["assembly_crop"][m], t["upper"], t["pelvis"], curve, prot,
-                                  first[m], lengths[m], out_start[m], orot, otrans)
+                assemble_timewarp(
+                    args[0],
+                    args[1],
+                    bank["arc"],
+                    *args[2:],
+                    p["assembly_locomotion"][m],
+                    p["assembly_action"][m],
+                    p["assembly_crop"][m],
+                    t["upper"],
+                    t["pelvis"],
+                    curve,
+                    prot,
+                    first[m],
+                    lengths[m],
+                    out_start[m],
+                    orot,
+                    otrans,
+                )
             m = (kind == 2) & (p["assembly_bank"] == b)
             if m.any():
                 acting = np.stack([(p["assembly_acting"][m] & 1) > 0, (p["assembly_acting"][m] & 2) > 0], axis=1)
                 loops = np.stack([p["assembly_loop_start"][m], p["assembly_loop_end"][m]], axis=1)
-                assemble_standing(*args, p["assembly_locomotion"][m], p["assembly_action"][m], p["assembly_method"][m],
-                                  p["assembly_timing"][m], p["assembly_window"][m], loops, acting, t["standing_upper"],
-                                  t["spine"], t["arms"], t["blend"], first[m], lengths[m], out_start[m], orot, otrans,
-                                  np.empty(N))
+                assemble_standing(
+                    *args,
+                    p["assembly_locomotion"][m],
+                    p["assembly_action"][m],
+                    p["assembly_method"][m],
+                    p["assembly_timing"][m],
+                    p["assembly_window"][m],
+                    loops,
+                    acting,
+                    t["standing_upper"],
+                    t["spine"],
+                    t["arms"],
+                    t["blend"],
+                    first[m],
+                    lengths[m],
+                    out_start[m],
+                    orot,
+                    otrans,
+                    np.empty(N),
+                )
         moved = self.moved_arms(db, k, starts, lengths, clip, out_start)
         if moved is not None:
             rows, joints, arms = moved
@@ -322,8 +400,9 @@ class Assembly:
         rows = np.repeat(out_start[which] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
         keep = (arms != 0).any(axis=(1, 2))
         bank = np.repeat(self.parts["assembly_bank"][clip[which]], n)[keep]
-        table = np.array([t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)],
-                         np.int64).reshape(-1, 4)
+        table = np.array(
+            [t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)], np.int64
+        ).reshape(-1, 4)
         joints = table[bank]
         known = (joints >= 0).all(axis=1)
         return rows[keep][known], joints[known], arms[keep][known]
@@ -357,9 +436,11 @@ class Assembly:
             key = (b, str(device))
             if key not in cache:
                 bank = self.banks[b]
-                cache[key] = (as_tensor(bank["rot"], device), as_tensor(bank["trans"], device),
-                              {n: (as_tensor(v, device) if isinstance(v, np.ndarray) else v)
-                               for n, v in bank["tables"].items()})
+                cache[key] = (
+                    as_tensor(bank["rot"], device),
+                    as_tensor(bank["trans"], device),
+                    {n: (as_tensor(v, device) if isinstance(v, np.ndarray) else v) for n, v in bank["tables"].items()},
+                )
             rot, trans, tb = cache[key]
             bank = self.banks[b]
             mine = np.repeat(p["assembly_bank"] == b, lengths)
@@ -375,10 +456,17 @@ class Assembly:
                 i0 = np.floor(x)
                 i1 = np.minimum(i0 + 1, n_act - 1)
                 base = bank["starts"][act] + crop
-                r, tr = timewarp_frames(rot, trans, as_tensor(bank["starts"][p["assembly_locomotion"][o]] + t[sel], device),
-                                        as_tensor(base + i0.astype(np.int64), device),
-                                        as_tensor(base + i1.astype(np.int64), device), as_tensor(x - i0, device),
-                                        as_tensor(prot, device), tb["upper"], tb["pelvis"])
+                r, tr = timewarp_frames(
+                    rot,
+                    trans,
+                    as_tensor(bank["starts"][p["assembly_locomotion"][o]] + t[sel], device),
+                    as_tensor(base + i0.astype(np.int64), device),
+                    as_tensor(base + i1.astype(np.int64), device),
+                    as_tensor(x - i0, device),
+                    as_tensor(prot, device),
+                    tb["upper"],
+                    tb["pelvis"],
+                )
                 orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
             sel = np.flatnonzero(mine & (kind == 2))
             if len(sel):
@@ -388,12 +476,26 @@ class Assembly:
                 lo, ac = p["assembly_locomotion"][cl], p["assembly_action"][cl]
                 per = lambda a: as_tensor(a, device)  # noqa: E731
                 acting = np.stack([(p["assembly_acting"][cl] & 1) > 0, (p["assembly_acting"][cl] & 2) > 0], axis=1)
-                r, tr = standing_frames(rot, trans, per(index[owner[sel]]), per(t[sel]), per(bank["starts"][lo]),
-                                        per(bank["lengths"][lo]), per(bank["starts"][ac]), per(bank["lengths"][ac]),
-                                        per(p["assembly_method"][cl]), per(p["assembly_timing"][cl]),
-                                        per(p["assembly_window"][cl]), per(p["assembly_loop_start"][cl]),
-                                        per(p["assembly_loop_end"][cl]), per(acting), tb["standing_upper"], tb["spine"],
-                                        tb["arms"], int(tb["blend"]))
+                r, tr = standing_frames(
+                    rot,
+                    trans,
+                    per(index[owner[sel]]),
+                    per(t[sel]),
+                    per(bank["starts"][lo]),
+                    per(bank["lengths"][lo]),
+                    per(bank["starts"][ac]),
+                    per(bank["lengths"][ac]),
+                    per(p["assembly_method"][cl]),
+                    per(p["assembly_timing"][cl]),
+                    per(p["assembly_window"][cl]),
+                    per(p["assembly_loop_start"][cl]),
+                    per(p["assembly_loop_end"][cl]),
+                    per(acting),
+                    tb["standing_upper"],
+                    tb["spine"],
+                    tb["arms"],
+                    int(tb["blend"]),
+                )
                 orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
         moved = self.moved_arms(db, k, starts, lengths, clip, np.cumsum(lengths) - lengths)
         if moved is not None:

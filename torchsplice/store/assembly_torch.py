@@ -66,8 +66,26 @@ def _times(t, Tl, Ta, timing, window, loop_s, loop_e, blend):
     return x, torch.where(phase < 1.0, loop_e, x), phase
 
 
-def standing_frames(rot, trans, clip, t, lstart, Tl, astart, Ta, method, timing, window, loop_s, loop_e, acting, upper,
-                    spine, arms, blend_s) -> tuple[torch.Tensor, torch.Tensor]:
+def standing_frames(
+    rot,
+    trans,
+    clip,
+    t,
+    lstart,
+    Tl,
+    astart,
+    Ta,
+    method,
+    timing,
+    window,
+    loop_s,
+    loop_e,
+    acting,
+    upper,
+    spine,
+    arms,
+    blend_s,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Frames of standing clips, as :func:`torchsplice.cpu.assemble.standing_rows`: per result
     frame ``clip (M,)`` (which of the ``B`` clips) and ``t`` (its frame); per clip (``(B,)``) the
     locomotion's first bank row ``lstart`` and frames ``Tl``, the action's ``astart``, ``Ta``,
@@ -81,8 +99,11 @@ def standing_frames(rot, trans, clip, t, lstart, Tl, astart, Ta, method, timing,
     mean = torch.zeros((B, S, 4), dtype=f64, device=dev)
     if S:
         owner = torch.repeat_interleave(torch.arange(B, device=dev), Tl)
-        rows = lstart[owner] + torch.arange(int(Tl.sum()), device=dev) - torch.repeat_interleave(
-            torch.cumsum(Tl, 0) - Tl, Tl)
+        rows = (
+            lstart[owner]
+            + torch.arange(int(Tl.sum()), device=dev)
+            - torch.repeat_interleave(torch.cumsum(Tl, 0) - Tl, Tl)
+        )
         q = rot[rows][:, spine]  # (R, S, 4)
         q0 = rot[lstart][:, spine][owner]
         sign = torch.where((q * q0).sum(-1, keepdim=True) < 0, -1.0, 1.0).to(f64)
@@ -90,8 +111,16 @@ def standing_frames(rot, trans, clip, t, lstart, Tl, astart, Ta, method, timing,
         mean = quat_normalize(mean)
     c = clip
     tf = t.to(f64)
-    x, source, phase = _times(tf, Tl[c].to(f64), Ta[c].to(f64), timing[c], window[c].to(f64), loop_s[c].to(f64),
-                              loop_e[c].to(f64), blend[c].to(f64))
+    x, source, phase = _times(
+        tf,
+        Tl[c].to(f64),
+        Ta[c].to(f64),
+        timing[c],
+        window[c].to(f64),
+        loop_s[c].to(f64),
+        loop_e[c].to(f64),
+        blend[c].to(f64),
+    )
     lrow = lstart[c] + t
     base = astart[c]
 
@@ -111,7 +140,9 @@ def standing_frames(rot, trans, clip, t, lstart, Tl, astart, Ta, method, timing,
 
         def at(x_):
             r0, r1, ww = sample(x_)
-            return _slerp(rot[r0], rot[r1], ww[:, None].expand(-1, J)), trans[r0] + ww[:, None, None] * (trans[r1] - trans[r0])
+            return _slerp(rot[r0], rot[r1], ww[:, None].expand(-1, J)), trans[r0] + ww[:, None, None] * (
+                trans[r1] - trans[r0]
+            )
 
         qb, lb = at(source)
         qbp, lbp = at(source - 1)

@@ -19,8 +19,21 @@ from ..core.errors import DatabaseError
 from ..core.names import CONTROL, control_character, printable
 from ..core.skeleton import Skeleton
 from .assembly import ALIGNMENT, check_assembly, store_kind
-from .schema import (CLIPS, COMPRESSIONS, FORMAT, SCHEMA_VERSION, SKELETONS, Damage, cap, checked_dataset, extra_columns,
-                     short, skeleton_from_group, skeleton_path, text_attr)
+from .schema import (
+    CLIPS,
+    COMPRESSIONS,
+    FORMAT,
+    SCHEMA_VERSION,
+    SKELETONS,
+    Damage,
+    cap,
+    checked_dataset,
+    extra_columns,
+    short,
+    skeleton_from_group,
+    skeleton_path,
+    text_attr,
+)
 
 __all__ = ["check_header", "check_structure", "control_name", "whole_number"]
 
@@ -83,8 +96,10 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
             folder = Path(h5.filename).resolve().parent
             for src in sorted({vs.file_name for vs in rot.virtual_sources()} - {"."}):
                 if not (folder / src).is_file():
-                    raise Damage(f"the frames of {where} are in {cap(src, 80)}, which is missing "
-                                  "(keep the shards folder beside the database)")
+                    raise Damage(
+                        f"the frames of {where} are in {cap(src, 80)}, which is missing "
+                        "(keep the shards folder beside the database)"
+                    )
         checked_dataset(g, "root_translation", where, (N, 3), "f")
         if "translations" in g or sk.has_joint_translations:
             checked_dataset(g, "translations", where, (N, J, 3), "f")
@@ -95,8 +110,17 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
     c = h5[CLIPS]
     C = checked_dataset(c, "name", "clips", (None,), "str").shape[0]
     kinds = {"str": "str", "int": "iu", "float": "fiu"}
-    for name, kind in [("name", "str"), ("source", "str"), ("role", "str"), ("labels", "str"), ("skeleton", "int"),
-                       ("start", "int"), ("length", "int"), ("fps", "float"), *columns.items()]:
+    for name, kind in [
+        ("name", "str"),
+        ("source", "str"),
+        ("role", "str"),
+        ("labels", "str"),
+        ("skeleton", "int"),
+        ("start", "int"),
+        ("length", "int"),
+        ("fps", "float"),
+        *columns.items(),
+    ]:
         ds = checked_dataset(c, name, "clips", (None,), kinds[kind])
         if ds.shape[0] != C:
             raise Damage(f"clips/{name} has {ds.shape[0]} rows, clips/name {C}")
@@ -118,7 +142,13 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
 
     K = len(skeletons)
     if (i := first((sk < 0) | (sk >= K))) is not None:
-        have = f"the file has skeletons 0..{K - 1}" if K > 1 else "the file has only skeleton 0" if K else "the file has none"
+        have = (
+            f"the file has skeletons 0..{K - 1}"
+            if K > 1
+            else "the file has only skeleton 0"
+            if K
+            else "the file has none"
+        )
         raise Damage(f"{clip(i)} points at skeleton {int(sk[i])}; {have}")
     if (i := first(start < 0)) is not None:
         raise Damage(f"{clip(i)} starts at row {int(start[i])} of skeleton {int(sk[i])}")
@@ -126,8 +156,10 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
         raise Damage(f"{clip(i)} has {int(length[i])} frames")
     rows = np.asarray(frames, dtype=np.int64)[sk.astype(np.int64)]
     if (i := first(start.astype(np.int64) + length.astype(np.int64) > rows)) is not None:
-        raise Damage(f"{clip(i)} ends at row {int(start[i]) + int(length[i])} of skeleton {int(sk[i])}, "
-                      f"which has {int(rows[i])} frames")
+        raise Damage(
+            f"{clip(i)} ends at row {int(start[i]) + int(length[i])} of skeleton {int(sk[i])}, "
+            f"which has {int(rows[i])} frames"
+        )
     if (i := first(~(np.isfinite(fps) & (fps > 0)))) is not None:
         raise Damage(f"{clip(i)} has fps {float(fps[i]):g}")
     bad = control_name(c["name"].asstr()[()])
@@ -160,7 +192,9 @@ def check_header(path: Path, h5: h5py.File, mode: str = "r") -> list[Skeleton]:
         have = "no schema_version attribute" if raw is None else f"schema_version is not a whole number ({cap(raw)})"
         raise DatabaseError(f"{path}: damaged database: {have}")
     if version > SCHEMA_VERSION:
-        raise DatabaseError(f"{path}: schema version {version} is newer than this torchsplice reads ({SCHEMA_VERSION}); upgrade torchsplice")
+        raise DatabaseError(
+            f"{path}: schema version {version} is newer than this torchsplice reads ({SCHEMA_VERSION}); upgrade torchsplice"
+        )
     if version < 1:
         raise DatabaseError(f"{path}: damaged database: schema version {version}")
     try:

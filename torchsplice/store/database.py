@@ -40,8 +40,19 @@ from .assembling import Assembling
 from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES, store_kind
 from .reading import ClipBatch, Reading, virtual_files
 from .resumable import RowLog, clear_status_flags, commit_path, detach, last_checkpoint, rows_path
-from .schema import (FRAME_ARRAYS, CLIPS, COLUMNS, COMPRESSIONS, FORMAT, KINDS, SCHEMA_VERSION, SKELETONS, extra_columns,
-                     skeleton_from_group, skeleton_path)
+from .schema import (
+    FRAME_ARRAYS,
+    CLIPS,
+    COLUMNS,
+    COMPRESSIONS,
+    FORMAT,
+    KINDS,
+    SCHEMA_VERSION,
+    SKELETONS,
+    extra_columns,
+    skeleton_from_group,
+    skeleton_path,
+)
 from .table import ClipTable, SkeletonInfo
 from .writing import SPACE_MARGIN, Writing, guarded, io_failure, mb
 
@@ -67,7 +78,11 @@ class MotionDatabase(Reading, Writing, Assembling):
         self.path, self._h5, self.mode, self._tmp, self._dtype = path, h5, mode, tmp, dtype
         self._target = path  # the file a write replaces on close (an append through a link: its target)
         self._lock = None
-        self._skeletons = skeletons if skeletons is not None else [skeleton_from_group(h5[SKELETONS][k]) for k in sorted(h5[SKELETONS], key=int)]
+        self._skeletons = (
+            skeletons
+            if skeletons is not None
+            else [skeleton_from_group(h5[SKELETONS][k]) for k in sorted(h5[SKELETONS], key=int)]
+        )
         self._names: list[str] | None = None
         self._name_index: dict[str, int] | None = None
         self._flushed = h5[f"{CLIPS}/name"].shape[0]
@@ -84,10 +99,19 @@ class MotionDatabase(Reading, Writing, Assembling):
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod
-    def create(cls, path, overwrite: bool = False, dtype=np.float32, chunk_frames: int = 1024,
-               compression: str | None = "gzip", columns: dict[str, str] | None = None,
-               frame_columns: tuple[str, ...] = (), attrs: dict | None = None,
-               staging: Path | None = None, store: str = "motion") -> "MotionDatabase":
+    def create(
+        cls,
+        path,
+        overwrite: bool = False,
+        dtype=np.float32,
+        chunk_frames: int = 1024,
+        compression: str | None = "gzip",
+        columns: dict[str, str] | None = None,
+        frame_columns: tuple[str, ...] = (),
+        attrs: dict | None = None,
+        staging: Path | None = None,
+        store: str = "motion",
+    ) -> "MotionDatabase":
         """Start a new database that appears at ``path`` when closed.
 
         Frames are stored as ``dtype`` (float32 by default) in chunks of ``chunk_frames``,
@@ -114,8 +138,9 @@ class MotionDatabase(Reading, Writing, Assembling):
             raise ValueError(f"store must be one of {STORES}, got {store!r}")
         if store == ALIGNMENT:
             columns.update(PART_COLUMNS)
-        bad = [c for c in list(columns) + list(frame_columns)
-               if c in COLUMNS or c in FRAME_ARRAYS or not c.isidentifier()]
+        bad = [
+            c for c in list(columns) + list(frame_columns) if c in COLUMNS or c in FRAME_ARRAYS or not c.isidentifier()
+        ]
         if bad or any(k not in KINDS for k in columns.values()):
             raise ValueError(f"bad extra columns {bad or columns}")
         if compression not in COMPRESSIONS:
@@ -138,15 +163,22 @@ class MotionDatabase(Reading, Writing, Assembling):
                 commit_path(tmp).unlink(missing_ok=True)
                 rows_path(tmp).unlink(missing_ok=True)
             h5 = h5py.File(tmp, "w", **({"libver": "latest"} if staging is not None else {}))
-            h5.attrs.update({
-                "format": FORMAT, "schema_version": SCHEMA_VERSION if store == ALIGNMENT else 1, "quaternion_order": "wxyz",
-                "rotation_convention": "local joint rotation, parent-from-child, column vectors",
-                "units": "", "up_axis": "", "created_by": f"torchsplice {__version__}",
-                "chunk_frames": chunk_frames, "compression": compression or "",
-                "extra_columns": json.dumps({"clip": columns, "frame": list(frame_columns)}),
-                **({"store": ALIGNMENT, "store_readme": STORE_README} if store == ALIGNMENT else {}),
-                **(attrs or {}),
-            })
+            h5.attrs.update(
+                {
+                    "format": FORMAT,
+                    "schema_version": SCHEMA_VERSION if store == ALIGNMENT else 1,
+                    "quaternion_order": "wxyz",
+                    "rotation_convention": "local joint rotation, parent-from-child, column vectors",
+                    "units": "",
+                    "up_axis": "",
+                    "created_by": f"torchsplice {__version__}",
+                    "chunk_frames": chunk_frames,
+                    "compression": compression or "",
+                    "extra_columns": json.dumps({"clip": columns, "frame": list(frame_columns)}),
+                    **({"store": ALIGNMENT, "store_readme": STORE_README} if store == ALIGNMENT else {}),
+                    **(attrs or {}),
+                }
+            )
             h5.create_group(SKELETONS)
             clips = h5.create_group(CLIPS)
             for name, dt in list(COLUMNS.items()) + [(n, KINDS[k][0]) for n, k in columns.items()]:
@@ -179,17 +211,32 @@ class MotionDatabase(Reading, Writing, Assembling):
             h5.swmr_mode = True  # from here on the file on disk is consistent at every moment
         h5.flush()
         shape = getattr(self, "_shape_of", None)
-        if shape is None or shape[0] != len(self._skeletons):  # the datasets and root attributes change with the skeletons
+        if shape is None or shape[0] != len(
+            self._skeletons
+        ):  # the datasets and root attributes change with the skeletons
             names = []
-            h5.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) and obj.maxshape
-                          and obj.maxshape[0] is None else None)
+            h5.visititems(
+                lambda name, obj: (
+                    names.append(name)
+                    if isinstance(obj, h5py.Dataset) and obj.maxshape and obj.maxshape[0] is None
+                    else None
+                )
+            )
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5.attrs.items()}
-            shape = self._shape_of = (len(self._skeletons), [(n, h5[n]) for n in names],
-                                      {k: v for k, v in attrs.items() if isinstance(v, (str, int, float))})
-        record = {"version": 1, "sizes": {n: int(ds.shape[0]) for n, ds in shape[1]}, "skeletons": shape[0],
-                  "rows": self._row_log.size(), "attrs": shape[2],
-                  "virtual": {str(k): [list(p) for p in parts] for k, parts in self._virtual.items()},
-                  "note": note or {}}
+            shape = self._shape_of = (
+                len(self._skeletons),
+                [(n, h5[n]) for n in names],
+                {k: v for k, v in attrs.items() if isinstance(v, (str, int, float))},
+            )
+        record = {
+            "version": 1,
+            "sizes": {n: int(ds.shape[0]) for n, ds in shape[1]},
+            "skeletons": shape[0],
+            "rows": self._row_log.size(),
+            "attrs": shape[2],
+            "virtual": {str(k): [list(p) for p in parts] for k, parts in self._virtual.items()},
+            "note": note or {},
+        }
         with open(commit_path(self._tmp), "a") as f:
             f.write(json.dumps(record) + "\n")  # one write: a killed process leaves whole lines
 
@@ -242,7 +289,16 @@ class MotionDatabase(Reading, Writing, Assembling):
                     h5.attrs[k] = v
             skeletons = check_header(path, h5, "a")
             dtype = h5[f"{skeleton_path(0)}/rotations"].dtype if "0" in h5[SKELETONS] else np.dtype(np.float32)
-        except (OSError, ValueError, KeyError, TypeError, RuntimeError, EOFError, pickle.UnpicklingError, DatabaseError):
+        except (
+            OSError,
+            ValueError,
+            KeyError,
+            TypeError,
+            RuntimeError,
+            EOFError,
+            pickle.UnpicklingError,
+            DatabaseError,
+        ):
             if h5 is not None:
                 detach(h5)
             if log is not None:
@@ -289,8 +345,10 @@ class MotionDatabase(Reading, Writing, Assembling):
                 tmp = temp_path(real)
                 free = shutil.disk_usage(real.parent).free
                 if free < path.stat().st_size + SPACE_MARGIN:
-                    raise DatabaseError(f"{path}: no space left on the device to append: appending works on a copy "
-                                        f"of {mb(path.stat().st_size)} and {real.parent} has {mb(free)} free")
+                    raise DatabaseError(
+                        f"{path}: no space left on the device to append: appending works on a copy "
+                        f"of {mb(path.stat().st_size)} and {real.parent} has {mb(free)} free"
+                    )
                 shutil.copyfile(path, tmp)
             h5 = h5py.File(tmp or path, "r+" if mode == "a" else "r")
         except (OSError, DatabaseError) as exc:
@@ -304,8 +362,10 @@ class MotionDatabase(Reading, Writing, Assembling):
         try:
             skeletons = check_header(path, h5, mode)
             if mode == "a" and store_kind(h5.attrs) == ALIGNMENT:
-                raise DatabaseError(f"{path}: is an alignment store (spliced clips kept as their parts); clips cannot be "
-                                    f"appended to it: write its motions first (torchsplice materialize {path} -o OUT.h5)")
+                raise DatabaseError(
+                    f"{path}: is an alignment store (spliced clips kept as their parts); clips cannot be "
+                    f"appended to it: write its motions first (torchsplice materialize {path} -o OUT.h5)"
+                )
         except DatabaseError:
             h5.close()
             if tmp is not None:
@@ -389,6 +449,7 @@ class MotionDatabase(Reading, Writing, Assembling):
         lock, self._lock = getattr(self, "_lock", None), None
         if lock is not None:
             lock.release()
+
     def __enter__(self) -> "MotionDatabase":
         return self
 
@@ -413,7 +474,7 @@ class MotionDatabase(Reading, Writing, Assembling):
         return self._h5
 
     def __len__(self) -> int:
-        self.h5  # raises when closed
+        self.h5  # noqa: B018 (raises when closed)
         return self._flushed + len(self._staged)
 
     @property
@@ -433,4 +494,3 @@ class MotionDatabase(Reading, Writing, Assembling):
     def __repr__(self) -> str:
         state = "closed" if self._h5 is None else self.mode
         return f"MotionDatabase({str(self.path)!r}, {state})"
-

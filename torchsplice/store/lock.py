@@ -42,7 +42,7 @@ def temp_path(path, kind: str = "partial") -> Path:
     name = path.name
     if len(name.encode()) > _TEMP_NAME_BYTES:
         digest = hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:10]
-        name = name.encode()[:_TEMP_NAME_BYTES - 11].decode(errors="ignore") + "~" + digest
+        name = name.encode()[: _TEMP_NAME_BYTES - 11].decode(errors="ignore") + "~" + digest
     return path.with_name(f".{name}.{kind}-{host_pid()}")
 
 
@@ -56,8 +56,10 @@ def check_name_length(path) -> None:
     """One line when ``path``'s file name is longer than :data:`MAX_NAME_BYTES`."""
     n = len(Path(path).name.encode("utf-8", "surrogatepass"))
     if n > MAX_NAME_BYTES:
-        raise TorchspliceError(f"{path}: the output's file name is {n} bytes long; torchsplice writes files beside it "
-                               f"whose names add a few bytes, so it takes at most {MAX_NAME_BYTES}")
+        raise TorchspliceError(
+            f"{path}: the output's file name is {n} bytes long; torchsplice writes files beside it "
+            f"whose names add a few bytes, so it takes at most {MAX_NAME_BYTES}"
+        )
 
 
 _TEMP = re.compile(r"\.(?P<kind>partial|staged)-(?P<host>.+)-(?P<pid>\d+)$")
@@ -71,7 +73,7 @@ def remove_stale_temporaries(folder: Path, kind: str = "partial", of: Path | Non
     if not folder.is_dir():
         return
     me = socket.gethostname()
-    pattern = f".*.{kind}-*" if of is None else glob.escape(temp_path(of, kind).name[:-len(host_pid())]) + "*"
+    pattern = f".*.{kind}-*" if of is None else glob.escape(temp_path(of, kind).name[: -len(host_pid())]) + "*"
     for f in folder.glob(pattern):
         m = _TEMP.search(f.name)
         if m and m["kind"] == kind and m["host"] == me and not pid_alive(int(m["pid"])):
@@ -140,8 +142,10 @@ class FileLock:
 
     def _refuse(self, holder: dict | None) -> None:
         h = holder or {}
-        raise LockedError(f"{self.what} is being written by process {h.get('pid', '?')} on {h.get('host', '?')} "
-                          f"since {h.get('started', '?')} (lock {self.path}); wait for it to finish, or stop it")
+        raise LockedError(
+            f"{self.what} is being written by process {h.get('pid', '?')} on {h.get('host', '?')} "
+            f"since {h.get('started', '?')} (lock {self.path}); wait for it to finish, or stop it"
+        )
 
     def acquire(self) -> "FileLock":
         if self.fd is not None:
@@ -175,8 +179,12 @@ class FileLock:
             if holder and not self.stale(holder) and holder.get("pid") != os.getpid():
                 os.close(fd)
                 self._refuse(holder)  # a live holder that took no flock (an older torchsplice)
-            me = {"host": socket.gethostname(), "pid": os.getpid(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                  "command": self.command}
+            me = {
+                "host": socket.gethostname(),
+                "pid": os.getpid(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "command": self.command,
+            }
             os.ftruncate(fd, 0)
             os.pwrite(fd, json.dumps(me).encode(), 0)
             self.fd = fd

@@ -1,21 +1,19 @@
 """Reading clips from a motion database: the read half of
 :class:`~torchsplice.store.database.MotionDatabase` (:class:`Reading`), the padded
-:class:`ClipBatch`, and :class:`FrameArray`, rows of one stored per-frame array.
+:class:`ClipBatch` (:class:`~torchsplice.store.frame_array.FrameArray`, rows of one stored
+per-frame array, lives in :mod:`torchsplice.store.frame_array`).
 
 Reads turn HDF5's ``OSError`` (a chunk that does not decompress, a truncated file) into one
-:class:`~torchsplice.core.errors.DatabaseError` line naming the file (:func:`reads`); reads of
+:class:`~torchsplice.core.errors.DatabaseError` line naming the file (:func:`~torchsplice.store.frame_array.reads`); reads of
 frames name the clip too.
 """
 
 from __future__ import annotations
 
 import difflib
-import functools
-import inspect
 import json
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Iterator, Sequence
 
 import h5py
@@ -26,7 +24,8 @@ from ..core.errors import DatabaseError
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import DatasetSpec, detect_spec
-from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, SKELETONS, cap, short, skeleton_path
+from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, cap, short, skeleton_path
+from .frame_array import FrameArray, reads, virtual_files
 from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
 
 __all__ = ["Reading", "ClipBatch", "FrameArray", "reads", "virtual_files"]
@@ -64,104 +63,13 @@ class ClipBatch:
         """Clip ``b`` of the batch, without padding."""
         n = int(self.lengths[b])
         return Motion(
-            self.skeleton, self.rotations[b, :n], self.root_translation[b, :n], float(self.fps[b]),
-            None if self.translations is None else self.translations[b, :n], name=self.names[b],
+            self.skeleton,
+            self.rotations[b, :n],
+            self.root_translation[b, :n],
+            float(self.fps[b]),
+            None if self.translations is None else self.translations[b, :n],
+            name=self.names[b],
         )
-
-
-def reads(method):
-    """Make a read method of :class:`MotionDatabase` turn HDF5's ``OSError`` (a damaged file:
-    a chunk that does not decompress, a truncated file) into one :class:`DatabaseError` line
-    naming the file; reads of frames name the clip too (:meth:`MotionDatabase._frames`)."""
-    if inspect.isgeneratorfunction(method):
-        @functools.wraps(method)
-        def generator(self, *args, **kwargs):
-            try:
-                yield from method(self, *args, **kwargs)
-            except OSError as exc:
-                raise self._unreadable(exc, "the file") from None
-        return generator
-
-    @functools.wraps(method)
-    def wrapper(self, *args, **kwargs):
-        try:
-            return method(self, *args, **kwargs)
-        except OSError as exc:
-            raise self._unreadable(exc, "the file") from None
-    return wrapper
-
-
-class FrameArray:
-    """Rows of one per-frame array of one skeleton (``rotations``, ``root_translation``,
-    ``translations`` or a per-frame column), read from the open file as numpy arrays.
-
-    ``array[lo:hi]`` reads rows ``lo:hi``; :meth:`gather` the rows of several clips at once.
-    A damaged chunk is one :class:`DatabaseError` line naming the file, the array and the rows.
-    """
-
-    def __init__(self, dataset: h5py.Dataset):
-        self._ds = dataset
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return self._ds.shape
-
-    @property
-    def dtype(self) -> np.dtype:
-        return self._ds.dtype
-
-    def __len__(self) -> int:
-        return self._ds.shape[0]
-
-    def __getitem__(self, rows: slice) -> np.ndarray:
-        """Rows ``rows`` (a slice)."""
-        try:
-            return self._ds[rows]
-        except OSError as exc:
-            raise self._damaged(rows.start, rows.stop, exc) from None
-
-    def gather(self, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        """Rows ``start:start+length`` for several clips, concatenated.
-
-        One read of the covering span when the clips lie close together, else one read per clip.
-        """
-        ds = self._ds
-        if len(starts) == 0:
-            return ds[0:0]
-        lo, hi = int(starts.min()), int((starts + lengths).max())
-        total = int(lengths.sum())
-        try:
-            if hi - lo <= 2 * total:
-                block = ds[lo:hi]
-                rel = np.repeat(starts - lo - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
-                return block[rel]
-            return np.concatenate([ds[int(s):int(s + n)] for s, n in zip(starts, lengths)])
-        except OSError as exc:  # a damaged chunk: one clear line, not HDF5's traceback
-            raise self._damaged(lo, hi, exc) from None
-
-    def _damaged(self, lo, hi, exc: OSError) -> DatabaseError:
-        ds = self._ds
-        return DatabaseError(f"{ds.file.filename}: damaged database: cannot read {ds.name} rows {lo}:{hi} "
-                             f"({short(exc)})")
-
-
-def virtual_files(path: Path) -> set[Path]:
-    """The files whose frames the database at ``path`` reads through virtual datasets (see
-    :meth:`~torchsplice.store.writing.Writing.append_virtual`); empty for a database holding
-    its own frames, and for a file that is not there or not readable."""
-    if not path.is_file():
-        return set()
-    files: set[Path] = set()
-    try:
-        with h5py.File(path, "r") as f:
-            for g in f[SKELETONS].values():
-                for ds in g.values():
-                    if isinstance(ds, h5py.Dataset) and ds.is_virtual:
-                        files |= {(path.parent / vs.file_name).resolve() for vs in ds.virtual_sources()
-                                  if vs.file_name != "."}
-    except (OSError, KeyError, ValueError):
-        return set()
-    return files
 
 
 class Reading:
@@ -185,7 +93,7 @@ class Reading:
                 s, n = int(start[i]), int(length[i])
                 for name in sets:
                     try:
-                        g[name][s:s + n]
+                        g[name][s : s + n]
                     except OSError as inner:
                         return self._unreadable(inner, f"the frames of clip {cap(self.names[i], 60)}")
         except (OSError, DatabaseError):
@@ -221,7 +129,9 @@ class Reading:
             return int(clip)
         index = self._index_map()
         if clip not in index:
-            close = [n for n in index if clip.lower() in n.lower()][:5] or difflib.get_close_matches(clip, list(index), n=5)
+            close = [n for n in index if clip.lower() in n.lower()][:5] or difflib.get_close_matches(
+                clip, list(index), n=5
+            )
             hint = f"; similar: {', '.join(close)}" if close else "; `torchsplice info` lists the clips"
             raise DatabaseError(f"{self.path}: no clip named {clip!r}{hint}")
         return self._name_index[clip]
@@ -268,7 +178,10 @@ class Reading:
         cached = getattr(self, "_clip_table", None)
         if cached is not None and len(cached) == c["name"].shape[0]:  # rows are only ever added
             return cached
-        columns = {k: (c[k].asstr()[()] if h5py.check_string_dtype(c[k].dtype) else c[k][()]) for k in [*COLUMNS, *self.columns]}
+        columns = {
+            k: (c[k].asstr()[()] if h5py.check_string_dtype(c[k].dtype) else c[k][()])
+            for k in [*COLUMNS, *self.columns]
+        }
         self._clip_table = ClipTable.from_columns(columns, self.columns, self.path)
         return self._clip_table
 
@@ -280,8 +193,10 @@ class Reading:
         self.flush()
         self._table_written()
         c = self.h5[CLIPS]
-        return {k: (c[k].asstr()[lo:hi] if h5py.check_string_dtype(c[k].dtype) else c[k][lo:hi])
-                for k in [*COLUMNS, *self.columns]}
+        return {
+            k: (c[k].asstr()[lo:hi] if h5py.check_string_dtype(c[k].dtype) else c[k][lo:hi])
+            for k in [*COLUMNS, *self.columns]
+        }
 
     def __contains__(self, clip) -> bool:
         """Whether the database holds a clip named ``clip``."""
@@ -300,10 +215,15 @@ class Reading:
         text = self.spec_json(skeleton)
         spec = json.loads(text or "{}")
         return SkeletonInfo(
-            id=skeleton, skeleton=sk, units=str(g.attrs.get("units", "")), up_axis=str(g.attrs.get("up_axis", "")),
-            spec_json=text, spec_name=spec.get("name", "") if isinstance(spec, dict) else "",
+            id=skeleton,
+            skeleton=sk,
+            units=str(g.attrs.get("units", "")),
+            up_axis=str(g.attrs.get("up_axis", "")),
+            spec_json=text,
+            spec_name=spec.get("name", "") if isinstance(spec, dict) else "",
             frame_arrays=tuple(n for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g),
-            dtype=np.dtype(g["rotations"].dtype))
+            dtype=np.dtype(g["rotations"].dtype),
+        )
 
     def stored_spec(self, skeleton: int) -> DatasetSpec | None:
         """The dataset spec stored with skeleton ``k``, or ``None`` where none was stored."""
@@ -331,10 +251,12 @@ class Reading:
     def read_frame_column(self, clip: str | int, name: str) -> np.ndarray:
         """A clip's values ``(T,)`` of the per-frame column ``name``."""
         if name not in self.frame_columns:
-            raise DatabaseError(f"{self.path}: no per-frame column {name!r} (has: {', '.join(self.frame_columns) or 'none'})")
+            raise DatabaseError(
+                f"{self.path}: no per-frame column {name!r} (has: {', '.join(self.frame_columns) or 'none'})"
+            )
         info = self.clip_info(clip)
         with self._frames(info["skeleton"], [self.index(clip)]):
-            return self.h5[f"{skeleton_path(info['skeleton'])}/{name}"][info["start"]:info["start"] + info["length"]]
+            return self.h5[f"{skeleton_path(info['skeleton'])}/{name}"][info["start"] : info["start"] + info["length"]]
 
     def _table_written(self) -> None:
         if self._resumable and self._h5 is not None:
@@ -384,15 +306,22 @@ class Reading:
 
             def get(name):
                 with self._frames(k, [i]):
-                    a = block[name][s - lo:s - lo + n] if block is not None else g[name][s:s + n]
+                    a = block[name][s - lo : s - lo + n] if block is not None else g[name][s : s + n]
                 return torch.from_numpy(np.ascontiguousarray(a)).to(dtype)
 
-            out.append(Motion(
-                skeleton=self._skeletons[k], rotations=get("rotations"), root_translation=get("root_translation"),
-                translations=get("translations") if "translations" in g else None, fps=float(t["fps"][i]),
-                name=str(t["name"][i]), source=str(t["source"][i]), role=str(t["role"][i]),
-                labels=dict(ct.labels[i]),
-            ))
+            out.append(
+                Motion(
+                    skeleton=self._skeletons[k],
+                    rotations=get("rotations"),
+                    root_translation=get("root_translation"),
+                    translations=get("translations") if "translations" in g else None,
+                    fps=float(t["fps"][i]),
+                    name=str(t["name"][i]),
+                    source=str(t["source"][i]),
+                    role=str(t["role"][i]),
+                    labels=dict(ct.labels[i]),
+                )
+            )
         return out
 
     def _read_assembled(self, idx: list[int], ct: ClipTable, dtype) -> list[Motion]:
@@ -404,21 +333,28 @@ class Reading:
             made = self.assembled(k, starts, lengths)
             at = np.concatenate(([0], np.cumsum(lengths)[:-1]))
             for i, a, n in zip(mine, at, lengths):
-                def get(name):
-                    return torch.from_numpy(np.ascontiguousarray(made[name][a:a + n])).to(dtype)
 
-                out[i] = Motion(skeleton=self._skeletons[k], rotations=get("rotations"),
-                                root_translation=get("root_translation"),
-                                translations=get("translations") if "translations" in made else None,
-                                fps=float(ct.fps[i]), name=str(ct.name[i]), source=str(ct.source[i]),
-                                role=str(ct.role[i]), labels=dict(ct.labels[i]))
+                def get(name):
+                    return torch.from_numpy(np.ascontiguousarray(made[name][a : a + n])).to(dtype)
+
+                out[i] = Motion(
+                    skeleton=self._skeletons[k],
+                    rotations=get("rotations"),
+                    root_translation=get("root_translation"),
+                    translations=get("translations") if "translations" in made else None,
+                    fps=float(ct.fps[i]),
+                    name=str(ct.name[i]),
+                    source=str(ct.source[i]),
+                    role=str(ct.role[i]),
+                    labels=dict(ct.labels[i]),
+                )
         return [out[i] for i in idx]
 
     @reads
     def read(self, clip: str | int, dtype: torch.dtype = torch.float32, device=None) -> Motion:
         """One clip as a :class:`Motion` (``dtype`` and ``device`` as asked)."""
         info = self.clip_info(clip)
-        g = self.h5[skeleton_path(info['skeleton'])]
+        g = self.h5[skeleton_path(info["skeleton"])]
         s, n = info["start"], info["length"]
         made = self.assembled(info["skeleton"], [s], [n]) if self.store == "alignment" else None
 
@@ -426,7 +362,7 @@ class Reading:
             if made is not None:
                 return torch.from_numpy(made[name]).to(device=device, dtype=dtype)
             with self._frames(info["skeleton"], [self.index(clip)]):
-                a = g[name][s:s + n]
+                a = g[name][s : s + n]
             return torch.from_numpy(a).to(device=device, dtype=dtype)
 
         return Motion(
@@ -434,7 +370,11 @@ class Reading:
             rotations=get("rotations"),
             root_translation=get("root_translation"),
             translations=get("translations") if "translations" in g else None,
-            fps=info["fps"], name=info["name"], source=info["source"], role=info["role"], labels=info["labels"],
+            fps=info["fps"],
+            name=info["name"],
+            source=info["source"],
+            role=info["role"],
+            labels=info["labels"],
         )
 
     @reads
@@ -448,7 +388,9 @@ class Reading:
         col = self.h5[CLIPS]
         sk_ids = col["skeleton"][()][idx]
         if len(set(sk_ids.tolist())) != 1:
-            raise DatabaseError(f"{self.path}: clips of one batch must share a skeleton, got skeletons {sorted(set(sk_ids.tolist()))}")
+            raise DatabaseError(
+                f"{self.path}: clips of one batch must share a skeleton, got skeletons {sorted(set(sk_ids.tolist()))}"
+            )
         k = int(sk_ids[0])
         starts = col["start"][()][idx].astype(np.int64)
         lengths = col["length"][()][idx].astype(np.int64)
@@ -469,7 +411,9 @@ class Reading:
                 offset = np.concatenate(([0], np.cumsum(lengths)[:-1]))
                 at = offset[:, None] + (rows - starts[:, None])
                 m = made[name]
-                out = m[torch.as_tensor(at, device=m.device)] if isinstance(m, torch.Tensor) else torch.from_numpy(m[at])
+                out = (
+                    m[torch.as_tensor(at, device=m.device)] if isinstance(m, torch.Tensor) else torch.from_numpy(m[at])
+                )
                 return out.to(device=device, dtype=dtype)
             ds = g[name]
             with self._frames(k, idx):
@@ -477,7 +421,7 @@ class Reading:
                     block = ds[lo:hi]
                     out = block[rows - lo]
                 else:
-                    out = np.stack([ds[s:s + n][np.minimum(np.arange(T), n - 1)] for s, n in zip(starts, lengths)])
+                    out = np.stack([ds[s : s + n][np.minimum(np.arange(T), n - 1)] for s, n in zip(starts, lengths)])
             return torch.from_numpy(out).to(device=device, dtype=dtype)
 
         lengths_t = torch.from_numpy(lengths).to(device)
@@ -495,38 +439,14 @@ class Reading:
         )
 
     @reads
-    def read_all(self, dtype: torch.dtype = torch.float32) -> Iterator[tuple[Motion, dict, dict]]:
-        """Every clip in row order as ``(motion, extra columns, per-frame columns)``.
-
-        Reads each dataset of the file once, whole: meant for small databases (the splice
-        job's parts); use :meth:`read` or :meth:`batches` on large ones.
-        """
-        ct = self.clip_table()  # labels decoded once
-        t = ct.to_dict()
-        frames: dict[int, dict[str, np.ndarray]] = {}
-        for i in range(len(t["name"])):
-            k = int(t["skeleton"][i])
-            if k not in frames:
-                g = self.h5[skeleton_path(k)]
-                if self.store == "alignment":
-                    frames[k] = self.whole_frames(k)
-                else:
-                    with self._frames(k):
-                        frames[k] = {n: g[n][()] for n in (*FRAME_ARRAYS, *self.frame_columns) if n in g}
-            f, s, n = frames[k], int(t["start"][i]), int(t["length"][i])
-
-            def get(name):
-                return torch.from_numpy(f[name][s:s + n]).to(dtype)
-
-            motion = Motion(self._skeletons[k], get("rotations"), get("root_translation"), float(t["fps"][i]),
-                            get("translations") if "translations" in f else None, name=str(t["name"][i]),
-                            source=str(t["source"][i]), role=str(t["role"][i]), labels=dict(ct.labels[i]))
-            extra = {c: json_value(t[c][i]) for c in self.columns}
-            yield motion, extra, {c: f[c][s:s + n] for c in self.frame_columns}
-
-    @reads
-    def batches(self, clips: Sequence[str | int] | None = None, batch_size: int = 32,
-                dtype: torch.dtype = torch.float32, device=None, sort_by_length: bool = False) -> Iterator[ClipBatch]:
+    def batches(
+        self,
+        clips: Sequence[str | int] | None = None,
+        batch_size: int = 32,
+        dtype: torch.dtype = torch.float32,
+        device=None,
+        sort_by_length: bool = False,
+    ) -> Iterator[ClipBatch]:
         """Iterate padded batches of up to ``batch_size`` clips, each batch on one skeleton.
 
         ``clips`` defaults to every clip in row order; ``sort_by_length`` groups clips of
@@ -542,7 +462,7 @@ class Reading:
             if sort_by_length:
                 group.sort(key=lambda i: int(length[i]))
             for b in range(0, len(group), batch_size):
-                yield self.read_batch(group[b:b + batch_size], dtype=dtype, device=device)
+                yield self.read_batch(group[b : b + batch_size], dtype=dtype, device=device)
 
     @reads
     def summary(self) -> dict:
@@ -552,11 +472,17 @@ class Reading:
         ct = self.clip_table()  # labels decoded once
         t = ct.to_dict()
         clips = [
-            {"name": str(t["name"][i]), "frames": int(t["length"][i]), "fps": float(t["fps"][i]),
-             "duration_s": round(float(t["length"][i] / t["fps"][i]), 3), "role": str(t["role"][i]),
-             "labels": dict(ct.labels[i]), "skeleton": int(t["skeleton"][i]),
-             "source": str(t["source"][i]),
-             **{n: json_value(t[n][i]) for n in self.columns}}
+            {
+                "name": str(t["name"][i]),
+                "frames": int(t["length"][i]),
+                "fps": float(t["fps"][i]),
+                "duration_s": round(float(t["length"][i] / t["fps"][i]), 3),
+                "role": str(t["role"][i]),
+                "labels": dict(ct.labels[i]),
+                "skeleton": int(t["skeleton"][i]),
+                "source": str(t["source"][i]),
+                **{n: json_value(t[n][i]) for n in self.columns},
+            }
             for i in range(len(t["name"]))
         ]
         roles: dict[str, int] = {}
@@ -565,18 +491,33 @@ class Reading:
         skeletons = []
         for k, sk in enumerate(self._skeletons):
             spec = json.loads(self.spec_json(k) or "{}")
-            skeletons.append({"id": k, "joints": sk.num_joints, "root": sk.names[0],
-                              "spec": spec.get("name", "") if isinstance(spec, dict) else "",
-                              "clips": sum(c["skeleton"] == k for c in clips), "joint_names": list(sk.names),
-                              "units": str(self.h5[skeleton_path(k)].attrs.get("units", "")),
-                              "up_axis": str(self.h5[skeleton_path(k)].attrs.get("up_axis", "")),
-                              "guessed_roles": (spec.get("guessed") or {}) if isinstance(spec, dict) else {}})
+            skeletons.append(
+                {
+                    "id": k,
+                    "joints": sk.num_joints,
+                    "root": sk.names[0],
+                    "spec": spec.get("name", "") if isinstance(spec, dict) else "",
+                    "clips": sum(c["skeleton"] == k for c in clips),
+                    "joint_names": list(sk.names),
+                    "units": str(self.h5[skeleton_path(k)].attrs.get("units", "")),
+                    "up_axis": str(self.h5[skeleton_path(k)].attrs.get("up_axis", "")),
+                    "guessed_roles": (spec.get("guessed") or {}) if isinstance(spec, dict) else {},
+                }
+            )
         attrs = self.attrs
         return {
-            "path": str(self.path), "format": attrs.get("format"), "schema_version": int(attrs.get("schema_version", 0)),
-            "quaternion_order": attrs.get("quaternion_order"), "units": attrs.get("units"), "up_axis": attrs.get("up_axis"),
-            "created_by": attrs.get("created_by"), "num_clips": len(clips),
+            "path": str(self.path),
+            "format": attrs.get("format"),
+            "schema_version": int(attrs.get("schema_version", 0)),
+            "quaternion_order": attrs.get("quaternion_order"),
+            "units": attrs.get("units"),
+            "up_axis": attrs.get("up_axis"),
+            "created_by": attrs.get("created_by"),
+            "num_clips": len(clips),
             "num_frames": int(sum(c["frames"] for c in clips)),
             "duration_s": round(sum(c["duration_s"] for c in clips), 3),
-            "roles": roles, "skeletons": skeletons, "clips": clips, "run": run_record(attrs.get("run")),
+            "roles": roles,
+            "skeletons": skeletons,
+            "clips": clips,
+            "run": run_record(attrs.get("run")),
         }

@@ -50,9 +50,27 @@ import torch
 
 from ..core.skeleton import Skeleton
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "COMPRESSIONS", "MIXED", "STR", "COLUMNS", "KINDS", "FRAME_ARRAYS", "CLIPS", "SKELETONS",
-           "skeleton_path", "Damage", "cap", "short", "checked_dataset", "skeleton_to_group", "skeleton_from_group",
-           "text_attr", "extra_columns"]
+__all__ = [
+    "FORMAT",
+    "SCHEMA_VERSION",
+    "COMPRESSIONS",
+    "MIXED",
+    "STR",
+    "COLUMNS",
+    "KINDS",
+    "FRAME_ARRAYS",
+    "CLIPS",
+    "SKELETONS",
+    "skeleton_path",
+    "Damage",
+    "cap",
+    "short",
+    "checked_dataset",
+    "skeleton_to_group",
+    "skeleton_from_group",
+    "text_attr",
+    "extra_columns",
+]
 
 FORMAT = "torchsplice.motiondb"
 SCHEMA_VERSION = 2
@@ -60,8 +78,14 @@ SCHEMA_VERSION = 2
 (:mod:`torchsplice.store.assembly`), which older versions must refuse rather than misread."""
 STR = h5py.string_dtype()
 COLUMNS = {  # the built-in clip columns: name -> dtype
-    "name": STR, "source": STR, "role": STR, "labels": STR,
-    "skeleton": np.int32, "start": np.int64, "length": np.int64, "fps": np.float64,
+    "name": STR,
+    "source": STR,
+    "role": STR,
+    "labels": STR,
+    "skeleton": np.int32,
+    "start": np.int64,
+    "length": np.int64,
+    "fps": np.float64,
 }
 MIXED = "mixed"  # the file's units or up axis when its skeletons differ in them
 COMPRESSIONS = ("gzip", "lzf", "auto", None)
@@ -115,7 +139,9 @@ def checked_dataset(g: h5py.Group, name: str, where: str, shape: tuple | None = 
         raise Damage(f"{where}/{name} is missing")
     if not isinstance(obj, h5py.Dataset):
         raise Damage(f"{where}/{name} is not a dataset")
-    if shape is not None and (len(obj.shape) != len(shape) or any(w is not None and s != w for s, w in zip(obj.shape, shape))):
+    if shape is not None and (
+        len(obj.shape) != len(shape) or any(w is not None and s != w for s, w in zip(obj.shape, shape))
+    ):
         want = "(" + ", ".join("N" if w is None else str(w) for w in shape) + ("," if len(shape) == 1 else "") + ")"
         raise Damage(f"{where}/{name} has shape {obj.shape}, expected {want}")
     if kind == "str" and h5py.check_string_dtype(obj.dtype) is None:
@@ -131,7 +157,11 @@ def skeleton_from_group(g: h5py.Group, where: str = "skeleton") -> Skeleton:
     J = names.shape[0]
     E = checked_dataset(g, "end_site_parents", where, (None,), "iu").shape[0]
     offsets = checked_dataset(g, "offsets", where, (J, 3), "fiu")[()].astype(np.float64)
-    ends = checked_dataset(g, "end_site_offsets", where, (E, 3) if E else None, "fiu")[()].astype(np.float64).reshape(-1, 3)
+    ends = (
+        checked_dataset(g, "end_site_offsets", where, (E, 3) if E else None, "fiu")[()]
+        .astype(np.float64)
+        .reshape(-1, 3)
+    )
     if not (np.isfinite(offsets).all() and np.isfinite(ends).all()):
         raise Damage(f"{where} has non-finite offsets")
     try:
@@ -171,10 +201,11 @@ def extra_columns(attrs) -> tuple[dict[str, str], tuple[str, ...]]:
     reserved = (*COLUMNS, *FRAME_ARRAYS)
     for name, kind in clip.items():
         if kind not in KINDS or name in reserved or not name.isidentifier():
-            raise Damage(f"extra_columns declares clip column {cap(name)} of kind {cap(kind)} "
-                         f"(a column needs a new name and a kind of {', '.join(KINDS)})")
+            raise Damage(
+                f"extra_columns declares clip column {cap(name)} of kind {cap(kind)} "
+                f"(a column needs a new name and a kind of {', '.join(KINDS)})"
+            )
     for name in frame:
         if not isinstance(name, str) or name in reserved or not name.isidentifier() or frame.count(name) > 1:
             raise Damage(f"extra_columns declares a bad frame column {cap(name)}")
     return dict(clip), tuple(frame)
-

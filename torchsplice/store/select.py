@@ -61,8 +61,10 @@ def parse_selector(text: str, columns: Sequence[str] = (), numbers: Sequence[str
                 raise TorchspliceError(f"selector {part!r}: {compared.group(3)!r} is not a number") from None
             alts.append(("number", compared.group(1), f"{compared.group(2)} {compared.group(3)}"))
         elif compared and numbers:
-            raise TorchspliceError(f"selector {part!r}: {compared.group(1)!r} is not a number column (number columns: "
-                                   f"{', '.join(numbers)})")
+            raise TorchspliceError(
+                f"selector {part!r}: {compared.group(1)!r} is not a number column (number columns: "
+                f"{', '.join(numbers)})"
+            )
         elif part.startswith("role:"):
             alts.append(("role", "", part[5:]))
         elif part.startswith("skeleton:"):
@@ -70,7 +72,7 @@ def parse_selector(text: str, columns: Sequence[str] = (), numbers: Sequence[str
                 raise TorchspliceError(f"selector {part!r} must read skeleton:K, K a skeleton number")
             alts.append(("skeleton", "", str(int(part[9:]))))
         elif prefix and prefix in columns:
-            alts.append(("column", prefix, part[len(prefix) + 1:]))
+            alts.append(("column", prefix, part[len(prefix) + 1 :]))
         elif part.startswith("label:"):
             key, eq, value = part[6:].partition("=")
             if not eq or not key:
@@ -78,8 +80,10 @@ def parse_selector(text: str, columns: Sequence[str] = (), numbers: Sequence[str
             alts.append(("label", key, value))
         elif re.match(r"^[A-Za-z]+:", part):
             known = "".join(f", {c}:VALUE" for c in columns)
-            raise TorchspliceError(f"selector {part!r}: unknown prefix {part.split(':')[0]!r} (use role:NAME, "
-                                   f"label:KEY=VALUE, skeleton:K{known}, or a glob on clip names)")
+            raise TorchspliceError(
+                f"selector {part!r}: unknown prefix {part.split(':')[0]!r} (use role:NAME, "
+                f"label:KEY=VALUE, skeleton:K{known}, or a glob on clip names)"
+            )
         else:
             alts.append(("name", "", part))
     return alts
@@ -109,8 +113,9 @@ def _option(what: str) -> tuple[str, ...]:
     return (what[1:-1],) if what.startswith("{") and what.endswith("}") else ()
 
 
-def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict], skeletons=None,
-                   columns: dict | None = None) -> str:
+def _what_there_is(
+    alts, names: list[str], roles: list[str], labels: list[dict], skeletons=None, columns: dict | None = None
+) -> str:
     """For an error: the database's roles, label keys, skeletons, column values or first clip
     names, as the selector asked."""
     kinds = {kind for kind, _, _ in alts}
@@ -124,8 +129,9 @@ def _what_there_is(alts, names: list[str], roles: list[str], labels: list[dict],
     if kinds == {"column"} and columns and len({key for _, key, _ in alts}) == 1:
         key = alts[0][1]
         values = sorted({str(v) for v in columns[key]})
-        return f"its {key} values: " + (", ".join(repr(v) for v in values[:8]) + (", ..." if len(values) > 8 else "")
-                                        or "none")
+        return f"its {key} values: " + (
+            ", ".join(repr(v) for v in values[:8]) + (", ..." if len(values) > 8 else "") or "none"
+        )
     if kinds == {"role"}:
         return "its roles: " + (", ".join(sorted({r for r in roles if r})) or "none")
     if kinds == {"label"}:
@@ -162,14 +168,18 @@ def select_clips(table: ClipTable, selectors: str | Sequence[str], what: str, so
         for alt in alts:
             hit |= _mask(alt, names, roles, labels, skeletons, columns)
         if not hit.any():
-            raise TorchspliceError(f"{what} {text!r} selects no clip of {source} "
-                                   f"({_what_there_is(alts, names, roles, labels, skeletons, columns)})"
-                                   + _colon_hint(text, [k for k in columns if k not in numbers]),
-                                   options=_option(what))
+            raise TorchspliceError(
+                f"{what} {text!r} selects no clip of {source} "
+                f"({_what_there_is(alts, names, roles, labels, skeletons, columns)})"
+                + _colon_hint(text, [k for k in columns if k not in numbers]),
+                options=_option(what),
+            )
         keep &= hit
     if not keep.any():
-        raise TorchspliceError(f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
-                               options=_option(what))
+        raise TorchspliceError(
+            f"{what} {' and '.join(repr(s) for s in selectors)} together select no clip of {source}",
+            options=_option(what),
+        )
     return np.flatnonzero(keep).tolist()
 
 

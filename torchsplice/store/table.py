@@ -32,8 +32,9 @@ def decode_labels(path, text, clip) -> dict:
     except ValueError:
         labels = None
     if not isinstance(labels, dict):
-        raise DatabaseError(f"{path}: damaged database: the labels of clip {cap(clip, 60)} "
-                            f"are not a JSON object ({cap(text)})")
+        raise DatabaseError(
+            f"{path}: damaged database: the labels of clip {cap(clip, 60)} are not a JSON object ({cap(text)})"
+        )
     return labels
 
 
@@ -80,10 +81,19 @@ class ClipTable:
                 labels.append(dict(decoded[text]))
         for array in columns.values():  # shared by every caller of a database's table
             array.setflags(write=False)
-        return cls(name=columns["name"], source=columns["source"], role=columns["role"], labels=labels,
-                   labels_json=columns["labels"], skeleton=columns["skeleton"], start=columns["start"],
-                   length=columns["length"], fps=columns["fps"],
-                   extra={n: columns[n] for n in kinds}, kinds=dict(kinds))
+        return cls(
+            name=columns["name"],
+            source=columns["source"],
+            role=columns["role"],
+            labels=labels,
+            labels_json=columns["labels"],
+            skeleton=columns["skeleton"],
+            start=columns["start"],
+            length=columns["length"],
+            fps=columns["fps"],
+            extra={n: columns[n] for n in kinds},
+            kinds=dict(kinds),
+        )
 
     def __len__(self) -> int:
         return len(self.name)
@@ -112,10 +122,19 @@ class ClipTable:
         """The table of ``rows`` only (row numbers, or a boolean mask), in that order."""
         rows = np.asarray(rows)
         rows = np.flatnonzero(rows) if rows.dtype == bool else rows.astype(np.intp)
-        return ClipTable(name=self.name[rows], source=self.source[rows], role=self.role[rows],
-                         labels=[self.labels[int(i)] for i in rows], labels_json=self.labels_json[rows],
-                         skeleton=self.skeleton[rows], start=self.start[rows], length=self.length[rows],
-                         fps=self.fps[rows], extra={n: v[rows] for n, v in self.extra.items()}, kinds=dict(self.kinds))
+        return ClipTable(
+            name=self.name[rows],
+            source=self.source[rows],
+            role=self.role[rows],
+            labels=[self.labels[int(i)] for i in rows],
+            labels_json=self.labels_json[rows],
+            skeleton=self.skeleton[rows],
+            start=self.start[rows],
+            length=self.length[rows],
+            fps=self.fps[rows],
+            extra={n: v[rows] for n, v in self.extra.items()},
+            kinds=dict(self.kinds),
+        )
 
     def captures(self) -> list[tuple[str, str, dict]]:
         """``(name, role, labels)`` of every clip: the candidates a reference or ground-truth

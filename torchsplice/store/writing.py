@@ -12,7 +12,6 @@ the disk is checked before each write (:data:`SPACE_MARGIN`).
 from __future__ import annotations
 
 import errno
-import functools
 import json
 import os
 import shutil
@@ -27,8 +26,19 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
 from .checks import control_name
+from .guards import (
+    column_array,
+    dataset_compression,
+    frame_values,
+    grow_rows,
+    guarded,
+    io_failure,
+    mb,
+    no_space,
+    per_clip,
+)
 from .assembly import ALIGNMENT, FRAME_PARTS
-from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, STR, short, skeleton_path, skeleton_to_group
+from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, short, skeleton_path, skeleton_to_group
 
 __all__ = ["Writing", "guarded", "io_failure", "SPACE_MARGIN", "FLUSH_FRAMES"]
 
@@ -36,84 +46,6 @@ FLUSH_FRAMES = 1 << 16
 """Buffered frames that make :meth:`Writing.append` write its buffer."""
 SPACE_MARGIN = 4 << 20
 """Bytes kept free beyond each write, for HDF5's caches and metadata."""
-
-
-def io_failure(exc: BaseException) -> bool:
-    """Whether ``exc`` is HDF5 failing to write the file (a full disk, an I/O error), not a bug."""
-    if isinstance(exc, OSError):
-        return True
-    text = str(exc)
-    return isinstance(exc, RuntimeError) and ("write failed" in text or "errno" in text or "flush" in text)
-
-
-def no_space(exc: BaseException) -> bool:
-    text = str(exc)
-    return getattr(exc, "errno", None) == errno.ENOSPC or "No space left" in text or "errno = 28" in text
-
-
-def mb(n: float) -> str:
-    return f"{n / 1e6:,.1f} MB" if n < 1e9 else f"{n / 1e9:,.2f} GB"
-
-
-def guarded(method):
-    """Make a write method of :class:`MotionDatabase` fail cleanly when the file cannot be written.
-
-    HDF5 cannot carry on after a failed write (a full disk leaves its metadata cache dirty, and
-    closing the file later crashes the process), so the write in progress is discarded at once
-    (:meth:`MotionDatabase.abort`) and one :class:`DatabaseError` line says what happened.
-    """
-    @functools.wraps(method)
-    def wrapper(self, *args, **kwargs):
-        try:
-            return method(self, *args, **kwargs)
-        except (OSError, RuntimeError) as exc:
-            if not io_failure(exc) or self._tmp is None:
-                raise
-            raise DatabaseError(self._write_failed(exc)) from None
-    return wrapper
-
-
-def column_array(columns: dict, name: str, values) -> np.ndarray:
-    """Values of clip-table column ``name`` (built-in or one of ``columns``) as the array its dataset stores."""
-    dt = COLUMNS.get(name) or KINDS[columns[name]][0]
-    return np.array(values, dtype=object if dt is STR else dt)
-
-
-def dataset_compression(policy: str | None, dataset: str) -> str | None:
-    """The filter of one frame dataset under a file's compression policy (see :meth:`MotionDatabase.create`)."""
-    if policy == "auto":
-        return None if dataset == "rotations" else "lzf"
-    return policy
-
-
-def frame_values(values, T: int, column: str, clip: str) -> np.ndarray:
-    """A per-frame column's ``(T,)`` float32 values for one clip (NaN when not given)."""
-    if values is None:
-        return np.full(T, np.nan, dtype=np.float32)
-    a = (values.detach().cpu().numpy() if isinstance(values, torch.Tensor) else np.asarray(values)).astype(np.float32)
-    if a.shape != (T,):
-        raise DatabaseError(f"clip {clip!r}: column {column!r} needs {T} values, got shape {a.shape}")
-    return a
-
-
-def grow_rows(g: h5py.Group, n: int) -> None:
-    """Give every per-frame dataset of the skeleton group ``g`` ``n`` rows: those a write did not
-    fill (an alignment store's parts beside stored frames, and the reverse) are left unwritten,
-    which HDF5 stores as nothing."""
-    for ds in g.values():
-        if isinstance(ds, h5py.Dataset) and ds.maxshape and ds.maxshape[0] is None and ds.shape[0] < n:
-            ds.resize(n, axis=0)
-
-
-def per_clip(v, C: int, what: str, path) -> list:
-    """One value for every one of ``C`` clips (``v`` repeated), or ``C`` values (a sequence or a
-    tensor); one clear error naming ``what`` otherwise."""
-    if isinstance(v, (str, bytes, int, float, np.generic)):
-        return [v] * C
-    out = list(v.detach().cpu().numpy() if isinstance(v, torch.Tensor) else v)
-    if len(out) != C:
-        raise DatabaseError(f"{path}: {what} needs {C} values, got {len(out)}")
-    return out
 
 
 class Writing:
@@ -136,8 +68,11 @@ class Writing:
         if free < nbytes + SPACE_MARGIN:
             # nothing failed yet: a resumable database stays open, so that its writer can
             # checkpoint what it holds (within the margin) before it stops
-            raise DatabaseError(self._write_failed(OSError(errno.ENOSPC, "No space left on device"), nbytes,
-                                                   discard=not self._resumable))
+            raise DatabaseError(
+                self._write_failed(
+                    OSError(errno.ENOSPC, "No space left on device"), nbytes, discard=not self._resumable
+                )
+            )
 
     def _write_failed(self, exc: BaseException, pending: int = 0, discard: bool = True) -> str:
         """Discard the write after ``exc`` (unless not ``discard``) and return the line that says so."""
@@ -150,16 +85,25 @@ class Writing:
         if discard:
             self.abort(failed=True)
         if not no_space(exc):
-            return os_error_message(self.path, exc) if isinstance(exc, OSError) else f"{self.path}: cannot write the file ({short(exc)})"
+            return (
+                os_error_message(self.path, exc)
+                if isinstance(exc, OSError)
+                else f"{self.path}: cannot write the file ({short(exc)})"
+            )
         folder = self.path.parent.resolve()
         free = shutil.disk_usage(folder).free
-        return (f"{self.path}: no space left on the device; the database needs more than {mb(written + pending)} "
-                f"and {folder} has {mb(free)} free ({kept}; free some space and run the command again)")
+        return (
+            f"{self.path}: no space left on the device; the database needs more than {mb(written + pending)} "
+            f"and {folder} has {mb(free)} free ({kept}; free some space and run the command again)"
+        )
 
     def _staged_bytes(self) -> int:
         """Uncompressed bytes of the clips waiting in the buffer (an upper bound of their size)."""
         size = self._dtype.itemsize
-        return sum(m.num_frames * (7 * m.skeleton.num_joints + 3 + len(self.frame_columns)) * size for m, *_ in self._staged)
+        return sum(
+            m.num_frames * (7 * m.skeleton.num_joints + 3 + len(self.frame_columns)) * size for m, *_ in self._staged
+        )
+
     # -- writing ------------------------------------------------------------------------------
     def update_run_record(self, fields: dict) -> None:
         """Update the run record (the root attribute ``run``, JSON written by ``splice-all``)
@@ -192,7 +136,10 @@ class Writing:
         self._writable()
         units = getattr(spec, "units", "") or ""
         up = getattr(spec, "up_axis", "") or ""
-        for key, value in (("units", units), ("up_axis", up)):  # each skeleton keeps its own; the file's is their common one
+        for key, value in (
+            ("units", units),
+            ("up_axis", up),
+        ):  # each skeleton keeps its own; the file's is their common one
             have = str(self.h5.attrs.get(key, ""))
             if value and have and have != value:
                 self.h5.attrs[key] = MIXED
@@ -210,16 +157,37 @@ class Writing:
             shapes["translations"] = (J, 3)
         for name, shape in shapes.items():
             comp = dataset_compression(policy, name)
-            g.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=self._dtype,
-                             chunks=(chunk,) + shape, compression=comp, shuffle=comp is not None)
+            g.create_dataset(
+                name,
+                shape=(0,) + shape,
+                maxshape=(None,) + shape,
+                dtype=self._dtype,
+                chunks=(chunk,) + shape,
+                compression=comp,
+                shuffle=comp is not None,
+            )
         for name in self.frame_columns:
             comp = dataset_compression(policy, name)
-            g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float32, chunks=(chunk,),
-                             compression=comp, shuffle=comp is not None)
+            g.create_dataset(
+                name,
+                shape=(0,),
+                maxshape=(None,),
+                dtype=np.float32,
+                chunks=(chunk,),
+                compression=comp,
+                shuffle=comp is not None,
+            )
         if self.store == ALIGNMENT:  # the per-frame parts of spliced clips (see torchsplice.store.assembly)
             for name, (shape, dt) in FRAME_PARTS.items():
-                g.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dt, chunks=(chunk,) + shape,
-                                 compression="lzf", shuffle=True)
+                g.create_dataset(
+                    name,
+                    shape=(0,) + shape,
+                    maxshape=(None,) + shape,
+                    dtype=dt,
+                    chunks=(chunk,) + shape,
+                    compression="lzf",
+                    shuffle=True,
+                )
         self._skeletons.append(skeleton)
         self._skeleton_ids[id(skeleton)] = (skeleton, k)
         return k
@@ -232,7 +200,9 @@ class Writing:
         ``frame_extra`` per-frame arrays ``(T,)`` of the declared frame columns (missing: NaN).
         """
         extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
-        unknown = [k for k in extra if k not in self._declared] + [k for k in frame_extra if k not in self.frame_columns]
+        unknown = [k for k in extra if k not in self._declared] + [
+            k for k in frame_extra if k not in self.frame_columns
+        ]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         self._writable()
@@ -253,9 +223,23 @@ class Writing:
         return len(self) - 1
 
     @guarded
-    def append_packed(self, skeleton: Skeleton, rotations, root_translation, translations, lengths, names, fps,
-                      spec=None, sources="", roles="", labels=None, extra: dict | None = None,
-                      frame_extra: dict | None = None, check: bool = True) -> None:
+    def append_packed(
+        self,
+        skeleton: Skeleton,
+        rotations,
+        root_translation,
+        translations,
+        lengths,
+        names,
+        fps,
+        spec=None,
+        sources="",
+        roles="",
+        labels=None,
+        extra: dict | None = None,
+        frame_extra: dict | None = None,
+        check: bool = True,
+    ) -> None:
         """Add many clips of one skeleton at once, from arrays packed along frames.
 
         Args:
@@ -281,8 +265,10 @@ class Writing:
         names = [str(n) for n in names]
         C, N, J = len(names), int(lengths.sum()), skeleton.num_joints
         if lengths.shape != (C,) or rot.shape != (N, J, 4) or root.shape != (N, 3) or (lengths < 1).any():
-            raise DatabaseError(f"{self.path}: packed clips do not fit: {C} names, lengths summing to {N}, "
-                                f"rotations {rot.shape}, root translation {root.shape} for {J} joints")
+            raise DatabaseError(
+                f"{self.path}: packed clips do not fit: {C} names, lengths summing to {N}, "
+                f"rotations {rot.shape}, root translation {root.shape} for {J} joints"
+            )
         trans = None if translations is None else arr(translations)
         if trans is not None and trans.shape != (N, J, 3):
             raise DatabaseError(f"{self.path}: translations must be {(N, J, 3)}, got {trans.shape}")
@@ -294,7 +280,9 @@ class Writing:
                 c = int(np.searchsorted(starts, row, side="right") - 1)
                 raise DatabaseError(f"{self.path}: clip {names[c]!r} has non-finite {name} at frame {row - starts[c]}")
         extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
-        unknown = [k for k in extra if k not in self._declared] + [k for k in frame_extra if k not in self.frame_columns]
+        unknown = [k for k in extra if k not in self._declared] + [
+            k for k in frame_extra if k not in self.frame_columns
+        ]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         if C == 0:
@@ -344,8 +332,20 @@ class Writing:
         self._added(index, names)
 
     @guarded
-    def append_virtual(self, source: Path, skeleton: Skeleton, lengths, names, fps, spec=None, sources="", roles="",
-                       labels=None, extra: dict | None = None, refer_as: Path | None = None) -> None:
+    def append_virtual(
+        self,
+        source: Path,
+        skeleton: Skeleton,
+        lengths,
+        names,
+        fps,
+        spec=None,
+        sources="",
+        roles="",
+        labels=None,
+        extra: dict | None = None,
+        refer_as: Path | None = None,
+    ) -> None:
         """Add the clips of skeleton 0 of the database file ``source`` without copying their frames.
 
         The clips' rows go into this file's table; their frames stay in ``source``. When this
@@ -371,7 +371,9 @@ class Writing:
     def _virtual_rows(self, k: int) -> int:
         """The frames skeleton ``k`` reads through virtual datasets so far (it may hold no real ones)."""
         if self.h5[f"{skeleton_path(k)}/rotations"].shape[0]:
-            raise DatabaseError(f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones")
+            raise DatabaseError(
+                f"{self.path}: skeleton {k} already holds real frames; it cannot also take virtual ones"
+            )
         return sum(n for _, n in self._virtual.setdefault(k, []))
 
     def _virtual_source(self, source: Path, refer_as: Path | None) -> str:
@@ -408,7 +410,8 @@ class Writing:
         """The name index, once ``names`` are checked as new, distinct and printable."""
         index = self._index_map()
         clash = [n for n in names if n in index] or (
-            [n for n in names if names.count(n) > 1][:1] if len(set(names)) < len(names) else [])
+            [n for n in names if names.count(n) > 1][:1] if len(set(names)) < len(names) else []
+        )
         if clash:
             raise DatabaseError(f"{self.path}: a clip named {clash[0]!r} is already in the database")
         if (bad := control_name(names)) is not None:
@@ -421,17 +424,24 @@ class Writing:
         C = len(names)
         lengths = np.asarray(lengths, dtype=np.int64).reshape(-1)
         if lengths.shape != (C,) or (lengths < 1).any():
-            raise DatabaseError(f"{self.path}: {C} clip names need {C} lengths of at least one frame, got "
-                                f"{len(lengths)} ({', '.join(map(str, lengths[:6].tolist()))}{', ...' if len(lengths) > 6 else ''})")
+            raise DatabaseError(
+                f"{self.path}: {C} clip names need {C} lengths of at least one frame, got "
+                f"{len(lengths)} ({', '.join(map(str, lengths[:6].tolist()))}{', ...' if len(lengths) > 6 else ''})"
+            )
         unknown = [n for n in extra if n not in self._declared]
         if unknown:
             raise DatabaseError(f"{self.path}: no extra column {unknown[0]!r} was declared")
         each = lambda v, what: per_clip(v, C, what, self.path)  # noqa: E731
         rows = {
-            "name": names, "source": each(sources, "source"), "role": each(roles, "role"),
-            "labels": [v if isinstance(v, str) else json.dumps(v, sort_keys=True)
-                       for v in each(labels if labels is not None else "{}", "labels")],
-            "length": lengths, "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
+            "name": names,
+            "source": each(sources, "source"),
+            "role": each(roles, "role"),
+            "labels": [
+                v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+                for v in each(labels if labels is not None else "{}", "labels")
+            ],
+            "length": lengths,
+            "fps": each(float(fps) if np.ndim(fps) == 0 else fps, "fps"),
         }
         for n, kind in self._declared.items():
             rows[n] = each(extra[n], f"column {n!r}") if n in extra else [KINDS[kind][1]] * C
@@ -457,7 +467,9 @@ class Writing:
                 layout = h5py.VirtualLayout(shape=shape, dtype=dtype)
                 at = 0
                 for rel, n in parts:
-                    layout[at:at + n] = h5py.VirtualSource(rel, f"{skeleton_path(0)}/{name}", shape=(n,) + ds.shape[1:])
+                    layout[at : at + n] = h5py.VirtualSource(
+                        rel, f"{skeleton_path(0)}/{name}", shape=(n,) + ds.shape[1:]
+                    )
                     at += n
                 del g[name]
                 g.create_virtual_dataset(name, layout, fillvalue=np.nan)
@@ -495,7 +507,9 @@ class Writing:
             if "translations" in g:
                 arrays["translations"] = torch.cat([m.local_translations().detach().cpu() for m, _ in staged]).numpy()
             for name in self.frame_columns:
-                arrays[name] = np.concatenate([frame_values(fx.get(name), m.num_frames, name, m.name) for m, fx in staged])
+                arrays[name] = np.concatenate(
+                    [frame_values(fx.get(name), m.num_frames, name, m.name) for m, fx in staged]
+                )
             for name, a in arrays.items():
                 ds = g[name]
                 ds.resize(n0 + a.shape[0], axis=0)
