@@ -611,7 +611,7 @@ def _same_content(a: Path, b: Path, rows: int = 1 << 20) -> bool:
 
 def bench_mix(files: list[Path], device: str, mix_db: Path | None) -> None:
     """The real workload: normal-style Bandai Namco locomotions x every action clip (nearly all of
-    them standing actions), as a user runs it (see README, "Speed")."""
+    them standing actions), as a user runs it (see docs/reference/speed.md)."""
     from torchsplice.cli import main as cli
     from torchsplice.store.database import MotionDatabase
     from torchsplice.job.size import format_bytes

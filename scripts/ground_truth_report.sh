@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Reproduce the evaluation on the real Bandai Namco ground-truth sets:
 # import the clips, splice every style's straight walk onto every normal-style locomotion with
-# all three methods, and write out/ground_truth/report.md (numbers quoted in the README).
+# all three methods, and write out/ground_truth/report.md (numbers quoted in docs/pictures.md).
 # Real data: ../shared/mocap (or $TORCHSPLICE_MOCAP).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -22,7 +22,8 @@ if ! python -c "import torch" >/dev/null 2>&1; then
   _pip install "${TORCHSPLICE_TORCH:-torch==2.13.0}" \
     ${TORCHSPLICE_TORCH_INDEX:+--index-url "$TORCHSPLICE_TORCH_INDEX"}
 fi
-# extras: the tests also install Ray (TORCHSPLICE_EXTRAS=test,ray, set by scripts/test.sh)
+# extras: the tests also install Ray and the documentation's tools (TORCHSPLICE_EXTRAS=test,ray,docs, set by
+# scripts/test.sh)
 _extras="${TORCHSPLICE_EXTRAS:-test}"
 # The stamp holds the pyproject.toml checksum and the extras installed: a later run with fewer
 # extras (the demo after the tests) reuses the environment instead of reinstalling.

@@ -6,6 +6,7 @@
 # The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
 # apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
 # tests skip, saying why. Under CI=true, missing real data or browser fail those tests instead.
+# The docs extra (mkdocs) lets tests/test_docs.py build the documentation site strictly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 all=0
@@ -18,7 +19,7 @@ if ! { command -v chromium >/dev/null && command -v chromedriver >/dev/null; } \
   apt-get update -qq >/dev/null
   apt-get install -y -qq --no-install-recommends chromium chromium-driver >/dev/null
 fi
-TORCHSPLICE_EXTRAS="test,ray" . scripts/setup_env.sh
+TORCHSPLICE_EXTRAS="test,ray,docs" . scripts/setup_env.sh
 if [ "$all" = 0 ]; then
   echo "test: the quick suite (tests marked slow left out; --all runs them too)" >&2
   set -- -m "not slow" "$@"

@@ -86,3 +86,15 @@ def runs_with_raised_hands(tmp_path_factory):
     splice_all(db, folder / "raw.h5", keep_hands_out=False, **select)
     splice_all(db, folder / "out.h5", **select)
     return db, folder / "raw.h5", folder / "out.h5"
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``gpu`` skip, saying so, where torch sees no CUDA device."""
+    gpu = [item for item in items if item.get_closest_marker("gpu")]
+    if not gpu:
+        return
+    import torch
+
+    if not torch.cuda.is_available():
+        for item in gpu:
+            item.add_marker(pytest.mark.skip(reason="gpu: no CUDA device on this machine"))

@@ -248,7 +248,7 @@ def test_a_gpu_collate_in_a_worker_process_is_one_line(sample_jobs, monkeypatch)
         MotionDataset(sample_jobs[1], assemble_on="cpu", preload=True)
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+@pytest.mark.gpu
 def test_a_dataset_assembles_its_batches_on_the_gpu(sample_jobs):
     for got, want in _device_batches(sample_jobs[1], "cuda", ["rotations", "positions"]):
         assert got["rotations"].device.type == "cuda" and got["mask"].device.type == "cuda"
@@ -339,7 +339,7 @@ def test_the_torch_assembly_for_gpus_gives_the_kernels_frames(sample_jobs):
     assert _torch_against_kernels(sample_jobs[1]) <= 1e-5
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+@pytest.mark.gpu
 def test_a_batch_asked_for_on_a_gpu_is_assembled_there(sample_jobs):
     with MotionDatabase.open(sample_jobs[1]) as a, MotionDatabase.open(sample_jobs[0]) as m:
         ba, bm = a.read_batch(list(range(12)), device="cuda"), m.read_batch(list(range(12)))

@@ -323,7 +323,7 @@ def test_bad_shapes_and_arguments_raise():
             call()
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA not available")
+@pytest.mark.gpu
 def test_cuda_matches_cpu():
     g = torch.Generator().manual_seed(100)
     a, b = random_clips(g, (2, 30, 3), torch.float64), random_clips(g, (2, 40, 3), torch.float64)

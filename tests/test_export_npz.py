@@ -331,17 +331,19 @@ def test_library_export_without_the_command_line(db, bandai_names, tmp_path):
         NpzExport(db, features="9d")
 
 
-def test_the_readme_npz_snippet_runs(db, bandai_names, tmp_path, capsys, monkeypatch):
+def test_the_docs_npz_snippet_runs(db, bandai_names, tmp_path, capsys, monkeypatch):
+    """The Python block of docs/npz.md reads a packed export and normalises it."""
     import re
 
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    start = text.index("### Exporting for other tools (.npz)")
+    page = Path(__file__).resolve().parents[1] / "docs" / "npz.md"
+    text = page.read_text()
+    start = text.index("# Exporting for other tools (.npz)")
     code = re.search(r"```python\n(.*?)```", text[start:], re.S).group(1)
     rc, _, err = run(capsys, "export", db, *bandai_names, "--packed", "--features", "6d", "-o", tmp_path / "train.npz", "-q")
     assert rc == 0, err
     monkeypatch.chdir(tmp_path)
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)
+    exec(compile(code, str(page), "exec"), scope)
     x, first, z = scope["x"], scope["first"], scope["z"]
     with MotionDatabase.open(db) as d:
         assert first.shape == (d.clip_info(str(z["names"][0]))["length"], 22, 6)

@@ -190,17 +190,17 @@ def test_11_long_titles_fit_their_panels_on_two_lines():
     assert all(len(ln) <= int(72 / (0.6 * 8)) for ln in text.split("\n"))
 
 
-def test_10_the_readme_says_what_info_shows_of_bandai_namcos_skeletons(mocap_dir, tmp_path, capsys):
-    """The README's figures (clips per skeleton and dataset, the Head End Sites' distance) are
-    what importing the Bandai Namco clips of ../shared/mocap gives and ``info`` prints."""
+def test_10_the_docs_say_what_info_shows_of_bandai_namcos_skeletons(mocap_dir, tmp_path, capsys):
+    """The figures of docs/mixing.md (clips per skeleton and dataset, the Head End Sites' distance)
+    are what importing the Bandai Namco clips of ../shared/mocap gives and ``info`` prints."""
     import re
 
     from conftest import REPO
 
     said = re.search(r"shows skeleton 0 \((\d+) clips of dataset 1\) and\s+skeleton 1 \((\d+) of dataset 1 and (\d+) "
                      r"of dataset 2\): the same (\d+) joints, their Head End Site (\d+) cm\s+apart",
-                     (REPO / "README.md").read_text())
-    assert said, "the README no longer says what info shows of Bandai Namco's skeletons"
+                     (REPO / "docs" / "mixing.md").read_text())
+    assert said, "docs/mixing.md no longer says what info shows of Bandai Namco's skeletons"
     db = tmp_path / "bandai.h5"
     assert main(["import", str(mocap_dir / BANDAI), "-o", str(db), "-q"]) == 0
     rc, text, _ = run(capsys, "info", db, "--limit", "0")
@@ -349,7 +349,8 @@ def test_per_clip_metrics_as_csv_for_any_database(sample_db, tmp_path, capsys):
 
 def test_11_the_demo_draws_the_pair_where_the_naive_splice_loses_the_actions_posture_most():
     """The demo's preview pair is, of the sample's 25, the one whose naive and method's splices
-    differ most in mean trunk lean, and the README's figures for it hold: the box carrier leans
+    differ most in mean trunk lean, and the figures the README and the docs' home page give for it
+    hold (both describe the picture): the box carrier leans
     back about 12 degrees, the method's splice keeps it, the naive one stands at about 5."""
     from test_splice import leans
     from torchsplice.sample import sample_motions
@@ -373,8 +374,9 @@ def test_11_the_demo_draws_the_pair_where_the_naive_splice_loses_the_actions_pos
     assert abs(lean["jog", "carry_box", "naive"] + 5) < 1
     demo = (Path(__file__).resolve().parents[1] / "scripts" / "demo.sh").read_text()
     assert "--overlay jog+carry_box jog+carry_box.naive" in demo
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    assert "leans back (12 degrees" in readme and "stands straighter (5 degrees)" in readme
+    for page in ("README.md", "docs/index.md"):
+        text = (Path(__file__).resolve().parents[1] / page).read_text()
+        assert "leans back (12 degrees" in text and "stands straighter (5 degrees)" in text, page
 
 
 def test_every_export_of_several_clips_writes_an_index_and_splits_by_source_clip(sample_db, tmp_path, capsys):

@@ -98,7 +98,7 @@ def test_shape_errors():
         forward_kinematics(torch.zeros(5, 4, 4), torch.zeros(4, 3), sk.offsets, sk.parents)
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+@pytest.mark.gpu
 def test_cuda_matches_cpu():
     sk = chain()
     rot = random_quat((2, 9, 4), generator=torch.Generator().manual_seed(2))

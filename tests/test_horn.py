@@ -134,7 +134,7 @@ def test_bad_shapes_raise(fn):
         fn(torch.zeros(4, 3), torch.zeros(4, 3), torch.ones(5))
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA not available")
+@pytest.mark.gpu
 def test_cuda_matches_cpu():
     g = torch.Generator().manual_seed(7)
     q = random_quat((64,), dtype=torch.float64, generator=g)

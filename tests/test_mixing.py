@@ -53,7 +53,7 @@ def topology_classes(mocap_dir) -> dict[str, str]:
 
 
 def test_which_shipped_datasets_share_a_topology(mocap_dir):
-    """The table in README "Mixing datasets"."""
+    """The table in docs/mixing.md."""
     assert topology_classes(mocap_dir) == {
         "bandai_namco session 1": "bandai_namco session 1", "bandai_namco session 2": "bandai_namco session 1",
         "cmu": "cmu", "cmu_max": "cmu_max", "lafan1": "lafan1", "sample": "lafan1"}

@@ -129,3 +129,54 @@ def test_a_registered_backend_runs_the_job_from_python_and_the_command_line(toy,
     assert code == 0, err
     cli_names, cli_rotations = _frames(tmp_path / "cli.h5")
     assert cli_names == names and all(torch.equal(a, b) for a, b in zip(cli_rotations, rotations))
+
+
+class _Declared:
+    """Backends that declare only where they run and how strongly ``"auto"`` prefers them."""
+
+    @staticmethod
+    def make(name: str, devices, priority: int, available: bool = True):
+        from torchsplice.splice.backends import Backend
+
+        return type(name, (Backend,), {"name": name, "devices": devices, "priority": priority,
+                                       "available": lambda self: available})
+
+
+@pytest.fixture
+def registry(monkeypatch):
+    """Registrations undone after the test: ``"auto"`` elsewhere sees the built-in backends only."""
+    import torchsplice.splice.backends as backends
+
+    monkeypatch.setattr(backends, "_REGISTRY", dict(backends._REGISTRY))
+    monkeypatch.setattr(backends, "_INSTANCES", dict(backends._INSTANCES))
+    return backends
+
+
+def test_auto_chooses_the_highest_priority_backend_that_runs_on_the_device(registry):
+    from torchsplice.cpu import available
+
+    builtin_cpu = "compiled" if available() else "torch"
+    assert registry.resolve_backend("auto", None) == builtin_cpu
+    assert registry.resolve_backend("auto", "cuda") == "torch"  # the compiled splicer runs on the CPU only
+    registry.register_backend("gpu", _Declared.make("gpu", ("cuda",), 50))
+    assert registry.resolve_backend("auto", "cuda:1") == "gpu"
+    assert registry.resolve_backend("auto", None) == builtin_cpu  # not on the CPU: the built-in choice stands
+    registry.register_backend("slow-everywhere", _Declared.make("slow-everywhere", None, -1))
+    assert registry.resolve_backend("auto", "mps") == "torch"  # the torch backend (0) beats a lower priority
+    registry.register_backend("gone", _Declared.make("gone", None, 99, available=False))
+    assert registry.resolve_backend("auto", None) == builtin_cpu  # an unavailable backend is never chosen
+    registry.register_backend("twin", _Declared.make("twin", ("cuda",), 50))
+    assert registry.resolve_backend("auto", "cuda") == "gpu"  # equals: the first registered
+
+
+def test_a_backend_named_for_a_device_it_does_not_run_on_says_which_do(registry):
+    registry.register_backend("gpu", _Declared.make("gpu", ("cuda",), 50))
+    from torchsplice.cpu import available
+
+    on_cpu = "'compiled' or 'torch'" if available() else "'torch'"
+    with pytest.raises(TorchspliceError, match=f"the gpu backend runs on cuda devices; device None needs backend "
+                                               f"{on_cpu} or 'auto'"):
+        registry.resolve_backend("gpu", None)
+    with pytest.raises(TorchspliceError, match=r"the compiled backend runs on the CPU; device 'cuda' needs backend "
+                                               r"'torch' or 'gpu' or 'auto'"):
+        registry.resolve_backend("compiled", "cuda")

@@ -201,16 +201,18 @@ def test_a_rename_failing_while_installing_puts_everything_back(sample_db, tmp_p
     assert everything(tmp_path) == sorted(["out", *(f"out/{f.name}" for f in first.files + first.index_files)])
 
 
-def test_the_readme_format_snippet_runs(sample_db, tmp_path, monkeypatch):
+def test_the_docs_format_snippet_runs(sample_db, tmp_path, monkeypatch):
+    """The export format snippet of docs/plugins.md registers a format and exports with it."""
     import re
     import shutil
 
-    text = (REPO / "README.md").read_text()
+    page = REPO / "docs" / "plugins.md"
+    text = page.read_text()
     start = text.index("**Exports from Python, and other formats.**")
     code = re.search(r"```python\n(.*?)```", text[start:], re.S).group(1)
     shutil.copy(sample_db, tmp_path / "sample.h5")
     monkeypatch.chdir(tmp_path)
-    exec(compile(code, "README.md", "exec"), {})
+    exec(compile(code, str(page), "exec"), {})
     with MotionDatabase.open(sample_db) as d:
         names = d.names
         walk = d.read("walk_curve", dtype=torch.float64)

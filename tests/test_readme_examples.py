@@ -1,8 +1,12 @@
-"""The README's Python snippets run as written, on real Bandai Namco clips.
+"""The snippets of the README and of the documentation's pages run as written, on real Bandai
+Namco clips, each read from the page it lives on (``docs/*.md``), so the pages cannot drift
+from the code.
 
-The training snippet ("Reading the output for training") filters a spliced database by the
-action's style label and reads the character's trajectory; the h5py snippet reads the layout
-with plain h5py. Both are taken from README.md itself, so the README cannot drift from the code.
+The README's three commands and its Python give the same database; the training snippet
+(docs/training.md) filters a spliced database by the action's style label and reads the
+character's trajectory; the h5py snippet (docs/python.md) reads the layout with plain h5py; and,
+marked slow, every block of the README and of the pages, in the site's order, runs in one fresh
+clone as a reader runs them.
 """
 
 from __future__ import annotations
@@ -17,18 +21,29 @@ import torch
 
 from torchsplice.cli import main
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+REPO = Path(__file__).resolve().parents[1]
+README = REPO / "README.md"
+DOCS = REPO / "docs"
 BANDAI = ["dataset-1_walk_normal_001", "dataset-2_walk-turn-left_normal_025",
           "dataset-1_walk_old_001", "dataset-1_walk_proud_001", "dataset-1_walk_sad_001"]
 
 
-def snippet(after_heading: str) -> str:
-    """The first ```python block after the heading ``after_heading``."""
-    text = README.read_text()
+def page_path(page: str) -> Path:
+    """``README.md``, or a documentation page by its path under ``docs/`` (``training.md``)."""
+    return README if page == "README.md" else DOCS / page
+
+
+def snippet(after_heading: str, page: str = "README.md") -> str:
+    """The first ```python block after the heading ``after_heading`` on ``page``."""
+    text = page_path(page).read_text()
     start = text.index(after_heading)
     m = re.search(r"```python\n(.*?)```", text[start:], re.S)
-    assert m, f"no python block after {after_heading!r}"
+    assert m, f"no python block after {after_heading!r} in {page}"
     return m.group(1)
+
+
+def run_snippet(code: str, page: str, scope: dict) -> None:
+    exec(compile(code, str(page_path(page)), "exec"), scope)
 
 
 @pytest.fixture(scope="module")
@@ -46,11 +61,11 @@ def spliced(mocap_dir, tmp_path_factory) -> Path:
 
 
 def test_the_training_snippet_runs_and_selects_by_the_actions_style(spliced, monkeypatch):
-    code = snippet("## Reading the output for training")
+    code = snippet("# Reading the output for training", "training.md")
     assert '"labels.action.style"' in code and '"trajectory"' in code
     monkeypatch.chdir(spliced)
     scope: dict = {}
-    exec(compile(code.replace("...", "pass"), "README.md", "exec"), scope)
+    run_snippet(code.replace("...", "pass"), "training.md", scope)
     ds, batch = scope["ds"], scope["batch"]
     styles = {ds.table["labels"][i] for i in range(ds.num_clips)}
     assert ds.num_clips == 4  # old and proud, each onto two locomotions; sad is filtered out
@@ -74,12 +89,12 @@ def test_the_trajectory_is_the_characters_world_position_where_root_translation_
 
 
 def test_the_h5py_snippet_runs_and_names_the_trajectory_joint(spliced, monkeypatch):
-    code = snippet("### Reading a database without torchsplice")
+    code = snippet("## Reading a database without torchsplice", "python.md")
     monkeypatch.chdir(spliced)
     shutil.copy(spliced / "bandai.h5", spliced / "clips.h5")
     code = code.replace('names.index("walk_straight")', 'names.index("dataset-1_walk_old_001")')
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)
+    run_snippet(code, "python.md", scope)
     assert scope["trajectory_joint"] == "Hips"
     assert scope["rotations"].shape[1:] == (22, 4) and scope["labels"]["style"] == "old"
     os.remove(spliced / "clips.h5")
@@ -104,11 +119,11 @@ def test_the_pipeline_snippet_imports_and_splices_like_the_commands(spliced, tmp
     import h5py
     import numpy as np
 
-    code = snippet("### The whole pipeline from Python")
+    code = snippet("## The whole pipeline from Python", "python.md")
     shutil.copytree(spliced / "bvh", tmp_path / "bvh")
     monkeypatch.chdir(tmp_path)
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)
+    run_snippet(code, "python.md", scope)
     report, summary = scope["report"], scope["summary"]
     assert sorted(c.name for c in report.imported) == sorted(BANDAI) and report.skipped == []
     assert "spliced" in capsys.readouterr().out
@@ -134,7 +149,7 @@ def test_the_plugin_snippet_registers_a_method_every_command_takes(spliced):
     from torchsplice.specs import DatasetSpec
 
     if "locomotion_only" not in available_methods():
-        exec(compile(snippet("**Plug-in methods.**"), "README.md", "exec"), {})
+        run_snippet(snippet("**Plug-in methods.**", "plugins.md"), "plugins.md", {})
     assert get_method("locomotion_only").description == "the locomotion unchanged"
     with MotionDatabase.open(spliced / "bandai.h5") as db:
         loco, act = db.read(BANDAI[1]), db.read(BANDAI[2])
@@ -144,11 +159,11 @@ def test_the_plugin_snippet_registers_a_method_every_command_takes(spliced):
     assert torch.equal(r.motion.rotations, loco.rotations.to(r.motion.rotations.dtype))
 
 
-def _bash_block(after_heading: str) -> list[list[str]]:
-    """The commands of the first ```bash block after ``after_heading`` (continued lines joined)."""
+def _bash_block(after_heading: str, page: str = "README.md") -> list[list[str]]:
+    """The commands of the first ```bash block after ``after_heading`` on ``page`` (continued lines joined)."""
     import shlex
 
-    text = README.read_text()
+    text = page_path(page).read_text()
     start = text.index(after_heading)
     m = re.search(r"```bash\n(.*?)```", text[start:], re.S)
     assert m, f"no bash block after {after_heading!r}"
@@ -159,12 +174,12 @@ def _bash_block(after_heading: str) -> list[list[str]]:
 def test_the_humanml3d_commands_and_the_loader_snippet_run_as_written(spliced, tmp_path, monkeypatch, capsys):
     """The "Train a text-to-motion model on it" commands on the Bandai Namco splices, then its
     Python snippet reading the folder as MDM does."""
-    heading = "## Train a text-to-motion model on it"
-    commands = _bash_block(heading)
+    heading = "# Train a text-to-motion model on it"
+    commands = _bash_block(heading, "humanml3d.md")
     assert [c[:2] for c in commands] == [["torchsplice", "export"], ["torchsplice", "export"], ["torchsplice", "import"]]
     shutil.copy(spliced / "spliced.h5", tmp_path / "spliced.h5")
-    (tmp_path / "datasets_spec").mkdir()  # the README's commands run from the repository's root
-    shutil.copy(README.parent / "datasets_spec" / "captions_example.json", tmp_path / "datasets_spec")
+    (tmp_path / "datasets_spec").mkdir()  # the page's commands run from the repository's root
+    shutil.copy(REPO / "datasets_spec" / "captions_example.json", tmp_path / "datasets_spec")
     monkeypatch.chdir(tmp_path)
     for c in commands:
         assert main(c[1:] + ["-q"]) == 0, c
@@ -182,19 +197,19 @@ def test_the_humanml3d_commands_and_the_loader_snippet_run_as_written(spliced, t
         assert len(d) == 2 * count and d.skeleton_info(0).spec_name == "smpl22"
     texts = " ".join(p.read_text() for p in (tmp_path / "HumanML3D_windows" / "texts").glob("*.txt"))
     assert "while shuffling along" in texts
-    code = snippet(heading)
+    code = snippet(heading, "humanml3d.md")
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)
+    run_snippet(code, "humanml3d.md", scope)
     assert scope["motion"].shape[1] == 263 and len(scope["tokens"].split()) >= 3
 
 
 def test_the_python_api_snippet_runs_as_written_in_a_fresh_folder(tmp_path, monkeypatch):
     """Every name it uses is defined in it (the built-in sample, no data), and it runs twice."""
-    code = snippet("## Python API")
+    code = snippet("# Python API", "python.md")
     monkeypatch.chdir(tmp_path)
     for _ in range(2):  # a reader who runs it again gets no "already exists"
         scope: dict = {}
-        exec(compile(code, "README.md", "exec"), scope)
+        run_snippet(code, "python.md", scope)
     assert scope["result"].motion.num_frames > 0 and len(scope["results"]) == 2
     assert scope["pos"].shape[-1] == 3 and scope["clip"].name == "walk_straight"
 
@@ -208,7 +223,7 @@ def test_the_n_x_m_block_and_the_pipeline_snippet_run_in_order_in_one_folder(spl
     shutil.copy(spliced / "bandai.h5", tmp_path / "bandai.h5")
     shutil.copytree(spliced / "bvh", tmp_path / "bvh")
     monkeypatch.chdir(tmp_path)
-    commands = _bash_block("## The n x m job")
+    commands = _bash_block("# The n x m job", "job.md")
     assert [c[0] for c in commands] == ["torchsplice", "torchsplice", "python"]
     for c in commands:
         if c[0] == "torchsplice":
@@ -220,18 +235,58 @@ def test_the_n_x_m_block_and_the_pipeline_snippet_run_in_order_in_one_folder(spl
             assert out.returncode == 0, out.stderr
     outputs = [c[c.index("-o") + 1] for c in commands]
     assert len(set(outputs)) == len(outputs) and all((tmp_path / o).is_file() for o in outputs)
-    code = snippet("### The whole pipeline from Python")
+    code = snippet("## The whole pipeline from Python", "python.md")
     for _ in range(2):
         scope: dict = {}
-        exec(compile(code, "README.md", "exec"), scope)
+        run_snippet(code, "python.md", scope)
         assert scope["summary"].spliced > 0
     capsys.readouterr()
 
 
-# --- the whole README, block by block, as a reader runs it ------------------------------------
+def test_the_readmes_three_commands_and_its_python_give_the_same_database(mocap_dir, tmp_path, monkeypatch, capsys):
+    """The README's "Three commands" on a folder of Bandai Namco takes, then "The same in Python"
+    in another folder: the same spliced clips bit for bit, the same packed file's frames, and a
+    dataset item of the shape the comment says."""
+    import h5py
+    import numpy as np
 
-#: the reader's own files, which the README names but cannot make: Bandai Namco takes (a few of
-#: the shared ones, covering every clip the README names, both of its skeletons, the styles the
+    bandai = mocap_dir / "bandai_namco_research_motiondataset"
+    commands = _bash_block("## Three commands")
+    assert [c[:2] for c in commands] == [["torchsplice", "import"], ["torchsplice", "splice-all"],
+                                         ["torchsplice", "export"]]
+    code = snippet("## The same in Python")
+    assert "from torchsplice import import_bvh, splice_all, export_clips, MotionDataset" in code
+    runs = {}
+    for how in ("commands", "python"):
+        folder = tmp_path / how
+        (folder / "path" / "to" / "bvh").mkdir(parents=True)
+        for stem in BANDAI + ["dataset-2_wave-right-hand_normal_001"]:
+            shutil.copy(bandai / f"{stem}.bvh", folder / "path" / "to" / "bvh")
+        monkeypatch.chdir(folder)
+        if how == "commands":
+            for c in commands:
+                extra = ["--workers", "1"] if c[1] == "splice-all" else []
+                assert main(c[1:] + ["-q", *extra]) == 0, c
+        else:
+            scope: dict = {}
+            run_snippet(code, "README.md", scope)
+            item, ds = scope["item"], scope["ds"]
+            assert item["rotations_6d"].shape == (60, 22, 6) and item["trajectory"].shape == (60, 3)
+            assert len(ds) > 0 and scope["summary"].spliced > 0
+        with h5py.File(folder / "mocap_spliced.h5", "r") as f:
+            runs[how] = (list(f["clips/name"].asstr()[()]), f["skeletons/0/rotations"][()])
+        with np.load(folder / "mocap_spliced.npz") as z:
+            runs[how] += (z["rotations_6d"], z["offsets"])
+    capsys.readouterr()
+    (names, rot, six, offsets), (names2, rot2, six2, offsets2) = runs["commands"], runs["python"]
+    assert names == names2 and len(names) > 0
+    assert np.array_equal(rot, rot2) and np.array_equal(six, six2) and np.array_equal(offsets, offsets2)
+
+
+# --- the README and every page, block by block, as a reader runs them -------------------------
+
+#: the reader's own files, which the pages name but cannot make: Bandai Namco takes (a few of
+#: the shared ones, covering every clip the pages name, both of its skeletons, the styles the
 #: training snippet filters, actions and locomotions), CMU and LAFAN1 folders, and a captions file
 READER_BANDAI = [
     "dataset-1_bye_normal_001", "dataset-1_run_normal_001", "dataset-1_walk_normal_001",
@@ -239,8 +294,10 @@ READER_BANDAI = [
     "dataset-1_punch_normal_001", "dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025",
     "dataset-2_walk_elderly_006", "dataset-2_wave-right-hand_normal_001",
 ]
+#: the folders of Bandai Namco takes the pages import from
+READER_FOLDERS = ("path/to/bvh", "path/to/bandai_namco", "bandai_namco")
 
-#: README lines the walkthrough does not run, each with why (every one must still be in the README)
+#: lines the walkthrough does not run, each with why (every one must still be on a page)
 NOT_RUN = {
     "bash scripts/test.sh": "the command running this test",
     "ray start --head --port 6379 --num-cpus 16": "starts a cluster across machines; "
@@ -250,21 +307,37 @@ NOT_RUN = {
 }
 
 
-def readme_blocks() -> list[tuple[int, str, str, str]]:
-    """Every fenced block of README.md, in order: (line, heading, language, text)."""
-    text = README.read_text()
-    blocks, heading = [], ""
-    for m in re.finditer(r"^(#+ [^\n]*)$|^```(\w*)\n(.*?)^```$", text, re.M | re.S):
-        if m.group(1):
-            heading = m.group(1)
-        else:
-            blocks.append((text.count("\n", 0, m.start()) + 1, heading, m.group(2), m.group(3)))
+def reading_order() -> list[str]:
+    """README.md, then every page of the site in the order of mkdocs.yml's ``nav``."""
+    nav = (REPO / "mkdocs.yml").read_text().split("\nnav:", 1)[1]
+    pages = re.findall(r"^\s+-\s+(?:[^:\n]+:\s+)?(\S+\.md)\s*$", nav, re.M)
+    assert pages and len(pages) == len(set(pages)), pages
+    return ["README.md", *pages]
+
+
+def test_every_page_with_commands_is_in_the_sites_order():
+    """The walkthrough's order holds every page of docs/ (a page left out of the nav would not run)."""
+    on_disk = {str(p.relative_to(DOCS)) for p in DOCS.rglob("*.md")}
+    assert set(reading_order()[1:]) == on_disk
+
+
+def readme_blocks() -> list[tuple[str, str, str, str]]:
+    """Every fenced block of the README and the pages, in reading order: (where, heading, language, text)."""
+    blocks = []
+    for page in reading_order():
+        text, heading = page_path(page).read_text(), ""
+        for m in re.finditer(r"^(#+ [^\n]*)$|^```(\w*)\n(.*?)^```$", text, re.M | re.S):
+            if m.group(1):
+                heading = m.group(1)
+            else:
+                where = f"{page} line {text.count(chr(10), 0, m.start()) + 1}"
+                blocks.append((where, heading, m.group(2), m.group(3)))
     return blocks
 
 
 def _reader_clone(repo: Path, dest: Path) -> None:
     """The repository's files (tracked, or new and not ignored) in ``dest``, as a git work tree
-    whose status shows what running the README leaves behind; its .venv is the repository's."""
+    whose status shows what running the pages leaves behind; its .venv is the repository's."""
     import subprocess
 
     files = subprocess.run(["git", "-C", str(repo), "ls-files", "-co", "--exclude-standard", "-z"],
@@ -281,23 +354,27 @@ def _reader_clone(repo: Path, dest: Path) -> None:
 @pytest.mark.slow
 def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path):
     """A reader's first hour: a fresh copy of the repository, their data beside the commands, and
-    every block of the README run top to bottom in that one folder (bash blocks by bash, Python
-    blocks by python, both from the repository root), each exiting 0; afterwards nothing the README
-    wrote is left untracked in the repository (git status), what it wrote is what it names (the
-    outputs .gitignore keeps out of commits), and no command left a work file behind."""
+    every block of the README and then of each page of the site (in the nav's order) run top to
+    bottom in that one folder (bash blocks by bash, Python blocks by python, both from the
+    repository root), each exiting 0; afterwards nothing they wrote is left untracked in the
+    repository (git status), what they wrote is what they name (the outputs .gitignore keeps out
+    of commits), and no command left a work file behind."""
     import subprocess
     import sys
 
-    repo = README.parent
+    repo = REPO
     if shutil.which("git") is None or not (repo / ".git").exists():
         pytest.skip("needs git and a git checkout (the copy is made from its files)")
     if not (repo / ".venv" / "bin" / "activate").is_file():
         pytest.skip("needs the repository's .venv (bash scripts/setup_env.sh makes it)")
+    # the shared .venv brought up to date by the repository itself first: the clone's set-up then finds it
+    # current, and never reinstalls the package from the clone (which this test deletes)
+    subprocess.run(["bash", "scripts/setup_env.sh"], cwd=repo, check=True, capture_output=True, timeout=1800)
     clone = tmp_path / "torchsplice"
     clone.mkdir()
     _reader_clone(repo, clone)
     bandai = mocap_dir / "bandai_namco_research_motiondataset"
-    for folder in ("path/to/bandai_namco", "bandai_namco"):
+    for folder in READER_FOLDERS:
         (clone / folder).mkdir(parents=True)
         for stem in READER_BANDAI:
             shutil.copy(bandai / f"{stem}.bvh", clone / folder)
@@ -311,11 +388,11 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
     scripts = tmp_path / "blocks"  # outside the clone, so that Python imports the installed package
     scripts.mkdir()
     skipped, ran = set(), 0
-    for line, heading, lang, text in readme_blocks():
-        if lang == "":
-            assert not re.search(r"^(torchsplice|python|bash) ", text, re.M), f"README line {line}: a command block without a language"
-            continue  # a listing or an output, nothing to run
-        assert lang in ("bash", "python"), f"README line {line}: a ```{lang} block the walkthrough cannot run"
+    for n, (where, heading, lang, text) in enumerate(readme_blocks()):
+        if lang in ("", "text"):
+            assert not re.search(r"^(torchsplice|python|bash) ", text, re.M), f"{where}: a command block without a language"
+            continue  # a listing, an output or an install line, nothing to run
+        assert lang in ("bash", "python"), f"{where}: a ```{lang} block the walkthrough cannot run"
         kept = []
         for ln in text.splitlines():
             command = ln.split("  #")[0].strip()
@@ -323,29 +400,29 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
                 skipped.add(command)
             else:
                 kept.append(ln)
-        script = scripts / f"line{line}.{'sh' if lang == 'bash' else 'py'}"
+        script = scripts / f"block{n:03d}.{'sh' if lang == 'bash' else 'py'}"
         script.write_text("\n".join(kept) + "\n")
         argv = ["bash", "-eo", "pipefail", str(script)] if lang == "bash" else [sys.executable, str(script)]
         out = subprocess.run(argv, cwd=clone, env=env, capture_output=True, text=True, timeout=900)
-        assert out.returncode == 0, (f"README line {line} ({heading}) exited {out.returncode}:\n"
+        assert out.returncode == 0, (f"{where} ({heading}) exited {out.returncode}:\n"
                                      f"{out.stdout[-2000:]}\n{out.stderr[-3000:]}")
         ran += 1
-    assert skipped == set(NOT_RUN), f"lines no longer in the README: {set(NOT_RUN) - skipped}"
+    assert skipped == set(NOT_RUN), f"lines no longer on any page: {set(NOT_RUN) - skipped}"
     assert ran >= 15
     status = subprocess.run(["git", "-C", str(clone), "status", "--porcelain", "--untracked-files=all"],
                             capture_output=True, text=True, check=True).stdout.splitlines()
-    assert [s for s in status if not s.startswith("A ")] == [], "the README's commands left files in the repository"
+    assert [s for s in status if not s.startswith("A ")] == [], "the pages' commands left files in the repository"
     ignored = subprocess.run(["git", "-C", str(clone), "status", "--porcelain", "--ignored"], capture_output=True,
                              text=True, check=True).stdout.splitlines()
     outputs = {ln[3:].rstrip("/") for ln in ignored if ln.startswith("!! ")} - {".venv"}
     outputs = {o for o in outputs if "__pycache__" not in o and not o.endswith(".egg-info")}
-    text = README.read_text()
-    assert len(outputs) >= 10, outputs  # what the README wrote, each an output it names (not a work file left over)
+    text = "\n".join(page_path(p).read_text() for p in reading_order())
+    assert len(outputs) >= 10, outputs  # what the pages wrote, each an output they name (not a work file left over)
 
     def named(n: str) -> bool:  # the index of a job or a packed export counts as named with its output
         return n in text or (n.endswith(".index.csv") and n[:-10] in text)
 
-    assert not [o for o in outputs if not named(Path(o).name)], "outputs the README does not name"
+    assert not [o for o in outputs if not named(Path(o).name)], "outputs no page names"
     left = [os.path.join(d, n) for d, dirs, files in os.walk(clone) if ".git" not in Path(d).relative_to(clone).parts
             for n in dirs + files if n.startswith(".") and (n.endswith((".parts", ".lock")) or ".partial-" in n)]
     assert left == [], "work files of an unfinished command left behind"

@@ -848,7 +848,7 @@ def test_splice_beats_naive_on_bandai_namco_ground_truth(mocap_dir, bandai, caps
 # ------------------------------------------------------------------------------ 15. CUDA
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+@pytest.mark.gpu
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
 def test_cuda_equals_cpu(sample, method):
     clips, spec, _ = sample

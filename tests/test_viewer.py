@@ -337,7 +337,7 @@ def test_viewer_in_chromium(job, tmp_path, browser):
     assert d.execute_script(f"return {v}.frames()")[0] != 45
     severe = [e for e in d.get_log("browser") if e["level"] == "SEVERE"]
     assert severe == [], severe
-    # the README's picture, refreshed only on request
+    # the picture of docs/viewer.md, refreshed only on request
     d.execute_script(f"{v}.setPlaying(false); {v}.setTime(1.5);")
     _settle(d)
     shot = tmp_path / "viewer.png"

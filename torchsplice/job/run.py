@@ -244,6 +244,8 @@ class SpliceJob:
                 out, merged = open_output(self.sink, c, plan, self.work, run, self.overwrite,
                                            lambda g: source_skeleton(plan, g, sources), sources)
                 remove_merged_shards(shard_dir, self.sink, tasks[:merged], c.layout)
+                sources.release_banks()  # in the output now; the workers map their own (this process again if it splices)
+                _return_freed_memory()
             have = {t.id for t in tasks[:merged]} | {t.id for t in tasks[merged:] if task_finished(shard_dir, self.sink, t)}
             pending = [t for t in tasks if t.id not in have]
             summary.resumed = sum(t.size for t in tasks if t.id in have)

@@ -199,6 +199,14 @@ class Sources:
         return sum(self.backends[k].prepared_bytes(b) for k, (b, _) in self.banks.items()
                    if isinstance(k, int) and not (Path(folder) / f"bank-{k}" / "made_for").exists())
 
+    def release_banks(self) -> None:
+        """Let go of the banks saved in :attr:`bank_dir` (the mapped pages they hold): a later
+        :meth:`bank` maps them again from there. Banks held only in memory are kept."""
+        for bank_id in [k for k in self.banks if isinstance(k, int)]:
+            folder = self._bank_folder(bank_id)
+            if folder is not None and self._bank_made_here(folder):
+                del self.banks[bank_id]
+
     def release_clips(self, keep=()) -> None:
         """Forget the clips read so far (but ``keep``, copied: clips read together share one
         buffer, which a kept clip would hold whole): the banks hold what splicing needs."""

@@ -162,22 +162,28 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
         )
     if (i := first(~(np.isfinite(fps) & (fps > 0)))) is not None:
         raise Damage(f"{clip(i)} has fps {float(fps[i]):g}")
-    bad = control_name(c["name"].asstr()[()])
-    if bad is not None:
-        raise Damage(bad)
+    names = c["name"].asstr()
+    for lo in range(0, len(fps), NAME_BLOCK):  # a block at a time: millions of names never sit in memory at once
+        bad = control_name(names[lo : lo + NAME_BLOCK], first_row=lo)
+        if bad is not None:
+            raise Damage(bad)
     if store_kind(h5.attrs) == ALIGNMENT:
         check_assembly(h5, skeletons, frames)
     return skeletons
 
 
-def control_name(names) -> str | None:
-    """What is wrong with the first of ``names`` that holds a control character (see
-    :mod:`torchsplice.core.names`), or ``None``; fast when none does."""
+NAME_BLOCK = 1 << 16
+"""Clip names a check of a database's names reads at a time."""
+
+
+def control_name(names, first_row: int = 0) -> str | None:
+    """What is wrong with the first of ``names`` (rows ``first_row`` on) that holds a control
+    character (see :mod:`torchsplice.core.names`), or ``None``; fast when none does."""
     names = [str(n) for n in names]
     if not CONTROL.search("".join(names)):
         return None
     row, name = next((k, n) for k, n in enumerate(names) if CONTROL.search(n))
-    return f"clip name {cap(printable(name))} (row {row}) contains {control_character(name)}"
+    return f"clip name {cap(printable(name))} (row {first_row + row}) contains {control_character(name)}"
 
 
 def check_header(path: Path, h5: h5py.File, mode: str = "r") -> list[Skeleton]:

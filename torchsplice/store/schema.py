@@ -1,8 +1,8 @@
 """The HDF5 layout of a motion database: the one description of it, its constants, and the
 checked reading of its skeleton groups.
 
-Layout (schema version 1; readable with plain h5py, see ``datasets_spec/README.md`` and the
-project README for a ten-line example)::
+Layout (schema version 1; readable with plain h5py, see ``datasets_spec/README.md`` and
+``docs/python.md``, "Reading a database without torchsplice", for a ten-line example)::
 
     /                       attrs: format="torchsplice.motiondb", schema_version=1,
                                    quaternion_order="wxyz", units, up_axis (those of the

@@ -14,7 +14,9 @@ Built in:
   against.
 
 A new backend is one module: a :class:`Backend` subclass and a :func:`register_backend` call
-(from a plug-in module, see :func:`torchsplice.splice.registry.load_plugins`).
+(from a plug-in module, see :func:`torchsplice.splice.registry.load_plugins`). It declares the
+devices it computes on and a priority (:attr:`Backend.devices`, :attr:`Backend.priority`):
+``"auto"`` runs the available backend of highest priority on the job's device.
 
 Conventions of :class:`SplicedBatch` (the one result type of every backend): pair ``b``'s frames
 are rows ``start[b] : start[b] + frames[b]`` of the packed arrays; rotations are local WXYZ
@@ -33,7 +35,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = ["Backend", "SplicedBatch", "PairFailedError", "register_backend", "get_backend", "available_backends", "backend_choices",
-           "resolve_backend", "backend_for"]
+           "resolve_backend", "backend_for", "device_type"]
 
 # numpy and torch are imported where used: the command line lists the backends without them.
 
@@ -126,19 +128,27 @@ class Backend:
             its workers (saved with :meth:`save` and mapped with :meth:`load`).
         runs_plugins: whether it runs any method (else only methods marked ``compiled``; the
             others fall back to ``"torch"``).
+        devices: the torch device types it computes on (``("cpu",)``, ``("cuda",)``), or
+            ``None`` for any device torch has.
+        priority: how strongly ``"auto"`` prefers it: :func:`resolve_backend` chooses, among the
+            registered backends available here that run on the device, the one of highest
+            priority (the first registered of equals). The torch backend has 0, the compiled
+            splicer 10; a GPU backend would declare ``devices=("cuda",)`` and a priority above 0.
     """
 
     name = ""
     prepares_once = False
     runs_plugins = True
+    devices: tuple[str, ...] | None = None
+    priority = 0
 
     def available(self) -> bool:
         """Whether it can run in this installation."""
         return True
 
     def runs_on(self, device: str | None) -> bool:
-        """Whether it computes on ``device`` (``None``: the CPU)."""
-        return True
+        """Whether it computes on ``device`` (``None``: the CPU): its type is one of :attr:`devices`."""
+        return self.devices is None or device_type(device) in self.devices
 
     def prepare(self, motions: list, skeleton, roles, options) -> Any:
         """Clips ``motions`` (one skeleton, one frame rate) made ready to splice; pairs then name
@@ -309,16 +319,36 @@ def get_backend(name: str) -> Backend:
     return _INSTANCES[name]
 
 
+def device_type(device) -> str:
+    """The type of a torch device given as ``None`` (the CPU), a string (``"cuda:1"``) or a
+    ``torch.device``: ``"cpu"``, ``"cuda"``, ... (without importing torch)."""
+    if device is None:
+        return "cpu"
+    return str(getattr(device, "type", device)).split(":")[0]
+
+
 def resolve_backend(backend: str, device: str | None) -> str:
     """The backend's name that ``backend`` (a name, or ``"auto"``) means on ``device``:
-    ``"auto"`` is the compiled splicer on the CPU when numba is installed, else torch."""
+    ``"auto"`` is, among every registered backend available in this installation that runs on
+    ``device``, the one of highest :attr:`Backend.priority` (so the compiled splicer on the CPU
+    when numba is installed, else torch)."""
     if backend not in backend_choices():
         raise TorchspliceError(f"unknown backend {backend!r}; choose one of {', '.join(backend_choices())}")
     if backend == "auto":
-        compiled = get_backend("compiled")
-        return "compiled" if compiled.available() and compiled.runs_on(device) else "torch"
-    if not get_backend(backend).runs_on(device):
-        raise TorchspliceError(f"the {backend} backend runs on the CPU; device {device!r} needs backend 'torch' or 'auto'")
+        best = None
+        for name in available_backends():
+            b = get_backend(name)
+            if b.available() and b.runs_on(device) and (best is None or b.priority > best.priority):
+                best = b
+        if best is None:
+            raise TorchspliceError(f"no backend runs on device {device!r}")
+        return best.name
+    chosen = get_backend(backend)
+    if not chosen.runs_on(device):
+        there = [n for n in available_backends() if get_backend(n).runs_on(device)]
+        where = "the CPU" if chosen.devices == ("cpu",) else f"{' or '.join(chosen.devices or ())} devices"
+        raise TorchspliceError(f"the {backend} backend runs on {where}; device {device!r} needs backend "
+                               f"{' or '.join(repr(n) for n in [*there, 'auto'])}")
     return backend
 
 

@@ -66,16 +66,13 @@ class CompiledBackend(Backend):
     name = "compiled"
     prepares_once = True
     runs_plugins = False
+    devices = ("cpu",)
+    priority = 10
 
     def available(self) -> bool:
         from ...cpu import available
 
         return available()
-
-    def runs_on(self, device) -> bool:
-        import torch
-
-        return device is None or torch.device(device).type == "cpu"
 
     def prepare(self, motions, skeleton, roles, options):
         from ...cpu.bank import ClipBank
