@@ -195,9 +195,6 @@ class SpliceJob:
             plan = saved
         else:
             plan = make_plan(c, sources)
-            if c.splice_backend().prepares_once:  # the banks hold what splicing needs: planning's clips let go now
-                sources.release_clips(keep=[g.clips[0] for g in plan.groups])
-                _return_freed_memory()
         new_plan = False
         if saved is not None and saved.digest() != plan.digest():
             raise UnfinishedJobError(

@@ -45,24 +45,15 @@ def lookup3(data: bytes, initval: int = 0) -> int:
     word = lambda k: data[k] | (data[k + 1] << 8) | (data[k + 2] << 16) | (data[k + 3] << 24)  # noqa: E731
     while n > 12:
         a, b, c = (a + word(i)) & _M, (b + word(i + 4)) & _M, (c + word(i + 8)) & _M
-        a = (a - c) & _M
-        a ^= _rot(c, 4)
-        c = (c + b) & _M  # noqa: E702 (the reference's mix, line by line)
-        b = (b - a) & _M
-        b ^= _rot(a, 6)
-        a = (a + c) & _M  # noqa: E702
-        c = (c - b) & _M
-        c ^= _rot(b, 8)
-        b = (b + a) & _M  # noqa: E702
-        a = (a - c) & _M
-        a ^= _rot(c, 16)
-        c = (c + b) & _M  # noqa: E702
-        b = (b - a) & _M
-        b ^= _rot(a, 19)
-        a = (a + c) & _M  # noqa: E702
-        c = (c - b) & _M
-        c ^= _rot(b, 4)
-        b = (b + a) & _M  # noqa: E702
+        # the reference's mix, a line per step of it
+        # fmt: off
+        a = (a - c) & _M; a ^= _rot(c, 4); c = (c + b) & _M  # noqa: E702
+        b = (b - a) & _M; b ^= _rot(a, 6); a = (a + c) & _M  # noqa: E702
+        c = (c - b) & _M; c ^= _rot(b, 8); b = (b + a) & _M  # noqa: E702
+        a = (a - c) & _M; a ^= _rot(c, 16); c = (c + b) & _M  # noqa: E702
+        b = (b - a) & _M; b ^= _rot(a, 19); a = (a + c) & _M  # noqa: E702
+        c = (c - b) & _M; c ^= _rot(b, 4); b = (b + a) & _M  # noqa: E702
+        # fmt: on
         n -= 12
         i += 12
     if n == 0:
@@ -70,20 +61,16 @@ def lookup3(data: bytes, initval: int = 0) -> int:
     tail = bytes(data[i : i + n]) + bytes(12 - n)
     w = lambda k: tail[k] | (tail[k + 1] << 8) | (tail[k + 2] << 16) | (tail[k + 3] << 24)  # noqa: E731
     a, b, c = (a + w(0)) & _M, (b + w(4)) & _M, (c + w(8)) & _M
-    c ^= b
-    c = (c - _rot(b, 14)) & _M  # noqa: E702 (the reference's final, line by line)
-    a ^= c
-    a = (a - _rot(c, 11)) & _M  # noqa: E702
-    b ^= a
-    b = (b - _rot(a, 25)) & _M  # noqa: E702
-    c ^= b
-    c = (c - _rot(b, 16)) & _M  # noqa: E702
-    a ^= c
-    a = (a - _rot(c, 4)) & _M  # noqa: E702
-    b ^= a
-    b = (b - _rot(a, 14)) & _M  # noqa: E702
-    c ^= b
-    c = (c - _rot(b, 24)) & _M  # noqa: E702
+    # the reference's final, a line per step of it
+    # fmt: off
+    c ^= b; c = (c - _rot(b, 14)) & _M  # noqa: E702
+    a ^= c; a = (a - _rot(c, 11)) & _M  # noqa: E702
+    b ^= a; b = (b - _rot(a, 25)) & _M  # noqa: E702
+    c ^= b; c = (c - _rot(b, 16)) & _M  # noqa: E702
+    a ^= c; a = (a - _rot(c, 4)) & _M  # noqa: E702
+    b ^= a; b = (b - _rot(a, 14)) & _M  # noqa: E702
+    c ^= b; c = (c - _rot(b, 24)) & _M  # noqa: E702
+    # fmt: on
     return c
 
 
