@@ -7,6 +7,9 @@
 - ``<!-- generated: benchmark -->``: the benchmark's sections, what each measures and its
   target, from the docstring of ``scripts/benchmark.py`` (read, not run: it takes long).
 - ``<!-- generated: spec-format -->``: ``datasets_spec/README.md``, the dataset spec format.
+- The API pages' docstrings are written for Sphinx (``:func:`name```, ``:class:`~a.b```): each
+  role becomes code, linked to the object's entry where the site documents it (a cross-reference
+  that mkdocs-autorefs resolves once every page is built, and leaves as code where none is).
 - The pictures the pages show live in ``torchsplice/viz/`` (where the tests refresh them); they
   are added to the site as ``images/NAME.png``.
 
@@ -23,6 +26,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 PICTURES = REPO / "torchsplice" / "viz"
 MARKER = re.compile(r"<!-- generated: ([a-z-]+) -->")
+#: a Sphinx role as the API pages render it: ``:func:<code>~torchsplice.x.y</code>``
+ROLE = re.compile(r":(?:func|meth|class|mod|attr|data|exc|obj|const):<code>(~?)([^<]+)</code>")
 
 
 # ------------------------------------------------------------------------------------ helpers
@@ -195,3 +200,16 @@ def on_page_markdown(markdown, page, config, files, **kwargs):
         return GENERATORS[name]()
 
     return MARKER.sub(generate, markdown)
+
+
+def _role(m: re.Match) -> str:
+    short, target = m.group(1) == "~", m.group(2).strip()
+    text = target.rsplit(".", 1)[-1] if short else target.lstrip(".")
+    if target.startswith("torchsplice."):  # a full name: linked where the site has its entry
+        return f'<autoref identifier="{target}" optional><code>{text}</code></autoref>'
+    return f"<code>{text}</code>"
+
+
+def on_page_content(html, page, config, files, **kwargs):
+    """Sphinx roles in the API pages' docstrings as code, cross-referenced (see the module docstring)."""
+    return ROLE.sub(_role, html)

@@ -86,6 +86,14 @@ def test_the_api_pages_document_the_main_verbs(site):
     assert "Parameters:" in _page_text(site, "reference/api/pipeline")  # docstrings rendered, not just names
 
 
+def test_the_api_pages_show_sphinx_roles_as_code_and_links(site):
+    pages = sorted((site / "reference" / "api").rglob("*.html"))
+    raw = " ".join(p.read_text(encoding="utf-8") for p in pages)
+    assert pages and not re.findall(r":(?:func|meth|class|mod|attr|data|exc):<code>", raw)
+    # a role naming an object the site documents links to its entry
+    assert re.search(r'<a class="autorefs autorefs-internal"[^>]*href="[^"]*#torchsplice\.[\w.]+"[^>]*><code>', raw)
+
+
 def test_the_errors_and_speed_pages_hold_what_they_are_generated_from(site):
     from torchsplice.core import errors
 
