@@ -6,6 +6,8 @@
   line's words, and the exit codes, from :mod:`torchsplice.core.errors` and the command line.
 - ``<!-- generated: benchmark -->``: the benchmark's sections, what each measures and its
   target, from the docstring of ``scripts/benchmark.py`` (read, not run: it takes long).
+- ``<!-- generated: benchmark-runs -->``: the figures ``scripts/benchmark.py --json`` recorded,
+  each section with its date, machine and command line (``docs/reference/benchmark-runs.json``).
 - ``<!-- generated: spec-format -->``: ``datasets_spec/README.md``, the dataset spec format.
 - The API pages' docstrings are written for Sphinx (``:func:`name```, ``:class:`~a.b```): each
   role becomes code, linked to the object's entry where the site documents it (a cross-reference
@@ -169,6 +171,38 @@ def benchmark_reference() -> str:
     return "\n".join(out) + "\n"
 
 
+#: what ``scripts/benchmark.py --json`` recorded, section by section (see scripts/bench_record.py)
+RUNS = REPO / "docs" / "reference" / "benchmark-runs.json"
+
+
+def benchmark_runs() -> str:
+    """Markdown for the figures the benchmark's runs printed (:data:`RUNS`): per section its
+    date, machine and command line, then each printed line beside its target."""
+    import json
+
+    sections = json.loads(RUNS.read_text(encoding="utf-8"))["sections"] if RUNS.is_file() else {}
+    if not sections:
+        return "No run is recorded yet: `python scripts/benchmark.py --json docs/reference/benchmark-runs.json`.\n"
+    out: list[str] = []
+    for name, run in sections.items():
+        lines = list(run["lines"])
+        data = [ln for ln in lines if ln.startswith("data: ")]
+        lines = [ln for ln in lines if not ln.startswith("data: ")]
+        out += [f"### `{name}`", "",
+                _text(f"{run['date']}, {run['machine']}; {run['seconds']:,.0f} s; ``{run['command']}``"
+                      + (f"; {data[0][6:]}" if data else "") + "."), "",
+                "| what it printed | target |", "|---|---|"]
+        for line in lines:
+            text = line.rstrip()
+            target = ""
+            if text.endswith("]") and "[" in text:
+                at = text.rfind("[")
+                text, target = text[:at].rstrip(), text[at + 1:-1].strip()
+            out.append(f"| {_text(' '.join(text.split()))} | {_text(target)} |")
+        out.append("")
+    return "\n".join(out)
+
+
 # ------------------------------------------------------------------------------------ specs
 def spec_format() -> str:
     """``datasets_spec/README.md``, as shipped with the package; its links into the docs
@@ -178,6 +212,7 @@ def spec_format() -> str:
 
 
 GENERATORS = {"cli": cli_reference, "errors": errors_reference, "benchmark": benchmark_reference,
+              "benchmark-runs": benchmark_runs,
               "spec-format": spec_format}
 
 

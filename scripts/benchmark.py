@@ -77,6 +77,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
 
+from bench_record import Recorder  # noqa: E402
 from torchsplice.formats.bvh import format_bvh, read_bvh  # noqa: E402
 
 
@@ -713,6 +714,9 @@ def main() -> int:
                    help="hands: also the held-back pairs and ground truth, from this folder of the whole Bandai Namco "
                         "dataset's BVH files (the takes that --mocap does not hold)")
     p.add_argument("--device", default="cpu", help="cpu (the compiled splicer) or a torch device such as cuda")
+    p.add_argument("--json", type=Path, default=None,
+                   help="also keep what each section printed, with the date and machine, in this file (its other "
+                        "sections kept): docs/reference/benchmark-runs.json is what the docs' Speed page shows")
     args = p.parse_args()
     sections = set(args.only.split(","))
     from torchsplice.cpu import get_threads
@@ -721,44 +725,41 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         files = real_files(args.mocap)
         if files:
-            print(f"data: {len(files)} real BVH files from {args.mocap}")
+            data = f"{len(files)} real BVH files from {args.mocap}"
         else:
             files = sample_files(Path(tmp))
-            print(f"data: no real data at {args.mocap}; using the built-in synthetic sample ({len(files)} clips)")
-        if "parse" in sections:
-            bench_parse(files)
-        if "stages" in sections:
-            bench_stages(files, args.device)
-        if "splice" in sections:
-            bench_splice(files, args.device)
-        if "job" in sections:
-            bench_job(files, args.device)
-        if "engines" in sections and args.device == "cpu":
-            bench_engines(files)
-        if "mix" in sections:
-            bench_mix(files, args.device, args.mix_db)
-        if "retarget" in sections:
-            from bench_retarget import bench_retarget
+            data = f"no real data at {args.mocap}; the built-in synthetic sample ({len(files)} clips)"
+        from bench_hands import bench_hands
+        from bench_humanml3d import bench_humanml3d, bench_packed_memory
+        from bench_retarget import bench_retarget
+        from bench_store import bench_store
 
-            bench_retarget(files, args.mocap)
-        if "humanml3d" in sections:
-            from bench_humanml3d import bench_humanml3d
-
-            bench_humanml3d(real_files(args.mocap))
-        if "hands" in sections:
-            from bench_hands import bench_hands
-
-            bench_hands(args.mocap, whole=args.held_back, whole_db=args.mix_db)
-        if "packed" in sections:
-            from bench_humanml3d import bench_packed_memory
-
-            bench_packed_memory()
-        if "store" in sections:
-            from bench_store import bench_store
-
-            bench_store(real_files(args.mocap), args.big_db)
-        if "startup" in sections:
-            bench_startup()
+        runs = {  # in the order they run
+            "parse": lambda: bench_parse(files),
+            "stages": lambda: bench_stages(files, args.device),
+            "splice": lambda: bench_splice(files, args.device),
+            "job": lambda: bench_job(files, args.device),
+            "engines": lambda: bench_engines(files) if args.device == "cpu" else None,
+            "mix": lambda: bench_mix(files, args.device, args.mix_db),
+            "retarget": lambda: bench_retarget(files, args.mocap),
+            "humanml3d": lambda: bench_humanml3d(real_files(args.mocap)),
+            "hands": lambda: bench_hands(args.mocap, whole=args.held_back, whole_db=args.mix_db),
+            "packed": bench_packed_memory,
+            "store": lambda: bench_store(real_files(args.mocap), args.big_db),
+            "startup": bench_startup,
+        }
+        unknown = sections - set(runs)
+        if unknown:
+            p.error(f"--only: no section named {', '.join(sorted(unknown))} (sections: {', '.join(runs)})")
+        recorder = Recorder(args.json)
+        try:
+            for name, run in runs.items():
+                if name in sections:
+                    with recorder.section(name):
+                        print(f"data: {data}")
+                        run()
+        finally:
+            recorder.save()
     return 0
 
 
