@@ -178,27 +178,25 @@ RUNS = REPO / "docs" / "reference" / "benchmark-runs.json"
 def benchmark_runs() -> str:
     """Markdown for the figures the benchmark's runs printed (:data:`RUNS`): per section its
     date, machine and command line, then each printed line beside its target."""
-    import json
+    import sys
 
-    sections = json.loads(RUNS.read_text(encoding="utf-8"))["sections"] if RUNS.is_file() else {}
+    sys.path.insert(0, str(REPO / "scripts"))
+    from bench_record import load_runs, split_target
+
+    sections = load_runs(RUNS)
     if not sections:
         return "No run is recorded yet: `python scripts/benchmark.py --json docs/reference/benchmark-runs.json`.\n"
     out: list[str] = []
     for name, run in sections.items():
-        lines = list(run["lines"])
-        data = [ln for ln in lines if ln.startswith("data: ")]
-        lines = [ln for ln in lines if not ln.startswith("data: ")]
+        data = [ln[len("data: "):] for ln in run["lines"] if ln.startswith("data: ")]
         out += [f"### `{name}`", "",
                 _text(f"{run['date']}, {run['machine']}; {run['seconds']:,.0f} s; ``{run['command']}``"
-                      + (f"; {data[0][6:]}" if data else "") + "."), "",
+                      + (f"; {data[0]}" if data else "") + "."), "",
                 "| what it printed | target |", "|---|---|"]
-        for line in lines:
-            text = line.rstrip()
-            target = ""
-            if text.endswith("]") and "[" in text:
-                at = text.rfind("[")
-                text, target = text[:at].rstrip(), text[at + 1:-1].strip()
-            out.append(f"| {_text(' '.join(text.split()))} | {_text(target)} |")
+        for line in run["lines"]:
+            if not line.startswith("data: "):
+                text, target = split_target(line)
+                out.append(f"| {_text(' '.join(text.split()))} | {_text(target)} |")
         out.append("")
     return "\n".join(out)
 

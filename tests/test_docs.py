@@ -94,6 +94,26 @@ def test_the_api_pages_show_sphinx_roles_as_code_and_links(site):
     assert re.search(r'<a class="autorefs autorefs-internal"[^>]*href="[^"]*#torchsplice\.[\w.]+"[^>]*><code>', raw)
 
 
+def test_recorded_benchmark_runs_render_each_line_beside_its_target(tmp_path, monkeypatch):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_hooks", REPO / "docs" / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    sys.path.insert(0, str(REPO / "scripts"))
+    from bench_record import Recorder
+
+    monkeypatch.setattr(hooks, "RUNS", tmp_path / "runs.json")
+    assert "No run is recorded yet" in hooks.benchmark_runs()
+    recorder = Recorder(hooks.RUNS)
+    with recorder.section("store"):
+        print("data: 4 clips")
+        print("store   reads: 1.5x  [>= 1x]")
+    recorder.save()
+    page = hooks.benchmark_runs()
+    assert "### `store`" in page and "| store reads: 1.5x | &gt;= 1x |" in page and "; 4 clips." in page
+
+
 def test_the_errors_and_speed_pages_hold_what_they_are_generated_from(site):
     from torchsplice.core import errors
 
