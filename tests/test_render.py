@@ -11,12 +11,16 @@ from PIL import Image
 
 import matplotlib.pyplot as plt
 
+import torchsplice.viz.camera as camera_mod
+import torchsplice.viz.panels as panels_mod
 import torchsplice.viz.render as render_mod
+import torchsplice.viz.writers as writers_mod
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.sample import sample_motion
 from torchsplice.viz.render import project, render, view_rotation
+from torchsplice.viz.style import GHOST_COLOR
 
 SMALL = dict(size=1.6, dpi=50)  # small pictures keep the file fast
 
@@ -177,15 +181,15 @@ def test_up_axis_is_followed(tmp_path, clips):
 
 
 def strip_cells(rgb: np.ndarray, rows: int, cols: int, size: float, dpi: int) -> list[list[np.ndarray]]:
-    """The panels of a filmstrip, cut by the layout of ``_filmstrip_figure`` (inches to pixels)."""
+    """The panels of a filmstrip, cut by the layout of ``filmstrip_figure`` (inches to pixels)."""
     H, W = rgb.shape[:2]
-    row_h = (H - (render_mod._MARGIN + render_mod._LEGEND_H) * dpi) / rows
-    top0 = (render_mod._LEGEND_H + render_mod._MARGIN / 2) * dpi
+    row_h = (H - (panels_mod.MARGIN + panels_mod.LEGEND_H) * dpi) / rows
+    top0 = (panels_mod.LEGEND_H + panels_mod.MARGIN / 2) * dpi
     col_w = W / cols
     cells = []
     for r in range(rows):
-        y0 = int(top0 + r * row_h + render_mod._TITLE_H * dpi) + 2
-        y1 = int(top0 + (r + 1) * row_h - render_mod._LABEL_H * dpi) - 2
+        y0 = int(top0 + r * row_h + panels_mod.TITLE_H * dpi) + 2
+        y1 = int(top0 + (r + 1) * row_h - panels_mod.LABEL_H * dpi) - 2
         w = int(col_w) - 8
         cells.append([rgb[y0:y1, int(k * col_w) + 4:int(k * col_w) + 4 + w] for k in range(cols)])
     return cells
@@ -211,7 +215,7 @@ def test_pictures_have_a_legend(tmp_path, clips):
         out = render([clips["walk"]], tmp_path / name, frames=2, size=2.0, dpi=60)
         with Image.open(out) as im:
             rgb = np.asarray(im.convert("RGB"), dtype=np.int16)
-        band = rgb[:int(render_mod._LEGEND_H * 60)]
+        band = rgb[:int(panels_mod.LEGEND_H * 60)]
         blue = (band[..., 2] > 150) & (band[..., 0] < 90)
         red = (band[..., 0] > 170) & (band[..., 2] < 90)
         assert blue.sum() >= 5 and red.sum() >= 5, name
@@ -323,7 +327,7 @@ def test_ten_second_gif_of_four_clips_is_under_3_mb(tmp_path):
 
 def test_mp4_without_ffmpeg_is_one_line(tmp_path, clips, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path / "empty"))  # no ffmpeg anywhere on PATH
-    if render_mod.FFMpegWriter.isAvailable():
+    if writers_mod.FFMpegWriter.isAvailable():
         pytest.skip("ffmpeg is configured by absolute path here (animation.ffmpeg_path)")
     with pytest.raises(TorchspliceError) as err:
         render([clips["walk"]], tmp_path / "movie.mp4")
@@ -369,7 +373,7 @@ def test_failure_mid_render_leaves_nothing(tmp_path, clips, monkeypatch, suffix)
         raise RuntimeError("disk on fire")
 
     if suffix == ".gif":
-        monkeypatch.setattr(render_mod._GifWriter, "finish", lambda self: half_written(self.outfile))
+        monkeypatch.setattr(writers_mod.GifWriter, "finish", lambda self: half_written(self.outfile))
     else:
         import matplotlib.figure
         monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda self, path, **kw: half_written(path))
@@ -390,7 +394,7 @@ def test_failure_at_the_first_frame_is_reported_as_it_is(tmp_path, clips, monkey
     def broken(self, **kwargs):
         raise RuntimeError("no frame for you")
 
-    monkeypatch.setattr(render_mod._GifWriter, "grab_frame", broken)
+    monkeypatch.setattr(writers_mod.GifWriter, "grab_frame", broken)
     with pytest.raises(RuntimeError, match="no frame for you"):
         render([clips["walk"]], tmp_path / "x.gif", **SMALL)
     assert list(tmp_path.iterdir()) == []
@@ -446,19 +450,19 @@ def _turning_in_place(frames=90, degrees=120.0) -> Motion:
 def test_the_heading_camera_turns_with_the_character_and_the_world_camera_does_not():
     m = _turning_in_place()
     half = 15  # half the heading camera's one-second window at 30 fps: inside it the smoothing is exact
-    heading = render_mod._prepare(m, 1, -55.0, 22.0, "heading").screen[half:-half, :-1]
-    world = render_mod._prepare(m, 1, -55.0, 22.0, "world").screen[half:-half, :-1]
+    heading = camera_mod.prepare_clip(m, 1, -55.0, 22.0, "heading").screen[half:-half, :-1]
+    world = camera_mod.prepare_clip(m, 1, -55.0, 22.0, "world").screen[half:-half, :-1]
     assert np.abs(heading - heading[:1]).max() < 1e-9  # seen from the same side all the way round
     assert np.abs(world - world[:1]).max() > 20.0  # centimetres: the figure turns in front of it
 
 
 def test_an_overlaid_clip_is_seen_from_the_first_clips_camera(clips):
     walk = clips["curve"]
-    lead = render_mod._prepare(walk, 1, -55.0, 22.0, "heading")
-    same = render_mod._prepare(walk, 1, -55.0, 22.0, "heading", leader=lead)
+    lead = camera_mod.prepare_clip(walk, 1, -55.0, 22.0, "heading")
+    same = camera_mod.prepare_clip(walk, 1, -55.0, 22.0, "heading", leader=lead)
     assert np.array_equal(same.screen, lead.screen, equal_nan=True)
     by = np.array([10.0, 0.0, -4.0])
-    moved = render_mod._prepare(shifted(walk, list(by)), 1, -55.0, 22.0, "heading", leader=lead)
+    moved = camera_mod.prepare_clip(shifted(walk, list(by)), 1, -55.0, 22.0, "heading", leader=lead)
     want = lead.screen[:, :-1] + np.einsum("tik,k->ti", lead.view, by)[:, None]
     assert np.allclose(moved.screen[:, :-1], want, atol=1e-9)  # not re-centred on its own root
 
@@ -468,10 +472,10 @@ def test_an_overlaid_clip_at_another_frame_rate_is_drawn_at_the_first_clips_time
     drawn from the first clip's camera at its frames' times, exactly where the walk is, and its
     frames past the first clip's end take no part (the panel's limits are the first clip's)."""
     walk = clips["curve"]
-    lead = render_mod._prepare(walk.slice(0, walk.num_frames - 20), 1, -55.0, 22.0, "heading")
+    lead = camera_mod.prepare_clip(walk.slice(0, walk.num_frames - 20), 1, -55.0, 22.0, "heading")
     double = Motion(walk.skeleton, walk.rotations.repeat_interleave(2, 0), walk.root_translation.repeat_interleave(2, 0),
                     2 * walk.fps, name="double")
-    ghost = render_mod._prepare(double, 1, -55.0, 22.0, "heading", leader=lead)
+    ghost = camera_mod.prepare_clip(double, 1, -55.0, 22.0, "heading", leader=lead)
     assert ghost.num_frames == lead.num_frames and ghost.fps == lead.fps
     assert np.allclose(ghost.screen, lead.screen, atol=1e-9, equal_nan=True)
 
@@ -489,7 +493,7 @@ def test_the_heading_holds_through_frames_that_are_not_finite():
 def test_an_overlay_panel_draws_the_further_clips_in_grey(tmp_path, clips):
     from matplotlib.colors import to_rgb
 
-    grey = np.array([round(255 * v) for v in to_rgb(render_mod._GHOST_COLOR)])
+    grey = np.array([round(255 * v) for v in to_rgb(GHOST_COLOR)])
     walk, box = clips["walk"], clips["box"]
     alone = pixels(render([walk], tmp_path / "alone.png", frames=2, **SMALL))
     over = pixels(render([[walk, shifted(box, (40.0, 0.0, 0.0))]], tmp_path / "over.png", frames=2, **SMALL))

@@ -6,7 +6,7 @@ modules that declare them import torch, numpy or h5py, which the command line mu
 ``--help`` (tests/test_cli_startup.py). So :func:`declared` reads such a value from the module's
 source when the module is not loaded yet: the literal it is assigned (a module constant, a
 dataclass field's default, a function parameter's default; a name of another constant of the
-same module is followed). Once the module is loaded (any command that does work loads it), the
+same module is followed, and so is a name imported from another torchsplice module). Once the module is loaded (any command that does work loads it), the
 live value is read instead, and a value that is not a literal imports the module. So the value
 is always the library's; tests/test_cli_options.py checks every parser choice and default
 against the imported library, and this reader against the live values.
@@ -72,11 +72,13 @@ def static_value(module: str, name: str) -> Any:
         node = _binding(node.body, rest[0]) if len(rest) == 1 else None
         if node is None:
             return _MISSING
-        value = _literal(tree, _default(node))
+        value = _literal(module, _default(node))
     elif isinstance(node, ast.FunctionDef) and len(rest) == 1:
-        value = _literal(tree, _parameter_default(node, rest[0]))
+        value = _literal(module, _parameter_default(node, rest[0]))
     elif node is not None and not rest and not isinstance(node, (ast.ClassDef, ast.FunctionDef)):
-        value = _literal(tree, node)
+        value = _literal(module, node)
+    elif node is None and not rest:
+        value = _literal(module, ast.Name(id=first, ctx=ast.Load()))
     return value
 
 
@@ -119,6 +121,26 @@ def _binding(body: list, name: str):
     return found
 
 
+def _imported_from(module: str, tree: ast.Module, name: str) -> str | None:
+    """The torchsplice module ``name`` is imported from (under its own name) at ``module``'s top
+    level, when that import is its only binding there; else ``None``."""
+    origin = None
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and any(a.name == name and a.asname in (None, name) for a in node.names):
+            if node.level:
+                package = module.split(".") if _PACKAGE.joinpath(*module.split(".")[1:]).is_dir() \
+                    else module.split(".")[:-1]
+                base = package[:len(package) - node.level + 1]
+                origin = ".".join(base + ([node.module] if node.module else []))
+            else:
+                origin = node.module
+        elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign, ast.FunctionDef, ast.ClassDef)) and any(
+                isinstance(n, ast.Name) and n.id == name and isinstance(n.ctx, ast.Store) for n in ast.walk(node)) \
+                or isinstance(node, (ast.FunctionDef, ast.ClassDef)) and node.name == name:
+            return None  # bound here too: not followed
+    return origin if origin is not None and origin.split(".")[0] == "torchsplice" else None
+
+
 def _is_field_call(node) -> bool:
     return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "field"
 
@@ -145,13 +167,17 @@ def _parameter_default(fn: ast.FunctionDef, name: str):
     return None
 
 
-def _literal(tree: ast.Module, node, depth: int = 0):
-    """The value of a literal expression (a name of a module constant is followed); ``_MISSING``
-    for anything else."""
+def _literal(module: str, node, depth: int = 0):
+    """The value of a literal expression in ``module`` (a name of a module constant is followed,
+    into the module it is imported from where it is); ``_MISSING`` for anything else."""
     if node is None or depth > 8:
         return _MISSING
     if isinstance(node, ast.Name):
-        return _literal(tree, _top_level(tree, node.id), depth + 1)
+        tree = _tree(module)
+        origin = _imported_from(module, tree, node.id) if tree is not None else None
+        if origin is not None:
+            return _literal(origin, node, depth + 1)
+        return _literal(module, _top_level(tree, node.id), depth + 1) if tree is not None else _MISSING
     try:
         return ast.literal_eval(node)
     except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):

@@ -103,7 +103,8 @@ def plausibility_pictures(db, per_clip: list[dict], methods: list[str], folder, 
 
     from ..formats.exporters import clip_filenames
     from ..ops.body import body_of, capsule_ends, inside_depth, segment_closest
-    from ..viz.render import canonical_axes, render
+    from ..viz.camera import canonical_axes
+    from ..viz.render import render
 
     if not per_clip or "penetration" not in per_clip[0]:
         return []

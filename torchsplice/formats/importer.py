@@ -26,7 +26,7 @@ from typing import Callable, Iterable, Sequence
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.names import control_character, printable
 
-__all__ = ["import_bvh", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh",
+__all__ = ["import_bvh", "ImportOptions", "run_import", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh",
            "collect_inputs", "FORMATS"]
 
 DATABASE_SUFFIXES = (".h5", ".hdf5")
@@ -256,15 +256,53 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
     a bad output or option; a full disk (:class:`~torchsplice.core.errors.DatabaseError`)
     stops the import with nothing written.
     """
-    import torch
+    options = ImportOptions(output=output, spec=spec, append=append, overwrite=overwrite, float64=float64,
+                            window=window, window_overlap=window_overlap, units=units, progress=progress,
+                            format=format, file_units=file_units, name_prefix=name_prefix)
+    return run_import(paths, options)
 
-    from ..specs import DatasetSpec, detect_spec, load_spec
-    from ..specs.smpl import SMPL22
-    from ..store.atomic import check_output
-    from .bvh import read_bvh
-    from ..store.database import MotionDatabase
-    from ..ops.units import CONVERTIBLE_UNITS, UNITS, convert_units, implausible_size
 
+@dataclass
+class ImportOptions:
+    """What an import does with its inputs: :func:`import_bvh`'s arguments but ``paths`` (see
+    there for each), as :func:`import_bvh` builds them for :func:`run_import`."""
+
+    output: Path
+    spec: object = "auto"
+    append: bool = False
+    overwrite: bool = False
+    float64: bool = False
+    window: float | None = None
+    window_overlap: float = 1.0
+    units: str | None = None
+    progress: Callable | None = None
+    format: str = "auto"
+    file_units: str | None = None
+    name_prefix: str = ""
+
+
+def run_import(paths: Sequence, options: ImportOptions) -> ImportReport:
+    """The import of ``paths`` with ``options`` (see :func:`import_bvh`): the options checked, the
+    inputs collected, the output checked, then each item loaded and appended, a failing one
+    skipped with its reason."""
+    o = options
+    check_options(o)
+    files, skipped = collect_inputs(paths, o.format)
+    out = checked_output(o, files)
+    report = ImportReport(output=out, skipped=skipped, window=o.window)
+    if not files:
+        raise NothingImportedError("no HumanML3D motions to import" if o.format == "humanml3d" else "no BVH files to import",
+                                   report)
+    check_window(o)
+    import_items(files, out, o, report)
+    return report
+
+
+def check_options(o: ImportOptions) -> None:
+    """The options that need no input checked before any work: the name prefix and the units."""
+    from ..ops.units import CONVERTIBLE_UNITS, UNITS
+
+    name_prefix, file_units, units = o.name_prefix, o.file_units, o.units
     bad = control_character(name_prefix) if name_prefix else ""
     if bad or not isinstance(name_prefix, str) or "," in name_prefix or ":" in name_prefix:
         raise TorchspliceError(f"{{name_prefix}} {name_prefix!r} must be text without control characters, commas or "
@@ -276,84 +314,61 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
         why = f"unknown length unit {units!r}" if units not in UNITS else f"cannot convert to {units!r} units"
         raise TorchspliceError(f"{{units}}: {why}; name a length unit ({', '.join(CONVERTIBLE_UNITS)})",
                                options=("units",))
-    files, skipped = collect_inputs(paths, format)
-    out = Path(output)
-    if append:
+
+
+def checked_output(o: ImportOptions, files: list) -> Path:
+    """The database to write: an existing one to append to, or a new one that may be written
+    (not one of the inputs; an existing file only with ``overwrite``)."""
+    from ..store.atomic import check_output
+
+    out = Path(o.output)
+    if o.append:
         if out.suffix.lower() not in DATABASE_SUFFIXES:
             raise TorchspliceError(f"{out}: {{append}} adds to a database, so its name must end in .h5 or .hdf5",
                                    options=("append",))
         if not out.is_file():
             raise TorchspliceError(f"{out}: no such database to append to (leave out {{append}} to make a new one)",
                                    options=("append",))
-    else:
-        out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=[f for f in files if isinstance(f, Path)],
-                           overwrite=overwrite)
-    report = ImportReport(output=out, skipped=skipped, window=window)
-    if not files:
-        raise NothingImportedError("no HumanML3D motions to import" if format == "humanml3d" else "no BVH files to import",
-                                   report)
+        return out
+    return check_output(out, DATABASE_SUFFIXES, "a database", inputs=[f for f in files if isinstance(f, Path)],
+                        overwrite=o.overwrite)
+
+
+def check_window(o: ImportOptions) -> None:
+    """The window and its overlap, when takes are cut into windows."""
+    window, window_overlap = o.window, o.window_overlap
     if window is not None and not (math.isfinite(window) and window >= MIN_WINDOW_SECONDS):
         raise TorchspliceError(f"{{window}} ({window:g} s) must be at least {MIN_WINDOW_SECONDS:g} s: a window is a clip "
                                "to splice", options=("window",))
     if window is not None and not 0 <= window_overlap < window:
         raise TorchspliceError(f"{{window_overlap}} ({window_overlap:g} s) must be at least 0 and shorter than "
                                f"{{window}} ({window:g} s)", options=("window_overlap", "window"))
+
+
+def import_items(files: list, out: Path, o: ImportOptions, report: ImportReport) -> None:
+    """Load and append every item of ``files`` to the database ``out`` (made, or opened to
+    append), recording each in ``report``; a failing item is skipped with its reason, a failing
+    output stops the import with nothing written."""
+    import torch
+
+    from ..specs import DatasetSpec, load_spec
+    from ..store.database import MotionDatabase
+
+    spec = o.spec
     fixed = None if isinstance(spec, str) and spec == "auto" else spec if isinstance(spec, DatasetSpec) else load_spec(spec)
-    if append:
+    if o.append:
         db = MotionDatabase.open(out, mode="a")
     else:
-        db = MotionDatabase.create(out, overwrite=overwrite, dtype="float64" if float64 else "float32")
-    dtype = torch.float64 if float64 else torch.float32
+        db = MotionDatabase.create(out, overwrite=o.overwrite, dtype="float64" if o.float64 else "float32")
+    dtype = torch.float64 if o.float64 else torch.float32
     origin: dict[str, Path] = {}
-    todo = progress(files, len(files), "import") if progress is not None else files
+    todo = o.progress(files, len(files), "import") if o.progress is not None else files
     humanml3d = _HumanML3DReader(f for f in files if isinstance(f, _HumanML3DItem))
     with db:
         for f in todo:
             try:
-                if isinstance(f, _HumanML3DItem):
-                    bad = control_character(f.id)
-                    if bad:
-                        raise TorchspliceError(f"clip name {f.id!r} (the file's name) contains {bad}; rename the file")
-                    m = humanml3d.motion(f).to(dtype)
-                    s = load_spec(SMPL22)
-                    if units is not None:
-                        m, s = convert_units(m, s, units)
-                else:
-                    bad = control_character(f.stem)
-                    if bad:  # printed raw, such a name would drive the terminal
-                        raise TorchspliceError(f"clip name {f.stem!r} (the file's name) contains {bad}; rename the file")
-                    with warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always")
-                        m = read_bvh(f, dtype=dtype)
-                    report.warnings += [(str(f), one_line(w.message, f)) for w in caught]
-                    m.check_finite()
-                    s = (fixed or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
-                    if file_units is not None and s.units != file_units:
-                        if s.units != "unknown":
-                            raise TorchspliceError(f"its spec {s.name!r} says its units are {s.units!r}, not {file_units!r} "
-                                                   "(file_units is for specs that do not say)")
-                        s = dataclasses.replace(s, units=file_units)
-                    s.bind(m.skeleton)
-                    if units is not None:  # lengths in one unit, so that datasets share the database
-                        m, s = convert_units(m, s, units)
-                    m.role, m.labels = s.clip_metadata(m.name)
-                if name_prefix:
-                    m.name = name_prefix + m.name
-                    if "mirror_of" in m.labels:
-                        m.labels["mirror_of"] = name_prefix + m.labels["mirror_of"]
-                if m.name in origin:
-                    raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
-                pieces = m.windows(window, window_overlap) if window else [m]
-                taken = [p.name for p in pieces if p.name in db]
-                if taken:  # appending: this file is skipped, the others land
-                    raise TorchspliceError(f"clip name {taken[0]!r} is already in the database")
-                known = len(db.skeletons)
-                for piece in pieces:
-                    db.append(piece, spec=s)
-                if len(db.skeletons) > known and s.is_guessed:
-                    report.guessed.append(GuessedSkeleton(known, str(f), s.name, s.guess_summary(), s.guessed_roles()))
-                if len(db.skeletons) > known and (odd := implausible_size(m.skeleton, s.units)):  # once a skeleton
-                    report.warnings.append((str(f), odd))
+                m, s = load_item(f, o, fixed, dtype, humanml3d, report)
+                pieces = append_clip(db, m, s, f, o, origin, report)
             except DatabaseError:
                 raise  # the output itself failed (a full disk): nothing more can be written
             except TorchspliceError as exc:
@@ -366,9 +381,75 @@ def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overw
                                                "please report it with the file"))
                 continue
             origin[m.name] = f
-            report.imported.append(ImportedClip(m.name, str(f), m.num_frames, len(pieces)))
+            report.imported.append(ImportedClip(m.name, str(f), m.num_frames, pieces))
         if not report.imported:
             db.abort()
-            raise NothingImportedError(f"no clip could be imported; {output} was not written", report)
+            raise NothingImportedError(f"no clip could be imported; {o.output} was not written", report)
         report.clips = len(db)
-    return report
+
+
+def load_item(f, o: ImportOptions, fixed, dtype, humanml3d: "_HumanML3DReader", report: ImportReport):
+    """``(clip, its bound spec)`` of one input: a HumanML3D motion on the SMPL body, or a BVH file
+    read, checked, matched to its spec (``fixed``, else detected) and given its role and labels;
+    in ``o.units`` where given, its name prefixed. Warnings of the file go to ``report``."""
+    from ..ops.units import convert_units
+    from ..specs import detect_spec, load_spec
+    from ..specs.smpl import SMPL22
+    from .bvh import read_bvh
+
+    units, file_units, name_prefix = o.units, o.file_units, o.name_prefix
+    if isinstance(f, _HumanML3DItem):
+        bad = control_character(f.id)
+        if bad:
+            raise TorchspliceError(f"clip name {f.id!r} (the file's name) contains {bad}; rename the file")
+        m = humanml3d.motion(f).to(dtype)
+        s = load_spec(SMPL22)
+        if units is not None:
+            m, s = convert_units(m, s, units)
+    else:
+        bad = control_character(f.stem)
+        if bad:  # printed raw, such a name would drive the terminal
+            raise TorchspliceError(f"clip name {f.stem!r} (the file's name) contains {bad}; rename the file")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            m = read_bvh(f, dtype=dtype)
+        report.warnings += [(str(f), one_line(w.message, f)) for w in caught]
+        m.check_finite()
+        s = (fixed or detect_spec(m.skeleton, f.name)).resolve(m.skeleton)
+        if file_units is not None and s.units != file_units:
+            if s.units != "unknown":
+                raise TorchspliceError(f"its spec {s.name!r} says its units are {s.units!r}, not {file_units!r} "
+                                       "(file_units is for specs that do not say)")
+            s = dataclasses.replace(s, units=file_units)
+        s.bind(m.skeleton)
+        if units is not None:  # lengths in one unit, so that datasets share the database
+            m, s = convert_units(m, s, units)
+        m.role, m.labels = s.clip_metadata(m.name)
+    if name_prefix:
+        m.name = name_prefix + m.name
+        if "mirror_of" in m.labels:
+            m.labels["mirror_of"] = name_prefix + m.labels["mirror_of"]
+    return m, s
+
+
+def append_clip(db, m, s, f, o: ImportOptions, origin: dict, report: ImportReport) -> int:
+    """Append clip ``m`` (spec ``s``, from input ``f``) to ``db``, cut into windows where asked;
+    the number of pieces. A name imported before (``origin``: name to input) or already in the
+    database is refused; a new skeleton's guessed roles and implausible size go to ``report``."""
+    from ..ops.units import implausible_size
+
+    window, window_overlap = o.window, o.window_overlap
+    if m.name in origin:
+        raise TorchspliceError(f"clip name {m.name!r} already imported from {origin[m.name]}")
+    pieces = m.windows(window, window_overlap) if window else [m]
+    taken = [p.name for p in pieces if p.name in db]
+    if taken:  # appending: this file is skipped, the others land
+        raise TorchspliceError(f"clip name {taken[0]!r} is already in the database")
+    known = len(db.skeletons)
+    for piece in pieces:
+        db.append(piece, spec=s)
+    if len(db.skeletons) > known and s.is_guessed:
+        report.guessed.append(GuessedSkeleton(known, str(f), s.name, s.guess_summary(), s.guessed_roles()))
+    if len(db.skeletons) > known and (odd := implausible_size(m.skeleton, s.units)):  # once a skeleton
+        report.warnings.append((str(f), odd))
+    return len(pieces)

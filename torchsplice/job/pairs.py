@@ -140,47 +140,89 @@ class PairTable:
         return cls(d["methods"], cols)
 
 
-def form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, refs):
+def form_pairs(config: JobConfig, loco_rows, action_rows, same_db: bool, loco_table, action_table, skeleton_pairs,
+               clip_checks, references):
     """Every (method, locomotion, action) of the selections: the pairs to splice, method by method,
     time-aligned ones first, each locomotion against each action; and, for the rest, the
     number of pairs per skip reason. Each reason is decided once per clip, per skeleton pair or
     per clip pair, and combined over the ``L x A`` grid by array operations; the first reason
     wins, in this order: a clip onto itself (or a window onto another window of its take),
-    skeletons (``kinds``, :func:`_skeleton_pairs`:
-    pairs on other skeletons are retargeted where they can be), too short, length ratio,
-    damaged, not locomoting, no reference."""
-    L, A = np.asarray(locos, dtype=np.int64), np.asarray(acts, dtype=np.int64)
-    nl, na = len(L), len(A)
-    reasons: list[str] = []
-    grid = np.zeros((nl, na), dtype=np.int32)  # 1 + the index of each pair's reason in reasons; 0: none
+    skeletons (``skeleton_pairs``: pairs on other skeletons are retargeted where they can be), too
+    short, length ratio, damaged, not locomoting, no reference.
 
-    def code(text: str) -> int:
-        reasons.append(text)
-        return len(reasons)
+    Args:
+        config: the job's configuration (its methods, ``max_length_ratio``, ``force_locomotion``).
+        loco_rows, action_rows: the selected rows of the locomotion and action databases.
+        same_db: whether locomotions and actions come from one database.
+        loco_table, action_table: the two databases' clip tables (names, lengths, frame rates,
+            skeletons, labels).
+        skeleton_pairs: ``[loco skeleton, action skeleton]`` -> why such pairs are not formed (a
+            string), the skeleton the action is retargeted onto (an int), or ``None`` (as it is).
+        clip_checks: clip key (:func:`~.sources.clip_key`) -> the clip's check (``finite``,
+            ``locomoting``, ``reason``); a retargeted action's under its retargeted key.
+        references: action row -> its ``cpmc`` reference row, or ``None``.
 
-    def put(codes) -> None:
+    Returns ``(PairTable, {reason: pairs skipped for it})``.
+    """
+    L, A = np.asarray(loco_rows, dtype=np.int64), np.asarray(action_rows, dtype=np.int64)
+    grid = _ReasonGrid(len(L), len(A))
+    if same_db:
+        _skip_same_takes(grid, L, A, loco_table, action_table)
+    pair_target = _skip_skeleton_pairs(grid, L, A, loco_table, action_table, skeleton_pairs)
+    _skip_too_short(grid, L, A, loco_table, action_table)
+    if config.max_length_ratio is not None:
+        _skip_length_ratio(grid, L, A, loco_table, action_table, config.max_length_ratio)
+    key_l = {int(i): clip_key("L", i, same_db) for i in L}
+    key_a = _action_check_keys(A, same_db, clip_checks)
+    _skip_damaged(grid, L, A, loco_table, action_table, clip_checks, key_l, key_a)
+    if not config.force_locomotion:
+        _skip_not_locomoting(grid, L, loco_table, clip_checks, key_l)
+    return _pairs_by_method(config, grid, L, A, action_table, clip_checks, references, key_a, pair_target)
+
+
+class _ReasonGrid:
+    """The ``L x A`` grid of skip reasons: ``codes[l, a]`` is 1 + the index of the pair's reason in
+    ``reasons``, 0 while it has none; the first reason given to a pair stays."""
+
+    def __init__(self, n_locos: int, n_actions: int):
+        self.reasons: list[str] = []
+        self.codes = np.zeros((n_locos, n_actions), dtype=np.int32)
+
+    def code(self, text: str) -> int:
+        """A new code for the reason ``text``."""
+        self.reasons.append(text)
+        return len(self.reasons)
+
+    def put(self, codes) -> None:
         """Give the pairs not skipped yet the reason codes ``codes`` (broadcast to the grid; 0: none)."""
-        np.copyto(grid, np.broadcast_to(codes, grid.shape), where=grid == 0)
+        np.copyto(self.codes, np.broadcast_to(codes, self.codes.shape), where=self.codes == 0)
 
-    def per_clip(rows, why) -> np.ndarray:
+    def per_clip(self, rows, why) -> np.ndarray:
         """Codes ``(len(rows),)``: ``why(row)`` gives a clip's reason text, or ``None``."""
         out = np.zeros(len(rows), dtype=np.int64)
         for n, r in enumerate(rows.tolist()):
             text = why(r)
             if text is not None:
-                out[n] = code(text)
+                out[n] = self.code(text)
         return out
 
-    if same:
-        put(np.where(L[:, None] == A[None, :], code("a clip is not spliced onto itself"), 0))
-        # windows of one take (import --split: label split_from) are one performance, like a clip itself
-        takes: dict[str, int] = {}
-        tk_l = np.array([takes.setdefault(tl.labels[r].get("split_from", ""), len(takes)) if tl.labels[r].get("split_from")
-                         else -1 for r in L.tolist()], dtype=np.int64)
-        tk_a = np.array([takes.setdefault(ta.labels[r].get("split_from", ""), len(takes)) if ta.labels[r].get("split_from")
-                         else -2 for r in A.tolist()], dtype=np.int64)
-        if takes:
-            put(np.where(tk_l[:, None] == tk_a[None, :], code("windows of one take are not spliced onto each other"), 0))
+
+def _skip_same_takes(grid: _ReasonGrid, L, A, tl, ta) -> None:
+    """One database: a clip is not spliced onto itself, nor a window onto another of its take."""
+    grid.put(np.where(L[:, None] == A[None, :], grid.code("a clip is not spliced onto itself"), 0))
+    # windows of one take (import --split: label split_from) are one performance, like a clip itself
+    takes: dict[str, int] = {}
+    tk_l = np.array([takes.setdefault(tl.labels[r].get("split_from", ""), len(takes)) if tl.labels[r].get("split_from")
+                     else -1 for r in L.tolist()], dtype=np.int64)
+    tk_a = np.array([takes.setdefault(ta.labels[r].get("split_from", ""), len(takes)) if ta.labels[r].get("split_from")
+                     else -2 for r in A.tolist()], dtype=np.int64)
+    if takes:
+        grid.put(np.where(tk_l[:, None] == tk_a[None, :], grid.code("windows of one take are not spliced onto each other"), 0))
+
+
+def _skip_skeleton_pairs(grid: _ReasonGrid, L, A, tl, ta, kinds) -> np.ndarray:
+    """Pairs whose skeletons are not paired (a reason per skeleton pair); returns ``(L, A)`` the
+    skeleton each pair's action is retargeted onto, -1 for none."""
     kl, ka = np.asarray(tl.skeleton, dtype=np.int64)[L], np.asarray(ta.skeleton, dtype=np.int64)[A]
     xs, ys = np.unique(kl).tolist(), np.unique(ka).tolist()
     by_pair = np.zeros((max(xs) + 1, max(ys) + 1), dtype=np.int64)
@@ -189,11 +231,15 @@ def form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, ref
         for y in ys:
             kind = kinds[x, y]
             if isinstance(kind, str):
-                by_pair[x, y] = code(kind)
+                by_pair[x, y] = grid.code(kind)
             elif kind is not None:
                 target[x, y] = kind
-    put(by_pair[kl[:, None], ka[None, :]])
-    pair_target = target[kl[:, None], ka[None, :]]
+    grid.put(by_pair[kl[:, None], ka[None, :]])
+    return target[kl[:, None], ka[None, :]]
+
+
+def _skip_too_short(grid: _ReasonGrid, L, A, tl, ta) -> None:
+    """Clips shorter than :data:`MIN_SECONDS` (at least 4 frames)."""
     def too_short(table):
         def why(r):
             need = max(4, int(MIN_SECONDS * float(table.fps[r])))
@@ -201,56 +247,74 @@ def form_pairs(c: JobConfig, locos, acts, same: bool, tl, ta, kinds, checks, ref
             return f"{table.name[r]} is too short to splice ({n} frames, at least {need})" if n < need else None
         return why
 
-    put(per_clip(L, too_short(tl))[:, None])
-    put(per_clip(A, too_short(ta))[None, :])
-    if c.max_length_ratio is not None:
-        dl = np.asarray(tl.length, dtype=np.float64)[L] / np.asarray(tl.fps, dtype=np.float64)[L]
-        da = np.asarray(ta.length, dtype=np.float64)[A] / np.asarray(ta.fps, dtype=np.float64)[A]
-        apart = np.maximum(dl[:, None], da[None, :]) > c.max_length_ratio * np.minimum(dl[:, None], da[None, :])
-        put(np.where(apart, code(f"lengths differ by more than {{max_length_ratio}} {c.max_length_ratio:g}"), 0))
-    key_l = {int(i): clip_key("L", i, same) for i in L}
-    # an action's checks: of its own clip, else of it retargeted (the first group's)
+    grid.put(grid.per_clip(L, too_short(tl))[:, None])
+    grid.put(grid.per_clip(A, too_short(ta))[None, :])
+
+
+def _skip_length_ratio(grid: _ReasonGrid, L, A, tl, ta, max_length_ratio: float) -> None:
+    """Pairs whose durations differ by more than ``max_length_ratio``."""
+    dl = np.asarray(tl.length, dtype=np.float64)[L] / np.asarray(tl.fps, dtype=np.float64)[L]
+    da = np.asarray(ta.length, dtype=np.float64)[A] / np.asarray(ta.fps, dtype=np.float64)[A]
+    apart = np.maximum(dl[:, None], da[None, :]) > max_length_ratio * np.minimum(dl[:, None], da[None, :])
+    grid.put(np.where(apart, grid.code(f"lengths differ by more than {{max_length_ratio}} {max_length_ratio:g}"), 0))
+
+
+def _action_check_keys(A, same_db: bool, checks: dict) -> dict:
+    """Action row -> the key of its checks: of its own clip, else of it retargeted (the first group's)."""
     moved: dict[str, str] = {}
     for k in sorted(checks):
         parts = retargeted_parts(k)
         if parts is not None:
             moved.setdefault(parts[1], k)
-    key_a = {j: key if key in checks else moved.get(key, key) for j, key in
-             ((j, clip_key("A", j, same)) for j in A.tolist())}
+    return {j: key if key in checks else moved.get(key, key) for j, key in
+            ((j, clip_key("A", j, same_db)) for j in A.tolist())}
 
+
+def _skip_damaged(grid: _ReasonGrid, L, A, tl, ta, checks: dict, key_l: dict, key_a: dict) -> None:
+    """Clips whose frames are not all finite."""
     def damaged(table, keys):
         def why(r):
             check = checks.get(keys[r])
             return f"{table.name[r]} {check.reason}" if check is not None and not check.finite else None
         return why
 
-    put(per_clip(L, damaged(tl, key_l))[:, None])
-    put(per_clip(A, damaged(ta, key_a))[None, :])
-    if not c.force_locomotion:
-        def still(r):
-            check = checks.get(key_l[r])
-            return (f"{tl.name[r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
-                    if check is not None and not check.locomoting else None)
-        put(per_clip(L, still)[:, None])
-    base = grid.copy()
+    grid.put(grid.per_clip(L, damaged(tl, key_l))[:, None])
+    grid.put(grid.per_clip(A, damaged(ta, key_a))[None, :])
+
+
+def _skip_not_locomoting(grid: _ReasonGrid, L, tl, checks: dict, key_l: dict) -> None:
+    """Locomotions that do not locomote (unless forced through)."""
+    def still(r):
+        check = checks.get(key_l[r])
+        return (f"{tl.name[r]} does not locomote ({check.reason}; {{force_locomotion}} splices it)"
+                if check is not None and not check.locomoting else None)
+    grid.put(grid.per_clip(L, still)[:, None])
+
+
+def _pairs_by_method(c: JobConfig, grid: _ReasonGrid, L, A, ta, checks: dict, refs: dict, key_a: dict,
+                     pair_target: np.ndarray):
+    """Per method, the pairs of the grid not skipped (a method that needs a reference skips the
+    time-aligned actions without one), time-aligned first, then standing ones; and the skipped
+    pairs counted per reason over all methods."""
+    base = grid.codes.copy()
     ref_of = np.array([-1 if refs.get(j) is None else refs[j] for j in A.tolist()], dtype=np.int32)
     L32, A32 = L.astype(np.int32), A.astype(np.int32)
     blocks: list[dict] = []
     skipped: dict[str, int] = {}
     for m, method in enumerate(c.methods):
-        grid[:] = base
+        grid.codes[:] = base
         standing = np.array([_mode(c, checks, key_a[int(j)], method) == "standing" for j in A], dtype=bool)
         if get_method(method).needs_reference:
-            noref = np.zeros(na, dtype=np.int64)
+            noref = np.zeros(len(A), dtype=np.int64)
             for n, j in enumerate(A.tolist()):
                 if refs.get(j) is None and not standing[n]:
-                    noref[n] = code(f"no plain-locomotion reference for {ta.name[j]} ({method})")
-            put(noref[None, :])
-        per = np.bincount(grid.reshape(-1), minlength=len(reasons) + 1)
+                    noref[n] = grid.code(f"no plain-locomotion reference for {ta.name[j]} ({method})")
+            grid.put(noref[None, :])
+        per = np.bincount(grid.codes.reshape(-1), minlength=len(grid.reasons) + 1)
         for r in np.nonzero(per[1:])[0].tolist():
-            skipped[reasons[r]] = skipped.get(reasons[r], 0) + int(per[r + 1])
+            skipped[grid.reasons[r]] = skipped.get(grid.reasons[r], 0) + int(per[r + 1])
         for mode, want in (("timewarp", ~standing), ("standing", standing)):
-            rows, cols = np.nonzero((grid == 0) & want[None, :])
+            rows, cols = np.nonzero((grid.codes == 0) & want[None, :])
             blocks.append({"method": np.full(len(rows), m, np.int32), "loco": L32[rows], "action": A32[cols],
                            "reference": ref_of[cols] if mode == "timewarp" else np.full(len(rows), -1, np.int32),
                            "mode": np.full(len(rows), MODES.index(mode), np.int32), "target": pair_target[rows, cols]})

@@ -279,7 +279,8 @@ def make_plan(config: JobConfig, sources: Sources) -> Plan:
             clips[key] = PlanClip(str(t.name[int(row)]), int(t.length[int(row)]), float(t.fps[int(row)]), labels)
     checks = _locomotion_checks(c, sources, groups, clips, sk_l)
 
-    pairs, skipped = form_pairs(c, locos, acts, same, tl, ta, kinds, checks, refs)
+    pairs, skipped = form_pairs(c, loco_rows=locos, action_rows=acts, same_db=same, loco_table=tl, action_table=ta,
+                                skeleton_pairs=kinds, clip_checks=checks, references=refs)
     _acting(c, sources, groups, clips, sk_l, _standing_action_keys(pairs, same))
     source_figures(c, sources, groups, clips, sk_l)
     if not len(pairs):

@@ -290,18 +290,48 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
     Returns ``(rotations, root, translations)`` float64, the same shapes.
     """
     sk = skeleton
-    for hip, knee, ankle, _ in legs:
-        if sk.parents[knee] != hip or sk.parents[ankle] != knee:
-            raise ValueError(f"leg {sk.names[hip]}-{sk.names[knee]}-{sk.names[ankle]} is not one chain of three joints")
+    _check_legs(sk, legs)
     rot = rotations.to(torch.float64)
     root = root.to(torch.float64).clone()
     trans = translations.to(torch.float64).clone() if translations is not None else None
     offsets, parents = sk.offsets.to(torch.float64), sk.parents
     src = source_positions.to(torch.float64)
-    N, B = rot.shape[0], len(lengths)
     spans = _slices(lengths)
-    counts = torch.tensor(lengths)
     src_points = [j for a, t in source_legs for j in (a, t) if j is not None]
+    contact_of, rest_src, per_frame = _source_contacts(src, spans, lengths, fps, src_points, source_leg, up_axis)
+    origin = src[[sl.start for sl in spans], source_pelvis].clone()
+    origin[:, up_axis] = 0.0
+    origin = origin[per_frame]
+    guide = origin[:, None] + (src - origin[:, None]) * scale  # the source in the target's units, scaled like the trajectory
+    pos, glob = forward_kinematics(rot, root, offsets, parents, trans)
+    targets, helds = _ankle_targets(pos, guide, src, spans, fps, legs, source_legs, contact_of, rest_src, src_points,
+                                    per_frame, scale, target_heights, up_axis)
+    size = leg_length(sk, legs)
+    up = torch.zeros(3, dtype=torch.float64)
+    up[up_axis] = 1.0
+    lift = _pelvis_lift(pos, targets, helds, legs, lengths, size, up_axis)[per_frame]
+    drop = _pelvis_drop(pos, targets, legs, offsets, lift, up, spans, fps, up_axis)
+    shift = (lift - drop)[:, None] * up
+    if bool((shift != 0).any()):
+        root = _shift_pelvis(sk, pos, glob, root, trans, shift, pelvis)
+    out = _solve_legs(rot, pos, glob, parents, legs, targets, size)
+    return quat_normalize(out), root, trans
+
+
+def _check_legs(sk, legs) -> None:
+    """Each leg one chain of three joints: the knee the hip's child, the ankle the knee's."""
+    for hip, knee, ankle, _ in legs:
+        if sk.parents[knee] != hip or sk.parents[ankle] != knee:
+            raise ValueError(f"leg {sk.names[hip]}-{sk.names[knee]}-{sk.names[ankle]} is not one chain of three joints")
+
+
+def _source_contacts(src: torch.Tensor, spans: list[slice], lengths: list[int], fps: list[float], src_points: list[int],
+                     source_leg: float, up_axis: int):
+    """The source's contacts, clip by clip: ``{point: (N,) bool}`` of each foot point
+    ``src_points``, ``(B, P)`` each point's resting height per clip (its median height while in
+    contact, else its lowest) and ``(N,)`` each frame's clip."""
+    B = len(lengths)
+    counts = torch.tensor(lengths)
     # the source's contacts, clip by clip (padded), and each point's resting height per clip
     padded = torch.nn.utils.rnn.pad_sequence([src[sl][:, src_points] for sl in spans], batch_first=True)
     contacts = foot_contacts(padded, counts, torch.tensor(fps, dtype=torch.float64),
@@ -315,11 +345,15 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
     rest_src = torch.where(torch.isnan(rest_src), lowest, rest_src)  # a point that never stands: its lowest
     per_frame = torch.repeat_interleave(torch.arange(B), counts)  # each frame's clip
     contact_of = {j: contacts[:, k] for k, j in enumerate(src_points)}
-    origin = src[[sl.start for sl in spans], source_pelvis].clone()
-    origin[:, up_axis] = 0.0
-    origin = origin[per_frame]
-    guide = origin[:, None] + (src - origin[:, None]) * scale  # the source in the target's units, scaled like the trajectory
-    pos, glob = forward_kinematics(rot, root, offsets, parents, trans)
+    return contact_of, rest_src, per_frame
+
+
+def _ankle_targets(pos, guide, src, spans, fps, legs, source_legs, contact_of, rest_src, src_points, per_frame,
+                   scale, target_heights, up_axis):
+    """Per leg, where its ankle should be ``(N, 3)`` (pinned on the floor plane where the source's
+    foot stands, blended in and out; at the source's height above the floor) and the frames it is
+    held ``(N,)``."""
+    N = pos.shape[0]
     # where each ankle should be: pinned on the floor plane, at the source's height above floor
     first = np.zeros(N, dtype=bool)
     first[[sl.start for sl in spans]] = True
@@ -349,18 +383,26 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
         target[:, up_axis] = height
         targets.append(target)
         helds.append(held)
-    size = leg_length(sk, legs)
-    up = torch.zeros(3, dtype=torch.float64)
-    up[up_axis] = 1.0
-    # the pelvis's height: raised or lowered by one amount per clip, the median of what the
-    # standing feet lack (a rig whose hips hang lower from its pelvis stands lower)
+    return targets, helds
+
+
+def _pelvis_lift(pos, targets, helds, legs, lengths, size: float, up_axis: int) -> torch.Tensor:
+    """``(B,)`` per clip, how much the pelvis is raised (or lowered): the median of what the
+    standing feet lack (a rig whose hips hang lower from its pelvis stands lower); 0 where that is
+    negligible or the feet never stand."""
+    B = len(lengths)
     lack = torch.stack([t[:, up_axis] - pos[:, leg[2], up_axis] for t, leg in zip(targets, legs)], dim=1)
     standing = torch.stack(helds, dim=1)
     nan = float("nan")
     lift = torch.nn.utils.rnn.pad_sequence(list(torch.where(standing, lack, nan).split(lengths)), batch_first=True,
                                            padding_value=nan).reshape(B, -1).nanmedian(dim=1).values
-    lift = torch.where(lift.abs() > _STILL * size, lift, torch.zeros_like(lift))  # NaN (never standing) too  # a clip on its own skeleton: as it is
-    lift = lift[per_frame]
+    return torch.where(lift.abs() > _STILL * size, lift, torch.zeros_like(lift))  # NaN (never standing) too  # a clip on its own skeleton: as it is
+
+
+def _pelvis_drop(pos, targets, legs, offsets, lift, up, spans, fps, up_axis: int) -> torch.Tensor:
+    """``(N,)`` how much further the pelvis comes down where a leg is short of its target
+    (after ``lift``), smoothed over :data:`BLEND_SECONDS` within each clip."""
+    N = pos.shape[0]
     # reach: lower it more where a leg is short of its target
     drop = torch.zeros(N, dtype=torch.float64)
     for (hip, knee, ankle, _), target in zip(legs, targets):
@@ -381,18 +423,30 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
             kernel = torch.ones(1, 1, k, dtype=torch.float64) / k
             drop[sl] = torch.nn.functional.conv1d(torch.nn.functional.pad(d, (blend, blend), mode="replicate"),
                                                   kernel)[0, 0]
-    shift = (lift - drop)[:, None] * up
-    if bool((shift != 0).any()):
-        if trans is not None and pelvis != 0 and sk.translation_animated[pelvis]:
-            # the pelvis's own channels carry the trajectory: move it in its parent's frame
-            trans[:, pelvis] = trans[:, pelvis] + quat_apply(quat_conj(glob[:, parents[pelvis]]), shift)
-            moved_joints = [pelvis, *sk.descendants(pelvis)]
-        else:
-            root = root + shift
-            if trans is not None:
-                trans[:, 0] = root
-            moved_joints = list(range(sk.num_joints))
-        pos[:, moved_joints] += shift[:, None]  # rotations unchanged: the joints below move with it
+    return drop
+
+
+def _shift_pelvis(sk, pos, glob, root, trans, shift, pelvis: int) -> torch.Tensor:
+    """Move the pelvis by ``shift`` ``(N, 3)``: through its own translation channels where they
+    carry the trajectory, else the root (``trans`` and ``pos`` are updated in place); returns the
+    root."""
+    parents = sk.parents
+    if trans is not None and pelvis != 0 and sk.translation_animated[pelvis]:
+        # the pelvis's own channels carry the trajectory: move it in its parent's frame
+        trans[:, pelvis] = trans[:, pelvis] + quat_apply(quat_conj(glob[:, parents[pelvis]]), shift)
+        moved_joints = [pelvis, *sk.descendants(pelvis)]
+    else:
+        root = root + shift
+        if trans is not None:
+            trans[:, 0] = root
+        moved_joints = list(range(sk.num_joints))
+    pos[:, moved_joints] += shift[:, None]  # rotations unchanged: the joints below move with it
+    return root
+
+
+def _solve_legs(rot, pos, glob, parents, legs, targets, size: float) -> torch.Tensor:
+    """The local rotations with each leg's hip and knee solved by :func:`two_bone_ik` onto its
+    target (a leg already there keeps its rotations), the foot keeping its world rotation."""
     out = rot.clone()
     for (hip, knee, ankle, toe), target in zip(legs, targets):
         # the way the knee bends: the foot's forward (ankle to toe), else the source knee's side
@@ -406,4 +460,4 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
         out[:, knee] = torch.where(moved, quat_mul(quat_conj(q_hip), q_knee), rot[:, knee])
         # the foot keeps its world rotation
         out[:, ankle] = torch.where(moved, quat_mul(quat_conj(q_knee), glob[:, ankle]), rot[:, ankle])
-    return quat_normalize(out), root, trans
+    return out

@@ -5,6 +5,8 @@
     motions = sample_motions()                  # list of Motion, deterministic
 """
 
-from .generate import SAMPLE_FPS, SAMPLE_SOURCE, SAMPLE_CLIPS, sample_skeleton, sample_motions, sample_motion
+from .clips import SAMPLE_CLIPS
+from .generate import SAMPLE_FPS, SAMPLE_SOURCE, sample_motions, sample_motion
+from .skeleton import sample_skeleton
 
 __all__ = ["SAMPLE_FPS", "SAMPLE_SOURCE", "SAMPLE_CLIPS", "sample_skeleton", "sample_motions", "sample_motion"]

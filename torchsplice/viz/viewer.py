@@ -9,7 +9,7 @@ What goes in, per clip (:func:`clip_payload`):
 - every drawn point's world position per frame (joints, end sites and the head's centre),
   from forward kinematics, turned into the viewer's frame: metres (the spec's units; a
   skeleton of unknown units is scaled to 1.7 m), Y up (``x = e2, y = up, z = e1`` of the
-  file's right-handed axes, see :mod:`torchsplice.viz.render`), the floor (the lowest point
+  file's right-handed axes, see :mod:`torchsplice.viz.camera`), the floor (the lowest point
   the clip reaches) at ``y = 0``;
 - quantised per clip and axis to int16 around the middle of its range, with the offset and
   step to decode ``p = q * scale + offset`` (a step of 0.15 mm over a 10 m walk), little
@@ -43,7 +43,8 @@ from ..core.motion import Motion
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
-from .render import canonical_axes, check_up_axis, head_joint, figure_points
+from .camera import canonical_axes, check_up_axis
+from .stick_figure import figure_points, head_joint
 from .sources import SourceClips, source_databases
 
 __all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS",
