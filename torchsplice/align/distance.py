@@ -48,19 +48,14 @@ import math
 
 import torch
 
+from ..kinematics.heading import floor_axes, heading_from_hips  # the conventions above, defined with the heading frame
+
 __all__ = ["wrap_angle", "floor_axes", "rotate_about_up", "heading_from_hips", "distance_grid", "align_frames"]
 
 
 def wrap_angle(x: torch.Tensor) -> torch.Tensor:
     """Angles (radians) wrapped to ``[-pi, pi)``, any shape."""
     return torch.remainder(x + math.pi, 2 * math.pi) - math.pi
-
-
-def floor_axes(up_axis: int = 1) -> tuple[int, int]:
-    """``(a1, a2) = ((up_axis + 1) % 3, (up_axis + 2) % 3)``; ``ValueError`` unless ``up_axis`` is 0, 1 or 2."""
-    if up_axis not in (0, 1, 2) or isinstance(up_axis, bool):
-        raise ValueError(f"up_axis must be 0, 1 or 2, got {up_axis!r}")
-    return (up_axis + 1) % 3, (up_axis + 2) % 3
 
 
 def rotate_about_up(points: torch.Tensor, theta: torch.Tensor | float, up_axis: int = 1) -> torch.Tensor:
@@ -79,21 +74,6 @@ def rotate_about_up(points: torch.Tensor, theta: torch.Tensor | float, up_axis: 
     out[a1], out[a2] = c * u - s * v, s * u + c * v
     out[up_axis] = points[..., up_axis].expand_as(out[a1])
     return torch.stack(out, dim=-1)
-
-
-def heading_from_hips(left_hip: torch.Tensor, right_hip: torch.Tensor, up_axis: int = 1) -> torch.Tensor:
-    """Facing direction ``(...)`` in radians from ``(..., 3)`` hip positions.
-
-    ``forward = (left_hip - right_hip) x up`` (in the floor plane), and the heading is
-    ``atan2(forward[a2], forward[a1])``: for Y up, a character whose left hip is towards +X
-    faces +Z, heading 0.
-    """
-    if left_hip.shape[-1:] != (3,) or right_hip.shape[-1:] != (3,):
-        raise ValueError(f"hips must have shape (..., 3), got {tuple(left_hip.shape)} and {tuple(right_hip.shape)}")
-    a1, a2 = floor_axes(up_axis)
-    d = left_hip - right_hip
-    # (d x e_up)[a1] = d[a2], (d x e_up)[a2] = -d[a1]
-    return torch.atan2(-d[..., a1], d[..., a2])
 
 
 def _check_clouds(a: torch.Tensor, b: torch.Tensor, min_dim: int, what: str) -> int:

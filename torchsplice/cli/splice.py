@@ -183,7 +183,7 @@ class Splice(Command):
             write_bvh(result.motion, out)
         extra = f", reference {result.reference}" if result.reference else ""
         if result.timing != "timewarp":
-            acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if method.name == "splice" else ""
+            acting = f"; acting limbs: {', '.join(result.acting) or 'none'}" if method.uses_acting_limbs else ""
             detail = f"; standing action ({result.timing}{acting})"
         else:
             shown = [f"alignment cost {result.cost:.3g}" if "cost" in method.diagnostics else "",

@@ -19,8 +19,8 @@ bits on the same grid; the whole splice agrees to float32 rounding).
 
 Modules: :mod:`.quat` (quaternion algebra on tuples), :mod:`.fk`, :mod:`.grid` (distance
 grids, phase crop), :mod:`.timewarp` (the DP), :mod:`.curve` (B-spline fit, resampling),
-:mod:`.horn`, :mod:`.splice` (whole pairs, in parallel), :mod:`.standing` (standing actions),
-:mod:`.bank` (the Python side), :mod:`.preload` (loading them before a fork). This package imports
+:mod:`.horn`, :mod:`.heading` (headings from the hips), :mod:`.splice` (whole pairs, in
+parallel), :mod:`.standing` (standing actions), :mod:`.bank` (the Python side), :mod:`.preload` (loading them before a fork). This package imports
 nothing above the skeleton roles: the splicer calls it through :mod:`torchsplice.splice.backends`.
 """
 
@@ -35,12 +35,13 @@ __all__ = ["available", "set_threads", "get_threads", "cache_dir", "warm"]
 
 
 def _kernel_hash() -> str:
-    """A hash of every kernel source here and of the formulas they compile from core
-    (:mod:`torchsplice.core.quat_formulas`): numba re-validates a cached function against its
-    own file only, so a change in a function it calls from another file would go unseen."""
+    """A hash of every kernel source here and of what they compile from core (the formulas of
+    :mod:`torchsplice.core.quat_formulas`, the method codes of :mod:`torchsplice.core.method_table`):
+    numba re-validates a cached function against its own file only, so a change in a function it
+    calls, or a constant it freezes, from another file would go unseen."""
     h = hashlib.sha256()
     here = Path(__file__).parent
-    for f in [*sorted(here.glob("*.py")), here.parent / "core" / "quat_formulas.py"]:
+    for f in [*sorted(here.glob("*.py")), here.parent / "core" / "quat_formulas.py", here.parent / "core" / "method_table.py"]:
         h.update(f.name.encode() + f.read_bytes())
     return h.hexdigest()[:16]
 

@@ -29,10 +29,16 @@ import math
 import numpy as np
 from numba import njit
 
+from ..core.method_table import CPMC, NAIVE, SPLICE
 from .curve import lerp, split_time
 from .quat import qarc, qconj, qload, qmul, qnormalize, qslerp, qslerp_arc, qstore
 
-__all__ = ["arc_table", "timewarp_rows", "standing_rows", "standing_times", "assemble_timewarp", "assemble_standing"]
+__all__ = ["arc_table", "timewarp_rows", "standing_rows", "standing_times", "assemble_timewarp", "assemble_standing",
+           "SPLICE_CODE", "NAIVE_CODE", "CPMC_CODE"]
+
+SPLICE_CODE, NAIVE_CODE, CPMC_CODE = SPLICE.code, NAIVE.code, CPMC.code
+"""The built-in methods' codes in the kernels (:data:`torchsplice.core.method_table.BUILTINS`): plain
+module-level ints, which numba freezes into the compiled branches."""
 
 
 @njit(cache=True, nogil=True)
@@ -149,7 +155,7 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
     ``orot``/``otrans``, and the action frame each plays into ``curve``.
 
     The locomotion is bank rows ``ls ..`` (``Tl`` frames), the action ``as_ ..`` (``Ta``);
-    ``method`` 0 splice, 1 naive, 2 cpmc; ``timing`` 0 loop, 1 hold, 2 fit; ``window`` the
+    ``method`` a built-in's code (:data:`SPLICE_CODE`, :data:`NAIVE_CODE`, :data:`CPMC_CODE`); ``timing`` 0 loop, 1 hold, 2 fit; ``window`` the
     action's first frame played onto a locomotion no longer than it; ``loop_s``/``loop_e`` the
     loop points; ``acting (2,)`` the arms that act (left, right); ``upper``, ``spine``,
     ``arms (2, J)`` and ``blend_s`` the skeleton's tables (:class:`torchsplice.cpu.bank.StandingTables`).
@@ -159,7 +165,7 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
     # the locomotion's mean posture of each spine joint (splice)
     S = spine.shape[0]
     mean = np.zeros((S, 4))
-    if method == 0:
+    if method == SPLICE_CODE:
         for k in range(S):
             j = spine[k]
             q0 = qload(rot, ls, j)
@@ -197,7 +203,7 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
             s0, s1, sw = split_time(float(loop_s), Ta)
             n0, n1, nw = split_time(loop_s + 1.0, Ta)
         for j in range(J):
-            if not upper[j] or (method == 0 and idle[j]):
+            if not upper[j] or (method == SPLICE_CODE and idle[j]):
                 qstore(orot, i, j, qload(rot, ls + t, j))
                 for c in range(3):
                     otrans[i, j, c] = trans[ls + t, j, c]
@@ -216,16 +222,16 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
                 v2 = _aa(qmul(qn, qconj(qs)))
                 q = qnormalize(qmul(_exp(r[0] * f + (v1[0] - v2[0]) * g, r[1] * f + (v1[1] - v2[1]) * g,
                                          r[2] * f + (v1[2] - v2[2]) * g), q))
-                if method == 1:  # only naive takes the action's translations
+                if method == NAIVE_CODE:  # only naive takes the action's translations
                     tx += _lin_offset(trans, as_, 0, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
                     ty += _lin_offset(trans, as_, 1, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
                     tz += _lin_offset(trans, as_, 2, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
             lq = qload(rot, ls + t, j)
-            if method == 1:  # naive: the action's upper body, translations too
+            if method == NAIVE_CODE:  # naive: the action's upper body, translations too
                 qstore(orot, i, j, q)
                 otrans[i, j, 0], otrans[i, j, 1], otrans[i, j, 2] = tx, ty, tz
                 continue
-            if method == 2:  # cpmc: the action's motion since its first frame, on the locomotion
+            if method == CPMC_CODE:  # cpmc: the action's motion since its first frame, on the locomotion
                 q = qnormalize(qmul(lq, qmul(qconj(qload(rot, as_, j)), q)))
             elif spine_k[j] >= 0:  # splice: the action's posture with the locomotion's deviation from its mean
                 k = spine_k[j]

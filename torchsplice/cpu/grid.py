@@ -10,7 +10,7 @@ is a vectorised pass over the action's frames):
 - ``floor`` ``(K, 2, T)``: landmark floor coordinates ``(a1, a2)`` centred on the cloud's
   centroid, ``a1 = (up + 1) % 3``, ``a2 = (up + 2) % 3``;
 - ``height`` ``(K, T)``: landmark heights; ``norm`` ``(T,)``: ``sum_k w |floor_k|^2``;
-- ``hcos``, ``hsin`` ``(T,)``: cosine and sine of the heading from the hips.
+- ``hcos``, ``hsin`` ``(T,)``: cosine and sine of the heading from the hips (:func:`~.heading.heading_cos_sin`).
 
 Closed form per cell, without ``atan2``: with ``C = sum w fa.fb``, ``S = sum w (fb x fa)``,
 ``r = |(C, S)|`` and the relative heading ``delta``, ``C' = C cos delta + S sin delta`` and
@@ -26,6 +26,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from .heading import heading_cos_sin
 
 __all__ = ["clip_features", "distance_row_block", "phase_crop_pair"]
 
@@ -55,14 +57,7 @@ def clip_features(pos, landmarks, hips, up, n, floor, height, norm, hcos, hsin):
             height[k, t] = pos[t, landmarks[k], up]
             nn += w * (u * u + v * v)
         norm[t] = nn
-        # heading = atan2(-d[a1], d[a2]) for d = left hip - right hip
-        y = -(pos[t, hips[0], a1] - pos[t, hips[1], a1])
-        x = pos[t, hips[0], a2] - pos[t, hips[1], a2]
-        r = math.sqrt(x * x + y * y)
-        if r > 0.0:
-            hcos[t], hsin[t] = x / r, y / r
-        else:
-            hcos[t], hsin[t] = 1.0, 0.0
+        hcos[t], hsin[t] = heading_cos_sin(pos, t, hips[0], hips[1], up)
 
 
 @njit(cache=True, nogil=True, inline="always")

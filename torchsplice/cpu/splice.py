@@ -30,17 +30,20 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..core.method_table import BUILTINS
 from .curve import fit_curve, resample_clip, split_time
 from .fk import fk_clip
 from .grid import distance_row_block, phase_crop_pair
+from .heading import heading_q
 from .horn import horn_cloud
-from .assemble import timewarp_rows
-from .quat import qconj, qload, qmul, qrot, qslerp, qstore, rotmat_to_q
+from .assemble import NAIVE_CODE, SPLICE_CODE, timewarp_rows
+from .quat import qconj, qload, qmul, qrot, qslerp, qstore
 from .timewarp import dp_pair
 
 __all__ = ["METHOD_CODES", "STATUS", "splice_batch", "compact"]
 
-METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
+METHOD_CODES = {m.name: m.code for m in BUILTINS}
+"""Built-in method name -> its code in the kernels (:data:`torchsplice.core.method_table.BUILTINS`)."""
 _UNIFORM = np.empty(0)  # horn_cloud's uniform weights
 STATUS = {0: "ok", 1: "no path: +inf costs block every alignment", 2: "the alignment does not advance in both clips"}
 
@@ -65,38 +68,13 @@ def _time_align(feat, starts, a, na, b, nb, opts, cells, curve):
     return 0, crop, length, total / length, frames
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _pick(c, lat, up, l, u, o):
-    """Component of column ``c`` of the heading matrix: the lateral, up or third axis."""
-    return l if c == lat else (u if c == up else o)
-
-
-@njit(cache=True, nogil=True)
-def _heading_q(pos, t, lh, rh, up):
-    """Heading frame (WXYZ, heading-frame to world) at frame ``t`` from the hips, as
-    :func:`torchsplice.kinematics.heading.heading_frame`: columns lateral (the floor projection
-    of left hip minus right hip), up, and their cross product (sign keeping it right-handed)."""
-    lat = 1 if up == 0 else 0
-    ux, uy, uz = (1.0 if up == 0 else 0.0), (1.0 if up == 1 else 0.0), (1.0 if up == 2 else 0.0)
-    vx, vy, vz = pos[t, lh, 0] - pos[t, rh, 0], pos[t, lh, 1] - pos[t, rh, 1], pos[t, lh, 2] - pos[t, rh, 2]
-    d = vx * ux + vy * uy + vz * uz
-    vx, vy, vz = vx - d * ux, vy - d * uy, vz - d * uz
-    nn = max(math.sqrt(vx * vx + vy * vy + vz * vz), 1e-12)
-    lx, ly, lz = vx / nn, vy / nn, vz / nn
-    sgn = 1.0 if (up - lat) % 3 == 1 else -1.0
-    ox, oy, oz = sgn * (ly * uz - lz * uy), sgn * (lz * ux - lx * uz), sgn * (lx * uy - ly * ux)
-    return rotmat_to_q(_pick(0, lat, up, lx, ux, ox), _pick(1, lat, up, lx, ux, ox), _pick(2, lat, up, lx, ux, ox),
-                       _pick(0, lat, up, ly, uy, oy), _pick(1, lat, up, ly, uy, oy), _pick(2, lat, up, ly, uy, oy),
-                       _pick(0, lat, up, lz, uz, oz), _pick(1, lat, up, lz, uz, oz), _pick(2, lat, up, lz, uz, oz))
-
-
 @njit(cache=True, nogil=True)
 def _mean_shoulders(pos, T, hips, shoulders, pelvis, up, out, H):
     """Frame-averaged shoulders ``out (2, 3)`` in heading frames around the pelvis; the heading
     frames go to ``H (T, 4)`` when it is not empty."""
     out[:, :] = 0.0
     for t in range(T):
-        h = _heading_q(pos, t, hips[0], hips[1], up)
+        h = heading_q(pos, t, hips[0], hips[1], up)
         if H.shape[0] > 0:
             H[t, 0], H[t, 1], H[t, 2], H[t, 3] = h
         hc = qconj(h)
@@ -114,7 +92,8 @@ def _twist_target(mean_u, mean_l, share, up):
     """Turn the action's mean shoulders ``mean_u (2, 3)`` about the up axis, in place, by
     ``share`` times the yaw of the locomotion's ``mean_l`` minus theirs, as
     :func:`torchsplice.splice.heck.twist_target` (yaw of left minus right shoulder in the floor
-    plane, from the lateral axis towards the third)."""
+    plane, from the lateral axis towards the third). Not a heading (:mod:`.heading`): the
+    shoulders' twist against the hips, measured inside heading frames."""
     lat = 1 if up == 0 else 0
     third = 3 - lat - up
     yl = math.atan2(mean_l[0, third] - mean_l[1, third], mean_l[0, lat] - mean_l[1, lat])
@@ -313,16 +292,16 @@ def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, op
         r, tr, cu, co, pe = orot[o:o + n], otrans[o:o + n], ocurve[o:o + n], ocorr[o:o + n], opel[o:o + n]
         for t in range(n):
             co[t] = 0.0
-        if method == 1:
+        if method == NAIVE_CODE:
             frames[b] = _naive_one(bank, starts, lengths, loco[b], act[b], joints, cu, r, tr, pe)
             status[b], crop[b], plen[b], cost[b], angle[b] = 0, 0, 0, np.nan, 0.0
             cells[b, :, :] = -1
             continue
         cb = np.empty((cells.shape[1], 2), dtype=np.int64)
-        if method == 0:
+        if method == SPLICE_CODE:
             st, c, pl, cs, T, ang = _splice_one(bank, feat, starts, lengths, loco[b], act[b], joints, opts, posture,
                                                 twist, cb, cu, r, tr, co, pe)
-        else:
+        else:  # cpmc
             st, c, pl, cs, T = _cpmc_one(bank, feat, starts, lengths, loco[b], act[b], ref[b], joints, opts, cb, cu, r, tr)
             ang = 0.0
         status[b], crop[b], plen[b], cost[b], frames[b], angle[b] = st, c, pl, cs, T, ang

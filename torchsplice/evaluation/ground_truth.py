@@ -24,7 +24,7 @@ import torch
 from ..align.horn import horn_rotation_matrix
 from ..core.motion import Motion
 from ..specs import SkeletonRoles
-from ..kinematics.heading import heading_frame, to_heading_frame
+from ..kinematics.heading import heading_points
 from ..splice.clips import clips_to_tensors, resample_motion
 from ..splice.heck import AlignOptions, time_align
 
@@ -42,8 +42,7 @@ class GroundTruthTriple:
 
 def _heading_local(positions: torch.Tensor, roles: SkeletonRoles) -> torch.Tensor:
     """``(B, T, U, 3)`` upper-body joints in the root heading frame."""
-    H = heading_frame(positions[:, :, roles.hips[0]], positions[:, :, roles.hips[1]], roles.up_axis)
-    return to_heading_frame(positions[:, :, list(roles.upper_body)], positions[:, :, roles.root], H)
+    return heading_points(positions, roles.hips, roles.root, roles.upper_body, roles.up_axis)[1]
 
 
 def _aligned_upper_bodies(results: list[Motion], captures: list[Motion], roles: SkeletonRoles,

@@ -35,7 +35,7 @@ import torch
 from ..core.motion import Motion
 from ..specs import SkeletonRoles
 from ..kinematics.contacts import floor_speed, foot_contacts
-from ..kinematics.heading import heading_frame, lateral_axis, to_heading_frame
+from ..kinematics.heading import heading_points, third_axis
 from ..splice.clips import ClipTensors, clips_to_tensors
 
 __all__ = [
@@ -131,13 +131,12 @@ def leg_length(positions: torch.Tensor, roles: SkeletonRoles) -> torch.Tensor:
 
 def _heading_points(positions: torch.Tensor, roles: SkeletonRoles, joints) -> torch.Tensor:
     """``(B, T, K, 3)`` joints ``joints`` in the pelvis-centred heading frame of each frame."""
-    H = heading_frame(positions[:, :, roles.hips[0]], positions[:, :, roles.hips[1]], roles.up_axis)
-    return to_heading_frame(positions[:, :, list(joints)], positions[:, :, roles.pelvis], H)
+    return heading_points(positions, roles.hips, roles.pelvis, joints, roles.up_axis)[1]
 
 
 def _forward_axis(up_axis: int) -> int:
     """Index of the heading frame's forward axis (z for Y up)."""
-    return 3 - up_axis - lateral_axis(up_axis)
+    return third_axis(up_axis)
 
 
 # --------------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.method_table import builtin
 from .plan import action_key
 from .sources import clip_key
 from .task import OUTPUT_COLUMNS
@@ -107,7 +108,8 @@ def estimate_output(plan, skeleton_of, compression, copied: list | None = None, 
     the source clips copied in as well (``copy_sources``). A standing action's result is as long
     as its locomotion; a time-aligned one at most as long as the shorter clip of the pair.
     ``store="alignment"``: its parts (:data:`PART_BYTES`) and banks instead of the spliced
-    clips' frames (but those of cpmc through the timewarp and of plug-ins)."""
+    clips' frames (but those of the built-ins that store frames, cpmc, through the timewarp, and of
+    plug-ins: :attr:`~torchsplice.core.method_table.BuiltinMethod.stores`)."""
     frames = clips = 0
     total = 0.0
     info = {k: (c.frames, c.fps) for k, c in plan.clips.items()}
@@ -125,7 +127,8 @@ def estimate_output(plan, skeleton_of, compression, copied: list | None = None, 
         sk = skeleton_of(t.group)
         frames += count
         clips += t.size
-        if store == "alignment" and (t.mode == "standing" or t.method in ("splice", "naive")):
+        row = builtin(t.method)
+        if store == "alignment" and (t.mode == "standing" or (row is not None and row.stores == "parts")):
             total += count * PART_BYTES["standing" if t.mode == "standing" else "timewarp"] + t.size * PART_TABLE_BYTES
         else:
             total += count * frame_bytes(sk.num_joints, sk.has_joint_translations, compression)

@@ -285,7 +285,7 @@ def _splice_standing(pairs, refs, roles: SkeletonRoles, method: Method, options:
     batch = prep.backend.standing(prep.clips, prep.loco, prep.action, acting, standing_tables(roles, skeleton, fps),
                                   method, options, fps)
     for b, (_loco, ac) in enumerate(pairs):
-        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method.name == "splice" else ""
+        limbs = f"; acting limbs: {', '.join(acting[b]) or 'none'}" if method.uses_acting_limbs else ""
         notes[b].append(f"{ac.name} does not locomote: spliced as a standing action ({options.timing}{limbs})")
     return _results(pairs, None, prep, batch, method, options, fps, checks_l, checks_a, notes, options.timing, acting)
 

@@ -36,18 +36,19 @@ from dataclasses import dataclass
 import torch
 
 from ..align.curve import fit_alignment_curve
-from ..align.distance import distance_grid, heading_from_hips
+from ..align.distance import distance_grid
 from ..align.horn import horn_rotation
 from ..align.timewarp import timewarp
 from ..core.rotations import quat_apply, quat_conj, quat_mul
 from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
 from ..specs.roles import landmark_indices
-from ..kinematics.heading import heading_frame, lateral_axis, to_heading_frame
+from ..kinematics.heading import heading_from_hips, heading_points, lateral_axis, third_axis
 from .clips import ClipTensors, shift_frames, with_fk, without_fk
+from .registry import MethodInput, MethodOutput
 
 __all__ = ["AlignOptions", "TimeAlignment", "time_align", "alignment_grid", "phase_crop", "splice_tensors",
-           "SplicedTensors", "shoulder_yaw", "twist_target"]
+           "SplicedTensors", "shoulder_yaw", "twist_target", "run_method"]
 
 
 @dataclass(frozen=True)
@@ -211,8 +212,7 @@ def _pelvis_clouds(c: ClipTensors, roles: SkeletonRoles) -> torch.Tensor:
 def _posture_clouds(c: ClipTensors, roles: SkeletonRoles, lengths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-frame heading frames ``(B, T, 4)`` and the frame-averaged shoulder cloud ``(B, 2, 3)``."""
     pos = c.positions
-    H = heading_frame(pos[:, :, roles.hips[0]], pos[:, :, roles.hips[1]], roles.up_axis)
-    local = to_heading_frame(pos[:, :, list(roles.shoulders)], pos[:, :, roles.pelvis], H)  # (B, T, 2, 3)
+    H, local = heading_points(pos, roles.hips, roles.pelvis, roles.shoulders, roles.up_axis)  # (B, T, 4), (B, T, 2, 3)
     valid = (torch.arange(pos.shape[1], device=pos.device)[None, :] < lengths[:, None]).to(pos.dtype)
     mean = (local * valid[..., None, None]).sum(1) / valid.sum(1)[:, None, None]
     return H, mean
@@ -220,14 +220,14 @@ def _posture_clouds(c: ClipTensors, roles: SkeletonRoles, lengths: torch.Tensor)
 
 def _plane_axes(up_axis: int) -> tuple[int, int]:
     """Heading-frame axes ``(lateral, third)`` spanning the floor plane (see :mod:`torchsplice.kinematics.heading`)."""
-    lat = lateral_axis(up_axis)
-    return lat, 3 - lat - up_axis
+    return lateral_axis(up_axis), third_axis(up_axis)
 
 
 def shoulder_yaw(cloud: torch.Tensor, up_axis: int) -> torch.Tensor:
     """``(...)`` yaw (radians) of the shoulder line of ``(..., 2, 3)`` clouds (left, right) in
     heading frames: the angle of ``left - right`` in the floor plane, from the lateral axis
-    towards the third axis (0 when the shoulders are square to the hips)."""
+    towards the third axis (0 when the shoulders are square to the hips). Not a heading: the
+    twist of the shoulders against the hips, measured inside the heading frame."""
     lat, third = _plane_axes(up_axis)
     d = cloud[..., 0, :] - cloud[..., 1, :]
     return torch.atan2(d[..., third], d[..., lat])
@@ -292,3 +292,18 @@ def splice_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, sk
         pelvis = quat_mul(local, pelvis)
     spliced = _assemble(loco, act_r, pelvis, roles, frames, skeleton, fk=False)
     return SplicedTensors(spliced, align, correction, q_g)
+
+
+def run_method(inp: MethodInput) -> MethodOutput:
+    """The built-in ``splice`` method on a batch (:func:`splice_tensors`, as the registry runs it)."""
+    out = splice_tensors(inp.loco, inp.act, inp.roles, inp.skeleton, inp.options.align, inp.fps,
+                         posture=inp.options.posture, twist=inp.options.twist)
+    al = out.alignment
+    B = inp.loco.lengths.shape[0]
+    q = out.posture_rotation
+    return MethodOutput(
+        clips=out.clips, times=al.curve + al.crop[:, None], cost=al.cost, crop=al.crop,
+        paths=[al.cells[b, : int(al.path_length[b])] for b in range(B)],
+        pelvis_correction=torch.rad2deg(out.pelvis_correction).to(torch.float64),
+        posture_deg=torch.rad2deg(2 * torch.atan2(q[:, 1:].norm(dim=-1), q[:, 0].abs())),
+    )

@@ -22,8 +22,9 @@ from ..specs import SkeletonRoles
 from ..align.curve import slerp_frames
 from .clips import ClipTensors, shift_frames, without_fk
 from .heck import AlignOptions, TimeAlignment, time_align
+from .registry import MethodInput, MethodOutput
 
-__all__ = ["naive_tensors", "cpmc_tensors", "upper_mask"]
+__all__ = ["naive_tensors", "cpmc_tensors", "upper_mask", "run_naive", "run_cpmc"]
 
 
 def upper_mask(roles: SkeletonRoles, J: int, device) -> torch.Tensor:
@@ -79,3 +80,17 @@ def cpmc_tensors(loco: ClipTensors, act: ClipTensors, ref: ClipTensors, roles: S
     base = loco.rotations[:, :T]
     rot = torch.where(upper[:, None], quat_mul(base, d), base)
     return without_fk(rot, loco.translations[:, :T], frames), act_to_base, ref_to_act
+
+
+def run_naive(inp: MethodInput) -> MethodOutput:
+    """The built-in ``naive`` method on a batch (:func:`naive_tensors`, as the registry runs it)."""
+    clips, times = naive_tensors(inp.loco, inp.act, inp.roles, inp.skeleton)
+    return MethodOutput(clips=clips, times=times)
+
+
+def run_cpmc(inp: MethodInput) -> MethodOutput:
+    """The built-in ``cpmc`` method on a batch (:func:`cpmc_tensors`, as the registry runs it)."""
+    clips, al, _ = cpmc_tensors(inp.loco, inp.act, inp.ref, inp.roles, inp.skeleton, inp.options.align, inp.fps)
+    B = inp.loco.lengths.shape[0]
+    return MethodOutput(clips=clips, times=al.curve + al.crop[:, None], cost=al.cost, crop=al.crop,
+                        paths=[al.cells[b, : int(al.path_length[b])] for b in range(B)])

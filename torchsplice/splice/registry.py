@@ -23,7 +23,8 @@ variable ``TORCHSPLICE_PLUGINS`` (comma-separated module names) and the command 
 and each worker (local processes or Ray) imports it before splicing, so the module must be
 importable there (installed, or on ``PYTHONPATH``).
 
-The built-in ``splice``, ``naive`` and ``cpmc`` register themselves in
+The built-in ``splice``, ``naive`` and ``cpmc`` are declared once, in the table
+:data:`torchsplice.core.method_table.BUILTINS`, and registered from it in
 :mod:`torchsplice.splice.builtin_methods`. They also run in the compiled CPU splicer
 (:mod:`torchsplice.cpu`, ``compiled=True``); a plug-in method runs in torch on any device.
 
@@ -41,6 +42,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from ..core.errors import MotionError, TorchspliceError
+from ..core.method_table import BUILTINS, builtin
 
 if TYPE_CHECKING:  # pragma: no cover
     import torch
@@ -54,7 +56,8 @@ __all__ = ["Method", "MethodInput", "MethodOutput", "MethodFailedError", "run_ch
 
 PLUGINS_ENV = "TORCHSPLICE_PLUGINS"
 ENTRY_POINT_GROUP = "torchsplice.methods"
-BUILTIN_METHODS = ("splice", "naive", "cpmc")
+BUILTIN_METHODS = tuple(m.name for m in BUILTINS)
+"""The built-in methods' names (from :data:`torchsplice.core.method_table.BUILTINS`)."""
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 
 
@@ -145,9 +148,18 @@ class Method:
     def builtin(self) -> bool:
         return self.name in BUILTIN_METHODS and self.module.startswith("torchsplice.")
 
+    @property
+    def uses_acting_limbs(self) -> bool:
+        """Its standing variant takes only the acting arms from the action (a built-in's table
+        row says: ``splice``); the limbs it used are then reported."""
+        row = builtin(self.name)
+        return row is not None and row.acting_limbs
+
     def clip_name(self, locomotion: str, action: str) -> str:
-        """The name of a spliced clip: ``LOCO+ACTION`` for ``splice``, else ``LOCO+ACTION.NAME``."""
-        return f"{locomotion}+{action}" if self.name == "splice" else f"{locomotion}+{action}.{self.name}"
+        """The name of a spliced clip: ``LOCO+ACTION`` for ``splice`` (a built-in without
+        :attr:`~torchsplice.core.method_table.BuiltinMethod.suffix`), else ``LOCO+ACTION.NAME``."""
+        row = builtin(self.name)
+        return f"{locomotion}+{action}" if row is not None and not row.suffix else f"{locomotion}+{action}.{self.name}"
 
 
 class MethodFailedError(MotionError):

@@ -54,6 +54,7 @@ import math
 
 import torch
 
+from ..core.method_table import builtin, resolve
 from ..core.rotations import axis_angle_to_quat, quat_apply, quat_conj, quat_mul, quat_normalize, quat_to_axis_angle
 from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
@@ -63,7 +64,7 @@ from .methods import upper_mask
 
 __all__ = ["TIMINGS", "LIMBS", "ACTING_THRESHOLD", "LOOP_BLEND_SECONDS", "CORE_SHARE", "arm_chains", "acting_limbs",
            "blend_frames", "hands_in_chest", "acting_mask", "motion_core", "best_windows", "loop_points", "action_times",
-           "standing_tensors", "standing_tables", "parse_limbs"]
+           "standing_tensors", "standing_tables", "parse_limbs", "splice_upper", "naive_upper", "cpmc_upper"]
 
 TIMINGS = ("loop", "hold", "fit")
 """How a standing action fills a longer (or shorter) locomotion."""
@@ -409,11 +410,17 @@ def standing_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, 
     ``loco`` and ``act`` are pairs (row ``b`` of each), at the same frame rate ``fps``.
     ``acting`` gives, per pair, the limbs the action acts with (``None``: every arm acts); their
     hands choose the best window and the loop points (see the module docstring).
-    ``method`` is ``"splice"`` (see the module docstring), ``"naive"`` (the action's whole upper
-    body) or ``"cpmc"`` (the action's motion since its first frame, added to the locomotion's
+    ``method`` is a built-in's name; its row of :data:`torchsplice.core.method_table.BUILTINS`
+    names how the upper body is assembled: ``"splice"`` (:func:`splice_upper`, see the module
+    docstring), ``"naive"`` (:func:`naive_upper`, the action's whole upper body) or ``"cpmc"``
+    (:func:`cpmc_upper`, the action's motion since its first frame, added to the locomotion's
     upper body). Returns the spliced clips (as long as their locomotions; no FK) and the action
     frame of every result frame ``(B, T)`` (float64).
     """
+    row = builtin(method)
+    if row is None:
+        raise ValueError(f"unknown method {method!r}")
+    assemble = resolve(row.standing)
     B, T, J = loco.rotations.shape[0], int(loco.lengths.max()), skeleton.num_joints
     dev = loco.rotations.device
     loop = window = None
@@ -428,26 +435,42 @@ def standing_tensors(loco: ClipTensors, act: ClipTensors, roles: SkeletonRoles, 
                              blend_frames(act.lengths, fps))  # (B, T, J, 4), (B, T, J, 3)
     l_rot, l_trans = loco.rotations[:, :T], loco.translations[:, :T]
     upper = upper_mask(roles, J, dev)
-    if method == "naive":
-        rot = torch.where(upper[:, None], a_rot, l_rot)
-    elif method == "cpmc":
-        first = act.rotations[:, :1]  # (B, 1, J, 4): the action's own reference pose
-        delta = quat_mul(quat_conj(first).expand_as(a_rot), a_rot)
-        rot = torch.where(upper[:, None], quat_normalize(quat_mul(l_rot, delta)), l_rot)
-    elif method == "splice":
-        rot = torch.where(upper[:, None], a_rot, l_rot)
-        spine = [j for j in roles.spine if upper[j]]
-        if spine:
-            mean = _mean_rotation(l_rot[:, :, spine], loco.lengths)  # (B, S, 4)
-            dev_loco = quat_mul(quat_conj(mean)[:, None].expand_as(l_rot[:, :, spine]), l_rot[:, :, spine])
-            rot[:, :, spine] = quat_normalize(quat_mul(a_rot[:, :, spine], dev_loco))
-        chains = arm_chains(roles, skeleton)
-        for name in LIMBS:
-            joints = list(chains[name][1])
-            idle = torch.tensor([acting is not None and name not in acting[b] for b in range(B)], device=dev)
-            if joints and bool(idle.any()):
-                rot[:, :, joints] = torch.where(idle[:, None, None, None], l_rot[:, :, joints], rot[:, :, joints])
-    else:
-        raise ValueError(f"unknown method {method!r}")
-    trans = torch.where(upper[:, None] & (method == "naive"), a_trans, l_trans).clone()
+    rot, trans = assemble(act, loco, a_rot, a_trans, l_rot, l_trans, upper, roles, skeleton, acting)
     return without_fk(rot, trans, loco.lengths.clone()), times
+
+
+# The upper-body assembly of each built-in method's standing variant, named by its row of
+# torchsplice.core.method_table: (act, loco, a_rot, a_trans, l_rot, l_trans, upper, roles, skeleton,
+# acting) -> (rotations, translations); a_* is the action sampled on the result's times, l_* the
+# locomotion's first T frames, upper the (J,) upper-body mask.
+
+
+def splice_upper(act, loco, a_rot, a_trans, l_rot, l_trans, upper, roles, skeleton, acting):
+    """``splice``: acting arms and spine from the action (the spine with the locomotion's secondary
+    motion on top), idle arms, root and lower body from the locomotion (see the module docstring)."""
+    B, dev = l_rot.shape[0], l_rot.device
+    rot = torch.where(upper[:, None], a_rot, l_rot)
+    spine = [j for j in roles.spine if upper[j]]
+    if spine:
+        mean = _mean_rotation(l_rot[:, :, spine], loco.lengths)  # (B, S, 4)
+        dev_loco = quat_mul(quat_conj(mean)[:, None].expand_as(l_rot[:, :, spine]), l_rot[:, :, spine])
+        rot[:, :, spine] = quat_normalize(quat_mul(a_rot[:, :, spine], dev_loco))
+    chains = arm_chains(roles, skeleton)
+    for name in LIMBS:
+        joints = list(chains[name][1])
+        idle = torch.tensor([acting is not None and name not in acting[b] for b in range(B)], device=dev)
+        if joints and bool(idle.any()):
+            rot[:, :, joints] = torch.where(idle[:, None, None, None], l_rot[:, :, joints], rot[:, :, joints])
+    return rot, l_trans.clone()
+
+
+def naive_upper(act, loco, a_rot, a_trans, l_rot, l_trans, upper, roles, skeleton, acting):
+    """``naive``: the action's whole upper body as it is, translations too."""
+    return torch.where(upper[:, None], a_rot, l_rot), torch.where(upper[:, None], a_trans, l_trans)
+
+
+def cpmc_upper(act, loco, a_rot, a_trans, l_rot, l_trans, upper, roles, skeleton, acting):
+    """``cpmc``: the action's motion since its first frame added to the locomotion's upper body."""
+    first = act.rotations[:, :1]  # (B, 1, J, 4): the action's own reference pose
+    delta = quat_mul(quat_conj(first).expand_as(a_rot), a_rot)
+    return torch.where(upper[:, None], quat_normalize(quat_mul(l_rot, delta)), l_rot), l_trans.clone()

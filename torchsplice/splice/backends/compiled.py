@@ -26,6 +26,7 @@ def warm_up(quiet: bool = False) -> float:
     t0 = time.perf_counter()
     if not quiet:
         print("setup: compiling the CPU splicer for this machine (once; one to three minutes)", file=sys.stderr, flush=True)
+    from ...core.method_table import BUILTINS
     from ...cpu.bank import ClipBank, splice_bank, standing_bank
     from ...sample import sample_motions
     from ...specs import load_spec
@@ -35,7 +36,7 @@ def warm_up(quiet: bool = False) -> float:
     roles = load_spec("sample").bind(clips[0].skeleton)
     bank = ClipBank.from_motions(clips, clips[0].skeleton, roles)
     tables = standing_tables(roles, clips[0].skeleton, clips[0].fps)
-    for method in ("splice", "naive", "cpmc"):
+    for method in (m.name for m in BUILTINS):
         splice_bank(bank, np.array([0, 1]), np.array([2, 3]), method, ref=np.array([0, 1]))
         for timing in ("loop", "hold", "fit"):
             standing_bank(bank, np.array([0, 1]), np.array([2, 3]), np.array([[True, False], [True, True]]), tables,
