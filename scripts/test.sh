@@ -6,7 +6,7 @@
 # The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
 # apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
 # tests skip, saying why. Under CI=true, missing real data or browser fail those tests instead.
-# The docs extra (mkdocs) lets tests/test_docs.py build the documentation site strictly.
+# The docs extra (mkdocs) lets tests/project/test_docs.py build the documentation site strictly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 all=0
