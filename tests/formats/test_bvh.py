@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 import torch
 
-from realdata import bvh_params
 from torchsplice.core.errors import BVHError, MotionError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
@@ -144,11 +143,9 @@ def base_with(replace: dict[int, str] | None = None, drop: set[int] = frozenset(
 # --------------------------------------------------------------------------------------------
 # real files
 # --------------------------------------------------------------------------------------------
-@pytest.mark.realdata
-@pytest.mark.parametrize("path", bvh_params())
-def test_real_file_matches_readme(path, mocap_dir):
+def check_real_file_matches_readme(path, m):
+    """``m``: the file as :func:`read_bvh` reads it by default (tests/formats/test_real_files.py)."""
     joints, fps, all_positions = SOURCES[path.parent.name]
-    m = read_bvh(path)
     frames, readme_fps = readme_table(path.parent)[path.name]
     assert m.skeleton.num_joints == joints
     assert m.num_frames == frames
@@ -185,10 +182,8 @@ def test_every_real_file_is_covered(mocap_dir):
         assert files and files == set(readme_table(mocap_dir / folder))
 
 
-@pytest.mark.realdata
-@pytest.mark.parametrize("path", bvh_params())
-def test_real_file_round_trip(path, mocap_dir, tmp_path):
-    m = read_bvh(path, dtype=torch.float64)
+def check_real_file_round_trip(path, m, tmp_path):
+    """``m``: the file read in float64 (tests/formats/test_real_files.py)."""
     assert m.rotations.dtype == torch.float64
     assert m.root_translation.dtype == torch.float64
     if m.translations is not None:

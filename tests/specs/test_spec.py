@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from realdata import bvh_params, real_bvh_files
+from realdata import real_bvh_files
 from torchsplice.core.errors import SpecError
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.specs import (
@@ -401,10 +401,8 @@ def test_every_real_bandai_name_is_parsed_and_ruled(mocap_dir):
 # --------------------------------------------------------------------------------------------
 # real skeletons
 # --------------------------------------------------------------------------------------------
-@pytest.mark.realdata
-@pytest.mark.parametrize("path", bvh_params())
-def test_spec_binds_real_skeleton(mocap_dir, path):
-    sk = real_skeleton(path)
+def check_spec_binds_real_skeleton(path, sk):
+    """``sk``: the real file's skeleton, :func:`real_skeleton` (tests/formats/test_real_files.py)."""
     spec = load_spec(family(path))
     roles = spec.bind(sk)
     assert sk.names[roles.root] == spec.root and sk.names[roles.pelvis] == spec.pelvis
@@ -418,13 +416,11 @@ def test_spec_binds_real_skeleton(mocap_dir, path):
     assert sk.translation_animated[roles.root]
 
 
-@pytest.mark.realdata
-@pytest.mark.parametrize("path", bvh_params())
-def test_guess_agrees_with_hand_written_spec(mocap_dir, path):
+def check_guess_agrees_with_hand_written_spec(path, sk):
     """The guess matches the hand-written spec on every role on every real family: the specs pick
     no alternatives (the shoulder is the glenohumeral joint in both, e.g. CMU Max LeftShoulder,
-    MotionBuilder LeftArm; CMU Max's hand is LeftWrist, the joint MotionBuilder calls LeftHand)."""
-    sk = real_skeleton(path)
+    MotionBuilder LeftArm; CMU Max's hand is LeftWrist, the joint MotionBuilder calls LeftHand).
+    ``sk``: the real file's skeleton, :func:`real_skeleton` (tests/formats/test_real_files.py)."""
     spec, guess = load_spec(family(path)), guess_spec(sk)
     for key in (*ROLE_KEYS, "spine", "toes", "hands", "head"):
         assert getattr(guess, key) == getattr(spec, key), key
@@ -432,10 +428,8 @@ def test_guess_agrees_with_hand_written_spec(mocap_dir, path):
     assert guess.notes and guess.path is None
 
 
-@pytest.mark.realdata
-@pytest.mark.parametrize("path", bvh_params())
-def test_detect_spec_picks_the_family(mocap_dir, path):
-    sk = real_skeleton(path)
+def check_detect_spec_picks_the_family(path, sk):
+    """``sk``: the real file's skeleton, :func:`real_skeleton` (tests/formats/test_real_files.py)."""
     assert detect_spec(sk, path).name == family(path)
     assert detect_spec(sk, path.name).name == family(path)
     assert detect_spec(sk).name == family(path)  # by skeleton alone
