@@ -352,6 +352,7 @@ def _reader_clone(repo: Path, dest: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)  # a set-up and every block of the site, each up to 900 s
 def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path):
     """A reader's first hour: a fresh copy of the repository, their data beside the commands, and
     every block of the README and then of each page of the site (in the nav's order) run top to

@@ -35,7 +35,8 @@ def _why_not() -> str | None:
     return None
 
 
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(_why_not() is not None, reason=_why_not() or "")]
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(_why_not() is not None, reason=_why_not() or ""),
+              pytest.mark.timeout(1800)]  # the first test also starts the cluster and runs its scenarios (up to 900 s)
 
 
 def frames_and_table(path) -> dict:
