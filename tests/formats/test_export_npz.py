@@ -25,6 +25,7 @@ from torchsplice.core.errors import TorchspliceError
 from torchsplice.core.rotations import quat_to_6d, quat_to_rotmat, random_quat, rotation_6d_to_rotmat
 from torchsplice.data import MotionDataset, collate_motion
 from torchsplice.formats.bvh import read_bvh
+from torchsplice.formats.exporters import export_clips
 from torchsplice.store.database import MotionDatabase
 from torchsplice.formats.npz import NpzExport, clip_of_packed, read_npz, write_npz
 from torchsplice.core.fk import forward_kinematics
@@ -120,10 +121,9 @@ def test_one_clip_to_a_file_and_to_a_folder(db, bandai_names, tmp_path, capsys):
 # --------------------------------------------------------------------------------------------
 # packed
 # --------------------------------------------------------------------------------------------
-def test_packed_offsets_slice_back_each_clip_in_the_order_asked(db, bandai_names, tmp_path, capsys):
+def test_packed_offsets_slice_back_each_clip_in_the_order_asked(db, bandai_names, tmp_path):
     names = bandai_names[::-1]  # not row order
-    rc, _, err = run(capsys, "export", db, *names, "--packed", "-o", tmp_path / "p.npz", "-q")
-    assert rc == 0, err
+    export_clips(db, names, out=tmp_path / "p.npz", packed=True)
     p = read_npz(tmp_path / "p.npz")
     assert p["layout"] == "packed" and list(p["names"]) == names
     with MotionDatabase.open(db) as d:
@@ -143,8 +143,7 @@ def test_packed_offsets_slice_back_each_clip_in_the_order_asked(db, bandai_names
             np.testing.assert_array_equal(p["end_site_offsets"][i], m.skeleton.end_site_offsets.numpy())
             assert p["skeleton"][i] == d.clip_info(n)["skeleton"]
     # the per-clip files hold the same frames
-    rc, _, err = run(capsys, "export", db, *names, "--format", "npz", "-o", tmp_path / "each", "-q")
-    assert rc == 0, err
+    export_clips(db, names, out=tmp_path / "each", format="npz")
     for i, n in enumerate(names):
         one, c = read_npz(tmp_path / "each" / f"{n}.npz"), clip_of_packed(p, i)
         for k in ("rotations", "root_translation", "trajectory", "translations", "positions"):
@@ -183,9 +182,8 @@ def numpy_velocity(x: np.ndarray, fps: float) -> np.ndarray:
     return v
 
 
-def test_feature_statistics_equal_a_brute_force_numpy_computation(db, bandai_names, tmp_path, capsys):
-    rc, _, err = run(capsys, "export", db, *bandai_names, "--packed", "--features", "6d", "-o", tmp_path / "p.npz", "-q")
-    assert rc == 0, err
+def test_feature_statistics_equal_a_brute_force_numpy_computation(db, bandai_names, tmp_path):
+    export_clips(db, bandai_names, out=tmp_path / "p.npz", packed=True, features="6d")
     p = read_npz(tmp_path / "p.npz")
     feats: dict[str, list[np.ndarray]] = {}
     with MotionDatabase.open(db) as d:
@@ -210,8 +208,7 @@ def test_feature_statistics_equal_a_brute_force_numpy_computation(db, bandai_nam
         np.testing.assert_allclose(p[k], x, rtol=1e-5, atol=2e-3 if k in ("positions", "trajectory") else 2e-2)
     assert (p["root_translation_std"] == 0).all()  # joint_Root stands still: a dimension to leave unscaled
     # per-clip files carry the same statistics, over the whole exported set
-    rc, _, err = run(capsys, "export", db, *bandai_names, "--features", "6d", "-o", tmp_path / "each", "-q")
-    assert rc == 0, err
+    export_clips(db, bandai_names, out=tmp_path / "each", features="6d")
     one = read_npz(tmp_path / "each" / f"{bandai_names[1]}.npz")
     for k in feats:
         np.testing.assert_array_equal(one[f"{k}_mean"], p[f"{k}_mean"])
@@ -389,11 +386,10 @@ def test_a_killed_exports_staged_files_are_removed_by_the_next_export(db, bandai
     assert sorted(f.name for f in out.glob("*.npz")) == sorted(f"{n}.npz" for n in bandai_names[:2])
 
 
-def test_the_streamed_packed_file_holds_what_packed_gives_array_for_array(db, bandai_names, tmp_path, capsys):
+def test_the_streamed_packed_file_holds_what_packed_gives_array_for_array(db, bandai_names, tmp_path):
     """The packed file is written member by member from files of rows (memory flat in the number of
     clips): it equals, array for array, the layout :meth:`NpzExport.packed` makes in memory."""
-    rc, _, err = run(capsys, "export", db, *bandai_names, "--packed", "--features", "6d", "-o", tmp_path / "p.npz", "-q")
-    assert rc == 0, err
+    export_clips(db, bandai_names, out=tmp_path / "p.npz", packed=True, features="6d")
     want = NpzExport(db, bandai_names, features="6d").packed()
     with np.load(tmp_path / "p.npz", allow_pickle=False) as got:
         assert sorted(got.files) == sorted(want)

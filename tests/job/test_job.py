@@ -28,7 +28,7 @@ from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.core.rotations import quat_angle
-from torchsplice.job import JobConfig, SpliceJob
+from torchsplice.job import JobConfig, SpliceJob, splice_all
 from writers import _digest, cli, nan_copy
 
 REPO = Path(__file__).resolve().parents[2]
@@ -379,8 +379,8 @@ def test_standing_pairs_do_not_depend_on_batch_size_or_workers(standing_out, tmp
     assert {c["timing"] for c in clips(want)} == {"loop"} and len(clips(want)) == 18
     for batch, workers in (("4", "2"), ("7", "3"), ("18", "1")):
         out = tmp_path / f"b{batch}_w{workers}.h5"
-        assert main(["splice-all", str(db), "-o", str(out), "--locomotions", "role:locomotion", "--actions", "role:action",
-                     "--batch-size", batch, "--workers", workers, "-q"]) == 0
+        splice_all(db, out, locomotions="role:locomotion", actions="role:action", batch_pairs=int(batch),
+                   workers=int(workers))
         assert datasets(out) == datasets(want), (batch, workers)
 
 
@@ -392,8 +392,7 @@ def test_standing_pairs_on_the_torch_path_equal_the_compiled_ones(standing_out, 
     db, want = standing_out
     monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
     out = tmp_path / "torch.h5"
-    assert main(["splice-all", str(db), "-o", str(out), "--locomotions", "role:locomotion", "--actions", "role:action",
-                 "-q"]) == 0
+    splice_all(db, out, locomotions="role:locomotion", actions="role:action")
     a, b = table(out), table(want)
     for col in ("name", "length", "timing", "acting", "locomotion", "action"):
         assert a[col] == b[col], col
@@ -553,7 +552,7 @@ def test_output_does_not_depend_on_batch_size_or_workers(sample_db, default_out,
     process, or 2 or 3 worker processes) give the same bits, clip data and columns alike."""
     for batch, threads in (("3", "1"), ("7", "2"), ("4", "3")):
         out = tmp_path / f"b{batch}_t{threads}.h5"
-        assert main(["splice-all", str(sample_db), "-o", str(out), "--batch-size", batch, "--workers", threads, "-q"]) == 0
+        splice_all(sample_db, out, batch_pairs=int(batch), workers=int(threads))
         assert datasets(out) == datasets(default_out), (batch, threads)
         assert run_record(out)["batch_pairs"] == int(batch)
 
@@ -562,7 +561,7 @@ def test_compression_choices_hold_the_same_clips(sample_db, default_out, tmp_pat
     want = datasets(default_out)
     for comp in ("none", "lzf", "gzip"):
         out = tmp_path / f"{comp}.h5"
-        assert main(["splice-all", str(sample_db), "-o", str(out), "--compression", comp, "-q"]) == 0
+        splice_all(sample_db, out, compression=comp)
         assert datasets(out) == want
         with h5py.File(out, "r") as f:
             ds = f["skeletons/0/rotations"]
@@ -581,7 +580,7 @@ def test_torch_path_writes_the_same_clips(sample_db, default_out, tmp_path, monk
 
     monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
     out = tmp_path / "torch.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(out), "-q"]) == 0
+    splice_all(sample_db, out)
     a, b = table(out), table(default_out)
     for col in ("name", "length", "crop", "locomotion", "action", "flags"):
         assert a[col] == b[col], col
