@@ -15,7 +15,7 @@
 - The pictures the pages show live in ``torchsplice/viz/`` (where the tests refresh them); they
   are added to the site as ``images/NAME.png``.
 
-``mkdocs.yml`` names this file under ``hooks``; ``tests/test_docs.py`` builds the site strictly.
+``mkdocs.yml`` names this file under ``hooks``; ``tests/project/test_docs.py`` builds the site strictly.
 """
 
 from __future__ import annotations

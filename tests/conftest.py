@@ -8,55 +8,17 @@ never passes by skipping.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-MOCAP = Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap"))
-
-
-def _require_mocap() -> Path:
-    if MOCAP.is_dir() and any(MOCAP.rglob("*.bvh")):
-        return MOCAP
-    reason = f"real motion capture not found at {MOCAP} (set TORCHSPLICE_MOCAP to its folder)"
-    if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
-        pytest.fail(reason + "; CI must run the real-data tests", pytrace=False)
-    pytest.skip(reason)
+from realdata import MOCAP, _require_mocap
 
 
 @pytest.fixture(scope="session")
 def mocap_dir() -> Path:
     """The folder of real BVH files (one subfolder per source)."""
     return _require_mocap()
-
-
-def real_bvh_files() -> list[Path]:
-    """Every real BVH file, sorted; empty when the data is absent (tests then skip via mocap_dir)."""
-    return sorted(MOCAP.rglob("*.bvh")) if MOCAP.is_dir() else []
-
-
-#: real files per folder that the quick suite checks; the others are marked ``slow``
-QUICK_FILES_PER_FOLDER = 2
-
-
-def bvh_params():
-    """pytest parameters over every real BVH file, with short ids; one skipping placeholder if none.
-
-    The first :data:`QUICK_FILES_PER_FOLDER` files of each folder run in the quick suite; the
-    rest are marked ``slow`` (``scripts/test.sh --all`` and CI run them too).
-    """
-    files = real_bvh_files()
-    if not files:
-        return [pytest.param(None, id="no-real-data")]
-    seen: dict[Path, int] = {}
-    params = []
-    for f in files:
-        seen[f.parent] = seen.get(f.parent, 0) + 1
-        marks = [pytest.mark.slow] if seen[f.parent] > QUICK_FILES_PER_FOLDER else []
-        params.append(pytest.param(f, id=f"{f.parent.name[:6]}/{f.stem}", marks=marks))
-    return params
 
 
 @pytest.fixture(scope="session")
@@ -68,6 +30,38 @@ def sample_db(tmp_path_factory):
     db = tmp_path_factory.mktemp("sample") / "sample.h5"
     assert main(["sample", "-o", str(db), "-q"]) == 0
     return db
+
+
+@pytest.fixture(scope="session")
+def mixed(mocap_dir, tmp_path_factory) -> Path:
+    """Two Bandai Namco clips (22 joints) and the CMU walk (31 joints)."""
+    from torchsplice.cli import main
+
+    out = tmp_path_factory.mktemp("mixed") / "mixed.h5"
+    bandai = mocap_dir / "bandai_namco_research_motiondataset"
+    files = [bandai / "dataset-1_walk_normal_001.bvh", bandai / "dataset-1_bye_normal_001.bvh",
+             mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"]
+    assert main(["import", *map(str, files), "-o", str(out), "--units", "cm", "-q"]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def bandai_namco_db(mocap_dir, tmp_path_factory) -> Path:
+    """Every Bandai Namco clip of ../shared/mocap imported as ``torchsplice import FOLDER`` does
+    (the spec detected), made once per session: read it, never write into it."""
+    from torchsplice.cli import main
+
+    db = tmp_path_factory.mktemp("bandai_namco") / "bandai.h5"
+    assert main(["import", str(mocap_dir / "bandai_namco_research_motiondataset"), "-o", str(db), "-q"]) == 0
+    return db
+
+
+@pytest.fixture
+def bandai_walks(mocap_dir) -> list[Path]:
+    """Ten real Bandai Namco walks (paths into the shared folder: read them, never write there)."""
+    files = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("dataset-1_walk*.bvh"))[:10]
+    assert len(files) == 10
+    return files
 
 
 @pytest.fixture(scope="session")

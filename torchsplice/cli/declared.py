@@ -3,12 +3,12 @@
 An option is declared once, in the library: ``--timing``'s choices are
 ``torchsplice.splice.standing.TIMINGS``, ``--max-run``'s default is ``JobConfig.max_run``. The
 modules that declare them import torch, numpy or h5py, which the command line must not load for
-``--help`` (tests/test_cli_startup.py). So :func:`declared` reads such a value from the module's
+``--help`` (tests/cli/test_cli_startup.py). So :func:`declared` reads such a value from the module's
 source when the module is not loaded yet: the literal it is assigned (a module constant, a
 dataclass field's default, a function parameter's default; a name of another constant of the
 same module is followed, and so is a name imported from another torchsplice module). Once the module is loaded (any command that does work loads it), the
 live value is read instead, and a value that is not a literal imports the module. So the value
-is always the library's; tests/test_cli_options.py checks every parser choice and default
+is always the library's; tests/cli/test_cli_options.py checks every parser choice and default
 against the imported library, and this reader against the live values.
 
 Names: ``"CONST"``, ``"Class.field"`` (a dataclass field's plain default), ``"function.param"``.

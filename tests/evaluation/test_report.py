@@ -1,0 +1,253 @@
+"""Alignment pictures, the spec's ground-truth rule, and the evaluation report."""
+
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from torchsplice.cli import main
+from torchsplice.core.errors import SpecError, TorchspliceError
+from torchsplice.sample import sample_motions
+from torchsplice.specs import DatasetSpec, load_spec
+from torchsplice.viz.alignment import alignment_data, plot_alignment
+from cli_helpers import error_line, run
+from torchsplice.store.database import MotionDatabase
+
+BANDAI = "bandai_namco_research_motiondataset"
+
+
+@pytest.fixture(scope="module")
+def sample():
+    return {m.name: m for m in sample_motions()}
+
+
+# -- the ground-truth rule --------------------------------------------------------------------
+def test_ground_truth_labels_follow_the_rule():
+    spec = load_spec("bandai_namco")
+    loco = {"dataset": "2", "content": "walk-turn-left", "style": "normal", "take": "025"}
+    act = {"dataset": "2", "content": "walk", "style": "elderly", "take": "006"}
+    assert spec.ground_truth_labels(loco, act) == {"dataset": "2", "content": "walk-turn-left", "style": "elderly"}
+    assert spec.ground_truth_labels({**loco, "style": "proud"}, act) is None  # locomotion must be normal style
+    assert spec.ground_truth_labels(loco, {**act, "content": "wave-left-hand"}) is None  # action must be a walk
+    assert spec.ground_truth_labels(loco, {"content": "walk"}) is None  # a label the template needs is missing
+    assert spec.ground_truth_labels({**loco, "dataset": "1"}, act) is None  # sources from different datasets
+    assert DatasetSpec.from_json(spec.to_json()).ground_truth == spec.ground_truth
+    assert load_spec("sample").ground_truth_labels({}, {}) is None
+
+
+def test_malformed_ground_truth_rule_is_a_spec_error(tmp_path):
+    base = (load_spec("sample").path).read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(base.replace('name = "sample"', 'name = "bad"') + '\n[clips.ground_truth]\naction = { content = "walk" }\n')
+    with pytest.raises(SpecError, match="ground_truth"):
+        load_spec(bad)
+
+
+# -- the alignment picture --------------------------------------------------------------------
+def test_alignment_data_is_consistent(sample):
+    loco, act = sample["walk_curve"], sample["carry_box"]
+    d = alignment_data(loco, act, load_spec("sample"))
+    assert d["grid"].shape == (loco.num_frames, act.num_frames)
+    path = d["path"]
+    assert tuple(path[0].tolist()) == (0, d["crop"])
+    assert bool((path[1:] >= path[:-1]).all())
+    curve = d["curve"]
+    assert bool((curve[1:] > curve[:-1]).all()) and abs(float(curve[0]) - d["crop"]) < 1e-6
+    # the path runs along low distances: its mean cost is the result's cost
+    i, j = path[:, 0], path[:, 1]
+    assert float(d["grid"][i, j].mean()) == pytest.approx(d["cost"], rel=1e-3)
+    assert float(d["grid"][i, j].mean()) < 0.5 * float(d["grid"].mean())
+
+
+def test_plot_alignment_writes_a_picture(sample, tmp_path):
+    import matplotlib.image as mpimg
+    import matplotlib.pyplot as plt
+
+    out = plot_alignment(sample["walk_straight"], sample["wave"], load_spec("sample"), tmp_path / "a.png")
+    img = mpimg.imread(out)
+    assert img.shape[0] > 300 and img.shape[1] > 300 and float(np.std(img)) > 0.05
+    assert plt.get_fignums() == []
+    with pytest.raises(TorchspliceError, match="unsupported picture type"):
+        plot_alignment(sample["walk_straight"], sample["wave"], load_spec("sample"), tmp_path / "a.bmpx")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]
+
+
+def test_plot_alignment_command(tmp_path, capsys):
+    db = tmp_path / "s.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    out = tmp_path / "a.png"
+    assert main(["plot-alignment", str(db), "--locomotion", "walk_curve", "--action", "carry_box", "-o", str(out), "-q"]) == 0
+    assert out.stat().st_size > 10_000
+    assert main(["plot-alignment", str(db), "--locomotion", "walk_curve", "--action", "nope", "-o", str(out), "-f"]) == 2
+    assert "nope" in capsys.readouterr().err
+
+
+# -- the report -------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def sample_job(tmp_path_factory):
+    d = tmp_path_factory.mktemp("job")
+    db, out = d / "s.h5", d / "spliced.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    assert main(["splice-all", str(db), "-o", str(out), "--method", "splice,naive", "-q"]) == 0
+    return out
+
+
+def test_report_on_the_sample_ranks_splice_above_naive(sample_job, tmp_path, capsys):
+    report = tmp_path / "report.md"
+    assert main(["evaluate", str(sample_job), "-o", str(report), "--no-pictures"]) == 0
+    out = capsys.readouterr().out
+    assert "splice: 25 clips" in out and "naive: 25 clips" in out
+    from torchsplice.evaluation.report import evaluate_database
+
+    agg = evaluate_database(sample_job, tmp_path / "r2.md", pictures=False)
+    assert agg["splice"]["clips"] == agg["naive"]["clips"] == 25
+    # the splice keeps the action's posture and the arm-leg coordination; naive copying does not
+    assert agg["splice"]["posture"] < 0.5 * agg["naive"]["posture"]
+    assert agg["splice"]["phase_in_range"] > agg["naive"]["phase_in_range"]
+    assert agg["splice"]["phase"] < agg["naive"]["phase"]
+    # the lower body comes from the locomotion either way: foot skate is about the same
+    assert agg["splice"]["foot_skate"] == pytest.approx(agg["naive"]["foot_skate"], rel=0.2)
+    text = report.read_text()
+    assert "| splice | 25 |" in text and "| naive | 25 |" in text and "walk_curve+carry_box" in text
+
+
+def test_figures_that_are_not_finite_print_as_a_dash(sample_job, tmp_path, capsys):
+    """A result with huge values (a plug-in's translations of 1e30) leaves aggregates that are
+    not finite: evaluate prints them as '-' and finishes, no traceback."""
+    import h5py
+
+    huge = tmp_path / "huge.h5"
+    shutil.copy(sample_job, huge)
+    with h5py.File(huge, "r+") as f:
+        rt = f["skeletons/0/root_translation"]
+        sign = np.where(np.arange(rt.shape[0]) % 2 == 0, 1.0, -1.0)[:, None]
+        rt[...] = (sign * np.full(rt.shape, 3e38)).astype(rt.dtype)  # steps of 6e38: past float32's range
+    rc = main(["evaluate", str(huge), "-o", str(tmp_path / "r.md"), "--no-pictures"])
+    cap = capsys.readouterr()
+    assert rc == 0 and "Traceback" not in cap.err, cap.err
+    assert "foot skate - " in cap.out and "splice: 25 clips" in cap.out
+
+
+def test_report_needs_a_spliced_database(tmp_path):
+    db = tmp_path / "s.h5"
+    assert main(["sample", "-o", str(db), "-q"]) == 0
+    assert main(["evaluate", str(db), "-o", str(tmp_path / "r.md")]) == 2
+    assert not (tmp_path / "r.md").exists()
+
+
+def test_report_with_ground_truth_on_real_clips(mocap_dir, tmp_path):
+    names = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031",
+             "dataset-2_walk_elderly_006", "dataset-2_walk_feminine_025",
+             "dataset-2_walk-turn-left_elderly_003", "dataset-2_walk-turn-right_elderly_020",
+             "dataset-2_walk-turn-left_feminine_025", "dataset-2_walk-turn-right_feminine_003"]
+    src = tmp_path / "in"
+    src.mkdir()
+    for n in names:
+        shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", src)
+    db, out, report = tmp_path / "b.h5", tmp_path / "o.h5", tmp_path / "r.md"
+    assert main(["import", str(src), "--spec", "bandai_namco", "-o", str(db), "-q"]) == 0
+    assert main(["splice-all", str(db), "-o", str(out), "-q", "--method", "splice,naive",
+                 "--locomotions", "label:style=normal", "--actions", "label:content=walk"]) == 0
+    from torchsplice.evaluation.report import evaluate_database
+
+    agg = evaluate_database(out, report, pictures=False)
+    assert agg["splice"]["gt_pairs"] == agg["naive"]["gt_pairs"] == 4  # 2 turns x 2 styles
+    assert agg["splice"]["gt_error"] < agg["naive"]["gt_error"]
+    assert "dataset-2_walk-turn-left_elderly_003" in report.read_text()
+    for m in ("splice", "naive"):  # the breakdown per locomotion type: 2 styles per turn
+        by = agg[m]["gt_by_type"]
+        assert set(by) == {"all", "walk-turn-left", "walk-turn-right"}
+        assert by["walk-turn-left"]["n"] == by["walk-turn-right"]["n"] == 2 and by["all"]["n"] == 4
+        assert by["all"]["mean"] == pytest.approx(agg[m]["gt_error"])
+        assert by["all"]["worst"] == max(by[k]["worst"] for k in ("walk-turn-left", "walk-turn-right"))
+        assert agg[m]["gt_bound"] < agg[m]["gt_error"]  # the oracle posture beats the real one
+        assert set(agg[m]["gt_bound_by_type"]) == set(by)
+    text = report.read_text()
+    assert "## Ground truth per locomotion type" in text and "| walk-turn-left | 2 |" in text and "| **all** | 4 |" in text
+
+
+def test_best_constant_posture_bound_known_answers():
+    from torchsplice.core.rotations import quat_to_rotmat, random_quat
+    from torchsplice.evaluation.ground_truth import _best_posture_clouds, _mean_error
+
+    g = torch.Generator().manual_seed(3)
+    b = torch.randn(2, 9, 5, 3, generator=g, dtype=torch.float64) * 20      # (B, T, U, 3) capture
+    R = quat_to_rotmat(random_quat((2,), dtype=torch.float64, generator=g))  # one rotation per pair
+    pivot = 2
+    a = torch.einsum("bij,btuj->btui", R, b - b[:, :, pivot:pivot + 1]) + b[:, :, pivot:pivot + 1]
+    valid = torch.ones(2, 9, dtype=torch.float64)
+    valid[1, 6:] = 0                                                         # pair 1: 6 aligned frames
+    assert float(_mean_error(a, b, valid).min()) > 1.0                       # turned: far off
+    assert float(_best_posture_clouds(a, b, valid, pivot).max()) < 1e-9      # the bound undoes the turn
+    noisy = a.clone()
+    noisy[1, 6:] += 1e3                                                      # frames past the alignment: ignored
+    assert float(_best_posture_clouds(noisy, b, valid, pivot)[1]) < 1e-9
+    moved = b + torch.tensor([0.0, 0.0, 5.0], dtype=torch.float64)           # a shift is no rotation
+    assert float(_best_posture_clouds(moved, b, valid, pivot).min()) > 1.0
+
+
+def test_error_stats_and_breakdown_by_type():
+    from torchsplice.evaluation.report import error_stats, ground_truth_by_type
+
+    assert error_stats([3.0, None, 1.0, 2.0]) == {"n": 3, "mean": 2.0, "median": 2.0, "worst": 3.0}
+    assert error_stats([4.0, 1.0, 2.0, 10.0])["median"] == 3.0  # even count: the two middle values
+    assert error_stats([None, float("nan")]) == {"n": 0, "mean": None, "median": None, "worst": None}
+    rows = [{"method": "splice", "loco_type": t, "gt_error": e}
+            for t, e in (("run", 1.0), ("run", 3.0), ("dash", 5.0), ("dash", None))]
+    rows.append({"method": "naive", "loco_type": "run", "gt_error": 7.0})
+    by = ground_truth_by_type(rows, ["splice", "naive", "cpmc"])
+    assert set(by) == {"splice", "naive"}  # cpmc has no ground-truth row
+    assert by["splice"]["run"] == {"n": 2, "mean": 2.0, "median": 2.0, "worst": 3.0}
+    assert by["splice"]["dash"]["n"] == 1 and by["splice"]["all"]["mean"] == 3.0
+    assert set(by["naive"]) == {"all", "run"}
+
+
+def test_an_out_of_range_lag_never_prints_as_its_bound():
+    from torchsplice.evaluation.report import _lag_text
+
+    band = (-0.0469, 0.089)
+    assert _lag_text(0.01, True, band) == "0.010"
+    assert _lag_text(-0.0474, False, band) == "-0.0474 (out of range: below -0.0469)"
+    assert _lag_text(0.2, False, band) == "0.200 (out of range: above 0.089)"
+    assert _lag_text(float("nan"), False, band) == "-"
+
+
+def test_8_evaluate_writes_every_row_for_scripts_and_says_where_its_tables_stop(sample_db, tmp_path, capsys):
+    import csv
+    import json
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
+    rc, out, _ = run(capsys, "evaluate", spliced, "-o", tmp_path / "r.md", "--no-pictures", "--max-rows", "4",
+                     "--csv", tmp_path / "r.csv", "--json", tmp_path / "r.json")
+    assert rc == 0 and "r.csv" in out and "r.json" in out
+    rows = list(csv.DictReader(open(tmp_path / "r.csv")))
+    doc = json.loads((tmp_path / "r.json").read_text())
+    with MotionDatabase.open(spliced) as d:
+        names = set(d.names)
+    assert {r["name"] for r in rows} == {c["name"] for c in doc["clips"]} == names and len(rows) == len(names) == 25
+    assert set(doc["aggregates"]) == {"splice"} and doc["aggregates"]["splice"]["clips"] == 25
+    assert float(rows[0]["foot_skate"]) == pytest.approx(doc["clips"][0]["foot_skate"])
+    assert "21 more (the table stops at 4 rows; every row: evaluate's csv or json)" in (tmp_path / "r.md").read_text()
+    rc, _, err = run(capsys, "evaluate", spliced, "-o", tmp_path / "s.md", "--csv", tmp_path / "r.txt")
+    assert rc == 2 and "must end in .csv" in error_line(err) and not (tmp_path / "s.md").exists()
+
+
+def test_per_clip_metrics_as_csv_for_any_database(sample_db, tmp_path, capsys):
+    import csv
+
+    spliced = tmp_path / "sp.h5"
+    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q", "--method", "splice,naive"]) == 0
+    rc, _, _ = run(capsys, "info", spliced, "method:naive", "--csv", tmp_path / "naive.csv", "--limit", "0")
+    rows = list(csv.DictReader(open(tmp_path / "naive.csv")))
+    assert rc == 0 and len(rows) == 25 and all(r["method"] == "naive" for r in rows)
+    with MotionDatabase.open(spliced) as d:
+        t = d.clip_table()
+        cost = {t.names[r]: float(t.extra["cost"][r]) for r in range(len(t))}
+    for r in rows:
+        assert {"flags", "alignment_distance", "coverage", "labels"} <= set(r)
+        want = cost[r["name"]]  # NaN where unset (the naive method aligns nothing): an empty cell
+        assert (r["cost"] == "") if want != want else float(r["cost"]) == pytest.approx(want)
+    rc, _, err = run(capsys, "info", spliced, "--csv", tmp_path / "x.txt")
+    assert rc == 2 and "must end in .csv" in error_line(err)

@@ -1,0 +1,204 @@
+"""A job's disk is its output: the merge as tasks finish, resumes that merge nothing twice, the
+size estimate and the refusal of a job that cannot fit, the dry run, and the closing summary.
+
+Real Bandai Namco clips from ``../shared/mocap`` where a test needs standing actions and many
+tasks; the built-in sample elsewhere.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cli_helpers import run
+from torchsplice.cli import main
+from torchsplice.store.database import MotionDatabase
+from torchsplice.job import splice_all
+from torchsplice.job.summary import REASONS_SHOWN, reason_lines
+from torchsplice.job.size import TABLE_BYTES_PER_CLIP, frame_bytes
+
+REPO = Path(__file__).resolve().parents[2]
+BANDAI = "bandai_namco_research_motiondataset"
+JOB = ["--locomotions", "label:style=normal", "--actions", "role:action,role:both"]
+
+
+@pytest.fixture(scope="module")
+def bandai_db(bandai_namco_db):
+    return bandai_namco_db
+
+
+def listing(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+# ------------------------------------------------------------------------------ size and room
+def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_path, capsys):
+    out = tmp_path / "out.h5"
+    before = listing(tmp_path)
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--method", "splice,naive", "--dry-run")
+    assert code == 0, err
+    first = text.splitlines()[0]
+    m = re.search(r"would write .*out\.h5: 50 spliced clips in (\d+) tasks; expected output about ([\d.]+) (MB|kB) "
+                  r"\(([\d,]+) frames\); ([\d.,]+) (GB|MB|TB) free in ", first)
+    assert m, first
+    assert listing(tmp_path) == before  # no output, no work folder, no lock
+    # a time-aligned result is at most as long as the shorter clip of its pair (the sample's fps are one)
+    with MotionDatabase.open(sample_db) as db:
+        t = db.table()
+    n = {str(a): int(b) for a, b in zip(t["name"], t["length"])}
+    want = 2 * sum(min(n[lo], n[ac]) for lo in ("walk_straight", "walk_curve", "turn_sharp", "sidestep", "jog")
+                   for ac in ("carry_box", "carry_cup", "wave", "punch", "arms_out"))
+    assert int(m.group(4).replace(",", "")) == want
+
+
+def test_the_estimate_is_close_to_what_the_job_writes(sample_db, bandai_db, tmp_path, capsys):
+    for db, extra in ((sample_db, {"methods": "splice,naive"}),
+                      (bandai_db, {"locomotions": "label:style=normal", "actions": "role:action,role:both"})):
+        for compression in ("auto", "gzip"):
+            out = tmp_path / f"{db.stem}_{compression}.h5"
+            s = splice_all(db, out, compression=compression, workers=1, **extra)
+            assert s.written == out.stat().st_size
+            # errs on the large side: a few percent for auto (rotations raw), more for gzip, whose ratio varies most
+            low = 0.85 if compression == "auto" else 0.6
+            assert low * s.expected.bytes <= s.written <= 1.02 * s.expected.bytes, (db, compression, s.written, s.expected)
+            line = next(ln for ln in s.lines() if "on disk" in ln)
+            assert re.fullmatch(r"  [\d.]+ (kB|MB|GB) on disk \(expected [\d.]+ (kB|MB|GB)\)", line), line
+
+
+def test_frame_bytes_follow_the_layout():
+    # a 22-joint frame without joint translations, raw: rotations 352 + root 12 + action frame 4
+    assert frame_bytes(22, False, None) == 368
+    assert frame_bytes(22, True, None) == 368 + 264
+    assert frame_bytes(22, True, "auto") < frame_bytes(22, True, None)
+    assert 500 <= TABLE_BYTES_PER_CLIP <= 5000
+
+
+def test_a_job_that_cannot_fit_is_refused_before_it_starts(sample_db, tmp_path, capsys, monkeypatch):
+    import torchsplice.job.run as run_mod
+
+    out = tmp_path / "out.h5"
+    monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 50_000)
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out)
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert "the job needs about" in err and "50.0 kB free" in err and str(out) in err
+    assert listing(tmp_path) == []  # refused before anything was written: no plan, no work folder
+    monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 10**12)
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--dry-run")
+    assert code == 0 and "(it does not fit)" not in text
+    monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 50_000)
+    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--dry-run")
+    assert code == 0 and "(it does not fit)" in text.splitlines()[0]
+
+
+def test_many_clips_of_one_kind_are_summed_up_in_the_summary():
+    skipped = {f"clip{k:02d} does not locomote (no alternating steps; {{force_locomotion}} splices it)": 10 + k
+               for k in range(REASONS_SHOWN + 4)}
+    skipped["a clip is not spliced onto itself"] = 3
+    lines = reason_lines(skipped, lambda why: why.replace("{force_locomotion}", "--force-locomotion"))
+    assert len(lines) == REASONS_SHOWN + 2
+    assert lines[0].startswith(f"  {10 + REASONS_SHOWN + 3} x clip{REASONS_SHOWN + 3:02d} does not locomote")
+    rest = sum(10 + k for k in range(4))  # the four least frequent
+    assert f"  {rest} x 4 other clips that do not locomote" in lines
+    assert "  3 x a clip is not spliced onto itself" in lines
+
+
+# ------------------------------------------------------------------------------ the disk while it runs
+def files_in(folder: Path):
+    """``(relative path, stat)`` of every file under ``folder`` (files and folders that vanish
+    during the walk skipped)."""
+    for root, _, names in os.walk(folder):
+        for name in names:
+            p = Path(root) / name
+            try:
+                yield str(p.relative_to(folder)), p.stat()
+            except OSError:
+                pass
+
+
+def footprint(folder: Path) -> tuple[int, dict]:
+    """Bytes of the job's files (each file once, whatever it was renamed to during the count): its
+    parts and shards, staged output, row log and checkpoints, and the output once renamed into
+    place (the clips' banks, an input cache, are counted apart); and the bytes by file."""
+    seen, parts = set(), {}
+    for rel, st in files_in(folder):
+        if "bank-" not in rel and st.st_ino not in seen:
+            seen.add(st.st_ino)
+            parts[rel] = st.st_size
+    return sum(parts.values()), parts
+
+
+def bank_bytes(folder: Path) -> int:
+    return sum(st.st_size for rel, st in files_in(folder) if "bank-" in rel)
+
+
+@pytest.mark.slow
+def test_the_peak_disk_of_a_job_is_about_its_output(bandai_db, tmp_path):
+    out = tmp_path / "out.h5"
+    proc = subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(bandai_db), "-o", str(out), *JOB,
+                             "--workers", "2", "--batch-size", "4", "-q"], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    peak, banks, at_peak = 0, 0, {}
+    while proc.poll() is None:
+        size, files = footprint(tmp_path)
+        if size > peak:
+            peak, at_peak = size, files
+        banks = max(banks, bank_bytes(tmp_path))
+        time.sleep(0.002)
+    _, err = proc.communicate()
+    assert proc.returncode == 0, err
+    final = out.stat().st_size
+    assert peak <= 1.3 * final, (peak, final, len(at_peak), sorted(at_peak.items(), key=lambda kv: -kv[1])[:6])
+    assert 0 < banks  # the workers mapped the driver's clips
+    assert listing(tmp_path) == ["out.h5", "out.h5.index.csv"]
+
+
+# ------------------------------------------------------------------------------ killed and resumed
+def held(work: Path) -> int:
+    return (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)
+
+
+@pytest.mark.slow
+def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(bandai_db, tmp_path):
+    from tests.job.test_job import assert_same_file
+
+    reference = tmp_path / "reference.h5"
+    assert main(["splice-all", str(bandai_db), "-o", str(reference), *JOB, "--batch-size", "4", "-q", "--workers", "1"]) == 0
+    out = tmp_path / "killed" / "out.h5"
+    out.parent.mkdir()
+    work = out.with_name(f".{out.name}.parts")
+    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(bandai_db), "-o", str(out), *JOB, "--batch-size", "4",
+           "--workers", "2"]
+    env = dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task
+    merged, kills = [], 0
+    for share in (0.2, 0.45, 0.7):
+        proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        total = None
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline:
+            if total is None and (work / "plan.json").exists():
+                try:
+                    total = len(json.loads((work / "plan.json").read_text())["tasks"])
+                except ValueError:
+                    pass
+            if total is not None and held(work) >= share * total:
+                proc.send_signal(signal.SIGKILL)
+                kills += 1
+                break
+            time.sleep(0.005)
+        proc.communicate()
+        merged.append(held(work))
+    assert kills == 3 and merged == sorted(merged) and merged[0] > 0
+    done = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    m = re.search(r"spliced clips \((\d+) pairs from an earlier run\)", done.stdout)
+    assert m and int(m.group(1)) >= 4 * merged[-1], done.stdout  # what the output held was not spliced again
+    assert not work.exists() and sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.h5.index.csv"]
+    assert_same_file(out, reference)
