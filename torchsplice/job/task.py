@@ -350,14 +350,16 @@ PART_KEYS = ("kind", "locomotion", "action")
 
 def _parts(plan: Plan, config: JobConfig, task: Task, keys, batch, ok: np.ndarray, standing: bool) -> dict | None:
     """A task's parts for an alignment store (see :class:`Part`), or ``None`` where its clips keep
-    their frames: a motion store, a backend that gives no parts, or cpmc through the timewarp
-    (whose result is a per-joint difference on the locomotion, not an alignment)."""
-    from ..store.assembly import METHOD_CODES, TIMING_CODES
+    their frames: a motion store, a backend that gives no parts, a plug-in method, or a built-in
+    whose table row stores frames (cpmc through the timewarp: its result is a per-joint difference
+    on the locomotion, not an alignment)."""
+    from ..core.method_table import builtin
+    from ..store.assembly import TIMING_CODES
     from ..splice.standing import LIMBS
 
-    method = task.method
-    if config.store != "alignment" or batch.parts is None or method not in METHOD_CODES or (
-            not standing and method == "cpmc"):
+    row = builtin(task.method)
+    if config.store != "alignment" or batch.parts is None or row is None or (
+            not standing and row.stores == "frames"):
         return None
     p = batch.parts
     C = len(keys)
@@ -366,7 +368,7 @@ def _parts(plan: Plan, config: JobConfig, task: Task, keys, batch, ok: np.ndarra
     loops = np.asarray(p["loops"], np.int64)[ok] if standing else np.zeros((C, 2), np.int64)
     return {"kind": ["standing" if standing else "timewarp"] * C, "locomotion": [k[0] for k in keys],
             "action": [k[1] for k in keys], "crop": np.asarray(p["crop"], np.int64)[ok],
-            "method": np.full(C, METHOD_CODES[method], np.int64),
+            "method": np.full(C, row.code, np.int64),
             "timing": np.full(C, TIMING_CODES[config.timing] if standing else -1, np.int64),
             "window": np.asarray(p["window"], np.int64)[ok], "loop_start": loops[:, 0].copy(),
             "loop_end": loops[:, 1].copy(), "acting": np.array(acting, np.int64),

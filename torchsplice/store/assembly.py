@@ -56,6 +56,7 @@ import h5py
 import numpy as np
 
 from ..core.errors import DatabaseError
+from ..core.method_table import BUILTINS
 from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
 
 __all__ = [
@@ -105,8 +106,8 @@ OPTIONAL_PARTS = ("assembly_arms",)
 """Per-frame parts a store written before them lacks (read as nothing to apply)."""
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
-METHOD_CODES = {"splice": 0, "naive": 1, "cpmc": 2}
-"""``assembly_method``: the built-in methods (as :data:`torchsplice.cpu.splice.METHOD_CODES`)."""
+METHOD_CODES = {m.name: m.code for m in BUILTINS}
+"""``assembly_method``: the built-in methods' codes (:data:`torchsplice.core.method_table.BUILTINS`)."""
 TIMING_CODES = {"loop": 0, "hold": 1, "fit": 2}
 """``assembly_timing``: a standing action's timing (as :data:`torchsplice.cpu.standing.TIMING_CODES`)."""
 KIND_CODES = {"motion": -1, "timewarp": 1, "standing": 2}
