@@ -255,6 +255,67 @@ def test_bad_input_is_refused():
         timewarp(bad)
 
 
+
+DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)]
+
+
+def test_the_dp_is_chosen_by_its_declared_devices_and_priority(monkeypatch):
+    """``"auto"`` runs the available implementation of highest priority on the grid's device (the
+    compiled DP on the CPU, torch without numba); a name runs that one; the errors are one line."""
+    from dataclasses import replace
+
+    import torchsplice.cpu
+    from torchsplice.align import timewarp as tw
+
+    ran = []
+
+    def spy(f, name):
+        def run(*args):
+            ran.append(name)
+            return f(*args)
+        return run
+
+    for name, impl in list(tw._IMPLEMENTATIONS.items()):
+        monkeypatch.setitem(tw._IMPLEMENTATIONS, name, replace(impl, timewarp=spy(impl.timewarp, name),
+                                                               cumulative=spy(impl.cumulative, name)))
+    g = torch.rand(2, 6, 7, dtype=torch.float64)
+    for backend, want in (("auto", "compiled"), ("compiled", "compiled"), ("torch", "torch")):
+        ran.clear()
+        timewarp(g, backend=backend)
+        cumulative_cost(g, backend=backend)
+        assert ran == [want, want], backend
+    monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
+    ran.clear()
+    timewarp(g)
+    assert ran == ["torch"]
+    with pytest.raises(ValueError, match=r"^backend must be 'auto', 'compiled' or 'torch', got 'gpu'$"):
+        timewarp(g, backend="gpu")
+    with pytest.raises(ValueError, match=r"^backend must be 'auto', 'compiled' or 'torch', got 'gpu'$"):
+        cumulative_cost(g, backend="gpu")
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_dp_on_a_device_gives_the_compiled_bits(device):
+    """The DP on ``device`` (``"auto"``: the torch DP on CUDA; the compiled one on the CPU, and
+    the torch one asked for by name) gives the compiled DP's paths, lengths and totals, bit for
+    bit, on padded float64 and float32 batches; the compiled DP refuses a grid elsewhere."""
+    gen = torch.Generator().manual_seed(5)
+    for dtype in (torch.float64, torch.float32):
+        g = torch.rand(4, 23, 19, generator=gen, dtype=dtype)
+        la, lb = torch.tensor([23, 17, 9, 20]), torch.tensor([19, 19, 12, 4])
+        want = timewarp(g, la, lb, max_run=3, backend="compiled")
+        want_cum = cumulative_cost(g, la, lb, max_run=3, backend="compiled")
+        for backend in ("auto", "torch"):
+            got = timewarp(g.to(device), la.to(device), lb.to(device), max_run=3, backend=backend)
+            assert got.cells.device.type == device
+            assert torch.equal(got.cells.cpu(), want.cells) and torch.equal(got.length.cpu(), want.length)
+            assert torch.equal(got.total.cpu(), want.total) and got.total.dtype == dtype
+            cum = cumulative_cost(g.to(device), la.to(device), lb.to(device), max_run=3, backend=backend)
+            assert cum.device.type == device and torch.equal(cum.cpu(), want_cum)
+    if device != "cpu":
+        with pytest.raises(ValueError, match=r"^the compiled backend runs on CPU tensors, got a grid on cuda:0$"):
+            timewarp(g.to(device), backend="compiled")
+
 def test_recovers_a_known_warp_of_a_real_clip(mocap_dir):
     from torchsplice.formats.bvh import read_bvh
 

@@ -36,7 +36,9 @@ and ``L``; a pair only fails (``ValueError`` naming it) when ``+inf`` cells bloc
 
 Two implementations give the same bits: this module's torch code (any device; it is what runs
 on CUDA) and the compiled one of :mod:`torchsplice.cpu.timewarp` (CPU tensors, by default),
-which runs each pair in one thread and pairs in parallel.
+which runs each pair in one thread and pairs in parallel. Each is declared with the devices it
+runs on and a priority (``_IMPLEMENTATIONS``), as the splicing backends are; ``backend="auto"``
+runs the available one of highest priority on the grid's device.
 
 Cost of the torch search: the Python loop runs over the ``Ta`` rows, each step vectorised over the
 batch and the columns (plus ``L`` shifts along the row); memory is the grid, three ``int8``
@@ -47,6 +49,7 @@ Backtracking steps every pair back at once, one path step per loop iteration.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import torch
@@ -300,20 +303,24 @@ def _backtrack(bp, end_i, end_j, state, length, L):
     return cells.masked_fill((t[None, :] >= length[:, None])[:, :, None], -1)
 
 
-# ----------------------------------------------------------------------------- public API
+# ----------------------------------------------------------------------------- implementations
 
 
-def _backend(backend: str, grid: torch.Tensor) -> str:
-    """``"compiled"`` or ``"torch"`` for ``backend`` (``"auto"``: compiled for CPU tensors)."""
-    if backend not in ("auto", "compiled", "torch"):
-        raise ValueError(f"backend must be 'auto', 'compiled' or 'torch', got {backend!r}")
-    if backend == "compiled" and grid.device.type != "cpu":
-        raise ValueError(f"the compiled backend runs on CPU tensors, got a grid on {grid.device}")
-    if backend == "auto":
-        from ..cpu import available
+def _timewarp_torch(grid, la, lb, L, unbatched) -> WarpPath:
+    """This module's search (any device): forward pass, end choice, backtracking."""
+    Le = _effective_run(L, grid.shape[1], grid.shape[2])
+    fw = _forward(grid, la, lb, Le)
+    end_i, end_j, state, total, length = _choose_end(fw, la, lb, L)
+    cells = _backtrack(fw["bp"], end_i, end_j, state, length, Le)
+    out = WarpPath(cells=cells, length=length, cost=total / length.to(total.dtype), total=total)
+    if unbatched:
+        out = WarpPath(cells=cells[0], length=length[0], cost=out.cost[0], total=total[0])
+    return out
 
-        return "compiled" if grid.device.type == "cpu" and available() else "torch"
-    return backend
+
+def _cumulative_torch(grid, la, lb, L, unbatched) -> torch.Tensor:
+    out = _forward(grid, la, lb, _effective_run(L, grid.shape[1], grid.shape[2]), keep_min=True)["min"]
+    return out[0] if unbatched else out
 
 
 def _timewarp_compiled(grid, la, lb, L, unbatched) -> WarpPath:
@@ -336,6 +343,71 @@ def _timewarp_compiled(grid, la, lb, L, unbatched) -> WarpPath:
     if unbatched:
         return WarpPath(cells=cells_t[0], length=length_t[0], cost=cost[0], total=total_t[0])
     return WarpPath(cells=cells_t, length=length_t, cost=cost, total=total_t)
+
+
+def _cumulative_compiled(grid, la, lb, L, unbatched) -> torch.Tensor:
+    from ..cpu.timewarp import cumulative_cost_batch
+
+    out = np.full(tuple(grid.shape), np.inf, dtype=grid.detach().numpy().dtype)
+    cumulative_cost_batch(grid.detach().contiguous().numpy(), la.numpy(), lb.numpy(), L, out)
+    out = torch.from_numpy(out)
+    return out[0] if unbatched else out
+
+
+def _compiled_available() -> bool:
+    from ..cpu import available
+
+    return available()
+
+
+@dataclass(frozen=True)
+class _Implementation:
+    """One implementation of the DP, declared as the splicing backends declare themselves
+    (:class:`torchsplice.splice.backends.Backend`): the torch device types it computes on
+    (``None``: any), how strongly ``"auto"`` prefers it, whether it can run in this installation,
+    and its two entry points, each ``(grid (B, Ta, Tb), la (B,), lb (B,), L, unbatched)`` as
+    :func:`_check_inputs` gives them, returning :func:`timewarp`'s and :func:`cumulative_cost`'s
+    results. Another implementation (a GPU kernel, say) is one more entry of :data:`_IMPLEMENTATIONS`."""
+
+    devices: tuple[str, ...] | None
+    priority: int
+    available: Callable[[], bool]
+    timewarp: Callable[..., WarpPath]
+    cumulative: Callable[..., torch.Tensor]
+
+    def runs_on(self, device: torch.device) -> bool:
+        return self.devices is None or device.type in self.devices
+
+
+_IMPLEMENTATIONS: dict[str, _Implementation] = {
+    "compiled": _Implementation(("cpu",), 10, _compiled_available, _timewarp_compiled, _cumulative_compiled),
+    "torch": _Implementation(None, 0, lambda: True, _timewarp_torch, _cumulative_torch),
+}
+
+
+def _implementation(backend: str, grid: torch.Tensor) -> _Implementation:
+    """The DP implementation ``backend`` names for ``grid``'s device: ``"auto"`` is, among the
+    available ones that run there, the one of highest priority (the first declared of equals;
+    so the compiled DP for CPU tensors where numba is installed, else torch)."""
+    if backend == "auto":
+        best = None
+        for impl in _IMPLEMENTATIONS.values():
+            if impl.runs_on(grid.device) and impl.available() and (best is None or impl.priority > best.priority):
+                best = impl
+        if best is None:
+            raise ValueError(f"no implementation of the DP runs on {grid.device}")
+        return best
+    if backend not in _IMPLEMENTATIONS:
+        names = [repr(n) for n in ("auto", *_IMPLEMENTATIONS)]
+        raise ValueError(f"backend must be {', '.join(names[:-1])} or {names[-1]}, got {backend!r}")
+    impl = _IMPLEMENTATIONS[backend]
+    if not impl.runs_on(grid.device):
+        where = " or ".join(d.upper() for d in impl.devices or ())
+        raise ValueError(f"the {backend} backend runs on {where} tensors, got a grid on {grid.device}")
+    return impl
+
+
+# ----------------------------------------------------------------------------- public API
 
 
 def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: str = "auto") -> WarpPath:
@@ -363,16 +435,7 @@ def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: st
             valid cell, or a pair whose every path to its top or right edge crosses ``+inf``.
     """
     grid, la, lb, L, unbatched = _check_inputs(grid, lengths_a, lengths_b, max_run)
-    if _backend(backend, grid) == "compiled":
-        return _timewarp_compiled(grid, la, lb, L, unbatched)
-    L = _effective_run(L, grid.shape[1], grid.shape[2])
-    fw = _forward(grid, la, lb, L)
-    end_i, end_j, state, total, length = _choose_end(fw, la, lb, max_run)
-    cells = _backtrack(fw["bp"], end_i, end_j, state, length, L)
-    out = WarpPath(cells=cells, length=length, cost=total / length.to(total.dtype), total=total)
-    if unbatched:
-        out = WarpPath(cells=cells[0], length=length[0], cost=out.cost[0], total=total[0])
-    return out
+    return _implementation(backend, grid).timewarp(grid, la, lb, L, unbatched)
 
 
 def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: str = "auto") -> torch.Tensor:
@@ -383,16 +446,7 @@ def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3, back
     unreachable under the slope limit, blocked by ``+inf`` costs, or padding.
     """
     grid, la, lb, L, unbatched = _check_inputs(grid, lengths_a, lengths_b, max_run)
-    if _backend(backend, grid) == "compiled":
-        from ..cpu.timewarp import cumulative_cost_batch
-
-        out = np.full(tuple(grid.shape), np.inf, dtype=grid.detach().numpy().dtype)
-        cumulative_cost_batch(grid.detach().contiguous().numpy(), la.numpy(), lb.numpy(), L, out)
-        out = torch.from_numpy(out)
-        return out[0] if unbatched else out
-    L = _effective_run(L, grid.shape[1], grid.shape[2])
-    out = _forward(grid, la, lb, L, keep_min=True)["min"]
-    return out[0] if unbatched else out
+    return _implementation(backend, grid).cumulative(grid, la, lb, L, unbatched)
 
 
 def reachable_mask(Ta: int, Tb: int, max_run: int = 3, device=None) -> torch.Tensor:

@@ -1,6 +1,8 @@
 """The local engine's fork server, started early: it imports torch and the compiled kernels for
 the workers (:mod:`torchsplice.job.worker`) while the driver plans, so that workers start
-splicing at once. Light to import (no torch): the command line calls it before it imports torch.
+splicing at once. Light to import and to call (no torch): the command line calls it before it
+imports torch, and choosing the backend (:func:`~torchsplice.splice.backends.resolve_backend`)
+loads none.
 """
 
 from __future__ import annotations
@@ -12,14 +14,21 @@ __all__ = ["prestart"]
 
 
 def prestart(engine: str, workers: int | None, device: str | None, backend: str = "auto") -> None:
-    """Start the fork server if the ``local`` engine will use worker processes (more than one
-    worker, on the CPU, with the compiled splicer: another backend runs in this process);
-    ``workers`` ``None``: one per core. Quietly does nothing where it cannot: the engine starts
-    it later, or says why it cannot."""
+    """Start the fork server if the ``local`` engine will use worker processes: more than one
+    worker, and a backend (``backend`` as resolved on ``device``) whose prepared clips the
+    workers share (:attr:`~torchsplice.splice.backends.Backend.prepares_once`, the compiled
+    splicer's; another backend runs in this process). ``workers`` ``None``: one per core.
+    Quietly does nothing where it cannot: the engine starts it later, or says why it cannot."""
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    if (engine != "local" or workers <= 1 or (device or "cpu") != "cpu" or backend not in ("auto", "compiled")
-            or sys.platform == "win32"):
+    if engine != "local" or workers <= 1 or sys.platform == "win32":
+        return
+    from ...splice.backends import get_backend, resolve_backend
+
+    try:
+        if not get_backend(resolve_backend(backend, device)).prepares_once:
+            return
+    except Exception:  # an unknown backend, or one that cannot run there: the job says why
         return
     import multiprocessing as mp
     from multiprocessing import forkserver

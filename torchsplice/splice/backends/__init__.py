@@ -338,7 +338,7 @@ def resolve_backend(backend: str, device: str | None) -> str:
         best = None
         for name in available_backends():
             b = get_backend(name)
-            if b.available() and b.runs_on(device) and (best is None or b.priority > best.priority):
+            if b.runs_on(device) and b.available() and (best is None or b.priority > best.priority):
                 best = b
         if best is None:
             raise TorchspliceError(f"no backend runs on device {device!r}")

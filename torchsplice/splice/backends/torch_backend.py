@@ -5,20 +5,25 @@ distinct actions (and references) into :class:`~torchsplice.splice.clips.ClipTen
 the method's function (checked by :func:`~torchsplice.splice.registry.run_checked`). It runs
 every method, plug-ins too, on CPU or CUDA, in the options' dtype. With
 ``SpliceOptions(backend="torch")`` the time alignment's DP runs in torch as well.
+
+Torch and the torch code of the splicer are imported where used: choosing a backend
+(:func:`~torchsplice.splice.backends.resolve_backend`, which asks every registered backend its
+devices and priority) loads no torch, so the job can decide early whether it starts workers.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from ...core.errors import TorchspliceError
-from ..clips import clips_to_tensors
-from ..locomotion import check_locomotion
 from ..registry import MethodInput, run_checked
 from . import Backend, SplicedBatch
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = ["TorchBackend", "TorchClips", "BACKEND"]
 
@@ -37,6 +42,8 @@ class TorchClips:
 
 def _distinct(rows) -> tuple[list[int], torch.Tensor]:
     """Distinct clip rows in order of first use, and per input its index among them."""
+    import torch
+
     seen: dict[int, int] = {}
     for r in rows:
         seen.setdefault(int(r), len(seen))
@@ -52,6 +59,8 @@ class TorchBackend(Backend):
         return TorchClips(list(motions), skeleton, roles)
 
     def _tensors(self, prepared: TorchClips, rows, options):
+        from ..clips import clips_to_tensors
+
         key = (tuple(int(r) for r in rows), options.dtype, options.device)
         if key not in prepared.padded:
             prepared.padded[key] = clips_to_tensors([prepared.motions[r] for r in key[0]], prepared.skeleton,
@@ -59,6 +68,8 @@ class TorchBackend(Backend):
         return prepared.padded[key]
 
     def positions(self, prepared, rows=None):
+        import torch
+
         from ..options import SpliceOptions
 
         rows = range(len(prepared.motions)) if rows is None else rows
@@ -66,6 +77,8 @@ class TorchBackend(Backend):
         return t.positions, t.lengths
 
     def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps, options):
+        from ..locomotion import check_locomotion
+
         L = self._tensors(prepared, loco_rows, options)
         A = self._tensors(prepared, action_rows, options)
         return check_locomotion(L, roles, fps), check_locomotion(A, roles, fps)
@@ -133,9 +146,13 @@ class TorchBackend(Backend):
                      cost=np.full(B, np.nan), posture=np.zeros(B), paths=[np.zeros((0, 2), np.int64)] * B)
 
     def threads(self):
+        import torch
+
         return torch.get_num_threads()
 
     def set_threads(self, n):
+        import torch
+
         if n is not None:
             torch.set_num_threads(max(1, int(n)))
 
@@ -143,6 +160,8 @@ class TorchBackend(Backend):
 def _pack(rotations, translations, times, lengths, correction, crop, cost, posture, paths) -> SplicedBatch:
     """A :class:`SplicedBatch` from padded ``(B, T, ...)`` method outputs (``lengths`` ``(B,)``,
     ``correction`` ``(B, T)`` or ``None``): each array packed by one mask, pair after pair."""
+    import torch
+
     def packed(x: torch.Tensor) -> torch.Tensor:
         valid = torch.arange(x.shape[1], device=x.device)[None, :] < lengths.to(x.device)[:, None]
         return x[valid]
@@ -157,6 +176,8 @@ def _pack(rotations, translations, times, lengths, correction, crop, cost, postu
 
 def _failed(prepared: TorchClips, why: str, options) -> SplicedBatch:
     """One pair that could not be spliced: no frames."""
+    import torch
+
     J = prepared.skeleton.num_joints
     kw = dict(dtype=options.dtype, device=options.device)
     return SplicedBatch(np.zeros(1, np.int64), np.zeros(1, np.int64), torch.zeros(0, J, 4, **kw), torch.zeros(0, J, 3, **kw),
