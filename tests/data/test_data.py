@@ -494,6 +494,49 @@ def test_batched_fetch_equals_single_items(spliced_db, two_skeleton_db):
                     assert b[key] == value
 
 
+DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)]
+READ_AS_STORED = {"rotations", "root_translation", "translations", "action_frame", "lengths", "mask"}
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_dataset_assembling_on_a_device_gives_the_batches_it_gives_here(spliced_db, two_skeleton_db, device):
+    """``MotionDataset(assemble_on=device)`` through a ``DataLoader`` (one skeleton per batch):
+    every tensor of each batch on ``device``, and the batch of the same items collated as usual
+    from ``__getitems__``: the frames as stored (NaN where stored), the mask and lengths bit for
+    bit; the derived features (forward kinematics, trajectory, velocities, 6D rotations) within
+    1e-5 of their scale (float32 computed on the device), 3e-4 for velocities (differences of
+    positions times the rate)."""
+    from torchsplice.data import collate_motion
+
+    cases = ((spliced_db, dict(window=25, stride=40, features=(*ALL_FEATURES, "rotations_6d", "action_frame"))),
+             (spliced_db, dict(features=("rotations", "positions", "velocities", "trajectory"))),
+             (two_skeleton_db, dict(features=ALL_FEATURES)))  # two skeletons, a one-frame clip
+    for path, kwargs in cases:
+        ds, plain = MotionDataset(path, assemble_on=device, **kwargs), MotionDataset(path, **kwargs)
+        batches = list(ds.batch_sampler(5))
+        loader = DataLoader(ds, batch_sampler=batches, collate_fn=ds.collate)
+        n = 0
+        for indices, got in zip(batches, loader):
+            want = collate_motion(plain.__getitems__(indices))
+            assert got.keys() == want.keys()
+            for key, w in want.items():
+                g = got[key]
+                if not isinstance(w, torch.Tensor):
+                    assert g == w, key
+                elif key == "fps":
+                    assert torch.equal(g, w)
+                elif key in READ_AS_STORED:
+                    assert g.device.type == device, (path.name, key)
+                    torch.testing.assert_close(g.cpu(), w, rtol=0, atol=0, equal_nan=True, msg=f"{path.name}: {key}")
+                else:
+                    assert g.device.type == device and g.dtype == w.dtype and g.shape == w.shape, (path.name, key)
+                    assert torch.equal(g.isnan().cpu(), w.isnan()), (path.name, key)
+                    scale = float(w.abs().nan_to_num().max()) + 1.0
+                    tol = (3e-4 if key == "velocities" else 1e-5) * scale
+                    assert float((g.cpu() - w).abs().nan_to_num().max()) <= tol, (path.name, key)
+            n += len(indices)
+        assert n == len(ds) > 0
+
 def test_a_window_longer_than_every_clip_is_refused_in_one_line(plain_db, motions):
     longest = max(m.num_frames for m in motions)
     assert len(MotionDataset(plain_db, window=longest)) >= 1  # the longest clip still gives one window

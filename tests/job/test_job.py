@@ -384,15 +384,16 @@ def test_standing_pairs_do_not_depend_on_batch_size_or_workers(standing_out, tmp
         assert datasets(out) == datasets(want), (batch, workers)
 
 
-def test_standing_pairs_on_the_torch_path_equal_the_compiled_ones(standing_out, tmp_path, monkeypatch):
-    """The torch splicer (CUDA's) plays the same action frames (the same windows and loop points)
-    and gives the same rotations to float32 rounding."""
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)])
+def test_standing_pairs_on_the_torch_path_equal_the_compiled_ones(standing_out, tmp_path, monkeypatch, device):
+    """The torch splicer (CUDA's; on the CPU with numba hidden) plays the same action frames (the
+    same windows and loop points, bit for bit) and gives the same rotations within 1e-3 degrees."""
     import torchsplice.cpu
 
     db, want = standing_out
     monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
     out = tmp_path / "torch.h5"
-    splice_all(db, out, locomotions="role:locomotion", actions="role:action")
+    splice_all(db, out, locomotions="role:locomotion", actions="role:action", device=device)
     a, b = table(out), table(want)
     for col in ("name", "length", "timing", "acting", "locomotion", "action"):
         assert a[col] == b[col], col

@@ -15,11 +15,11 @@ import pytest
 import torch
 
 from torchsplice.cli import main
-from torchsplice.core.rotations import quat_apply, quat_conj
+from torchsplice.core.rotations import quat_angle, quat_apply, quat_conj
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.specs import load_spec
 from torchsplice.core.fk import forward_kinematics
-from torchsplice.splice import SpliceOptions, splice
+from torchsplice.splice import SpliceOptions, splice, splice_standing
 from torchsplice.splice.standing import (ACTING_THRESHOLD, LOOP_BLEND_SECONDS, action_times, arm_chains,
                                          parse_limbs)
 
@@ -181,6 +181,31 @@ def test_the_baselines_handle_standing_actions(clips, method):
     else:  # the walk plus the action's motion since its first frame: frame 0 is the walk's
         assert torch.allclose(r.motion.rotations[0, upper].abs(), loco.rotations[0, upper].abs(), atol=1e-9)
 
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)])
+def test_standing_actions_on_a_device_equal_the_compiled_splicer(clips, device):
+    """Standing actions spliced by the torch splicer on ``device`` (CUDA, or the CPU) against the
+    compiled splicer on the CPU, every method and timing: the same lengths, acting arms and
+    action frames (within 1e-9 frames), the lower body and root the locomotion's bit for bit,
+    rotations within 1e-3 degrees."""
+    read, spec = clips
+    pairs = [(read[WALK], read[WAVE_R]), (read[TURN], read[RAISE_BOTH]), (read[WALK_OLD], read[RAISE_LEFT])]
+    lower = list(spec.bind(read[WALK].skeleton).lower_body)
+    for method in ("splice", "naive", "cpmc"):
+        for timing in ("loop", "hold", "fit"):
+            want = splice_standing(pairs, spec, method, SpliceOptions(timing=timing))
+            got = splice_standing(pairs, spec, method, SpliceOptions(timing=timing, device=device, backend="torch"))
+            for (loco, _), g, w in zip(pairs, got, want):
+                where = (method, timing, g.action)
+                assert g.motion.rotations.device.type == device, where
+                assert g.timing == w.timing == timing and g.acting == w.acting, where
+                assert g.motion.num_frames == w.motion.num_frames == loco.num_frames, where
+                assert float((g.curve.cpu() - w.curve).abs().max()) <= 1e-9, where
+                rot = g.motion.rotations.cpu().double()
+                assert torch.equal(rot[:, lower], loco.rotations[:, lower].float().double()), where
+                assert torch.equal(g.motion.root_translation.cpu(), loco.root_translation.float()), where
+                angle = torch.rad2deg(quat_angle(rot, w.motion.rotations.double()))
+                assert float(angle.max()) < 1e-3, where
 
 @pytest.mark.slow
 def test_the_default_job_on_bandai_skips_no_standing_action(bandai_namco_db, tmp_path, capsys):

@@ -248,11 +248,19 @@ def test_a_gpu_collate_in_a_worker_process_is_one_line(sample_jobs, monkeypatch)
         MotionDataset(sample_jobs[1], assemble_on="cpu", preload=True)
 
 
-@pytest.mark.gpu
-def test_a_dataset_assembles_its_batches_on_the_gpu(sample_jobs):
-    for got, want in _device_batches(sample_jobs[1], "cuda", ["rotations", "positions"]):
-        assert got["rotations"].device.type == "cuda" and got["mask"].device.type == "cuda"
+DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)]
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_dataset_assembles_its_batches_on_the_device(sample_jobs, device):
+    """A dataset over an alignment store assembling on ``device``: its batches there, positions
+    within 1e-4 of the compiled assembly's (float32 forward kinematics)."""
+    n = 0
+    for got, want in _device_batches(sample_jobs[1], device, ["rotations", "positions"]):
+        assert got["rotations"].device.type == device and got["mask"].device.type == device
         assert float((got["positions"].cpu() - want["positions"]).abs().max()) <= 1e-4
+        n += 1
+    assert n > 0
 
 
 def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
@@ -317,8 +325,9 @@ def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path, c
     assert rc == 0 and "with --store alignment about" in out
 
 
-def _torch_against_kernels(path) -> float:
-    """The largest difference between the torch assembly (on the CPU) and the compiled kernels'."""
+def _torch_against_kernels(path, device: str = "cpu") -> float:
+    """The largest difference between the torch assembly (on ``device``) and the compiled
+    kernels'; the per-frame columns, read and moved there, are the same bits."""
     worst = 0.0
     with MotionDatabase.open(path) as db:
         t = db.clip_table()
@@ -326,25 +335,37 @@ def _torch_against_kernels(path) -> float:
             r = np.flatnonzero(t.skeleton == k)
             for starts, lengths in ((t.start[r], t.length[r]), (t.start[r] + 3, np.minimum(t.length[r] - 3, 20))):
                 a = db.assembled(k, starts, lengths)
-                b = db.assembled_on(k, starts, lengths, "cpu")
+                b = db.assembled_on(k, starts, lengths, device)
                 assert a.keys() == b.keys()
                 for name in ("rotations", "root_translation", "translations"):
                     if name in a:
+                        assert b[name].device.type == device
                         assert b[name].dtype == torch.float32 and b[name].shape == a[name].shape
-                        worst = max(worst, float(np.abs(a[name] - b[name].numpy()).max()))
+                        worst = max(worst, float(np.abs(a[name] - b[name].cpu().numpy()).max()))
+                for name in db.frame_columns:
+                    assert b[name].device.type == device
+                    np.testing.assert_array_equal(b[name].cpu().numpy(), a[name], err_msg=name)
     return worst
 
 
-def test_the_torch_assembly_for_gpus_gives_the_kernels_frames(sample_jobs):
-    assert _torch_against_kernels(sample_jobs[1]) <= 1e-5
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_torch_assembly_on_a_device_gives_the_kernels_frames(sample_jobs, device):
+    """An alignment store's clips (whole, and windows inside them) assembled by torch on
+    ``device`` (what a GPU reads with) are the compiled kernels' frames within 1e-5."""
+    assert _torch_against_kernels(sample_jobs[1], device) <= 1e-5
 
 
-@pytest.mark.gpu
-def test_a_batch_asked_for_on_a_gpu_is_assembled_there(sample_jobs):
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_batch_asked_for_on_a_device_is_assembled_there(sample_jobs, device):
+    """``read_batch(device=...)`` of an alignment store (assembled by torch on a GPU, by the
+    kernels on the CPU) gives the motion store's padded batch on that device, within 1e-5."""
     with MotionDatabase.open(sample_jobs[1]) as a, MotionDatabase.open(sample_jobs[0]) as m:
-        ba, bm = a.read_batch(list(range(12)), device="cuda"), m.read_batch(list(range(12)))
-        assert ba.rotations.device.type == "cuda"
+        ba, bm = a.read_batch(list(range(12)), device=device), m.read_batch(list(range(12)))
+        assert ba.rotations.device.type == ba.mask.device.type == device
+        assert torch.equal(ba.mask.cpu(), bm.mask) and torch.equal(ba.lengths.cpu(), bm.lengths)
         assert float((ba.rotations.cpu() - bm.rotations).abs().max()) <= 1e-5
+        assert float((ba.root_translation.cpu() - bm.root_translation).abs().max()) <= 1e-5 * (
+            1 + float(bm.root_translation.abs().max()))
 
 
 def test_the_stores_codes_are_the_kernels():
