@@ -112,6 +112,13 @@ def test_recorded_benchmark_runs_render_each_line_beside_its_target(tmp_path, mo
     recorder.save()
     page = hooks.benchmark_runs()
     assert "### `store`" in page and "| store reads: 1.5x | &gt;= 1x |" in page and "; 4 clips." in page
+    import json
+    import os
+
+    load = json.loads(hooks.RUNS.read_text())["sections"]["store"]["load"]
+    if hasattr(os, "getloadavg"):  # the machine's load as the section started and ended, on the page
+        assert len(load) == 2 and all(x >= 0 for x in load)
+        assert f", load {load[0]:.1f} to {load[1]:.1f};" in page
 
 
 def test_the_errors_and_speed_pages_hold_what_they_are_generated_from(site):
