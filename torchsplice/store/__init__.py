@@ -10,7 +10,8 @@ Modules: :mod:`.schema` (the file's layout, described once), :mod:`.checks` (its
 checked on open), :mod:`.table` (the typed clip table), :mod:`.reading` and :mod:`.writing`
 (the two halves of the database), :mod:`.database` (opening, creating, resuming, closing),
 :mod:`.resumable` (files written across runs), :mod:`.lock` and :mod:`.atomic` (one writer
-at a time, outputs that appear whole).
+at a time, outputs that appear whole), :mod:`.state` (the database's state, declared once for
+its mixins' type checks).
 """
 
 from .database import ClipBatch, MotionDatabase

@@ -166,10 +166,10 @@ def skeleton_from_group(g: h5py.Group, where: str = "skeleton") -> Skeleton:
         raise Damage(f"{where} has non-finite offsets")
     try:
         return Skeleton(
-            names=[s for s in names.asstr()[()]],
+            names=tuple(names.asstr()[()]),
             parents=checked_dataset(g, "parents", where, (J,), "iu")[()].tolist(),
             offsets=torch.from_numpy(offsets),
-            channels=[c.split() for c in checked_dataset(g, "channels", where, (J,), "str").asstr()[()]],
+            channels=tuple(tuple(c.split()) for c in checked_dataset(g, "channels", where, (J,), "str").asstr()[()]),
             end_site_parents=g["end_site_parents"][()].tolist(),
             end_site_offsets=torch.from_numpy(ends),
         )
