@@ -9,10 +9,9 @@ formats (``--format``) are the registry's, so a ``--plugin`` module's format is 
 from __future__ import annotations
 
 from .base import Command, register_command
-from .common import add_output_flags, command_line, declared, progress, say
+from .common import add_output_flags, command_line, progress, say
 from ..core.errors import TorchspliceError
-
-EXPORTERS = "torchsplice.formats.exporters"
+from ..formats.defaults import DEFAULT_EXPORT_INDEX
 
 
 def _option(format: str, name: str):
@@ -69,7 +68,7 @@ class Export(Command):
                             f"(default: {','.join(f'{r:g}' for r in h['split_ratios'])})")
         s.add_argument("--split-seed", type=int, default=None, metavar="N",
                        help=f"the seed of the split (default: {h['split_seed']})")
-        s.add_argument("--no-index", dest="index", action="store_false", default=declared(EXPORTERS, "export_clips.index"),
+        s.add_argument("--no-index", dest="index", action="store_false", default=DEFAULT_EXPORT_INDEX,
                        help="several clips: write no index.csv (each file's clip, split, role, labels, cost, flags, "
                             "coverage...) and no train/val/test.txt beside them")
         s.add_argument("--paraphrases", type=int, default=None, metavar="N",
