@@ -43,3 +43,4 @@ def test_every_defaults_module_and_the_export_options_load_no_heavy_module():
     loaded, options = json.loads(p.stdout)
     assert loaded == {name: [] for name in [*DEFAULTS, "exporters"]}, loaded
     assert set(options) >= {"bvh", "npz", "humanml3d"}
+    assert all(has_help for f in ("npz", "humanml3d") for _, has_help in options[f].values())  # each a flag with help
