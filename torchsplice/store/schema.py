@@ -49,6 +49,7 @@ import numpy as np
 import torch
 
 from ..core.skeleton import Skeleton
+from .defaults import COMPRESSIONS  # declared there, torch-free (the command line reads it)
 
 __all__ = [
     "FORMAT",
@@ -88,7 +89,6 @@ COLUMNS = {  # the built-in clip columns: name -> dtype
     "fps": np.float64,
 }
 MIXED = "mixed"  # the file's units or up axis when its skeletons differ in them
-COMPRESSIONS = ("gzip", "lzf", "auto", None)
 KINDS = {"str": (STR, ""), "float": (np.float64, np.nan), "int": (np.int64, -1)}
 """Kinds of extra clip columns: ``kind: (dtype, the value of a row that does not give one)``."""
 FRAME_ARRAYS = ("rotations", "root_translation", "translations")
