@@ -190,7 +190,7 @@ def benchmark_runs() -> str:
     for name, run in sections.items():
         data = [ln[len("data: "):] for ln in run["lines"] if ln.startswith("data: ")]
         out += [f"### `{name}`", "",
-                _text(f"{run['date']}, {run['machine']}; {run['seconds']:,.0f} s; ``{run['command']}``"
+                _text(f"{run['date']}, {run['machine']}; {run['seconds']:,.0f} s{_load_words(run)}; ``{run['command']}``"
                       + (f"; {data[0]}" if data else "") + "."), "",
                 "| what it printed | target |", "|---|---|"]
         for line in run["lines"]:
@@ -199,6 +199,14 @@ def benchmark_runs() -> str:
                 out.append(f"| {_text(' '.join(text.split()))} | {_text(target)} |")
         out.append("")
     return "\n".join(out)
+
+
+def _load_words(run: dict) -> str:
+    """``", load 0.4 to 1.9"``: the one-minute load average as the section started and ended."""
+    load = run.get("load") or [None, None]
+    if None in load:
+        return ""
+    return f", load {load[0]:.1f} to {load[1]:.1f}"
 
 
 # ------------------------------------------------------------------------------------ specs

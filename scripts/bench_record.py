@@ -9,7 +9,11 @@ on another day than the quick ones, and the page says which is which.
 The file, UTF-8 JSON::
 
     {"sections": {"NAME": {"date": "2026-12-05", "machine": "...", "command": "...",
-                           "seconds": 12.3, "lines": ["what the section printed", ...]}}}
+                           "seconds": 12.3, "load": [0.4, 1.9],
+                           "lines": ["what the section printed", ...]}}}
+
+``load`` is the machine's one-minute load average when the section started and when it ended
+(``os.getloadavg``): a figure measured beside other work says so.
 
 A printed line ends with its target in brackets where it has one (``... 2.1x  [>= 1x]``).
 """
@@ -56,6 +60,14 @@ def machine() -> str:
     except ImportError:
         pass
     return ", ".join(words)
+
+
+def _load() -> float | None:
+    """The one-minute load average, ``None`` where the system has none."""
+    try:
+        return round(os.getloadavg()[0], 2)
+    except (OSError, AttributeError):
+        return None
 
 
 def split_target(line: str) -> tuple[str, str]:
@@ -118,7 +130,7 @@ class _Section:
         self.recorder, self.name = recorder, name
 
     def __enter__(self):
-        self.t0, self.stdout = time.perf_counter(), sys.stdout
+        self.t0, self.stdout, self.load0 = time.perf_counter(), sys.stdout, _load()
         self.tee = sys.stdout = _Tee(self.stdout)
         return self
 
@@ -130,6 +142,7 @@ class _Section:
                 "machine": machine(),
                 "command": shlex.join(["python", "scripts/benchmark.py", *sys.argv[1:]]),
                 "seconds": round(time.perf_counter() - self.t0, 1),
+                "load": [self.load0, _load()],
                 "lines": self.tee.lines + ([self.tee.partial] if self.tee.partial.strip() else []),
             }
         return False

@@ -1,13 +1,13 @@
 """Every option is declared once, in the library: the command line's choices and defaults are
 the library's (its registries, constants and option dataclasses), checked here by walking the
-parser's actions, so that the two cannot drift apart. And the parser reads them right without
-importing the library (torchsplice.cli.declared reads the source): checked against the live values."""
+parser's actions, so that the two cannot drift apart. Both read them from the packages'
+torch-free ``defaults`` modules, so a parser built without torch holds the same values
+(checked in a fresh process); every export format's declared options are flags."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib
 import inspect
 import logging
 import subprocess
@@ -16,7 +16,6 @@ import sys
 import pytest
 
 from torchsplice.cli import build_parser
-from torchsplice.cli.declared import ASKED, live_value, static_value
 from torchsplice.evaluation.report import evaluate_database
 from torchsplice.formats.exporters import DEFAULT_FORMAT, available_exporters, export_clips, get_exporter
 from torchsplice.formats.importer import FORMATS as IMPORT_FORMATS, import_bvh
@@ -68,8 +67,8 @@ def expected() -> dict:
         ("mirror", "originals"): (param(mirror_clips, "originals"), None),
         ("export", "index"): (param(export_clips, "index"), None),
         ("export", "format"): (None, available_exporters()),
-        ("export", "packed"): (get_exporter("npz").options["packed"].default, None),
-        ("export", "features"): (get_exporter("npz").options["features"].default, tuple(FEATURE_SETS)),
+        # every format's options (None: the format's own default, which export_clips fills in)
+        **{("export", k): (None, o.choices) for f in available_exporters() for k, o in get_exporter(f).options.items()},
         ("splice", "method"): (param(splice, "method"), available_methods()),
         ("render", "frames"): (param(render, "frames"), None),
         ("render", "max_seconds"): (param(render, "max_seconds"), None),
@@ -161,15 +160,20 @@ def test_choices_and_spellings_of_the_command_lines_own():
     assert DEFAULT_FORMAT in available_exporters()
 
 
-def test_the_parser_reads_the_declarations_from_the_source_as_the_library_has_them():
-    """Every value the parser asked for reads the same from the source (what ``--help`` uses,
-    without torch) as from the imported module."""
-    build_parser()
-    assert len(ASKED) >= 20
-    for module, name in sorted(ASKED):
-        static = static_value(module, name)
-        live = live_value(importlib.import_module(module), name)
-        assert static == live and type(static) is type(live), (module, name, static, live)
+def test_the_export_formats_options_are_their_flags():
+    """Each option a format declares is a flag with its type, choices and help (after the name of
+    the format that takes it; none for the options of every export); the npz format's choices are
+    its feature sets."""
+    acts = {a.dest: a for a in subparsers()["export"]._actions}
+    assert acts["features"].choices == tuple(FEATURE_SETS) and acts["features"].help.startswith("npz: add 6D")
+    assert acts["packed"].nargs == 0 and acts["packed"].help.startswith("npz: one file")
+    assert acts["paraphrases"].type is int and acts["paraphrases"].metavar == "N"
+    assert acts["paraphrases"].help == "humanml3d: captions per clip, at most (default: 3)"
+    assert acts["split_seed"].help == "the seed of the split (default: 0)"  # every export's: no format named
+    args = build_parser().parse_args(["export", "db.h5", "--all", "-o", "out", "--packed", "--features", "6d"])
+    assert (args.packed, args.features, args.mirror, args.window) == (True, "6d", None, None)
+    assert set(args.format_options) >= {"packed", "features", "captions", "mirror", "window", "split_ratios",
+                                        "split_seed", "paraphrases", "shards"}
 
 
 @pytest.mark.parametrize("command", ["splice", "splice-all", "export", "import", "render", "retarget"])

@@ -27,7 +27,8 @@ print("loaded:" + ",".join(m for m in {heavy!r} if m in sys.modules))
 
 def test_version_and_help_load_no_heavy_module():
     argvs = [["--version"], ["--help"]] + [[c, "--help"] for c in ("import", "info", "splice", "splice-all",
-                                                                      "evaluate", "render", "merge")]
+                                                                      "evaluate", "render", "merge", "export",
+                                                                      "retarget", "mirror", "view", "materialize")]
     p = subprocess.run([sys.executable, "-c", PROBE.format(argvs=argvs, heavy=HEAVY)], capture_output=True, text=True,
                        timeout=120)
     assert p.returncode == 0, p.stderr
@@ -51,25 +52,31 @@ def test_info_json_has_the_run_record(tmp_path, capsys):
     assert f"run: {run['command']}" in capsys.readouterr().out
 
 
-def test_a_command_line_declares_only_its_commands_options():
-    """Start-up reads only the named command's defaults from the library (every command's for
-    ``--help`` or a mistyped command), and that command parses as it does with every one declared."""
-    from torchsplice.cli import declared as declared_mod
+def test_a_command_line_declares_only_its_commands_options(monkeypatch):
+    """Start-up builds only the named command's flags (every command's for ``--help`` or a
+    mistyped command: their registries are read then), and that command parses as it does with
+    every one built."""
+    from torchsplice.cli.base import registered_commands
     from torchsplice.cli.main import _command_in, build_parser
 
     assert _command_in(["--plugin", "mymod", "info", "db.h5"]) == "info"
     assert _command_in(["--plugin=mymod", "-h"]) is None and _command_in([]) is None
+    build_parser()  # every command registered
+    built: list[str] = []
+    for command in registered_commands():
+        def spy(parser, _add=command.add_arguments, _name=command.name):
+            built.append(_name)
+            _add(parser)
+        monkeypatch.setattr(command, "add_arguments", spy)
     argv = ["render", "db.h5", "walk", "-o", "x.png", "--camera", "world", "--overlay", "a", "b"]
-    declared_mod.ASKED.clear()
     one = build_parser(only="render")
-    asked_one = {m for m, _ in declared_mod.ASKED}
-    declared_mod.ASKED.clear()
+    assert built == ["render"]
+    built.clear()
     every = build_parser(only=None)
-    asked_every = {m for m, _ in declared_mod.ASKED}
-    assert asked_one == {"torchsplice.viz.render"} and asked_one < asked_every
+    assert built == [c.name for c in registered_commands()]
     a, b = vars(one.parse_args(argv)), vars(every.parse_args(argv))
     assert {k: v for k, v in a.items() if k not in ("func", "cli_command")} == \
         {k: v for k, v in b.items() if k not in ("func", "cli_command")}
-    declared_mod.ASKED.clear()
+    built.clear()
     build_parser(only="splce-all")  # a mistyped command: every command's, as for --help
-    assert {m for m, _ in declared_mod.ASKED} == asked_every
+    assert built == [c.name for c in registered_commands()]

@@ -75,6 +75,32 @@ def test_the_toy_format_through_the_command_line(sample_db, tmp_path):
     assert p.returncode == 2 and "invalid choice: 'toy'" in p.stderr and not (tmp_path / "other").exists()
 
 
+def test_a_plug_in_formats_option_is_a_flag(sample_db, tmp_path, capsys):
+    """The toy format declares one option (``decimals``, an int): ``--plugin toy_exporter`` makes it
+    export's flag ``--decimals N``, listed in ``--help`` after the format's name, read as an int,
+    and given to the format, which then writes that many digits; without it, its default."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "tests" / "helpers")])}
+    help_text = subprocess.run([sys.executable, "-m", "torchsplice", "--plugin", "toy_exporter", "export", "--help"],
+                               capture_output=True, text=True, env=env, timeout=300).stdout
+    assert "--decimals N" in help_text and "toy: digits after the point" in " ".join(help_text.split())
+    assert "--decimals" not in subprocess.run([sys.executable, "-m", "torchsplice", "export", "--help"],
+                                              capture_output=True, text=True, env=env, timeout=300).stdout
+    rc, _, err = run(capsys, "--plugin", "toy_exporter", "export", sample_db, "walk_curve", "-o", tmp_path / "w.csv",
+                     "--decimals", "2")
+    assert rc == 0, err
+    rows = (tmp_path / "w.csv").read_text().splitlines()[1:]
+    with MotionDatabase.open(sample_db) as d:
+        m = d.read("walk_curve", dtype=torch.float64)
+    assert rows[0] == "0," + ",".join(f"{v:.2f}" for v in m.root_translation[0].tolist())
+    with pytest.raises(SystemExit) as exc:  # a usage mistake: argparse's one line, exit code 2
+        run(capsys, "--plugin", "toy_exporter", "export", sample_db, "walk_curve", "-o", tmp_path / "d.csv",
+            "--decimals", "two")
+    assert exc.value.code == 2 and "--decimals: invalid int value: 'two'" in capsys.readouterr().err
+    rc, _, err = run(capsys, "--plugin", "toy_exporter", "export", sample_db, "walk_curve", "-o", tmp_path / "n.npz",
+                     "--decimals", "2")  # the option chooses its format (toy): a .npz output is refused in one line
+    assert rc == 2 and "must end in .csv" in error_line(err) and not (tmp_path / "n.npz").exists()
+
+
 def test_the_toy_format_in_process_one_clip_to_a_file(sample_db, tmp_path, capsys):
     rc, out, err = run(capsys, "--plugin", "toy_exporter", "export", sample_db, "walk_curve", "-o", tmp_path / "w.csv")
     assert rc == 0, err

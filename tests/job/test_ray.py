@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 import subprocess
+import tempfile
 import sys
 from pathlib import Path
 
@@ -56,8 +57,17 @@ def assert_same(path, want, what) -> None:
 
 
 @pytest.fixture(scope="module")
-def scenarios(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("ray")
+def scenarios():
+    # a short folder of its own: Ray's socket paths under it must stay within AF_UNIX's 107 bytes,
+    # which pytest's own temporary folders (deeper still under pytest-xdist) can exceed
+    tmp = Path(tempfile.mkdtemp(prefix="tsray-"))
+    try:
+        yield _scenarios(tmp)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _scenarios(tmp: Path):
     db = tmp / "sample.h5"
     assert main(["sample", "-o", str(db), "-q"]) == 0
     ref = tmp / "local.h5"

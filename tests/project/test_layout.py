@@ -5,6 +5,9 @@
 - No import cycle between modules (imports inside functions count; ``if TYPE_CHECKING:``
   blocks do not: they never run).
 - No module imports another module's private (``_underscore``) name.
+- A package's ``defaults`` module (its options' defaults and allowed values, which the library
+  and the command line both import) imports only the standard library and other ``defaults``
+  modules: it sits in its package's layer, and the command line reads it without torch.
 - HDF5 (h5py) is opened only in the storage package; the compiled kernels are reached only by
   the alignment and the splicer (whose backends the job calls).
 - No library module is over :data:`MAX_LINES` lines unless its docstring says why
@@ -14,6 +17,7 @@
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -180,6 +184,14 @@ def test_no_module_imports_another_modules_private_names():
             private = [n for n in names if n.startswith("_") and not n.startswith("__")]
             if private:
                 wrong.append(f"{module}:{line} imports {', '.join(private)} from {name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_defaults_modules_import_only_the_standard_library_and_each_other():
+    defaults = [m for m in MODULES if m.endswith(".defaults")]
+    assert len(defaults) >= 7, defaults
+    wrong = [f"{m}:{line} imports {name}" for m in defaults for name, _, line in _imports(m)
+             if not (name.split(".")[0] in sys.stdlib_module_names or name.startswith("torchsplice.") and name.endswith(".defaults"))]
     assert not wrong, "\n".join(wrong)
 
 

@@ -7,8 +7,9 @@ all or nothing, the same from Python). Layout:
 - :mod:`.base`: the :class:`~.base.Command` base class and the command registry (a command is
   one module and one :func:`~.base.register_command` call);
 - :mod:`.common`: what commands share (errors said with flags, output checks, argument types);
-- :mod:`.declared`: the library's defaults and allowed values, read without importing torch, so
-  that every option is declared once, in the library (tests/cli/test_cli_options.py checks them);
+- the flags' defaults and allowed values are the library's, declared once in each package's
+  torch-free ``defaults`` module (``torchsplice.job.defaults``, ...), which the library and the
+  commands both import (tests/cli/test_cli_options.py checks them);
 - one module per group of commands: :mod:`.databases` (``sample``, ``import``, ``info``),
   :mod:`.export`, :mod:`.splice` (``splice``, ``plot-alignment``), :mod:`.views` (``render``,
   ``view``), :mod:`.evaluate`, :mod:`.jobs` (``splice-all``, ``merge``);

@@ -3,7 +3,8 @@ argument types and flag groups used by several commands.
 
 Errors never name flags in the library (:mod:`torchsplice.core.errors`): an error names its
 options (``{max_length_ratio}``) and a hint key, and :func:`cli_message` says them as this
-command line's flags. Defaults and allowed values come from the library (:func:`declared`).
+command line's flags. Defaults and allowed values come from the library's ``defaults`` modules
+(``torchsplice.<package>.defaults``: torch-free, so ``--help`` loads no torch).
 """
 
 from __future__ import annotations
@@ -16,16 +17,11 @@ from pathlib import Path
 from ..core.errors import OutputExistsError, TorchspliceError
 from ..core.names import counted as n  # "1 clip", "2 clips"
 from ..core.stop import Terminated, ask_stop, stop_kind
-from .declared import declared
+from ..viz.defaults import SUPPORTED_SUFFIXES
 
 __all__ = ["cli_message", "flag", "output", "locked", "say", "n", "at", "one_line", "progress", "command_line",
            "positive_int", "positive_float", "share", "bounded_int", "add_output_flags", "device",
-           "Terminated", "on_sigterm", "stopped", "stop_code", "JOB", "SPLICE", "ALIGN", "STANDING", "expand_clips"]
-
-JOB = "torchsplice.job.config"  # JobConfig: the options of splice-all and torchsplice.job.splice_all
-SPLICE = "torchsplice.splice.options"  # SpliceOptions: the options of splice and torchsplice.splice.splice
-ALIGN = "torchsplice.splice.heck"  # AlignOptions
-STANDING = "torchsplice.splice.standing"  # TIMINGS, LIMBS
+           "Terminated", "on_sigterm", "stopped", "stop_code", "expand_clips"]
 
 _CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS) are on the command line
     "overwrite": "use --force to overwrite",
@@ -73,7 +69,7 @@ def _outputs(kind: str) -> tuple[tuple[str, ...], str]:
         "database": (DATABASE_SUFFIXES, "a database"),
         "report": ((".md",), "a Markdown report"),
         "plot": ((".png", ".pdf", ".svg"), "a picture"),
-        "render": (tuple(declared("torchsplice.viz.render", "SUPPORTED_SUFFIXES")), "a GIF, MP4 or PNG filmstrip"),
+        "render": (tuple(SUPPORTED_SUFFIXES), "a GIF, MP4 or PNG filmstrip"),
         "viewer": ((".html", ".htm"), "an HTML page"),
     }[kind]
 

@@ -8,9 +8,10 @@ import sys
 from pathlib import Path
 
 from .base import Command, register_command
-from .common import add_output_flags, at, declared, n, output, positive_float, progress, say
-
-IMPORTER = "torchsplice.formats.importer"
+from .common import add_output_flags, at, n, output, positive_float, progress, say
+from ..formats.defaults import (DEFAULT_FILE_UNITS, DEFAULT_IMPORT_FORMAT, DEFAULT_IMPORT_WINDOW,
+                                DEFAULT_IMPORT_WINDOW_OVERLAP, DEFAULT_NAME_PREFIX, DEFAULT_SPEC, DEFAULT_UNITS,
+                                IMPORT_FORMATS)
 
 
 class Sample(Command):
@@ -54,9 +55,9 @@ class Import(Command):
                    "and the good files still land; the exit code is then 1.")
 
     def add_arguments(self, s) -> None:
-        spec = declared(IMPORTER, "import_bvh.spec")
+        spec = DEFAULT_SPEC
         s.add_argument("paths", nargs="+", metavar="PATH", help="BVH files or folders, or HumanML3D folders")
-        s.add_argument("--format", choices=declared(IMPORTER, "FORMATS"), default=declared(IMPORTER, "import_bvh.format"),
+        s.add_argument("--format", choices=IMPORT_FORMATS, default=DEFAULT_IMPORT_FORMAT,
                        help="what the paths hold: auto (default: a folder holding new_joint_vecs/ is HumanML3D, the "
                             "rest BVH), bvh or humanml3d")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
@@ -65,22 +66,22 @@ class Import(Command):
                             f".toml path; {spec!r} (default) picks per file")
         s.add_argument("--append", action="store_true", help="add to an existing database")
         s.add_argument("--float64", action="store_true", help="store frames in float64 (default float32)")
-        s.add_argument("--units", default=declared(IMPORTER, "import_bvh.units"), metavar="UNIT",  # checked by import_bvh
+        s.add_argument("--units", default=DEFAULT_UNITS, metavar="UNIT",  # checked by import_bvh
                        help="convert every clip from its spec's units to these (m, cm, mm, in, ft; CMU's own unit is "
                             "'cmu'), so that datasets in different units share one database; default: keep each "
                             "file's units")
-        s.add_argument("--file-units", default=declared(IMPORTER, "import_bvh.file_units"), metavar="UNIT",
+        s.add_argument("--file-units", default=DEFAULT_FILE_UNITS, metavar="UNIT",
                        help="the units the files are in, where their spec does not say (the generic spec: joints "
                             "guessed): recorded, and converted by --units")
-        s.add_argument("--name-prefix", default=declared(IMPORTER, "import_bvh.name_prefix"), metavar="PREFIX",
+        s.add_argument("--name-prefix", default=DEFAULT_NAME_PREFIX, metavar="PREFIX",
                        help="put PREFIX before every clip's name, so that sources with the same file names (two "
                             "HumanML3D folders) share a database")
-        s.add_argument("--window", type=positive_float, default=declared(IMPORTER, "import_bvh.window"), metavar="SECONDS",
+        s.add_argument("--window", type=positive_float, default=DEFAULT_IMPORT_WINDOW, metavar="SECONDS",
                        help="cut takes longer than 1.25 x SECONDS into windows of SECONDS (named NAME#000, NAME#001, "
                             "...; labels split_from and split_frame say where each came from), so that long takes "
                             "splice in reasonable time and memory (train/val/test splits are the exports' "
                             "--split-ratios)")
-        overlap = declared(IMPORTER, "import_bvh.window_overlap")
+        overlap = DEFAULT_IMPORT_WINDOW_OVERLAP
         s.add_argument("--window-overlap", type=float, default=overlap, metavar="SECONDS",
                        help=f"overlap of consecutive windows (default {overlap:g} s)")
         # the earlier names, kept working for scripts that use them (unlisted: "split" is train/val/test)

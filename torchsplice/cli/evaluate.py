@@ -5,9 +5,8 @@ from __future__ import annotations
 import math
 
 from .base import Command, register_command
-from .common import add_output_flags, declared, locked, n, output, positive_int, progress
-
-REPORT = "torchsplice.evaluation.report"
+from .common import add_output_flags, locked, n, output, positive_int, progress
+from ..evaluation.defaults import DEFAULT_MAX_ROWS, DEFAULT_PICTURES
 
 
 class Evaluate(Command):
@@ -18,11 +17,11 @@ class Evaluate(Command):
                    "pictures.")
 
     def add_arguments(self, s) -> None:
-        max_rows = declared(REPORT, "evaluate_database.max_rows")
+        max_rows = DEFAULT_MAX_ROWS
         s.add_argument("database", help="database written by splice-all")
         s.add_argument("-o", "--output", required=True, help="report to write (.md); pictures go to <stem>_files/")
         s.add_argument("--sources", nargs="+", metavar="DB", help="databases holding the source clips (default: as recorded)")
-        s.add_argument("--no-pictures", action="store_true", default=not declared(REPORT, "evaluate_database.pictures"),
+        s.add_argument("--no-pictures", action="store_true", default=not DEFAULT_PICTURES,
                        help="tables only")
         s.add_argument("--max-rows", type=positive_int, default=max_rows, metavar="N",
                        help=f"per-clip rows per method in the report (default {max_rows}; --csv and --json hold every row)")

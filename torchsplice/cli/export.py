@@ -3,22 +3,58 @@
 The command parses its flags and calls :func:`torchsplice.formats.exporters.export_clips`, which
 does everything else (the format, the files, all or nothing), exactly as from Python. The
 formats (``--format``) are the registry's, so a ``--plugin`` module's format is a choice too;
-``--packed`` and ``--features`` are the ``npz`` format's options, with its default and choices.
+so are the formats' options: each option a registered format declares
+(:attr:`~torchsplice.formats.exporters.Exporter.options`, an
+:class:`~torchsplice.formats.defaults.ExportOption` each) is a flag (:func:`add_format_flags`:
+``--packed`` and ``--features`` are the ``npz`` format's, ``--mirror`` ... ``humanml3d``'s, a
+plug-in's its own), with its type, choices and help.
 """
 
 from __future__ import annotations
 
+import argparse
+
 from .base import Command, register_command
-from .common import add_output_flags, command_line, declared, progress, say
+from .common import add_output_flags, command_line, flag, progress, say
 from ..core.errors import TorchspliceError
+from ..formats.defaults import DEFAULT_EXPORT_INDEX, DEFAULT_FORMAT
 
-EXPORTERS = "torchsplice.formats.exporters"
+
+def format_options() -> dict:
+    """Every registered format's options: name -> (its declaration, the formats that take it),
+    in registration order (the first format's declaration of a name is the flag's)."""
+    from ..formats.exporters import available_exporters, get_exporter
+
+    out: dict = {}
+    for format in available_exporters():
+        for name, option in get_exporter(format).options.items():
+            out.setdefault(name, (option, []))[1].append(format)
+    return out
 
 
-def _option(format: str, name: str):
-    from ..formats.exporters import get_exporter
+def add_format_flags(s, later: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """A flag for each format's option (:func:`format_options`): ``--NAME`` (a switch for one
+    that is off or on by default), its help after the formats that take it (``npz: ...``; none
+    for an option every export takes, :data:`~torchsplice.formats.exporters.SHARED_OPTIONS`).
+    Its default is ``None``: the format's own. An option whose flag or name the command has
+    already (or adds ``later``: flags and names) is left to Python. Returns the options that got a flag."""
+    from ..formats.exporters import SHARED_OPTIONS
 
-    return get_exporter(format).options[name]
+    taken = {d for a in s._actions for d in (a.dest, *a.option_strings)} | {"format_options", *later}
+    added = []
+    for name, (option, formats) in format_options().items():
+        if flag(name) in taken or name in taken:
+            continue
+        text = (option.help or f"the {name} option").replace("%", "%%")  # argparse formats help with %
+        kwargs = dict(dest=name, default=None, help=text if name in SHARED_OPTIONS else f"{', '.join(formats)}: {text}")
+        if isinstance(option.default, bool):
+            kwargs["action"] = argparse.BooleanOptionalAction if option.default else "store_true"
+        else:
+            kwargs.update(type=option.type, choices=option.choices, metavar=option.metavar)
+        s.add_argument(flag(name), **kwargs)
+        added.append(name)
+    s.set_defaults(format_options=tuple(added))
+    return tuple(added)
 
 
 class Export(Command):
@@ -33,7 +69,7 @@ class Export(Command):
                    "clip (or --packed), else a folder, one file per clip.")
 
     def add_arguments(self, s) -> None:
-        from ..formats.exporters import DEFAULT_FORMAT, available_exporters
+        from ..formats.exporters import available_exporters
 
         formats = available_exporters()
         s.add_argument("database", help="motion database (.h5)")
@@ -45,38 +81,11 @@ class Export(Command):
         s.add_argument("--format", choices=formats, default=None,
                        help=f"{' or '.join(formats) if len(formats) < 3 else ', '.join(formats)} (default: from -o's "
                             f"suffix; {DEFAULT_FORMAT} for a folder unless --packed or --features)")
-        packed, features = _option("npz", "packed"), _option("npz", "features")
-        s.add_argument("--packed", action="store_true", default=packed.default,
-                       help="npz: one file with every clip concatenated along frames and offsets[i]:offsets[i+1] "
-                            "slicing clip i (clips of one skeleton topology)")
-        s.add_argument("--features", choices=features.choices, default=features.default,
-                       help="npz: add 6D rotations (Zhou et al. 2019), joint, root and trajectory velocities, and per-"
-                            "dimension mean and std of every array over all exported clips, for normalisation")
-        h = {k: _option("humanml3d", k).default for k in ("mirror", "split_ratios", "split_seed", "paraphrases")}
-        s.add_argument("--captions", default=None, metavar="FILE",
-                       help="humanml3d: your captions per source clip (JSON: clip name -> list of captions, each "
-                            "'caption#word/POS ...#0.0#0.0' or word/POS words); they compose like the labels' phrases")
-        s.add_argument("--mirror", action="store_true", default=None,
-                       help=f"humanml3d: add each clip's mirrored copy (M + ID), left and right swapped in the motion and "
-                            f"its captions (default: {'on' if h['mirror'] else 'off'}); for the other formats, write "
-                            "the mirror images with `torchsplice mirror` and export that database")
-        s.add_argument("--window", type=float, default=None, metavar="SECONDS",
-                       help="humanml3d: cut clips longer than SECONDS into windows of SECONDS spread over the clip, "
-                            "each with the clip's captions (MDM and MoMask keep motions of 40 to 199 frames: windows of at most 9.95 s, at least 2.05 s)")
-        s.add_argument("--split-ratios", default=None, metavar="TRAIN,VAL,TEST",
-                       help="fractions of the source clips in each split of the index (every format) or the "
-                            "HumanML3D lists; a result is in a split when all its sources are "
-                            f"(default: {','.join(f'{r:g}' for r in h['split_ratios'])})")
-        s.add_argument("--split-seed", type=int, default=None, metavar="N",
-                       help=f"the seed of the split (default: {h['split_seed']})")
-        s.add_argument("--no-index", dest="index", action="store_false", default=declared(EXPORTERS, "export_clips.index"),
+        add_format_flags(s, later=("--no-index", "index", "--select", "select", "--skeleton", "skeleton", "-f", "--force",
+                                   "force", "-q", "--quiet", "quiet"))
+        s.add_argument("--no-index", dest="index", action="store_false", default=DEFAULT_EXPORT_INDEX,
                        help="several clips: write no index.csv (each file's clip, split, role, labels, cost, flags, "
                             "coverage...) and no train/val/test.txt beside them")
-        s.add_argument("--paraphrases", type=int, default=None, metavar="N",
-                       help=f"humanml3d: captions per clip, at most (default: {h['paraphrases']})")
-        s.add_argument("--shards", type=int, default=None, metavar="N",
-                       help="humanml3d: write the motions as about N tar files in WebDataset's layout (ID.npy, ID.txt; "
-                            "SPLIT-000000.tar ...) instead of one file each")
         s.add_argument("--select", action="append", metavar="SELECT", default=None,
                        help="only clips this selector selects (repeat: all of them), as splice-all's --locomotions read")
         s.add_argument("--skeleton", default=None, metavar="K[,K...]",
@@ -105,10 +114,8 @@ class Export(Command):
                 clips, chosen = names_or_selector(db.clip_table(), args.clips)
             select += [chosen] if chosen else []
         result = export_clips(args.database, clips, out=args.output, format=args.format, select=select or None,
-                              overwrite=args.force, skeletons=skeletons, command=command_line(args),
-                              packed=args.packed, features=args.features, captions=args.captions, mirror=args.mirror,
-                              window=args.window, split_ratios=args.split_ratios, split_seed=args.split_seed,
-                              paraphrases=args.paraphrases, shards=args.shards, index=args.index,
+                              overwrite=args.force, skeletons=skeletons, command=command_line(args), index=args.index,
+                              **{name: getattr(args, name) for name in args.format_options},
                               progress=lambda it, total, desc: progress(it, total, desc, args.quiet))
         say(args, f"wrote {result.summary}")
         return 0

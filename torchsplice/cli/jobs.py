@@ -1,7 +1,8 @@
 """The n x m job: ``splice-all`` (splice every selected pair into a new database, resumable,
 on local workers, a Ray cluster or a plug-in engine, or one ``--shard`` of it) and ``merge``
 (join the shards of ``--shard`` runs). The flags are :class:`~torchsplice.job.config.JobConfig`'s
-fields, with its defaults; the engines and layouts are the library's."""
+fields, with its defaults (declared in :mod:`torchsplice.job.defaults`); the engines and layouts
+are the library's."""
 
 from __future__ import annotations
 
@@ -11,21 +12,25 @@ import sys
 from pathlib import Path
 
 from .base import Command, register_command
-from .common import (JOB, add_output_flags, command_line, declared, device, flag, positive_float, positive_int,
-                     stop_code, stopped)
-from .splice import add_splice_options, job_default, methods
+from .common import add_output_flags, command_line, device, flag, positive_float, positive_int, stop_code, stopped
+from .splice import add_splice_options, methods
 from ..core.errors import TorchspliceError
 from ..core.names import counted
+from ..job.defaults import (DEFAULT_ACTIONS, DEFAULT_ACTIONS_DB, DEFAULT_BATCH_PAIRS, DEFAULT_COMPRESSION,
+                            DEFAULT_COPY_SOURCES, DEFAULT_ENGINE, DEFAULT_INDEX, DEFAULT_KEEP_HANDS_OUT, DEFAULT_LAYOUT,
+                            DEFAULT_LOCOMOTIONS, DEFAULT_MAX_LENGTH_RATIO, DEFAULT_MEMORY_BUDGET_MB, DEFAULT_METHODS,
+                            DEFAULT_RAY_ADDRESS, DEFAULT_RETARGET, DEFAULT_STORE, DEFAULT_TARGET, DEFAULT_WORKERS,
+                            LAYOUTS, STORES)
+from ..retarget.defaults import DEFAULT_FIX_FEET
+from ..store.defaults import COMPRESSIONS
 
-MERGE = "torchsplice.job.merge"  # merge_job: the options of merge
-MATERIALIZE = "torchsplice.job.materialize"  # materialize: the options of materialize
 LOG_LEVELS = ("debug", "info", "warning", "error")  # --log-level: the logging levels worth choosing
 
 
 def compressions() -> tuple[str, ...]:
     """``--compression`` choices: the database's compressions (``None`` spelt ``none``), the job's default first."""
-    default = declared(JOB, "JobConfig.compression")
-    names = ["none" if c is None else c for c in declared("torchsplice.store.schema", "COMPRESSIONS")]
+    default = DEFAULT_COMPRESSION
+    names = ["none" if c is None else c for c in COMPRESSIONS]
     return tuple(sorted(names, key=lambda c: c != ("none" if default is None else default)))
 
 
@@ -41,24 +46,24 @@ class SpliceAll(Command):
     def add_arguments(self, s) -> None:
         from ..job.engines import available_engines
 
-        method = ",".join(job_default("methods"))
-        budget = job_default("memory_budget_mb")
-        engine = job_default("engine")
+        method = ",".join(DEFAULT_METHODS)
+        budget = DEFAULT_MEMORY_BUDGET_MB
+        engine = DEFAULT_ENGINE
         s.add_argument("database", help="motion database with the locomotions (and actions)")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
         s.add_argument("--locomotions", action="append", metavar="SELECT",
-                       help=f"clips giving the lower body (default: {' '.join(declared(JOB, 'DEFAULT_LOCOMOTIONS'))})")
+                       help=f"clips giving the lower body (default: {' '.join(DEFAULT_LOCOMOTIONS)})")
         s.add_argument("--actions", action="append", metavar="SELECT",
-                       help=f"clips giving the upper body (default: {' '.join(declared(JOB, 'DEFAULT_ACTIONS'))})")
-        s.add_argument("--actions-db", metavar="DB", default=job_default("actions_db"),
+                       help=f"clips giving the upper body (default: {' '.join(DEFAULT_ACTIONS)})")
+        s.add_argument("--actions-db", metavar="DB", default=DEFAULT_ACTIONS_DB,
                        help="take the actions from this database (any humanoid skeleton: see --retarget)")
-        s.add_argument("--retarget", action=argparse.BooleanOptionalAction, default=job_default("retarget"),
+        s.add_argument("--retarget", action=argparse.BooleanOptionalAction, default=DEFAULT_RETARGET,
                        help="form the pairs whose clips are on different skeletons (other joints or units) by "
                             "retargeting the action onto the locomotion's skeleton, once per action and skeleton "
                             "(default: on; --no-retarget skips those pairs)")
-        s.add_argument("--fix-feet", action=argparse.BooleanOptionalAction, default=job_default("fix_feet"),
+        s.add_argument("--fix-feet", action=argparse.BooleanOptionalAction, default=DEFAULT_FIX_FEET,
                        help="when retargeting, hold each foot where the source's stands (default: on)")
-        s.add_argument("--target", default=job_default("target"), metavar="TARGET",
+        s.add_argument("--target", default=DEFAULT_TARGET, metavar="TARGET",
                        help="bring every clip onto this skeleton first (other.h5, other.h5:K, a .bvh file, or smpl22), "
                             "into OUT.target-locomotions.h5 (and OUT.target-actions.h5) beside the output, made once "
                             "and reused by reruns")
@@ -67,43 +72,43 @@ class SpliceAll(Command):
                             "more, see --plugin)")
         s.add_argument("--memory-budget", type=positive_int, default=budget, metavar="MB",
                        help=f"memory for one batch of pairs (default {budget} MB); sets the batch size")
-        s.add_argument("--batch-size", type=positive_int, default=job_default("batch_pairs"), metavar="N",
+        s.add_argument("--batch-size", type=positive_int, default=DEFAULT_BATCH_PAIRS, metavar="N",
                        help="pairs per batch (overrides the budget)")
-        s.add_argument("--copy-sources", action="store_true", default=job_default("copy_sources"),
+        s.add_argument("--copy-sources", action="store_true", default=DEFAULT_COPY_SOURCES,
                        help="copy the source clips into the output too")
-        s.add_argument("--no-index", dest="index", action="store_false", default=job_default("index"),
+        s.add_argument("--no-index", dest="index", action="store_false", default=DEFAULT_INDEX,
                        help="write no OUT.h5.index.csv beside the output (by default: every clip's cost, flags, coverage, "
                             "labels and split by source clip, as info --csv and the exports give them)")
-        s.add_argument("--max-length-ratio", type=positive_float, default=job_default("max_length_ratio"), metavar="R",
+        s.add_argument("--max-length-ratio", type=positive_float, default=DEFAULT_MAX_LENGTH_RATIO, metavar="R",
                        help="skip pairs whose longer clip lasts more than R times the shorter (e.g. 3); long takes are "
                             "better cut with import --split")
         s.add_argument("--engine", default=engine, choices=list(available_engines()),
                        help="local: worker processes on this machine (default); ray: Ray tasks on a cluster; or an engine "
                             "a --plugin module registers")
-        s.add_argument("--workers", type=positive_int, default=job_default("workers"), metavar="N",
+        s.add_argument("--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="N",
                        help="local worker processes, one compute thread each (default: one per core); results do not "
                             "depend on it")
-        s.add_argument("--ray-address", default=job_default("ray_address"), metavar="HOST:PORT",
+        s.add_argument("--ray-address", default=DEFAULT_RAY_ADDRESS, metavar="HOST:PORT",
                        help="the Ray cluster to run on (with --engine ray; default: start a local Ray instance)")
         s.add_argument("--shard", default=None, metavar="K/N",
                        help="run only the K-th of N slices of the job's tasks into its work folder, and write no output "
                             "(for Slurm arrays, CI matrices); then run 'torchsplice merge OUT'")
-        s.add_argument("--layout", default=job_default("layout"), choices=list(declared(JOB, "LAYOUTS")),
+        s.add_argument("--layout", default=DEFAULT_LAYOUT, choices=list(LAYOUTS),
                        help="copy: one self-contained output file (default); virtual: the output's frames are HDF5 "
                             "virtual datasets over the task shards, kept in OUT.shards/ beside it (no copy, for "
                             "outputs too large to copy)")
-        s.add_argument("--store", default=job_default("store"), choices=list(declared(JOB, "STORES")),
+        s.add_argument("--store", default=DEFAULT_STORE, choices=list(STORES),
                        help="motion: each spliced clip's frames (default); alignment: each source clip once and per "
                             "spliced clip what splicing computed (alignment curve, pelvis rotation), about a tenth of "
                             "the disk; every reader assembles the motions, bit for bit the same ('torchsplice "
                             "materialize' writes them out)")
-        s.add_argument("--compression", default=job_default("compression") or "none", choices=list(compressions()),
+        s.add_argument("--compression", default=DEFAULT_COMPRESSION or "none", choices=list(compressions()),
                        help="compression of the output: auto (default: LZF on translations and per-frame columns, "
                             "rotations raw; fast, read by h5py), lzf (everything), gzip (smallest, read by every "
                             "HDF5 tool, several times slower to write) or none")
-        add_splice_options(s, "job")
+        add_splice_options(s)
         s.add_argument("--no-keep-hands-out", dest="keep_hands_out", action="store_false",
-                       default=job_default("keep_hands_out"),
+                       default=DEFAULT_KEEP_HANDS_OUT,
                        help="write each splice as it comes, even where it puts a hand or forearm inside the body "
                             "deeper than its sources do (by default the arm is moved out by IK on the shoulder and "
                             "elbow, and the corrected_frames column counts the frames changed)")
@@ -164,7 +169,7 @@ class Merge(Command):
 
     def add_arguments(self, s) -> None:
         s.add_argument("output", help="the output the job was run with (-o of splice-all)")
-        s.add_argument("--no-index", dest="index", action="store_false", default=declared(MERGE, "merge_job.index"),
+        s.add_argument("--no-index", dest="index", action="store_false", default=DEFAULT_INDEX,
                        help="write no OUT.h5.index.csv beside the output")
         add_output_flags(s, force_help="overwrite an existing output")
 
@@ -188,7 +193,7 @@ class Materialize(Command):
     def add_arguments(self, s) -> None:
         s.add_argument("database", help="the alignment store (.h5)")
         s.add_argument("-o", "--output", required=True, help="the motion store to write (.h5)")
-        s.add_argument("--no-index", dest="index", action="store_false", default=declared(MATERIALIZE, "materialize.index"),
+        s.add_argument("--no-index", dest="index", action="store_false", default=DEFAULT_INDEX,
                        help="write no OUT.h5.index.csv beside the output")
         add_output_flags(s, force_help="overwrite an existing output")
 

@@ -54,8 +54,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The parser of every registered command (plug-ins loaded before it is built show in its choices).
 
     ``only``: a command whose options alone are declared (the others are listed, with their
-    help, but their options are not read from the library): what a command line that names one
-    pays at start-up. Unknown, or ``None``: every command's."""
+    help, but their flags are not built, nor the registries they list read): what a command line
+    that names one pays at start-up. Unknown, or ``None``: every command's."""
     from ..splice.registry import available_methods
 
     available_methods()  # loads the entry points and TORCHSPLICE_PLUGINS first: their formats and engines are choices

@@ -10,9 +10,8 @@ from __future__ import annotations
 import argparse
 
 from .base import Command, register_command
-from .common import add_clip_arguments, add_output_flags, chosen_clips, command_line, declared, output, progress, say
-
-MIRROR = "torchsplice.retarget.mirror"
+from .common import add_clip_arguments, add_output_flags, chosen_clips, command_line, output, progress, say
+from ..retarget.defaults import DEFAULT_ORIGINALS
 
 
 class Mirror(Command):
@@ -28,7 +27,7 @@ class Mirror(Command):
         add_clip_arguments(s, "mirror")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
         s.add_argument("--originals", action=argparse.BooleanOptionalAction,
-                       default=declared(MIRROR, "mirror_clips.originals"),
+                       default=DEFAULT_ORIGINALS,
                        help="write each original before its mirror image (default: on; --no-originals: mirrors only)")
         add_output_flags(s, quiet_help="no progress bar or summary")
 

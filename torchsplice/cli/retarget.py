@@ -9,9 +9,8 @@ from __future__ import annotations
 import argparse
 
 from .base import Command, register_command
-from .common import add_clip_arguments, add_output_flags, chosen_clips, command_line, declared, output, progress, say
-
-RETARGET = "torchsplice.retarget.clips"
+from .common import add_clip_arguments, add_output_flags, chosen_clips, command_line, output, progress, say
+from ..retarget.defaults import DEFAULT_FIX_FEET
 
 
 class Retarget(Command):
@@ -30,7 +29,7 @@ class Retarget(Command):
                        help="other.h5, other.h5:K, a .bvh file, or smpl22")
         s.add_argument("-o", "--output", required=True, help="database to write (.h5)")
         s.add_argument("--fix-feet", action=argparse.BooleanOptionalAction,
-                       default=declared(RETARGET, "retarget_clips.fix_feet"),
+                       default=DEFAULT_FIX_FEET,
                        help="hold each foot where the source's stands, at the source's height above the floor "
                             "(default: on)")
         add_output_flags(s, quiet_help="no progress bar or summary")

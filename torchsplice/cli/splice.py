@@ -1,9 +1,9 @@
 """Commands on one pair of clips: ``splice`` (write the result as BVH) and ``plot-alignment``
 (draw the pair's time alignment); and the splice's flags, which ``splice-all`` shares.
 
-The splice's flags take their defaults from the library's option dataclasses: ``SpliceOptions``
-(and ``AlignOptions``) for the commands on one pair, ``JobConfig`` for ``splice-all``
-(:func:`add_splice_options`).
+The splice's flags take their defaults from the splice's declared defaults
+(:mod:`torchsplice.splice.defaults`), which ``SpliceOptions`` and ``AlignOptions`` (the commands
+on one pair) and ``JobConfig`` (``splice-all``) all take (:func:`add_splice_options`).
 """
 
 from __future__ import annotations
@@ -11,9 +11,10 @@ from __future__ import annotations
 import sys
 
 from .base import Command, register_command
-from .common import (ALIGN, JOB, SPLICE, STANDING, add_output_flags, declared, device, locked, output,
-                     positive_int, say, share)
+from .common import add_output_flags, device, locked, output, positive_int, say, share
 from ..core.errors import TorchspliceError
+from ..splice.defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_MAX_RUN,
+                               DEFAULT_METHOD, DEFAULT_POSTURE, DEFAULT_TIMING, DEFAULT_TWIST, LIMBS, TIMINGS)
 
 ACTING_LIMBS_AUTO = "auto"
 """How ``--acting-limbs`` spells the library's ``acting_limbs=None`` (found per clip);
@@ -34,26 +35,13 @@ def backend_choices() -> tuple[str, ...]:
     return choices()
 
 
-def job_default(name: str):
-    """A field's default of :class:`~torchsplice.job.config.JobConfig` (splice-all's flags)."""
-    return declared(JOB, f"JobConfig.{name}")
-
-
-def splice_defaults(source: str) -> dict:
-    """The splice's defaults as flags see them, from ``source``: ``"job"`` (``JobConfig``, for
-    splice-all) or ``"splice"`` (``SpliceOptions`` and ``AlignOptions``, for one pair)."""
-    if source == "job":
-        get = job_default
-        max_run = get("max_run")
-        force_locomotion = get("force_locomotion")
-    else:
-        get = lambda name: declared(SPLICE, f"SpliceOptions.{name}")  # noqa: E731
-        max_run = declared(ALIGN, "AlignOptions.max_run")
-        force_locomotion = get("force")
-    limbs = get("acting_limbs")
-    return {"max_run": max_run, "no_posture": not get("posture"), "twist": get("twist"), "timing": get("timing"),
-            "force_locomotion": force_locomotion, "device": get("device"), "backend": get("backend"),
-            "acting_limbs": ACTING_LIMBS_AUTO if limbs is None else ",".join(limbs)}
+def splice_defaults() -> dict:
+    """The splice's defaults as flags see them (:mod:`torchsplice.splice.defaults`: those of
+    ``SpliceOptions`` and ``AlignOptions``, for one pair, and of ``JobConfig``, for splice-all)."""
+    limbs = DEFAULT_ACTING_LIMBS
+    return {"max_run": DEFAULT_MAX_RUN, "no_posture": not DEFAULT_POSTURE, "twist": DEFAULT_TWIST,
+            "timing": DEFAULT_TIMING, "force_locomotion": DEFAULT_FORCE, "device": DEFAULT_DEVICE,
+            "backend": DEFAULT_BACKEND, "acting_limbs": ACTING_LIMBS_AUTO if limbs is None else ",".join(limbs)}
 
 
 def add_pair_args(s) -> None:
@@ -62,11 +50,10 @@ def add_pair_args(s) -> None:
     s.add_argument("--action", required=True, metavar="NAME", help="clip giving the upper body")
 
 
-def add_splice_options(s, source: str = "splice", standing: bool = True) -> None:
-    """The splice's flags, with the defaults of ``source`` (:func:`splice_defaults`);
-    ``standing=False`` leaves out those about clips that do not locomote (plot-alignment always
-    time-aligns)."""
-    d = splice_defaults(source)
+def add_splice_options(s, standing: bool = True) -> None:
+    """The splice's flags, with the splice's defaults (:func:`splice_defaults`); ``standing=False``
+    leaves out those about clips that do not locomote (plot-alignment always time-aligns)."""
+    d = splice_defaults()
     s.add_argument("--max-run", type=positive_int, default=d["max_run"], metavar="L",
                    help=f"slope limit of the timewarp: at most L frames of one clip while the other waits "
                         f"(default {d['max_run']})")
@@ -87,11 +74,11 @@ def add_splice_options(s, source: str = "splice", standing: bool = True) -> None
 
 
 def _add_standing_options(s, d: dict) -> None:
-    limbs = declared(STANDING, "LIMBS")
+    limbs = LIMBS
     s.add_argument("--force-locomotion", action="store_true", default=d["force_locomotion"],
                    help="time-align clips that do not locomote (the method's limit) instead of refusing a locomotion "
                         "that does not locomote and splicing a standing action by --timing")
-    s.add_argument("--timing", choices=declared(STANDING, "TIMINGS"), default=d["timing"],
+    s.add_argument("--timing", choices=TIMINGS, default=d["timing"],
                    help="how an action that does not locomote (a standing action: a wave, a bow) fills the locomotion: "
                         "loop: play it from its start and loop it (the loop holds the whole gesture) with a seamless "
                         "blend (default); hold: play it once and hold its last frame; fit: time-scale the whole action "
@@ -138,13 +125,13 @@ class Splice(Command):
                    "chosen by the spec's [clips.reference] rule or named with --reference).")
 
     def add_arguments(self, s) -> None:
-        method = declared("torchsplice.splice.api", "splice.method")
+        method = DEFAULT_METHOD
         add_pair_args(s)
         s.add_argument("-o", "--output", required=True, help="BVH file to write")
         s.add_argument("--method", default=method, choices=methods(),
                        help=f"splicing method (default {method}; plug-ins add more, see --plugin)")
         s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
-        add_splice_options(s, "splice")
+        add_splice_options(s)
         add_output_flags(s)
 
     def run(self, args) -> int:
@@ -217,7 +204,7 @@ class PlotAlignment(Command):
     def add_arguments(self, s) -> None:
         add_pair_args(s)
         s.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
-        add_splice_options(s, "splice", standing=False)
+        add_splice_options(s, standing=False)
         add_output_flags(s)
 
     def run(self, args) -> int:

@@ -6,10 +6,10 @@ from __future__ import annotations
 import sys
 
 from .base import Command, register_command
-from .common import add_output_flags, bounded_int, declared, expand_clips, locked, output, positive_float, positive_int, say
+from .common import add_output_flags, bounded_int, expand_clips, locked, output, positive_float, positive_int, say
+from ..viz.defaults import (CAMERAS, DEFAULT_AZIMUTH, DEFAULT_CAMERA, DEFAULT_ELEVATION, DEFAULT_FRAMES, DEFAULT_MAX_CLIPS,
+                           DEFAULT_MAX_SECONDS)
 
-RENDER = "torchsplice.viz.render"
-VIEWER = "torchsplice.viz.viewer"
 MAX_FILMSTRIP = 64  # columns of a PNG filmstrip: more would not fit a screen (and took minutes and GBs)
 
 
@@ -22,24 +22,24 @@ class Render(Command):
                    ".gif and .mp4 (needs ffmpeg) animate; .png is a filmstrip.")
 
     def add_arguments(self, s) -> None:
-        frames = declared(RENDER, "render.frames")
+        frames = DEFAULT_FRAMES
         s.add_argument("database", help="motion database (.h5)")
         s.add_argument("clips", nargs="+", metavar="CLIP",
                        help="clip names, or selectors ('walk_curve+*', 'method:naive'): their clips in row order")
         s.add_argument("-o", "--output", required=True, help="file to write (.gif, .mp4, .png)")
         s.add_argument("--frames", type=bounded_int(1, MAX_FILMSTRIP), default=frames, metavar="N",
                        help=f"frames per clip in a PNG filmstrip (default {frames}, at most {MAX_FILMSTRIP})")
-        s.add_argument("--max-seconds", type=positive_float, default=declared(RENDER, "render.max_seconds"),
+        s.add_argument("--max-seconds", type=positive_float, default=DEFAULT_MAX_SECONDS,
                        metavar="SECONDS", help="show at most this many seconds")
         s.add_argument("--overlay", nargs="+", metavar="CLIP",
                        help="one more panel: these clips drawn over each other, the first in colour, the others in "
                             "grey at the same times, seen from the first's camera (e.g. 'walk_curve+carry_box' "
                             "'walk_curve+carry_box.naive')")
-        camera = declared(RENDER, "render.camera")
-        s.add_argument("--camera", choices=declared(RENDER, "CAMERAS"), default=camera,
+        camera = DEFAULT_CAMERA
+        s.add_argument("--camera", choices=CAMERAS, default=camera,
                        help=f"heading: the camera turns with each character's heading; world: its direction is "
                             f"fixed (default {camera}); it follows the character in both")
-        azimuth, elevation = declared(RENDER, "render.azimuth"), declared(RENDER, "render.elevation")
+        azimuth, elevation = DEFAULT_AZIMUTH, DEFAULT_ELEVATION
         s.add_argument("--azimuth", type=float, default=azimuth, metavar="DEG",
                        help=f"the camera's angle about the up axis at the first frame (default {azimuth:g}: front "
                             "right of a character facing +Z; -90 its right side)")
@@ -84,7 +84,7 @@ class View(Command):
                    "click.")
 
     def add_arguments(self, s) -> None:
-        max_clips = declared(VIEWER, "write_viewer.max_clips")
+        max_clips = DEFAULT_MAX_CLIPS
         s.add_argument("database", help="motion database (.h5)")
         s.add_argument("clips", nargs="*", metavar="CLIP",
                        help="clips to include (with the sources and other methods of spliced ones), names or "

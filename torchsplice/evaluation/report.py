@@ -37,6 +37,7 @@ from ..store.database import MotionDatabase
 from ..formats.exporters import clip_filenames
 from ..specs import DatasetSpec
 from ..splice.clips import clips_to_tensors, resample_motion
+from .defaults import DEFAULT_MAX_ROWS, DEFAULT_PICTURES
 from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
 from .plausibility import plausibility_pictures, plausibility_rows, plausibility_section
@@ -150,8 +151,8 @@ def _fmt(v, digits=2) -> str:
     return f"{v:.{digits}f}"
 
 
-def evaluate_database(path, output, sources=None, pictures: bool = True, max_rows: int = 60, examples: int = 3,
-                      csv=None, json=None, progress=None, select=None) -> dict:
+def evaluate_database(path, output, sources=None, pictures: bool = DEFAULT_PICTURES, max_rows: int = DEFAULT_MAX_ROWS,
+                      examples: int = 3, csv=None, json=None, progress=None, select=None) -> dict:
     """Write the Markdown report for the splice job's output ``path`` to ``output``.
 
     Returns the aggregate figures per method (also in the report). Pictures (filmstrips and

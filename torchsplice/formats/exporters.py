@@ -27,9 +27,12 @@ loaded as plug-in methods are (``--plugin MODULE``, ``TORCHSPLICE_PLUGINS``, or 
 that needs more than one clip at a time (statistics over every clip, one packed file) overrides
 :meth:`Exporter.select`, :meth:`Exporter.check`, :meth:`Exporter.items` and
 :attr:`Exporter.single_file`, as the NumPy exporter does (:mod:`.npz_exporter`). Options a
-format takes (``packed``, ``features``) are declared in :attr:`Exporter.options`, with their
-default and allowed values (keywords of :func:`export_clips`; the command line exposes the npz
-format's two, ``--packed`` and ``--features``, with their defaults and choices read from there).
+format takes (``packed``, ``features``) are declared in :attr:`Exporter.options`, each an
+:class:`~.defaults.ExportOption` (its default, allowed values, type and help): keywords of
+:func:`export_clips`, and the ``export`` command's flags (``--packed``, ``--features``), a
+plug-in format's as the built-ins'::
+
+    options = {"decimals": ExportOption(None, type=int, metavar="N", help="digits after the point")}
 
 The built-ins, ``bvh`` (:mod:`.bvh_exporter`) and ``npz`` (:mod:`.npz_exporter`), register
 themselves on first use of the registry. This module imports no torch, numpy or h5py: the
@@ -47,6 +50,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Iterable, Iterator, Sequence
 
 from ..core.errors import TorchspliceError
 from ..core.names import counted
+from .defaults import DEFAULT_EXPORT_INDEX, DEFAULT_FORMAT, ExportOption
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..store.database import MotionDatabase
@@ -55,11 +59,9 @@ __all__ = ["Exporter", "selected_names", "ExportOption", "ExportResult", "regist
            "choose_exporter", "export_clips", "export_targets", "folder_targets", "select_rows", "clip_filename", "clip_filenames",
            "MAX_FILE_BYTES", "DEFAULT_FORMAT"]
 
-DEFAULT_FORMAT = "bvh"
-"""The format of an export that names none, whose output's suffix is no format's and whose
-options no format needs (a folder of BVH files)."""
 _BUILTIN_MODULES = ("torchsplice.formats.bvh_exporter", "torchsplice.formats.npz_exporter",
                     "torchsplice.formats.humanml3d_exporter")
+_EXPORT_KEYWORDS = ("database", "clips", "out", "format", "overwrite", "skeletons", "command", "select", "index", "progress")
 _NAME = re.compile(r"^[a-z][a-z0-9_-]*$")
 _SUFFIX = re.compile(r"^\.[A-Za-z0-9][A-Za-z0-9_-]*$")
 READ_BATCH = 64
@@ -67,15 +69,6 @@ READ_BATCH = 64
 SHARED_OPTIONS = ("split_ratios", "split_seed")
 """Options of every export: the splits of its index (:mod:`.index`; a format that writes its own
 splits, as HumanML3D's does, declares them too and gets them)."""
-
-
-@dataclass(frozen=True)
-class ExportOption:
-    """An option a format takes (a keyword of :func:`export_clips`): its default and its allowed
-    values (``None``: any)."""
-
-    default: Any = None
-    choices: tuple | None = None
 
 
 @dataclass
@@ -244,6 +237,9 @@ def register_exporter(exporter: type[Exporter], replace_existing: bool = False) 
         raise TorchspliceError(f"format {name!r}: the exporter must define write(item, path)")
     if not isinstance(exporter.options, dict) or not all(isinstance(o, ExportOption) for o in exporter.options.values()):
         raise TorchspliceError(f"format {name!r}: options must map names to ExportOption")
+    taken = [k for k in exporter.options if not (isinstance(k, str) and k.isidentifier()) or k in _EXPORT_KEYWORDS]
+    if taken:
+        raise TorchspliceError(f"format {name!r}: option name {taken[0]!r} is not a name or is export_clips's own")
     exporter.what = exporter.what or f"a {exporter.suffix} file"
     exporter.title = exporter.title or name
     old = _REGISTRY.get(name)
@@ -305,7 +301,7 @@ def choose_exporter(format: str | None, output, options: dict) -> type[Exporter]
 # --------------------------------------------------------------------------------------------
 def export_clips(database, clips: Sequence[str] | None = None, *, out, format: str | None = None,
                  overwrite: bool = False, skeletons: Iterable[int] | None = None, command: str = "",
-                 select: str | Sequence[str] | None = None, index: bool = True, progress=None,
+                 select: str | Sequence[str] | None = None, index: bool = DEFAULT_EXPORT_INDEX, progress=None,
                  **options) -> ExportResult:
     """Write clips of a database as files of a registered format, all or nothing.
 

@@ -81,13 +81,27 @@ class HumanML3DExporter(Exporter):
     what = "a HumanML3D folder"
     title = "HumanML3D"
     options = {
-        "captions": ExportOption(None),
-        "mirror": ExportOption(False),
-        "window": ExportOption(None),
-        "split_ratios": ExportOption(DEFAULT_RATIOS),
-        "split_seed": ExportOption(0),
-        "paraphrases": ExportOption(3),
-        "shards": ExportOption(None),
+        "captions": ExportOption(None, metavar="FILE",
+                                 help="your captions per source clip (JSON: clip name -> list of captions, each "
+                                      "'caption#word/POS ...#0.0#0.0' or word/POS words); they compose like the "
+                                      "labels' phrases"),
+        "mirror": ExportOption(False, help="add each clip's mirrored copy (M + ID), left and right swapped in the "
+                                           "motion and its captions (default: off); for the other formats, write the "
+                                           "mirror images with `torchsplice mirror` and export that database"),
+        "window": ExportOption(None, type=float, metavar="SECONDS",
+                               help="cut clips longer than SECONDS into windows of SECONDS spread over the clip, each "
+                                    "with the clip's captions (MDM and MoMask keep motions of 40 to 199 frames: "
+                                    "windows of at most 9.95 s, at least 2.05 s)"),
+        # the index's splits, which every format's export takes (SHARED_OPTIONS); this format writes its own lists
+        "split_ratios": ExportOption(DEFAULT_RATIOS, metavar="TRAIN,VAL,TEST",
+                                     help="fractions of the source clips in each split of the index (every format) or "
+                                          "the HumanML3D lists; a result is in a split when all its sources are "
+                                          f"(default: {','.join(f'{r:g}' for r in DEFAULT_RATIOS)})"),
+        "split_seed": ExportOption(0, type=int, metavar="N", help="the seed of the split (default: 0)"),
+        "paraphrases": ExportOption(3, type=int, metavar="N", help="captions per clip, at most (default: 3)"),
+        "shards": ExportOption(None, type=int, metavar="N",
+                               help="write the motions as about N tar files in WebDataset's layout (ID.npy, ID.txt; "
+                                    "SPLIT-000000.tar ...) instead of one file each"),
     }
 
     # -- the plan: which files, made from the clip table alone --------------------------------

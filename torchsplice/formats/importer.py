@@ -25,6 +25,8 @@ from typing import Callable, Iterable, Sequence
 
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.names import control_character, printable
+from .defaults import (DEFAULT_FILE_UNITS, DEFAULT_IMPORT_FORMAT, DEFAULT_IMPORT_WINDOW, DEFAULT_IMPORT_WINDOW_OVERLAP,
+                       DEFAULT_NAME_PREFIX, DEFAULT_SPEC, DEFAULT_UNITS, IMPORT_FORMATS)
 
 __all__ = ["import_bvh", "ImportOptions", "run_import", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh",
            "collect_inputs", "FORMATS"]
@@ -150,9 +152,9 @@ def one_line(message, path=None, limit: int = 300) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
-FORMATS = ("auto", "bvh", "humanml3d")
-"""What :func:`import_bvh` reads: ``auto`` takes a folder holding ``new_joint_vecs/`` as a
-HumanML3D folder and anything else as BVH."""
+FORMATS = IMPORT_FORMATS
+"""What :func:`import_bvh` reads (declared in :mod:`.defaults`): ``auto`` takes a folder holding
+``new_joint_vecs/`` as a HumanML3D folder and anything else as BVH."""
 
 
 @dataclass(frozen=True)
@@ -218,10 +220,11 @@ def collect_inputs(paths: Iterable, format: str = "auto") -> tuple[list, list[tu
     return items + files, skipped + missing
 
 
-def import_bvh(paths: Sequence, output, spec="auto", append: bool = False, overwrite: bool = False,
-               float64: bool = False, window: float | None = None, window_overlap: float = 1.0,
-               units: str | None = None, progress: Callable | None = None, format: str = "auto",
-               file_units: str | None = None, name_prefix: str = "") -> ImportReport:
+def import_bvh(paths: Sequence, output, spec=DEFAULT_SPEC, append: bool = False, overwrite: bool = False,
+               float64: bool = False, window: float | None = DEFAULT_IMPORT_WINDOW,
+               window_overlap: float = DEFAULT_IMPORT_WINDOW_OVERLAP, units: str | None = DEFAULT_UNITS,
+               progress: Callable | None = None, format: str = DEFAULT_IMPORT_FORMAT,
+               file_units: str | None = DEFAULT_FILE_UNITS, name_prefix: str = DEFAULT_NAME_PREFIX) -> ImportReport:
     """Import BVH files and folders (and HumanML3D folders) into the database ``output`` (see
     the module docstring).
 
@@ -268,17 +271,17 @@ class ImportOptions:
     there for each), as :func:`import_bvh` builds them for :func:`run_import`."""
 
     output: Path
-    spec: object = "auto"
+    spec: object = DEFAULT_SPEC
     append: bool = False
     overwrite: bool = False
     float64: bool = False
-    window: float | None = None
-    window_overlap: float = 1.0
-    units: str | None = None
+    window: float | None = DEFAULT_IMPORT_WINDOW
+    window_overlap: float = DEFAULT_IMPORT_WINDOW_OVERLAP
+    units: str | None = DEFAULT_UNITS
     progress: Callable | None = None
-    format: str = "auto"
-    file_units: str | None = None
-    name_prefix: str = ""
+    format: str = DEFAULT_IMPORT_FORMAT
+    file_units: str | None = DEFAULT_FILE_UNITS
+    name_prefix: str = DEFAULT_NAME_PREFIX
 
 
 def run_import(paths: Sequence, options: ImportOptions) -> ImportReport:

@@ -23,8 +23,12 @@ class NpzExporter(Exporter):
     what = "a NumPy .npz file"
     title = ".npz"
     options = {
-        "packed": ExportOption(False),
-        "features": ExportOption(None, choices=tuple(FEATURE_SETS)),
+        "packed": ExportOption(False, help="one file with every clip concatenated along frames and "
+                                           "offsets[i]:offsets[i+1] slicing clip i (clips of one skeleton topology)"),
+        "features": ExportOption(None, choices=tuple(FEATURE_SETS),
+                                 help="add 6D rotations (Zhou et al. 2019), joint, root and trajectory velocities, and "
+                                      "per-dimension mean and std of every array over all exported clips, for "
+                                      "normalisation"),
     }
 
     @cached_property

@@ -19,20 +19,23 @@ import numpy as np
 
 from ..core.errors import TorchspliceError
 from ..store.atomic import same_file
-from ..store.database import COMPRESSIONS
+from ..store.defaults import COMPRESSIONS
+from ..retarget.defaults import DEFAULT_FIX_FEET
+from ..splice.defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_MAX_RUN,
+                               DEFAULT_POSTURE, DEFAULT_TIMING, DEFAULT_TWIST)
 from ..splice.heck import AlignOptions
 from ..splice.options import SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules
+from .defaults import (DEFAULT_ACTIONS, DEFAULT_ACTIONS_DB, DEFAULT_BATCH_PAIRS, DEFAULT_COMPRESSION, DEFAULT_COPY_SOURCES,
+                       DEFAULT_ENGINE, DEFAULT_INDEX, DEFAULT_KEEP_HANDS_OUT, DEFAULT_LAYOUT, DEFAULT_LOCOMOTIONS,
+                       DEFAULT_MAX_LENGTH_RATIO, DEFAULT_MEMORY_BUDGET_MB, DEFAULT_METHODS, DEFAULT_RAY_ADDRESS,
+                       DEFAULT_RETARGET, DEFAULT_STORE, DEFAULT_TARGET, DEFAULT_WORKERS, LAYOUTS, STORES)
 from .engines import available_engines
 
 __all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "STORES", "parse_shard"]
 
-DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
-DEFAULT_ACTIONS = ("role:action,role:both",)
-LAYOUTS = ("copy", "virtual")
-STORES = ("motion", "alignment")
-"""What the output stores (``store``): each spliced clip's frames, or what splicing computed
-(:mod:`torchsplice.store.assembly`); the same as :data:`torchsplice.store.assembly.STORES`."""
+# DEFAULT_LOCOMOTIONS, DEFAULT_ACTIONS, LAYOUTS, STORES and the fields' defaults are declared in .defaults
+# (torch-free: the command line reads them there)
 
 
 @dataclass(frozen=True)
@@ -102,33 +105,33 @@ class JobConfig:
 
     database: Path
     output: Path
-    actions_db: Path | None = None
+    actions_db: Path | None = DEFAULT_ACTIONS_DB
     locomotions: tuple[str, ...] = DEFAULT_LOCOMOTIONS
     actions: tuple[str, ...] = DEFAULT_ACTIONS
-    methods: tuple[str, ...] = ("splice",)
-    force_locomotion: bool = False
-    max_length_ratio: float | None = None
-    timing: str = "loop"
-    acting_limbs: tuple[str, ...] | None = None
-    retarget: bool = True
-    fix_feet: bool = True
-    target: str | None = None
-    copy_sources: bool = False
-    index: bool = True
-    max_run: int = 3
-    posture: bool = True
-    twist: float = 0.0
-    keep_hands_out: bool = True
-    compression: str | None = "auto"
-    layout: str = "copy"
-    store: str = "motion"
-    memory_budget_mb: int = 1024
-    batch_pairs: int | None = None
-    engine: str = "local"
-    workers: int | None = None
-    ray_address: str | None = None
-    device: str | None = None
-    backend: str = "auto"
+    methods: tuple[str, ...] = DEFAULT_METHODS
+    force_locomotion: bool = DEFAULT_FORCE
+    max_length_ratio: float | None = DEFAULT_MAX_LENGTH_RATIO
+    timing: str = DEFAULT_TIMING
+    acting_limbs: tuple[str, ...] | None = DEFAULT_ACTING_LIMBS
+    retarget: bool = DEFAULT_RETARGET
+    fix_feet: bool = DEFAULT_FIX_FEET
+    target: str | None = DEFAULT_TARGET
+    copy_sources: bool = DEFAULT_COPY_SOURCES
+    index: bool = DEFAULT_INDEX
+    max_run: int = DEFAULT_MAX_RUN
+    posture: bool = DEFAULT_POSTURE
+    twist: float = DEFAULT_TWIST
+    keep_hands_out: bool = DEFAULT_KEEP_HANDS_OUT
+    compression: str | None = DEFAULT_COMPRESSION
+    layout: str = DEFAULT_LAYOUT
+    store: str = DEFAULT_STORE
+    memory_budget_mb: int = DEFAULT_MEMORY_BUDGET_MB
+    batch_pairs: int | None = DEFAULT_BATCH_PAIRS
+    engine: str = DEFAULT_ENGINE
+    workers: int | None = DEFAULT_WORKERS
+    ray_address: str | None = DEFAULT_RAY_ADDRESS
+    device: str | None = DEFAULT_DEVICE
+    backend: str = DEFAULT_BACKEND
 
     def checked(self) -> "JobConfig":
         """The configuration with paths and names normalised; a clear error for a bad value."""
@@ -352,7 +355,7 @@ def job_config(database, output, **options) -> JobConfig:
     for key, default in (("locomotions", DEFAULT_LOCOMOTIONS), ("actions", DEFAULT_ACTIONS)):
         value = options.get(key, default)
         options[key] = default if value is None or value == () or value == [] else strings(key, value)
-    methods = options.get("methods", ("splice",))
+    methods = options.get("methods", DEFAULT_METHODS)
     methods = methods.split(",") if isinstance(methods, str) else strings("methods", methods)
     options["methods"] = tuple(m.strip() for m in methods if m.strip())
     options["device"] = check_device(options.get("device"))

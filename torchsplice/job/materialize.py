@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core.errors import TorchspliceError
 from ..store.database import MotionDatabase
+from .defaults import DEFAULT_INDEX
 
 __all__ = ["materialize", "BATCH_FRAMES"]
 
@@ -22,7 +23,7 @@ BATCH_FRAMES = 1 << 16
 """Frames assembled and written at a time."""
 
 
-def materialize(source, output, overwrite: bool = False, progress: bool = False, index: bool = True) -> int:
+def materialize(source, output, overwrite: bool = False, progress: bool = False, index: bool = DEFAULT_INDEX) -> int:
     """Write the motion store of the alignment store ``source`` to ``output`` (and, with
     ``index``, ``NAME.h5.index.csv`` beside it, as the job does); returns the number of clips."""
     from ..store.atomic import same_file

@@ -20,6 +20,7 @@ from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from ..store.database import MotionDatabase
 from . import shards
 from .config import JobConfig
+from .defaults import DEFAULT_INDEX
 from .plan import Plan
 from .shards import gaps, output_lock_path, ranges, refuse_live_slices, remove_shard_files, run_shards
 from .sink import make_sink
@@ -35,7 +36,7 @@ log = logging.getLogger("torchsplice.job")
 
 
 def merge_job(output: Path, overwrite: bool = False, progress: bool = True, command: str | None = None,
-              index: bool = True) -> JobSummary:
+              index: bool = DEFAULT_INDEX) -> JobSummary:
     """Write ``output`` from the finished shards of its job (``splice-all --shard`` runs), and
     with ``index`` its ``NAME.h5.index.csv`` beside it (as the job does: see ``JobConfig.index``).
 

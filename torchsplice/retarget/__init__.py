@@ -12,9 +12,22 @@ source's stand); this package reads the database, names the target, and writes t
 A target is a skeleton of a database (``other.h5``, or ``other.h5:K`` when it holds several), a
 BVH file (its skeleton; its frames, where it has some, say how high its feet stand), or the
 built-in SMPL body (``smpl22``, :mod:`torchsplice.specs.smpl`).
+
+The names below are imported on first use, so that the defaults (:mod:`.defaults`) are read
+without torch.
 """
 
-from .clips import RetargetReport, retarget_clips
-from .targets import BUILTIN_TARGETS, RetargetTarget, resolve_target
+from typing import TYPE_CHECKING
+
+from ..core.lazy import lazy_names
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .clips import RetargetReport, retarget_clips
+    from .targets import BUILTIN_TARGETS, RetargetTarget, resolve_target
 
 __all__ = ["retarget_clips", "RetargetReport", "resolve_target", "RetargetTarget", "BUILTIN_TARGETS"]
+
+__getattr__, __dir__ = lazy_names(__name__, {
+    "retarget_clips": ".clips", "RetargetReport": ".clips",
+    "resolve_target": ".targets", "RetargetTarget": ".targets", "BUILTIN_TARGETS": ".targets",
+})

@@ -22,6 +22,7 @@ import torch
 from ..core.errors import SpecError, TorchspliceError
 from ..core.version import __version__
 from ..ops.retarget import RetargetMap, retarget_map, retarget_motions
+from .defaults import DEFAULT_FIX_FEET
 from .targets import database_target, resolve_target
 
 __all__ = ["retarget_clips", "RetargetReport", "Retargeter", "needs_retargeting", "onto_skeleton", "CHUNK_CLIPS"]
@@ -116,7 +117,7 @@ class Retargeter:
         return out
 
 
-def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, select=None, fix_feet: bool = True,
+def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, select=None, fix_feet: bool = DEFAULT_FIX_FEET,
                    overwrite: bool = False, command: str = "", progress: Callable | None = None) -> RetargetReport:
     """Retarget clips of ``database`` onto ``to`` and write them to the database ``out``.
 

@@ -32,6 +32,7 @@ import torch
 from ..core.errors import TorchspliceError
 from ..core.version import __version__
 from ..ops.mirror import mirror_motion, mirror_rig
+from .defaults import DEFAULT_ORIGINALS
 
 __all__ = ["mirror_clips", "MirrorReport", "MIRROR_SUFFIX"]
 
@@ -56,7 +57,7 @@ class MirrorReport:
                 f"{self.mirrored} of them mirror images")
 
 
-def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=None, originals: bool = True,
+def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=None, originals: bool = DEFAULT_ORIGINALS,
                  overwrite: bool = False, command: str = "", progress: Callable | None = None) -> MirrorReport:
     """Write clips of ``database`` and their mirror images to the database ``out``.
 

@@ -16,7 +16,7 @@ import types as _types
 from ..core.lazy import lazy_names
 
 __getattr__, __dir__ = lazy_names(__name__, {
-    "TIMINGS": ".standing", "SpliceOptions": ".options", "SpliceResult": ".api", "NotLocomotingError": ".api",
+    "TIMINGS": ".defaults", "SpliceOptions": ".options", "SpliceResult": ".api", "NotLocomotingError": ".api",
     "splice": ".api", "splice_pairs": ".api", "splice_standing": ".api", "AlignOptions": ".heck",
     "Method": ".registry", "MethodInput": ".registry", "MethodOutput": ".registry", "register_method": ".registry",
     "get_method": ".registry", "available_methods": ".registry", "load_plugins": ".registry",

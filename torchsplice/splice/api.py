@@ -33,6 +33,7 @@ from ..specs import DatasetSpec, SkeletonRoles
 from . import backends
 from .backends import PairFailedError, SplicedBatch, backend_for
 from .clips import check_clip, check_pair, clips_to_tensors, resample_motion
+from .defaults import DEFAULT_METHOD
 from .locomotion import LocomotionCheck, check_locomotion
 from .options import SpliceOptions
 from .registry import Method, get_method
@@ -102,7 +103,7 @@ class SpliceResult:
     acting: tuple[str, ...] = ()
 
 
-def splice(locomotion: Motion, action: Motion, spec: DatasetSpec | SkeletonRoles, method: str | Method = "splice",
+def splice(locomotion: Motion, action: Motion, spec: DatasetSpec | SkeletonRoles, method: str | Method = DEFAULT_METHOD,
            reference: Motion | None = None, options: SpliceOptions | None = None) -> SpliceResult:
     """Splice the upper body of ``action`` onto the lower body of ``locomotion``."""
     return splice_pairs([(locomotion, action)], spec, method, None if reference is None else [reference], options)[0]
@@ -121,8 +122,9 @@ def _unique(motions: Sequence[Motion]) -> tuple[list[Motion], torch.Tensor]:
     return uniq, torch.tensor(idx)
 
 
-def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str | Method = "splice",
-                 references: Sequence[Motion] | None = None, options: SpliceOptions | None = None) -> list[SpliceResult]:
+def splice_pairs(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles,
+                 method: str | Method = DEFAULT_METHOD, references: Sequence[Motion] | None = None,
+                 options: SpliceOptions | None = None) -> list[SpliceResult]:
     """Splice every ``(locomotion, action)`` pair, batched; results in the order of ``pairs``.
 
     ``method`` is a registered method's name (see :func:`~torchsplice.splice.registry.available_methods`)
@@ -186,8 +188,8 @@ def _standing_pairs(pairs, roles: SkeletonRoles, skeleton, options: SpliceOption
     return {b for b in range(len(pairs)) if checks[int(ai[b])].finite and not checks[int(ai[b])].locomoting}
 
 
-def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles, method: str | Method = "splice",
-                    options: SpliceOptions | None = None,
+def splice_standing(pairs: Sequence[tuple[Motion, Motion]], spec: DatasetSpec | SkeletonRoles,
+                    method: str | Method = DEFAULT_METHOD, options: SpliceOptions | None = None,
                     acting: Sequence[tuple[str, ...]] | None = None) -> list[SpliceResult]:
     """Splice ``(locomotion, action)`` pairs as standing actions (see :mod:`torchsplice.splice.standing`),
     whether or not the actions locomote; results in the order of ``pairs``, each as long as its

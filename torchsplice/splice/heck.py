@@ -45,6 +45,7 @@ from ..specs import SkeletonRoles
 from ..specs.roles import landmark_indices
 from ..kinematics.heading import heading_from_hips, heading_points, lateral_axis, third_axis
 from .clips import ClipTensors, shift_frames, with_fk, without_fk
+from .defaults import DEFAULT_MAX_RUN
 from .registry import MethodInput, MethodOutput
 
 __all__ = ["AlignOptions", "TimeAlignment", "time_align", "alignment_grid", "phase_crop", "splice_tensors",
@@ -73,7 +74,7 @@ class AlignOptions:
             :func:`~torchsplice.align.timewarp.timewarp`; both give the same bits).
     """
 
-    max_run: int = 3
+    max_run: int = DEFAULT_MAX_RUN
     landmarks: tuple[str, ...] = ("root", "knees")
     heading_window_deg: float | None = 60.0
     crop: bool = True

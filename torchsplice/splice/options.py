@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 
 import torch
 
+from .defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_POSTURE, DEFAULT_TIMING,
+                       DEFAULT_TWIST)
 from .heck import AlignOptions
 
 __all__ = ["SpliceOptions", "bank_kwargs", "align_kwargs"]
@@ -40,16 +42,16 @@ class SpliceOptions:
     """
 
     align: AlignOptions = field(default_factory=AlignOptions)
-    posture: bool = True
-    twist: float = 0.0
-    force: bool = False
+    posture: bool = DEFAULT_POSTURE
+    twist: float = DEFAULT_TWIST
+    force: bool = DEFAULT_FORCE
     check_locomotion: bool = True
     min_seconds: float = 0.5
     dtype: torch.dtype = torch.float32
-    device: str | None = None
-    backend: str = "auto"
-    timing: str = "loop"
-    acting_limbs: tuple[str, ...] | None = None
+    device: str | None = DEFAULT_DEVICE
+    backend: str = DEFAULT_BACKEND
+    timing: str = DEFAULT_TIMING
+    acting_limbs: tuple[str, ...] | None = DEFAULT_ACTING_LIMBS
 
 
 def bank_kwargs(options: SpliceOptions, fps: float) -> dict:

@@ -60,17 +60,13 @@ from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
 from ..align.curve import interpolate_frames, slerp_frames
 from .clips import ClipTensors, without_fk
+from .defaults import LIMBS, TIMINGS  # declared there (read by the command line without torch)
 from .methods import upper_mask
 
 __all__ = ["TIMINGS", "LIMBS", "ACTING_THRESHOLD", "LOOP_BLEND_SECONDS", "CORE_SHARE", "arm_chains", "acting_limbs",
            "blend_frames", "hands_in_chest", "acting_mask", "motion_core", "best_windows", "loop_points", "action_times",
            "standing_tensors", "standing_tables", "parse_limbs", "splice_upper", "naive_upper", "cpmc_upper"]
 
-TIMINGS = ("loop", "hold", "fit")
-"""How a standing action fills a longer (or shorter) locomotion."""
-
-LIMBS = ("left_arm", "right_arm")
-"""Limbs an action may act with (the legs always come from the locomotion)."""
 
 ACTING_THRESHOLD = 0.3
 """An arm acts when the 90th percentile of its hand's distance from the hand's median position,

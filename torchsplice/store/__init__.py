@@ -10,11 +10,30 @@ Modules: :mod:`.schema` (the file's layout, described once), :mod:`.checks` (its
 checked on open), :mod:`.table` (the typed clip table), :mod:`.reading` and :mod:`.writing`
 (the two halves of the database), :mod:`.database` (opening, creating, resuming, closing),
 :mod:`.resumable` (files written across runs), :mod:`.lock` and :mod:`.atomic` (one writer
-at a time, outputs that appear whole).
+at a time, outputs that appear whole), :mod:`.state` (the database's state, declared once for
+its mixins' type checks), :mod:`.defaults` (the compressions, torch-free).
+
+The names below are imported on first use, so that :mod:`.defaults` is read without h5py.
 """
 
-from .database import ClipBatch, MotionDatabase
-from .reading import FrameArray
-from .table import ClipTable, SkeletonInfo
+from typing import TYPE_CHECKING
+
+from ..core.lazy import lazy_names
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .database import ClipBatch, MotionDatabase
+    from .reading import FrameArray
+    from .table import ClipTable, SkeletonInfo
 
 __all__ = ["MotionDatabase", "ClipBatch", "ClipTable", "SkeletonInfo", "FrameArray"]
+
+__getattr__, __dir__ = lazy_names(
+    __name__,
+    {
+        "MotionDatabase": ".database",
+        "ClipBatch": ".database",
+        "ClipTable": ".table",
+        "SkeletonInfo": ".table",
+        "FrameArray": ".reading",
+    },
+)

@@ -13,6 +13,7 @@ from ..core.errors import DatabaseError
 from .assembly import ALIGNMENT, BANKS, Assembly, store_kind
 from .reading import FrameArray
 from .schema import CLIPS, FRAME_ARRAYS, STR, skeleton_path
+from .state import DatabaseState
 from .writing import io_failure
 
 __all__ = ["Assembling", "AssembledArray"]
@@ -41,7 +42,7 @@ class AssembledArray(FrameArray):
         return last[1][self._name]
 
 
-class Assembling:
+class Assembling(DatabaseState):
     """The alignment store's methods of :class:`~torchsplice.store.database.MotionDatabase` (a
     mixin: the database's state, file and opening live there)."""
 
@@ -211,7 +212,7 @@ class Assembling:
             return
         index = self._new_names(names)
         frame_extra = dict(frame_extra or {})
-        arrays = {}
+        arrays: dict[str, np.ndarray] = {}
         if curve is not None:
             arrays["assembly_curve"] = np.asarray(curve, np.float64).reshape(N)
         if pelvis is not None:

@@ -58,6 +58,7 @@ import numpy as np
 from ..core.errors import DatabaseError
 from ..core.method_table import BUILTINS
 from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
+from .state import DatabaseState
 
 __all__ = [
     "STORES",
@@ -237,7 +238,7 @@ class Assembly:
     """An alignment store's source banks and per-clip parts, read once per open database, and the
     assembly of frame ranges from them (:meth:`frames`)."""
 
-    def __init__(self, db):
+    def __init__(self, db: DatabaseState) -> None:
         h5 = db.h5
         self.banks = []
         for b in range(len(h5[BANKS])):

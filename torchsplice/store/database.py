@@ -75,27 +75,28 @@ class MotionDatabase(Reading, Writing, Assembling):
     """
 
     def __init__(self, path: Path, h5: h5py.File, mode: str, tmp: Path | None, dtype, skeletons: list | None = None):
+        # the state the mixins share, its types and meanings declared in DatabaseState
         self.path, self._h5, self.mode, self._tmp, self._dtype = path, h5, mode, tmp, dtype
-        self._target = path  # the file a write replaces on close (an append through a link: its target)
+        self._target = path
         self._lock = None
         self._skeletons = (
             skeletons
             if skeletons is not None
             else [skeleton_from_group(h5[SKELETONS][k]) for k in sorted(h5[SKELETONS], key=int)]
         )
-        self._names: list[str] | None = None
-        self._name_index: dict[str, int] | None = None
+        self._names = None
+        self._name_index = None
         self._flushed = h5[f"{CLIPS}/name"].shape[0]
         columns, frame_columns = extra_columns(h5.attrs)
-        self._declared: dict[str, str] = columns  # every declared clip column, the store's own parts too
-        self.columns: dict[str, str] = {n: kind for n, kind in columns.items() if n not in PART_COLUMNS}
-        self.frame_columns: tuple[str, ...] = frame_columns
-        self._staged: list[tuple] = []
+        self._declared = columns
+        self.columns = {n: kind for n, kind in columns.items() if n not in PART_COLUMNS}
+        self.frame_columns = frame_columns
+        self._staged = []
         self._staged_frames = 0
-        self._skeleton_ids: dict[int, tuple[Skeleton, int]] = {}  # id -> (object kept alive, row)
-        self._virtual: dict[int, list[tuple[str, int]]] = {}  # skeleton -> (source file, frames) in order
-        self._resumable = False  # written at a staging path across runs (see checkpoint, resume)
-        self._row_log: RowLog | None = None  # a resumable database's clip-table rows until it closes
+        self._skeleton_ids = {}
+        self._virtual = {}
+        self._resumable = False
+        self._row_log = None
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod
@@ -205,6 +206,7 @@ class MotionDatabase(Reading, Writing, Assembling):
         """
         if not self._resumable:
             raise ValueError(f"{self.path}: only a database created with a staging path has checkpoints")
+        assert self._row_log is not None and self._tmp is not None  # set with _resumable (create, resume)
         self.flush()
         h5 = self.h5
         if not h5.swmr_mode:
@@ -393,8 +395,10 @@ class MotionDatabase(Reading, Writing, Assembling):
             self._build_virtual()
             self._h5.close()
             self._h5 = None
+            assert self._tmp is not None  # a write works on a copy, a temporary or the staging file
             os.replace(self._tmp, self._target)
             if self._resumable:
+                assert self._row_log is not None  # set with _resumable (create, resume)
                 self._row_log.close()
                 commit_path(self._tmp).unlink(missing_ok=True)
                 rows_path(self._tmp).unlink(missing_ok=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import inspect
 from pathlib import Path
+from typing import Any, Callable, TypeVar, cast
 
 import h5py
 import numpy as np
@@ -17,8 +18,10 @@ from .schema import SKELETONS, short
 
 __all__ = ["FrameArray", "reads", "virtual_files"]
 
+Method = TypeVar("Method", bound=Callable[..., Any])
 
-def reads(method):
+
+def reads(method: Method) -> Method:
     """Make a read method of :class:`MotionDatabase` turn HDF5's ``OSError`` (a damaged file:
     a chunk that does not decompress, a truncated file) into one :class:`DatabaseError` line
     naming the file; reads of frames name the clip too (:meth:`MotionDatabase._frames`)."""
@@ -31,7 +34,7 @@ def reads(method):
             except OSError as exc:
                 raise self._unreadable(exc, "the file") from None
 
-        return generator
+        return cast(Method, generator)  # wraps: the method's own signature
 
     @functools.wraps(method)
     def wrapper(self, *args, **kwargs):
@@ -40,7 +43,7 @@ def reads(method):
         except OSError as exc:
             raise self._unreadable(exc, "the file") from None
 
-    return wrapper
+    return cast(Method, wrapper)
 
 
 class FrameArray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import functools
+from typing import Any, Callable, TypeVar, cast
 
 import h5py
 import numpy as np
@@ -30,6 +31,8 @@ __all__ = [
     "per_clip",
 ]
 
+Method = TypeVar("Method", bound=Callable[..., Any])
+
 
 def io_failure(exc: BaseException) -> bool:
     """Whether ``exc`` is HDF5 failing to write the file (a full disk, an I/O error), not a bug."""
@@ -48,7 +51,7 @@ def mb(n: float) -> str:
     return f"{n / 1e6:,.1f} MB" if n < 1e9 else f"{n / 1e9:,.2f} GB"
 
 
-def guarded(method):
+def guarded(method: Method) -> Method:
     """Make a write method of :class:`MotionDatabase` fail cleanly when the file cannot be written.
 
     HDF5 cannot carry on after a failed write (a full disk leaves its metadata cache dirty, and
@@ -65,7 +68,7 @@ def guarded(method):
                 raise
             raise DatabaseError(self._write_failed(exc)) from None
 
-    return wrapper
+    return cast(Method, wrapper)  # wraps: the method's own signature
 
 
 def column_array(columns: dict, name: str, values) -> np.ndarray:

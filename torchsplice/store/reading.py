@@ -25,6 +25,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import DatasetSpec, detect_spec
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, cap, short, skeleton_path
+from .state import DatabaseState
 from .frame_array import FrameArray, reads, virtual_files
 from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
 
@@ -72,7 +73,7 @@ class ClipBatch:
         )
 
 
-class Reading:
+class Reading(DatabaseState):
     """The read methods of :class:`~torchsplice.store.database.MotionDatabase` (a mixin: the
     database's state, file and opening live there)."""
 
@@ -134,7 +135,7 @@ class Reading:
             )
             hint = f"; similar: {', '.join(close)}" if close else "; `torchsplice info` lists the clips"
             raise DatabaseError(f"{self.path}: no clip named {clip!r}{hint}")
-        return self._name_index[clip]
+        return index[clip]
 
     def _index_map(self) -> dict[str, int]:
         """Name -> row, built once per open and kept up to date by :meth:`append`."""

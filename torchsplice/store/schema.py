@@ -49,6 +49,7 @@ import numpy as np
 import torch
 
 from ..core.skeleton import Skeleton
+from .defaults import COMPRESSIONS  # declared there, torch-free (the command line reads it)
 
 __all__ = [
     "FORMAT",
@@ -88,7 +89,6 @@ COLUMNS = {  # the built-in clip columns: name -> dtype
     "fps": np.float64,
 }
 MIXED = "mixed"  # the file's units or up axis when its skeletons differ in them
-COMPRESSIONS = ("gzip", "lzf", "auto", None)
 KINDS = {"str": (STR, ""), "float": (np.float64, np.nan), "int": (np.int64, -1)}
 """Kinds of extra clip columns: ``kind: (dtype, the value of a row that does not give one)``."""
 FRAME_ARRAYS = ("rotations", "root_translation", "translations")
@@ -166,10 +166,10 @@ def skeleton_from_group(g: h5py.Group, where: str = "skeleton") -> Skeleton:
         raise Damage(f"{where} has non-finite offsets")
     try:
         return Skeleton(
-            names=[s for s in names.asstr()[()]],
+            names=tuple(names.asstr()[()]),
             parents=checked_dataset(g, "parents", where, (J,), "iu")[()].tolist(),
             offsets=torch.from_numpy(offsets),
-            channels=[c.split() for c in checked_dataset(g, "channels", where, (J,), "str").asstr()[()]],
+            channels=tuple(tuple(c.split()) for c in checked_dataset(g, "channels", where, (J,), "str").asstr()[()]),
             end_site_parents=g["end_site_parents"][()].tolist(),
             end_site_offsets=torch.from_numpy(ends),
         )

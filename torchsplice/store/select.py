@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import fnmatch
 import re
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -114,16 +114,16 @@ def _option(what: str) -> tuple[str, ...]:
 
 
 def _what_there_is(
-    alts, names: list[str], roles: list[str], labels: list[dict], skeletons=None, columns: dict | None = None
+    alts, names: list[str], roles: Iterable[str], labels: list[dict], skeletons=None, columns: dict | None = None
 ) -> str:
     """For an error: the database's roles, label keys, skeletons, column values or first clip
     names, as the selector asked."""
     kinds = {kind for kind, _, _ in alts}
     if kinds == {"number"} and columns and len({key for _, key, _ in alts}) == 1:
         key = alts[0][1]
-        values = np.asarray(columns[key], dtype=np.float64)
-        values = values[np.isfinite(values)]
-        return f"its {key} values: " + (f"{values.min():g} to {values.max():g}" if len(values) else "none")
+        numbers = np.asarray(columns[key], dtype=np.float64)
+        numbers = numbers[np.isfinite(numbers)]
+        return f"its {key} values: " + (f"{numbers.min():g} to {numbers.max():g}" if len(numbers) else "none")
     if kinds == {"skeleton"} and skeletons is not None:
         return "its skeletons: " + (", ".join(str(k) for k in sorted({int(k) for k in skeletons})) or "none")
     if kinds == {"column"} and columns and len({key for _, key, _ in alts}) == 1:

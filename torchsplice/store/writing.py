@@ -39,6 +39,7 @@ from .guards import (
 )
 from .assembly import ALIGNMENT, FRAME_PARTS
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, short, skeleton_path, skeleton_to_group
+from .state import DatabaseState
 
 __all__ = ["Writing", "guarded", "io_failure", "SPACE_MARGIN", "FLUSH_FRAMES"]
 
@@ -48,7 +49,7 @@ SPACE_MARGIN = 4 << 20
 """Bytes kept free beyond each write, for HDF5's caches and metadata."""
 
 
-class Writing:
+class Writing(DatabaseState):
     """The write methods of :class:`~torchsplice.store.database.MotionDatabase` (a mixin: the
     database's state, file and opening live there)."""
 
@@ -515,7 +516,7 @@ class Writing:
                 ds.resize(n0 + a.shape[0], axis=0)
                 ds[n0:] = a.astype(ds.dtype)
             grow_rows(g, g["rotations"].shape[0])
-        rows = {c: [] for c in [*COLUMNS, *self._declared]}
+        rows: dict[str, list] = {c: [] for c in [*COLUMNS, *self._declared]}
         for m, k, extra, _ in self._staged:
             rows["name"].append(m.name)
             rows["source"].append(m.source)
@@ -536,6 +537,7 @@ class Writing:
         :meth:`close` writes to the datasets at once (HDF5's heap of variable-length strings is
         not covered by SWMR's ordered writes, so a killed process could leave it torn)."""
         if self._resumable:
+            assert self._row_log is not None  # a resumable database has its row log (create, resume)
             self._row_log.append({name: column_array(self._declared, name, values) for name, values in rows.items()})
             return
         c = self.h5[CLIPS]
@@ -565,7 +567,8 @@ class Writing:
         names = list(c)
         for name in names:
             c[name].resize(0, axis=0)
-        written, block = 0, []
+        written = 0
+        block: list[dict] = []  # the records of the rows not yet written
 
         def write() -> int:
             n = 0
@@ -578,6 +581,7 @@ class Writing:
             return n
 
         pending = 0
+        assert self._row_log is not None  # only a resumable database logs its rows
         for record in self._row_log.records():
             block.append(record)
             pending += len(record[names[0]])

@@ -33,16 +33,13 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
+from .defaults import CAMERAS, DEFAULT_AZIMUTH, DEFAULT_ELEVATION  # declared there (read by the command line)
 from .stick_figure import figure_points, head_joint
 
 __all__ = ["check_up_axis", "canonical_axes", "view_rotation", "view_rotations", "heading_yaw", "project",
            "moving_average", "Clip", "at_times", "prepare_clip", "DEFAULT_AZIMUTH", "DEFAULT_ELEVATION", "CAMERAS",
            "FOLLOW_SECONDS", "HEADING_SECONDS"]
 
-DEFAULT_AZIMUTH = -55.0
-DEFAULT_ELEVATION = 22.0
-CAMERAS = ("heading", "world")
-"""How the camera turns: with the character's heading, or never (it follows the root in both)."""
 FOLLOW_SECONDS = 0.5  # smoothing window of the follow camera
 HEADING_SECONDS = 1.0  # smoothing window of the heading camera (a gait's twist averages out)
 

@@ -52,7 +52,8 @@ from ..core.errors import TorchspliceError
 from ..core.motion import Motion
 from ..store.atomic import atomic_path
 from .camera import Clip, check_up_axis, prepare_clip
-from .camera import CAMERAS, DEFAULT_AZIMUTH, DEFAULT_ELEVATION  # noqa: F401 (the command line reads them here)
+from .defaults import (CAMERAS, DEFAULT_AZIMUTH, DEFAULT_CAMERA, DEFAULT_ELEVATION, DEFAULT_FRAMES, DEFAULT_MAX_SECONDS,
+                       SUPPORTED_SUFFIXES)
 from .camera import canonical_axes, heading_yaw, project, view_rotation, view_rotations  # noqa: F401 (re-exported)
 from .panels import animation_figure, filmstrip_figure, make_scene, release
 from .panels import fit_title  # noqa: F401 (re-exported)
@@ -60,9 +61,6 @@ from .stick_figure import Figure3D, figure_points, head_joint  # noqa: F401 (re-
 from .writers import GIF_DPI, GIF_FPS, GIF_MAX_FPS, abandon, ffmpeg_available, ffmpeg_complaint, gif_delay, make_writer
 
 __all__ = ["render", "project", "view_rotation", "SUPPORTED_SUFFIXES", "CAMERAS"]
-
-SUPPORTED_SUFFIXES = (".gif", ".mp4", ".png")
-"""Output types :func:`render` writes, chosen by the output's suffix."""
 
 _GIF_MAX_PIXELS = 1.2e9
 """A GIF is assembled in memory (one byte a pixel, twice over while Pillow encodes it): more
@@ -90,14 +88,14 @@ def render(
     titles: Sequence[str] | None = None,
     up_axis: int = 1,
     fps: float | None = None,
-    frames: int = 8,
+    frames: int = DEFAULT_FRAMES,
     size: float = 3.0,
     dpi: int | None = None,
-    max_seconds: float | None = None,
+    max_seconds: float | None = DEFAULT_MAX_SECONDS,
     *,
     azimuth: float = DEFAULT_AZIMUTH,
     elevation: float = DEFAULT_ELEVATION,
-    camera: str = "heading",
+    camera: str = DEFAULT_CAMERA,
 ) -> Path:
     """Draw clips as stick figures side by side and write ``output``; returns its path.
 

@@ -44,13 +44,13 @@ from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .camera import canonical_axes, check_up_axis
+from .defaults import DEFAULT_MAX_CLIPS
 from .stick_figure import figure_points, head_joint
 from .sources import SourceClips, source_databases
 
 __all__ = ["write_viewer", "build_viewer", "viewer_notes", "clip_payload", "quantize", "dequantize", "DEFAULT_MAX_CLIPS",
            "MAX_PAGE_FRAMES"]
 
-DEFAULT_MAX_CLIPS = 100
 MAX_PAGE_FRAMES = 60_000
 """The most frames one page holds, whatever the clips (about 14 MB of page; 33 minutes at 30
 fps): clips past it are left out, as past ``max_clips``."""
