@@ -697,6 +697,14 @@ def bench_startup() -> None:
                   f"{'' if (ours if clips else s) <= target else '  NOT MET'}")
 
 
+def _shown(path: Path) -> str:
+    """``path`` as the records show it: relative to the repository where it is beside it."""
+    try:
+        return os.path.relpath(path.resolve(), REPO)
+    except ValueError:
+        return str(path)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--mocap", type=Path, default=Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap")),
@@ -725,7 +733,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         files = real_files(args.mocap)
         if files:
-            data = f"{len(files)} real BVH files from {args.mocap}"
+            data = f"{len(files)} real BVH files from {_shown(args.mocap)}"
         else:
             files = sample_files(Path(tmp))
             data = f"no real data at {args.mocap}; the built-in synthetic sample ({len(files)} clips)"
