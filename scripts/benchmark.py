@@ -242,7 +242,7 @@ def bench_splice(files: list[Path], device: str) -> None:
     from torchsplice.cpu.bank import splice_bank
     from torchsplice.splice import SpliceOptions, splice_pairs
     from torchsplice.splice.options import align_kwargs
-    from torchsplice.splice.heck import AlignOptions
+    from torchsplice.splice.options import AlignOptions
 
     chosen = walks_and_turns(files, 60)
     clips, spec, roles, bank = _bank(chosen)

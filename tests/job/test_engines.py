@@ -289,7 +289,7 @@ register_engine("threads", ThreadsEngine)
 def test_an_engine_of_ones_own_is_one_module_and_a_registration(sample_db, reference, tmp_path, monkeypatch, capsys):
     """An engine over a concurrent.futures executor, registered by a plug-in module, runs the job
     through the command line and the Python API, with the same bits as the built-in engines."""
-    import torchsplice.job.engines as engines
+    import torchsplice.job.engines.registry as engines
 
     monkeypatch.setattr(engines, "_ENGINES", dict(engines._ENGINES))  # the registration ends with the test
     (tmp_path / "toy_threads.py").write_text(TOY_ENGINE)

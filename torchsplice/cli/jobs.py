@@ -44,7 +44,7 @@ class SpliceAll(Command):
                    "too. Killed or interrupted, the same command resumes where it stopped.")
 
     def add_arguments(self, s) -> None:
-        from ..job.engines import available_engines
+        from ..job.engines.registry import available_engines
 
         method = ",".join(DEFAULT_METHODS)
         budget = DEFAULT_MEMORY_BUDGET_MB

@@ -26,7 +26,8 @@ from ..core.motion import Motion
 from ..specs import SkeletonRoles
 from ..kinematics.heading import heading_points
 from ..splice.clips import clips_to_tensors, resample_motion
-from ..splice.heck import AlignOptions, time_align
+from ..splice.heck import time_align
+from ..splice.options import AlignOptions
 
 __all__ = ["GroundTruthTriple", "upper_body_error", "best_posture_error", "bandai_namco_triples"]
 

@@ -23,14 +23,13 @@ from ..store.defaults import COMPRESSIONS
 from ..retarget.defaults import DEFAULT_FIX_FEET
 from ..splice.defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_MAX_RUN,
                                DEFAULT_POSTURE, DEFAULT_TIMING, DEFAULT_TWIST)
-from ..splice.heck import AlignOptions
-from ..splice.options import SpliceOptions
+from ..splice.options import AlignOptions, SpliceOptions
 from ..splice.registry import available_methods, get_method, plugin_modules
 from .defaults import (DEFAULT_ACTIONS, DEFAULT_ACTIONS_DB, DEFAULT_BATCH_PAIRS, DEFAULT_COMPRESSION, DEFAULT_COPY_SOURCES,
                        DEFAULT_ENGINE, DEFAULT_INDEX, DEFAULT_KEEP_HANDS_OUT, DEFAULT_LAYOUT, DEFAULT_LOCOMOTIONS,
                        DEFAULT_MAX_LENGTH_RATIO, DEFAULT_MEMORY_BUDGET_MB, DEFAULT_METHODS, DEFAULT_RAY_ADDRESS,
                        DEFAULT_RETARGET, DEFAULT_STORE, DEFAULT_TARGET, DEFAULT_WORKERS, LAYOUTS, STORES)
-from .engines import available_engines
+from .engines.registry import available_engines
 
 __all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "STORES", "parse_shard"]
 

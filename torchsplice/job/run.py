@@ -52,7 +52,7 @@ from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobErro
 from ..core.stop import check_stop
 from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
-from .engines import EngineContext, make_engine
+from .engines.base import EngineContext, make_engine
 from .engines.forkserver import prestart
 from .merge import (STAGING, OutputMerge, merge_job, open_output, remove_merged_shards, source_rows, source_skeleton,
                     task_finished)

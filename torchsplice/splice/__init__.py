@@ -17,7 +17,7 @@ from ..core.lazy import lazy_names
 
 __getattr__, __dir__ = lazy_names(__name__, {
     "TIMINGS": ".defaults", "SpliceOptions": ".options", "SpliceResult": ".api", "NotLocomotingError": ".api",
-    "splice": ".api", "splice_pairs": ".api", "splice_standing": ".api", "AlignOptions": ".heck",
+    "splice": ".api", "splice_pairs": ".api", "splice_standing": ".api", "AlignOptions": ".options",
     "Method": ".registry", "MethodInput": ".registry", "MethodOutput": ".registry", "register_method": ".registry",
     "get_method": ".registry", "available_methods": ".registry", "load_plugins": ".registry",
 })

@@ -1,5 +1,5 @@
 """The splice's option defaults and allowed values, declared once: :class:`~.options.SpliceOptions`,
-:class:`~.heck.AlignOptions`, :func:`~.api.splice` and :mod:`.standing` take them from here, and
+:class:`~.options.AlignOptions`, :func:`~.api.splice` and :mod:`.standing` take them from here, and
 so do the job's configuration (:mod:`torchsplice.job.defaults`) and the command line.
 
 Every package whose options the command line shows has such a module, ``<package>/defaults.py``

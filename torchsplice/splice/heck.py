@@ -45,43 +45,11 @@ from ..specs import SkeletonRoles
 from ..specs.roles import landmark_indices
 from ..kinematics.heading import heading_from_hips, heading_points, lateral_axis, third_axis
 from .clips import ClipTensors, shift_frames, with_fk, without_fk
-from .defaults import DEFAULT_MAX_RUN
+from .options import AlignOptions
 from .registry import MethodInput, MethodOutput
 
 __all__ = ["AlignOptions", "TimeAlignment", "time_align", "alignment_grid", "phase_crop", "splice_tensors",
            "SplicedTensors", "shoulder_yaw", "twist_target", "run_method"]
-
-
-@dataclass(frozen=True)
-class AlignOptions:
-    """Parameters of time alignment (defaults follow the paper where it gives them).
-
-    Attributes:
-        max_run: slope limit ``L``: at most this many consecutive frames of one clip while the
-            other stands still.
-        landmarks: roles whose joints form the lower-body point cloud (``root``, ``hips``,
-            ``knees``, ``feet``, ``toes``); the paper uses root and knees.
-        heading_window_deg: the rotation that aligns two frames must stay within this many
-            degrees of their relative heading (from the hips), which tells left from right;
-            ``None`` gives the paper's unrestricted metric.
-        crop: crop the action's start to bring it in phase with the locomotion.
-        crop_context_s: cropping compares windows of this many seconds, not single frames,
-            so that a frame is not taken for its mirror half a stride later.
-        crop_window_s: the local minimum for cropping must be the smallest within this many
-            seconds on either side (robustness to small noise).
-        knot_spacing_s: seconds of locomotion per span of the alignment B-spline.
-        dp_backend: the DP's implementation in :func:`time_align` (see
-            :func:`~torchsplice.align.timewarp.timewarp`; both give the same bits).
-    """
-
-    max_run: int = DEFAULT_MAX_RUN
-    landmarks: tuple[str, ...] = ("root", "knees")
-    heading_window_deg: float | None = 60.0
-    crop: bool = True
-    crop_context_s: float = 0.5
-    crop_window_s: float = 0.2
-    knot_spacing_s: float = 0.25
-    dp_backend: str = "auto"
 
 
 def _clouds_and_headings(c: ClipTensors, roles: SkeletonRoles, options: AlignOptions):

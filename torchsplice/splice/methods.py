@@ -21,7 +21,8 @@ from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
 from ..align.curve import slerp_frames
 from .clips import ClipTensors, shift_frames, without_fk
-from .heck import AlignOptions, TimeAlignment, time_align
+from .heck import TimeAlignment, time_align
+from .options import AlignOptions
 from .registry import MethodInput, MethodOutput
 
 __all__ = ["naive_tensors", "cpmc_tensors", "upper_mask", "run_naive", "run_cpmc"]

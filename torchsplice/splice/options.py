@@ -1,4 +1,5 @@
-"""The options of every splicing method (:class:`SpliceOptions`), and how they map onto the
+"""The options of every splicing method (:class:`SpliceOptions`), the time alignment's
+(:class:`AlignOptions`, which :mod:`.heck` uses and re-exports), and how they map onto the
 compiled kernels' arguments (:func:`bank_kwargs`, the one place that does, so that an option
 cannot reach one code path and miss the other)."""
 
@@ -8,11 +9,42 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_POSTURE, DEFAULT_TIMING,
-                       DEFAULT_TWIST)
-from .heck import AlignOptions
+from .defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_MAX_RUN,
+                       DEFAULT_POSTURE, DEFAULT_TIMING, DEFAULT_TWIST)
 
-__all__ = ["SpliceOptions", "bank_kwargs", "align_kwargs"]
+__all__ = ["AlignOptions", "SpliceOptions", "bank_kwargs", "align_kwargs"]
+
+
+@dataclass(frozen=True)
+class AlignOptions:
+    """Parameters of time alignment (defaults follow the paper where it gives them).
+
+    Attributes:
+        max_run: slope limit ``L``: at most this many consecutive frames of one clip while the
+            other stands still.
+        landmarks: roles whose joints form the lower-body point cloud (``root``, ``hips``,
+            ``knees``, ``feet``, ``toes``); the paper uses root and knees.
+        heading_window_deg: the rotation that aligns two frames must stay within this many
+            degrees of their relative heading (from the hips), which tells left from right;
+            ``None`` gives the paper's unrestricted metric.
+        crop: crop the action's start to bring it in phase with the locomotion.
+        crop_context_s: cropping compares windows of this many seconds, not single frames,
+            so that a frame is not taken for its mirror half a stride later.
+        crop_window_s: the local minimum for cropping must be the smallest within this many
+            seconds on either side (robustness to small noise).
+        knot_spacing_s: seconds of locomotion per span of the alignment B-spline.
+        dp_backend: the DP's implementation in :func:`time_align` (see
+            :func:`~torchsplice.align.timewarp.timewarp`; both give the same bits).
+    """
+
+    max_run: int = DEFAULT_MAX_RUN
+    landmarks: tuple[str, ...] = ("root", "knees")
+    heading_window_deg: float | None = 60.0
+    crop: bool = True
+    crop_context_s: float = 0.5
+    crop_window_s: float = 0.2
+    knot_spacing_s: float = 0.25
+    dp_backend: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -20,7 +52,7 @@ class SpliceOptions:
     """Options for every method.
 
     Attributes:
-        align: time-alignment parameters (:class:`~torchsplice.splice.heck.AlignOptions`).
+        align: time-alignment parameters (:class:`AlignOptions`).
         posture: apply posture transfer (``splice`` only).
         twist: the share (0 to 1) of the locomotion's torso twist that posture transfer adds to
             the action's posture (``splice`` only; 0, the default, is the paper's transfer; see

@@ -7,7 +7,7 @@ from __future__ import annotations
 from concurrent.futures import Future, ThreadPoolExecutor
 
 from ..task import run_task
-from . import Engine
+from .base import Engine
 
 __all__ = ["InlineEngine"]
 

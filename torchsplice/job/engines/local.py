@@ -25,7 +25,7 @@ from ..config import JobConfig
 from ..plan import Plan, Task
 from ..sources import Sources
 from ..task import run_task
-from . import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker, shard_compression
+from .base import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker, shard_compression
 
 __all__ = ["LocalEngine", "make_local_engine", "IN_FLIGHT_PER_WORKER"]
 

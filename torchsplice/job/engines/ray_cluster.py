@@ -20,7 +20,7 @@ from ..config import JobConfig
 from ..plan import Plan, Task
 from ..sources import Sources
 from ..task import run_task
-from . import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker
+from .base import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker
 
 __all__ = ["RayEngine"]
 
