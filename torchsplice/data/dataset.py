@@ -88,18 +88,29 @@ import torch
 from torch.utils.data import Dataset
 
 from ..core.skeleton import Skeleton
-from ..core.errors import TorchspliceError
 from ..store import MotionDatabase
-from ..store.select import select_clips
 from .collate import collate_motion  # noqa: F401 (its home before data.collate)
 from .errors import DatasetError
 from .features import BUILTIN_FEATURES, NEEDS_FK, NOT_PER_FRAME, VELOCITY, derive_features, trajectory_joint
-from .where import clip_mask, where_mask
+from .where import selection_mask
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "FeatureStatistics", "BUILTIN_FEATURES", "ITEM_KEYS"]
 
 ITEM_KEYS = ("name", "length", "fps", "index", "start", "skeleton")
 """The metadata keys of every item, besides its features."""
+
+
+def _window_and_stride(window: int | None, stride: int | None) -> tuple[int | None, int | None]:
+    """``(window, stride)`` checked: a stride needs a window and defaults to it; both at least 1."""
+    if window is None:
+        if stride is not None:
+            raise ValueError("stride needs a window")
+        return None, None
+    window = operator.index(window)
+    stride = window if stride is None else operator.index(stride)
+    if window < 1 or stride < 1:
+        raise ValueError(f"window and stride must be at least 1, got window={window}, stride={stride}")
+    return window, stride
 
 
 class FeatureStatistics(NamedTuple):
@@ -194,102 +205,88 @@ class MotionDataset(Dataset):
         if self.assemble_on is not None and preload:
             raise ValueError("assemble_on makes each batch's features in the collate step; preload=True makes them all "
                              "here: choose one")
-        if isinstance(features, str):
-            features = (features,)
-        self.features = tuple(dict.fromkeys(features))
+        self.features = tuple(dict.fromkeys((features,) if isinstance(features, str) else features))
         self.dtype = dtype
         self.preload = bool(preload)
         if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
             raise ValueError(f"dtype must be a floating torch dtype, got {dtype!r}")
-        if window is None:
-            if stride is not None:
-                raise ValueError("stride needs a window")
-        else:
-            window = operator.index(window)
-            stride = window if stride is None else operator.index(stride)
-            if window < 1 or stride < 1:
-                raise ValueError(f"window and stride must be at least 1, got window={window}, stride={stride}")
-        self.window, self.stride = window, stride
+        self.window, self.stride = _window_and_stride(window, stride)
 
         self._db: MotionDatabase | None = None
         self._db_pid: int | None = None
         self._datasets: dict = {}
         with MotionDatabase.open(self.path) as db:
             clip_table = db.clip_table()
-            self.skeletons: list[Skeleton] = db.skeletons
-            self.frame_columns: tuple[str, ...] = tuple(db.frame_columns)
-            self.columns: dict[str, str] = dict(db.columns)
-            info = [db.skeleton_info(k) for k in range(len(self.skeletons))]
-            stored = {k: set(i.frame_arrays) for k, i in enumerate(info)}
-            self.trajectory_joints: dict[int, int] = (
-                {k: trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)}
-                if {"trajectory", "trajectory_velocity"} & set(self.features) else {})
-            self.units: dict[int, str] = {k: i.units for k, i in enumerate(info)}
+            stored = self._read_layout(db)
             self._check_features()
-            keep = np.ones(len(clip_table), dtype=bool)
-            if clips is not None:
-                keep &= clip_mask(clips, clip_table.name, self.path)
-            if where:
-                keep &= where_mask(where, clip_table, self.frame_columns, self.path)
-            if select is not None:  # the selection language of the job and the exports
-                try:
-                    rows = select_clips(clip_table, select, "select", str(self.path))
-                except TorchspliceError as exc:
-                    raise DatasetError(str(exc)) from None
-                chosen = np.zeros(len(keep), dtype=bool)
-                chosen[rows] = True
-                keep &= chosen
-            if split is not None:  # by source clips over the whole database: no action in two splits
-                from .splits import SPLITS, table_splits
-
-                if split not in SPLITS:
-                    raise DatasetError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
-                keep &= np.asarray(table_splits(clip_table, split_ratios, split_seed)) == split
-            if not keep.any():
-                raise DatasetError(
-                    f"{self.path}: no clip is selected (of {len(keep)}) by clips={clips!r}, where={dict(where or {})!r}"
-                    + (f", select={select!r}" if select is not None else "") + (f", split={split!r}" if split else ""))
-            sel = np.flatnonzero(keep)
-            self.indices = sel.astype(np.int64)
-            chosen = clip_table.take(sel)
-            self.table = chosen.to_dict()
-            self._labels = chosen.labels
-            self.names = [str(n) for n in self.table["name"]]
-            self._skel = self.table["skeleton"].astype(np.int64)
-            self._row0 = self.table["start"].astype(np.int64)
-            self._len = self.table["length"].astype(np.int64)
-            self._fps = self.table["fps"].astype(np.float64)
-            self._names_arr = np.array(self.names, dtype=str) if self.names else np.zeros(0, dtype="<U1")
-            # stored arrays each skeleton needs to make the features
-            self._raw: dict[int, tuple[str, ...]] = {}
-            for k in sorted(set(self._skel.tolist())):
-                need = []
-                if set(self.features) & ({"rotations", "rotations_6d", "translations"} | NEEDS_FK):
-                    need.append("rotations")
-                if set(self.features) & ({"root_translation", "root_velocity", "translations"} | NEEDS_FK):
-                    need.append("root_translation")
-                if "translations" in stored[k] and set(self.features) & ({"translations"} | NEEDS_FK):
-                    need.append("translations")
-                need += [f for f in self.features if f in self.frame_columns]
-                self._raw[k] = tuple(need)
+            keep = selection_mask(clip_table, self.path, self.frame_columns, clips=clips, where=where, select=select,
+                                  split=split, split_ratios=split_ratios, split_seed=split_seed)
+            self._take(clip_table, np.flatnonzero(keep))
+            self._raw: dict[int, tuple[str, ...]] = {k: self._arrays_needed(stored[k])
+                                                     for k in sorted(set(self._skel.tolist()))}
             if self.preload:
                 self._load_all(db)
-
         self.num_clips = len(self.indices)
+        self._make_windows()
+
+    # -- construction, step by step ---------------------------------------------------------------
+    def _read_layout(self, db: MotionDatabase) -> dict[int, set[str]]:
+        """The database's skeletons, columns, trajectory joints and units; returns the frame
+        arrays stored per skeleton."""
+        self.skeletons: list[Skeleton] = db.skeletons
+        self.frame_columns: tuple[str, ...] = tuple(db.frame_columns)
+        self.columns: dict[str, str] = dict(db.columns)
+        info = [db.skeleton_info(k) for k in range(len(self.skeletons))]
+        self.trajectory_joints: dict[int, int] = (
+            {k: trajectory_joint(db, k, sk) for k, sk in enumerate(self.skeletons)}
+            if {"trajectory", "trajectory_velocity"} & set(self.features) else {})
+        self.units: dict[int, str] = {k: i.units for k, i in enumerate(info)}
+        return {k: set(i.frame_arrays) for k, i in enumerate(info)}
+
+    def _take(self, clip_table, sel: np.ndarray) -> None:
+        """Keep the clips of rows ``sel``: their rows, names, metadata and the columns items read."""
+        self.indices = sel.astype(np.int64)
+        chosen = clip_table.take(sel)
+        self.table = chosen.to_dict()
+        self._labels = chosen.labels
+        self.names = [str(n) for n in self.table["name"]]
+        self._skel = self.table["skeleton"].astype(np.int64)
+        self._row0 = self.table["start"].astype(np.int64)
+        self._len = self.table["length"].astype(np.int64)
+        self._fps = self.table["fps"].astype(np.float64)
+        self._names_arr = np.array(self.names, dtype=str) if self.names else np.zeros(0, dtype="<U1")
+
+    def _arrays_needed(self, stored: set[str]) -> tuple[str, ...]:
+        """The stored arrays a skeleton's clips are read from to make the features (``stored``:
+        what that skeleton's frames hold)."""
+        features = set(self.features)
+        need = []
+        if features & ({"rotations", "rotations_6d", "translations"} | NEEDS_FK):
+            need.append("rotations")
+        if features & ({"root_translation", "root_velocity", "translations"} | NEEDS_FK):
+            need.append("root_translation")
+        if "translations" in stored and features & ({"translations"} | NEEDS_FK):
+            need.append("translations")
+        need += [f for f in self.features if f in self.frame_columns]
+        return tuple(need)
+
+    def _make_windows(self) -> None:
+        """The items: one per clip, or the windows of ``window`` frames every ``stride`` frames."""
+        window, stride = self.window, self.stride
         if window is None:
             self._win_clip = self._win_start = None
             self.num_too_short, self.too_short = 0, ()
-        else:
-            counts = np.where(self._len >= window, (self._len - window) // stride + 1, 0)
-            self._win_clip = np.repeat(np.arange(self.num_clips, dtype=np.int64), counts)
-            first = np.cumsum(counts) - counts
-            self._win_start = (np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(first, counts)) * stride
-            short = np.flatnonzero(counts == 0)
-            self.num_too_short = int(len(short))
-            self.too_short = tuple(self.names[i] for i in short)
-            if self.num_clips and not counts.any():  # an empty dataset would only fail later, in the loader
-                raise DatasetError(f"{self.path}: no selected clip is as long as window={window} frames "
-                                   f"(the longest of the {self.num_clips} has {int(self._len.max())})")
+            return
+        counts = np.where(self._len >= window, (self._len - window) // stride + 1, 0)
+        self._win_clip = np.repeat(np.arange(self.num_clips, dtype=np.int64), counts)
+        first = np.cumsum(counts) - counts
+        self._win_start = (np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(first, counts)) * stride
+        short = np.flatnonzero(counts == 0)
+        self.num_too_short = int(len(short))
+        self.too_short = tuple(self.names[i] for i in short)
+        if self.num_clips and not counts.any():  # an empty dataset would only fail later, in the loader
+            raise DatasetError(f"{self.path}: no selected clip is as long as window={window} frames "
+                               f"(the longest of the {self.num_clips} has {int(self._len.max())})")
 
     # -- checks and files -------------------------------------------------------------------------
     def _check_features(self) -> None:
