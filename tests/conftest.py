@@ -22,6 +22,19 @@ def mocap_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def sample_f64():
+    """Every clip of the built-in sample by name (float64), its spec and the roles bound to it."""
+    import torch
+
+    from torchsplice.sample import sample_motions
+    from torchsplice.specs import load_spec
+
+    clips = {m.name: m for m in sample_motions(torch.float64)}
+    spec = load_spec("sample")
+    return clips, spec, spec.bind(clips["walk_straight"].skeleton)
+
+
+@pytest.fixture(scope="session")
 def sample_db(tmp_path_factory):
     """The built-in sample as a database (``torchsplice sample``), made once per session; a test
     module may define its own."""

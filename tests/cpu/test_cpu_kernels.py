@@ -27,7 +27,6 @@ from torchsplice.cpu.grid import clip_features, distance_row_block, phase_crop_p
 from torchsplice.cpu.horn import horn_batch, horn_cloud, horn_from_h
 from torchsplice.cpu.timewarp import timewarp_batch
 from torchsplice.formats.bvh import read_bvh
-from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.core.fk import forward_kinematics
 from torchsplice.splice import SpliceOptions, splice_pairs
@@ -43,14 +42,6 @@ WALKS = ("dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025", "da
 
 
 @pytest.fixture(scope="module")
-def sample():
-    """Every sample clip by name (float64), the spec and the bound roles."""
-    clips = {m.name: m for m in sample_motions(F64)}
-    spec = load_spec("sample")
-    return clips, spec, spec.bind(clips["walk_straight"].skeleton)
-
-
-@pytest.fixture(scope="module")
 def bandai(mocap_dir):
     """A few real Bandai Namco walks by name (float64), the spec and the bound roles."""
     clips = {n: read_bvh(mocap_dir / BANDAI / f"{n}.bvh", dtype=F64) for n in WALKS}
@@ -59,8 +50,9 @@ def bandai(mocap_dir):
 
 
 def clips_of(request, source: str):
-    """The ``sample`` or ``bandai`` fixture by name (only the real one needs the mocap)."""
-    return request.getfixturevalue(source)
+    """The clips of ``source``, ``"sample"`` (the ``sample_f64`` fixture) or ``"bandai"`` (only the
+    real one needs the mocap)."""
+    return request.getfixturevalue({"sample": "sample_f64"}.get(source, source))
 
 
 def dp_kernel(grid: np.ndarray, la, lb, max_run: int):
@@ -396,8 +388,8 @@ def test_fk_clips_equal_forward_kinematics(request, source):
         assert float((grot - want_rot).abs().max()) <= 1e-10, m.name
 
 
-def test_fk_clip_on_a_joint_subset(sample):
-    clips, _, roles = sample
+def test_fk_clip_on_a_joint_subset(sample_f64):
+    clips, _, roles = sample_f64
     m = clips["wave"]
     sk = m.skeleton
     parents = np.array(sk.parents, dtype=np.int64)
@@ -684,8 +676,8 @@ def assert_identical(x: dict, y: dict) -> None:
 
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_splice_bank_is_bit_identical_alone_in_any_batch_and_on_any_thread_count(sample, method, dtype):
-    clips, _, roles = sample
+def test_splice_bank_is_bit_identical_alone_in_any_batch_and_on_any_thread_count(sample_f64, method, dtype):
+    clips, _, roles = sample_f64
     names = list(clips)
     bank = ClipBank.from_motions(list(clips.values()), clips["walk_straight"].skeleton, roles)
     idx = {n: k for k, n in enumerate(names)}

@@ -22,7 +22,6 @@ from torchsplice.evaluation.metrics import (
     leg_length, phase_range, posture_kept, posture_offset,
 )
 from torchsplice.formats.bvh import read_bvh
-from torchsplice.sample import sample_motions
 from torchsplice.specs import SkeletonRoles, load_spec
 from torchsplice.splice import SpliceOptions, splice
 from torchsplice.splice.clips import ClipTensors, clips_to_tensors
@@ -35,14 +34,6 @@ WALKS = ("walk_straight", "walk_curve", "turn_sharp")
 
 
 # ------------------------------------------------------------------------------ fixtures, helpers
-
-
-@pytest.fixture(scope="module")
-def sample():
-    """Every sample clip by name (float64), the spec and the bound roles."""
-    clips = {m.name: m for m in sample_motions(F64)}
-    spec = load_spec("sample")
-    return clips, spec, spec.bind(clips["walk_straight"].skeleton)
 
 
 @pytest.fixture(scope="module")
@@ -123,8 +114,8 @@ def test_no_contact_is_zero_not_nan():
     assert int(s.contact_frames[0]) == 0 and float(s.speed[0]) == 0.0 and float(s.contact_fraction[0]) == 0.0
 
 
-def test_sample_walks_keep_their_feet_planted(sample):
-    clips, _, roles = sample
+def test_sample_walks_keep_their_feet_planted(sample_f64):
+    clips, _, roles = sample_f64
     s = foot_skate_stats([clips[n] for n in WALKS], roles)
     assert s.joints == roles.feet + roles.toes
     assert (s.speed < 5.0).all(), s.speed  # measured 3.3-3.4 cm/s (heel rocker and heel-off)
@@ -138,8 +129,8 @@ def test_real_walks_skate_little(real):
     assert (s.contact_fraction > 0.3).all(), s.contact_fraction
 
 
-def test_metrics_ignore_where_the_clip_is_in_the_world(sample):
-    clips, _, roles = sample
+def test_metrics_ignore_where_the_clip_is_in_the_world(sample_f64):
+    clips, _, roles = sample_f64
     base = [clips["walk_curve"], clips["carry_box"]]
     away = [moved(m, 73.0, (250.0, 12.0, -400.0)) for m in base]
     for metric in (foot_skate, arm_leg_phase, gait_period):
@@ -153,15 +144,15 @@ def test_metrics_ignore_where_the_clip_is_in_the_world(sample):
 # ------------------------------------------------------------------------------ gait period, arm-leg phase
 
 
-def test_gait_period_matches_the_sample_cadence(sample):
-    clips, _, roles = sample
+def test_gait_period_matches_the_sample_cadence(sample_f64):
+    clips, _, roles = sample_f64
     period = gait_period([clips["walk_straight"], clips["jog"], clips["carry_box"]], roles)
     expected = torch.tensor([1 / 0.95, 1 / 1.35, 1 / 0.86], dtype=F64)  # cadences of the generator
     torch.testing.assert_close(period, expected, rtol=0.03, atol=0.0)
 
 
-def test_sample_walk_is_in_phase_and_deterministic(sample):
-    clips, _, roles = sample
+def test_sample_walk_is_in_phase_and_deterministic(sample_f64):
+    clips, _, roles = sample_f64
     w = clips["walk_straight"]
     s = arm_leg_phase_stats([w, w], roles)
     assert isinstance(s, ArmLegPhase)
@@ -172,8 +163,8 @@ def test_sample_walk_is_in_phase_and_deterministic(sample):
         assert abs(float(arm_leg_phase([clips[n]], roles)[0])) < 0.05
 
 
-def test_half_cycle_upper_body_is_out_of_phase(sample, real):
-    clips, _, roles = sample
+def test_half_cycle_upper_body_is_out_of_phase(sample_f64, real):
+    clips, _, roles = sample_f64
     w = clips["walk_straight"]
     half = round(float(gait_period([w], roles)[0]) * w.fps / 2)
     assert half == 16  # 1.057 s cycle at 30 fps
@@ -186,9 +177,9 @@ def test_half_cycle_upper_body_is_out_of_phase(sample, real):
 
 
 @pytest.mark.parametrize("frames", [4, 8, 12, 19, 26])
-def test_upper_body_moved_in_time_moves_the_lag(sample, frames):
+def test_upper_body_moved_in_time_moves_the_lag(sample_f64, frames):
     """Upper body taken ``frames`` later: the arms lead by frames / cycle more, wrapped to [-0.5, 0.5)."""
-    clips, _, roles = sample
+    clips, _, roles = sample_f64
     w = clips["walk_straight"]
     base = float(arm_leg_phase([w], roles)[0])
     cycle = float(gait_period([w], roles)[0]) * w.fps
@@ -213,8 +204,8 @@ def test_real_walks_lie_in_a_plausible_band(real):
     assert abs(shifted) > 0.4 and not low <= shifted <= high
 
 
-def test_standing_still_has_no_gait_cycle(sample):
-    clips, _, roles = sample
+def test_standing_still_has_no_gait_cycle(sample_f64):
+    clips, _, roles = sample_f64
     w = clips["walk_straight"]
     still = replace(w, rotations=w.rotations[:1].expand(90, -1, -1).clone(), root_translation=w.root_translation[:1].expand(90, -1).clone())
     assert math.isnan(float(gait_period([still], roles)[0]))
@@ -228,14 +219,14 @@ def test_standing_still_has_no_gait_cycle(sample):
 # ------------------------------------------------------------------------------ posture
 
 
-def test_posture_of_a_clip_against_itself_is_kept(sample):
-    clips, _, roles = sample
+def test_posture_of_a_clip_against_itself_is_kept(sample_f64):
+    clips, _, roles = sample_f64
     ms = [clips[n] for n in ("walk_straight", "carry_box", "wave")]
     assert posture_kept(ms, ms, roles).abs().max() == 0.0
 
 
-def test_box_carry_leans_back(sample):
-    clips, _, roles = sample
+def test_box_carry_leans_back(sample_f64):
+    clips, _, roles = sample_f64
     walk, box = posture_offset([clips["walk_straight"], clips["carry_box"]], roles)
     assert 30.0 < float(walk[1]) < 40.0  # shoulders about 36 cm above the pelvis joint
     assert float(walk[2] - box[2]) > 6.0  # measured 9.2 cm further back
@@ -243,8 +234,8 @@ def test_box_carry_leans_back(sample):
     assert float(posture_kept([clips["carry_box"]], [clips["walk_straight"]], roles)[0]) > 6.0
 
 
-def test_splice_keeps_the_action_posture_and_posture_off_does_not(sample):
-    clips, spec, roles = sample
+def test_splice_keeps_the_action_posture_and_posture_off_does_not(sample_f64):
+    clips, spec, roles = sample_f64
     walk, box = clips["walk_straight"], clips["carry_box"]
     kept = splice(walk, box, spec, options=SpliceOptions(dtype=F64)).motion
     lost = splice(walk, box, spec, options=SpliceOptions(dtype=F64, posture=False)).motion
@@ -258,8 +249,8 @@ def test_splice_keeps_the_action_posture_and_posture_off_does_not(sample):
 # ------------------------------------------------------------------------------ batching
 
 
-def test_padded_batch_equals_single_clips(sample):
-    clips, _, roles = sample
+def test_padded_batch_equals_single_clips(sample_f64):
+    clips, _, roles = sample_f64
     names = ("jog", "walk_curve", "carry_box", "walk_straight")  # 150, 210, 210, 180 frames
     ms = [clips[n] for n in names]
     ct = clips_to_tensors(ms, ms[0].skeleton, dtype=F64)
@@ -279,8 +270,8 @@ def test_padded_batch_equals_single_clips(sample):
         torch.testing.assert_close(batch["posture"][b], posture_offset([m], roles)[0], rtol=1e-9, atol=1e-9)
 
 
-def test_clip_tensors_need_a_frame_rate_and_motions_their_own(sample):
-    clips, _, roles = sample
+def test_clip_tensors_need_a_frame_rate_and_motions_their_own(sample_f64):
+    clips, _, roles = sample_f64
     w = clips["walk_straight"]
     with pytest.raises(ValueError, match="fps"):
         foot_skate(clips_to_tensors([w], w.skeleton, dtype=F64), roles)

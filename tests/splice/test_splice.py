@@ -21,7 +21,6 @@ from torchsplice.core.motion import Motion
 from torchsplice.core.rotations import axis_angle_to_quat, quat_angle, quat_apply, quat_mul
 from torchsplice.evaluation.ground_truth import bandai_namco_triples, upper_body_error
 from torchsplice.formats.bvh import read_bvh
-from torchsplice.sample import sample_motions
 from torchsplice.specs import detect_spec, load_spec
 from torchsplice.kinematics.heading import heading_frame, to_heading_frame
 from torchsplice.splice import NotLocomotingError, SpliceOptions, splice, splice_pairs
@@ -40,14 +39,6 @@ WALK2 = "dataset-2_walk_normal_008"
 
 
 # ------------------------------------------------------------------------------ fixtures, helpers
-
-
-@pytest.fixture(scope="module")
-def sample():
-    """Every sample clip by name (float64), the spec and the bound roles."""
-    clips = {m.name: m for m in sample_motions(F64)}
-    spec = load_spec("sample")
-    return clips, spec, spec.bind(clips["walk_straight"].skeleton)
 
 
 @pytest.fixture(scope="module")
@@ -141,8 +132,8 @@ def assert_returns_itself(m: Motion, spec, options: SpliceOptions = OPT) -> None
 
 
 @pytest.mark.parametrize("name", LOCOMOTION + ACTIONS)
-def test_splicing_a_sample_clip_onto_itself_returns_it(sample, name):
-    clips, spec, _ = sample
+def test_splicing_a_sample_clip_onto_itself_returns_it(sample_f64, name):
+    clips, spec, _ = sample_f64
     assert_returns_itself(clips[name], spec)
 
 
@@ -182,8 +173,8 @@ def assert_same_result(r1, r2, size: float) -> None:
 
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
 @pytest.mark.parametrize("loco, act", [("walk_straight", "carry_box"), ("walk_curve", "wave"), ("turn_sharp", "punch")])
-def test_placing_the_action_elsewhere_changes_nothing_sample(sample, method, loco, act):
-    clips, spec, _ = sample
+def test_placing_the_action_elsewhere_changes_nothing_sample(sample_f64, method, loco, act):
+    clips, spec, _ = sample_f64
     L, A = clips[loco], clips[act]
     ref = clips["walk_straight"] if method == "cpmc" else None
     r1 = splice(L, A, spec, method, ref, OPT)
@@ -214,8 +205,8 @@ def test_placing_the_action_elsewhere_changes_nothing_bandai(bandai, method):
 
 
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
-def test_same_inputs_give_bit_identical_results(sample, method):
-    clips, spec, _ = sample
+def test_same_inputs_give_bit_identical_results(sample_f64, method):
+    clips, spec, _ = sample_f64
     clips32 = {n: clips[n].to(torch.float32) for n in ("walk_curve", "carry_box", "jog", "wave", "walk_straight")}
     runs = ((clips, OPT), (clips32, SpliceOptions())) if method == "splice" else ((clips, OPT),)
     for c, opt in runs:
@@ -236,8 +227,8 @@ def test_same_inputs_give_bit_identical_results(sample, method):
 
 
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
-def test_batched_pairs_equal_single_pairs(sample, method):
-    clips, spec, _ = sample
+def test_batched_pairs_equal_single_pairs(sample_f64, method):
+    clips, spec, _ = sample_f64
     names = [("walk_straight", "carry_box"), ("walk_curve", "wave"), ("turn_sharp", "carry_cup"),
              ("jog", "punch"), ("sidestep", "arms_out"), ("walk_straight", "punch")]
     pairs = [(clips[a], clips[b]) for a, b in names]
@@ -258,10 +249,10 @@ def test_batched_pairs_equal_single_pairs(sample, method):
 
 
 @pytest.mark.parametrize("frames", [16, 24])
-def test_a_short_clip_in_the_batch_changes_no_other_pair(sample, frames):
+def test_a_short_clip_in_the_batch_changes_no_other_pair(sample_f64, frames):
     """A pair's result must not depend on what else is in the batch. A short action (here
     ``frames`` frames, forced) beside it must leave its crop, length and poses unchanged."""
-    clips, spec, _ = sample
+    clips, spec, _ = sample_f64
     opt = replace(OPT, force=True)
     short = replace(clips["wave"].slice(40, 40 + frames), name=f"wave{frames}")
     for loco, act in [("walk_curve", "carry_box"), ("sidestep", "arms_out"), ("jog", "wave")]:
@@ -271,9 +262,9 @@ def test_a_short_clip_in_the_batch_changes_no_other_pair(sample, frames):
         assert angle(two.motion.rotations, one.motion.rotations) < 1e-9
 
 
-def test_locomotion_verdict_does_not_depend_on_the_batch(sample):
+def test_locomotion_verdict_does_not_depend_on_the_batch(sample_f64):
     """A 29-frame walk is refused alone; it must be refused in a batch beside a longer clip too."""
-    clips, spec, _ = sample
+    clips, spec, _ = sample_f64
     short = replace(clips["walk_straight"].slice(0, 29), name="walk29")
     alone = splice(short, clips["carry_box"], spec, options=replace(OPT, force=True)).checks[0]
     batched = splice_pairs([(clips["walk_straight"], clips["carry_box"]), (short, clips["carry_box"])], spec,
@@ -285,8 +276,8 @@ def test_locomotion_verdict_does_not_depend_on_the_batch(sample):
 
 
 @pytest.mark.parametrize("loco", ["walk_straight", "walk_curve"])
-def test_posture_transfer_keeps_the_carry_box_lean(sample, loco):
-    clips, spec, roles = sample
+def test_posture_transfer_keeps_the_carry_box_lean(sample_f64, loco):
+    clips, spec, roles = sample_f64
     L, A = clips[loco], clips["carry_box"]
     r = splice(L, A, spec, options=OPT)
     want = float(leans(at_times(A, r.curve), roles).mean())
@@ -330,10 +321,10 @@ def test_posture_transfer_on_real_styled_walk_and_the_literal_paper_formula(band
     assert abs(paper - want) > ours + 4.0
 
 
-def test_literal_paper_formula_agrees_on_world_aligned_joint_axes(sample):
+def test_literal_paper_formula_agrees_on_world_aligned_joint_axes(sample_f64):
     """Where the pelvis's local axes are the world's (the sample), both formulas agree: this
     validates the re-computation of the paper's formula in the test above."""
-    clips, spec, roles = sample
+    clips, spec, roles = sample_f64
     L, A = clips["walk_straight"], clips["carry_box"]
     r = splice(L, A, spec, options=OPT)
     flat = splice(L, A, spec, options=replace(OPT, posture=False))
@@ -361,12 +352,12 @@ def with_pelvis(m: Motion, roles, rot: torch.Tensor) -> Motion:
 
 
 @pytest.mark.parametrize("where", ["sample", "bandai"])
-def test_spatial_alignment_is_the_best_pelvis_rotation(sample, request, where):
+def test_spatial_alignment_is_the_best_pelvis_rotation(sample_f64, request, where):
     """Without posture transfer the spliced pelvis rotation ``q_LP * q_A`` brings the action's
     spine and shoulders as close as any pelvis rotation can to the locomotion's (Horn's
     least squares): perturbing it, or leaving ``q_LP`` alone, never does better."""
     if where == "sample":
-        clips, spec, roles = sample
+        clips, spec, roles = sample_f64
         L, A = clips["walk_curve"], clips["punch"]
     else:
         read, spec = request.getfixturevalue("bandai")
@@ -459,10 +450,10 @@ def test_never_on_the_wrong_foot(bandai, name):
 
 @pytest.mark.parametrize("loco", ["walk_straight", "walk_curve", "turn_sharp"])
 @pytest.mark.parametrize("warp", ["1.2x", "wavy"])
-def test_alignment_curve_recovers_a_known_time_warp(sample, loco, warp):
+def test_alignment_curve_recovers_a_known_time_warp(sample_f64, loco, warp):
     """The action is the locomotion played at action frame a -> locomotion time g(a); the curve
     must be g's inverse."""
-    clips, spec, _ = sample
+    clips, spec, _ = sample_f64
     W = clips[loco]
     if warp == "1.2x":
         g = lambda a: 1.2 * a  # noqa: E731
@@ -486,8 +477,8 @@ def test_alignment_curve_recovers_a_known_time_warp(sample, loco, warp):
 # ------------------------------------------------------------------------------ 8. frame rates
 
 
-def test_action_at_120_fps_onto_locomotion_at_30_fps(sample):
-    clips, spec, roles = sample
+def test_action_at_120_fps_onto_locomotion_at_30_fps(sample_f64):
+    clips, spec, roles = sample_f64
     L, A = clips["walk_straight"], clips["carry_box"]
     A120 = replace(at_times(A, torch.arange(0, A.num_frames - 1 + 1e-9, 0.25, dtype=F64)), fps=120.0, name="carry_box@120")
     r30, r120 = splice(L, A, spec, options=OPT), splice(L, A120, spec, options=OPT)
@@ -534,12 +525,12 @@ def test_in_place_locomotions_are_refused_unless_forced_and_in_place_actions_sta
     assert r.checks[0].locomoting and not r.checks[1].locomoting and r.checks[1].reason
 
 
-def test_walks_pass_the_locomotion_check(bandai, sample):
+def test_walks_pass_the_locomotion_check(bandai, sample_f64):
     read, spec = bandai
     r = splice(read(TURN_LEFT), read(ELDERLY), spec, options=OPT)
     assert r.checks[0].locomoting and r.checks[1].locomoting and r.notes == ()
     assert min(r.checks[0].swings) >= 1 and r.checks[0].travel >= 1.0
-    clips, sspec, _ = sample
+    clips, sspec, _ = sample_f64
     for res in splice_pairs([(clips[n], clips["wave"]) for n in LOCOMOTION], sspec, options=OPT):
         assert all(c.locomoting for c in res.checks) and res.notes == ()
 
@@ -573,8 +564,8 @@ def test_pairs_of_different_skeletons_in_one_batch_are_refused(three_skeletons, 
         splice_pairs([(a, a), (laf, laf)], spec)
 
 
-def test_short_and_non_finite_clips_are_refused_by_name(sample):
-    clips, spec, _ = sample
+def test_short_and_non_finite_clips_are_refused_by_name(sample_f64):
+    clips, spec, _ = sample_f64
     L, A = clips["walk_straight"], clips["carry_box"]
     short = replace(A.slice(0, 5), name="tiny_clip")
     for pair in ((L, short), (short, L)):
@@ -643,8 +634,8 @@ def test_the_twist_share_moves_the_shoulders_towards_the_side_walks(bandai):
         splice(loco, act, spec, options=replace(OPT, twist=1.5, force=True))
 
 
-def test_unknown_method_and_missing_reference(sample):
-    clips, spec, _ = sample
+def test_unknown_method_and_missing_reference(sample_f64):
+    clips, spec, _ = sample_f64
     L, A = clips["walk_straight"], clips["carry_box"]
     with pytest.raises(TorchspliceError, match="unknown method 'blend'"):
         splice(L, A, spec, "blend")
@@ -692,8 +683,8 @@ def assert_structure(L: Motion, A: Motion, r, roles, max_run: int = 3) -> None:
 
 @pytest.mark.parametrize("loco, act", [("walk_straight", "carry_box"), ("turn_sharp", "wave"), ("jog", "punch"),
                                        ("sidestep", "carry_cup")])
-def test_result_structure_sample(sample, loco, act):
-    clips, spec, roles = sample
+def test_result_structure_sample(sample_f64, loco, act):
+    clips, spec, roles = sample_f64
     L, A = clips[loco], clips[act]
     r = splice(L, A, spec, options=OPT)
     assert r.method == "splice" and r.locomotion == loco and r.action == act and r.reference is None
@@ -701,8 +692,8 @@ def test_result_structure_sample(sample, loco, act):
     assert_structure(L, A, r, roles)
 
 
-def test_result_structure_respects_max_run(sample):
-    clips, spec, roles = sample
+def test_result_structure_respects_max_run(sample_f64):
+    clips, spec, roles = sample_f64
     L, A = clips["walk_curve"], clips["carry_box"]
     for max_run in (1, 2, 5):
         opt = replace(OPT, align=replace(OPT.align, max_run=max_run))
@@ -721,8 +712,8 @@ def test_result_structure_bandai(bandai):
 
 
 @pytest.mark.parametrize("loco, act", [("walk_straight", "carry_box"), ("jog", "wave"), ("walk_curve", "punch")])
-def test_naive_copies_the_upper_body_frame_by_frame(sample, loco, act):
-    clips, spec, roles = sample
+def test_naive_copies_the_upper_body_frame_by_frame(sample_f64, loco, act):
+    clips, spec, roles = sample_f64
     L, A = clips[loco], clips[act]
     r = splice(L, A, spec, "naive", options=OPT)
     n = min(L.num_frames, A.num_frames)
@@ -752,7 +743,7 @@ def test_naive_bandai_keeps_locomotion_translations(bandai):
 
 
 @pytest.mark.parametrize("act", ["carry_box", "wave", "punch"])
-def test_cpmc_with_the_base_as_reference_returns_the_action(sample, act):
+def test_cpmc_with_the_base_as_reference_returns_the_action(sample_f64, act):
     """Reference = locomotion = walk_straight: the difference added back onto its own reference.
 
     The result is ``W(t) * R(tau)^-1 * A(s)`` with ``s`` = curve(t) the action frame and
@@ -763,7 +754,7 @@ def test_cpmc_with_the_base_as_reference_returns_the_action(sample, act):
     variation. Beyond that, slerping the difference instead of each factor adds a second-order
     term: at most (w * (L + 1))^2 / 8 for per-frame angular steps w and path slope limit L.
     """
-    clips, spec, roles = sample
+    clips, spec, roles = sample_f64
     W, A = clips["walk_straight"], clips[act]
     r = splice(W, A, spec, "cpmc", W, OPT)
     assert r.reference == "walk_straight"
@@ -790,8 +781,8 @@ def test_cpmc_with_the_base_as_reference_returns_the_action(sample, act):
     assert float(err.mean()) < 0.5 * float(base_err.mean())
 
 
-def test_cpmc_result_structure(sample):
-    clips, spec, roles = sample
+def test_cpmc_result_structure(sample_f64):
+    clips, spec, roles = sample_f64
     L, A, R = clips["walk_curve"], clips["carry_box"], clips["walk_straight"]
     r = splice(L, A, spec, "cpmc", R, OPT)
     n = r.motion.num_frames
@@ -802,8 +793,8 @@ def test_cpmc_result_structure(sample):
     assert n == int(r.path[-1, 0]) + 1 and bool((torch.diff(r.curve) > 0).all())
 
 
-def test_find_reference_sample(sample):
-    clips, spec, _ = sample
+def test_find_reference_sample(sample_f64):
+    clips, spec, _ = sample_f64
     cands = [(m.name, m.role, m.labels) for m in clips.values()]
     for act in ACTIONS:
         assert find_reference(act, clips[act].labels, cands, spec) == "walk_straight"
@@ -850,8 +841,8 @@ def test_splice_beats_naive_on_bandai_namco_ground_truth(mocap_dir, bandai, caps
 
 @pytest.mark.gpu
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
-def test_cuda_equals_cpu(sample, method):
-    clips, spec, _ = sample
+def test_cuda_equals_cpu(sample_f64, method):
+    clips, spec, _ = sample_f64
     pairs = [(clips["walk_curve"], clips["carry_box"]), (clips["jog"], clips["wave"])]
     refs = [clips["walk_straight"]] * 2 if method == "cpmc" else None
     cpu = splice_pairs(pairs, spec, method, refs, OPT)
