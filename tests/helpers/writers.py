@@ -4,6 +4,7 @@ its own process, another process holding an output's lock, what a command left b
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import subprocess
@@ -22,6 +23,33 @@ def cli(*argv, env: dict | None = None) -> subprocess.Popen:
     env = dict(os.environ if env is None else env, PYTHONPATH=str(REPO))
     return subprocess.Popen([sys.executable, "-m", "torchsplice", *map(str, argv)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
+
+
+SPLICE_ALL = """
+import json, sys
+from torchsplice.job import splice_all
+
+if __name__ == "__main__":
+    options = json.loads(sys.argv[1])
+    s = splice_all(options.pop("database"), options.pop("output"), **options)
+    print(json.dumps({"pairs": s.pairs, "spliced": s.spliced, "resumed": s.resumed, "skipped": s.skipped,
+                      "lines": s.lines()}))
+"""
+
+
+def splice_all_process(database, output, *, env: dict | None = None, cwd=None, **options) -> subprocess.Popen:
+    """``splice_all(database, output, **options)`` (the Python API) in a process of its own, to
+    kill it or to give it an environment; its last line of stdout is the summary as JSON
+    (``pairs``, ``spliced``, ``resumed``, ``skipped``, ``lines``)."""
+    env = dict(os.environ if env is None else env, PYTHONPATH=str(REPO))
+    args = json.dumps({"database": str(database), "output": str(output), **options})
+    return subprocess.Popen([sys.executable, "-c", SPLICE_ALL, args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env, cwd=cwd)
+
+
+def summary_of(stdout: str) -> dict:
+    """The summary a :func:`splice_all_process` printed."""
+    return json.loads(stdout.strip().splitlines()[-1])
 
 
 @contextlib.contextmanager

@@ -21,8 +21,11 @@ import numpy as np
 import pytest
 
 from cli_helpers import run
-from torchsplice.cli import main
+from torchsplice.core.errors import TorchspliceError
+from torchsplice.job import merge_job, splice_all
 from torchsplice.store.database import MotionDatabase
+from torchsplice.store.lock import LockedError
+from writers import splice_all_process
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -42,12 +45,12 @@ def frames_and_table(path) -> dict:
 def reference(sample_db, tmp_path_factory):
     """The one-shot run in this process, three methods: what every other way must reproduce."""
     out = tmp_path_factory.mktemp("ref") / "out.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(out), "--method", "splice,naive,cpmc", "--workers", "1",
-                 "--batch-size", "4", "--copy-sources", "-q"]) == 0
+    splice_all(sample_db, out, **JOB, workers=1)
     return out
 
 
-JOB = ["--method", "splice,naive,cpmc", "--batch-size", "4", "--copy-sources", "-q"]
+JOB = dict(methods="splice,naive,cpmc", batch_pairs=4, copy_sources=True)  # the job every test here runs
+JOB_FLAGS = ["--method", "splice,naive,cpmc", "--batch-size", "4", "--copy-sources", "-q"]  # the same, on the command line
 
 
 def children(pid: int) -> list[int]:
@@ -88,10 +91,17 @@ def kill_one_worker(proc, when) -> str:
     return stderr
 
 
-def start_job(db, out, *extra):
+def start_job(db, out, **options):
+    """The job (:data:`JOB`, and ``options``) through the Python API, in a process of its own."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task
-    return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), *JOB, *extra],
-                            cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return splice_all_process(db, out, **{**JOB, **options}, env=env, cwd=REPO)
+
+
+def start_cli_job(db, out, *extra):
+    """The job (:data:`JOB_FLAGS`, and ``extra``) through ``python -m torchsplice splice-all``."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task
+    return subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(db), "-o", str(out), *JOB_FLAGS,
+                             *extra], cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 # --------------------------------------------------------------------------------------------
@@ -101,7 +111,7 @@ def start_job(db, out, *extra):
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
 def test_a_killed_worker_is_replaced_and_the_output_is_unchanged(sample_db, reference, tmp_path):
     out = tmp_path / "out.h5"
-    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    proc = start_job(sample_db, out, workers=2, batch_pairs=1)
     merged = lambda: (MotionDatabase.checkpoint_note(tmp_path / ".out.h5.parts" / "output.h5") or {}).get("tasks")  # noqa: E731
     stderr = kill_one_worker(proc, when=merged)  # once a task is merged
     assert proc.returncode == 0, stderr
@@ -118,7 +128,7 @@ def test_a_worker_killed_before_any_task_finishes_is_retried_under_a_console_scr
     script.write_text("import sys\nfrom torchsplice.cli import main\nif __name__ == '__main__':\n    sys.exit(main())\n")
     out = tmp_path / "out.h5"
     env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, str(script), "splice-all", str(sample_db), "-o", str(out), *JOB,
+    proc = subprocess.Popen([sys.executable, str(script), "splice-all", str(sample_db), "-o", str(out), *JOB_FLAGS,
                              "--workers", "2", "--batch-size", "1"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     stderr = kill_one_worker(proc, when=lambda: True)  # at once: no task has finished yet
@@ -129,8 +139,9 @@ def test_a_worker_killed_before_any_task_finishes_is_retried_under_a_console_scr
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds worker processes through /proc")
 def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path):
+    """The command line's end of it: exit code 2 and one line, no traceback."""
     out = tmp_path / "out.h5"
-    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    proc = start_cli_job(sample_db, out, "--workers", "2", "--batch-size", "1")
     try:
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:
@@ -195,7 +206,7 @@ def test_a_pool_that_breaks_while_tasks_are_handed_out_is_a_break_not_a_crash(mo
 @pytest.mark.slow
 def test_a_killed_driver_leaves_no_worker_behind(sample_db, tmp_path):
     out = tmp_path / "out.h5"
-    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    proc = start_job(sample_db, out, workers=2, batch_pairs=1)
     ws = []
     deadline = time.monotonic() + 120
     while proc.poll() is None and time.monotonic() < deadline and not ws:
@@ -226,7 +237,7 @@ def test_a_supervisor_reading_the_output_of_a_killed_driver_is_not_left_waiting(
     driver stays a zombie until the supervisor reaps it, which it does only once the output
     pipes close; the workers holding them must notice the zombie and exit."""
     out = tmp_path / "out.h5"
-    proc = start_job(sample_db, out, "--workers", "2", "--batch-size", "1")
+    proc = start_job(sample_db, out, workers=2, batch_pairs=1)
     try:
         deadline, seen = time.monotonic() + 120, []
         while proc.poll() is None and time.monotonic() < deadline and not seen:
@@ -295,12 +306,11 @@ def test_an_engine_of_ones_own_is_one_module_and_a_registration(sample_db, refer
     (tmp_path / "toy_threads.py").write_text(TOY_ENGINE)
     monkeypatch.syspath_prepend(str(tmp_path))
     out = tmp_path / "cli.h5"
-    code, text, err = run(capsys, "--plugin", "toy_threads", "splice-all", sample_db, "-o", out, *JOB[:-1],
+    code, text, err = run(capsys, "--plugin", "toy_threads", "splice-all", sample_db, "-o", out, *JOB_FLAGS[:-1],
                           "--engine", "threads")
     assert code == 0, err
     assert "with two threads of this process" in text
     assert frames_and_table(out) == frames_and_table(reference)
-    from torchsplice.job import splice_all
     from torchsplice.job.engines import available_engines
 
     assert available_engines()[:2] == ("local", "ray") and "threads" in available_engines()
@@ -311,8 +321,6 @@ def test_an_engine_of_ones_own_is_one_module_and_a_registration(sample_db, refer
 
 
 def test_an_unknown_engine_names_the_registered_ones(sample_db, tmp_path, capsys):
-    from torchsplice.core.errors import TorchspliceError
-    from torchsplice.job import splice_all
     from torchsplice.job.engines import register_engine
 
     with pytest.raises(SystemExit) as exit_:  # a usage mistake, said by the argument parser
@@ -330,31 +338,29 @@ def test_an_unknown_engine_names_the_registered_ones(sample_db, tmp_path, capsys
 # --------------------------------------------------------------------------------------------
 # slices and merge
 # --------------------------------------------------------------------------------------------
-def test_slices_then_merge_equal_the_one_shot_run(sample_db, reference, tmp_path, capsys):
+def test_slices_then_merge_equal_the_one_shot_run(sample_db, reference, tmp_path):
     out = tmp_path / "out.h5"
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB[:-1], "--shard", "2/3")
-    assert code == 0, err
-    assert "slice 2/3" in text and "torchsplice merge" in text and not out.exists()
-    code, _, err = run(capsys, "merge", out)
-    assert code == 2 and err.count("\n") == 1
-    assert "slices of 3 done: 2; missing: 1, 3" in err, err
+    summary = splice_all(sample_db, out, **JOB, shard="2/3")
+    text = "\n".join(summary.lines())
+    assert summary.shard == (2, 3) and "slice 2/3" in text and "torchsplice merge" in text and not out.exists()
+    with pytest.raises(TorchspliceError, match="slices of 3 done: 2; missing: 1, 3") as exc:
+        merge_job(out, progress=False)
+    assert "\n" not in str(exc.value)
     for k in ("1/3", "3/3"):
-        assert run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--shard", k, "--workers", "2")[0] == 0
-    code, text, err = run(capsys, "merge", out)
-    assert code == 0, err
+        splice_all(sample_db, out, **JOB, shard=k, workers=2)
+    merge_job(out, progress=False)
     assert frames_and_table(out) == frames_and_table(reference)
     assert not (tmp_path / ".out.h5.parts").exists()
     with h5py.File(out, "r") as f:
         assert json.loads(f.attrs["run"])["plan_sha256"]
 
 
-def test_a_slice_resumes_into_a_full_run(sample_db, reference, tmp_path, capsys):
+def test_a_slice_resumes_into_a_full_run(sample_db, reference, tmp_path):
     """Slices done by hand count as finished tasks for an ordinary run of the same job."""
     out = tmp_path / "out.h5"
-    assert run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--shard", "1/2")[0] == 0
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB[:-1])
-    assert code == 0, err
-    assert "from an earlier run" in text
+    splice_all(sample_db, out, **JOB, shard="1/2")
+    summary = splice_all(sample_db, out, **JOB)
+    assert 0 < summary.resumed < summary.spliced and "from an earlier run" in "\n".join(summary.lines())
     assert frames_and_table(out) == frames_and_table(reference)
 
 
@@ -368,11 +374,11 @@ def test_merge_without_a_job(tmp_path, capsys):
 # --------------------------------------------------------------------------------------------
 def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, capsys):
     out = tmp_path / "out.h5"
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB, "--layout", "virtual")
+    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB_FLAGS, "--layout", "virtual")
     assert code == 2 and "--copy-sources needs --layout copy" in err  # a virtual output holds spliced clips only
-    job = [a for a in JOB if a != "--copy-sources"]
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *job, "--layout", "virtual")
-    assert code == 0, err
+    with pytest.raises(TorchspliceError, match="copy_sources needs layout copy"):
+        splice_all(sample_db, out, **JOB, layout="virtual")
+    splice_all(sample_db, out, **dict(JOB, copy_sources=False), layout="virtual")
     shards = tmp_path / "out.h5.shards"
     assert shards.is_dir() and len(list(shards.glob("*/part-*.h5"))) > 1  # in the run's own folder
     with h5py.File(out, "r") as f:
@@ -391,8 +397,7 @@ def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, caps
     finally:
         os.chdir(cwd)
     # another job over the same output replaces the shards; none of the old ones is reused
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--method", "naive", "--layout", "virtual", "--force", "-q")
-    assert code == 0, err
+    splice_all(sample_db, out, methods="naive", layout="virtual", overwrite=True)
     with MotionDatabase.open(out) as db:
         assert set(db.table()["method"]) == {"naive"} and len(db) == 25
         assert np.isfinite(db.read(len(db) - 1).rotations.numpy()).all()
@@ -402,14 +407,16 @@ def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, caps
 # --------------------------------------------------------------------------------------------
 # locks and temporary files
 # --------------------------------------------------------------------------------------------
-def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(sample_db, tmp_path, capsys):
+def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     lock = tmp_path / ".out.h5.lock"
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
         lock.write_text(json.dumps({"host": socket.gethostname(), "pid": holder.pid, "started": "then"}))
-        code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
-        assert code == 2 and err.count("\n") == 1
+        with pytest.raises(LockedError) as exc:
+            splice_all(sample_db, out)
+        err = str(exc.value)
+        assert "\n" not in err
         assert f"being written by process {holder.pid} on {socket.gethostname()}" in err and str(lock) in err
         assert not out.exists() and lock.exists()
     finally:
@@ -419,19 +426,19 @@ def test_a_second_writer_is_refused_and_a_dead_ones_lock_is_taken_over(sample_db
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     lock.write_text(json.dumps({"host": socket.gethostname(), "pid": dead.pid, "started": "then"}))
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
-    assert code == 0, err
+    splice_all(sample_db, out)
     assert out.exists() and not lock.exists()
 
 
-def test_a_lock_from_another_host_is_not_broken(sample_db, tmp_path, capsys):
+def test_a_lock_from_another_host_is_not_broken(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     (tmp_path / ".out.h5.lock").write_text(json.dumps({"host": "elsewhere.example", "pid": 1, "started": "then"}))
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, "-q")
-    assert code == 2 and "on elsewhere.example" in err
+    with pytest.raises(LockedError, match="on elsewhere.example"):
+        splice_all(sample_db, out)
+    assert not out.exists()
 
 
-def test_temporary_files_of_dead_processes_on_this_host_are_removed(sample_db, tmp_path, capsys):
+def test_temporary_files_of_dead_processes_on_this_host_are_removed(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
@@ -443,7 +450,7 @@ def test_temporary_files_of_dead_processes_on_this_host_are_removed(sample_db, t
         remote = tmp_path / ".out.h5.partial-elsewhere.example-12345"
         for f in (stale, alive, remote):
             f.write_bytes(b"half")
-        assert run(capsys, "splice-all", sample_db, "-o", out, "-q")[0] == 0
+        splice_all(sample_db, out)
         assert not stale.exists() and alive.exists() and remote.exists()
     finally:
         living.kill()

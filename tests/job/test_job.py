@@ -1,8 +1,12 @@
-"""``torchsplice splice-all``: the n x m database job (:mod:`torchsplice.job.run`).
+"""The n x m database job (:mod:`torchsplice.job.run`): ``splice_all`` and ``torchsplice splice-all``.
 
 Counts and provenance on the built-in sample and on real Bandai Namco clips, several methods,
 resuming after SIGKILL and after an interrupt (bit-identical to an uninterrupted run), refusing
 to mix runs with other arguments, determinism, bounded memory and bad input.
+
+The job's properties are tested through the Python API (:func:`torchsplice.job.splice_all`,
+``import_bvh``, ``export_clips``; in a process of its own where a test kills it or sets its
+environment); the command line (``main([...])``) where its words, flags or exit codes are the subject.
 """
 
 from __future__ import annotations
@@ -23,13 +27,16 @@ import torch
 
 from torchsplice import __version__
 from torchsplice.cli import main
+from torchsplice.core.errors import UnfinishedJobError
 from torchsplice.core.motion import Motion
+from torchsplice.formats.exporters import export_clips
+from torchsplice.formats.importer import import_bvh
 from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.core.rotations import quat_angle
 from torchsplice.job import JobConfig, SpliceJob, splice_all
-from writers import _digest, cli, nan_copy
+from writers import _digest, cli, nan_copy, splice_all_process, summary_of
 
 REPO = Path(__file__).resolve().parents[2]
 BANDAI = "bandai_namco_research_motiondataset"
@@ -138,43 +145,41 @@ def sample_copies(copies: int, frames: int | None = None):
 @pytest.fixture(scope="module")
 def default_out(sample_db, tmp_path_factory):
     out = tmp_path_factory.mktemp("default") / "out.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(out), "-q"]) == 0
+    splice_all(sample_db, out)
     return out
 
 
 @pytest.fixture(scope="module")
 def multi_out(sample_db, tmp_path_factory):
     out = tmp_path_factory.mktemp("multi") / "out.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(out), "--method", "splice,naive,cpmc", "--copy-sources", "-q"]) == 0
+    splice_all(sample_db, out, methods="splice,naive,cpmc", copy_sources=True)
     return out
 
 
 @pytest.fixture(scope="module")
 def batch2_out(sample_db, tmp_path_factory):
-    """An uninterrupted run with ``--batch-size 2`` (13 batches), the reference for resumed runs."""
+    """An uninterrupted run with ``batch_pairs=2`` (13 batches), the reference for resumed runs."""
     out = tmp_path_factory.mktemp("batch2") / "out.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(out), "--batch-size", "2", "-q"]) == 0
+    splice_all(sample_db, out, batch_pairs=2)
     return out
 
 
 @pytest.fixture(scope="module")
 def bandai_db(mocap_dir, tmp_path_factory):
     db = tmp_path_factory.mktemp("bandai") / "bandai.h5"
-    files = [str(mocap_dir / BANDAI / f"{n}.bvh") for n in BANDAI_CLIPS]
-    assert main(["import", *files, "-o", str(db), "--spec", "bandai_namco", "-q"]) == 0
+    import_bvh([mocap_dir / BANDAI / f"{n}.bvh" for n in BANDAI_CLIPS], db, spec="bandai_namco")
     return db
 
 
 # --------------------------------------------------------------------------------------------
 # 1. the sample job: counts, provenance, per-frame column, quality figures, run record
 # --------------------------------------------------------------------------------------------
-def test_sample_job_counts_and_provenance(sample_db, default_out, capsys):
+def test_sample_job_counts_and_provenance(sample_db, default_out):
     src = table(sample_db)
     assert sorted(n for n, r in zip(src["name"], src["role"]) if r == "locomotion") == sorted(SAMPLE_LOCOS)
     assert sorted(n for n, r in zip(src["name"], src["role"]) if r == "action") == sorted(SAMPLE_ACTIONS)
-    code, out, _ = run(capsys, "info", default_out, "--json")
-    assert code == 0
-    info = json.loads(out)
+    with MotionDatabase.open(default_out) as db:
+        info = json.loads(json.dumps(db.summary()))  # what `torchsplice info --json` prints
     cs = info["clips"]
     assert info["num_clips"] == len(cs) == 25
     assert {c["role"] for c in cs} == {"spliced"}
@@ -276,12 +281,11 @@ def test_splice_rows_do_not_depend_on_the_other_methods(default_out, multi_out):
 # --------------------------------------------------------------------------------------------
 # 3. real data
 # --------------------------------------------------------------------------------------------
-def test_real_clips_selected_by_labels(bandai_db, tmp_path, capsys):
+def test_real_clips_selected_by_labels(bandai_db, tmp_path):
     out = tmp_path / "real.h5"
-    code, text, err = run(capsys, "splice-all", bandai_db, "-o", out,
-                          "--locomotions", "label:style=normal", "--locomotions", "label:content=walk-turn-*",
-                          "--actions", "label:dataset=2", "--actions", "label:content=walk*")
-    assert code == 0, err
+    summary = splice_all(bandai_db, out, locomotions=["label:style=normal", "label:content=walk-turn-*"],
+                         actions=["label:dataset=2", "label:content=walk*"])
+    text = "\n".join(summary.lines())
     src = table(bandai_db)
     locos = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031"]
     acts = [n for n in BANDAI_CLIPS if n != WAVE]  # every walk* clip, whatever its role
@@ -294,6 +298,8 @@ def test_real_clips_selected_by_labels(bandai_db, tmp_path, capsys):
         assert c["name"] == f"{c['locomotion']}+{c['action']}" and c["role"] == "spliced"
         assert src["name"][c["locomotion_id"]] == c["locomotion"] and src["name"][c["action_id"]] == c["action"]
         assert np.isfinite(c["cost"]) and 0 < c["coverage"] <= 1 and c["fps"] == 30.0
+    assert summary.spliced == summary.pairs == len(want)
+    assert summary.skipped == {"a clip is not spliced onto itself": 2}
     assert "wrote" in text and f"{len(want)} spliced clips" in text
     assert "skipped 2 pairs:" in text and "2 x a clip is not spliced onto itself" in text
     rec = run_record(out)
@@ -305,13 +311,14 @@ def test_real_clips_selected_by_labels(bandai_db, tmp_path, capsys):
         assert m.translations is not None  # Bandai Namco animates joint translations; they are kept
 
 
-def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_db, tmp_path, capsys):
+def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_db, tmp_path):
     out = tmp_path / "wave.h5"
-    code, text, err = run(capsys, "splice-all", bandai_db, "-o", out, "--locomotions", "role:locomotion")
-    assert code == 0, err
+    summary = splice_all(bandai_db, out, locomotions="role:locomotion")
+    text = "\n".join(summary.lines())
     cs = clips(out)
     # 3 locomotions x (2 'both' clips + the standing wave): nothing skipped
-    assert len(cs) == 9 and "skipped" not in text
+    assert len(cs) == 9 and summary.skipped == {} and "skipped" not in text
+    assert summary.timings == {"timewarp": 6, "loop": 3}
     assert "6 time-aligned (timewarp), 3 standing actions (loop)" in text
     for c in cs:
         standing = c["action"] == WAVE
@@ -320,18 +327,16 @@ def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_
         if standing:
             assert c["coverage"] == 1.0 and "does not locomote" not in c["flags"]
     for timing in ("hold", "fit"):
-        code, text, err = run(capsys, "splice-all", bandai_db, "-o", tmp_path / f"{timing}.h5", "--locomotions",
-                              "role:locomotion", "--actions", WAVE, "--timing", timing, "--acting-limbs", "none")
-        assert code == 0, err
-        assert f"3 standing actions ({timing})" in text
+        summary = splice_all(bandai_db, tmp_path / f"{timing}.h5", locomotions="role:locomotion", actions=WAVE,
+                             timing=timing, acting_limbs="none")
+        assert summary.timings == {timing: 3} and f"3 standing actions ({timing})" in "\n".join(summary.lines())
         assert {(c["timing"], c["acting"], c["coverage"]) for c in clips(tmp_path / f"{timing}.h5")} == {(timing, "", 1.0)}
 
 
-def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_path, capsys):
+def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_path):
     out = tmp_path / "forced.h5"
-    code, text, err = run(capsys, "splice-all", bandai_db, "-o", out, "--locomotions", "role:locomotion",
-                          "--force-locomotion")
-    assert code == 0, err
+    summary = splice_all(bandai_db, out, locomotions="role:locomotion", force_locomotion=True)
+    text = "\n".join(summary.lines())
     cs = clips(out)
     assert len(cs) == 9
     waves = [c for c in cs if c["action"] == WAVE]
@@ -343,10 +348,11 @@ def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_pat
         assert set(c["flags"].split(",")) - {""} <= {"action_not_locomoting", "poor_alignment"}, c["flags"]
         assert ("poor_alignment" in c["flags"]) == (c["alignment_distance"] > 0.10), c["name"]
         assert json.loads(c["params"])["force_locomotion"] is True
-    assert "skipped" not in text
+    assert summary.skipped == {} and "skipped" not in text
     # the summary counts flagged clips: one line "flagged N clips", N = clips with a non-empty flags column,
     # then one line per code with what it means
     flagged = sum(1 for c in cs if c["flags"])
+    assert summary.flagged_clips == flagged and summary.flagged["action_not_locomoting"] == 3
     m = re.search(r"flagged (\d+) clips", text)
     assert m and int(m.group(1)) == flagged, text
     assert re.search(r"  3 x action_not_locomoting: the action does not locomote", text), text
@@ -364,11 +370,9 @@ def standing_out(mocap_dir, tmp_path_factory):
     locomotions shorter than the action, some longer), in this process, one task per pair."""
     folder = tmp_path_factory.mktemp("standing")
     db = folder / "db.h5"
-    files = [str(mocap_dir / BANDAI / f"{n}.bvh") for n in STANDING_LOCOS + STANDING_ACTIONS]
-    assert main(["import", *files, "-o", str(db), "--spec", "bandai_namco", "-q"]) == 0
+    import_bvh([mocap_dir / BANDAI / f"{n}.bvh" for n in STANDING_LOCOS + STANDING_ACTIONS], db, spec="bandai_namco")
     out = folder / "out.h5"
-    assert main(["splice-all", str(db), "-o", str(out), "--locomotions", "role:locomotion", "--actions", "role:action",
-                 "--workers", "1", "--batch-size", "1", "-q"]) == 0
+    splice_all(db, out, locomotions="role:locomotion", actions="role:action", workers=1, batch_pairs=1)
     return db, out
 
 
@@ -412,22 +416,22 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     out.parent.mkdir()
     work = work_folder(out)
     held = lambda: (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)  # noqa: E731
-    cmd = [sys.executable, "scripts/splice_all.py", str(sample_db), "-o", str(out), "--batch-size", "2"]
     every_task = dict(env(), TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task, to kill between two
-    proc = subprocess.Popen(cmd, cwd=REPO, env=every_task, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = splice_all_process(sample_db, out, batch_pairs=2, env=every_task, cwd=REPO)
     try:
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:
             if held() >= 2:
                 break
             time.sleep(0.005)
-        assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read().decode()[-2000:]
+        assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read()[-2000:]
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+        proc.stdout.close()
         proc.stderr.close()
     assert proc.returncode == -signal.SIGKILL
     assert not out.exists()  # the output appears only once complete
@@ -439,11 +443,13 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     # after their append) the kill cut short; the rerun removes those
     assert sum(t < k for t in waiting) <= 2, (k, waiting)
 
-    done = subprocess.run(cmd, cwd=REPO, env=env(), capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    m = re.search(r"25 spliced clips \((\d+) pairs from an earlier run\)", done.stdout)
-    assert m, done.stdout
-    assert kept_pairs <= int(m.group(1)) <= 25  # what the output held, and the shards finished since
+    again = splice_all_process(sample_db, out, batch_pairs=2, env=env(), cwd=REPO)
+    stdout, stderr = again.communicate(timeout=300)
+    assert again.returncode == 0, stderr
+    summary = summary_of(stdout)
+    m = re.search(r"25 spliced clips \((\d+) pairs from an earlier run\)", summary["lines"][0])
+    assert m and summary["spliced"] == 25 and summary["resumed"] == int(m.group(1)), summary
+    assert kept_pairs <= summary["resumed"] <= 25  # what the output held, and the shards finished since
     assert not work.exists()
     assert sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.h5.index.csv"]  # nothing else left behind
     names = [c["name"] for c in clips(out)]
@@ -509,8 +515,9 @@ def test_other_arguments_refuse_to_mix_until_restart(sample_db, tmp_path, capsys
         return real(plan, task, *args, **kw)
 
     monkeypatch.setattr(executors, "run_task", interrupted)
-    base = ["splice-all", sample_db, "-o", out, "--batch-size", "2", "--workers", "1", "-q"]
-    code, _, err = run(capsys, *base)
+    # the command line, interrupted, says where the finished tasks are and how to resume
+    cli_base = ["splice-all", sample_db, "-o", out, "--batch-size", "2", "--workers", "1", "-q"]
+    code, _, err = run(capsys, *cli_base)
     assert code == 130 and str(work) in err and "resume" in err
     monkeypatch.setattr(executors, "run_task", real)
     state = lambda: (sorted(p.name for p in work.iterdir()), MotionDatabase.checkpoint_note(work / "output.h5"))  # noqa: E731
@@ -518,15 +525,22 @@ def test_other_arguments_refuse_to_mix_until_restart(sample_db, tmp_path, capsys
     before = state()
     assert before[1]["tasks"] == 2  # two tasks finished, in the staged output
 
-    for other in (["--method", "naive"], ["--actions", "carry_box"], ["--batch-size", "3"], ["--no-posture"]):
-        code, text, err = run(capsys, *base, *other)
-        assert code == 2, other
-        assert err.count("\n") == 1 and str(work) in err and "--restart" in err and "Traceback" not in err, err
+    base = dict(batch_pairs=2, workers=1)  # the same job, from Python
+    for other in (dict(methods="naive"), dict(actions="carry_box"), dict(batch_pairs=3), dict(posture=False)):
+        with pytest.raises(UnfinishedJobError, match="holds an unfinished job with other arguments") as exc:
+            splice_all(sample_db, out, **{**base, **other})
+        said = str(exc.value)
+        assert "\n" not in said and str(work) in said and "restart=True" in said, (other, said)
         assert not out.exists()
         assert state() == before and (work / "plan.json").read_text() == plan
+    # the command line's refusal: one line, naming its flag
+    code, _, err = run(capsys, *cli_base, "--method", "naive")
+    assert code == 2
+    assert err.count("\n") == 1 and str(work) in err and "--restart" in err and "Traceback" not in err, err
+    assert not out.exists()
+    assert state() == before and (work / "plan.json").read_text() == plan
 
-    code, _, err = run(capsys, *base, "--method", "naive", "--restart")
-    assert code == 0, err
+    splice_all(sample_db, out, **base, methods="naive", restart=True)
     cs = clips(out)
     assert len(cs) == 25 and {c["method"] for c in cs} == {"naive"}
     assert not work.exists()
@@ -536,10 +550,11 @@ def test_other_arguments_refuse_to_mix_until_restart(sample_db, tmp_path, capsys
 # 7. determinism
 # --------------------------------------------------------------------------------------------
 def test_two_separate_runs_are_bit_identical(sample_db, default_out, tmp_path):
+    """The same job in another process (another interpreter, its own hash seed) writes the same file."""
     out = tmp_path / "again.h5"
-    done = subprocess.run([sys.executable, "-m", "torchsplice", "splice-all", str(sample_db), "-o", str(out), "-q"],
-                          cwd=tmp_path, env=env(), capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
+    p = splice_all_process(sample_db, out, cwd=tmp_path, env=env())
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
     assert_same_file(out, default_out)
 
 
@@ -594,7 +609,7 @@ def test_torch_path_writes_the_same_clips(sample_db, default_out, tmp_path, monk
 
 
 @pytest.mark.parametrize("compiled", [True, False])
-def test_a_pair_that_cannot_be_aligned_is_skipped_and_the_rest_land(tmp_path, capsys, monkeypatch, compiled):
+def test_a_pair_that_cannot_be_aligned_is_skipped_and_the_rest_land(tmp_path, monkeypatch, compiled):
     """An action that is its locomotion's first pose held still, with runs as long as the action:
     the cheapest path stays on the locomotion's first frame, so the alignment does not advance.
     That pair is skipped with its reason; the other pair of the batch still lands."""
@@ -611,8 +626,9 @@ def test_a_pair_that_cannot_be_aligned_is_skipped_and_the_rest_land(tmp_path, ca
     walk.role = "locomotion"
     db = write_db(tmp_path / "in.h5", [walk, pose, box])
     out = tmp_path / "out.h5"
-    code, stdout, err = run(capsys, "splice-all", db, "-o", out, "--force-locomotion", "--max-run", "15")
-    assert code == 0, err
+    summary = splice_all(db, out, force_locomotion=True, max_run=15)
+    assert summary.spliced == 1 and sum(summary.skipped.values()) == 1, summary.skipped
+    stdout = "\n".join(summary.lines())
     assert "1 x the alignment failed (the alignment does not advance in both clips)" in stdout.replace("pair 0: ", "")
     assert [c["name"] for c in clips(out)] == ["walk_straight+carry_box"]
 
@@ -623,7 +639,7 @@ def test_a_pair_that_cannot_be_aligned_is_skipped_and_the_rest_land(tmp_path, ca
 DRIVER = """
 import json, resource, sys
 import torch, torchsplice.job
-from torchsplice.cli import main
+from torchsplice.job import splice_all
 
 
 def peak_kb():
@@ -638,9 +654,8 @@ def peak_kb():
 
 before = peak_kb()
 # one worker, in this process: the process measured is the one that holds the results
-code = main(["splice-all", sys.argv[1], "-o", sys.argv[2], "--method", "naive", "--batch-size", "64",
-             "--memory-budget", "64", "--workers", "1", "-q"])
-print(json.dumps({"code": code, "before_kb": before, "after_kb": peak_kb()}))
+summary = splice_all(sys.argv[1], sys.argv[2], methods="naive", batch_pairs=64, memory_budget_mb=64, workers=1)
+print(json.dumps({"spliced": summary.spliced, "before_kb": before, "after_kb": peak_kb()}))
 """
 
 
@@ -665,7 +680,7 @@ def test_peak_memory_does_not_grow_with_the_number_of_pairs(tmp_path):
         out, err = p.communicate(timeout=300)
         assert p.returncode == 0, err
         res.append(json.loads(out.strip().splitlines()[-1]))
-    assert [r["code"] for r in res] == [0, 0]
+    assert [r["spliced"] for r in res] == [25, 1600]
     assert len(clips(tmp_path / "out_small.h5")) == 25 and len(clips(tmp_path / "out_big.h5")) == 1600
     grow_small, grow_big = ((r["after_kb"] - r["before_kb"]) / 1024 for r in res)
     assert grow_big < 1.5 * grow_small + 112, (grow_small, grow_big)
@@ -696,7 +711,7 @@ def test_selector_matching_nothing(sample_db, tmp_path, capsys):
 
 def test_actions_db_with_another_skeleton(bandai_db, mocap_dir, tmp_path, capsys):
     lafan = tmp_path / "lafan.h5"
-    assert run(capsys, "import", mocap_dir / "lafan1_via_pypi_bvhtools" / "test2.bvh", "-o", lafan, "-q")[0] == 0
+    import_bvh([mocap_dir / "lafan1_via_pypi_bvhtools" / "test2.bvh"], lafan)
     out_dir = tmp_path / "o"
     out_dir.mkdir()
     # without retargeting: refused in one line naming both databases
@@ -706,11 +721,11 @@ def test_actions_db_with_another_skeleton(bandai_db, mocap_dir, tmp_path, capsys
     assert str(bandai_db) in err and str(lafan) in err and "skeleton" in err and "--retarget is off" in err
     assert_left_nothing(out_dir)
     # by default the action is retargeted onto the locomotions' skeleton
-    code, out, err = run(capsys, "splice-all", bandai_db, "--actions-db", lafan, "--actions", "*", "-o", out_dir / "x.h5")
-    assert code == 0, err
+    summary = splice_all(bandai_db, out_dir / "x.h5", actions_db=lafan, actions="*")
     with MotionDatabase.open(out_dir / "x.h5") as db:
         spliced = [i for i, r in enumerate(db.clip_table().role) if r == "spliced"]
-        assert spliced and f"{len(spliced)} had the action retargeted" in out
+        assert spliced and summary.retargeted == len(spliced)
+        assert f"{len(spliced)} had the action retargeted" in "\n".join(summary.lines())
         for i in spliced:
             m = db.read(i)
             assert m.skeleton.num_joints == 22 and m.labels["action.retargeted_from"] == "lafan.h5:0 (lafan1)"
@@ -748,18 +763,19 @@ def test_missing_database(tmp_path, capsys):
     assert_left_nothing(tmp_path)
 
 
-def test_too_short_clip_is_skipped_not_fatal(tmp_path, capsys):
+def test_too_short_clip_is_skipped_not_fatal(tmp_path):
     """A clip too short to align (10 frames at 30 fps; 15 needed) costs its pairs, not the whole job, forced or not."""
     motions = sample_motions()
     short = motions[5].slice(0, 10)
     short.name = "carry_box_short"
     db = write_db(tmp_path / "db.h5", motions + [short])
-    for force in ([], ["--force-locomotion"]):
-        out = tmp_path / f"out{len(force)}.h5"
-        code, text, err = run(capsys, "splice-all", db, "-o", out, *force)
-        assert code == 0, err
+    for force in (False, True):
+        out = tmp_path / f"out{int(force)}.h5"
+        summary = splice_all(db, out, force_locomotion=force)
+        text = "\n".join(summary.lines())
         cs = clips(out)
         assert len(cs) == 25 and "carry_box_short" not in {c["action"] for c in cs}
+        assert sum(summary.skipped.values()) == 5 and all("carry_box_short" in why for why in summary.skipped)
         assert "skipped 5 pairs:" in text and "carry_box_short" in text
         assert not work_folder(out).exists()
 
@@ -776,10 +792,11 @@ def test_script_help():
         assert option in done.stdout
 
 
-def test_a_nan_locomotion_is_skipped_for_its_real_reason(sample_db, tmp_path, capsys):
+def test_a_nan_locomotion_is_skipped_for_its_real_reason(sample_db, tmp_path):
     db = nan_copy(sample_db, tmp_path, "walk_straight")
-    rc, out, err = run(capsys, "splice-all", db, "-o", tmp_path / "o.h5", "--workers", "1", "--force-locomotion")
-    assert rc == 0, err
+    summary = splice_all(db, tmp_path / "o.h5", workers=1, force_locomotion=True)
+    out = "\n".join(summary.lines())
+    assert any("walk_straight has non-finite values (NaN or infinity) from frame 5" in why for why in summary.skipped)
     assert "walk_straight has non-finite values (NaN or infinity) from frame 5" in out
     assert "walk_straight does not locomote" not in out
     with MotionDatabase.open(tmp_path / "o.h5") as o:
@@ -811,25 +828,19 @@ def test_sigterm_stops_a_job_like_ctrl_c_and_the_rerun_resumes(sample_db, tmp_pa
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["compiled", "torch"])
 def test_splice_all_gives_the_same_bits_with_any_workers_and_threads(backend, sample_db, tmp_path, monkeypatch):
-    import torch
-
+    """Each run in a process of its own, with 1 or 2 threads (OMP_NUM_THREADS) and 1 to 3 workers."""
     if backend == "torch":
         monkeypatch.setenv("TORCHSPLICE_BACKEND", "torch")
-    runs = [["--workers", "1"], ["--workers", "2"], ["--workers", "3"]]
+    runs = [dict(workers=1), dict(workers=2), dict(workers=3)]
     if backend == "compiled":  # each pair is spliced on its own: the batching does not matter either
-        runs = [r + ["--batch-size", str(b)] for r, b in zip(runs, (8, 3, 5))]
+        runs = [dict(r, batch_pairs=b) for r, b in zip(runs, (8, 3, 5))]
     digests = set()
-    before = torch.get_num_threads()
-    try:
-        for n, extra in enumerate(runs):
-            torch.set_num_threads(1 + n % 2)
-            p = cli("splice-all", sample_db, "-o", tmp_path / f"o{n}.h5", "-q", "--method", "splice,naive,cpmc", *extra,
-                    env=dict(os.environ, OMP_NUM_THREADS=str(1 + n % 2)))
-            _, err = p.communicate(timeout=600)
-            assert p.returncode == 0, err
-            digests.add(_digest(tmp_path / f"o{n}.h5"))
-    finally:
-        torch.set_num_threads(before)
+    for n, extra in enumerate(runs):
+        p = splice_all_process(sample_db, tmp_path / f"o{n}.h5", methods="splice,naive,cpmc", **extra,
+                               env=dict(os.environ, OMP_NUM_THREADS=str(1 + n % 2)))
+        _, err = p.communicate(timeout=600)
+        assert p.returncode == 0, err
+        digests.add(_digest(tmp_path / f"o{n}.h5"))
     assert len(digests) == 1
 
 
@@ -852,15 +863,15 @@ def test_a_ctrl_c_that_a_library_swallows_still_stops_the_job_as_an_interrupt():
     check_stop()  # nothing asked: nothing raised
 
 
-def test_7_windows_of_one_take_are_not_spliced_onto_each_other(sample_db, tmp_path, capsys):
+def test_7_windows_of_one_take_are_not_spliced_onto_each_other(sample_db, tmp_path):
     bvh = tmp_path / "bvh"
-    assert main(["export", str(sample_db), "walk_straight", "jog", "-o", str(bvh), "-q"]) == 0
+    export_clips(sample_db, ["walk_straight", "jog"], out=bvh)
     db = tmp_path / "win.h5"
-    assert main(["import", str(bvh), "-o", str(db), "--window", "2", "--window-overlap", "0.5", "-q"]) == 0
+    import_bvh([bvh], db, window=2, window_overlap=0.5)
     out = tmp_path / "sp.h5"
-    rc, stdout, _ = run(capsys, "splice-all", db, "-o", out, "--locomotions", "walk_straight*", "--actions",
-                        "walk_straight*,jog*")
-    assert rc == 0 and "windows of one take are not spliced onto each other" in stdout
+    summary = splice_all(db, out, locomotions="walk_straight*", actions="walk_straight*,jog*")
+    assert any("windows of one take are not spliced onto each other" in why for why in summary.skipped)
+    assert "windows of one take are not spliced onto each other" in "\n".join(summary.lines())
     with MotionDatabase.open(out) as d:
         table = d.clip_table()
         pairs = [(lab["locomotion.split_from"], lab["action.split_from"]) for lab in table.labels]
