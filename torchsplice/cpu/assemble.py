@@ -58,63 +58,65 @@ def arc_table(rot, joints):
 
 
 @njit(cache=True, nogil=True)
-def timewarp_rows(rot, trans, arc, ls, as_, n_act, upper, pelvis, curve, prot, n, orot, otrans):
-    """``n`` result frames of a timewarp clip into rows ``0 .. n - 1`` of ``orot``/``otrans``.
+def timewarp_rows(rot, trans, arc, loco_start, action_start, action_frames, upper, pelvis, curve, pelvis_rot, n,
+                  out_rot, out_trans):
+    """``n`` result frames of a timewarp clip into rows ``0 .. n - 1`` of ``out_rot``/``out_trans``.
 
-    ``ls``: the bank row of the locomotion's first frame wanted; ``as_``: the bank row of the
-    action's frame 0 after its crop, ``n_act`` its frames from there; ``curve (n,)``: the
-    action frame (from ``as_``) of each result frame; ``prot (n, 4)``: the pelvis's rotation.
+    ``loco_start``: the bank row of the locomotion's first frame wanted; ``action_start``: the
+    bank row of the action's frame 0 after its crop, ``action_frames`` its frames from there; ``curve (n,)``: the
+    action frame (from ``action_start``) of each result frame; ``pelvis_rot (n, 4)``: the pelvis's rotation.
     ``arc``: :func:`arc_table` of ``rot`` on the ``upper`` joints, or an empty ``(0, J, 2)``
     array to compute the slerps' angles here (the same bits either way).
     """
     J = rot.shape[1]
     table = arc.shape[0] > 0
     for t in range(n):
-        i0, i1, w = split_time(curve[t], n_act)
+        i0, i1, w = split_time(curve[t], action_frames)
         for j in range(J):
             if j == pelvis:
                 for c in range(4):
-                    orot[t, j, c] = prot[t, c]
+                    out_rot[t, j, c] = pelvis_rot[t, c]
                 for c in range(3):
-                    otrans[t, j, c] = trans[ls + t, j, c]
+                    out_trans[t, j, c] = trans[loco_start + t, j, c]
             elif upper[j]:
-                p, q = qload(rot, as_ + i0, j), qload(rot, as_ + i1, j)
+                p, q = qload(rot, action_start + i0, j), qload(rot, action_start + i1, j)
                 if table:  # w > 0 only where i1 = i0 + 1: the pair the table holds at row as_ + i0
-                    qstore(orot, t, j, qslerp_arc(p, q, w, arc[as_ + i0, j, 0], arc[as_ + i0, j, 1]))
+                    row = action_start + i0
+                    qstore(out_rot, t, j, qslerp_arc(p, q, w, arc[row, j, 0], arc[row, j, 1]))
                 else:
-                    qstore(orot, t, j, qslerp(p, q, w))
+                    qstore(out_rot, t, j, qslerp(p, q, w))
                 for c in range(3):
-                    otrans[t, j, c] = lerp(trans[as_ + i0, j, c], trans[as_ + i1, j, c], w)
+                    out_trans[t, j, c] = lerp(trans[action_start + i0, j, c], trans[action_start + i1, j, c], w)
             else:
                 for c in range(4):
-                    orot[t, j, c] = rot[ls + t, j, c]
+                    out_rot[t, j, c] = rot[loco_start + t, j, c]
                 for c in range(3):
-                    otrans[t, j, c] = trans[ls + t, j, c]
+                    out_trans[t, j, c] = trans[loco_start + t, j, c]
 
 
 @njit(cache=True, nogil=True)
-def standing_times(t, Tl, Ta, timing, window, loop_s, loop_e, blend):
+def standing_times(t, loco_frames, action_frames, timing, window, loop_start, loop_end, blend):
     """``(time, fade source, fade phase)`` of result frame ``t`` of a standing clip (as
     :func:`torchsplice.splice.standing.action_times`): the action frame it plays, and during a
     loop's fade the frame faded from and how far the fade is (1: none)."""
     phase = 1.0
     if timing == 2:  # fit
-        x = t * (Ta - 1.0) / max(Tl - 1.0, 1.0)
-    elif Tl <= Ta:  # a window of the action
-        x = min(window + t, Ta - 1.0)
+        x = t * (action_frames - 1.0) / max(loco_frames - 1.0, 1.0)
+    elif loco_frames <= action_frames:  # a window of the action
+        x = min(window + t, action_frames - 1.0)
     elif timing == 1:  # hold
-        x = min(float(t), Ta - 1.0)
+        x = min(float(t), action_frames - 1.0)
     else:  # loop
-        period = max(loop_e - loop_s, 1.0)
-        if t >= loop_e:
-            after = t - loop_e
+        period = max(loop_end - loop_start, 1.0)
+        if t >= loop_end:
+            after = t - loop_end
             u = after - math.floor(after / period) * period
-            x = loop_s + u
+            x = loop_start + u
             if u < blend:
                 phase = min(max(u / blend, 0.0), 1.0)
         else:
             x = float(t)
-    return x, (loop_e if phase < 1.0 else x), phase
+    return x, (loop_end if phase < 1.0 else x), phase
 
 
 @njit(cache=True, nogil=True)
@@ -149,28 +151,29 @@ def _lin_offset(trans, a, c, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, n
 
 
 @njit(cache=True, nogil=True)
-def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, loop_e, acting, upper, spine, arms,
-                  blend_s, first, n, curve, orot, otrans):
+def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_frames, method, timing, window, loop_start,
+                  loop_end, acting, upper, spine, arms, blend_s, first, n, curve, out_rot, out_trans):
     """Result frames ``first .. first + n - 1`` of a standing clip into rows ``0 .. n - 1`` of
-    ``orot``/``otrans``, and the action frame each plays into ``curve``.
+    ``out_rot``/``out_trans``, and the action frame each plays into ``curve``.
 
-    The locomotion is bank rows ``ls ..`` (``Tl`` frames), the action ``as_ ..`` (``Ta``);
-    ``method`` a built-in's code (:data:`SPLICE_CODE`, :data:`NAIVE_CODE`, :data:`CPMC_CODE`); ``timing`` 0 loop, 1 hold, 2 fit; ``window`` the
-    action's first frame played onto a locomotion no longer than it; ``loop_s``/``loop_e`` the
+    The locomotion is bank rows ``loco_start ..`` (``loco_frames`` frames), the action
+    ``action_start ..`` (``action_frames``); ``method`` a built-in's code (:data:`SPLICE_CODE`,
+    :data:`NAIVE_CODE`, :data:`CPMC_CODE`); ``timing`` 0 loop, 1 hold, 2 fit; ``window`` the
+    action's first frame played onto a locomotion no longer than it; ``loop_start``/``loop_end`` the
     loop points; ``acting (2,)`` the arms that act (left, right); ``upper``, ``spine``,
     ``arms (2, J)`` and ``blend_s`` the skeleton's tables (:class:`torchsplice.cpu.bank.StandingTables`).
     """
     J = rot.shape[1]
-    blend = max(min(blend_s, Ta // 3), 1)
+    blend = max(min(blend_s, action_frames // 3), 1)
     # the locomotion's mean posture of each spine joint (splice)
     S = spine.shape[0]
     mean = np.zeros((S, 4))
     if method == SPLICE_CODE:
         for k in range(S):
             j = spine[k]
-            q0 = qload(rot, ls, j)
-            for t in range(Tl):
-                q = qload(rot, ls + t, j)
+            q0 = qload(rot, loco_start, j)
+            for t in range(loco_frames):
+                q = qload(rot, loco_start + t, j)
                 sg = -1.0 if q[0] * q0[0] + q[1] * q0[1] + q[2] * q0[2] + q[3] * q0[3] < 0 else 1.0
                 for c in range(4):
                     mean[k, c] += sg * q[c]
@@ -187,9 +190,10 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
                     idle[j] = True
     for i in range(n):
         t = first + i
-        x, source, phase = standing_times(t, Tl, Ta, timing, float(window), float(loop_s), float(loop_e), float(blend))
+        x, source, phase = standing_times(t, loco_frames, action_frames, timing, float(window), float(loop_start),
+                                          float(loop_end), float(blend))
         curve[i] = x
-        i0, i1, w = split_time(x, Ta)
+        i0, i1, w = split_time(x, action_frames)
         fading = phase < 1.0
         f = g = bw = bpw = sw = nw = 0.0
         b0 = b1 = bp0 = bp1 = s0 = s1 = n0 = n1 = 0
@@ -198,71 +202,74 @@ def standing_rows(rot, trans, ls, Tl, as_, Ta, method, timing, window, loop_s, l
             u = sph * blend
             f = 1 - sph * sph * (3 - 2 * sph)
             g = u * (1 - sph) ** 2
-            b0, b1, bw = split_time(source, Ta)
-            bp0, bp1, bpw = split_time(source - 1, Ta)
-            s0, s1, sw = split_time(float(loop_s), Ta)
-            n0, n1, nw = split_time(loop_s + 1.0, Ta)
+            b0, b1, bw = split_time(source, action_frames)
+            bp0, bp1, bpw = split_time(source - 1, action_frames)
+            s0, s1, sw = split_time(float(loop_start), action_frames)
+            n0, n1, nw = split_time(loop_start + 1.0, action_frames)
         for j in range(J):
             if not upper[j] or (method == SPLICE_CODE and idle[j]):
-                qstore(orot, i, j, qload(rot, ls + t, j))
+                qstore(out_rot, i, j, qload(rot, loco_start + t, j))
                 for c in range(3):
-                    otrans[i, j, c] = trans[ls + t, j, c]
+                    out_trans[i, j, c] = trans[loco_start + t, j, c]
                 continue
-            q = qslerp(qload(rot, as_ + i0, j), qload(rot, as_ + i1, j), w)
-            tx = trans[as_ + i0, j, 0] + w * (trans[as_ + i1, j, 0] - trans[as_ + i0, j, 0])
-            ty = trans[as_ + i0, j, 1] + w * (trans[as_ + i1, j, 1] - trans[as_ + i0, j, 1])
-            tz = trans[as_ + i0, j, 2] + w * (trans[as_ + i1, j, 2] - trans[as_ + i0, j, 2])
+            q = qslerp(qload(rot, action_start + i0, j), qload(rot, action_start + i1, j), w)
+            tx = trans[action_start + i0, j, 0] + w * (trans[action_start + i1, j, 0] - trans[action_start + i0, j, 0])
+            ty = trans[action_start + i0, j, 1] + w * (trans[action_start + i1, j, 1] - trans[action_start + i0, j, 1])
+            tz = trans[action_start + i0, j, 2] + w * (trans[action_start + i1, j, 2] - trans[action_start + i0, j, 2])
             if fading:  # inertialization of the jump back (see torchsplice.splice.standing._sample)
-                qb = qslerp(qload(rot, as_ + b0, j), qload(rot, as_ + b1, j), bw)
-                qbp = qslerp(qload(rot, as_ + bp0, j), qload(rot, as_ + bp1, j), bpw)
-                qs = qslerp(qload(rot, as_ + s0, j), qload(rot, as_ + s1, j), sw)
-                qn = qslerp(qload(rot, as_ + n0, j), qload(rot, as_ + n1, j), nw)
+                qb = qslerp(qload(rot, action_start + b0, j), qload(rot, action_start + b1, j), bw)
+                qbp = qslerp(qload(rot, action_start + bp0, j), qload(rot, action_start + bp1, j), bpw)
+                qs = qslerp(qload(rot, action_start + s0, j), qload(rot, action_start + s1, j), sw)
+                qn = qslerp(qload(rot, action_start + n0, j), qload(rot, action_start + n1, j), nw)
                 r = _aa(qmul(qb, qconj(qs)))
                 v1 = _aa(qmul(qb, qconj(qbp)))
                 v2 = _aa(qmul(qn, qconj(qs)))
                 q = qnormalize(qmul(_exp(r[0] * f + (v1[0] - v2[0]) * g, r[1] * f + (v1[1] - v2[1]) * g,
                                          r[2] * f + (v1[2] - v2[2]) * g), q))
                 if method == NAIVE_CODE:  # only naive takes the action's translations
-                    tx += _lin_offset(trans, as_, 0, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
-                    ty += _lin_offset(trans, as_, 1, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
-                    tz += _lin_offset(trans, as_, 2, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g)
-            lq = qload(rot, ls + t, j)
+                    tx += _lin_offset(trans, action_start, 0, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw,
+                                      f, g)
+                    ty += _lin_offset(trans, action_start, 1, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw,
+                                      f, g)
+                    tz += _lin_offset(trans, action_start, 2, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw,
+                                      f, g)
+            lq = qload(rot, loco_start + t, j)
             if method == NAIVE_CODE:  # naive: the action's upper body, translations too
-                qstore(orot, i, j, q)
-                otrans[i, j, 0], otrans[i, j, 1], otrans[i, j, 2] = tx, ty, tz
+                qstore(out_rot, i, j, q)
+                out_trans[i, j, 0], out_trans[i, j, 1], out_trans[i, j, 2] = tx, ty, tz
                 continue
             if method == CPMC_CODE:  # cpmc: the action's motion since its first frame, on the locomotion
-                q = qnormalize(qmul(lq, qmul(qconj(qload(rot, as_, j)), q)))
+                q = qnormalize(qmul(lq, qmul(qconj(qload(rot, action_start, j)), q)))
             elif spine_k[j] >= 0:  # splice: the action's posture with the locomotion's deviation from its mean
                 k = spine_k[j]
                 q = qnormalize(qmul(q, qmul(qconj((mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3])), lq)))
-            qstore(orot, i, j, q)
+            qstore(out_rot, i, j, q)
             for c in range(3):
-                otrans[i, j, c] = trans[ls + t, j, c]
+                out_trans[i, j, c] = trans[loco_start + t, j, c]
 
 
 @njit(cache=True, nogil=True)
-def assemble_timewarp(rot, trans, arc, starts, lengths, loco, act, crop, upper, pelvis, curve, prot, first, count,
-                      out_start, orot, otrans):
+def assemble_timewarp(rot, trans, arc, starts, lengths, loco, action, crop, upper, pelvis, curve, pelvis_rot, first,
+                      count, out_start, out_rot, out_trans):
     """Timewarp clips ``b``: result frames ``first[b] .. first[b] + count[b] - 1`` of
-    the pair (bank clips ``loco[b]``, ``act[b]``, the action cropped by ``crop[b]``) into rows
-    ``out_start[b] ..`` of ``orot``/``otrans``; ``curve``/``prot`` hold those frames' parts in
+    the pair (bank clips ``loco[b]``, ``action[b]``, the action cropped by ``crop[b]``) into rows
+    ``out_start[b] ..`` of ``out_rot``/``out_trans``; ``curve``/``pelvis_rot`` hold those frames' parts in
     the same rows."""
     for b in range(loco.shape[0]):
         o, n = out_start[b], count[b]
-        a = act[b]
+        a = action[b]
         timewarp_rows(rot, trans, arc, starts[loco[b]] + first[b], starts[a] + crop[b], lengths[a] - crop[b], upper, pelvis,
-                      curve[o:o + n], prot[o:o + n], n, orot[o:o + n], otrans[o:o + n])
+                      curve[o:o + n], pelvis_rot[o:o + n], n, out_rot[o:o + n], out_trans[o:o + n])
 
 
 @njit(cache=True, nogil=True)
-def assemble_standing(rot, trans, starts, lengths, loco, act, method, timing, window, loops, acting, upper, spine, arms,
-                      blend_s, first, count, out_start, orot, otrans, ocurve):
+def assemble_standing(rot, trans, starts, lengths, loco, action, method, timing, window, loops, acting, upper, spine,
+                      arms, blend_s, first, count, out_start, out_rot, out_trans, out_curve):
     """Standing clips ``b`` (per-clip arguments as :func:`standing_rows`'s, ``loops
     (B, 2)``, ``acting (B, 2)``): result frames ``first[b] ..`` into rows ``out_start[b] ..``."""
     for b in range(loco.shape[0]):
         o, n = out_start[b], count[b]
-        lo, a = loco[b], act[b]
+        lo, a = loco[b], action[b]
         standing_rows(rot, trans, starts[lo], lengths[lo], starts[a], lengths[a], method[b], timing[b], window[b],
-                      loops[b, 0], loops[b, 1], acting[b], upper, spine, arms, blend_s, first[b], n, ocurve[o:o + n],
-                      orot[o:o + n], otrans[o:o + n])
+                      loops[b, 0], loops[b, 1], acting[b], upper, spine, arms, blend_s, first[b], n, out_curve[o:o + n],
+                      out_rot[o:o + n], out_trans[o:o + n])
