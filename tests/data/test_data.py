@@ -453,6 +453,16 @@ def test_pickle_drops_the_file_handle(plain_db):
     assert ds._db is None and torch.equal(ds[3]["rotations"], first["rotations"])  # reopens
 
 
+def assert_same_item(got: dict, want: dict, i: int) -> None:
+    """Item ``got`` holds exactly ``want``'s keys and values (tensors bit for bit, NaN equal to NaN)."""
+    assert got.keys() == want.keys()
+    for key, value in want.items():
+        if isinstance(value, torch.Tensor):
+            torch.testing.assert_close(got[key], value, rtol=0, atol=0, equal_nan=True, msg=f"{key} of item {i}")
+        else:
+            assert got[key] == value
+
+
 def test_preload_gives_identical_items(spliced_db, two_skeleton_db):
     for path, kwargs in ((spliced_db, dict(where={"cost": lambda c: c < 8 or c != c}, window=40, stride=33,
                                             features=(*ALL_FEATURES, "action_frame"))),
@@ -461,13 +471,7 @@ def test_preload_gives_identical_items(spliced_db, two_skeleton_db):
         pre = MotionDataset(path, preload=True, **kwargs)
         assert pre._db is None and len(pre) == len(lazy) > 0
         for i in range(len(lazy)):
-            a, b = lazy[i], pre[i]
-            assert a.keys() == b.keys()
-            for key, value in a.items():
-                if isinstance(value, torch.Tensor):
-                    torch.testing.assert_close(b[key], value, rtol=0, atol=0, equal_nan=True, msg=f"{key} of item {i}")
-                else:
-                    assert b[key] == value
+            assert_same_item(pre[i], lazy[i], i)
         assert pre._db is None  # never touched the file again
         item = pre[0]
         item["rotations"].zero_()  # items do not alias the preloaded memory
@@ -485,13 +489,7 @@ def test_batched_fetch_equals_single_items(spliced_db, two_skeleton_db):
         batch = ds.__getitems__(order)
         assert len(batch) == len(order)
         for i, b in zip(order, batch):
-            a = ds[i]
-            assert a.keys() == b.keys()
-            for key, value in a.items():
-                if isinstance(value, torch.Tensor):
-                    torch.testing.assert_close(b[key], value, rtol=0, atol=0, equal_nan=True, msg=f"{key} of item {i}")
-                else:
-                    assert b[key] == value
+            assert_same_item(b, ds[i], i)
 
 
 DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)]
