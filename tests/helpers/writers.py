@@ -47,6 +47,21 @@ def splice_all_process(database, output, *, env: dict | None = None, cwd=None, *
                             text=True, env=env, cwd=cwd)
 
 
+@contextlib.contextmanager
+def reaped(proc: subprocess.Popen):
+    """Yields ``proc``; on leaving, even by a failed assertion, kills it if it still runs, waits
+    for it and closes its pipes, so that no test leaves a process or a file handle behind."""
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for stream in (proc.stdin, proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
+
+
 def summary_of(stdout: str) -> dict:
     """The summary a :func:`splice_all_process` printed."""
     return json.loads(stdout.strip().splitlines()[-1])

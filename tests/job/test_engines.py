@@ -25,7 +25,7 @@ from torchsplice.core.errors import TorchspliceError
 from torchsplice.job import merge_job, splice_all
 from torchsplice.store.database import MotionDatabase
 from torchsplice.store.lock import LockedError
-from writers import splice_all_process
+from writers import reaped, splice_all_process
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -74,7 +74,7 @@ def kill_one_worker(proc, when) -> str:
     """SIGKILL the first worker of the job ``proc`` seen once ``when()`` holds, let the job end,
     and return its stderr (asserting that a worker was killed)."""
     killed = None
-    try:
+    with reaped(proc):
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline and killed is None:
             ws = workers_of(proc.pid) if when() else []
@@ -83,10 +83,6 @@ def kill_one_worker(proc, when) -> str:
                 killed = ws[0]
             time.sleep(0.005)
         _, stderr = proc.communicate(timeout=180)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert killed is not None, "no worker was found to kill"
     return stderr
 
@@ -142,7 +138,7 @@ def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path)
     """The command line's end of it: exit code 2 and one line, no traceback."""
     out = tmp_path / "out.h5"
     proc = start_cli_job(sample_db, out, "--workers", "2", "--batch-size", "1")
-    try:
+    with reaped(proc):
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:
             for w in workers_of(proc.pid):
@@ -152,10 +148,6 @@ def test_workers_killed_again_and_again_end_the_job_cleanly(sample_db, tmp_path)
                     pass
             time.sleep(0.02)
         stdout, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == 2, stderr
     assert stderr.strip().count("\n") == 0 and "worker processes died 3 times in a row" in stderr and "Traceback" not in stderr
     assert not out.exists() and (tmp_path / ".out.h5.parts" / "plan.json").is_file()  # kept, to resume
@@ -238,7 +230,7 @@ def test_a_supervisor_reading_the_output_of_a_killed_driver_is_not_left_waiting(
     pipes close; the workers holding them must notice the zombie and exit."""
     out = tmp_path / "out.h5"
     proc = start_job(sample_db, out, workers=2, batch_pairs=1)
-    try:
+    with reaped(proc):
         deadline, seen = time.monotonic() + 120, []
         while proc.poll() is None and time.monotonic() < deadline and not seen:
             seen = workers_of(proc.pid)  # kept: a worker may finish between this look and the next
@@ -248,10 +240,6 @@ def test_a_supervisor_reading_the_output_of_a_killed_driver_is_not_left_waiting(
         t0 = time.monotonic()
         proc.communicate(timeout=30)
         assert time.monotonic() - t0 < 30
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
 
 
 @pytest.mark.slow

@@ -36,7 +36,7 @@ from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.core.rotations import quat_angle
 from torchsplice.job import JobConfig, SpliceJob, splice_all
-from writers import _digest, cli, nan_copy, splice_all_process, summary_of
+from writers import _digest, cli, nan_copy, reaped, splice_all_process, summary_of
 
 REPO = Path(__file__).resolve().parents[2]
 BANDAI = "bandai_namco_research_motiondataset"
@@ -418,7 +418,7 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     held = lambda: (MotionDatabase.checkpoint_note(work / "output.h5") or {}).get("tasks", 0)  # noqa: E731
     every_task = dict(env(), TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task, to kill between two
     proc = splice_all_process(sample_db, out, batch_pairs=2, env=every_task, cwd=REPO)
-    try:
+    with reaped(proc):
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:
             if held() >= 2:
@@ -427,12 +427,6 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
         assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read()[-2000:]
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
-        proc.stderr.close()
     assert proc.returncode == -signal.SIGKILL
     assert not out.exists()  # the output appears only once complete
     k = held()

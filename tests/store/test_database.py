@@ -20,6 +20,7 @@ from torchsplice.core.errors import DatabaseError, MotionError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.store.database import SCHEMA_VERSION, ClipBatch, MotionDatabase
+from writers import reaped
 
 # --------------------------------------------------------------------------------------------
 # synthetic clips
@@ -616,7 +617,7 @@ def _run_and_kill(tmp_path: Path, target: Path, mode: str) -> None:
     script.write_text(textwrap.dedent(WRITER))
     proc = subprocess.Popen([sys.executable, str(script), str(target), mode],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
+    with reaped(proc):
         line = proc.stdout.readline()
         assert line.strip() == "ready", proc.stderr.read() if proc.poll() is not None else line
         partial = [p for p in target.parent.iterdir() if p.name.startswith(f".{target.name}.partial")]
@@ -624,12 +625,6 @@ def _run_and_kill(tmp_path: Path, target: Path, mode: str) -> None:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
         assert proc.returncode == -signal.SIGKILL
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
-        proc.stderr.close()
 
 
 def test_killed_writer_leaves_no_file(tmp_path):

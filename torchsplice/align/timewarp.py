@@ -54,6 +54,8 @@ from typing import Callable
 import numpy as np
 import torch
 
+from ..core.priority import highest_priority
+
 __all__ = ["WarpPath", "timewarp", "cumulative_cost", "reachable_mask"]
 
 
@@ -390,10 +392,7 @@ def _implementation(backend: str, grid: torch.Tensor) -> _Implementation:
     available ones that run there, the one of highest priority (the first declared of equals;
     so the compiled DP for CPU tensors where numba is installed, else torch)."""
     if backend == "auto":
-        best = None
-        for impl in _IMPLEMENTATIONS.values():
-            if impl.runs_on(grid.device) and impl.available() and (best is None or impl.priority > best.priority):
-                best = impl
+        best = highest_priority(_IMPLEMENTATIONS.values(), grid.device)
         if best is None:
             raise ValueError(f"no implementation of the DP runs on {grid.device}")
         return best

@@ -215,6 +215,13 @@ class JobConfig:
             return self.workers
         return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
+    def uses_worker_processes(self) -> bool:
+        """Whether the ``local`` engine runs worker processes: more than one worker, and a backend
+        whose prepared clips they share (:attr:`~torchsplice.splice.backends.Backend.prepares_once`);
+        otherwise the job splices in this process. (:func:`.engines.forkserver.prestart` asks the
+        same before a config exists.)"""
+        return self.worker_count() > 1 and self.splice_backend().prepares_once
+
     def align_options(self) -> AlignOptions:
         return AlignOptions(max_run=self.max_run)
 

@@ -338,7 +338,7 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
 # ----------------------------------------------------------------------------------------- helpers
 def _shares_banks(config: JobConfig) -> bool:
     """Whether the job's local workers map the driver's banks (see :mod:`.sources`)."""
-    return config.splice_backend().prepares_once and config.engine == "local" and config.worker_count() > 1
+    return config.engine == "local" and config.uses_worker_processes()
 
 
 def _free_bytes(folder: Path) -> int | None:

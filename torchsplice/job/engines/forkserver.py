@@ -18,7 +18,9 @@ def prestart(engine: str, workers: int | None, device: str | None, backend: str 
     worker, and a backend (``backend`` as resolved on ``device``) whose prepared clips the
     workers share (:attr:`~torchsplice.splice.backends.Backend.prepares_once`, the compiled
     splicer's; another backend runs in this process). ``workers`` ``None``: one per core.
-    Quietly does nothing where it cannot: the engine starts it later, or says why it cannot."""
+    Quietly does nothing where it cannot: the engine starts it later, or says why it cannot.
+    This is :meth:`~torchsplice.job.config.JobConfig.uses_worker_processes`'s question, asked
+    from the command line's flags before the job's config exists."""
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     if engine != "local" or workers <= 1 or sys.platform == "win32":

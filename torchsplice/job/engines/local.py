@@ -36,8 +36,7 @@ wait for the driver's merge on disk, so this bounds the disk they take."""
 
 def make_local_engine(ctx: EngineContext) -> Engine:
     """The ``local`` engine: worker processes, or this process for one worker or a torch device."""
-    workers = ctx.config.worker_count()
-    if workers == 1 or not ctx.config.splice_backend().prepares_once:
+    if not ctx.config.uses_worker_processes():
         from .inline import InlineEngine
 
         return InlineEngine(ctx)

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
 
 from ...core.errors import TorchspliceError
+from ...core.priority import highest_priority
 
 if TYPE_CHECKING:
     import numpy as np
@@ -335,11 +336,7 @@ def resolve_backend(backend: str, device: str | None) -> str:
     if backend not in backend_choices():
         raise TorchspliceError(f"unknown backend {backend!r}; choose one of {', '.join(backend_choices())}")
     if backend == "auto":
-        best = None
-        for name in available_backends():
-            b = get_backend(name)
-            if b.runs_on(device) and b.available() and (best is None or b.priority > best.priority):
-                best = b
+        best = highest_priority((get_backend(name) for name in available_backends()), device)
         if best is None:
             raise TorchspliceError(f"no backend runs on device {device!r}")
         return best.name
