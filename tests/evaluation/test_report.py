@@ -88,16 +88,9 @@ def test_plot_alignment_command(sample_db, tmp_path, capsys):
 
 # -- the report -------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def sample_job(tmp_path_factory):
-    from torchsplice.sample import sample_motions as motions
-
-    d = tmp_path_factory.mktemp("job")
-    db, out = d / "s.h5", d / "spliced.h5"
-    spec = load_spec("sample")
-    with MotionDatabase.create(db) as w:
-        for m in motions():
-            w.append(m, spec=spec)
-    assert splice_all(db, out, methods="splice,naive").spliced == 50
+def sample_job(sample_db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("job") / "spliced.h5"
+    assert splice_all(sample_db, out, methods="splice,naive").spliced == 50
     return out
 
 

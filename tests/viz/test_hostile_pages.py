@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -114,19 +115,11 @@ def test_a_folder_that_cannot_be_made_is_one_line(tmp_path, sample_db, monkeypat
         assert "\n" not in err and "permission denied" in err and "clips" in err, err
 
 
-def _sample(path: Path) -> Path:
-    """The built-in sample as a database (what ``torchsplice sample`` writes)."""
-    spec = load_spec("sample")
-    with MotionDatabase.create(path) as db:
-        for m in sample_motions():
-            db.append(m, spec=spec)
-    return path
-
-
 @pytest.fixture(scope="module")
-def spliced(tmp_path_factory):
+def spliced(sample_db, tmp_path_factory):
     d = tmp_path_factory.mktemp("spliced")
-    splice_all(_sample(d / "sample.h5"), d / "sp.h5", workers=1, locomotions="walk_curve", actions="carry_box,wave")
+    shutil.copy(sample_db, d / "sample.h5")
+    splice_all(d / "sample.h5", d / "sp.h5", workers=1, locomotions="walk_curve", actions="carry_box,wave")
     (d / "notes.txt").write_text("not a database")
     return d
 
@@ -225,18 +218,19 @@ def test_read_npz_of_files_that_are_not_exports_is_one_line(tmp_path):
             read_npz(tmp_path / name)
 
 
-def _damaged_source(tmp_path: Path) -> tuple[Path, Path]:
+def _damaged_source(sample_db: Path, tmp_path: Path) -> tuple[Path, Path]:
     """A spliced output whose run record names a source database damaged since: (source, output)."""
-    db, out = _sample(tmp_path / "sample.h5"), tmp_path / "out.h5"
+    db, out = tmp_path / "sample.h5", tmp_path / "out.h5"
+    shutil.copy(sample_db, db)
     splice_all(db, out, locomotions="walk_curve", actions="carry_box", workers=1)
     db.write_bytes(b"not a database any more")
     return db, out
 
 
-def test_a_damaged_recorded_source_is_skipped_with_one_warning(tmp_path):
+def test_a_damaged_recorded_source_is_skipped_with_one_warning(sample_db, tmp_path):
     """The run record names the job's input; damaged since, it is skipped with one warning (the
     spliced clips still render and view), and only a clip that needed it is refused."""
-    db, out = _damaged_source(tmp_path)
+    db, out = _damaged_source(sample_db, tmp_path)
     with pytest.warns(UserWarning) as caught:
         clips, spec = read_clips(out, ["walk_curve+carry_box"])
     lines = [str(w.message) for w in caught]
@@ -253,11 +247,11 @@ def test_a_damaged_recorded_source_is_skipped_with_one_warning(tmp_path):
         read_clips(out, ["walk_curve+carry_box"], sources=[db])
 
 
-def test_the_warning_of_a_damaged_source_is_one_line_of_the_command(tmp_path, capsys):
+def test_the_warning_of_a_damaged_source_is_one_line_of_the_command(sample_db, tmp_path, capsys):
     """On the command line that warning is one ``torchsplice: warning:`` line naming the file."""
     from cli_helpers import run
 
-    db, out = _damaged_source(tmp_path)
+    db, out = _damaged_source(sample_db, tmp_path)
     rc, _, err = run(capsys, "render", out, "walk_curve+carry_box", "-o", tmp_path / "x.png", "-q")
     lines = err.strip().splitlines()
     assert rc == 0 and len(lines) == 1 and lines[0].startswith("torchsplice: warning:") and str(db) in lines[0], err
