@@ -326,9 +326,10 @@ def test_bad_input_gets_one_line(sample_db, sample_jobs, tmp_path, capsys):
         assert rc != 0 and str(broken) in error_line(err)
 
 
-def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path, capsys):
-    rc, out, _ = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--dry-run")
-    assert rc == 0 and "with --store alignment about" in out
+def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path):
+    summary = splice_all(sample_db, tmp_path / "x.h5", dry_run=True)
+    assert summary.alignment is not None and summary.alignment.bytes > 0
+    assert "with --store alignment about" in "\n".join(summary.lines()) and not (tmp_path / "x.h5").exists()
 
 
 def _torch_against_kernels(path, device: str = "cpu") -> float:
