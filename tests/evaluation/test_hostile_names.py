@@ -1,5 +1,8 @@
 """Hostile clip and method names (``adversary_corpus.py``): control characters never reach a
-database, a terminal or a report; Markdown and HTML in legal names stay plain text in reports."""
+database, a terminal or a report; Markdown and HTML in legal names stay plain text in reports.
+Through the Python API (:func:`import_bvh`, :func:`splice_all`, :func:`evaluate_database`,
+:func:`export_clips`); the command line where what reaches the terminal is the subject, and for
+``info --csv``, a table only the command writes."""
 
 from __future__ import annotations
 
@@ -7,11 +10,15 @@ import re
 import warnings
 from dataclasses import replace
 
+import shutil
+
 import h5py
 import pytest
 
 from adversary_corpus import CONTROL_NAMES, MARKUP_NAMES
+from torchsplice import export_clips, import_bvh, splice_all
 from torchsplice.cli import main
+from torchsplice.evaluation.report import evaluate_database
 from torchsplice.core.errors import DatabaseError, TorchspliceError
 from torchsplice.core.names import control_character, printable
 from torchsplice.formats.bvh import write_bvh
@@ -32,13 +39,30 @@ def test_printable_escapes_every_control_character_and_keeps_the_rest():
     assert printable("x" * 50, limit=10) == "xxxxxxx..."
 
 
-def test_import_skips_files_named_with_control_characters_in_one_clean_line_each(tmp_path, capsys):
+def _control_named_files(tmp_path):
+    """A folder of BVH files: ``good.bvh`` and one named after each of :data:`CONTROL_NAMES`."""
     folder = tmp_path / "bvh"
     folder.mkdir()
     walk = sample_motions()[0]
     write_bvh(walk, folder / "good.bvh")
     for name in CONTROL_NAMES:
         write_bvh(walk, folder / f"{name}.bvh")
+    return folder
+
+
+def test_import_skips_files_named_with_control_characters_saying_why(tmp_path):
+    report = import_bvh([_control_named_files(tmp_path)], tmp_path / "db.h5", spec="sample")
+    assert len(report.skipped) == len(CONTROL_NAMES) and len(report.imported) == 1
+    reasons = [why for _, why in report.skipped]
+    assert not any(RAW_CONTROL.search(why) or "\n" in why for why in reasons), reasons
+    for code in set(CONTROL_NAMES.values()):
+        assert any(f"contains control character {code}; rename the file" in why for why in reasons), code
+    with MotionDatabase.open(tmp_path / "db.h5") as db:
+        assert db.names == ["good"]
+
+
+def test_import_skips_files_named_with_control_characters_in_one_clean_line_each(tmp_path, capsys):
+    folder = _control_named_files(tmp_path)
     rc = main(["import", str(folder), "-o", str(tmp_path / "db.h5"), "--spec", "sample"])
     cap = capsys.readouterr()
     assert rc == 1
@@ -68,10 +92,10 @@ def test_every_database_writer_refuses_a_name_with_a_control_character(tmp_path,
         assert len(db) == 1
 
 
-def test_a_database_holding_a_control_name_is_refused_on_open_in_one_line(tmp_path, capsys):
+def test_a_database_holding_a_control_name_is_refused_on_open_in_one_line(sample_db, tmp_path, capsys):
     """A file written by another tool: opening it names the clip (escaped) and the character."""
     db = tmp_path / "forged.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
+    shutil.copy(sample_db, db)
     with h5py.File(db, "r+") as f:
         f["clips/name"][0] = "forged\x1b]0;owned\x07\nwrote everything"
     with pytest.raises(DatabaseError, match=r"row 0\) contains control character U\+001B"):
@@ -108,13 +132,13 @@ def markup_job(tmp_path_factory):
         for k, m in enumerate(clips):
             name = MARKUP_NAMES[k % len(MARKUP_NAMES)] + ("" if k < len(MARKUP_NAMES) else f" {k}")
             w.append(replace(m, name=name), spec=spec)
-    assert main(["splice-all", str(db), "-o", str(out), "--method", "splice,naive", "-q"]) == 0
+    splice_all(db, out, methods="splice,naive")
     return out
 
 
-def test_markup_in_names_stays_plain_text_in_the_report(markup_job, tmp_path, capsys):
+def test_markup_in_names_stays_plain_text_in_the_report(markup_job, tmp_path):
     report = tmp_path / "r.md"
-    assert main(["evaluate", str(markup_job), "-o", str(report), "--no-pictures"]) == 0
+    evaluate_database(markup_job, report, pictures=False)
     text = report.read_text()
     for raw in ("<img", "<svg", "<!--", " [link](", "`code`", "**bold**"):
         assert raw not in text, raw
@@ -143,10 +167,10 @@ def test_a_name_that_starts_like_a_formula_is_text_in_every_csv(tmp_path, capsys
     with MotionDatabase.create(db) as w:
         for k, m in enumerate(sample_motions()):
             w.append(replace(m, name=FORMULAS[k] if k < len(FORMULAS) else m.name), spec=spec)
-    assert main(["splice-all", str(db), "-o", str(out), "--method", "naive", "-q"]) == 0
-    assert main(["info", str(out), "--csv", str(tmp_path / "info.csv")]) == 0
-    assert main(["evaluate", str(out), "-o", str(tmp_path / "r.md"), "--no-pictures", "--csv", str(tmp_path / "ev.csv")]) == 0
-    assert main(["export", str(out), "--all", "--format", "humanml3d", "-o", str(tmp_path / "h3d"), "-q"]) == 0
+    splice_all(db, out, methods="naive")
+    assert main(["info", str(out), "--csv", str(tmp_path / "info.csv")]) == 0  # a table only the command writes
+    evaluate_database(out, tmp_path / "r.md", pictures=False, csv=tmp_path / "ev.csv")
+    export_clips(out, out=tmp_path / "h3d", format="humanml3d")
     capsys.readouterr()
     files = [out.with_name("out.h5.index.csv"), tmp_path / "info.csv", tmp_path / "ev.csv", tmp_path / "h3d" / "index.csv"]
     def formula(c):  # what a spreadsheet would evaluate: a formula start that is not a number
@@ -175,7 +199,7 @@ def test_report_escaping_known_answers():
     assert md("_em_") == "\\_em\\_" and md("a\x1bb") == "a\\\\x1bb"
 
 
-def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tmp_path, capsys):
+def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tmp_path):
     from adversary_corpus import FILE_NAMES
     from torchsplice.formats.bvh import read_bvh
 
@@ -185,7 +209,7 @@ def test_exported_file_names_are_safe_everywhere_and_unique_whatever_the_case(tm
     with MotionDatabase.create(db) as w:  # clip k is sample clip k % 10, so each file can be told apart
         for k, name in enumerate(FILE_NAMES):
             w.append(replace(clips[k % len(clips)], name=name), spec=spec)
-    assert main(["export", str(db), "--all", "-o", str(tmp_path / "bvh"), "-q"]) == 0
+    export_clips(db, out=tmp_path / "bvh")
     files = sorted(p.name for p in (tmp_path / "bvh").glob("*.bvh"))  # and the index beside them
     assert len(files) == len(FILE_NAMES) and len({f.casefold() for f in files}) == len(files)
     for f in files:

@@ -1,4 +1,6 @@
-"""Alignment pictures, the spec's ground-truth rule, and the evaluation report."""
+"""Alignment pictures, the spec's ground-truth rule, and the evaluation report: through the Python
+API (:func:`evaluate_database`, :func:`splice_all`, :func:`import_bvh`); the command line where
+its words, its exit codes or a table only it writes (``info --csv``) are the subject."""
 
 import shutil
 
@@ -6,8 +8,10 @@ import numpy as np
 import pytest
 import torch
 
+from torchsplice import import_bvh, splice_all
 from torchsplice.cli import main
 from torchsplice.core.errors import SpecError, TorchspliceError
+from torchsplice.evaluation.report import evaluate_database
 from torchsplice.sample import sample_motions
 from torchsplice.specs import DatasetSpec, load_spec
 from torchsplice.viz.alignment import alignment_data, plot_alignment
@@ -73,9 +77,8 @@ def test_plot_alignment_writes_a_picture(sample, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]
 
 
-def test_plot_alignment_command(tmp_path, capsys):
-    db = tmp_path / "s.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
+def test_plot_alignment_command(sample_db, tmp_path, capsys):
+    db = sample_db
     out = tmp_path / "a.png"
     assert main(["plot-alignment", str(db), "--locomotion", "walk_curve", "--action", "carry_box", "-o", str(out), "-q"]) == 0
     assert out.stat().st_size > 10_000
@@ -85,22 +88,15 @@ def test_plot_alignment_command(tmp_path, capsys):
 
 # -- the report -------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def sample_job(tmp_path_factory):
-    d = tmp_path_factory.mktemp("job")
-    db, out = d / "s.h5", d / "spliced.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
-    assert main(["splice-all", str(db), "-o", str(out), "--method", "splice,naive", "-q"]) == 0
+def sample_job(sample_db, tmp_path_factory):
+    out = tmp_path_factory.mktemp("job") / "spliced.h5"
+    assert splice_all(sample_db, out, methods="splice,naive").spliced == 50
     return out
 
 
-def test_report_on_the_sample_ranks_splice_above_naive(sample_job, tmp_path, capsys):
+def test_report_on_the_sample_ranks_splice_above_naive(sample_job, tmp_path):
     report = tmp_path / "report.md"
-    assert main(["evaluate", str(sample_job), "-o", str(report), "--no-pictures"]) == 0
-    out = capsys.readouterr().out
-    assert "splice: 25 clips" in out and "naive: 25 clips" in out
-    from torchsplice.evaluation.report import evaluate_database
-
-    agg = evaluate_database(sample_job, tmp_path / "r2.md", pictures=False)
+    agg = evaluate_database(sample_job, report, pictures=False)
     assert agg["splice"]["clips"] == agg["naive"]["clips"] == 25
     # the splice keeps the action's posture and the arm-leg coordination; naive copying does not
     assert agg["splice"]["posture"] < 0.5 * agg["naive"]["posture"]
@@ -126,13 +122,12 @@ def test_figures_that_are_not_finite_print_as_a_dash(sample_job, tmp_path, capsy
     rc = main(["evaluate", str(huge), "-o", str(tmp_path / "r.md"), "--no-pictures"])
     cap = capsys.readouterr()
     assert rc == 0 and "Traceback" not in cap.err, cap.err
-    assert "foot skate - " in cap.out and "splice: 25 clips" in cap.out
+    assert "foot skate - " in cap.out and "splice: 25 clips" in cap.out and "naive: 25 clips" in cap.out
 
 
-def test_report_needs_a_spliced_database(tmp_path):
-    db = tmp_path / "s.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
-    assert main(["evaluate", str(db), "-o", str(tmp_path / "r.md")]) == 2
+def test_report_needs_a_spliced_database(sample_db, tmp_path):
+    with pytest.raises(TorchspliceError, match="not written by the splice job"):
+        evaluate_database(sample_db, tmp_path / "r.md")
     assert not (tmp_path / "r.md").exists()
 
 
@@ -146,11 +141,8 @@ def test_report_with_ground_truth_on_real_clips(mocap_dir, tmp_path):
     for n in names:
         shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", src)
     db, out, report = tmp_path / "b.h5", tmp_path / "o.h5", tmp_path / "r.md"
-    assert main(["import", str(src), "--spec", "bandai_namco", "-o", str(db), "-q"]) == 0
-    assert main(["splice-all", str(db), "-o", str(out), "-q", "--method", "splice,naive",
-                 "--locomotions", "label:style=normal", "--actions", "label:content=walk"]) == 0
-    from torchsplice.evaluation.report import evaluate_database
-
+    assert len(import_bvh([src], db, spec="bandai_namco").imported) == len(names)
+    splice_all(db, out, methods="splice,naive", locomotions="label:style=normal", actions="label:content=walk")
     agg = evaluate_database(out, report, pictures=False)
     assert agg["splice"]["gt_pairs"] == agg["naive"]["gt_pairs"] == 4  # 2 turns x 2 styles
     assert agg["splice"]["gt_error"] < agg["naive"]["gt_error"]
@@ -218,10 +210,10 @@ def test_8_evaluate_writes_every_row_for_scripts_and_says_where_its_tables_stop(
     import json
 
     spliced = tmp_path / "sp.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
-    rc, out, _ = run(capsys, "evaluate", spliced, "-o", tmp_path / "r.md", "--no-pictures", "--max-rows", "4",
-                     "--csv", tmp_path / "r.csv", "--json", tmp_path / "r.json")
-    assert rc == 0 and "r.csv" in out and "r.json" in out
+    splice_all(sample_db, spliced)
+    agg = evaluate_database(spliced, tmp_path / "r.md", pictures=False, max_rows=4, csv=tmp_path / "r.csv",
+                            json=tmp_path / "r.json")
+    assert set(agg) == {"splice"} and agg["splice"]["clips"] == 25
     rows = list(csv.DictReader(open(tmp_path / "r.csv")))
     doc = json.loads((tmp_path / "r.json").read_text())
     with MotionDatabase.open(spliced) as d:
@@ -230,6 +222,10 @@ def test_8_evaluate_writes_every_row_for_scripts_and_says_where_its_tables_stop(
     assert set(doc["aggregates"]) == {"splice"} and doc["aggregates"]["splice"]["clips"] == 25
     assert float(rows[0]["foot_skate"]) == pytest.approx(doc["clips"][0]["foot_skate"])
     assert "21 more (the table stops at 4 rows; every row: evaluate's csv or json)" in (tmp_path / "r.md").read_text()
+    # the command's words: where it wrote its tables, and a table file of the wrong kind refused up front
+    rc, out, _ = run(capsys, "evaluate", spliced, "-o", tmp_path / "t.md", "--no-pictures", "--csv", tmp_path / "t.csv",
+                     "--json", tmp_path / "t.json")
+    assert rc == 0 and out.splitlines()[-1] == f"wrote {tmp_path / 't.md'}, {tmp_path / 't.csv'}, {tmp_path / 't.json'}"
     rc, _, err = run(capsys, "evaluate", spliced, "-o", tmp_path / "s.md", "--csv", tmp_path / "r.txt")
     assert rc == 2 and "must end in .csv" in error_line(err) and not (tmp_path / "s.md").exists()
 
@@ -238,7 +234,7 @@ def test_per_clip_metrics_as_csv_for_any_database(sample_db, tmp_path, capsys):
     import csv
 
     spliced = tmp_path / "sp.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q", "--method", "splice,naive"]) == 0
+    splice_all(sample_db, spliced, methods="splice,naive")
     rc, _, _ = run(capsys, "info", spliced, "method:naive", "--csv", tmp_path / "naive.csv", "--limit", "0")
     rows = list(csv.DictReader(open(tmp_path / "naive.csv")))
     assert rc == 0 and len(rows) == 25 and all(r["method"] == "naive" for r in rows)

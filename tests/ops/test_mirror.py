@@ -132,14 +132,13 @@ def test_labels_swap_left_and_right_as_words_and_parts_of_words():
     assert mirror_text(mirror_text("walk-turn-left counterclockwise")) == "walk-turn-left counterclockwise"
 
 
-def test_mirror_command_writes_originals_and_mirrors_with_columns_and_splits_together(sample_db, tmp_path, capsys):
-    from torchsplice.cli import main
+def test_mirror_clips_writes_originals_and_mirrors_with_columns_and_splits_together(sample_db, tmp_path, capsys):
+    from torchsplice import export_clips, splice_all
 
     spliced = tmp_path / "sp.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q", "--workers", "1"]) == 0
+    splice_all(sample_db, spliced, workers=1)
     out = tmp_path / "m.h5"
-    rc, text, err = run(capsys, "mirror", spliced, "role:spliced", "-o", out)
-    assert rc == 0, err
+    text = mirror_clips(spliced, select="role:spliced", out=out).summary()
     with MotionDatabase.open(spliced) as d:
         src = d.clip_table()
         names = [n for n, r in zip(src.names, src.role) if r == "spliced"]
@@ -152,11 +151,15 @@ def test_mirror_command_writes_originals_and_mirrors_with_columns_and_splits_tog
         m, mm = d.read(names[0]), d.read(names[0] + ".mirror")
     assert torch.allclose(points(mm), reflected_partners(m), atol=1e-3)  # float32 storage
     assert f"{2 * len(names)} clips" in text and f"{len(names)} of them mirror images" in text
-    assert run(capsys, "export", out, "--all", "-o", tmp_path / "bvh")[0] == 0
+    export_clips(out, out=tmp_path / "bvh")
     split = {r["clip"]: r["split"] for r in csv.DictReader(open(tmp_path / "bvh" / "index.csv"))}
     assert all(split[n + ".mirror"] == split[n] for n in names) and set(split.values()) - {""}
-    rc, _, err = run(capsys, "mirror", out, "--all", "-o", tmp_path / "again.h5")
-    assert rc != 0 and ".mirror.mirror' exists" not in err and "exists already" in error_line(err)
+    with pytest.raises(TorchspliceError, match="exists already") as exc:
+        mirror_clips(out, out=tmp_path / "again.h5")
+    assert ".mirror.mirror' exists" not in str(exc.value) and "\n" not in str(exc.value)
+    assert not (tmp_path / "again.h5").exists()
+    rc, _, err = run(capsys, "mirror", out, "--all", "-o", tmp_path / "again.h5")  # the command: one line, exit 2
+    assert rc == 2 and ".mirror.mirror' exists" not in err and "exists already" in error_line(err)
     assert not (tmp_path / "again.h5").exists()
 
 

@@ -1,6 +1,7 @@
 """Units under attack: clips of one dataset in metres and in centimetres in one database (they
 are two skeletons, whose pairs are not spliced), on every shipped dataset, and a metre BVH read
-back as centimetres (a warning that the skeleton is not a human's size)."""
+back as centimetres (a warning that the skeleton is not a human's size). Through the Python API
+(:func:`import_bvh`, :func:`splice_all`, :func:`export_clips`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import json
 
 import pytest
 
-from torchsplice.cli import main
+from torchsplice import export_clips, import_bvh, splice_all
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.store.database import MotionDatabase
 from torchsplice.ops.units import convert_units, implausible_size
@@ -46,26 +47,24 @@ def test_bandai_sessions_of_one_unit_still_share_their_skeletons(mocap_dir):
     assert a._same_scale(c)
 
 
-def test_clips_appended_in_other_units_are_not_spliced_with_the_others(mocap_dir, tmp_path, capsys):
-    files = [str(mocap_dir / BANDAI / f"dataset-2_{n}.bvh") for n in
+def test_clips_appended_in_other_units_are_not_spliced_with_the_others(mocap_dir, tmp_path):
+    files = [mocap_dir / BANDAI / f"dataset-2_{n}.bvh" for n in
              ("walk_normal_008", "walk-turn-left_normal_025", "walk_active_032", "walk-turn-left_elderly_003")]
     db = tmp_path / "mix.h5"
-    assert main(["import", *files[:2], "-o", str(db), "--units", "m", "-q"]) == 0
-    assert main(["import", *files[2:], "-o", str(db), "--append", "-q"]) == 0
+    assert not import_bvh(files[:2], db, units="m").skipped
+    assert not import_bvh(files[2:], db, append=True).skipped
     with MotionDatabase.open(db) as d:
         assert len(d.skeletons) == 2
         units = {json.loads(d.spec_json(k))["dataset"]["units"] for k in range(len(d.skeletons))}
     assert units == {"m", "cm"}
-    capsys.readouterr()
-    assert main(["splice-all", str(db), "-o", str(tmp_path / "out.h5"), "--locomotions", "*", "--actions", "*",
-                 "--no-retarget"]) == 0
-    text = capsys.readouterr().out
+    summary = splice_all(db, tmp_path / "out.h5", locomotions="*", actions="*", retarget=False)
+    text = "\n".join(summary.lines())
     assert "units differ" in text, text
     with MotionDatabase.open(tmp_path / "out.h5") as out:
         assert len(out) == 4  # m onto m, cm onto cm: 2 + 2
     # retargeting (the default) brings each action onto the other units' skeleton: every pair is formed
-    assert main(["splice-all", str(db), "-o", str(tmp_path / "all.h5"), "--locomotions", "*", "--actions", "*"]) == 0
-    text = capsys.readouterr().out
+    summary = splice_all(db, tmp_path / "all.h5", locomotions="*", actions="*")
+    text = "\n".join(summary.lines())
     assert "units differ" not in text and "8 had the action retargeted" in text, text
     with MotionDatabase.open(tmp_path / "all.h5") as out:
         assert len(out) == 12
@@ -76,15 +75,15 @@ def test_clips_appended_in_other_units_are_not_spliced_with_the_others(mocap_dir
             assert 1.2 < size * (100 if unit == "m" else 1) / 100 < 2.2, (name, size, unit)
 
 
-def test_a_metre_file_read_back_as_centimetres_is_warned_about(mocap_dir, tmp_path, capsys):
+def test_a_metre_file_read_back_as_centimetres_is_warned_about(mocap_dir, tmp_path):
     db = tmp_path / "m.h5"
     src = mocap_dir / BANDAI / "dataset-2_walk_normal_008.bvh"
-    assert main(["import", str(src), "-o", str(db), "--units", "m", "-q"]) == 0
+    import_bvh([src], db, units="m")
     bvh = tmp_path / "bvh" / "dataset-2_walk_normal_008.bvh"
     bvh.parent.mkdir()
-    assert main(["export", str(db), "dataset-2_walk_normal_008", "-o", str(bvh), "-q"]) == 0
-    capsys.readouterr()
-    assert main(["import", str(bvh), "-o", str(tmp_path / "again.h5")]) == 0
-    err = capsys.readouterr().err
+    export_clips(db, ["dataset-2_walk_normal_008"], out=bvh)
+    report = import_bvh([bvh], tmp_path / "again.h5")
+    assert not report.skipped and len(report.imported) == 1
+    err = "\n".join(why for _, why in report.warnings)
     size = f"{read_bvh(src).skeleton.size() / 100:.3g} cm"  # the metre figure, read as centimetres
     assert "not a human's size" in err and f"measures {size} across" in err and err.count("not a human") == 1, err

@@ -3,7 +3,8 @@
 Known answers: a CMU clip (spec units ``cmu``, 1/0.45 inch) converted to centimetres has legs
 2.54 / 0.45 times as long, forward-kinematics positions scaled by exactly that factor,
 rotations untouched; round trips through inches return the original to 1e-9; and CMU plus
-Bandai Namco imported with ``--units cm`` share one centimetre database.
+Bandai Namco imported with ``units="cm"`` (``import --units cm``) share one centimetre database.
+The imports go through :func:`import_bvh`; the command line keeps its one-line refusal.
 """
 
 from __future__ import annotations
@@ -13,8 +14,10 @@ import json
 import pytest
 import torch
 
+from torchsplice import import_bvh
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.bvh import read_bvh
+from torchsplice.formats.importer import NothingImportedError
 from torchsplice.store.database import MotionDatabase
 from torchsplice.specs import UNITS, detect_spec, load_spec
 from torchsplice.ops.units import convert_units, scale_motion, unit_factor
@@ -100,15 +103,20 @@ def test_same_units_are_returned_unchanged(cmu_walk):
         convert_units(m, load_spec("generic"), "cm")
 
 
-def test_import_units_cm_puts_cmu_and_bandai_namco_in_one_centimetre_database(mocap_dir, tmp_path, capsys):
+def test_import_units_cm_puts_cmu_and_bandai_namco_in_one_centimetre_database(mocap_dir, tmp_path):
     cmu = mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"
     bandai = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("dataset-2_walk_*.bvh"))[:2]
     out = tmp_path / "mixed.h5"
-    rc, _, err = run(capsys, "import", cmu, *bandai, "-o", out, "--units", "cm", "-q")
-    assert rc == 0, err
+    report = import_bvh([cmu, *bandai], out, units="cm")
+    assert not report.skipped and len(report.imported) == 3
     plain = tmp_path / "plain.h5"
-    assert run(capsys, "import", cmu, "-o", plain, "-q")[0] == 0
-    info = json.loads(run(capsys, "info", out, "--json")[1])
+    assert not import_bvh([cmu], plain).skipped
+
+    def summary(path) -> dict:  # what ``info --json`` prints
+        with MotionDatabase.open(path) as db:
+            return db.summary()
+
+    info = summary(out)
     assert info["units"] == "cm" and {k["units"] for k in info["skeletons"]} == {"cm"}
     assert {k["spec"] for k in info["skeletons"]} == {"cmu", "bandai_namco"}
     with MotionDatabase.open(out) as db, MotionDatabase.open(plain) as ref:
@@ -119,20 +127,29 @@ def test_import_units_cm_puts_cmu_and_bandai_namco_in_one_centimetre_database(mo
         # the Bandai Namco clips were already in centimetres: stored as read
         m = read_bvh(bandai[0])
         assert torch.equal(db.read(bandai[0].stem).root_translation, m.root_translation)
-    # appending in another unit converts to it too; without --units the file's units are mixed
-    rc, _, err = run(capsys, "import", "--append", cmu.parent / "131_01.bvh", "-o", out, "--units", "cm", "-q")
-    assert rc == 0, err
-    assert json.loads(run(capsys, "info", out, "--json")[1])["units"] == "cm"
-    rc, _, err = run(capsys, "import", "--append", cmu.parent / "131_02.bvh", "-o", out, "-q")
-    assert rc == 0, err
-    assert json.loads(run(capsys, "info", out, "--json")[1])["units"] == "mixed"
+    # appending in another unit converts to it too; without units the file's units are mixed
+    assert not import_bvh([cmu.parent / "131_01.bvh"], out, append=True, units="cm").skipped
+    assert summary(out)["units"] == "cm"
+    assert not import_bvh([cmu.parent / "131_02.bvh"], out, append=True).skipped
+    assert summary(out)["units"] == "mixed"
 
 
-def test_import_units_refuses_unknown_units_per_file(mocap_dir, tmp_path, capsys):
+def test_import_units_refuses_unknown_units_per_file(mocap_dir, tmp_path):
+    f = mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"
+    with pytest.raises(NothingImportedError) as exc:
+        import_bvh([f], tmp_path / "g.h5", spec="generic", units="cm")
+    assert [why for _, why in exc.value.report.skipped if "units are unknown" in why], exc.value.report.skipped
+    assert not (tmp_path / "g.h5").exists()
+    with pytest.raises(TorchspliceError, match="unknown length unit 'furlong'") as exc:
+        import_bvh([f], tmp_path / "g.h5", units="furlong")
+    assert "\n" not in str(exc.value)
+    assert not (tmp_path / "g.h5").exists()
+
+
+def test_the_import_command_refuses_unknown_units_in_one_line(mocap_dir, tmp_path, capsys):
     f = mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"
     rc, _, err = run(capsys, "import", f, "-o", tmp_path / "g.h5", "--spec", "generic", "--units", "cm", "-q")
     assert rc == 2 and "units are unknown" in err and "Traceback" not in err
-    assert not (tmp_path / "g.h5").exists()
     rc, _, err = run(capsys, "import", f, "-o", tmp_path / "g.h5", "--units", "furlong")
     assert rc == 2 and "unknown length unit 'furlong'" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "g.h5").exists()

@@ -16,7 +16,8 @@ import torch
 
 from cli_helpers import error_line, run
 from torchsplice.core.errors import DatabaseError, TorchspliceError
-from torchsplice.job import splice_all
+from torchsplice.job import merge_job, splice_all
+from torchsplice.job.materialize import materialize
 from torchsplice.store.database import MotionDatabase
 
 READ = ("rotations", "root_translation", "translations")
@@ -137,25 +138,24 @@ def test_a_resumed_alignment_store_is_bit_identical(sample_db, sample_jobs, tmp_
             assert np.array_equal(f[f"clips/{col}"][()], g[f"clips/{col}"][()]), col
 
 
-def test_shards_merge_into_the_same_alignment_store(sample_db, sample_jobs, tmp_path, capsys):
+def test_shards_merge_into_the_same_alignment_store(sample_db, sample_jobs, tmp_path):
     out = tmp_path / "sliced.h5"
     for k in (1, 2, 3):
-        rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--store", "alignment", "--method", "splice,naive,cpmc",
-                         "--batch-size", "9", "--shard", f"{k}/3", "-q")
-        assert rc == 0, err
+        splice_all(sample_db, out, store="alignment", methods="splice,naive,cpmc", batch_pairs=9, shard=f"{k}/3")
+    assert not out.exists()  # slices write no output
     shards = sorted((tmp_path / ".sliced.h5.parts").glob("part-*.shard"))
     assert len(shards) == 9  # a task's parts, not its frames
     broken = shards[4].read_bytes()
     shards[4].write_bytes(broken[:-7])  # a shard cut short: one line naming it
-    rc, _, err = run(capsys, "merge", out)
-    assert rc != 0 and str(shards[4]) in error_line(err) and "not a whole part" in err
+    with pytest.raises(TorchspliceError, match="not a whole part") as exc:
+        merge_job(out, progress=False)
+    assert str(shards[4]) in str(exc.value) and "\n" not in str(exc.value)
     shards[4].write_bytes(broken)
-    rc, _, err = run(capsys, "merge", out, "-q")
-    assert rc == 0, err
+    merge_job(out, progress=False)
     assert_reads_alike(out, sample_jobs[0])
 
 
-def test_a_virtual_alignment_store_reads_its_shards_parts_as_the_motion_store(sample_db, sample_jobs, tmp_path, capsys):
+def test_a_virtual_alignment_store_reads_its_shards_parts_as_the_motion_store(sample_db, sample_jobs, tmp_path):
     """``--layout virtual --store alignment``: the table and banks in the output, each task's
     per-frame parts in its shard under OUT.shards/, read through virtual datasets; whole
     runs, a --shard run merged, and the output moved with its shards read the same bits."""
@@ -172,11 +172,9 @@ def test_a_virtual_alignment_store_reads_its_shards_parts_as_the_motion_store(sa
     assert_reads_alike(moved / out.name, sample_jobs[0])
     sliced = tmp_path / "sliced.h5"
     for k in (1, 2):
-        rc, _, err = run(capsys, "splice-all", sample_db, "-o", sliced, "--store", "alignment", "--layout", "virtual",
-                         "--method", "splice,naive,cpmc", "--batch-size", "9", "--shard", f"{k}/2", "-q")
-        assert rc == 0, err
-    rc, _, err = run(capsys, "merge", sliced, "-q")
-    assert rc == 0, err
+        splice_all(sample_db, sliced, store="alignment", layout="virtual", methods="splice,naive,cpmc", batch_pairs=9,
+                   shard=f"{k}/2")
+    merge_job(sliced, progress=False)
     assert_reads_alike(sliced, sample_jobs[0])
 
 
@@ -266,8 +264,9 @@ def test_a_dataset_assembles_its_batches_on_the_device(sample_jobs, device):
 def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
     motion, alignment = sample_jobs
     out = tmp_path / "materialized.h5"
-    rc, stdout, _ = run(capsys, "materialize", alignment, "-o", out, "-q")
-    assert rc == 0 and out.is_file() and (tmp_path / "materialized.h5.index.csv").is_file()
+    with MotionDatabase.open(motion) as m:
+        assert materialize(alignment, out) == len(m)
+    assert out.is_file() and (tmp_path / "materialized.h5.index.csv").is_file()
     with MotionDatabase.open(out) as db:
         assert db.store == "motion" and "assembly_curve" not in db.h5["skeletons/0"]
     for x, y in ((out, motion),):
@@ -275,17 +274,24 @@ def test_materialize_writes_the_motion_store(sample_jobs, tmp_path, capsys):
             assert a.names == m.names
             for k in READ[:2]:
                 assert _bits(a.packed(0)[k]) == _bits(m.packed(0)[k])
+    with pytest.raises(TorchspliceError, match="is a motion store already") as exc:
+        materialize(motion, tmp_path / "again.h5")
+    assert "\n" not in str(exc.value) and not (tmp_path / "again.h5").exists()
+    # the command says the library's refusal in one line, its option as the flag
     rc, _, err = run(capsys, "materialize", motion, "-o", tmp_path / "again.h5")
-    assert rc != 0 and "is a motion store already" in error_line(err)
+    assert rc != 0 and "is a motion store already" in error_line(err) and "--store alignment" in err
 
 
-def test_render_and_view_draw_an_alignment_store_as_the_motion_store(sample_jobs, tmp_path, capsys):
+def test_render_and_view_draw_an_alignment_store_as_the_motion_store(sample_jobs, tmp_path):
+    from torchsplice.viz.render import render
+    from torchsplice.viz.sources import read_clips
+    from torchsplice.viz.viewer import write_viewer
+
     motion, alignment = sample_jobs
     for store, path in (("m", motion), ("a", alignment)):
-        rc, _, err = run(capsys, "render", path, "jog+carry_box", "-o", tmp_path / f"{store}.png", "-q")
-        assert rc == 0, err
-        rc, _, err = run(capsys, "view", path, "jog+carry_box", "jog+wave", "-o", tmp_path / f"{store}.html", "-q")
-        assert rc == 0, err
+        clips, spec = read_clips(path, ["jog+carry_box"])
+        render(clips, tmp_path / f"{store}.png", titles=[c.name for c in clips], up_axis=spec.up_axis)
+        write_viewer(path, tmp_path / f"{store}.html", clips=["jog+carry_box", "jog+wave"], quiet=True)
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "m.png").read_bytes()
     page = (tmp_path / "a.html").read_text().replace(str(alignment), str(motion)).replace(alignment.name, motion.name)
     assert page == (tmp_path / "m.html").read_text()
@@ -320,9 +326,10 @@ def test_bad_input_gets_one_line(sample_db, sample_jobs, tmp_path, capsys):
         assert rc != 0 and str(broken) in error_line(err)
 
 
-def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path, capsys):
-    rc, out, _ = run(capsys, "splice-all", sample_db, "-o", tmp_path / "x.h5", "--dry-run")
-    assert rc == 0 and "with --store alignment about" in out
+def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path):
+    summary = splice_all(sample_db, tmp_path / "x.h5", dry_run=True)
+    assert summary.alignment is not None and summary.alignment.bytes > 0
+    assert "with --store alignment about" in "\n".join(summary.lines()) and not (tmp_path / "x.h5").exists()
 
 
 def _torch_against_kernels(path, device: str = "cpu") -> float:

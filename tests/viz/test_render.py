@@ -363,6 +363,8 @@ def test_bad_arguments(tmp_path, clips):
         render([clips["walk"]], tmp_path / "x.png", up_axis=3)
     with pytest.raises(TorchspliceError, match="does not exist"):
         render([clips["walk"]], tmp_path / "missing" / "x.png")
+    with pytest.raises(TorchspliceError, match="elevation from -90 to 90"):  # the command's --elevation 95 too
+        render([clips["walk"]], tmp_path / "x.png", elevation=95)
     assert list(tmp_path.iterdir()) == []
 
 

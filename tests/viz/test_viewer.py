@@ -1,7 +1,9 @@
 """The browser viewer (``torchsplice view``): compact positions that decode to the clips, the
 clips a page holds (sources and other methods of spliced clips, the --max-clips bound, the
 run record's inputs or --sources), a self-contained page, render --sources, and the page in a
-real browser (headless chromium through selenium: marker ``browser``)."""
+real browser (headless chromium through selenium: marker ``browser``). Through the Python API
+(:func:`build_viewer`, :func:`write_viewer`, :func:`read_clips`, :func:`splice_all`); the command
+line where its words (flags in its notes) and its one-line refusals are the subject."""
 
 from __future__ import annotations
 
@@ -12,30 +14,28 @@ import os
 import re
 import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from cli_helpers import run
 from realdata import REPO
 from tests.viz.test_render import axes_cycled, ten_seconds
 
-from torchsplice.cli import main
-from torchsplice.core.errors import TorchspliceError
+from torchsplice import splice_all
+from torchsplice.core.errors import DatabaseError, TorchspliceError
 from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motion
 from torchsplice.specs import load_spec
-from torchsplice.viz.viewer import build_viewer, clip_payload, dequantize, quantize, write_viewer
+from torchsplice.viz.render import render
+from torchsplice.viz.sources import read_clips
+from torchsplice.viz.viewer import build_viewer, clip_payload, dequantize, quantize, viewer_notes, write_viewer
 
 LOCOS = ["walk_straight", "walk_curve"]
 ACTIONS = ["carry_box", "wave"]
 METHODS = ["splice", "naive", "cpmc"]
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def page_data(html: str) -> dict:
@@ -49,14 +49,12 @@ def decoded(c: dict) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def job(tmp_path_factory):
-    """A sample database and a 2 x 2 job with three methods (12 spliced clips), sources not copied."""
-    d = tmp_path_factory.mktemp("view")
-    src, out = d / "sample.h5", d / "spliced.h5"
-    assert main(["sample", "-o", str(src), "-q"]) == 0
-    assert main(["splice-all", str(src), "-o", str(out), "--locomotions", ",".join(LOCOS), "--actions", ",".join(ACTIONS),
-                 "--method", ",".join(METHODS), "-q"]) == 0
-    return src, out
+def job(sample_db, tmp_path_factory):
+    """The sample database and a 2 x 2 job with three methods (12 spliced clips), sources not copied."""
+    out = tmp_path_factory.mktemp("view") / "spliced.h5"
+    assert splice_all(sample_db, out, locomotions=",".join(LOCOS), actions=",".join(ACTIONS),
+                      methods=",".join(METHODS)).spliced == 12
+    return sample_db, out
 
 
 # -- compact positions ---------------------------------------------------------------------------
@@ -139,42 +137,63 @@ def test_named_clips_bring_their_group_and_the_bound_cuts(job, tmp_path, capsys)
     assert got.names == ["walk_curve+wave.naive", "walk_curve", "wave", "walk_curve+wave", "walk_curve+wave.cpmc"]
     _, got = build_viewer(out, max_clips=5)
     assert len(got.names) == 5 and got.cut
+    got = write_viewer(out, tmp_path / "v.html", max_clips=4)
+    err = capsys.readouterr().err
+    assert len(got.names) == 4 and got.cut and len(page_data((tmp_path / "v.html").read_text())["clips"]) == 4
+    assert "max_clips 4" in err and "of the 12" in err and err == "".join(ln + "\n" for ln in viewer_notes(got, out, 4))
+    with pytest.raises(TorchspliceError, match="no clip named 'nope'"):
+        build_viewer(out, clips=["nope"])
+
+
+def test_the_view_command_says_its_notes_with_its_flags(job, tmp_path, capsys):
+    src, out = job
     code, msg, err = run(capsys, "view", out, "-o", tmp_path / "v.html", "--max-clips", "4")
     assert code == 0 and "wrote" in msg and "4 clips" in msg
     assert "--max-clips 4" in err and "of the 12" in err
-    with pytest.raises(TorchspliceError, match="no clip named 'nope'"):
-        build_viewer(out, clips=["nope"])
+    code, _, err = run(capsys, "view", _moved(job, tmp_path), "-o", tmp_path / "a.html")
+    assert code == 0 and "4 source clips are in no database" in err and "--sources" in err
+
+
+def _moved(job, tmp_path) -> Path:
+    """A copy of the job's output whose run record names an input that no longer exists."""
+    import h5py
+
+    src, out = job
+    moved_out = tmp_path / "spliced.h5"
+    shutil.copy(out, moved_out)
+    with h5py.File(moved_out, "r+") as f:
+        rec = json.loads(f.attrs["run"])
+        rec["database"]["path"] = str(tmp_path / "gone.h5")
+        f.attrs["run"] = json.dumps(rec)
+    return moved_out
 
 
 def test_sources_from_another_place(job, tmp_path, capsys):
     """The run record's input moved away: the page says which sources it lacks; --sources finds them."""
     src, out = job
-    moved_out = tmp_path / "spliced.h5"
-    shutil.copy(out, moved_out)
-    away = tmp_path / "elsewhere.h5"
-    shutil.copy(src, away)
-    with MotionDatabase.open(moved_out) as db:
+    with MotionDatabase.open(out) as db:
         run_rec = json.loads(db.attrs["run"])
     assert run_rec["database"]["path"] == str(src.resolve())
-    # simulate a run record naming a file that no longer exists
-    import h5py
-    with h5py.File(moved_out, "r+") as f:
-        rec = json.loads(f.attrs["run"])
-        rec["database"]["path"] = str(tmp_path / "gone.h5")
-        f.attrs["run"] = json.dumps(rec)
-    code, _, err = run(capsys, "view", moved_out, "-o", tmp_path / "a.html")
-    assert code == 0 and "4 source clips are in no database" in err and "--sources" in err
+    moved_out = _moved(job, tmp_path)  # a run record naming a file that no longer exists
+    away = tmp_path / "elsewhere.h5"
+    shutil.copy(src, away)
+    got = write_viewer(moved_out, tmp_path / "a.html")
+    err = capsys.readouterr().err
+    assert "4 source clips are in no database" in err and "sources" in err
+    assert sorted(got.missing) == sorted(LOCOS + ACTIONS)
     assert sorted(page_data((tmp_path / "a.html").read_text())["missing"]) == sorted(LOCOS + ACTIONS)
-    code, _, err = run(capsys, "view", moved_out, "--sources", away, "-o", tmp_path / "b.html")
-    assert code == 0 and err == ""
+    got = write_viewer(moved_out, tmp_path / "b.html", sources=[away])
+    assert capsys.readouterr().err == "" and not got.missing
     data = page_data((tmp_path / "b.html").read_text())
     assert {c["name"] for c in data["clips"] if c["db"] == "elsewhere.h5"} == set(LOCOS + ACTIONS)
     # render takes the same sources: a spliced clip beside its locomotion and action
-    code, msg, err = run(capsys, "render", moved_out, "walk_curve", "wave", "walk_curve+wave", "--sources", away,
-                         "-o", tmp_path / "r.png", "--frames", "2")
-    assert code == 0 and "3 clips" in msg
-    code, _, err = run(capsys, "render", moved_out, "walk_curve", "-o", tmp_path / "r2.png")
-    assert code == 2 and err.count("\n") == 1 and "no clip named 'walk_curve'" in err
+    clips, spec = read_clips(moved_out, ["walk_curve", "wave", "walk_curve+wave"], sources=[away])
+    assert [c.name for c in clips] == ["walk_curve", "wave", "walk_curve+wave"]
+    render(clips, tmp_path / "r.png", up_axis=spec.up_axis, frames=2)
+    assert (tmp_path / "r.png").exists()
+    with pytest.raises(DatabaseError, match="no clip named 'walk_curve'") as exc:
+        read_clips(moved_out, ["walk_curve"])
+    assert "\n" not in str(exc.value)
 
 
 def test_view_command_errors_are_one_line(job, tmp_path, capsys):
@@ -281,7 +300,7 @@ def test_viewer_in_chromium(job, tmp_path, browser):
 
     src, out = job
     page = tmp_path / "viewer.html"
-    assert main(["view", str(out), "-o", str(page), "-q"]) == 0
+    write_viewer(out, page, quiet=True)
     d = browser
     d.get(page.as_uri())
     for _ in range(200):
