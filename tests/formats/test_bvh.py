@@ -569,61 +569,84 @@ def test_error_missing_file(tmp_path):
 
 
 # --------------------------------------------------------------------------------------------
-# the command line on malformed files
+# importing malformed files: each skipped with its reason (import_bvh), one line each (the CLI)
 # --------------------------------------------------------------------------------------------
+def _skipped_naming(report, name: str) -> list[tuple[str, str]]:
+    return [(f, why) for f, why in report.skipped if Path(f).name == name]
+
+
+def test_import_of_only_bad_files_skips_each_with_its_reason_and_writes_nothing(tmp_path):
+    from torchsplice.formats.importer import NothingImportedError, import_bvh
+
+    bad1 = write(tmp_path, base_with({LINE["f1"]: "1 2 3 10 20 30 5 6"}), "bad_count.bvh")
+    bad2 = write(tmp_path, base_with(drop={1}), "bad_header.bvh")
+    out = tmp_path / "db" / "out.h5"
+    out.parent.mkdir()
+    with pytest.raises(NothingImportedError) as caught:
+        import_bvh([bad1, bad2], out)
+    report = caught.value.report
+    for bad, phrase in ((bad1, "expected 9 values"), (bad2, "missing HIERARCHY")):
+        naming = _skipped_naming(report, bad.name)
+        assert len(naming) == 1, report.skipped
+        assert naming[0][0] == str(bad) and phrase in naming[0][1]
+    assert report.imported == []
+    assert not out.exists()
+    assert list(out.parent.iterdir()) == []  # no partial file either
+
+
+def test_import_of_one_bad_file_skips_it_with_its_reason(tmp_path):
+    from torchsplice.formats.importer import NothingImportedError, import_bvh
+
+    bad = write(tmp_path, base_with({LINE["spine_offset"]: "    OFFSET 0 ten 0"}), "bad.bvh")
+    out = tmp_path / "out.h5"
+    with pytest.raises(NothingImportedError) as caught:
+        import_bvh([bad], out)
+    naming = _skipped_naming(caught.value.report, "bad.bvh")
+    assert len(naming) == 1 and "non-numeric OFFSET" in naming[0][1]
+    assert not out.exists()
+
+
+def test_import_of_one_good_one_bad_file_lands_the_good_one(tmp_path, mocap_dir):
+    from torchsplice.formats.importer import import_bvh
+    from torchsplice.store.database import MotionDatabase
+
+    good = mocap_dir / "bandai_namco_research_motiondataset" / "dataset-1_dash_normal_001.bvh"
+    bad = write(tmp_path, base_with({LINE["f2"]: "2 4 6 20 40 sixty 10 12 14"}), "bad.bvh")
+    out = tmp_path / "out.h5"
+    report = import_bvh([good, bad], out)
+    assert not report.ok
+    naming = _skipped_naming(report, "bad.bvh")
+    assert len(naming) == 1 and "non-numeric" in naming[0][1]
+    assert not _skipped_naming(report, good.name)
+    assert [c.name for c in report.imported] == [good.stem]
+    with MotionDatabase.open(out) as db:
+        assert db.names == [good.stem]
+        assert db.read(good.stem).num_frames == 20
+
+
 def _stderr_lines(capsys) -> tuple[str, list[str]]:
     cap = capsys.readouterr()
     assert "Traceback" not in cap.err and "Traceback" not in cap.out
     return cap.out, [l for l in cap.err.splitlines() if l.strip()]
 
 
-def test_cli_import_only_bad_files(tmp_path, capsys):
+def test_cli_import_of_bad_files_says_one_line_each_naming_file_and_fault(tmp_path, capsys):
+    """The command line's words for what import_bvh skips (the exit code of an import with good
+    files too: tests/cli/test_cli.py)."""
     from torchsplice.cli import main
 
     bad1 = write(tmp_path, base_with({LINE["f1"]: "1 2 3 10 20 30 5 6"}), "bad_count.bvh")
     bad2 = write(tmp_path, base_with(drop={1}), "bad_header.bvh")
-    out = tmp_path / "db" / "out.h5"
-    out.parent.mkdir()
-    code = main(["import", str(bad1), str(bad2), "-o", str(out), "-q"])
+    bad3 = write(tmp_path, base_with({LINE["spine_offset"]: "    OFFSET 0 ten 0"}), "bad_offset.bvh")
+    out = tmp_path / "out.h5"
+    code = main(["import", str(bad1), str(bad2), str(bad3), "-o", str(out), "-q"])
     assert code != 0
     _, err = _stderr_lines(capsys)
-    for bad, phrase in ((bad1, "expected 9 values"), (bad2, "missing HIERARCHY")):
+    for bad, phrase in ((bad1, "expected 9 values"), (bad2, "missing HIERARCHY"), (bad3, "non-numeric OFFSET")):
         naming = [l for l in err if bad.name in l]
         assert len(naming) == 1, err
         assert phrase in naming[0] and str(bad) in naming[0]
     assert not out.exists()
-    assert list(out.parent.iterdir()) == []  # no partial file either
-
-
-def test_cli_import_single_bad_file_no_traceback(tmp_path, capsys):
-    from torchsplice.cli import main
-
-    bad = write(tmp_path, base_with({LINE["spine_offset"]: "    OFFSET 0 ten 0"}), "bad.bvh")
-    out = tmp_path / "out.h5"
-    code = main(["import", str(bad), "-o", str(out)])
-    assert code != 0
-    _, err = _stderr_lines(capsys)
-    naming = [l for l in err if "bad.bvh" in l]
-    assert len(naming) == 1 and "non-numeric OFFSET" in naming[0]
-    assert not out.exists()
-
-
-def test_cli_import_one_good_one_bad(tmp_path, capsys, mocap_dir):
-    from torchsplice.cli import main
-    from torchsplice.store.database import MotionDatabase
-
-    good = mocap_dir / "bandai_namco_research_motiondataset" / "dataset-1_dash_normal_001.bvh"
-    bad = write(tmp_path, base_with({LINE["f2"]: "2 4 6 20 40 sixty 10 12 14"}), "bad.bvh")
-    out = tmp_path / "out.h5"
-    code = main(["import", str(good), str(bad), "-o", str(out), "-q"])
-    assert code == 1
-    _, err = _stderr_lines(capsys)
-    naming = [l for l in err if "bad.bvh" in l]
-    assert len(naming) == 1 and "non-numeric" in naming[0]
-    assert not any(good.name in l for l in err)
-    with MotionDatabase.open(out) as db:
-        assert db.names == [good.stem]
-        assert db.read(good.stem).num_frames == 20
 
 
 # --------------------------------------------------------------------------------------------

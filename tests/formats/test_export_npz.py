@@ -1,4 +1,4 @@
-"""``torchsplice export`` to NumPy .npz (per clip and packed, with 6D features and statistics),
+"""Exports (``export_clips``; ``torchsplice export`` for its one-line mistakes) to NumPy .npz (per clip and packed, with 6D features and statistics),
 several clips to BVH, and ``MotionDataset``'s ``labels`` feature and ``statistics``.
 
 On real clips: Bandai Namco (two capture sessions: two skeletons of one topology, a trajectory
@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 import torch
 
-from torchsplice.cli import main
-from torchsplice.core.errors import TorchspliceError
+from torchsplice.core.errors import OutputExistsError, TorchspliceError
 from torchsplice.core.rotations import quat_to_6d, quat_to_rotmat, random_quat, rotation_6d_to_rotmat
 from torchsplice.data import MotionDataset, collate_motion
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.formats.exporters import export_clips
+from torchsplice.formats.importer import import_bvh
 from torchsplice.store.database import MotionDatabase
 from torchsplice.formats.npz import NpzExport, clip_of_packed, read_npz, write_npz
 from torchsplice.core.fk import forward_kinematics
@@ -49,8 +49,7 @@ def db(mocap_dir, tmp_path_factory) -> Path:
     files = [folder / f"{n}.bvh" for n in CLIPS if (folder / f"{n}.bvh").is_file()]
     assert len(files) == len(CLIPS)
     out = tmp_path_factory.mktemp("npz") / "mixed.h5"
-    assert main([*map(str, ["import", *files, mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh",
-                            "-o", out, "--units", "cm", "-q"])]) == 0
+    assert import_bvh([*files, mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"], out, units="cm").ok
     return out
 
 
@@ -69,10 +68,9 @@ def clip_fk(m) -> torch.Tensor:
 # --------------------------------------------------------------------------------------------
 # per clip
 # --------------------------------------------------------------------------------------------
-def test_per_clip_npz_reads_back_the_database_and_positions_are_fk(db, tmp_path, capsys):
+def test_per_clip_npz_reads_back_the_database_and_positions_are_fk(db, tmp_path):
     out = tmp_path / "clips"
-    rc, msg, err = run(capsys, "export", db, "--all", "--format", "npz", "-o", out)
-    assert rc == 0, err
+    msg = export_clips(db, None, format="npz", out=out).summary
     with MotionDatabase.open(db) as d:
         index = ["index.csv", "test.txt", "train.txt", "val.txt"]  # beside every export of several clips
         assert sorted(p.name for p in out.iterdir()) == sorted([f"{n}.npz" for n in d.names] + index)
@@ -107,13 +105,11 @@ def test_per_clip_npz_reads_back_the_database_and_positions_are_fk(db, tmp_path,
     assert f"{len(list(out.glob('*.npz')))} clips as .npz" in msg
 
 
-def test_one_clip_to_a_file_and_to_a_folder(db, bandai_names, tmp_path, capsys):
+def test_one_clip_to_a_file_and_to_a_folder(db, bandai_names, tmp_path):
     name = bandai_names[0]
-    rc, _, err = run(capsys, "export", db, name, "-o", tmp_path / "one.npz", "-q")
-    assert rc == 0, err
+    assert export_clips(db, [name], out=tmp_path / "one.npz").format == "npz"  # the format from the suffix
     (tmp_path / "f").mkdir()
-    rc, _, err = run(capsys, "export", db, name, "-o", tmp_path / "f", "--format", "npz", "-q")
-    assert rc == 0, err
+    assert export_clips(db, [name], out=tmp_path / "f", format="npz").files == [tmp_path / "f" / f"{name}.npz"]
     a, b = read_npz(tmp_path / "one.npz"), read_npz(tmp_path / "f" / f"{name}.npz")
     assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a if isinstance(a[k], np.ndarray))
 
@@ -150,17 +146,19 @@ def test_packed_offsets_slice_back_each_clip_in_the_order_asked(db, bandai_names
             np.testing.assert_array_equal(one[k], c[k])
 
 
-def test_clips_of_different_skeletons_are_not_packed(db, tmp_path, capsys):
-    rc, _, err = run(capsys, "export", db, "--all", "--packed", "-o", tmp_path / "p.npz")
-    line = error_line(err)
-    assert rc == 2 and "cannot pack clips of different skeletons" in line and "cmu" in line and "--skeleton" in line
+def test_clips_of_different_skeletons_are_not_packed(db, tmp_path):
+    with pytest.raises(TorchspliceError, match="cannot pack clips of different skeletons") as caught:
+        export_clips(db, None, out=tmp_path / "p.npz", packed=True)
+    line = str(caught.value)
+    assert "cmu" in line and "\n" not in line
+    assert "{skeleton}" in caught.value.message and "skeleton" in caught.value.options  # the CLI: --skeleton
     assert not (tmp_path / "p.npz").exists() and leftovers(tmp_path) == []
-    rc, _, err = run(capsys, "export", db, "--all", "--features", "6d", "-o", tmp_path / "f")
-    assert rc == 2 and "feature statistics" in error_line(err) and not (tmp_path / "f").exists()
+    with pytest.raises(TorchspliceError, match="feature statistics"):
+        export_clips(db, None, out=tmp_path / "f", features="6d")
+    assert not (tmp_path / "f").exists()
     with MotionDatabase.open(db) as d:
         k = d.clip_info("cmu_12_01_walk")["skeleton"]
-    rc, _, err = run(capsys, "export", db, "--all", "--packed", "--skeleton", k, "-o", tmp_path / "cmu.npz", "-q")
-    assert rc == 0, err
+    export_clips(db, None, out=tmp_path / "cmu.npz", packed=True, skeletons=[k])
     assert list(read_npz(tmp_path / "cmu.npz")["names"]) == ["cmu_12_01_walk"]
 
 
@@ -259,19 +257,18 @@ def test_labels_feature_collates_as_a_list_of_dicts(db, bandai_names):
 # --------------------------------------------------------------------------------------------
 # BVH, outputs and errors
 # --------------------------------------------------------------------------------------------
-def test_several_clips_as_bvh_into_a_folder(db, bandai_names, tmp_path, capsys):
+def test_several_clips_as_bvh_into_a_folder(db, bandai_names, tmp_path):
     out = tmp_path / "bvh"
-    rc, msg, err = run(capsys, "export", db, *bandai_names[:3], "-o", out)
-    assert rc == 0, err
-    assert "3 clips as BVH" in msg
+    result = export_clips(db, bandai_names[:3], out=out)
+    assert result.format == "bvh" and "3 clips as BVH" in result.summary
     with MotionDatabase.open(db) as d:
         for n in bandai_names[:3]:
             back, m = read_bvh(out / f"{n}.bvh", dtype=F64), d.read(n, dtype=F64)
             torch.testing.assert_close(back.global_positions(), m.global_positions(), rtol=0, atol=1e-3)
     assert leftovers(out) == []
-    rc, _, err = run(capsys, "export", db, *bandai_names[:3], "-o", out)  # exists: --force
-    assert rc == 2 and "already exists" in error_line(err)
-    assert run(capsys, "export", db, *bandai_names[:3], "-o", out, "-f", "-q")[0] == 0
+    with pytest.raises(OutputExistsError, match="already exists"):  # exists: overwrite=True
+        export_clips(db, bandai_names[:3], out=out)
+    export_clips(db, bandai_names[:3], out=out, overwrite=True)
 
 
 @pytest.mark.parametrize("argv, why", [
@@ -293,16 +290,17 @@ def test_export_mistakes_get_one_line(db, bandai_names, tmp_path, capsys, argv, 
     assert leftovers(tmp_path) == [] and not any(p.suffix == ".npz" for p in tmp_path.iterdir())
 
 
-def test_an_existing_npz_is_kept_without_force(db, bandai_names, tmp_path, capsys):
+def test_an_existing_npz_is_kept_without_overwrite(db, bandai_names, tmp_path):
     out = tmp_path / "x.npz"
     out.write_bytes(b"keep")
-    rc, _, err = run(capsys, "export", db, bandai_names[0], "-o", out)
-    assert rc == 2 and "already exists" in error_line(err) and out.read_bytes() == b"keep"
-    assert run(capsys, "export", db, bandai_names[0], "-o", out, "-f", "-q")[0] == 0
+    with pytest.raises(OutputExistsError, match="already exists"):
+        export_clips(db, [bandai_names[0]], out=out)
+    assert out.read_bytes() == b"keep"
+    export_clips(db, [bandai_names[0]], out=out, overwrite=True)
     assert read_npz(out)["name"] == bandai_names[0]
 
 
-def test_values_that_are_not_finite_are_refused(db, bandai_names, tmp_path, capsys):
+def test_values_that_are_not_finite_are_refused(db, bandai_names, tmp_path):
     with pytest.raises(TorchspliceError, match=r"clip 'c': non-finite value in positions \(row 2\)"):
         write_npz(tmp_path / "w.npz", {"positions": np.array([[0.0], [1.0], [np.nan]])}, what="clip 'c'")
     assert not (tmp_path / "w.npz").exists()
@@ -312,9 +310,10 @@ def test_values_that_are_not_finite_are_refused(db, bandai_names, tmp_path, caps
         row = list(f["clips/name"].asstr()[()]).index(bandai_names[0])
         k = int(f["clips/skeleton"][row])
         f[f"skeletons/{k}/rotations"][int(f["clips/start"][row]) + 5, 3, 0] = np.nan
-    rc, _, err = run(capsys, "export", bad, bandai_names[0], "-o", tmp_path / "x.npz")
-    line = error_line(err)
-    assert rc == 2 and "non-finite" in line and bandai_names[0] in line and "frame 5" in line
+    with pytest.raises(TorchspliceError, match="non-finite") as caught:
+        export_clips(bad, [bandai_names[0]], out=tmp_path / "x.npz")
+    line = str(caught.value)
+    assert bandai_names[0] in line and "frame 5" in line and "\n" not in line
     assert not (tmp_path / "x.npz").exists() and leftovers(tmp_path) == []
 
 
@@ -329,7 +328,7 @@ def test_library_export_without_the_command_line(db, bandai_names, tmp_path):
         NpzExport(db, features="9d")
 
 
-def test_the_docs_npz_snippet_runs(db, bandai_names, tmp_path, capsys, monkeypatch):
+def test_the_docs_npz_snippet_runs(db, bandai_names, tmp_path, monkeypatch):
     """The Python block of docs/npz.md reads a packed export and normalises it."""
     import re
 
@@ -337,8 +336,7 @@ def test_the_docs_npz_snippet_runs(db, bandai_names, tmp_path, capsys, monkeypat
     text = page.read_text()
     start = text.index("# Exporting for other tools (.npz)")
     code = re.search(r"```python\n(.*?)```", text[start:], re.S).group(1)
-    rc, _, err = run(capsys, "export", db, *bandai_names, "--packed", "--features", "6d", "-o", tmp_path / "train.npz", "-q")
-    assert rc == 0, err
+    export_clips(db, bandai_names, out=tmp_path / "train.npz", packed=True, features="6d")
     monkeypatch.chdir(tmp_path)
     scope: dict = {}
     exec(compile(code, str(page), "exec"), scope)
@@ -364,7 +362,7 @@ def test_window_velocities_are_slices_of_the_clips(db, bandai_names):
     assert float(whole[0]["trajectory_velocity"][:, [0, 2]].norm(dim=1).mean()) > 10  # Bandai walks move (cm/s)
 
 
-def test_a_killed_exports_staged_files_are_removed_by_the_next_export(db, bandai_names, tmp_path, capsys):
+def test_a_killed_exports_staged_files_are_removed_by_the_next_export(db, bandai_names, tmp_path):
     """A SIGKILLed export leaves ``.NAME.staged-HOST-PID`` files; the next export into that folder
     removes those of dead processes of this host and keeps the others'."""
     import socket
@@ -380,8 +378,7 @@ def test_a_killed_exports_staged_files_are_removed_by_the_next_export(db, bandai
     other = out / f".{bandai_names[0]}.npz.staged-elsewhere-{p.pid}"
     for f in (dead, alive, other):
         f.write_bytes(b"partial")
-    rc, _, err = run(capsys, "export", db, *bandai_names[:2], "--format", "npz", "-o", out, "-f")
-    assert rc == 0, err
+    export_clips(db, bandai_names[:2], format="npz", out=out, overwrite=True)
     assert not dead.exists() and alive.exists() and other.exists()
     assert sorted(f.name for f in out.glob("*.npz")) == sorted(f"{n}.npz" for n in bandai_names[:2])
 
@@ -398,9 +395,9 @@ def test_the_streamed_packed_file_holds_what_packed_gives_array_for_array(db, ba
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no row files left
 
 
-def test_export_refuses_values_that_are_not_finite(sample_db, tmp_path, capsys):
+def test_export_refuses_values_that_are_not_finite(sample_db, tmp_path):
     db = nan_copy(sample_db, tmp_path, "wave")
-    rc, _, err = run(capsys, "export", db, "wave", "-o", tmp_path / "w.bvh")
-    line = error_line(err)
-    assert rc == 2 and "wave" in line and "frame 5" in line
+    with pytest.raises(TorchspliceError, match="frame 5") as caught:
+        export_clips(db, ["wave"], out=tmp_path / "w.bvh")
+    assert "wave" in str(caught.value) and "\n" not in str(caught.value)
     assert not (tmp_path / "w.bvh").exists() and leftovers(tmp_path) == []

@@ -1,4 +1,4 @@
-"""``torchsplice export --format humanml3d``: a folder text-to-motion training reads as HumanML3D.
+"""Exports as HumanML3D (``export_clips(format="humanml3d")``, ``torchsplice export --format humanml3d``): a folder text-to-motion training reads as HumanML3D.
 
 Checked on the spliced sample (every pair of the built-in sample) and on real clips of Bandai
 Namco, CMU and LAFAN1 (retargeted onto the SMPL body):
@@ -26,10 +26,11 @@ import pytest
 import torch
 
 from cli_helpers import error_line, run
-from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.captions import gerund, mirror_caption, parse_caption_line
 from torchsplice.formats.exporters import export_clips
+from torchsplice.formats.importer import import_bvh
+from torchsplice.job import splice_all
 from torchsplice.evaluation.humanml3d import folder_properties
 from torchsplice.formats.humanml3d_features import GROUPS
 from torchsplice.specs.text import POS_TAGS
@@ -40,14 +41,14 @@ BANDAI = "bandai_namco_research_motiondataset"
 @pytest.fixture(scope="module")
 def spliced(sample_db, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("h3") / "spliced.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(out), "-q"]) == 0
+    splice_all(sample_db, out)
     return out
 
 
 @pytest.fixture(scope="module")
 def folder(spliced, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("h3out") / "HumanML3D"
-    assert main(["export", str(spliced), "--all", "-o", str(out), "--format", "humanml3d", "--mirror", "-q"]) == 0
+    export_clips(spliced, out=out, format="humanml3d", mirror=True)
     return out
 
 
@@ -276,7 +277,7 @@ def _real_db(mocap_dir, tmp_path) -> Path:
     files = [f for f in files if f.is_file()]
     assert len(files) >= 5
     db = tmp_path / "real.h5"
-    assert main(["import", *map(str, files), "-o", str(db), "-q"]) == 0
+    assert import_bvh(files, db).ok
     return db
 
 
@@ -300,8 +301,8 @@ def test_real_clips_of_three_datasets_export_with_the_formats_properties(mocap_d
 def test_a_spliced_bandai_clip_is_captioned_from_both_sources(mocap_dir, tmp_path):
     db = _real_db(mocap_dir, tmp_path)
     spliced = tmp_path / "sp.h5"
-    assert main(["splice-all", str(db), "-o", str(spliced), "--locomotions", "dataset-2_walk-turn-left_normal_025",
-                 "--actions", "dataset-2_walk_elderly_006,dataset-1_bye_normal_001", "-q"]) == 0
+    assert splice_all(db, spliced, locomotions="dataset-2_walk-turn-left_normal_025",
+                      actions="dataset-2_walk_elderly_006,dataset-1_bye_normal_001").spliced == 2
     out = tmp_path / "sp"
     export_clips(spliced, out=out, format="humanml3d")
     texts = {r["action"]: (out / "texts" / f"{r['id']}.txt").read_text() for r in _index(out)}
@@ -310,29 +311,44 @@ def test_a_spliced_bandai_clip_is_captioned_from_both_sources(mocap_dir, tmp_pat
     assert "while waving goodbye" in texts["dataset-1_bye_normal_001"]
 
 
-def test_bad_input_is_one_line_and_leaves_nothing(spliced, tmp_path, capsys):
+def _refusal(call) -> str:  # the one-line message of the TorchspliceError call() raises
+    with pytest.raises(TorchspliceError) as caught:
+        call()
+    assert "\n" not in str(caught.value), caught.value
+    return str(caught.value)
+
+
+def test_bad_input_is_one_line_and_leaves_nothing(spliced, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"wave": ["waves"]}')
-    for args, words in (
-            (["--captions", bad], "bad.json: 'wave': 'waves' is not word/POS"),
-            (["--captions", tmp_path / "none.json"], "none.json: no such captions file"),
-            (["--window", "0.01"], "--window must be a length in seconds"),
-            (["--split-ratios", "0.5,0.6"], "--split-ratios must be three numbers"),
-            (["--split-ratios", "nan,1,1"], "--split-ratios must be three numbers"),
-            (["--split-ratios", "inf,-inf,1"], "--split-ratios must be three numbers"),
-            (["--paraphrases", "0"], "--paraphrases must be a whole number")):
+    for options, words in (
+            ({"captions": bad}, "bad.json: 'wave': 'waves' is not word/POS"),
+            ({"captions": tmp_path / "none.json"}, "none.json: no such captions file"),
+            ({"window": 0.01}, "window must be a length in seconds"),
+            *(({"split_ratios": r}, "split_ratios must be three numbers")
+              for r in ((0.5, 0.6), (float("nan"), 1, 1), (float("inf"), float("-inf"), 1))),
+            ({"paraphrases": 0}, "paraphrases must be a whole number")):
         out = tmp_path / "o"
+        assert words in _refusal(lambda: export_clips(spliced, out=out, format="humanml3d", **options)), options
+        assert not out.exists()
+    (tmp_path / "file.txt").write_text("x")  # a file, and a file's suffix with an option only HumanML3D takes
+    assert "writes a folder" in _refusal(lambda: export_clips(spliced, out=tmp_path / "file.txt", format="humanml3d"))
+    assert "writes a folder" in _refusal(lambda: export_clips(spliced, out=tmp_path / "x.npz", mirror=True))
+    assert not (tmp_path / "x.npz").exists() and (tmp_path / "file.txt").read_text() == "x"
+
+
+def test_cli_names_its_flags_in_the_one_line_refusals_of_bad_options(spliced, tmp_path, capsys):
+    """The command line's words for export_clips' refusals of the options above: its flags."""
+    ratios, out = "--split-ratios must be three numbers", tmp_path / "o"
+    for args, words in ((["--window", "0.01"], "--window must be a length in seconds"), (["--split-ratios", "0.5,0.6"], ratios),
+                        (["--split-ratios", "nan,1,1"], ratios), (["--split-ratios", "inf,-inf,1"], ratios),
+                        (["--paraphrases", "0"], "--paraphrases must be a whole number")):
         rc, _, err = run(capsys, "export", spliced, "--all", "-o", out, "--format", "humanml3d", *args)
         assert rc == 2 and words in error_line(err), (args, err)
         assert not out.exists()
-    (tmp_path / "file.txt").write_text("x")
-    rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "file.txt", "--format", "humanml3d")
-    assert rc == 2 and "writes a folder" in error_line(err)
-    rc, _, err = run(capsys, "export", spliced, "--all", "-o", tmp_path / "x.npz", "--mirror")
-    assert rc == 2 and "writes a folder" in error_line(err) and not (tmp_path / "x.npz").exists()
 
 
-def test_a_skeleton_that_does_not_map_onto_smpl_is_refused_naming_the_database(tmp_path, capsys):
+def test_a_skeleton_that_does_not_map_onto_smpl_is_refused_naming_the_database(tmp_path):
     from rigs import armless_sample
     from torchsplice.store.database import MotionDatabase
 
@@ -340,9 +356,8 @@ def test_a_skeleton_that_does_not_map_onto_smpl_is_refused_naming_the_database(t
     db = tmp_path / "stumps.h5"
     with MotionDatabase.create(db) as w:
         w.append(stump)
-    rc, _, err = run(capsys, "export", db, "--all", "-o", tmp_path / "o", "--format", "humanml3d")
-    line = error_line(err)
-    assert rc == 2 and "stumps.h5" in line and "SMPL" in line and "elbow" in line, line
+    line = _refusal(lambda: export_clips(db, out=tmp_path / "o", format="humanml3d"))
+    assert "stumps.h5" in line and "SMPL" in line and "elbow" in line, line
     assert not (tmp_path / "o").exists()
 
 
@@ -565,7 +580,7 @@ def test_export_mirror_does_not_mirror_the_mirrors_of_a_mirrored_database(sample
     assert sorted(r["clip"] for r in _index(tmp_path / "o") if r["mirrored"] == "1") == ["jog", "walk_straight"]
 
 
-def test_user_captions_with_inflected_verbs_are_refused_and_unknown_keys_are_reported(spliced, tmp_path, capsys):
+def test_user_captions_with_inflected_verbs_are_refused_and_unknown_keys_are_reported(spliced, tmp_path):
     """``waves/VERB`` became "wavesing": a verb that reads as inflected is one line; a key naming
     no clip is said in the summary, not silently unused; the shipped example reads."""
     from torchsplice.formats.captions import read_captions
@@ -573,8 +588,8 @@ def test_user_captions_with_inflected_verbs_are_refused_and_unknown_keys_are_rep
     bad = tmp_path / "bad.json"
     for word in ("waves", "waved", "waving"):
         bad.write_text(json.dumps({"wave": [f"a/DET person/NOUN {word}/VERB"]}))
-        rc, _, err = run(capsys, "export", spliced, "--all", "--format", "humanml3d", "--captions", bad, "-o", tmp_path / "x")
-        assert rc == 2 and f"verb {word!r} reads as inflected" in error_line(err) and "waves=wave/VERB" in err, err
+        line = _refusal(lambda: export_clips(spliced, out=tmp_path / "x", format="humanml3d", captions=bad))
+        assert f"verb {word!r} reads as inflected" in line and "waves=wave/VERB" in line and not (tmp_path / "x").exists()
     good = tmp_path / "good.json"
     good.write_text(json.dumps({"walk_straight": ["a/DET person/NOUN strolls=stroll/VERB"], "nope": ["a/DET man/NOUN"]}))
     result = export_clips(spliced, out=tmp_path / "h", format="humanml3d", captions=good)

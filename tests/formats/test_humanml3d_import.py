@@ -1,4 +1,4 @@
-"""``torchsplice import DIR`` of a HumanML3D folder: each motion a clip on the SMPL body, its
+"""Importing a HumanML3D folder (``import_bvh``, ``torchsplice import DIR``): each motion a clip on the SMPL body, its
 captions kept, so that HumanML3D motions splice with each other and with any humanoid's.
 
 Known answers: importing an export gives back the exported positions (1e-5 m; the target is 1e-4); imported
@@ -16,9 +16,10 @@ import pytest
 import torch
 
 from cli_helpers import run
-from torchsplice.cli import main
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.exporters import export_clips
+from torchsplice.formats.importer import NothingImportedError, import_bvh
+from torchsplice.job import splice_all
 from torchsplice.formats.humanml3d_import import positions_to_motion, read_humanml3d_motion, read_humanml3d_motions
 from torchsplice.store.database import MotionDatabase
 
@@ -28,16 +29,16 @@ def exported(sample_db, tmp_path_factory) -> Path:
     """The spliced sample, exported as a HumanML3D folder with mirrors."""
     folder = tmp_path_factory.mktemp("h3i")
     spliced = folder / "spliced.h5"
-    assert main(["splice-all", str(sample_db), "-o", str(spliced), "-q"]) == 0
+    splice_all(sample_db, spliced)
     out = folder / "HumanML3D"
     export_clips(spliced, out=out, format="humanml3d", mirror=True)
     return out
 
 
-def test_importing_an_export_gives_back_its_positions_and_captions(exported, tmp_path, capsys):
+def test_importing_an_export_gives_back_its_positions_and_captions(exported, tmp_path):
     db = tmp_path / "back.h5"
-    rc, out, _ = run(capsys, "import", exported, "-o", db)
-    assert rc == 0 and "imported 50 clips" in out
+    report = import_bvh([exported], db)
+    assert report.ok and report.clips == len(report.imported) == 50
     with MotionDatabase.open(db) as d:
         assert d.skeleton_info(0).spec_name == "smpl22" and d.skeleton_info(0).units == "m"
         worst = 0.0
@@ -98,11 +99,11 @@ def test_positions_back_from_a_motion_are_exact_on_the_standard_body():
 
 def test_imported_motions_splice_and_their_captions_compose(exported, tmp_path):
     db = tmp_path / "h.h5"
-    assert main(["import", str(exported), "-o", str(db), "-q"]) == 0
+    assert import_bvh([exported], db).ok
     index = {r["clip"]: r["id"] for r in csv.DictReader(open(exported / "index.csv")) if r["mirrored"] == "0"}
     loco, action = index["walk_curve+carry_cup"], index["walk_straight+wave"]
     spliced = tmp_path / "s.h5"
-    assert main(["splice-all", str(db), "-o", str(spliced), "--locomotions", loco, "--actions", action, "-q"]) == 0
+    assert splice_all(db, spliced, locomotions=loco, actions=action).spliced == 1
     out = tmp_path / "again"
     export_clips(spliced, out=out, format="humanml3d")
     lines = [ln.split("#")[0] for ln in (out / "texts" / "000000.txt").read_text().splitlines()]
@@ -130,12 +131,19 @@ def _damaged(exported: Path, tmp_path: Path) -> Path:
     return bad
 
 
-def test_bad_motions_are_one_line_each_and_the_others_land(exported, tmp_path, capsys):
+def skipped_lines(report) -> list[str]:
+    """``PATH: why`` of every input the import skipped (one line each)."""
+    lines = [f"{path}: {why}" for path, why in report.skipped]
+    assert all("\n" not in ln for ln in lines), lines
+    return lines
+
+
+def test_bad_motions_are_one_line_each_and_the_others_land(exported, tmp_path):
     bad = _damaged(exported, tmp_path)
     db = tmp_path / "b.h5"
-    rc, out, err = run(capsys, "import", bad, "-o", db, "-q")
-    assert rc == 1 and "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
+    report = import_bvh([bad], db)
+    assert not report.ok and report.imported
+    lines = err = skipped_lines(report)
     expect = {
         "000001.npy": "expected (frames, 263) features, got shape (30, 251)",
         "000002.npy": "not finite (NaN or infinity) at frame 5",
@@ -153,17 +161,17 @@ def test_bad_motions_are_one_line_each_and_the_others_land(exported, tmp_path, c
                                                                    "000007"}
 
 
-def test_the_format_option_and_its_errors(exported, tmp_path, capsys):
-    rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "x.h5", "--format", "bvh")
-    assert rc == 2 and "no BVH files to import" in err and "folder holds no .bvh files" in err
-    rc, _, err = run(capsys, "import", tmp_path, "-o", tmp_path / "y.h5", "--format", "humanml3d")
-    assert rc == 2 and "not a HumanML3D folder" in err and "no HumanML3D motions to import" in err
-    with pytest.raises(SystemExit) as exit_:
-        main(["import", str(exported), "-o", str(tmp_path / "z.h5"), "--format", "fbx"])
-    assert exit_.value.code == 2 and "invalid choice: 'fbx'" in capsys.readouterr().err
-    assert not (tmp_path / "x.h5").exists() and not (tmp_path / "y.h5").exists()
-    rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "cm.h5", "--units", "cm", "-q")
-    assert rc == 0
+def test_the_format_option_and_its_errors(exported, tmp_path):
+    with pytest.raises(NothingImportedError, match="no BVH files to import") as caught:
+        import_bvh([exported], tmp_path / "x.h5", format="bvh")
+    assert any("folder holds no .bvh files" in ln for ln in skipped_lines(caught.value.report))
+    with pytest.raises(NothingImportedError, match="no HumanML3D motions to import") as caught:
+        import_bvh([tmp_path], tmp_path / "y.h5", format="humanml3d")
+    assert any("not a HumanML3D folder" in ln for ln in skipped_lines(caught.value.report))
+    with pytest.raises(TorchspliceError, match="format must be one of auto, bvh, humanml3d, got 'fbx'"):
+        import_bvh([exported], tmp_path / "z.h5", format="fbx")
+    assert not (tmp_path / "x.h5").exists() and not (tmp_path / "y.h5").exists() and not (tmp_path / "z.h5").exists()
+    assert import_bvh([exported], tmp_path / "cm.h5", units="cm").ok
     with MotionDatabase.open(tmp_path / "cm.h5") as d:
         assert d.skeleton_info(0).units == "cm"
         m = d.read(d.names[0], dtype=torch.float64)
@@ -175,7 +183,7 @@ def test_an_imported_folders_splits_and_mirrors_hold_when_exported_again(exporte
     """Imported motions keep their split, and a mirrored copy splits with its original, so a
     re-export never puts a test motion (or its mirror) in train."""
     db = tmp_path / "h.h5"
-    assert main(["import", str(exported), "-o", str(db), "-q"]) == 0
+    assert import_bvh([exported], db).ok
     first = {r["id"]: r["split"] for r in csv.DictReader(open(exported / "index.csv"))}
     for seed in (0, 1, 2):
         out = tmp_path / f"again{seed}"
@@ -188,35 +196,48 @@ def test_an_imported_folders_splits_and_mirrors_hold_when_exported_again(exporte
                 assert split == again[name[1:]], (seed, name)
 
 
-def test_an_npz_archive_named_npy_is_one_line(exported, tmp_path, capsys):
+def test_an_npz_archive_named_npy_is_one_line(exported, tmp_path):
     import shutil
 
     bad = tmp_path / "bad"
     shutil.copytree(exported, bad)
     np.savez(bad / "new_joint_vecs" / "000003.npy", x=np.zeros(3))
     (bad / "new_joint_vecs" / "000003.npy.npz").rename(bad / "new_joint_vecs" / "000003.npy")
-    rc, _, err = run(capsys, "import", bad, "-o", tmp_path / "b.h5", "-q")
-    assert rc == 1 and "Traceback" not in err and "unexpected" not in err
-    assert any("000003.npy" in ln and "a NumPy .npz archive, not one array" in ln for ln in err.splitlines()), err
+    report = import_bvh([bad], tmp_path / "b.h5")
+    err = skipped_lines(report)
+    assert report.imported and err and not any("unexpected" in ln for ln in err)
+    assert any("000003.npy" in ln and "a NumPy .npz archive, not one array" in ln for ln in err), err
 
 
-def test_two_folders_with_the_same_ids_share_a_database_by_a_name_prefix(exported, tmp_path, capsys):
+def test_two_folders_with_the_same_ids_share_a_database_by_a_name_prefix(exported, tmp_path):
     db = tmp_path / "two.h5"
-    assert main(["import", str(exported), "-o", str(db), "-q"]) == 0
-    rc, _, err = run(capsys, "import", exported, "-o", db, "--append", "-q")
-    assert rc == 2 and "already in the database" in err  # every motion of the second: skipped, one line each
-    rc, _, err = run(capsys, "import", exported, "-o", db, "--append", "--name-prefix", "again_", "-q")
-    assert rc == 0, err
+    assert import_bvh([exported], db).ok
+    with pytest.raises(NothingImportedError) as caught:  # every motion of the second: skipped, one line each
+        import_bvh([exported], db, append=True)
+    err = skipped_lines(caught.value.report)
+    assert len(err) == 50 and all("already in the database" in ln for ln in err)
+    report = import_bvh([exported], db, append=True, name_prefix="again_")
+    assert report.ok, report.skipped
     with MotionDatabase.open(db) as d:
         names = set(d.names)
         mirrored = d.clip_info("again_M000003")["labels"]
     assert len(names) == 100 and {"000003", "again_000003", "again_M000003"} <= names
     assert mirrored["mirror_of"] == "again_000003"
+    with pytest.raises(TorchspliceError, match="name_prefix 'a:b' must be text without control characters, commas or colons"):
+        import_bvh([exported], tmp_path / "x.h5", name_prefix="a:b")
+
+
+def test_cli_refuses_an_unknown_format_and_a_bad_name_prefix_in_its_words(exported, tmp_path, capsys):
+    """The command line's words for import_bvh's refusals: argparse's choices, the flag's name."""
+    with pytest.raises(SystemExit) as exit_:
+        run(capsys, "import", exported, "-o", tmp_path / "z.h5", "--format", "fbx")
+    assert exit_.value.code == 2 and "invalid choice: 'fbx'" in capsys.readouterr().err
     rc, _, err = run(capsys, "import", exported, "-o", tmp_path / "x.h5", "--name-prefix", "a:b")
     assert rc == 2 and "--name-prefix 'a:b' must be text without control characters, commas or colons" in err
+    assert not (tmp_path / "z.h5").exists() and not (tmp_path / "x.h5").exists()
 
 
-def test_an_id_in_two_split_lists_is_one_line_and_the_unlisted_motions_land_with_no_split(exported, tmp_path, capsys):
+def test_an_id_in_two_split_lists_is_one_line_and_the_unlisted_motions_land_with_no_split(exported, tmp_path):
     """An ID in train.txt and test.txt is not silently put in test: it is skipped in one line
     naming both lists. A motion that no list names (an exported result in no split) is
     imported, with no split."""
@@ -229,9 +250,9 @@ def test_an_id_in_two_split_lists_is_one_line_and_the_unlisted_motions_land_with
     listed = set((folder / "all.txt").read_text().split())
     unlisted = sorted(f.stem for f in (folder / "new_joint_vecs").glob("*.npy") if f.stem not in listed)
     assert unlisted  # the sample's export has results in no split
-    rc, _, err = run(capsys, "import", folder, "-o", tmp_path / "t.h5", "-q")
-    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
-    assert rc == 1 and len(lines) == 1 and f"{train[0]}.npy" in lines[0] and "train.txt and test.txt" in lines[0], err
+    report = import_bvh([folder], tmp_path / "t.h5")
+    lines = err = skipped_lines(report)
+    assert report.imported and len(lines) == 1 and f"{train[0]}.npy" in lines[0] and "train.txt and test.txt" in lines[0], err
     with MotionDatabase.open(tmp_path / "t.h5") as db:
         assert train[0] not in db.names and set(unlisted) <= set(db.names)
         t = db.clip_table()
@@ -239,7 +260,7 @@ def test_an_id_in_two_split_lists_is_one_line_and_the_unlisted_motions_land_with
     assert all(split[u] == "" for u in unlisted) and split[train[1]] == "train"
 
 
-def test_fifos_links_out_of_the_folder_and_endless_files_are_one_line_each_never_read(exported, tmp_path, capsys):
+def test_fifos_links_out_of_the_folder_and_endless_files_are_one_line_each_never_read(exported, tmp_path):
     """A FIFO named like a motion or a caption file would block the import forever, a symlink
     out of the folder would pull a file from elsewhere into the captions, /dev/zero would eat
     the memory: each is skipped in one line, and the other motions land."""
@@ -258,12 +279,12 @@ def test_fifos_links_out_of_the_folder_and_endless_files_are_one_line_each_never
     (folder / "texts" / "000003.txt").symlink_to(secret)
     (folder / "texts" / "000004.txt").unlink()
     (folder / "texts" / "000004.txt").symlink_to("/dev/zero")
-    rc, _, err = run(capsys, "import", folder, "-o", tmp_path / "h.h5", "-q")
-    lines = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
+    report = import_bvh([folder], tmp_path / "h.h5")
+    lines = err = skipped_lines(report)
     for name, words in (("000001.npy", "named pipe (FIFO)"), ("000002.txt", "named pipe (FIFO)"),
                         ("000003.txt", "leads out of"), ("000004.txt", "not a regular file")):
         assert any(name in ln and words in ln for ln in lines), (name, err)
-    assert rc == 1 and "Traceback" not in err
+    assert report.imported and not report.ok
     with MotionDatabase.open(tmp_path / "h.h5") as db:
         names = set(db.names)
         assert "000000" in names and not names & {"000001", "000002", "000003", "000004"}

@@ -4,7 +4,6 @@ same database as ``torchsplice import``, and nothing written when nothing can be
 
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 
@@ -102,7 +101,7 @@ def test_units_convert_every_clip(inputs, tmp_path):
     np.testing.assert_allclose(mb.global_positions().numpy() * 100, ma.global_positions().numpy(), rtol=1e-5, atol=1e-3)
 
 
-def test_an_unexpected_failure_on_one_file_skips_only_that_file(bandai_walks, tmp_path, capsys, monkeypatch):
+def test_an_unexpected_failure_on_one_file_skips_only_that_file(bandai_walks, tmp_path, monkeypatch):
     import torchsplice.formats.bvh as bvh
 
     real = bvh.read_bvh
@@ -114,14 +113,14 @@ def test_an_unexpected_failure_on_one_file_skips_only_that_file(bandai_walks, tm
 
     monkeypatch.setattr(bvh, "read_bvh", flaky)
     out = tmp_path / "db.h5"
-    rc, _, err = run(capsys, "import", *bandai_walks, "-o", out)
-    assert rc == 1 and "Traceback" not in err
-    skipped = [ln for ln in err.splitlines() if ln.startswith("skipped ")]
-    assert len(skipped) == 1 and bandai_walks[3].name in skipped[0] and "RuntimeError" in skipped[0]
-    assert len(names(out)) == 9
+    report = import_bvh(bandai_walks, out)
+    assert not report.ok and len(report.skipped) == 1
+    ((path, why),) = report.skipped
+    assert Path(path).name == bandai_walks[3].name and "RuntimeError" in why
+    assert len(report.imported) == 9 and len(names(out)) == 9
 
 
-def test_a_folder_mixing_datasets_imports_every_file_whatever_the_order(mocap_dir, tmp_path, capsys):
+def test_a_folder_mixing_datasets_imports_every_file_whatever_the_order(mocap_dir, tmp_path):
     mixed = tmp_path / "mixed"
     mixed.mkdir()
     picks = [*sorted((mocap_dir / "cmu_graphics_lab").glob("*.bvh"))[:2],
@@ -132,10 +131,10 @@ def test_a_folder_mixing_datasets_imports_every_file_whatever_the_order(mocap_di
         for n, f in enumerate(order):
             shutil.copy(f, mixed / f"{n}_{f.name}")
         out = tmp_path / "mixed.h5"
-        rc, _, err = run(capsys, "import", mixed, "-o", out, "--force", "-q")
-        assert rc == 0, err
-        rc, out_json, _ = run(capsys, "info", out, "--json")
-        info = json.loads(out_json)
+        report = import_bvh([mixed], out, overwrite=True)
+        assert report.ok, report.skipped
+        with MotionDatabase.open(out) as db:
+            info = db.summary()
         assert info["num_clips"] == 3
         units = {k["spec"]: k["units"] for k in info["skeletons"]}
         assert len(set(units.values())) == 2 and info["units"] == "mixed", units
@@ -158,6 +157,7 @@ def test_import_gives_the_same_bits_with_any_thread_count(bandai_walks, tmp_path
 
 
 def test_import_prints_the_guessed_roles_once_per_skeleton_and_info_shows_them(mocap_dir, tmp_path, capsys):
+    """The command line's words for the guessed roles (the roles as data: test_guessed_roles_and_append)."""
     walk = sorted((mocap_dir / "cmu_graphics_lab").glob("*walk*.bvh"))[0]
     copy = tmp_path / "again.bvh"
     shutil.copy(walk, copy)
@@ -166,18 +166,18 @@ def test_import_prints_the_guessed_roles_once_per_skeleton_and_info_shows_them(m
     assert rc == 0, err
     assert text.count("joint roles guessed by the 'generic' spec") == 1
     assert "  left leg: LeftUpLeg > LeftLeg > LeftFoot > LeftToeBase" in text
-    rc, text, _ = run(capsys, "info", out, "--json")
-    roles = json.loads(text)["skeletons"][0]["guessed_roles"]
+    with MotionDatabase.open(out) as db:
+        roles = db.summary()["skeletons"][0]["guessed_roles"]  # what info --json shows
     assert roles["left_leg"] == ["LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase"] and roles["head"] == "Head"
     rc, text, _ = run(capsys, "import", walk, "-o", tmp_path / "s.h5", "--spec", "cmu")
     assert rc == 0 and "joint roles guessed" not in text
 
 
-def test_import_warns_in_one_line_about_lines_after_the_declared_frames(bandai_walks, tmp_path, capsys):
+def test_import_warns_about_lines_after_the_declared_frames_and_imports_the_clip(bandai_walks, tmp_path):
     f = tmp_path / "keyframes.bvh"
     f.write_text(bandai_walks[0].read_text().rstrip("\n") + "\n1 5 9 13\n")  # as QAvimator writes keyframe indices
-    rc, _, err = run(capsys, "import", f, "-o", tmp_path / "k.h5")
-    assert rc == 0 and "Traceback" not in err
-    warned = [ln for ln in err.splitlines() if ln.startswith("warning: ")]
-    assert len(warned) == 1 and str(f) in warned[0] and "ignored" in warned[0]
+    report = import_bvh([f], tmp_path / "k.h5")
+    assert report.ok and len(report.warnings) == 1
+    ((path, why),) = report.warnings
+    assert path == str(f) and "ignored" in why and "\n" not in why
     assert names(tmp_path / "k.h5") == ["keyframes"]

@@ -15,7 +15,10 @@ import pytest
 import torch
 
 from torchsplice.cli import main
+from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.bvh import read_bvh
+from torchsplice.formats.importer import import_bvh
+from torchsplice.job.run import splice_all
 from torchsplice.store.database import MotionDatabase
 from cli_helpers import run
 
@@ -25,16 +28,20 @@ def lafan(mocap_dir) -> Path:
     return mocap_dir / "lafan1_via_pypi_bvhtools"
 
 
-def test_window_cuts_long_takes_into_overlapping_windows_equal_to_the_take(lafan, tmp_path, capsys):
+def _windows(take_frames: int, n: int = 600, step: int = 540) -> list[int]:
+    """The first frames of the 20 s windows (2 s overlap, 30 fps) of a take of ``take_frames``."""
+    expect = list(range(0, take_frames - n + 1, step))
+    return expect + ([take_frames - n] if expect[-1] != take_frames - n else [])
+
+
+def test_window_cuts_long_takes_into_overlapping_windows_equal_to_the_take(lafan, tmp_path):
     out = tmp_path / "w.h5"
-    rc, text, err = run(capsys, "import", lafan / "test.bvh", "-o", out, "--window", "20", "--window-overlap", "2")
-    assert rc == 0, err
+    report = import_bvh([lafan / "test.bvh"], out, window=20, window_overlap=2)
     take = read_bvh(lafan / "test.bvh")
-    T, n, step = take.num_frames, 600, 540
-    expect = list(range(0, T - n + 1, step))
-    expect += [T - n] if expect[-1] != T - n else []
-    assert f"1 long take cut into {len(expect)} windows of 20 s" in text
-    assert text.startswith(f"imported {len(expect)} clips from 1 file ")  # the clips written, not the files
+    T, n = take.num_frames, 600
+    expect = _windows(T, n)
+    assert [(c.name, c.windows) for c in report.cut] == [("test", len(expect))]
+    assert report.window == 20 and report.clips == len(expect)  # the clips written, not the files
     with MotionDatabase.open(out) as db:
         assert db.names == [f"test#{k:03d}" for k in range(len(expect))]
         for k, s in enumerate(expect):
@@ -46,12 +53,27 @@ def test_window_cuts_long_takes_into_overlapping_windows_equal_to_the_take(lafan
     assert expect[-1] + n == T  # the last window ends with the take
 
 
-def test_short_takes_stay_whole_and_bad_window_arguments_are_refused(lafan, mocap_dir, tmp_path, capsys):
+def test_short_takes_stay_whole_and_bad_window_arguments_are_refused(mocap_dir, tmp_path):
+    walk = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("dataset-1_walk_normal*.bvh"))[0]
+    report = import_bvh([walk], tmp_path / "a.h5", window=60)
+    assert report.cut == [] and report.clips == 1
+    with MotionDatabase.open(tmp_path / "a.h5") as db:
+        assert db.names == [walk.stem] and "split_from" not in db.read(walk.stem).labels
+    with pytest.raises(TorchspliceError, match="window_overlap"):
+        import_bvh([walk], tmp_path / "b.h5", window=5, window_overlap=5)
+    assert not (tmp_path / "b.h5").exists()
+
+
+def test_cli_says_what_the_window_cut_and_names_its_flags(lafan, mocap_dir, tmp_path, capsys):
+    rc, text, err = run(capsys, "import", lafan / "test.bvh", "-o", tmp_path / "w.h5", "--window", "20",
+                        "--window-overlap", "2")
+    assert rc == 0, err
+    count = len(_windows(read_bvh(lafan / "test.bvh").num_frames))
+    assert f"1 long take cut into {count} windows of 20 s" in text
+    assert text.startswith(f"imported {count} clips from 1 file ")  # the clips written, not the files
     walk = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("dataset-1_walk_normal*.bvh"))[0]
     rc, text, _ = run(capsys, "import", walk, "-o", tmp_path / "a.h5", "--window", "60")
     assert rc == 0 and "cut" not in text
-    with MotionDatabase.open(tmp_path / "a.h5") as db:
-        assert db.names == [walk.stem] and "split_from" not in db.read(walk.stem).labels
     rc, _, err = run(capsys, "import", walk, "-o", tmp_path / "b.h5", "--window", "5", "--window-overlap", "5")
     assert rc == 2 and "--window-overlap" in err
     with pytest.raises(SystemExit) as done:  # "split" is the exports' train/val/test: not listed here
@@ -60,24 +82,26 @@ def test_short_takes_stay_whole_and_bad_window_arguments_are_refused(lafan, moca
     assert done.value.code == 0 and "--window SECONDS" in text and "--split" not in text.replace("--split-ratios", "")
 
 
-def test_max_length_ratio_skips_pairs_of_very_different_lengths(lafan, tmp_path, capsys):
+def test_max_length_ratio_skips_pairs_of_very_different_lengths(lafan, tmp_path):
     db = tmp_path / "mixed.h5"
-    assert main(["import", str(lafan / "test.bvh"), "-o", str(db), "-q"]) == 0
-    assert main(["import", str(lafan / "test2.bvh"), "-o", str(db), "-q", "--append", "--split", "20"]) == 0  # the earlier name
-    assert main(["import", str(lafan / "test.bvh"), "-o", str(db), "-q", "--append", "--window", "20"]) == 0
-    rc, text, err = run(capsys, "splice-all", db, "-o", tmp_path / "o.h5", "--locomotions", "test,test#000,test2#000",
-                        "--actions", "test2#00[1-2]", "--max-length-ratio", "3", "--force-locomotion", "--workers", "1")
-    assert rc == 0, err
-    assert "2 x lengths differ by more than --max-length-ratio 3" in text  # 244 s against 20 s
+    import_bvh([lafan / "test.bvh"], db)
+    import_bvh([lafan / "test2.bvh"], db, append=True, window=20)  # the earlier name
+    import_bvh([lafan / "test.bvh"], db, append=True, window=20)
+    summary = splice_all(db, tmp_path / "o.h5", locomotions="test,test#000,test2#000", actions="test2#00[1-2]",
+                         max_length_ratio=3, force_locomotion=True, workers=1)
+    text = "\n".join(summary.lines())
+    assert "2 x lengths differ by more than max_length_ratio 3" in text  # 244 s against 20 s
     assert "2 x windows of one take are not spliced onto each other" in text  # test2#000 onto test2#001, #002
+    assert summary.spliced == 2
     with MotionDatabase.open(tmp_path / "o.h5") as out:
         assert sorted(out.names) == ["test#000+test2#001", "test#000+test2#002"]
         assert json.loads(out.attrs["run"])["max_length_ratio"] == 3
 
 
 def test_splicing_two_whole_long_takes_is_flagged_as_a_poor_alignment(lafan, tmp_path, capsys):
+    """The command line's note (``splice`` of one pair: the note is its own words)."""
     db = tmp_path / "takes.h5"
-    assert main(["import", str(lafan), "-o", str(db), "-q"]) == 0
+    import_bvh([lafan], db)
     rc, _, err = run(capsys, "splice", db, "--locomotion", "test", "--action", "test2", "-o", tmp_path / "x.bvh",
                      "--force-locomotion")
     assert rc == 0
