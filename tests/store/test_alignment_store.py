@@ -15,6 +15,7 @@ import pytest
 import torch
 
 from cli_helpers import error_line, run
+from torchsplice.cli.common import flag
 from torchsplice.core.errors import DatabaseError, TorchspliceError
 from torchsplice.job import merge_job, splice_all
 from torchsplice.job.materialize import materialize
@@ -329,7 +330,8 @@ def test_bad_input_gets_one_line(sample_db, sample_jobs, tmp_path, capsys):
 def test_dry_run_says_what_the_alignment_store_would_take(sample_db, tmp_path):
     summary = splice_all(sample_db, tmp_path / "x.h5", dry_run=True)
     assert summary.alignment is not None and summary.alignment.bytes > 0
-    assert "with --store alignment about" in "\n".join(summary.lines()) and not (tmp_path / "x.h5").exists()
+    assert "with store alignment about" in "\n".join(summary.lines()) and not (tmp_path / "x.h5").exists()
+    assert "with --store alignment about" in "\n".join(summary.lines(flag))  # the command line names its flag
 
 
 def _torch_against_kernels(path, device: str = "cpu") -> float:

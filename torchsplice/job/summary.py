@@ -63,7 +63,7 @@ class JobSummary:
         if self.dry_run:
             out = [f"would write {self.output}: {counted(self.pairs, 'spliced clip')} in {counted(self.tasks, 'task')}"
                    + (f" ({self.pairs - self.standing} time-aligned, {self.standing} standing actions)" if self.standing else "")
-                   + f"; {self._room()}"]
+                   + f"; {self._room(option_name)}"]
         elif self.shard is not None:
             k, n = self.shard
             out = [f"slice {k}/{n}: {self.tasks_done} of {self.tasks} tasks done"
@@ -108,15 +108,19 @@ class JobSummary:
                     for code, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
         return out
 
-    def _room(self) -> str:
+    def _room(self, option_name=None) -> str:
+        """Expected size and free room; for a motion store, what the alignment store would take
+        (``option_name`` writes the option, as in :meth:`lines`)."""
+        from ..core.errors import render_message
+
         folder = self.output.parent
         expect = (f"expected output about {format_bytes(self.expected.bytes)} ({self.expected.frames:,} frames)"
                   if self.expected is not None else "")
         free = f"{format_bytes(self.free)} free in {folder}" if self.free is not None else ""
         fits = "" if self.expected is None or self.free is None else \
             ("" if self.free >= self.expected.bytes else " (it does not fit)")
-        other = (f"; with --store alignment about {format_bytes(self.alignment.bytes)}"
-                 if self.alignment is not None else "")
+        store = render_message("{store} alignment", ("store",), option_name or (lambda o: o))
+        other = f"; with {store} about {format_bytes(self.alignment.bytes)}" if self.alignment is not None else ""
         return "; ".join(x for x in (expect, free) if x) + fits + other
 
 
