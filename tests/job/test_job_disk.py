@@ -18,8 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from cli_helpers import run
-from torchsplice.cli import main
+from torchsplice.core.errors import TorchspliceError
 from torchsplice.store.database import MotionDatabase
 from torchsplice.job import splice_all
 from torchsplice.job.summary import REASONS_SHOWN, reason_lines
@@ -40,12 +39,12 @@ def listing(folder: Path) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ size and room
-def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_path, capsys):
+def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     before = listing(tmp_path)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--method", "splice,naive", "--dry-run")
-    assert code == 0, err
-    first = text.splitlines()[0]
+    summary = splice_all(sample_db, out, methods="splice,naive", dry_run=True)
+    assert summary.dry_run and summary.pairs == 50
+    first = summary.lines()[0]
     m = re.search(r"would write .*out\.h5: 50 spliced clips in (\d+) tasks; expected output about ([\d.]+) (MB|kB) "
                   r"\(([\d,]+) frames\); ([\d.,]+) (GB|MB|TB) free in ", first)
     assert m, first
@@ -81,21 +80,20 @@ def test_frame_bytes_follow_the_layout():
     assert 500 <= TABLE_BYTES_PER_CLIP <= 5000
 
 
-def test_a_job_that_cannot_fit_is_refused_before_it_starts(sample_db, tmp_path, capsys, monkeypatch):
+def test_a_job_that_cannot_fit_is_refused_before_it_starts(sample_db, tmp_path, monkeypatch):
     import torchsplice.job.run as run_mod
 
     out = tmp_path / "out.h5"
     monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 50_000)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out)
-    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
-    assert "the job needs about" in err and "50.0 kB free" in err and str(out) in err
+    with pytest.raises(TorchspliceError, match="the job needs about") as caught:
+        splice_all(sample_db, out)
+    line = str(caught.value)
+    assert "\n" not in line and "50.0 kB free" in line and str(out) in line, line
     assert listing(tmp_path) == []  # refused before anything was written: no plan, no work folder
     monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 10**12)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--dry-run")
-    assert code == 0 and "(it does not fit)" not in text
+    assert "(it does not fit)" not in "\n".join(splice_all(sample_db, out, dry_run=True).lines())
     monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 50_000)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--dry-run")
-    assert code == 0 and "(it does not fit)" in text.splitlines()[0]
+    assert "(it does not fit)" in splice_all(sample_db, out, dry_run=True).lines()[0]
 
 
 def test_many_clips_of_one_kind_are_summed_up_in_the_summary():
@@ -170,7 +168,8 @@ def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(ba
     from tests.job.test_job import assert_same_file
 
     reference = tmp_path / "reference.h5"
-    assert main(["splice-all", str(bandai_db), "-o", str(reference), *JOB, "--batch-size", "4", "-q", "--workers", "1"]) == 0
+    splice_all(bandai_db, reference, locomotions="label:style=normal", actions="role:action,role:both", batch_pairs=4,
+               workers=1)
     out = tmp_path / "killed" / "out.h5"
     out.parent.mkdir()
     work = out.with_name(f".{out.name}.parts")
