@@ -36,36 +36,43 @@ def sample_f64():
 
 @pytest.fixture(scope="session")
 def sample_db(tmp_path_factory):
-    """The built-in sample as a database (``torchsplice sample``), made once per session; a test
-    module may define its own."""
-    from torchsplice.cli import main
+    """The built-in sample as a database (what ``torchsplice sample`` writes: every sample clip
+    with the sample spec), made once per session; a test module may define its own."""
+    from torchsplice import MotionDatabase
+    from torchsplice.sample import sample_motions
+    from torchsplice.specs import load_spec
 
     db = tmp_path_factory.mktemp("sample") / "sample.h5"
-    assert main(["sample", "-o", str(db), "-q"]) == 0
+    spec = load_spec("sample")
+    with MotionDatabase.create(db) as w:
+        for m in sample_motions():
+            w.append(m, spec=spec)
     return db
 
 
 @pytest.fixture(scope="session")
 def mixed(mocap_dir, tmp_path_factory) -> Path:
     """Two Bandai Namco clips (22 joints) and the CMU walk (31 joints)."""
-    from torchsplice.cli import main
+    from torchsplice import import_bvh
 
     out = tmp_path_factory.mktemp("mixed") / "mixed.h5"
     bandai = mocap_dir / "bandai_namco_research_motiondataset"
     files = [bandai / "dataset-1_walk_normal_001.bvh", bandai / "dataset-1_bye_normal_001.bvh",
              mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"]
-    assert main(["import", *map(str, files), "-o", str(out), "--units", "cm", "-q"]) == 0
+    report = import_bvh(files, out, units="cm")
+    assert not report.skipped and len(report.imported) == 3
     return out
 
 
 @pytest.fixture(scope="session")
 def bandai_namco_db(mocap_dir, tmp_path_factory) -> Path:
-    """Every Bandai Namco clip of ../shared/mocap imported as ``torchsplice import FOLDER`` does
-    (the spec detected), made once per session: read it, never write into it."""
-    from torchsplice.cli import main
+    """Every Bandai Namco clip of ../shared/mocap imported as ``import_bvh([FOLDER], db)`` (and
+    ``torchsplice import FOLDER``) does (the spec detected), made once per session: read it, never write into it."""
+    from torchsplice import import_bvh
 
     db = tmp_path_factory.mktemp("bandai_namco") / "bandai.h5"
-    assert main(["import", str(mocap_dir / "bandai_namco_research_motiondataset"), "-o", str(db), "-q"]) == 0
+    report = import_bvh([mocap_dir / "bandai_namco_research_motiondataset"], db)
+    assert not report.skipped and report.imported
     return db
 
 

@@ -20,6 +20,7 @@ from cli_helpers import run
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.data import MotionStream
 from torchsplice.data.stream import epoch_order
+from torchsplice.formats.exporters import export_clips
 from torchsplice.formats.humanml3d_stream import HumanML3DStream
 from torchsplice.job import splice_all
 
@@ -156,8 +157,7 @@ def test_the_humanml3d_stream_gives_the_exports_motions_captions_and_splits(stor
 
 def test_humanml3d_shards_read_back_as_the_folder_export(stores, exported, tmp_path, capsys):
     out = tmp_path / "shards"
-    rc, _, err = run(capsys, "export", stores["alignment"], "--all", "--format", "humanml3d", "--shards", "3", "-o", out, "-q")
-    assert rc == 0, err
+    export_clips(stores["alignment"], None, out=out, format="humanml3d", shards=3)
     tars = sorted(out.glob("*.tar"))
     assert 3 <= len(tars) <= 5 and not (out / "new_joint_vecs").exists()
     ids, nosplit = [], set()
@@ -182,8 +182,11 @@ def test_humanml3d_shards_read_back_as_the_folder_export(stores, exported, tmp_p
     assert sorted(i for i in ids if i not in nosplit) == (exported / "all.txt").read_text().split()
     for name in ("train.txt", "val.txt", "test.txt", "index.csv"):
         assert (out / name).read_text() == (exported / name).read_text()
+    with pytest.raises(TorchspliceError, match="shards must be a whole number of at least 1") as caught:
+        export_clips(stores["alignment"], None, out=tmp_path / "none", format="humanml3d", shards=0)
+    assert "\n" not in str(caught.value) and not (tmp_path / "none").exists()
     rc, _, err = run(capsys, "export", stores["alignment"], "--all", "--format", "humanml3d", "--shards", "0", "-o",
-                     tmp_path / "none")
+                     tmp_path / "none")  # the command names its flag
     assert rc != 0 and "--shards must be a whole number of at least 1" in err
 
 

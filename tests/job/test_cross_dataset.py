@@ -96,8 +96,10 @@ def test_an_action_of_one_dataset_on_a_locomotion_of_another(dbs, loco_db, loco,
 def test_splice_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp_path):
     """One database holding both datasets: ``splice`` and ``plot-alignment`` retarget the action
     as ``splice-all`` does (the BVH is on the locomotion's skeleton, and its upper body is the
-    job's result's), and ``evaluate`` measures a retargeted output against the action as spliced."""
+    job's result's; the commands retarget, ``splice()`` does not), and ``evaluate_database``
+    measures a retargeted output against the action as spliced."""
     from torchsplice.cli import main
+    from torchsplice.evaluation.report import evaluate_database
     from torchsplice.formats.bvh import read_bvh
 
     mixed = tmp_path / "mixed.h5"
@@ -109,15 +111,14 @@ def test_splice_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp
     assert main(["plot-alignment", str(mixed), "--locomotion", loco, "--action", "test", "-o",
                  str(tmp_path / "a.png"), "-q"]) == 0
     out = tmp_path / "job.h5"
-    assert main(["splice-all", str(mixed), "--locomotions", loco, "--actions", "test", "-o", str(out), "-q",
-                 "--workers", "1"]) == 0
+    splice_all(mixed, out, locomotions=loco, actions="test", workers=1)
     one = read_bvh(tmp_path / "one.bvh", dtype=torch.float64)
     with MotionDatabase.open(out) as d:
         job = d.read(f"{loco}+test", dtype=torch.float64)
     assert one.skeleton.same_topology(job.skeleton) and one.num_frames == job.num_frames
     # BVH text holds 6 decimals of degrees: the same motion
     assert float((one.global_positions() - job.global_positions()).abs().max()) < 0.05
-    assert main(["evaluate", str(out), "-o", str(tmp_path / "report.md"), "--no-pictures"]) == 0
+    evaluate_database(out, tmp_path / "report.md", pictures=False)
     text = (tmp_path / "report.md").read_text()
     assert "| splice |" in text and "## Retargeted pairs" in text, text
     section = text.split("## Retargeted pairs", 1)[1]

@@ -11,23 +11,21 @@ import json
 import os
 import re
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from cli_helpers import run
-from torchsplice.cli import main
+from torchsplice.core.errors import TorchspliceError
 from torchsplice.store.database import MotionDatabase
 from torchsplice.job import splice_all
 from torchsplice.job.summary import REASONS_SHOWN, reason_lines
 from torchsplice.job.size import TABLE_BYTES_PER_CLIP, frame_bytes
+from writers import reaped, splice_all_process, summary_of
 
 REPO = Path(__file__).resolve().parents[2]
 BANDAI = "bandai_namco_research_motiondataset"
-JOB = ["--locomotions", "label:style=normal", "--actions", "role:action,role:both"]
+JOB = {"locomotions": "label:style=normal", "actions": "role:action,role:both"}
 
 
 @pytest.fixture(scope="module")
@@ -40,12 +38,12 @@ def listing(folder: Path) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ size and room
-def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_path, capsys):
+def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     before = listing(tmp_path)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--method", "splice,naive", "--dry-run")
-    assert code == 0, err
-    first = text.splitlines()[0]
+    summary = splice_all(sample_db, out, methods="splice,naive", dry_run=True)
+    assert summary.dry_run and summary.pairs == 50
+    first = summary.lines()[0]
     m = re.search(r"would write .*out\.h5: 50 spliced clips in (\d+) tasks; expected output about ([\d.]+) (MB|kB) "
                   r"\(([\d,]+) frames\); ([\d.,]+) (GB|MB|TB) free in ", first)
     assert m, first
@@ -61,7 +59,7 @@ def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_pa
 
 def test_the_estimate_is_close_to_what_the_job_writes(sample_db, bandai_db, tmp_path, capsys):
     for db, extra in ((sample_db, {"methods": "splice,naive"}),
-                      (bandai_db, {"locomotions": "label:style=normal", "actions": "role:action,role:both"})):
+                      (bandai_db, JOB)):
         for compression in ("auto", "gzip"):
             out = tmp_path / f"{db.stem}_{compression}.h5"
             s = splice_all(db, out, compression=compression, workers=1, **extra)
@@ -81,21 +79,20 @@ def test_frame_bytes_follow_the_layout():
     assert 500 <= TABLE_BYTES_PER_CLIP <= 5000
 
 
-def test_a_job_that_cannot_fit_is_refused_before_it_starts(sample_db, tmp_path, capsys, monkeypatch):
+def test_a_job_that_cannot_fit_is_refused_before_it_starts(sample_db, tmp_path, monkeypatch):
     import torchsplice.job.run as run_mod
 
     out = tmp_path / "out.h5"
     monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 50_000)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out)
-    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
-    assert "the job needs about" in err and "50.0 kB free" in err and str(out) in err
+    with pytest.raises(TorchspliceError, match="the job needs about") as caught:
+        splice_all(sample_db, out)
+    line = str(caught.value)
+    assert "\n" not in line and "50.0 kB free" in line and str(out) in line, line
     assert listing(tmp_path) == []  # refused before anything was written: no plan, no work folder
     monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 10**12)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--dry-run")
-    assert code == 0 and "(it does not fit)" not in text
+    assert "(it does not fit)" not in "\n".join(splice_all(sample_db, out, dry_run=True).lines())
     monkeypatch.setattr(run_mod, "_free_bytes", lambda folder: 50_000)
-    code, text, err = run(capsys, "splice-all", sample_db, "-o", out, "--dry-run")
-    assert code == 0 and "(it does not fit)" in text.splitlines()[0]
+    assert "(it does not fit)" in splice_all(sample_db, out, dry_run=True).lines()[0]
 
 
 def test_many_clips_of_one_kind_are_summed_up_in_the_summary():
@@ -142,17 +139,15 @@ def bank_bytes(folder: Path) -> int:
 @pytest.mark.slow
 def test_the_peak_disk_of_a_job_is_about_its_output(bandai_db, tmp_path):
     out = tmp_path / "out.h5"
-    proc = subprocess.Popen([sys.executable, "-m", "torchsplice", "splice-all", str(bandai_db), "-o", str(out), *JOB,
-                             "--workers", "2", "--batch-size", "4", "-q"], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    peak, banks, at_peak = 0, 0, {}
-    while proc.poll() is None:
-        size, files = footprint(tmp_path)
-        if size > peak:
-            peak, at_peak = size, files
-        banks = max(banks, bank_bytes(tmp_path))
-        time.sleep(0.002)
-    _, err = proc.communicate()
+    with reaped(splice_all_process(bandai_db, out, **JOB, workers=2, batch_pairs=4, cwd=REPO)) as proc:
+        peak, banks, at_peak = 0, 0, {}
+        while proc.poll() is None:
+            size, files = footprint(tmp_path)
+            if size > peak:
+                peak, at_peak = size, files
+            banks = max(banks, bank_bytes(tmp_path))
+            time.sleep(0.002)
+        _, err = proc.communicate()
     assert proc.returncode == 0, err
     final = out.stat().st_size
     assert peak <= 1.3 * final, (peak, final, len(at_peak), sorted(at_peak.items(), key=lambda kv: -kv[1])[:6])
@@ -170,35 +165,36 @@ def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(ba
     from tests.job.test_job import assert_same_file
 
     reference = tmp_path / "reference.h5"
-    assert main(["splice-all", str(bandai_db), "-o", str(reference), *JOB, "--batch-size", "4", "-q", "--workers", "1"]) == 0
+    splice_all(bandai_db, reference, **JOB, batch_pairs=4, workers=1)
     out = tmp_path / "killed" / "out.h5"
     out.parent.mkdir()
     work = out.with_name(f".{out.name}.parts")
-    cmd = [sys.executable, "-m", "torchsplice", "splice-all", str(bandai_db), "-o", str(out), *JOB, "--batch-size", "4",
-           "--workers", "2"]
-    env = dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task
+    job = dict(JOB, batch_pairs=4, workers=2, cwd=REPO,
+               env=dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0"))  # a checkpoint after each task
     merged, kills = [], 0
     for share in (0.2, 0.45, 0.7):
-        proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        total = None
-        deadline = time.monotonic() + 300
-        while proc.poll() is None and time.monotonic() < deadline:
-            if total is None and (work / "plan.json").exists():
-                try:
-                    total = len(json.loads((work / "plan.json").read_text())["tasks"])
-                except ValueError:
-                    pass
-            if total is not None and held(work) >= share * total:
-                proc.send_signal(signal.SIGKILL)
-                kills += 1
-                break
-            time.sleep(0.005)
-        proc.communicate()
+        with reaped(splice_all_process(bandai_db, out, **job)) as proc:
+            total = None
+            deadline = time.monotonic() + 300
+            while proc.poll() is None and time.monotonic() < deadline:
+                if total is None and (work / "plan.json").exists():
+                    try:
+                        total = len(json.loads((work / "plan.json").read_text())["tasks"])
+                    except ValueError:
+                        pass
+                if total is not None and held(work) >= share * total:
+                    proc.send_signal(signal.SIGKILL)
+                    kills += 1
+                    break
+                time.sleep(0.005)
+            proc.communicate()
         merged.append(held(work))
     assert kills == 3 and merged == sorted(merged) and merged[0] > 0
-    done = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    m = re.search(r"spliced clips \((\d+) pairs from an earlier run\)", done.stdout)
-    assert m and int(m.group(1)) >= 4 * merged[-1], done.stdout  # what the output held was not spliced again
+    with reaped(splice_all_process(bandai_db, out, **job)) as done:
+        stdout, stderr = done.communicate(timeout=600)
+    assert done.returncode == 0, stderr
+    summary = summary_of(stdout)
+    m = re.search(r"spliced clips \((\d+) pairs from an earlier run\)", " ".join(summary["lines"]))
+    assert m and int(m.group(1)) == summary["resumed"] >= 4 * merged[-1], stdout  # what the output held was not spliced again
     assert not work.exists() and sorted(p.name for p in out.parent.iterdir()) == ["out.h5", "out.h5.index.csv"]
     assert_same_file(out, reference)

@@ -13,12 +13,12 @@ import re
 
 import pytest
 
-from torchsplice.cli import main
+from torchsplice import import_bvh, splice_all
+from torchsplice.cli.common import flag
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
-from cli_helpers import run
 
 BANDAI = "bandai_namco_research_motiondataset"
 LOCOS = ["dataset-2_walk_normal_008", "dataset-1_walk_proud_001", "cmu_12_01_walk", "walk_curve", "test#001"]
@@ -30,9 +30,8 @@ def mixed_db(mocap_dir, tmp_path_factory):
     """Bandai Namco, CMU (both namings), LAFAN1 (cut into 4 s windows) and the sample, in centimetres."""
     out = tmp_path_factory.mktemp("mixing") / "mixed.h5"
     bandai = [mocap_dir / BANDAI / f"{n}.bvh" for n in (*LOCOS[:2], *ACTIONS[:2])]
-    assert main([*map(str, ["import", *bandai, mocap_dir / "cmu_graphics_lab", "-o", out, "--units", "cm", "-q"])]) == 0
-    assert main([*map(str, ["import", mocap_dir / "lafan1_via_pypi_bvhtools", "-o", out, "--append", "--units", "cm",
-                            "--window", "4", "-q"])]) == 0
+    assert import_bvh([*bandai, mocap_dir / "cmu_graphics_lab"], out, units="cm").ok
+    assert import_bvh([mocap_dir / "lafan1_via_pypi_bvhtools"], out, append=True, units="cm", window=4).ok
     with MotionDatabase.open(out, mode="a") as db:
         spec = load_spec("sample")
         for m in sample_motions():
@@ -59,11 +58,11 @@ def test_which_shipped_datasets_share_a_topology(mocap_dir):
         "cmu": "cmu", "cmu_max": "cmu_max", "lafan1": "lafan1", "sample": "lafan1"}
 
 
-def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(mixed_db, tmp_path, capsys):
+def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(mixed_db, tmp_path):
     out = tmp_path / "out.h5"
-    rc, text, err = run(capsys, "splice-all", mixed_db, "-o", out, "--workers", "1", "--no-retarget",
-                        "--locomotions", ",".join(LOCOS), "--actions", ",".join(ACTIONS))
-    assert rc == 0, err
+    summary = splice_all(mixed_db, out, workers=1, retarget=False, locomotions=",".join(LOCOS), actions=",".join(ACTIONS))
+    text = "\n".join(summary.lines())
+    assert "(--retarget is off)" in "\n".join(summary.lines(flag))  # the command names its flag
     with MotionDatabase.open(mixed_db) as db:
         sk = db.skeletons
         kind = {n: db.clip_info(n)["skeleton"] for n in LOCOS + ACTIONS}
@@ -81,7 +80,7 @@ def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(
     assert formed == 8 and sum(want.values()) == 17
     got = {}
     pattern = re.compile(r"^  (\d+) x locomotions on skeleton (\d+) \((\w+), (\d+) joints\) x actions on skeleton (\d+) "
-                         r"\((\w+), (\d+) joints\) \(--retarget is off\)$")
+                         r"\((\w+), (\d+) joints\) \(retarget is off\)$")
     for line in text.splitlines():
         hit = pattern.match(line)
         if hit:
@@ -105,13 +104,13 @@ def test_splice_all_on_a_mixed_database_counts_the_pairs_not_formed_by_skeleton(
     assert any({specs[kind[lo]], specs[kind[ac]]} == {"sample", "lafan1"} for lo, ac in pairs), pairs
 
 
-def test_splice_all_on_a_mixed_database_retargets_the_pairs_across_skeletons(mixed_db, tmp_path, capsys):
+def test_splice_all_on_a_mixed_database_retargets_the_pairs_across_skeletons(mixed_db, tmp_path):
     """By default every humanoid pair is formed: the 17 pairs across topologies with the action
     retargeted onto the locomotion's skeleton (once per action and skeleton), the others as they are."""
     out = tmp_path / "out.h5"
-    rc, text, err = run(capsys, "splice-all", mixed_db, "-o", out, "--workers", "1",
-                        "--locomotions", ",".join(LOCOS), "--actions", ",".join(ACTIONS))
-    assert rc == 0, err
+    summary = splice_all(mixed_db, out, workers=1, locomotions=",".join(LOCOS), actions=",".join(ACTIONS))
+    text = "\n".join(summary.lines())
+    assert summary.retargeted == 17
     assert "not formed" not in text and "17 had the action retargeted onto the locomotion's skeleton" in text, text
     with MotionDatabase.open(mixed_db) as db:
         sk = db.skeletons

@@ -1,7 +1,8 @@
 """Virtual outputs under attack: a job or merge killed at each step of putting a new virtual
 output in place of an old one (the old one stays readable, or the new one is whole, and a
 rerun finishes), an output renamed away while another job writes its old name (it keeps
-reading its own frames), and a copy-layout job over a virtual output (no orphaned shards)."""
+reading its own frames), and a copy-layout job over a virtual output (no orphaned shards); the
+jobs run through ``splice_all`` and ``merge_job``, stopped as by Ctrl-C."""
 
 from __future__ import annotations
 
@@ -9,15 +10,16 @@ import numpy as np
 import pytest
 
 import torchsplice.job.shards as run_module
-from torchsplice.cli import main
+from torchsplice.job import merge_job, splice_all
 from torchsplice.store.database import MotionDatabase
 
 LOCOS, ACTIONS = "walk_curve,jog,turn_sharp", "carry_box,wave"
 
 
-def job(db, out, method, *extra):
-    return main(["splice-all", str(db), "-o", str(out), "--locomotions", LOCOS, "--actions", ACTIONS, "--method", method,
-                 "--layout", "virtual", "--batch-size", "2", "--workers", "1", "-q", *extra])
+def job(db, out, method, **extra):
+    """The virtual-layout job of ``method`` on the locomotions LOCOS x the actions ACTIONS."""
+    return splice_all(db, out, locomotions=LOCOS, actions=ACTIONS, methods=method, layout="virtual", batch_pairs=2,
+                      workers=1, **extra)
 
 
 def frames(path) -> dict:
@@ -34,8 +36,8 @@ def same(a: dict, b: dict) -> bool:
 def references(sample_db, tmp_path_factory):
     """The splice and naive outputs of the job, each written alone."""
     d = tmp_path_factory.mktemp("refs")
-    assert job(sample_db, d / "splice.h5", "splice") == 0
-    assert job(sample_db, d / "naive.h5", "naive") == 0
+    job(sample_db, d / "splice.h5", "splice")
+    job(sample_db, d / "naive.h5", "naive")
     return frames(d / "splice.h5"), frames(d / "naive.h5")
 
 
@@ -58,12 +60,13 @@ def test_a_virtual_job_killed_while_replacing_an_output_leaves_one_readable_then
         sample_db, references, tmp_path, monkeypatch, kill):
     want_splice, want_naive = references
     out = tmp_path / "v.h5"
-    assert job(sample_db, out, "splice") == 0
+    job(sample_db, out, "splice")
     interrupt_after(monkeypatch, "install_shards", first=1 if kill == "mid-install" else None)
-    assert job(sample_db, out, "naive", "--force") == 130
+    with pytest.raises(KeyboardInterrupt):
+        job(sample_db, out, "naive", overwrite=True)
     assert same(frames(out), want_splice)  # the old output, whole and its own
     monkeypatch.undo()
-    assert job(sample_db, out, "naive", "--force") == 0  # the rerun finishes
+    job(sample_db, out, "naive", overwrite=True)  # the rerun finishes
     assert same(frames(out), want_naive)
     subfolders = [p for p in (tmp_path / "v.h5.shards").iterdir()]
     assert len(subfolders) == 1  # the old output's shards went with it
@@ -71,17 +74,17 @@ def test_a_virtual_job_killed_while_replacing_an_output_leaves_one_readable_then
 
 
 def test_a_merge_killed_while_replacing_an_output_leaves_one_readable_then_finishes(
-        sample_db, references, tmp_path, monkeypatch, capsys):
+        sample_db, references, tmp_path, monkeypatch):
     want_splice, want_naive = references
     out = tmp_path / "bv.h5"
-    assert job(sample_db, out, "splice") == 0
-    assert job(sample_db, out, "naive", "--shard", "1/1") == 0
+    job(sample_db, out, "splice")
+    job(sample_db, out, "naive", shard="1/1")
     interrupt_after(monkeypatch, "install_shards")
-    assert main(["merge", str(out), "-f"]) == 130
+    with pytest.raises(KeyboardInterrupt):
+        merge_job(out, overwrite=True, progress=False)
     assert same(frames(out), want_splice)
     monkeypatch.undo()
-    capsys.readouterr()
-    assert main(["merge", str(out), "-f"]) == 0, capsys.readouterr().err
+    merge_job(out, overwrite=True, progress=False)
     assert same(frames(out), want_naive)
     assert len(list((tmp_path / "bv.h5.shards").iterdir())) == 1
 
@@ -89,9 +92,9 @@ def test_a_merge_killed_while_replacing_an_output_leaves_one_readable_then_finis
 def test_an_output_renamed_away_keeps_reading_its_own_frames(sample_db, references, tmp_path):
     want_splice, want_naive = references
     out = tmp_path / "v.h5"
-    assert job(sample_db, out, "splice") == 0
+    job(sample_db, out, "splice")
     out.rename(tmp_path / "run1.h5")
-    assert job(sample_db, out, "naive") == 0
+    job(sample_db, out, "naive")
     assert same(frames(tmp_path / "run1.h5"), want_splice)
     assert same(frames(out), want_naive)
 
@@ -99,9 +102,8 @@ def test_an_output_renamed_away_keeps_reading_its_own_frames(sample_db, referenc
 def test_a_copy_job_over_a_virtual_output_leaves_no_orphaned_shards(sample_db, references, tmp_path):
     _, want_naive = references
     out = tmp_path / "v.h5"
-    assert job(sample_db, out, "splice") == 0
+    job(sample_db, out, "splice")
     assert (tmp_path / "v.h5.shards").is_dir()
-    assert main(["splice-all", str(sample_db), "-o", str(out), "--locomotions", LOCOS, "--actions", ACTIONS,
-                 "--method", "naive", "--workers", "1", "-q", "--force"]) == 0
+    splice_all(sample_db, out, locomotions=LOCOS, actions=ACTIONS, methods="naive", workers=1, overwrite=True)
     assert not (tmp_path / "v.h5.shards").exists()
     assert same(frames(out), want_naive)

@@ -31,10 +31,12 @@ from torchsplice.store.database import MotionDatabase
 
 
 def _sample_db(tmp_path):
-    from torchsplice.cli.main import main
-
+    """The built-in sample as a database of the test's own (what ``torchsplice sample`` writes)."""
     path = tmp_path / "sample.h5"
-    assert main(["sample", "-o", str(path), "-q"]) == 0
+    spec = load_spec("sample")
+    with MotionDatabase.create(path) as db:
+        for m in sample_motions():
+            db.append(m, spec=spec)
     return path
 
 

@@ -14,7 +14,8 @@ import re
 import pytest
 import torch
 
-from torchsplice.cli import main
+from torchsplice import import_bvh, splice_all
+from torchsplice.evaluation.report import evaluate_database
 from torchsplice.core.rotations import quat_angle, quat_apply, quat_conj
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.specs import load_spec
@@ -208,22 +209,21 @@ def test_standing_actions_on_a_device_equal_the_compiled_splicer(clips, device):
                 assert float(angle.max()) < 1e-3, where
 
 @pytest.mark.slow
-def test_the_default_job_on_bandai_skips_no_standing_action(bandai_namco_db, tmp_path, capsys):
+def test_the_default_job_on_bandai_skips_no_standing_action(bandai_namco_db, tmp_path):
     db = bandai_namco_db  # ../shared/mocap's Bandai Namco clips as `torchsplice import FOLDER` makes them
-    capsys.readouterr()
-    rc = main(["splice-all", str(db), "-o", str(tmp_path / "out.h5"), "--locomotions", "role:locomotion",
-               "--actions", "role:action", "--method", "splice,naive,cpmc"])
-    text = capsys.readouterr().out
-    assert rc == 0
+    summary = splice_all(db, tmp_path / "out.h5", locomotions="role:locomotion", actions="role:action",
+                         methods="splice,naive,cpmc")
+    text = "\n".join(summary.lines())
     from torchsplice.store.database import MotionDatabase
 
     with MotionDatabase.open(db) as src:
         t = src.table()
         actions = {str(n) for n, r in zip(t["name"], t["role"]) if r == "action"}
-    not_locomoting = set(re.findall(r"x (\S+) does not locomote", text))
-    assert not_locomoting and not (not_locomoting & actions), text  # only short locomotions are skipped so
+    not_locomoting = {m.group(1) for why in summary.skipped for m in [re.match(r"(\S+) does not locomote", why)] if m}
+    assert not_locomoting and not (not_locomoting & actions), summary.skipped  # only short locomotions are skipped so
+    assert not_locomoting == set(re.findall(r"x (\S+) does not locomote", text)), text
     m = re.search(r"(\d+) time-aligned \(timewarp\), (\d+) standing actions \(loop\)", text)
-    assert m and int(m.group(2)) > 0, text
+    assert m and int(m.group(2)) == summary.timings["loop"] > 0, text
     with MotionDatabase.open(tmp_path / "out.h5") as out:
         t = out.table()
         actions = {str(a) for a in t["action"]}
@@ -234,7 +234,7 @@ def test_the_default_job_on_bandai_skips_no_standing_action(bandai_namco_db, tmp
 
 
 @pytest.mark.slow
-def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_path, capsys):
+def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_path):
     folder = tmp_path / "bvh"
     folder.mkdir()
     import shutil
@@ -242,11 +242,10 @@ def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_pa
     for n in (WALK, WALK_OLD, TURN, WAVE_L, WAVE_R, RAISE_LEFT):
         shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", folder)
     db, out, report = tmp_path / "b.h5", tmp_path / "o.h5", tmp_path / "r.md"
-    assert main(["import", str(folder), "-o", str(db), "-q"]) == 0
-    assert main(["splice-all", str(db), "-o", str(out), "-q", "--locomotions", "role:locomotion,role:both",
-                 "--actions", "role:action", "--method", "splice,naive,cpmc", "--workers", "1"]) == 0
-    assert main(["evaluate", str(out), "-o", str(report), "-q"]) == 0
-    capsys.readouterr()
+    assert import_bvh([folder], db).ok
+    splice_all(db, out, locomotions="role:locomotion,role:both", actions="role:action", methods="splice,naive,cpmc",
+               workers=1)
+    evaluate_database(out, report)
     text = report.read_text()
     start = text.index("## Standing actions")
     section = text[start:text.index("\n## ", start)]  # up to the next section

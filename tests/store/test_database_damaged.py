@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
+from torchsplice import splice_all
 from torchsplice.cli import main
 from torchsplice.core.errors import DatabaseError
 from torchsplice.store.database import MotionDatabase
@@ -147,14 +148,13 @@ _SKIP = {("flipped_bytes", "info"), ("flipped_bytes", "info-json")}
 
 
 @pytest.fixture(scope="module")
-def good(tmp_path_factory) -> dict[str, Path]:
-    """A good sample database and a small splice-all output of it (gzip: damage breaks a chunk)."""
-    d = tmp_path_factory.mktemp("good")
-    sample, spliced = d / "sample.h5", d / "spliced.h5"
-    assert main(["sample", "-o", str(sample), "-q"]) == 0
-    assert main(["splice-all", str(sample), "-o", str(spliced), "--workers", "1", "--compression", "gzip", "-q",
-                 "--locomotions", f"{LOCO},jog", "--actions", f"{ACTION},punch", "--method", "naive"]) == 0
-    return {"sample": sample, "spliced": spliced}
+def good(sample_db, tmp_path_factory) -> dict[str, Path]:
+    """The session's sample database and a small splice_all output of it (gzip: damage breaks a
+    chunk); both only read and copied."""
+    spliced = tmp_path_factory.mktemp("good") / "spliced.h5"
+    splice_all(sample_db, spliced, workers=1, compression="gzip", locomotions=f"{LOCO},jog",
+               actions=f"{ACTION},punch", methods="naive")
+    return {"sample": sample_db, "spliced": spliced}
 
 
 @pytest.fixture(scope="module")
@@ -239,11 +239,16 @@ def test_every_read_path_maps_a_damaged_chunk(reader, damaged):
 def test_missing_shards_of_a_virtual_output_are_named(good, tmp_path, capsys):
     """HDF5 reads the frames of a missing virtual source as NaN without a word: open says so."""
     out = tmp_path / "virtual.h5"
-    assert main(["splice-all", str(good["sample"]), "-o", str(out), "--workers", "1", "-q", "--layout", "virtual",
-                 "--locomotions", LOCO, "--actions", ACTION, "--method", "naive"]) == 0
+    splice_all(good["sample"], out, workers=1, layout="virtual", locomotions=LOCO, actions=ACTION, methods="naive")
+    with MotionDatabase.open(out) as db:
+        assert len(db) >= 1
     assert main(["info", str(out)]) == 0
     (tmp_path / "virtual.h5.shards").rename(tmp_path / "elsewhere")
-    capsys.readouterr()
+    with pytest.raises(DatabaseError, match="missing") as caught:
+        MotionDatabase.open(out)
+    line = str(caught.value)
+    assert "\n" not in line and line.startswith(f"{out}: ") and "virtual.h5.shards/" in line
+    capsys.readouterr()  # the command says the same in one line, its exit code 2
     assert main(["info", str(out)]) == 2
     line = capsys.readouterr().err.strip()
     assert "\n" not in line and line.startswith(f"torchsplice: error: {out}: ") and "virtual.h5.shards/" in line

@@ -1,6 +1,7 @@
 """One writer per output: a second writer is refused at once naming the holder, concurrent appends
 lose no clip, a lock left by a dead process is taken over, and a killed writer's partial file is
-removed by the next write of that output. Writers race as separate processes."""
+removed by the next write of that output. Writers race as separate processes (the command in
+its own process where two race; the Python API where one writer meets a held or stale lock)."""
 
 from __future__ import annotations
 
@@ -12,23 +13,38 @@ import sys
 
 import pytest
 
-from cli_helpers import error_line, run
+from torchsplice import MotionDatabase, export_clips, import_bvh, splice_all
+from torchsplice.retarget import retarget_clips
+from torchsplice.retarget.mirror import mirror_clips
+from torchsplice.sample import sample_motions
+from torchsplice.specs import load_spec
+from torchsplice.store.lock import LockedError
 from writers import cli, held_elsewhere, leftovers, names
 
 
-def test_a_second_writer_is_refused_at_once_naming_the_holder(sample_db, tmp_path, capsys, bandai_walks):
+def write_sample(out, overwrite: bool = False) -> None:
+    """The built-in sample written to ``out`` (what ``torchsplice sample`` writes)."""
+    spec = load_spec("sample")
+    with MotionDatabase.create(out, overwrite=overwrite) as db:
+        for m in sample_motions():
+            db.append(m, spec=spec)
+
+
+def test_a_second_writer_is_refused_at_once_naming_the_holder(sample_db, tmp_path, bandai_walks):
     out = tmp_path / "db.h5"
     shutil.copy(sample_db, out)
     with held_elsewhere(out) as pid:
-        for argv in (["import", *bandai_walks[:2], "-o", out, "--append"], ["sample", "-o", out, "-f"],
-                     ["splice-all", sample_db, "-o", out, "-f", "-q"]):
-            rc, _, err = run(capsys, *argv)
-            line = error_line(err)
-            assert rc == 2 and f"is being written by process {pid}" in line and str(out) in line, line
+        for write in (lambda: import_bvh(bandai_walks[:2], out, append=True),
+                      lambda: write_sample(out, overwrite=True),
+                      lambda: splice_all(sample_db, out, overwrite=True)):
+            with pytest.raises(LockedError, match=f"is being written by process {pid}") as caught:
+                write()
+            line = str(caught.value)
+            assert str(out) in line and "\n" not in line, line
     assert names(out) == names(sample_db)  # untouched
     assert leftovers(tmp_path) == [".db.h5.lock"]  # the killed holder's lock: stale, taken over by the next writer
-    rc, _, err = run(capsys, "sample", "-o", out, "-f", "-q")
-    assert rc == 0 and leftovers(tmp_path) == []
+    write_sample(out, overwrite=True)
+    assert leftovers(tmp_path) == []
 
 
 def test_two_appends_at_once_lose_no_clip(bandai_walks, sample_db, tmp_path):
@@ -57,7 +73,7 @@ def test_two_new_imports_to_one_path_never_both_succeed(bandai_walks, tmp_path):
     assert leftovers(tmp_path) == []
 
 
-def test_a_lock_left_by_a_dead_process_is_taken_over(sample_db, tmp_path, capsys):
+def test_a_lock_left_by_a_dead_process_is_taken_over(tmp_path):
     out = tmp_path / "db.h5"
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
@@ -65,21 +81,21 @@ def test_a_lock_left_by_a_dead_process_is_taken_over(sample_db, tmp_path, capsys
     import socket
 
     lock.write_text(json.dumps({"host": socket.gethostname(), "pid": dead.pid, "started": "then", "command": "x"}))
-    rc, _, err = run(capsys, "sample", "-o", out, "-q")
-    assert rc == 0, err
+    write_sample(out)
     assert not lock.exists() and out.is_file()
 
 
-def test_splice_all_restart_while_the_same_job_runs_is_refused(sample_db, tmp_path, capsys):
+def test_splice_all_restart_while_the_same_job_runs_is_refused(sample_db, tmp_path):
     out = tmp_path / "out.h5"
     with held_elsewhere(out):
-        rc, _, err = run(capsys, "splice-all", sample_db, "-o", out, "--restart", "-q")
-    assert rc == 2 and "is being written by process" in error_line(err)
+        with pytest.raises(LockedError, match="is being written by process") as caught:
+            splice_all(sample_db, out, restart=True)
+    assert "\n" not in str(caught.value)
     assert not out.exists() and not (tmp_path / ".out.h5.parts").exists()
 
 
 @pytest.mark.parametrize("command", ["retarget", "mirror", "import"])
-def test_a_killed_writers_partial_file_is_removed_by_the_next_write_of_that_output(sample_db, tmp_path, capsys, command):
+def test_a_killed_writers_partial_file_is_removed_by_the_next_write_of_that_output(sample_db, tmp_path, command):
     """A SIGKILLed retarget, mirror or import leaves ``.OUT.h5.partial-HOST-PID``; the next
     command writing that output removes it (its process is dead), and never a live process's,
     another host's or another output's."""
@@ -99,10 +115,10 @@ def test_a_killed_writers_partial_file_is_removed_by_the_next_write_of_that_outp
         f.write_bytes(b"left by a killed writer")
     assert temp_path(out).name.startswith(".out.h5.partial-")
     bvh = tmp_path / "walk.bvh"
-    assert run(capsys, "export", sample_db, "walk_straight", "-o", bvh, "-q")[0] == 0
-    argv = {"retarget": ["retarget", sample_db, "walk_straight", "--to", "smpl22", "-o", out, "-q"],
-            "mirror": ["mirror", sample_db, "walk_straight", "-o", out, "-q"],
-            "import": ["import", bvh, "-o", out, "-q"]}[command]
-    rc, _, err = run(capsys, *argv)
-    assert rc == 0, err
+    export_clips(sample_db, ["walk_straight"], out=bvh)
+    write = {"retarget": lambda: retarget_clips(sample_db, ["walk_straight"], to="smpl22", out=out),
+             "mirror": lambda: mirror_clips(sample_db, ["walk_straight"], out=out),
+             "import": lambda: import_bvh([bvh], out)}[command]
+    report = write()
+    assert out.is_file() and (command != "import" or report.ok)  # the import skipped nothing
     assert not stale.exists() and alive.exists() and remote.exists() and other.exists()

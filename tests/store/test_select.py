@@ -11,7 +11,7 @@ import pytest
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.job import parse_selector, select_clips
 from torchsplice.store import ClipTable
-from torchsplice.cli import main
+from torchsplice import import_bvh, splice_all
 from torchsplice.data import MotionDataset
 from torchsplice.store.database import MotionDatabase
 
@@ -255,10 +255,9 @@ def test_6_flags_are_codes_that_selections_filter_with_the_figures_in_their_own_
     folder = mocap_dir / BANDAI
     db = tmp_path / "b.h5"
     names = ["dataset-2_walk-turn-left_normal_025", "dataset-1_run_chimpira_001", "dataset-2_walk_elderly_006"]
-    assert main(["import", *[str(folder / f"{n}.bvh") for n in names], "-o", str(db), "-q"]) == 0
+    assert import_bvh([folder / f"{n}.bvh" for n in names], db).ok
     out = tmp_path / "sp.h5"
-    assert main(["splice-all", str(db), "-o", str(out), "-q", "--locomotions", names[0], "--actions",
-                 f"{names[1]},{names[2]}", "--force-locomotion"]) == 0
+    splice_all(db, out, locomotions=names[0], actions=f"{names[1]},{names[2]}", force_locomotion=True)
     with MotionDatabase.open(out) as d:
         t = d.clip_table()
         rows = {t.names[r]: {c: t.extra[c][r] for c in ("flags", "flag_details", "alignment_distance")}
