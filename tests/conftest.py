@@ -38,15 +38,10 @@ def sample_f64():
 def sample_db(tmp_path_factory):
     """The built-in sample as a database (what ``torchsplice sample`` writes: every sample clip
     with the sample spec), made once per session; a test module may define its own."""
-    from torchsplice import MotionDatabase
-    from torchsplice.sample import sample_motions
-    from torchsplice.specs import load_spec
+    from torchsplice import write_sample
 
     db = tmp_path_factory.mktemp("sample") / "sample.h5"
-    spec = load_spec("sample")
-    with MotionDatabase.create(db) as w:
-        for m in sample_motions():
-            w.append(m, spec=spec)
+    write_sample(db)
     return db
 
 

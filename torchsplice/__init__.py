@@ -22,7 +22,7 @@ _os.environ.setdefault("MKL_CBWR", "AUTO")
 
 __all__ = [
     "__version__", "import_bvh", "splice", "splice_all", "export_clips", "MotionDatabase", "MotionDataset",
-    "Motion", "Skeleton", "forward_kinematics",
+    "write_sample", "Motion", "Skeleton", "forward_kinematics",
     "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError",
 ]
 
@@ -33,6 +33,7 @@ from .core.lazy import lazy_names  # noqa: E402 (after the environment is set)
 __getattr__, __dir__ = lazy_names(__name__, {
     "import_bvh": ".formats.importer", "splice": ".splice", "splice_all": ".job.run", "export_clips": ".formats.exporters",
     "MotionDatabase": ".store.database", "MotionDataset": ".data.dataset",
+    "write_sample": ".formats.sample_database",
     "Motion": ".core.motion", "Skeleton": ".core.skeleton", "forward_kinematics": ".core.fk",
     "TorchspliceError": ".core.errors", "BVHError": ".core.errors", "DatabaseError": ".core.errors",
     "SpecError": ".core.errors", "MotionError": ".core.errors",

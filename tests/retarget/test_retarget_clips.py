@@ -22,6 +22,7 @@ from rigs import armless_sample
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.bvh_write import write_bvh
 from torchsplice.formats.importer import import_bvh
+from torchsplice.formats.sample_database import write_sample
 from torchsplice.ops.retarget import retarget_map, retarget_motion
 from torchsplice.retarget import resolve_target, retarget_clips
 from torchsplice.sample import sample_motions
@@ -33,10 +34,7 @@ from torchsplice.store.database import MotionDatabase
 def _sample_db(tmp_path):
     """The built-in sample as a database of the test's own (what ``torchsplice sample`` writes)."""
     path = tmp_path / "sample.h5"
-    spec = load_spec("sample")
-    with MotionDatabase.create(path) as db:
-        for m in sample_motions():
-            db.append(m, spec=spec)
+    write_sample(path)
     return path
 
 

@@ -10,19 +10,9 @@ import subprocess
 import numpy as np
 import pytest
 
-from torchsplice import DatabaseError, import_bvh, splice_all
-from torchsplice.sample import sample_motions
-from torchsplice.specs import load_spec
+from torchsplice import DatabaseError, import_bvh, splice_all, write_sample
 from torchsplice.store.database import MotionDatabase
 from writers import fill
-
-
-def write_sample(out) -> None:
-    """The built-in sample written to ``out`` (what ``torchsplice sample`` writes)."""
-    spec = load_spec("sample")
-    with MotionDatabase.create(out) as db:
-        for m in sample_motions():
-            db.append(m, spec=spec)
 
 
 @pytest.fixture

@@ -13,21 +13,11 @@ import sys
 
 import pytest
 
-from torchsplice import MotionDatabase, export_clips, import_bvh, splice_all
+from torchsplice import export_clips, import_bvh, splice_all, write_sample
 from torchsplice.retarget import retarget_clips
 from torchsplice.retarget.mirror import mirror_clips
-from torchsplice.sample import sample_motions
-from torchsplice.specs import load_spec
 from torchsplice.store.lock import LockedError
 from writers import cli, held_elsewhere, leftovers, names
-
-
-def write_sample(out, overwrite: bool = False) -> None:
-    """The built-in sample written to ``out`` (what ``torchsplice sample`` writes)."""
-    spec = load_spec("sample")
-    with MotionDatabase.create(out, overwrite=overwrite) as db:
-        for m in sample_motions():
-            db.append(m, spec=spec)
 
 
 def test_a_second_writer_is_refused_at_once_naming_the_holder(sample_db, tmp_path, bandai_walks):

@@ -26,17 +26,9 @@ class Sample(Command):
         add_output_flags(s)
 
     def run(self, args) -> int:
-        from ..sample import sample_motions
-        from ..specs import load_spec
-        from ..store.database import MotionDatabase
+        from ..formats.sample_database import write_sample
 
-        out = output(args, "database")
-        spec = load_spec("sample")
-        motions = sample_motions()
-        db = MotionDatabase.create(out, overwrite=args.force)
-        with db:
-            for m in motions:
-                db.append(m, spec=spec)
+        motions = write_sample(output(args, "database"), overwrite=args.force)
         frames = sum(m.num_frames for m in motions)
         roles = {}
         for m in motions:
