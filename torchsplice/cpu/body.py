@@ -26,12 +26,13 @@ __all__ = ["inside_clips"]
 
 
 @njit(cache=True, nogil=True)
-def _apart(e, i, k):
-    """A lower bound on the distance between segments ``i`` and ``k`` of ``e`` (rows ``2i, 2i+1``):
-    their midpoints' distance less both half-lengths (a pair surely further than a capsule's
-    reach is skipped)."""
-    a0, a1, b0, b1 = row(e, 2 * i), row(e, 2 * i + 1), row(e, 2 * k), row(e, 2 * k + 1)
-    return length(scale(sub(add(a0, a1), add(b0, b1)), 0.5)) - 0.5 * length(sub(a1, a0)) - 0.5 * length(sub(b1, b0))
+def _apart(ends, i, k):
+    """A lower bound on the distance between segments ``i`` and ``k`` of the capsule ends ``ends``
+    (rows ``2i, 2i+1``): their midpoints' distance less both half-lengths (a pair surely further
+    than a capsule's reach is skipped)."""
+    i_start, i_end, k_start, k_end = row(ends, 2 * i), row(ends, 2 * i + 1), row(ends, 2 * k), row(ends, 2 * k + 1)
+    return (length(scale(sub(add(i_start, i_end), add(k_start, k_end)), 0.5)) - 0.5 * length(sub(i_end, i_start))
+            - 0.5 * length(sub(k_end, k_start)))
 
 
 @njit(cache=True, parallel=True)
@@ -40,12 +41,12 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``share[c]`` and ``depth[c]``
     (see the module docstring)."""
     J = rot.shape[1]
-    K = end_a.shape[0]
+    n_ends = end_a.shape[0]
     for c in prange(starts.shape[0]):
         pos = np.zeros((J, 3))
         grot = np.zeros((J, 4))
-        ends = np.empty((K, 3))
-        inside = 0
+        ends = np.empty((n_ends, 3))
+        frames_inside = 0
         deepest = 0.0
         for t in range(starts[c], starts[c] + lengths[c]):
             for j in joints:
@@ -55,28 +56,29 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
                     grot[j, 0], grot[j, 1], grot[j, 2], grot[j, 3] = q
                     pos[j, 0], pos[j, 1], pos[j, 2] = trans[t, j, 0], trans[t, j, 1], trans[t, j, 2]
                 else:
-                    gp = (grot[p, 0], grot[p, 1], grot[p, 2], grot[p, 3])
-                    grot[j, 0], grot[j, 1], grot[j, 2], grot[j, 3] = qmul(gp, q)
-                    o = qrot(gp, (trans[t, j, 0], trans[t, j, 1], trans[t, j, 2]))
-                    pos[j, 0] = pos[p, 0] + o[0]
-                    pos[j, 1] = pos[p, 1] + o[1]
-                    pos[j, 2] = pos[p, 2] + o[2]
-            for k in range(K):
-                w = end_w[k]
+                    parent_rot = (grot[p, 0], grot[p, 1], grot[p, 2], grot[p, 3])
+                    grot[j, 0], grot[j, 1], grot[j, 2], grot[j, 3] = qmul(parent_rot, q)
+                    offset = qrot(parent_rot, (trans[t, j, 0], trans[t, j, 1], trans[t, j, 2]))
+                    pos[j, 0] = pos[p, 0] + offset[0]
+                    pos[j, 1] = pos[p, 1] + offset[1]
+                    pos[j, 2] = pos[p, 2] + offset[2]
+            for k in range(n_ends):
+                share_b = end_w[k]
                 for x in range(3):
-                    ends[k, x] = pos[end_a[k], x] * (1.0 - w) + pos[end_b[k], x] * w
-            best = -math.inf
-            for i in probes:
-                for o_ in obstacles:
-                    if _apart(ends, i, o_) >= radii[o_] - margin:  # cannot count: not measured
+                    ends[k, x] = pos[end_a[k], x] * (1.0 - share_b) + pos[end_b[k], x] * share_b
+            frame_depth = -math.inf
+            for probe in probes:
+                for obstacle in obstacles:
+                    if _apart(ends, probe, obstacle) >= radii[obstacle] - margin:  # cannot count: not measured
                         continue
-                    d = radii[o_] - segment_distance(row(ends, 2 * i), row(ends, 2 * i + 1), row(ends, 2 * o_),
-                                                     row(ends, 2 * o_ + 1))
-                    if d > best:
-                        best = d
-            if best > margin:
-                inside += 1
-                if best > deepest:
-                    deepest = best
-        share[c] = inside / max(lengths[c], 1)
+                    pair_depth = radii[obstacle] - segment_distance(row(ends, 2 * probe), row(ends, 2 * probe + 1),
+                                                                    row(ends, 2 * obstacle),
+                                                                    row(ends, 2 * obstacle + 1))
+                    if pair_depth > frame_depth:
+                        frame_depth = pair_depth
+            if frame_depth > margin:
+                frames_inside += 1
+                if frame_depth > deepest:
+                    deepest = frame_depth
+        share[c] = frames_inside / max(lengths[c], 1)
         depth[c] = deepest

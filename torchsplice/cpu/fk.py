@@ -31,12 +31,12 @@ def fk_clip(rot, trans, parents, joints, n, pos, grot):
                 qstore(grot, t, j, q)
                 pos[t, j, 0], pos[t, j, 1], pos[t, j, 2] = v
             else:
-                gp = qload(grot, t, p)
-                qstore(grot, t, j, qmul(gp, q))
-                o = qrot(gp, v)
-                pos[t, j, 0] = pos[t, p, 0] + o[0]
-                pos[t, j, 1] = pos[t, p, 1] + o[1]
-                pos[t, j, 2] = pos[t, p, 2] + o[2]
+                parent_rot = qload(grot, t, p)
+                qstore(grot, t, j, qmul(parent_rot, q))
+                offset = qrot(parent_rot, v)
+                pos[t, j, 0] = pos[t, p, 0] + offset[0]
+                pos[t, j, 1] = pos[t, p, 1] + offset[1]
+                pos[t, j, 2] = pos[t, p, 2] + offset[2]
 
 
 @njit(cache=True, parallel=True)
@@ -45,8 +45,9 @@ def fk_clips(rot, trans, parents, starts, lengths, pos, grot):
     ``starts[c]:starts[c]+lengths[c]`` of ``(N, J, ...)`` arrays), one clip per thread."""
     joints = np.arange(rot.shape[1])
     for c in prange(starts.shape[0]):
-        s, n = starts[c], lengths[c]
-        fk_clip(rot[s:s + n], trans[s:s + n], parents, joints, n, pos[s:s + n], grot[s:s + n])
+        first, n = starts[c], lengths[c]
+        fk_clip(rot[first:first + n], trans[first:first + n], parents, joints, n, pos[first:first + n],
+                grot[first:first + n])
 
 
 def joint_closure(parents, joints) -> np.ndarray:

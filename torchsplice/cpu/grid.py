@@ -43,36 +43,38 @@ def clip_features(pos, landmarks, hips, up, n, floor, height, norm, hcos, hsin):
     a1, a2 = (up + 1) % 3, (up + 2) % 3
     w = 1.0 / K
     for t in range(n):
-        cu = 0.0
-        cv = 0.0
+        centre_u = 0.0
+        centre_v = 0.0
         for k in range(K):
-            cu += w * pos[t, landmarks[k], a1]
-            cv += w * pos[t, landmarks[k], a2]
-        nn = 0.0
+            centre_u += w * pos[t, landmarks[k], a1]
+            centre_v += w * pos[t, landmarks[k], a2]
+        norm_t = 0.0
         for k in range(K):
-            u = pos[t, landmarks[k], a1] - cu
-            v = pos[t, landmarks[k], a2] - cv
+            u = pos[t, landmarks[k], a1] - centre_u
+            v = pos[t, landmarks[k], a2] - centre_v
             floor[k, 0, t] = u
             floor[k, 1, t] = v
             height[k, t] = pos[t, landmarks[k], up]
-            nn += w * (u * u + v * v)
-        norm[t] = nn
+            norm_t += w * (u * u + v * v)
+        norm[t] = norm_t
         hcos[t], hsin[t] = heading_cos_sin(pos, t, hips[0], hips[1], up)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _aligned(c, s, cd, sd, cos_dev, sin_dev):
-    """The best aligned term ``M`` from ``C``, ``S`` and the relative heading's cosine and sine."""
+def _aligned(c, s, cos_delta, sin_delta, cos_dev, sin_dev):
+    """The best aligned term ``M`` from ``C``, ``S`` and the relative heading's cosine and sine
+    ``cos_delta``, ``sin_delta`` (``c_rel``, ``s_rel``: the module docstring's ``C'``, ``S'``)."""
     r = math.sqrt(c * c + s * s)
-    c2 = c * cd + s * sd
-    s2 = s * cd - c * sd
-    return r if c2 >= r * cos_dev else c2 * cos_dev + abs(s2) * sin_dev
+    c_rel = c * cos_delta + s * sin_delta
+    s_rel = s * cos_delta - c * sin_delta
+    return r if c_rel >= r * cos_dev else c_rel * cos_dev + abs(s_rel) * sin_dev
 
 
 @njit(cache=True, nogil=True)
-def distance_row_block(feat, sa, la, sb, lb, max_dev, out):
-    """``out[i, j]`` for ``i < la``, ``j < lb``: distance of frame ``sa + i`` to frame ``sb + j`` of
-    the packed features ``feat`` (see :func:`clip_features`; ``max_dev >= pi``: unrestricted).
+def distance_row_block(feat, start_a, frames_a, start_b, frames_b, max_dev, out):
+    """``out[i, j]`` for ``i < frames_a``, ``j < frames_b``: distance of frame ``start_a + i`` to frame
+    ``start_b + j`` of the packed features ``feat`` (see :func:`clip_features`; ``max_dev >= pi``:
+    unrestricted).
 
     The features stay whole arrays indexed by offset, so that the compiler sees unit strides
     and vectorises the pass over ``j``; three landmarks (root and knees, the default) take a
@@ -85,77 +87,85 @@ def distance_row_block(feat, sa, la, sb, lb, max_dev, out):
     sin_dev = math.sin(max_dev)
     if K == 3:
         # 1-D rows of b's features from its first frame (unit stride, no aliasing with out)
-        b00, b01, b10, b11 = floor[0, 0, sb:sb + lb], floor[0, 1, sb:sb + lb], floor[1, 0, sb:sb + lb], floor[1, 1, sb:sb + lb]
-        b20, b21 = floor[2, 0, sb:sb + lb], floor[2, 1, sb:sb + lb]
-        y0, y1, y2 = height[0, sb:sb + lb], height[1, sb:sb + lb], height[2, sb:sb + lb]
-        nb, cb, sbh = norm[sb:sb + lb], hcos[sb:sb + lb], hsin[sb:sb + lb]
-        for i in range(la):
-            ia = sa + i
-            u0, v0, u1, v1 = w * floor[0, 0, ia], w * floor[0, 1, ia], w * floor[1, 0, ia], w * floor[1, 1, ia]
-            u2, v2 = w * floor[2, 0, ia], w * floor[2, 1, ia]
-            a0, a1, a2 = height[0, ia], height[1, ia], height[2, ia]
-            ci, si, ni = hcos[ia], hsin[ia], norm[ia]
+        b00, b01, b10, b11 = (floor[0, 0, start_b:start_b + frames_b], floor[0, 1, start_b:start_b + frames_b],
+                              floor[1, 0, start_b:start_b + frames_b], floor[1, 1, start_b:start_b + frames_b])
+        b20, b21 = floor[2, 0, start_b:start_b + frames_b], floor[2, 1, start_b:start_b + frames_b]
+        y0, y1, y2 = (height[0, start_b:start_b + frames_b], height[1, start_b:start_b + frames_b],
+                      height[2, start_b:start_b + frames_b])
+        norm_b, cos_b, sin_b = (norm[start_b:start_b + frames_b], hcos[start_b:start_b + frames_b],
+                                hsin[start_b:start_b + frames_b])
+        for i in range(frames_a):
+            row_a = start_a + i
+            u0, v0, u1, v1 = (w * floor[0, 0, row_a], w * floor[0, 1, row_a], w * floor[1, 0, row_a],
+                              w * floor[1, 1, row_a])
+            u2, v2 = w * floor[2, 0, row_a], w * floor[2, 1, row_a]
+            a0, a1, a2 = height[0, row_a], height[1, row_a], height[2, row_a]
+            cos_a, sin_a, norm_a = hcos[row_a], hsin[row_a], norm[row_a]
             row = out[i]
-            for j in range(lb):
+            for j in range(frames_b):
                 c = u0 * b00[j] + v0 * b01[j] + u1 * b10[j] + v1 * b11[j] + u2 * b20[j] + v2 * b21[j]
                 s = v0 * b00[j] - u0 * b01[j] + v1 * b10[j] - u1 * b11[j] + v2 * b20[j] - u2 * b21[j]
                 d0, d1, d2 = a0 - y0[j], a1 - y1[j], a2 - y2[j]
-                hh = w * (d0 * d0 + d1 * d1 + d2 * d2)
-                m = _aligned(c, s, ci * cb[j] + si * sbh[j], si * cb[j] - ci * sbh[j], cos_dev, sin_dev)
-                d = ni + nb[j] + hh - 2.0 * m
+                height_term = w * (d0 * d0 + d1 * d1 + d2 * d2)
+                m = _aligned(c, s, cos_a * cos_b[j] + sin_a * sin_b[j], sin_a * cos_b[j] - cos_a * sin_b[j], cos_dev,
+                             sin_dev)
+                d = norm_a + norm_b[j] + height_term - 2.0 * m
                 row[j] = d if d > 0.0 else 0.0
         return
-    C = np.empty(lb)
-    S = np.empty(lb)
-    Hh = np.empty(lb)
-    for i in range(la):
-        ia = sa + i
-        for j in range(lb):
+    C = np.empty(frames_b)
+    S = np.empty(frames_b)
+    height_terms = np.empty(frames_b)
+    for i in range(frames_a):
+        row_a = start_a + i
+        for j in range(frames_b):
             C[j] = 0.0
             S[j] = 0.0
-            Hh[j] = 0.0
+            height_terms[j] = 0.0
         for k in range(K):
-            u, v, y = w * floor[k, 0, ia], w * floor[k, 1, ia], height[k, ia]
-            for j in range(lb):
-                fu, fv = floor[k, 0, sb + j], floor[k, 1, sb + j]
+            u, v, y = w * floor[k, 0, row_a], w * floor[k, 1, row_a], height[k, row_a]
+            for j in range(frames_b):
+                fu, fv = floor[k, 0, start_b + j], floor[k, 1, start_b + j]
                 C[j] += u * fu + v * fv
                 S[j] += v * fu - u * fv
-                d = y - height[k, sb + j]
-                Hh[j] += w * d * d
-        ci, si, ni = hcos[ia], hsin[ia], norm[ia]
-        for j in range(lb):
-            jb = sb + j
-            m = _aligned(C[j], S[j], ci * hcos[jb] + si * hsin[jb], si * hcos[jb] - ci * hsin[jb], cos_dev, sin_dev)
-            d = ni + norm[jb] + Hh[j] - 2.0 * m
+                d = y - height[k, start_b + j]
+                height_terms[j] += w * d * d
+        cos_a, sin_a, norm_a = hcos[row_a], hsin[row_a], norm[row_a]
+        for j in range(frames_b):
+            row_b = start_b + j
+            m = _aligned(C[j], S[j], cos_a * hcos[row_b] + sin_a * hsin[row_b],
+                         sin_a * hcos[row_b] - cos_a * hsin[row_b], cos_dev, sin_dev)
+            d = norm_a + norm[row_b] + height_terms[j] - 2.0 * m
             out[i, j] = d if d > 0.0 else 0.0
 
 
 @njit(cache=True, nogil=True)
-def phase_crop_pair(grid, la, lb, context, window, depth):
+def phase_crop_pair(grid, frames_a, frames_b, context, window, depth):
     """Frames to crop from the start of clip b (columns) to bring it in phase with clip a, as
     :func:`torchsplice.splice.heck.phase_crop`: the first local minimum (over ``window``
     frames either side) of the windowed distance ``d(j)`` that is within ``depth`` of the way
-    from its lowest to its highest value, leaving at least half of b; 0 if none."""
-    W = max(1, min(la, lb // 2, context))
-    d = np.full(lb, np.inf)
-    lo = np.inf
-    hi = -np.inf
-    half = (lb - 1) // 2
-    for j in range(lb):
-        if j + W <= lb and j <= half:
+    from its lowest to its highest value, leaving at least half of b; 0 if none. ``grid``: the pair's
+    ``(frames_a, frames_b)`` distances; ``d(j)`` the mean over ``span`` frames of its diagonal from
+    ``(0, j)``."""
+    span = max(1, min(frames_a, frames_b // 2, context))
+    d = np.full(frames_b, np.inf)
+    lowest = np.inf
+    highest = -np.inf
+    half = (frames_b - 1) // 2
+    for j in range(frames_b):
+        if j + span <= frames_b and j <= half:
             s = 0.0
-            for k in range(W):
+            for k in range(span):
                 s += grid[k, j + k]
-            d[j] = s / W
-            lo = min(lo, d[j])
-            hi = max(hi, d[j])
-    for j in range(lb):
-        if not (j + W <= lb and j <= half):
+            d[j] = s / span
+            lowest = min(lowest, d[j])
+            highest = max(highest, d[j])
+    for j in range(frames_b):
+        if not (j + span <= frames_b and j <= half):
             continue
-        if not d[j] <= lo + depth * (hi - lo):
+        if not d[j] <= lowest + depth * (highest - lowest):
             continue
         ok = True
-        for k in range(max(0, j - window), min(lb, j + window + 1)):
+        for k in range(max(0, j - window), min(frames_b, j + window + 1)):
             if d[k] < d[j]:
                 ok = False
                 break

@@ -3,16 +3,16 @@
 The same passes as :func:`torchsplice.ops.hands.keep_hands_out`, one clip per thread: per frame,
 FK of the joints needed (``joints``, ascending and closed under parents); then ``iterations``
 passes of the push out of every obstacle (closed-form closest points of the forearm's axis and
-each obstacle's), taken into the chest's frame, spread in time (the largest push within ``w``
-frames, then a Hann window of half-width ``w``) and added to the wrists' displacement, and
+each obstacle's), taken into the chest's frame, spread in time (the largest push within ``spread``
+frames, then a Hann window of half-width ``spread``) and added to the wrists' displacement, and
 two-bone IK of shoulder and elbow onto it, about each elbow's hinge (the clip's mean plane
 normal in the upper arm's frame; none, and the chest's, where its mean is ``hinge_min`` or
 shorter), its reach's change damped by ``flex`` as there. Shapes: rotations ``(N, J, 4)`` (unit WXYZ,
 local; ``out`` the same, written only at the moved joints of changed frames), translations
 ``(N, J, 3)`` (row 0 the root's position); capsule ends ``end_a``, ``end_b``, ``end_w``
-``(2C,)`` as :mod:`.body`'s; per arm (left, right) ``sh``, ``el``, ``wr`` and their parents
-``psh``, ``pel`` ``(2,)``; per clip ``target`` (how deep a forearm may stay, the skeleton's
-units) and ``w`` (frames); ``corrected`` ``(B,)`` the frames changed.
+``(2C,)`` as :mod:`.body`'s; per arm (left, right) the joints ``shoulder``, ``elbow``,
+``wrist`` and the parents ``shoulder_parent``, ``elbow_parent`` ``(2,)``; per clip ``target`` (how
+deep a forearm may stay, the skeleton's units) and ``spread`` (frames); ``corrected`` ``(B,)`` the frames changed.
 """
 
 from __future__ import annotations
@@ -71,192 +71,206 @@ def _chest_hinge(upper, chest):
 
 
 @njit(cache=True, nogil=True)
-def _arm_ik(S, E, W, T, hinge, flex):
-    """:func:`torchsplice.ops.hands.arm_ik` of one arm: ``(q1, q2, E', W')``."""
-    upper, lower = _sub(E, S), _sub(W, E)
-    l1 = _length(upper)
-    u = _scale(upper, 1.0 / max(l1, 1e-300))
-    a = _sub(hinge, _scale(u, _dot(hinge, u)))
-    a = _scale(a, 1.0 / max(_length(a), 1e-300))
-    flat = _sub(lower, _scale(a, _dot(lower, a)))
-    lf, l2 = _length(flat), _length(lower)
-    now = math.atan2(-_dot(_cross(u, flat), a), _dot(flat, u))
-    d0 = _length(_sub(W, S))
-    top = math.sqrt(l1 * l1 + l2 * l2 + 2.0 * l1 * lf)
-    bottom = math.sqrt(max(l1 * l1 + l2 * l2 - 2.0 * l1 * lf, 0.0))
-    e = (_length(_sub(T, S)) - d0) * (1.0 - math.exp(-(now / flex) ** 2))
-    room = max(top - d0 if e > 0.0 else d0 - bottom, 1e-12 * (l1 + l2))
-    sign = 1.0 if e > 0.0 else -1.0 if e < 0.0 else 0.0
-    reach = d0 + sign * room * -math.expm1(-abs(e) / room)
-    want = math.acos(min(max((reach * reach - l1 * l1 - l2 * l2) / max(2.0 * l1 * lf, 1e-300), -1.0), 1.0))
+def _arm_ik(shoulder, elbow, wrist, target, hinge, flex):
+    """:func:`torchsplice.ops.hands.arm_ik` of one arm, its joints' positions ``shoulder``, ``elbow``,
+    ``wrist`` moved so that the wrist reaches ``target``: ``(elbow_turn, shoulder_turn, elbow', wrist')``,
+    the elbow's and the shoulder's world rotations and the elbow's and wrist's new positions."""
+    upper, lower = _sub(elbow, shoulder), _sub(wrist, elbow)
+    upper_len = _length(upper)
+    upper_dir = _scale(upper, 1.0 / max(upper_len, 1e-300))
+    axis = _sub(hinge, _scale(upper_dir, _dot(hinge, upper_dir)))
+    axis = _scale(axis, 1.0 / max(_length(axis), 1e-300))
+    flat = _sub(lower, _scale(axis, _dot(lower, axis)))
+    flat_len, lower_len = _length(flat), _length(lower)
+    now = math.atan2(-_dot(_cross(upper_dir, flat), axis), _dot(flat, upper_dir))
+    span = _length(_sub(wrist, shoulder))
+    top = math.sqrt(upper_len * upper_len + lower_len * lower_len + 2.0 * upper_len * flat_len)
+    bottom = math.sqrt(max(upper_len * upper_len + lower_len * lower_len - 2.0 * upper_len * flat_len, 0.0))
+    change = (_length(_sub(target, shoulder)) - span) * (1.0 - math.exp(-(now / flex) ** 2))
+    room = max(top - span if change > 0.0 else span - bottom, 1e-12 * (upper_len + lower_len))
+    sign = 1.0 if change > 0.0 else -1.0 if change < 0.0 else 0.0
+    reach = span + sign * room * -math.expm1(-abs(change) / room)
+    want = math.acos(min(max((reach * reach - upper_len * upper_len - lower_len * lower_len)
+                             / max(2.0 * upper_len * flat_len, 1e-300), -1.0), 1.0))
     if now < 0.0:
         want = -want
-    q1 = _axis_angle(_scale(a, now - want))
-    W1 = _add(E, qrot(q1, lower))
-    q2 = _between(_normalized(_sub(W1, S), upper), _normalized(_sub(T, S), upper))
-    return q1, q2, _add(S, qrot(q2, upper)), _add(S, qrot(q2, _sub(W1, S)))
+    elbow_turn = _axis_angle(_scale(axis, now - want))
+    bent_wrist = _add(elbow, qrot(elbow_turn, lower))
+    shoulder_turn = _between(_normalized(_sub(bent_wrist, shoulder), upper), _normalized(_sub(target, shoulder), upper))
+    return (elbow_turn, shoulder_turn, _add(shoulder, qrot(shoulder_turn, upper)),
+            _add(shoulder, qrot(shoulder_turn, _sub(bent_wrist, shoulder))))
 
 
 @njit(cache=True, nogil=True)
-def _push(pos, t, E, W, k, ends, end_a, end_b, end_w, radii, probe, obstacles, target, slack, el, wr):
-    """The move of arm ``k``'s wrist (world) out of every obstacle at frame ``t`` (see :mod:`torchsplice.ops.hands`)."""
-    pts = np.empty((2, 3))
+def _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, obstacles, target, slack, elbow, wrist):
+    """The move of arm ``k``'s wrist (world) out of every obstacle at frame ``t`` (see :mod:`torchsplice.ops.hands`);
+    ``elbows``, ``wrists (n, 2, 3)``: both arms' current positions, used for its ``elbow`` and ``wrist`` joints
+    wherever a capsule end names them."""
+    probe_ends = np.empty((2, 3))
     for e in range(2):
         row = 2 * probe + e
         for x in range(3):
-            ja, jb = end_a[row], end_b[row]
-            va = E[t, k, x] if ja == el else W[t, k, x] if ja == wr else pos[t, ja, x]
-            vb = E[t, k, x] if jb == el else W[t, k, x] if jb == wr else pos[t, jb, x]
-            pts[e, x] = va * (1.0 - end_w[row]) + vb * end_w[row] if end_w[row] != 0.0 else va
-    pa, pb = _vec(pts, 0), _vec(pts, 1)
-    arm = _length(_sub((W[t, k, 0], W[t, k, 1], W[t, k, 2]), (E[t, k, 0], E[t, k, 1], E[t, k, 2])))
-    out = (0.0, 0.0, 0.0)
+            joint_a, joint_b = end_a[row], end_b[row]
+            at_a = elbows[t, k, x] if joint_a == elbow else wrists[t, k, x] if joint_a == wrist else pos[t, joint_a, x]
+            at_b = elbows[t, k, x] if joint_b == elbow else wrists[t, k, x] if joint_b == wrist else pos[t, joint_b, x]
+            probe_ends[e, x] = at_a * (1.0 - end_w[row]) + at_b * end_w[row] if end_w[row] != 0.0 else at_a
+    probe_a, probe_b = _vec(probe_ends, 0), _vec(probe_ends, 1)
+    arm = _length(_sub((wrists[t, k, 0], wrists[t, k, 1], wrists[t, k, 2]),
+                       (elbows[t, k, 0], elbows[t, k, 1], elbows[t, k, 2])))
+    push = (0.0, 0.0, 0.0)
     for o in obstacles:
-        oa, ob = _vec(ends[t], 2 * o), _vec(ends[t], 2 * o + 1)
-        s, u = _closest(pa, pb, oa, ob)
-        cp = _add(pa, _scale(_sub(pb, pa), s))
-        co = _add(oa, _scale(_sub(ob, oa), u))
-        excess = radii[o] - _length(_sub(cp, co)) - target
+        obstacle_a, obstacle_b = _vec(ends[t], 2 * o), _vec(ends[t], 2 * o + 1)
+        s, u = _closest(probe_a, probe_b, obstacle_a, obstacle_b)
+        on_probe = _add(probe_a, _scale(_sub(probe_b, probe_a), s))
+        on_obstacle = _add(obstacle_a, _scale(_sub(obstacle_b, obstacle_a), u))
+        excess = radii[o] - _length(_sub(on_probe, on_obstacle)) - target
         if excess > 0.0:
-            away = _normalized(_sub(cp, co), _sub(cp, _scale(_add(oa, ob), 0.5)))
-            lever = min(max(_length(_sub(pb, pa)) / max(arm, 1e-300) * s, 0.5), 2.0)
-            out = _add(out, _scale(away, (excess + slack) / lever))
-    return out
+            away = _normalized(_sub(on_probe, on_obstacle), _sub(on_probe, _scale(_add(obstacle_a, obstacle_b), 0.5)))
+            lever = min(max(_length(_sub(probe_b, probe_a)) / max(arm, 1e-300) * s, 0.5), 2.0)
+            push = _add(push, _scale(away, (excess + slack) / lever))
+    return push
 
 
 @njit(cache=True, parallel=True)
-def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, chest, sh, el, wr, psh,
-                    pel, starts, lengths, target, w, slack, iterations, hinge_min, flex, out, corrected):
+def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder, elbow,
+                    wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations, hinge_min,
+                    flex, out, corrected):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``out`` and ``corrected[c]``
     (see the module docstring)."""
     J = rot.shape[1]
-    K = end_a.shape[0]
+    n_ends = end_a.shape[0]
     for c in prange(starts.shape[0]):
-        n, r0, wc = lengths[c], starts[c], w[c]
+        n, first, half = lengths[c], starts[c], spread[c]
         pos = np.zeros((n, J, 3))
         grot = np.zeros((n, J, 4))
-        ends = np.empty((n, K, 3))
-        E = np.empty((n, 2, 3))
-        W = np.empty((n, 2, 3))
-        D = np.zeros((n, 2, 3))
-        P = np.zeros((n, 2, 3))
+        ends = np.empty((n, n_ends, 3))
+        elbows = np.empty((n, 2, 3))
+        wrists = np.empty((n, 2, 3))
+        shift = np.zeros((n, 2, 3))  # the wrists' displacement, chest frame
+        pushes = np.zeros((n, 2, 3))
         widest = np.zeros((n, 2, 3))
-        Q = np.zeros((n, 2, 8))  # per arm: q1, q2
+        turns = np.zeros((n, 2, 8))  # per arm: the elbow's turn, the shoulder's
         for t in range(n):
             for j in joints:
                 p = parents[j]
-                q = qload(rot, r0 + t, j)
+                q = qload(rot, first + t, j)
                 if p < 0:
                     grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = q
-                    pos[t, j, 0], pos[t, j, 1], pos[t, j, 2] = trans[r0 + t, j, 0], trans[r0 + t, j, 1], trans[r0 + t, j, 2]
+                    pos[t, j, 0], pos[t, j, 1], pos[t, j, 2] = (trans[first + t, j, 0], trans[first + t, j, 1],
+                                                                trans[first + t, j, 2])
                 else:
-                    gp = qload(grot, t, p)
-                    grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = qmul(gp, q)
-                    o = qrot(gp, (trans[r0 + t, j, 0], trans[r0 + t, j, 1], trans[r0 + t, j, 2]))
+                    parent_rot = qload(grot, t, p)
+                    grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = qmul(parent_rot, q)
+                    offset = qrot(parent_rot, (trans[first + t, j, 0], trans[first + t, j, 1], trans[first + t, j, 2]))
                     for x in range(3):
-                        pos[t, j, x] = pos[t, p, x] + o[x]
-            for e in range(K):
+                        pos[t, j, x] = pos[t, p, x] + offset[x]
+            for e in range(n_ends):
                 for x in range(3):
                     ends[t, e, x] = pos[t, end_a[e], x] * (1.0 - end_w[e]) + pos[t, end_b[e], x] * end_w[e]
             for k in range(2):
                 for x in range(3):
-                    E[t, k, x] = pos[t, el[k], x]
-                    W[t, k, x] = pos[t, wr[k], x]
-        H = np.zeros((2, 3))  # the clip's elbow hinges, in the upper arms' frames (ops.hands.elbow_hinges)
+                    elbows[t, k, x] = pos[t, elbow[k], x]
+                    wrists[t, k, x] = pos[t, wrist[k], x]
+        hinges = np.zeros((2, 3))  # the clip's elbow hinges, in the upper arms' frames (ops.hands.elbow_hinges)
         for k in range(2):
             for t in range(n):
-                up = _sub(_vec(E[t], k), _vec(pos[t], sh[k]))
-                lo = _sub(_vec(W[t], k), _vec(E[t], k))
-                nrm = _scale(_cross(_scale(up, -1.0), lo), 1.0 / max(_length(up) * _length(lo), 1e-300))
-                loc = qrot(qconj(qload(grot, t, sh[k])), nrm)
+                upper_arm = _sub(_vec(elbows[t], k), _vec(pos[t], shoulder[k]))
+                forearm = _sub(_vec(wrists[t], k), _vec(elbows[t], k))
+                normal = _scale(_cross(_scale(upper_arm, -1.0), forearm),
+                                1.0 / max(_length(upper_arm) * _length(forearm), 1e-300))
+                local_normal = qrot(qconj(qload(grot, t, shoulder[k])), normal)
                 for x in range(3):
-                    H[k, x] += loc[x]
+                    hinges[k, x] += local_normal[x]
             for x in range(3):
-                H[k, x] /= max(n, 1)
-            if _length(_vec(H, k)) <= hinge_min:
-                H[k, 0] = H[k, 1] = H[k, 2] = 0.0
+                hinges[k, x] /= max(n, 1)
+            if _length(_vec(hinges, k)) <= hinge_min:
+                hinges[k, 0] = hinges[k, 1] = hinges[k, 2] = 0.0
         moved = np.zeros(n, np.bool_)
-        hann = np.empty(2 * wc + 1)  # the spread's weights by offset d = -w..w
-        for d in range(2 * wc + 1):
-            hann[d] = 1.0 + math.cos(math.pi * (d - wc) / (wc + 1.0))
+        hann = np.empty(2 * half + 1)  # the spread's weights by offset d = -spread..spread
+        for d in range(2 * half + 1):
+            hann[d] = 1.0 + math.cos(math.pi * (d - half) / (half + 1.0))
         for it in range(iterations):
-            lo, hi = n, -1  # the frames pushed in this pass
+            pushed_first, pushed_last = n, -1  # the frames pushed in this pass
             for t in range(n):
                 for k in range(2):
                     for x in range(3):
-                        P[t, k, x] = 0.0
+                        pushes[t, k, x] = 0.0
                 if it > 0 and not moved[t]:
                     continue  # a frame no pass has moved was out already, and is still
-                inv = qconj(qload(grot, t, chest))
+                to_chest = qconj(qload(grot, t, chest))
                 for k in range(2):
-                    v = _push(pos, t, E, W, k, ends, end_a, end_b, end_w, radii, probes[k], obstacles, target[c], slack,
-                              el[k], wr[k])
+                    v = _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probes[k], obstacles, target[c],
+                              slack,
+                              elbow[k], wrist[k])
                     if v[0] != 0.0 or v[1] != 0.0 or v[2] != 0.0:
-                        lo, hi = min(lo, t), max(hi, t)
-                        v = qrot(inv, v)
-                        P[t, k, 0], P[t, k, 1], P[t, k, 2] = v
-            if hi < 0:
+                        pushed_first, pushed_last = min(pushed_first, t), max(pushed_last, t)
+                        v = qrot(to_chest, v)
+                        pushes[t, k, 0], pushes[t, k, 1], pushes[t, k, 2] = v
+            if pushed_last < 0:
                 break
-            # a push reaches w frames by the largest-push step and w more by the window: only the
-            # frames within 2 w of one change (the rest would add zeros)
-            a0, a1 = max(lo - wc, 0), min(hi + wc, n - 1)
-            for t in range(a0, a1 + 1):  # the spread in time: the largest push within w ...
+            # a push reaches `spread` frames by the largest-push step and as many more by the window:
+            # only the frames within 2 spread of one change (the rest would add zeros)
+            spread_first, spread_last = max(pushed_first - half, 0), min(pushed_last + half, n - 1)
+            for t in range(spread_first, spread_last + 1):  # the spread in time: the largest push within spread ...
                 for k in range(2):
                     best, size = t, -1.0
-                    for g in range(max(t - wc, 0), min(t + wc, n - 1) + 1):
-                        s2 = P[g, k, 0] * P[g, k, 0] + P[g, k, 1] * P[g, k, 1] + P[g, k, 2] * P[g, k, 2]
+                    for g in range(max(t - half, 0), min(t + half, n - 1) + 1):
+                        s2 = (pushes[g, k, 0] * pushes[g, k, 0] + pushes[g, k, 1] * pushes[g, k, 1]
+                              + pushes[g, k, 2] * pushes[g, k, 2])
                         if s2 > size:
                             best, size = g, s2
                     for x in range(3):
-                        widest[t, k, x] = P[best, k, x]
-            b0, b1 = max(lo - 2 * wc, 0), min(hi + 2 * wc, n - 1)
-            for t in range(b0, b1 + 1):  # ... then a Hann window of half-width w
+                        widest[t, k, x] = pushes[best, k, x]
+            window_first, window_last = max(pushed_first - 2 * half, 0), min(pushed_last + 2 * half, n - 1)
+            for t in range(window_first, window_last + 1):  # ... then a Hann window of half-width spread
                 den = 0.0
-                for f in range(max(t - wc, 0), min(t + wc, n - 1) + 1):
-                    den += hann[f - t + wc]
+                for f in range(max(t - half, 0), min(t + half, n - 1) + 1):
+                    den += hann[f - t + half]
                 for k in range(2):
                     num0 = num1 = num2 = 0.0
-                    for f in range(max(t - wc, a0), min(t + wc, a1) + 1):
-                        weight = hann[f - t + wc]
+                    for f in range(max(t - half, spread_first), min(t + half, spread_last) + 1):
+                        weight = hann[f - t + half]
                         num0 += weight * widest[f, k, 0]
                         num1 += weight * widest[f, k, 1]
                         num2 += weight * widest[f, k, 2]
-                    D[t, k, 0] += num0 / den
-                    D[t, k, 1] += num1 / den
-                    D[t, k, 2] += num2 / den
-            for t in range(b0, b1 + 1):  # the IK where the displacement changed
-                ch = qload(grot, t, chest)
+                    shift[t, k, 0] += num0 / den
+                    shift[t, k, 1] += num1 / den
+                    shift[t, k, 2] += num2 / den
+            for t in range(window_first, window_last + 1):  # the IK where the displacement changed
+                chest_rot = qload(grot, t, chest)
                 for k in range(2):
-                    if D[t, k, 0] == 0.0 and D[t, k, 1] == 0.0 and D[t, k, 2] == 0.0:
+                    if shift[t, k, 0] == 0.0 and shift[t, k, 1] == 0.0 and shift[t, k, 2] == 0.0:
                         continue
                     moved[t] = True
-                    d = qrot(ch, (D[t, k, 0], D[t, k, 1], D[t, k, 2]))
-                    S0 = _vec(pos[t], sh[k])
-                    W0 = _vec(pos[t], wr[k])
-                    E0 = _vec(pos[t], el[k])
-                    hk = _vec(H, k)
-                    if hk[0] != 0.0 or hk[1] != 0.0 or hk[2] != 0.0:
-                        hinge = qrot(qload(grot, t, sh[k]), hk)
+                    d = qrot(chest_rot, (shift[t, k, 0], shift[t, k, 1], shift[t, k, 2]))
+                    shoulder_pos = _vec(pos[t], shoulder[k])
+                    wrist_pos = _vec(pos[t], wrist[k])
+                    elbow_pos = _vec(pos[t], elbow[k])
+                    hinge_local = _vec(hinges, k)
+                    if hinge_local[0] != 0.0 or hinge_local[1] != 0.0 or hinge_local[2] != 0.0:
+                        hinge = qrot(qload(grot, t, shoulder[k]), hinge_local)
                     else:
-                        hinge = _chest_hinge(_sub(E0, S0), ch)
-                    q1, q2, e2, w2 = _arm_ik(S0, E0, W0, _add(W0, d), hinge, flex)
+                        hinge = _chest_hinge(_sub(elbow_pos, shoulder_pos), chest_rot)
+                    elbow_turn, shoulder_turn, new_elbow, new_wrist = _arm_ik(shoulder_pos, elbow_pos, wrist_pos,
+                                                                              _add(wrist_pos, d), hinge, flex)
                     for x in range(4):
-                        Q[t, k, x], Q[t, k, 4 + x] = q1[x], q2[x]
+                        turns[t, k, x], turns[t, k, 4 + x] = elbow_turn[x], shoulder_turn[x]
                     for x in range(3):
-                        E[t, k, x], W[t, k, x] = e2[x], w2[x]
+                        elbows[t, k, x], wrists[t, k, x] = new_elbow[x], new_wrist[x]
         count = 0
         for t in range(n):
             if not moved[t]:
                 continue
             count += 1
             for k in range(2):
-                if D[t, k, 0] == 0.0 and D[t, k, 1] == 0.0 and D[t, k, 2] == 0.0:
+                if shift[t, k, 0] == 0.0 and shift[t, k, 1] == 0.0 and shift[t, k, 2] == 0.0:
                     continue
-                q1 = (Q[t, k, 0], Q[t, k, 1], Q[t, k, 2], Q[t, k, 3])
-                q2 = (Q[t, k, 4], Q[t, k, 5], Q[t, k, 6], Q[t, k, 7])
-                ns = qmul(qconj(qload(grot, t, psh[k])), qmul(q2, qload(grot, t, sh[k])))
-                ne = qmul(qconj(qload(grot, t, pel[k])), qmul(q1, qload(grot, t, el[k])))
+                elbow_turn = (turns[t, k, 0], turns[t, k, 1], turns[t, k, 2], turns[t, k, 3])
+                shoulder_turn = (turns[t, k, 4], turns[t, k, 5], turns[t, k, 6], turns[t, k, 7])
+                shoulder_local = qmul(qconj(qload(grot, t, shoulder_parent[k])),
+                                      qmul(shoulder_turn, qload(grot, t, shoulder[k])))
+                elbow_local = qmul(qconj(qload(grot, t, elbow_parent[k])), qmul(elbow_turn, qload(grot, t, elbow[k])))
                 for x in range(4):
-                    out[r0 + t, sh[k], x] = ns[x]
-                    out[r0 + t, el[k], x] = ne[x]
+                    out[first + t, shoulder[k], x] = shoulder_local[x]
+                    out[first + t, elbow[k], x] = elbow_local[x]
         corrected[c] = count

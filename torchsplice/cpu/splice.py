@@ -49,275 +49,301 @@ STATUS = {0: "ok", 1: "no path: +inf costs block every alignment", 2: "the align
 
 
 @njit(cache=True, nogil=True)
-def _time_align(feat, starts, a, na, b, nb, opts, cells, curve):
-    """Align clip ``b`` (its first ``nb`` frames) to clip ``a`` (first ``na``): grid, crop, DP, curve.
+def _time_align(feat, starts, clip_a, frames_a, clip_b, frames_b, opts, cells, curve):
+    """Align bank clip ``clip_b`` (its first ``frames_b`` frames) to bank clip ``clip_a`` (first ``frames_a``): grid,
+    crop, DP, curve.
 
     Returns ``(status, crop, path_length, cost, frames)``; the path goes to ``cells`` (in cropped
     frames of b) and the curve (cropped frames of b per frame of a) to ``curve``.
     """
     max_run, max_dev, do_crop, context, window, depth, knot_spacing, smoothing = opts
-    grid = np.empty((na, nb))
-    distance_row_block(feat, starts[a], na, starts[b], nb, max_dev, grid)
-    crop = phase_crop_pair(grid, na, nb, int(context), int(window), depth) if do_crop > 0 else 0
-    length, total = dp_pair(grid, crop, na, nb - crop, int(max_run), cells)
-    if length < 0:
+    grid = np.empty((frames_a, frames_b))
+    distance_row_block(feat, starts[clip_a], frames_a, starts[clip_b], frames_b, max_dev, grid)
+    crop = phase_crop_pair(grid, frames_a, frames_b, int(context), int(window), depth) if do_crop > 0 else 0
+    path_length, total_cost = dp_pair(grid, crop, frames_a, frames_b - crop, int(max_run), cells)
+    if path_length < 0:
         return 1, crop, 0, np.nan, 0
-    frames = fit_curve(cells, length, knot_spacing, smoothing, curve)
+    frames = fit_curve(cells, path_length, knot_spacing, smoothing, curve)
     if frames < 0:
-        return 2, crop, length, total / length, 0
-    return 0, crop, length, total / length, frames
+        return 2, crop, path_length, total_cost / path_length, 0
+    return 0, crop, path_length, total_cost / path_length, frames
 
 
 @njit(cache=True, nogil=True)
-def _mean_shoulders(pos, T, hips, shoulders, pelvis, up, out, H):
+def _mean_shoulders(pos, frames, hips, shoulders, pelvis, up, out, headings):
     """Frame-averaged shoulders ``out (2, 3)`` in heading frames around the pelvis; the heading
-    frames go to ``H (T, 4)`` when it is not empty."""
+    frames (of the first ``frames`` rows of ``pos``) go to ``headings (frames, 4)`` when it is not empty."""
     out[:, :] = 0.0
-    for t in range(T):
-        h = heading_q(pos, t, hips[0], hips[1], up)
-        if H.shape[0] > 0:
-            H[t, 0], H[t, 1], H[t, 2], H[t, 3] = h
-        hc = qconj(h)
+    for t in range(frames):
+        heading = heading_q(pos, t, hips[0], hips[1], up)
+        if headings.shape[0] > 0:
+            headings[t, 0], headings[t, 1], headings[t, 2], headings[t, 3] = heading
+        from_heading = qconj(heading)
         for k in range(2):
-            s = shoulders[k]
-            v = qrot(hc, (pos[t, s, 0] - pos[t, pelvis, 0], pos[t, s, 1] - pos[t, pelvis, 1], pos[t, s, 2] - pos[t, pelvis, 2]))
+            shoulder = shoulders[k]
+            v = qrot(from_heading, (pos[t, shoulder, 0] - pos[t, pelvis, 0], pos[t, shoulder, 1] - pos[t, pelvis, 1],
+                                    pos[t, shoulder, 2] - pos[t, pelvis, 2]))
             out[k, 0] += v[0]
             out[k, 1] += v[1]
             out[k, 2] += v[2]
-    out /= T
+    out /= frames
 
 
 @njit(cache=True, nogil=True)
-def _twist_target(mean_u, mean_l, share, up):
-    """Turn the action's mean shoulders ``mean_u (2, 3)`` about the up axis, in place, by
-    ``share`` times the yaw of the locomotion's ``mean_l`` minus theirs, as
+def _twist_target(mean_action, mean_loco, share, up):
+    """Turn the action's mean shoulders ``mean_action (2, 3)`` about the up axis, in place, by
+    ``share`` times the yaw of the locomotion's ``mean_loco`` minus theirs, as
     :func:`torchsplice.splice.heck.twist_target` (yaw of left minus right shoulder in the floor
     plane, from the lateral axis towards the third). Not a heading (:mod:`.heading`): the
     shoulders' twist against the hips, measured inside heading frames."""
-    lat = 1 if up == 0 else 0
-    third = 3 - lat - up
-    yl = math.atan2(mean_l[0, third] - mean_l[1, third], mean_l[0, lat] - mean_l[1, lat])
-    yu = math.atan2(mean_u[0, third] - mean_u[1, third], mean_u[0, lat] - mean_u[1, lat])
-    a = share * (yl - yu)
-    c, s = math.cos(a), math.sin(a)
+    lateral = 1 if up == 0 else 0
+    third = 3 - lateral - up
+    yaw_loco = math.atan2(mean_loco[0, third] - mean_loco[1, third], mean_loco[0, lateral] - mean_loco[1, lateral])
+    yaw_action = math.atan2(mean_action[0, third] - mean_action[1, third],
+                            mean_action[0, lateral] - mean_action[1, lateral])
+    angle = share * (yaw_loco - yaw_action)
+    c, s = math.cos(angle), math.sin(angle)
     for k in range(2):
-        x, z = mean_u[k, lat], mean_u[k, third]
-        mean_u[k, lat] = c * x - s * z
-        mean_u[k, third] = s * x + c * z
+        x, z = mean_action[k, lateral], mean_action[k, third]
+        mean_action[k, lateral] = c * x - s * z
+        mean_action[k, third] = s * x + c * z
 
 
 @njit(cache=True, nogil=True)
-def _assemble(lrot, ltrans, ls, arot, atrans, T, joints_list, upper, pelvis, prot, rot, trans):
-    """Rows ``t < T`` for ``joints_list``: upper body from the resampled action, the rest from the
-    locomotion (rows from ``ls``), the pelvis's rotation ``prot (T, 4)`` and its translation
+def _assemble(loco_rot, loco_trans, loco_start, action_rot, action_trans, frames, joints_list, upper, pelvis,
+              pelvis_rot, out_rot, out_trans):
+    """Rows ``t < frames`` of ``out_rot``/``out_trans`` for ``joints_list``: upper body from the resampled
+    action ``action_rot``/``action_trans``, the rest from the locomotion (``loco_rot``/``loco_trans``
+    rows from ``loco_start``), the pelvis's rotation ``pelvis_rot (frames, 4)`` and its translation
     from the locomotion."""
-    for t in range(T):
+    for t in range(frames):
         for j in joints_list:
             if j == pelvis:
-                rot[t, j, 0], rot[t, j, 1], rot[t, j, 2], rot[t, j, 3] = prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3]
+                (out_rot[t, j, 0], out_rot[t, j, 1], out_rot[t, j, 2],
+                 out_rot[t, j, 3]) = pelvis_rot[t, 0], pelvis_rot[t, 1], pelvis_rot[t, 2], pelvis_rot[t, 3]
                 for c in range(3):
-                    trans[t, j, c] = ltrans[ls + t, j, c]
+                    out_trans[t, j, c] = loco_trans[loco_start + t, j, c]
             elif upper[j]:
                 for c in range(4):
-                    rot[t, j, c] = arot[t, j, c]
+                    out_rot[t, j, c] = action_rot[t, j, c]
                 for c in range(3):
-                    trans[t, j, c] = atrans[t, j, c]
+                    out_trans[t, j, c] = action_trans[t, j, c]
             else:
                 for c in range(4):
-                    rot[t, j, c] = lrot[ls + t, j, c]
+                    out_rot[t, j, c] = loco_rot[loco_start + t, j, c]
                 for c in range(3):
-                    trans[t, j, c] = ltrans[ls + t, j, c]
+                    out_trans[t, j, c] = loco_trans[loco_start + t, j, c]
 
 
 @njit(cache=True, nogil=True)
 def _pelvis_cloud(pos, grot, t, pelvis, cloud, out):
     """Joints ``cloud`` at frame ``t`` in the pelvis's own frame, into ``out (K, 3)``."""
-    qc = qconj(qload(grot, t, pelvis))
+    to_pelvis = qconj(qload(grot, t, pelvis))
     for k in range(cloud.shape[0]):
         j = cloud[k]
-        v = qrot(qc, (pos[t, j, 0] - pos[t, pelvis, 0], pos[t, j, 1] - pos[t, pelvis, 1], pos[t, j, 2] - pos[t, pelvis, 2]))
+        v = qrot(to_pelvis, (pos[t, j, 0] - pos[t, pelvis, 0], pos[t, j, 1] - pos[t, pelvis, 1],
+                             pos[t, j, 2] - pos[t, pelvis, 2]))
         out[k, 0], out[k, 1], out[k, 2] = v
 
 
 @njit(cache=True, nogil=True)
-def _splice_one(bank, feat, starts, lengths, loco, act, joints, opts, posture, twist, cells, curve, orot, otrans, ocorr,
-                opel):
+def _splice_one(bank, feat, starts, lengths, loco, action, joints, opts, posture, twist, cells, curve, out_rot,
+                out_trans, out_corr, out_pelvis):
     """The Heck et al. splice of one pair; returns ``(status, crop, path_length, cost, frames, posture_angle)``.
     ``twist``: the share of the locomotion's torso twist the posture takes (0: none). Its parts
-    go to ``curve`` (the action frame after the crop) and ``opel`` (the pelvis's rotation), its
-    frames, assembled from them (:func:`torchsplice.cpu.assemble.timewarp_rows`), to ``orot``/``otrans``."""
+    go to ``curve`` (the action frame after the crop) and ``out_pelvis`` (the pelvis's rotation), its
+    frames, assembled from them (:func:`torchsplice.cpu.assemble.timewarp_rows`), to
+    ``out_rot``/``out_trans``; the pelvis correction per frame (radians) to ``out_corr``."""
     rot, trans, pos, grot = bank
-    parents, upper, fk_joints, act_joints, landmarks, hips, shoulders, pcloud, pelvis, pelvis_parent, up = joints
+    parents, upper, fk_joints, act_joints, landmarks, hips, shoulders, pelvis_cloud, pelvis, pelvis_parent, up = joints
     J = rot.shape[1]
-    ls, as_ = starts[loco], starts[act]
-    status, crop, plen, cost, T = _time_align(feat, starts, loco, lengths[loco], act, lengths[act], opts, cells, curve)
+    loco_start, action_start = starts[loco], starts[action]
+    status, crop, path_length, cost, T = _time_align(feat, starts, loco, lengths[loco], action, lengths[action], opts,
+                                                     cells, curve)
     if status != 0:
-        return status, crop, plen, cost, 0, 0.0
-    n_c = lengths[act] - crop
+        return status, crop, path_length, cost, 0, 0.0
+    action_frames = lengths[action] - crop
     # every array below is read only on the joints it is written on (act_joints, fk_joints)
-    arot = np.empty((T, J, 4))
-    atrans = np.empty((T, J, 3))
-    resample_clip(rot, trans, as_ + crop, n_c, curve, T, act_joints, arot, atrans)
+    action_rot = np.empty((T, J, 4))
+    action_trans = np.empty((T, J, 3))
+    resample_clip(rot, trans, action_start + crop, action_frames, curve, T, act_joints, action_rot, action_trans)
     # spatial alignment: q_A per frame between the pelvis clouds of (action on loco) and loco
-    frot = np.empty((T, J, 4))
-    ftrans = np.empty((T, J, 3))
-    fpos = np.empty((T, J, 3))
-    fgrot = np.empty((T, J, 4))
-    q_lp = np.empty((T, 4))
+    spliced_rot = np.empty((T, J, 4))
+    spliced_trans = np.empty((T, J, 3))
+    spliced_pos = np.empty((T, J, 3))
+    spliced_grot = np.empty((T, J, 4))
+    loco_pelvis = np.empty((T, 4))
     for t in range(T):
         for c in range(4):
-            q_lp[t, c] = rot[ls + t, pelvis, c]
-    _assemble(rot, trans, ls, arot, atrans, T, fk_joints, upper, pelvis, q_lp, frot, ftrans)
-    fk_clip(frot, ftrans, parents, fk_joints, T, fpos, fgrot)
-    K = pcloud.shape[0]
-    src = np.empty((K, 3))
-    tgt = np.empty((K, 3))
-    prot = np.empty((T, 4))
-    lpos, lgrot = pos[ls:ls + T], grot[ls:ls + T]
+            loco_pelvis[t, c] = rot[loco_start + t, pelvis, c]
+    _assemble(rot, trans, loco_start, action_rot, action_trans, T, fk_joints, upper, pelvis, loco_pelvis, spliced_rot,
+              spliced_trans)
+    fk_clip(spliced_rot, spliced_trans, parents, fk_joints, T, spliced_pos, spliced_grot)
+    K = pelvis_cloud.shape[0]
+    spliced_cloud = np.empty((K, 3))
+    loco_cloud = np.empty((K, 3))
+    pelvis_rot = np.empty((T, 4))
+    loco_pos, loco_grot = pos[loco_start:loco_start + T], grot[loco_start:loco_start + T]
     for t in range(T):
-        _pelvis_cloud(fpos, fgrot, t, pelvis, pcloud, src)
-        _pelvis_cloud(lpos, lgrot, t, pelvis, pcloud, tgt)
-        qa = horn_cloud(src, tgt, _UNIFORM)
-        ocorr[t] = 2.0 * math.atan2(math.sqrt(qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]), abs(qa[0]))
-        p = qmul((q_lp[t, 0], q_lp[t, 1], q_lp[t, 2], q_lp[t, 3]), qa)
-        prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3] = p
+        _pelvis_cloud(spliced_pos, spliced_grot, t, pelvis, pelvis_cloud, spliced_cloud)
+        _pelvis_cloud(loco_pos, loco_grot, t, pelvis, pelvis_cloud, loco_cloud)
+        align = horn_cloud(spliced_cloud, loco_cloud, _UNIFORM)
+        out_corr[t] = 2.0 * math.atan2(math.sqrt(align[1] * align[1] + align[2] * align[2] + align[3] * align[3]),
+                                       abs(align[0]))
+        p = qmul((loco_pelvis[t, 0], loco_pelvis[t, 1], loco_pelvis[t, 2], loco_pelvis[t, 3]), align)
+        pelvis_rot[t, 0], pelvis_rot[t, 1], pelvis_rot[t, 2], pelvis_rot[t, 3] = p
     angle = 0.0
     if posture:
-        _assemble(rot, trans, ls, arot, atrans, T, fk_joints, upper, pelvis, prot, frot, ftrans)
-        fk_clip(frot, ftrans, parents, fk_joints, T, fpos, fgrot)
-        H = np.empty((T, 4))
-        mean_s = np.empty((2, 3))
-        mean_u = np.empty((2, 3))
-        _mean_shoulders(fpos, T, hips, shoulders, pelvis, up, mean_s, H)
-        upos = np.empty((T, J, 3))
-        ugrot = np.empty((T, J, 4))
-        fk_clip(arot, atrans, parents, fk_joints, T, upos, ugrot)
-        _mean_shoulders(upos, T, hips, shoulders, pelvis, up, mean_u, np.empty((0, 4)))
+        _assemble(rot, trans, loco_start, action_rot, action_trans, T, fk_joints, upper, pelvis, pelvis_rot,
+                  spliced_rot, spliced_trans)
+        fk_clip(spliced_rot, spliced_trans, parents, fk_joints, T, spliced_pos, spliced_grot)
+        headings = np.empty((T, 4))
+        mean_spliced = np.empty((2, 3))
+        mean_action = np.empty((2, 3))
+        _mean_shoulders(spliced_pos, T, hips, shoulders, pelvis, up, mean_spliced, headings)
+        action_pos = np.empty((T, J, 3))
+        action_grot = np.empty((T, J, 4))
+        fk_clip(action_rot, action_trans, parents, fk_joints, T, action_pos, action_grot)
+        _mean_shoulders(action_pos, T, hips, shoulders, pelvis, up, mean_action, np.empty((0, 4)))
         if twist != 0.0:
-            mean_l = np.empty((2, 3))
-            _mean_shoulders(lpos, T, hips, shoulders, pelvis, up, mean_l, np.empty((0, 4)))
-            _twist_target(mean_u, mean_l, twist, up)
-        qg = horn_cloud(mean_s, mean_u, _UNIFORM)
-        angle = 2.0 * math.atan2(math.sqrt(qg[1] * qg[1] + qg[2] * qg[2] + qg[3] * qg[3]), abs(qg[0]))
+            mean_loco = np.empty((2, 3))
+            _mean_shoulders(loco_pos, T, hips, shoulders, pelvis, up, mean_loco, np.empty((0, 4)))
+            _twist_target(mean_action, mean_loco, twist, up)
+        posture_rot = horn_cloud(mean_spliced, mean_action, _UNIFORM)
+        angle = 2.0 * math.atan2(math.sqrt(posture_rot[1] * posture_rot[1] + posture_rot[2] * posture_rot[2]
+                                           + posture_rot[3] * posture_rot[3]), abs(posture_rot[0]))
         for t in range(T):
-            h = (H[t, 0], H[t, 1], H[t, 2], H[t, 3])
-            world = qmul(qmul(h, qg), qconj(h))
-            qpar = qload(fgrot, t, pelvis_parent) if pelvis_parent >= 0 else (1.0, 0.0, 0.0, 0.0)
-            local = qmul(qmul(qconj(qpar), world), qpar)
-            p = qmul(local, (prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3]))
-            prot[t, 0], prot[t, 1], prot[t, 2], prot[t, 3] = p
+            heading = (headings[t, 0], headings[t, 1], headings[t, 2], headings[t, 3])
+            world = qmul(qmul(heading, posture_rot), qconj(heading))
+            parent_rot = qload(spliced_grot, t, pelvis_parent) if pelvis_parent >= 0 else (1.0, 0.0, 0.0, 0.0)
+            local = qmul(qmul(qconj(parent_rot), world), parent_rot)
+            p = qmul(local, (pelvis_rot[t, 0], pelvis_rot[t, 1], pelvis_rot[t, 2], pelvis_rot[t, 3]))
+            pelvis_rot[t, 0], pelvis_rot[t, 1], pelvis_rot[t, 2], pelvis_rot[t, 3] = p
     for t in range(T):
         for c in range(4):
-            opel[t, c] = prot[t, c]
-    # the frames timewarp_rows(rot, trans, arc, ls, as_ + crop, n_c, upper, pelvis, curve, prot, ...) assembles
+            out_pelvis[t, c] = pelvis_rot[t, c]
+    # the frames timewarp_rows(rot, trans, arc, loco_start, action_start + crop, action_frames, upper, pelvis, curve,
+    # pelvis_rot, ...) assembles
     # from these parts when an alignment store is read: the upper body is the action resampled above
     # (resample_clip: the same slerp and lerp at the same curve), taken from there rather than slerped twice
-    _assemble(rot, trans, ls, arot, atrans, T, np.arange(J), upper, pelvis, prot, orot, otrans)
-    return 0, crop, plen, cost, T, angle
+    _assemble(rot, trans, loco_start, action_rot, action_trans, T, np.arange(J), upper, pelvis, pelvis_rot, out_rot,
+              out_trans)
+    return 0, crop, path_length, cost, T, angle
 
 
 @njit(cache=True, nogil=True)
-def _naive_one(bank, starts, lengths, loco, act, joints, curve, orot, otrans, opel):
+def _naive_one(bank, starts, lengths, loco, action, joints, curve, out_rot, out_trans, out_pelvis):
     """Naive DOF replacement of one pair; returns the number of frames. As a timewarp clip's
     parts: the curve ``t`` and the pelvis's rotation of whichever clip gives the upper body."""
     rot, trans, pos, grot = bank
     upper, pelvis = joints[1], joints[8]
-    ls, as_ = starts[loco], starts[act]
-    T = min(lengths[loco], lengths[act])
-    src = as_ if upper[pelvis] else ls
-    for t in range(T):
+    loco_start, action_start = starts[loco], starts[action]
+    n = min(lengths[loco], lengths[action])
+    source_start = action_start if upper[pelvis] else loco_start
+    for t in range(n):
         curve[t] = t
         for c in range(4):
-            opel[t, c] = rot[src + t, pelvis, c]
-    timewarp_rows(rot, trans, np.empty((0, rot.shape[1], 2)), ls, as_, lengths[act], upper, pelvis, curve, opel, T, orot, otrans)
-    return T
+            out_pelvis[t, c] = rot[source_start + t, pelvis, c]
+    timewarp_rows(rot, trans, np.empty((0, rot.shape[1], 2)), loco_start, action_start, lengths[action], upper, pelvis,
+                  curve, out_pelvis, n, out_rot, out_trans)
+    return n
 
 
 @njit(cache=True, nogil=True)
-def _cpmc_one(bank, feat, starts, lengths, loco, act, ref, joints, opts, cells, curve, orot, otrans):
+def _cpmc_one(bank, feat, starts, lengths, loco, action, ref, joints, opts, cells, curve, out_rot, out_trans):
     """CPMC differencing of one pair against its reference; returns ``(status, crop, path_length, cost, frames)``."""
     rot, trans, pos, grot = bank
     upper = joints[1]
     J = rot.shape[1]
-    ls, as_, rs = starts[loco], starts[act], starts[ref]
+    loco_start, action_start, ref_start = starts[loco], starts[action], starts[ref]
     upper_joints = np.nonzero(upper)[0]
     # the reference aligned to the action (rows: action frames)
-    c1 = np.full((lengths[act] + lengths[ref], 2), -1, dtype=np.int64)
-    curve1 = np.empty(lengths[act])
-    status, crop1, _, _, n_act = _time_align(feat, starts, act, lengths[act], ref, lengths[ref], opts, c1, curve1)
+    ref_cells = np.full((lengths[action] + lengths[ref], 2), -1, dtype=np.int64)
+    ref_curve = np.empty(lengths[action])
+    status, ref_crop, _, _, action_frames = _time_align(feat, starts, action, lengths[action], ref, lengths[ref], opts,
+                                                        ref_cells, ref_curve)
     if status != 0:
-        return status, crop1, 0, np.nan, 0
-    rrot = np.empty((n_act, J, 4))
-    rtrans = np.empty((n_act, J, 3))
-    resample_clip(rot, trans, rs + crop1, lengths[ref] - crop1, curve1, n_act, upper_joints, rrot, rtrans)
-    diff = np.empty((n_act, J, 4))  # upper-body joints only
-    for t in range(n_act):
+        return status, ref_crop, 0, np.nan, 0
+    ref_rot = np.empty((action_frames, J, 4))
+    ref_trans = np.empty((action_frames, J, 3))
+    resample_clip(rot, trans, ref_start + ref_crop, lengths[ref] - ref_crop, ref_curve, action_frames, upper_joints,
+                  ref_rot, ref_trans)
+    diff = np.empty((action_frames, J, 4))  # upper-body joints only
+    for t in range(action_frames):
         for j in upper_joints:
-            qstore(diff, t, j, qmul(qconj(qload(rrot, t, j)), qload(rot, as_ + t, j)))
+            qstore(diff, t, j, qmul(qconj(qload(ref_rot, t, j)), qload(rot, action_start + t, j)))
     # the action (its frames with a reference) aligned to the locomotion
-    status, crop, plen, cost, T = _time_align(feat, starts, loco, lengths[loco], act, n_act, opts, cells, curve)
+    status, crop, path_length, cost, T = _time_align(feat, starts, loco, lengths[loco], action, action_frames, opts,
+                                                     cells, curve)
     if status != 0:
-        return status, crop, plen, cost, 0
+        return status, crop, path_length, cost, 0
     for t in range(T):
-        i0, i1, w = split_time(curve[t], n_act - crop)
+        i0, i1, w = split_time(curve[t], action_frames - crop)
         for j in range(J):
-            base = qload(rot, ls + t, j)
+            loco_q = qload(rot, loco_start + t, j)
             if upper[j]:
-                d = qslerp(qload(diff, crop + i0, j), qload(diff, crop + i1, j), w)
-                qstore(orot, t, j, qmul(base, d))
+                delta = qslerp(qload(diff, crop + i0, j), qload(diff, crop + i1, j), w)
+                qstore(out_rot, t, j, qmul(loco_q, delta))
             else:
-                qstore(orot, t, j, base)
+                qstore(out_rot, t, j, loco_q)
             for c in range(3):
-                otrans[t, j, c] = trans[ls + t, j, c]
-    return 0, crop, plen, cost, T
+                out_trans[t, j, c] = trans[loco_start + t, j, c]
+    return 0, crop, path_length, cost, T
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def splice_batch(bank, feat, starts, lengths, method, loco, act, ref, joints, opts, posture, twist, out_start,
-                 orot, otrans, ocurve, ocorr, opel, cells, status, crop, plen, cost, frames, angle):
-    """Splice every pair ``b`` (bank clips ``loco[b]``, ``act[b]``, ``ref[b]`` for cpmc) in parallel.
+def splice_batch(bank, feat, starts, lengths, method, loco, action, ref, joints, opts, posture, twist, out_start,
+                 out_rot, out_trans, out_curve, out_corr, out_pelvis, cells, status, crop, path_length, cost, frames,
+                 angle):
+    """Splice every pair ``b`` (bank clips ``loco[b]``, ``action[b]``, ``ref[b]`` for cpmc) in parallel.
 
     Per pair: ``status`` (0 ok, else a :data:`STATUS` code), ``crop`` (action frames skipped),
-    ``plen`` and ``cells[b]`` (the DP path, -1 padded), ``cost`` (mean path cost), ``frames``,
+    ``path_length`` and ``cells[b]`` (the DP path, -1 padded), ``cost`` (mean path cost), ``frames``,
     ``angle`` (posture rotation, radians; ``twist`` is the share of the locomotion's torso twist
     it takes); per result frame from row ``out_start[b]``:
-    ``orot``/``otrans`` (float32 local rotations and translations), ``ocurve`` (action frame,
-    counted from the crop), ``ocorr`` (pelvis correction, radians) and ``opel (M, 4)`` (the
-    pelvis's local rotation; splice and naive: with ``ocurve``, the parts the frames are
+    ``out_rot``/``out_trans`` (float32 local rotations and translations), ``out_curve`` (action frame,
+    counted from the crop), ``out_corr`` (pelvis correction, radians) and ``out_pelvis (M, 4)`` (the
+    pelvis's local rotation; splice and naive: with ``out_curve``, the parts the frames are
     assembled from, see :mod:`torchsplice.cpu.assemble`).
     """
     for b in prange(loco.shape[0]):
-        o = out_start[b]
+        row = out_start[b]
         n = lengths[loco[b]]
-        r, tr, cu, co, pe = orot[o:o + n], otrans[o:o + n], ocurve[o:o + n], ocorr[o:o + n], opel[o:o + n]
+        rot_b, trans_b, curve_b, corr_b, pelvis_b = (out_rot[row:row + n], out_trans[row:row + n],
+                                                     out_curve[row:row + n], out_corr[row:row + n],
+                                                     out_pelvis[row:row + n])
         for t in range(n):
-            co[t] = 0.0
+            corr_b[t] = 0.0
         if method == NAIVE_CODE:
-            frames[b] = _naive_one(bank, starts, lengths, loco[b], act[b], joints, cu, r, tr, pe)
-            status[b], crop[b], plen[b], cost[b], angle[b] = 0, 0, 0, np.nan, 0.0
+            frames[b] = _naive_one(bank, starts, lengths, loco[b], action[b], joints, curve_b, rot_b, trans_b, pelvis_b)
+            status[b], crop[b], path_length[b], cost[b], angle[b] = 0, 0, 0, np.nan, 0.0
             cells[b, :, :] = -1
             continue
-        cb = np.empty((cells.shape[1], 2), dtype=np.int64)
+        cells_b = np.empty((cells.shape[1], 2), dtype=np.int64)
         if method == SPLICE_CODE:
-            st, c, pl, cs, T, ang = _splice_one(bank, feat, starts, lengths, loco[b], act[b], joints, opts, posture,
-                                                twist, cb, cu, r, tr, co, pe)
+            status_b, crop_b, path_b, cost_b, frames_b, angle_b = _splice_one(
+                bank, feat, starts, lengths, loco[b], action[b], joints, opts, posture, twist, cells_b, curve_b, rot_b,
+                trans_b, corr_b, pelvis_b)
         else:  # cpmc
-            st, c, pl, cs, T = _cpmc_one(bank, feat, starts, lengths, loco[b], act[b], ref[b], joints, opts, cb, cu, r, tr)
-            ang = 0.0
-        status[b], crop[b], plen[b], cost[b], frames[b], angle[b] = st, c, pl, cs, T, ang
+            status_b, crop_b, path_b, cost_b, frames_b = _cpmc_one(
+                bank, feat, starts, lengths, loco[b], action[b], ref[b], joints, opts, cells_b, curve_b, rot_b, trans_b)
+            angle_b = 0.0
+        status[b], crop[b], path_length[b], cost[b], frames[b], angle[b] = (status_b, crop_b, path_b, cost_b, frames_b,
+                                                                            angle_b)
         for p in range(cells.shape[1]):
-            cells[b, p, 0] = cb[p, 0] if p < pl else -1
-            cells[b, p, 1] = cb[p, 1] if p < pl else -1
+            cells[b, p, 0] = cells_b[p, 0] if p < path_b else -1
+            cells[b, p, 1] = cells_b[p, 1] if p < path_b else -1
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def compact(rot, trans, curve, corr, pel, start, frames, new_start, crot, ctrans, ccurve, ccorr, cpel):
-    """Copy pair ``b``'s ``frames[b]`` rows from ``start[b]`` to ``new_start[b]`` (packing the
-    results of :func:`splice_batch` without gaps), in parallel over pairs."""
+def compact(rot, trans, curve, corr, pelvis, start, frames, new_start, packed_rot, packed_trans, packed_curve,
+            packed_corr, packed_pelvis):
+    """Copy pair ``b``'s ``frames[b]`` rows from ``start[b]`` to ``new_start[b]`` of the ``packed_*``
+    arrays (packing the results of :func:`splice_batch` without gaps), in parallel over pairs."""
     for b in prange(start.shape[0]):
-        s, d, n = start[b], new_start[b], frames[b]
-        crot[d:d + n] = rot[s:s + n]
-        ctrans[d:d + n] = trans[s:s + n]
-        ccurve[d:d + n] = curve[s:s + n]
-        ccorr[d:d + n] = corr[s:s + n]
-        cpel[d:d + n] = pel[s:s + n]
+        old, new, n = start[b], new_start[b], frames[b]
+        packed_rot[new:new + n] = rot[old:old + n]
+        packed_trans[new:new + n] = trans[old:old + n]
+        packed_curve[new:new + n] = curve[old:old + n]
+        packed_corr[new:new + n] = corr[old:old + n]
+        packed_pelvis[new:new + n] = pelvis[old:old + n]
