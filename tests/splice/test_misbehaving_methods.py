@@ -152,3 +152,6 @@ def test_an_entry_point_that_fails_is_one_line(monkeypatch, obj, why):
         registry.available_methods()
     msg = str(caught.value)
     assert "\n" not in msg and "adv_ep" in msg and why in msg, msg
+    with pytest.raises(TorchspliceError) as again:  # said again, not skipped from then on
+        registry.available_methods()
+    assert str(again.value) == msg

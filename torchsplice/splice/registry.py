@@ -257,7 +257,7 @@ def run_checked(method: Method, fn: Callable, inp: MethodInput, *args):
 
 
 _REGISTRY: dict[str, Method] = {}
-_LOADED = {"builtins": False, "entry_points": False, "env": None}
+_LOADED = {"builtins": False, "entry_points": False, "env": None, "env_loading": None}
 _PLUGIN_MODULES: list[str] = []
 
 
@@ -290,31 +290,43 @@ def register_method(method: Method, replace_existing: bool = False) -> Method:
 
 
 def _ensure_loaded() -> None:
-    """Register the built-ins, the entry points and ``TORCHSPLICE_PLUGINS`` (each once)."""
+    """Register the built-ins, the entry points and ``TORCHSPLICE_PLUGINS`` (each once). A plug-in
+    that fails to load is tried, and reported, again on the next call, rather than leaving the
+    plug-ins after it unloaded without a word; a plug-in that asks for the methods while it loads
+    sees those registered so far."""
     _ensure_loaded_builtins()
-    if not _LOADED["entry_points"]:
-        _LOADED["entry_points"] = True
+    if _LOADED["entry_points"] is False:
+        _LOADED["entry_points"] = None  # loading
         from importlib.metadata import entry_points
 
-        for ep in entry_points(group=ENTRY_POINT_GROUP):
-            where = f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})"
-            try:
-                obj = ep.load()
-                if isinstance(obj, Method):
-                    register_method(obj)
-                elif callable(obj):
-                    obj()
-                elif not isinstance(obj, types.ModuleType):  # a module registered its methods on import
-                    raise TorchspliceError(f"names a {type(obj).__name__}, neither a Method nor a function")
-            except TorchspliceError as exc:
-                raise TorchspliceError(f"{where}: {exc}") from None
-            except (Exception, SystemExit) as exc:
-                raise TorchspliceError(f"{where} cannot be loaded: {type(exc).__name__}: {exc}") from None
-            _remember(ep.value.split(":")[0])
+        try:
+            for ep in entry_points(group=ENTRY_POINT_GROUP):
+                where = f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})"
+                try:
+                    obj = ep.load()
+                    if isinstance(obj, Method):
+                        register_method(obj)
+                    elif callable(obj):
+                        obj()
+                    elif not isinstance(obj, types.ModuleType):  # a module registered its methods on import
+                        raise TorchspliceError(f"names a {type(obj).__name__}, neither a Method nor a function")
+                except TorchspliceError as exc:
+                    raise TorchspliceError(f"{where}: {exc}") from None
+                except (Exception, SystemExit) as exc:
+                    raise TorchspliceError(f"{where} cannot be loaded: {type(exc).__name__}: {exc}") from None
+                _remember(ep.value.split(":")[0])
+        except BaseException:
+            _LOADED["entry_points"] = False
+            raise
+        _LOADED["entry_points"] = True
     env = os.environ.get(PLUGINS_ENV, "")
-    if env != _LOADED["env"]:
+    if env not in (_LOADED["env"], _LOADED["env_loading"]):
+        _LOADED["env_loading"] = env
+        try:
+            load_plugins([m for m in env.split(",") if m.strip()])
+        finally:
+            _LOADED["env_loading"] = None
         _LOADED["env"] = env
-        load_plugins([m for m in env.split(",") if m.strip()])
 
 
 def _remember(module: str) -> None:
