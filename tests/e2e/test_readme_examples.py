@@ -337,7 +337,10 @@ def readme_blocks() -> list[tuple[str, str, str, str]]:
 
 def _reader_clone(repo: Path, dest: Path) -> None:
     """The repository's files (tracked, or new and not ignored) in ``dest``, as a git work tree
-    whose status shows what running the pages leaves behind; its .venv is the repository's."""
+    whose status shows what running the pages leaves behind; its .venv is the repository's, and
+    its compiled kernels are the repository's too (numba's cache files, valid while the source's
+    size and time match, which the copies keep), as a reader's clone holds them once set up."""
+    import hashlib
     import subprocess
 
     files = subprocess.run(["git", "-C", str(repo), "ls-files", "-co", "--exclude-standard", "-z"],
@@ -346,6 +349,15 @@ def _reader_clone(repo: Path, dest: Path) -> None:
         if (repo / f).is_file():
             (dest / f).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(repo / f, dest / f)
+    # numba files a kernel's cache under a folder named by a hash of its source folder's path
+    # (numba.core.caching's locator); should that naming change, the clone compiles: slower, as right
+    def named(root: Path) -> str:
+        return "cpu_" + hashlib.sha1(str((root / "torchsplice" / "cpu").resolve()).encode()).hexdigest()
+
+    for cached in (repo / "torchsplice" / "cpu" / "__pycache__" / "numba").glob(f"*/{named(repo)}/*.nb[ic]"):
+        to = dest / cached.relative_to(repo).parent.parent / named(dest) / cached.name
+        to.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(cached, to)
     subprocess.run(["git", "init", "-q", str(dest)], check=True)
     subprocess.run(["git", "-C", str(dest), "add", "-A"], check=True)
     (dest / ".venv").symlink_to(repo / ".venv")
