@@ -28,7 +28,7 @@ from ..splice.registry import available_methods, get_method, plugin_modules
 from .defaults import (DEFAULT_ACTIONS, DEFAULT_ACTIONS_DB, DEFAULT_BATCH_PAIRS, DEFAULT_COMPRESSION, DEFAULT_COPY_SOURCES,
                        DEFAULT_ENGINE, DEFAULT_INDEX, DEFAULT_KEEP_HANDS_OUT, DEFAULT_LAYOUT, DEFAULT_LOCOMOTIONS,
                        DEFAULT_MAX_LENGTH_RATIO, DEFAULT_MEMORY_BUDGET_MB, DEFAULT_METHODS, DEFAULT_RAY_ADDRESS,
-                       DEFAULT_RETARGET, DEFAULT_STORE, DEFAULT_TARGET, DEFAULT_WORKERS, LAYOUTS, STORES)
+                       DEFAULT_RETARGET, DEFAULT_STORE, DEFAULT_TARGET, DEFAULT_WORKERS, LAYOUTS, STORES, usable_cores)
 from .engines.registry import available_engines
 
 __all__ = ["JobConfig", "job_config", "DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "STORES", "parse_shard"]
@@ -213,7 +213,7 @@ class JobConfig:
         """Local worker processes: ``workers``, or one per core."""
         if self.workers:
             return self.workers
-        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        return usable_cores()
 
     def uses_worker_processes(self) -> bool:
         """Whether the ``local`` engine runs worker processes: more than one worker, and a backend

@@ -6,12 +6,15 @@ library only (see :mod:`torchsplice.splice.defaults` for the ``defaults`` module
 
 from __future__ import annotations
 
+import os
+
 from ..splice.defaults import DEFAULT_METHOD
 
 __all__ = ["DEFAULT_LOCOMOTIONS", "DEFAULT_ACTIONS", "LAYOUTS", "STORES", "DEFAULT_ACTIONS_DB", "DEFAULT_METHODS",
            "DEFAULT_MAX_LENGTH_RATIO", "DEFAULT_RETARGET", "DEFAULT_TARGET", "DEFAULT_COPY_SOURCES", "DEFAULT_INDEX",
            "DEFAULT_KEEP_HANDS_OUT", "DEFAULT_COMPRESSION", "DEFAULT_LAYOUT", "DEFAULT_STORE", "DEFAULT_MEMORY_BUDGET_MB",
-           "DEFAULT_BATCH_PAIRS", "DEFAULT_ENGINE", "DEFAULT_WORKERS", "DEFAULT_RAY_ADDRESS"]
+           "DEFAULT_BATCH_PAIRS", "DEFAULT_ENGINE", "DEFAULT_WORKERS", "DEFAULT_RAY_ADDRESS",
+           "usable_cores"]
 
 DEFAULT_LOCOMOTIONS = ("role:locomotion,role:both",)
 """The selectors of the clips giving the lower body."""
@@ -49,3 +52,9 @@ DEFAULT_WORKERS: int | None = None
 """Local worker processes (``None``: one per core)."""
 DEFAULT_RAY_ADDRESS: str | None = None
 """The Ray cluster (``None``: start a local Ray instance)."""
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one): the
+    local engine's worker count when ``workers`` is ``None``."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1

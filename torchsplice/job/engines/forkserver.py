@@ -7,7 +7,6 @@ loads none.
 
 from __future__ import annotations
 
-import os
 import sys
 
 __all__ = ["prestart"]
@@ -22,7 +21,9 @@ def prestart(engine: str, workers: int | None, device: str | None, backend: str 
     This is :meth:`~torchsplice.job.config.JobConfig.uses_worker_processes`'s question, asked
     from the command line's flags before the job's config exists."""
     if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        from ..defaults import usable_cores
+
+        workers = usable_cores()
     if engine != "local" or workers <= 1 or sys.platform == "win32":
         return
     from ...splice.backends import get_backend, resolve_backend
