@@ -23,7 +23,8 @@ _os.environ.setdefault("MKL_CBWR", "AUTO")
 __all__ = [
     "__version__", "import_bvh", "splice", "splice_all", "export_clips", "MotionDatabase", "MotionDataset",
     "write_sample", "Motion", "Skeleton", "forward_kinematics",
-    "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError",
+    "TorchspliceError", "BVHError", "DatabaseError", "SpecError", "MotionError", "OutputExistsError",
+    "NotLocomotingError", "UnfinishedJobError", "LockedError",
 ]
 
 from .core.lazy import lazy_names  # noqa: E402 (after the environment is set)
@@ -36,6 +37,7 @@ __getattr__, __dir__ = lazy_names(__name__, {
     "write_sample": ".formats.sample_database",
     "Motion": ".core.motion", "Skeleton": ".core.skeleton", "forward_kinematics": ".core.fk",
     "TorchspliceError": ".core.errors", "BVHError": ".core.errors", "DatabaseError": ".core.errors",
-    "SpecError": ".core.errors", "MotionError": ".core.errors",
+    "SpecError": ".core.errors", "MotionError": ".core.errors", "OutputExistsError": ".core.errors",
+    "NotLocomotingError": ".core.errors", "UnfinishedJobError": ".core.errors", "LockedError": ".core.errors",
 })
 

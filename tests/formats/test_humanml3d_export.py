@@ -558,7 +558,12 @@ def test_the_summary_says_why_results_are_in_no_split_and_in_no_list(spliced, tm
         rows = _index(tmp_path / "two")
     assert rows[0]["split"] == "" and (result.output / "all.txt").read_text() == ""
     assert "1 in no split, so in no list, all.txt included" in result.summary
-    assert "--split-ratios 1,0,0 puts every result in train" in result.summary
+    assert "split_ratios 1,0,0 puts every result in train" in result.summary and "--" not in result.summary
+    from torchsplice.cli.common import flag  # the command line says the option as its flag
+    from torchsplice.core.errors import render_message
+
+    said = render_message(result.summary_text, result.summary_options, flag)
+    assert "--split-ratios 1,0,0 puts every result in train" in said
 
 
 def test_export_mirror_does_not_mirror_the_mirrors_of_a_mirrored_database(sample_db, tmp_path):

@@ -106,4 +106,4 @@ def test_splicing_two_whole_long_takes_is_flagged_as_a_poor_alignment(lafan, tmp
                      "--force-locomotion")
     assert rc == 0
     note = [ln for ln in err.splitlines() if "poor alignment" in ln]
-    assert len(note) == 1 and "leg lengths, above 0.1" in note[0] and "import --split" in note[0]
+    assert len(note) == 1 and "leg lengths, above 0.1" in note[0] and "cut long takes into windows on import" in note[0]

@@ -93,31 +93,32 @@ def test_an_action_of_one_dataset_on_a_locomotion_of_another(dbs, loco_db, loco,
             assert abs(skate - loco_skate) <= 1.0, (t["method"][i], skate, loco_skate)
 
 
-def test_splice_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp_path):
-    """One database holding both datasets: ``splice`` and ``plot-alignment`` retarget the action
-    as ``splice-all`` does (the BVH is on the locomotion's skeleton, and its upper body is the
-    job's result's; the commands retarget, ``splice()`` does not), and ``evaluate_database``
-    measures a retargeted output against the action as spliced."""
+def test_splice_pair_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp_path):
+    """One database holding both datasets: ``splice_pair`` (what the ``splice`` command runs) and
+    ``plot-alignment`` retarget the action as ``splice-all`` does (the result is on the
+    locomotion's skeleton, and its upper body is the job's result's; ``splice()`` on two clips
+    does not retarget), and ``evaluate_database`` measures a retargeted output against the action
+    as spliced."""
     from torchsplice.cli import main
     from torchsplice.evaluation.report import evaluate_database
-    from torchsplice.formats.bvh import read_bvh
+    from torchsplice.job import splice_pair
 
     mixed = tmp_path / "mixed.h5"
     import_bvh([MOCAP / BANDAI / "dataset-2_walk-turn-left_normal_025.bvh", MOCAP / "lafan1_via_pypi_bvhtools" / "test.bvh"],
                mixed)
     loco = "dataset-2_walk-turn-left_normal_025"
-    assert main(["splice", str(mixed), "--locomotion", loco, "--action", "test", "-o", str(tmp_path / "one.bvh"),
-                 "-q"]) == 0
+    one = splice_pair(mixed, loco, "test").motion
     assert main(["plot-alignment", str(mixed), "--locomotion", loco, "--action", "test", "-o",
                  str(tmp_path / "a.png"), "-q"]) == 0
     out = tmp_path / "job.h5"
     splice_all(mixed, out, locomotions=loco, actions="test", workers=1)
-    one = read_bvh(tmp_path / "one.bvh", dtype=torch.float64)
     with MotionDatabase.open(out) as d:
-        job = d.read(f"{loco}+test", dtype=torch.float64)
-    assert one.skeleton.same_topology(job.skeleton) and one.num_frames == job.num_frames
-    # BVH text holds 6 decimals of degrees: the same motion
-    assert float((one.global_positions() - job.global_positions()).abs().max()) < 0.05
+        job = d.read(f"{loco}+test")
+    with MotionDatabase.open(mixed) as d:
+        skeleton = d.read(loco).skeleton
+    assert one.skeleton.same_topology(skeleton) and job.skeleton.same_topology(skeleton)
+    assert one.num_frames == job.num_frames
+    assert torch.equal(one.rotations, job.rotations) and torch.equal(one.root_translation, job.root_translation)
     evaluate_database(out, tmp_path / "report.md", pictures=False)
     text = (tmp_path / "report.md").read_text()
     assert "| splice |" in text and "## Retargeted pairs" in text, text

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+import torchsplice
+
 REPO = Path(__file__).resolve().parents[2]
 README_MAX_LINES = 250
 
@@ -130,8 +132,8 @@ def test_the_errors_and_speed_pages_hold_what_they_are_generated_from(site):
     from torchsplice.core import errors
 
     text = _page_text(site, "reference/errors")
-    for name in ("TorchspliceError", "OutputExistsError", "NotLocomotingError", "UnfinishedJobError"):
-        assert name in text
+    for name in ("TorchspliceError", "OutputExistsError", "NotLocomotingError", "UnfinishedJobError", "LockedError"):
+        assert name in text and hasattr(torchsplice, name)
     for said in errors.HINTS.values():
         assert said in text
     assert "--force" in text and "130" in text  # the command line's words and the exit codes

@@ -16,7 +16,7 @@ import argparse
 
 from .base import Command, register_command
 from .common import add_output_flags, command_line, flag, progress, say
-from ..core.errors import TorchspliceError
+from ..core.errors import TorchspliceError, render_message
 from ..formats.defaults import DEFAULT_EXPORT_INDEX, DEFAULT_FORMAT
 
 
@@ -117,7 +117,7 @@ class Export(Command):
                               overwrite=args.force, skeletons=skeletons, command=command_line(args), index=args.index,
                               **{name: getattr(args, name) for name in args.format_options},
                               progress=lambda it, total, desc: progress(it, total, desc, args.quiet))
-        say(args, f"wrote {result.summary}")
+        say(args, f"wrote {render_message(result.summary_text, result.summary_options, flag)}")
         return 0
 
 

@@ -136,36 +136,13 @@ class Splice(Command):
 
     def run(self, args) -> int:
         from ..formats.bvh import write_bvh
-        from ..retarget.clips import onto_skeleton
-        from ..splice import splice
-        from ..splice.references import find_reference
+        from ..job.pair import splice_pair
         from ..splice.registry import get_method
-        from ..store.database import MotionDatabase
 
         method = get_method(args.method)
         out = output(args, "bvh")
-        with MotionDatabase.open(args.database) as db:
-            loco, act, spec = _read_pair(db, args)
-            ref = None
-            if method.needs_reference:
-                name = args.reference
-                if name is None:
-                    name = find_reference(act.name, act.labels, db.clip_table().captures(),
-                                          db.spec(db.clip_info(act.name)["skeleton"]))
-                ref = db.read(name) if name is not None else None  # a standing action needs none
-            elif args.reference is not None:
-                raise TorchspliceError(f"--reference is only used by methods that need a reference clip (cpmc), not {method.name}")
-            moved = onto_skeleton(db, args.database, [act] + ([ref] if ref is not None else []),
-                                  db.clip_info(loco.name)["skeleton"])
-            if moved is not None:  # the action on another skeleton: retargeted onto the locomotion's first
-                act, ref = moved[0], (moved[1] if ref is not None else None)
-        try:
-            result = splice(loco, act, spec, method=method, reference=ref, options=splice_options(args))
-        except TorchspliceError as exc:
-            if method.needs_reference and ref is None and "reference" in str(exc):
-                raise TorchspliceError(f"no plain-locomotion reference found for action {act.name!r}: name one with "
-                                       "--reference (or add a [clips.reference] rule to the spec)") from None
-            raise
+        result = splice_pair(args.database, args.locomotion, args.action, method=method, reference=args.reference,
+                             options=splice_options(args))
         with locked(out, args):
             write_bvh(result.motion, out)
         extra = f", reference {result.reference}" if result.reference else ""
@@ -177,18 +154,10 @@ class Splice(Command):
                      f"action cropped by {result.crop} frames" if "crop" in method.diagnostics else "",
                      f"posture rotation {result.posture_deg:.1f} deg" if "posture" in method.diagnostics else ""]
             detail = "".join(f"{'; ' if not k else ', '}{t}" for k, t in enumerate(t for t in shown if t))
-        say(args, f"wrote {out}: {method.name} of {act.name} onto {loco.name}{extra}: {result.motion.num_frames} frames "
-                  f"at {result.motion.fps:g} fps{detail}")
+        say(args, f"wrote {out}: {method.name} of {result.action} onto {result.locomotion}{extra}: "
+                  f"{result.motion.num_frames} frames at {result.motion.fps:g} fps{detail}")
         for note in result.notes:
             print(f"note: {note}", file=sys.stderr)
-        if "cost" in method.diagnostics:
-            from ..job.plan import leg_length
-            from ..job.task import poor_alignment
-
-            poor = poor_alignment(result.cost, leg_length(loco.skeleton, spec.bind(loco.skeleton)))
-            if poor:
-                print(f"note: {poor}: the two gaits match worse than 95% of walk-onto-walk pairs (whose median is "
-                      f"0.05); check the result, or cut long takes with import --split", file=sys.stderr)
         return 0
 
 

@@ -118,6 +118,11 @@ class OutputExistsError(DatabaseError):
     hint = "overwrite"
 
 
+class LockedError(TorchspliceError):
+    """An output another writer holds the lock of (:mod:`torchsplice.store.lock`): the message
+    names the holder (host, process, start, command)."""
+
+
 class NotLocomotingError(MotionError):
     """A clip that does not locomote, refused unless forced (hint ``"force_locomotion"``)."""
 

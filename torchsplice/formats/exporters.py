@@ -30,11 +30,7 @@ that needs more than one clip at a time (statistics over every clip, one packed 
 format takes (``packed``, ``features``) are declared in :attr:`Exporter.options`, each an
 :class:`~.defaults.ExportOption` (its default, allowed values, type and help): keywords of
 :func:`export_clips`, and the ``export`` command's flags (``--packed``, ``--features``), a
-plug-in format's as the built-ins'::
-
-    options = {"decimals": ExportOption(None, type=int, metavar="N", help="digits after the point")}
-
-The built-ins, ``bvh`` (:mod:`.bvh_exporter`) and ``npz`` (:mod:`.npz_exporter`), register
+plug-in format's as the built-ins'. The built-ins, ``bvh`` (:mod:`.bvh_exporter`) and ``npz`` (:mod:`.npz_exporter`), register
 themselves on first use of the registry. This module imports no torch, numpy or h5py: the
 command line lists the formats without loading them.
 """
@@ -48,7 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Iterable, Iterator, Sequence
 
-from ..core.errors import TorchspliceError
+from ..core.errors import TorchspliceError, render_message
 from ..core.names import counted
 from .defaults import DEFAULT_EXPORT_INDEX, DEFAULT_FORMAT, ExportOption
 
@@ -83,6 +79,7 @@ class ExportResult:
         frames: frames written in all.
         fps: the frame rate of each clip written as a file of its own (empty for a packed file).
         summary: one line saying what was written (``"OUT: 3 clips as BVH, 900 frames"``).
+        summary_text, summary_options: ``summary`` with the options it names as ``{option}`` (said as flags by the CLI).
         index_files: the index and split lists written beside the clips (:mod:`.index`; empty
             for one clip, without ``index``, or for a format with a layout of its own).
     """
@@ -95,6 +92,8 @@ class ExportResult:
     fps: list[float] = field(default_factory=list)
     summary: str = ""
     index_files: list[Path] = field(default_factory=list)
+    summary_options: tuple[str, ...] = ()
+    summary_text: str = ""
 
 
 class Exporter:
@@ -106,6 +105,7 @@ class Exporter:
         what: a file of the format, in messages (``"BVH"``: "the output is BVH, so its name must end in .bvh").
         title: the format in summaries (``"BVH"``: "3 clips as BVH").
         options: the keyword options it takes, with their defaults and choices.
+        summary_options: the options its :meth:`summary` may name, written ``{option}`` there.
 
     An instance holds the export's ``database``, ``clips`` (names, or ``None`` for every clip),
     ``skeletons`` (database skeleton ids to keep, or ``None``) and ``options`` (every declared
@@ -117,6 +117,7 @@ class Exporter:
     what: ClassVar[str] = ""
     title: ClassVar[str] = ""
     options: ClassVar[dict[str, ExportOption]] = {}
+    summary_options: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, database, clips: Sequence[str] | None = None, skeletons: Sequence[int] | None = None,
                  **options):
@@ -416,7 +417,9 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
 
                     raise TorchspliceError(f"{os_error_message(stale, exc)} (an earlier export's file; the new export is "
                                            "in place)") from None
-    result.summary = exporter.summary(result) + (index_note if indexed else "")
+    result.summary_text = exporter.summary(result) + (index_note if indexed else "")
+    result.summary_options = tuple(type(exporter).summary_options)
+    result.summary = render_message(result.summary_text, result.summary_options)
     return result
 
 

@@ -80,6 +80,7 @@ class HumanML3DExporter(Exporter):
     suffix = ".npy"
     what = "a HumanML3D folder"
     title = "HumanML3D"
+    summary_options = ("split_ratios",)
     options = {
         "captions": ExportOption(None, metavar="FILE",
                                  help="your captions per source clip (JSON: clip name -> list of captions, each "
@@ -442,7 +443,7 @@ class HumanML3DExporter(Exporter):
                          "or its image is exported too)")
         if unsplit:
             notes.append(f"{unsplit} in no split, so in no list, all.txt included (a result is in a split when its "
-                         "locomotion and its action both are, and theirs differ; --split-ratios 1,0,0 puts every "
+                         "locomotion and its action both are, and theirs differ; {split_ratios} 1,0,0 puts every "
                          "result in train)")
         if undescribed:
             notes.append(f"{undescribed} whose labels no phrase table describes (captioned 'moves': give them captions)")

@@ -20,13 +20,9 @@ import socket
 import time
 from pathlib import Path
 
-from ..core.errors import TorchspliceError
+from ..core.errors import LockedError, TorchspliceError
 
 __all__ = ["FileLock", "LockedError", "host_pid", "pid_alive", "output_lock", "remove_stale_temporaries"]
-
-
-class LockedError(TorchspliceError):
-    """Someone else holds the lock."""
 
 
 def host_pid() -> str:
