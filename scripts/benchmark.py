@@ -195,7 +195,7 @@ def bench_stages(files: list[Path], device: str) -> None:
             dt = best_of(lambda: horn_batch(src, tgt, w, out), 3)
             print(f"stages  Horn rotation (4 points, closed form), compiled: {N / dt / 1e6:.1f} million frames/s per core")
             pos, grot = np.empty_like(bank.trans), np.empty_like(bank.rot)
-            dt = best_of(lambda: fk_clips(bank.rot, bank.trans, bank.joints[0], bank.starts, bank.lengths, pos, grot), 3)
+            dt = best_of(lambda: fk_clips(bank.rot, bank.trans, bank.joints.parents, bank.starts, bank.lengths, pos, grot), 3)
             print(f"stages  forward kinematics, compiled: {bank.rot.shape[0] * bank.rot.shape[1] / dt / 1e6:.1f} million joint-frames/s per core")
         torch.set_num_threads(1)
         # the torch implementations, on the same machine (and the GPU with --device cuda)

@@ -14,6 +14,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -27,21 +28,55 @@ from .fk import fk_clips, joint_closure
 from .grid import clip_features
 from .splice import METHOD_CODES, STATUS, compact, splice_batch
 
-__all__ = ["ClipBank", "PackedSplices", "Buffers", "StandingTables", "joint_config", "splice_bank", "standing_bank"]
+__all__ = ["ClipBank", "PackedSplices", "Buffers", "JointTables", "StandingTables", "joint_config", "splice_bank", "standing_bank"]
 
 
-def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> tuple:
-    """The joint tables the kernels take (see :mod:`torchsplice.cpu.splice`)."""
+class JointTables(NamedTuple):
+    """The joint tables of one skeleton that the splice kernels take (:func:`joint_config`), in the
+    kernels' order (:func:`torchsplice.cpu.splice.splice_batch` takes them as a plain tuple).
+
+    Attributes:
+        parents ``(J,)`` int64; upper ``(J,)`` bool: the upper-body joints; fk_joints: the joints
+        whose FK the spatial alignment needs (ancestors included); act_joints: the action's joints
+        resampled at the alignment curve (``fk_joints`` and the upper body); landmarks ``(K,)``: the
+        joints the distance grid compares; hips, shoulders ``(2,)`` (left, right); pcloud: the
+        spine and shoulder joints whose point cloud Horn's alignment fits; pelvis, pelvis_parent
+        (-1 when the pelvis is the root); up: the up axis (0 X, 1 Y, 2 Z).
+    """
+
+    parents: np.ndarray
+    upper: np.ndarray
+    fk_joints: np.ndarray
+    act_joints: np.ndarray
+    landmarks: np.ndarray
+    hips: np.ndarray
+    shoulders: np.ndarray
+    pcloud: np.ndarray
+    pelvis: int
+    pelvis_parent: int
+    up: int
+
+    def to_json(self) -> list:
+        return [a.tolist() if isinstance(a, np.ndarray) else a for a in self]
+
+    @classmethod
+    def from_json(cls, raw: list) -> "JointTables":
+        kinds = (np.int64, np.bool_, np.int64, np.int64, np.int64, np.int64, np.int64, np.int64)
+        return cls(*(np.array(raw[k], dtype=kinds[k]) for k in range(8)), *(int(x) for x in raw[8:]))
+
+
+def joint_config(roles: SkeletonRoles, skeleton: Skeleton, landmarks) -> JointTables:
+    """The joint tables the kernels take, for ``roles`` of ``skeleton`` and the grid's
+    ``landmarks`` (names of :func:`~torchsplice.specs.roles.landmark_indices`)."""
     parents = np.array(skeleton.parents, dtype=np.int64)
-    J = skeleton.num_joints
-    upper = np.zeros(J, dtype=np.bool_)
+    upper = np.zeros(skeleton.num_joints, dtype=np.bool_)
     upper[list(roles.upper_body)] = True
     pcloud = [j for j in roles.spine if j != roles.pelvis] + list(roles.shoulders)
     fk_joints = joint_closure(parents, [roles.pelvis, *pcloud, *roles.hips, *roles.shoulders])
     act_joints = np.array(sorted(set(fk_joints.tolist()) | set(np.nonzero(upper)[0].tolist())), dtype=np.int64)
-    return (parents, upper, fk_joints, act_joints, np.array(landmark_indices(roles, landmarks), dtype=np.int64),
-            np.array(roles.hips, dtype=np.int64), np.array(roles.shoulders, dtype=np.int64), np.array(pcloud, dtype=np.int64),
-            int(roles.pelvis), int(parents[roles.pelvis]), int(roles.up_axis))
+    return JointTables(parents, upper, fk_joints, act_joints, np.array(landmark_indices(roles, landmarks), dtype=np.int64),
+                       np.array(roles.hips, dtype=np.int64), np.array(roles.shoulders, dtype=np.int64),
+                       np.array(pcloud, dtype=np.int64), int(roles.pelvis), int(parents[roles.pelvis]), int(roles.up_axis))
 
 
 @dataclass(frozen=True)
@@ -82,7 +117,7 @@ class ClipBank:
     Attributes:
         rot ``(N, J, 4)``, trans ``(N, J, 3)`` (row 0: root position), pos ``(N, J, 3)``,
         grot ``(N, J, 4)``; starts, lengths ``(C,)`` int64; feat: the five arrays of
-        :func:`torchsplice.cpu.grid.clip_features`; joints: :func:`joint_config`.
+        :func:`torchsplice.cpu.grid.clip_features`; joints: the :class:`JointTables`.
     """
 
     rot: np.ndarray
@@ -92,7 +127,7 @@ class ClipBank:
     starts: np.ndarray
     lengths: np.ndarray
     feat: tuple
-    joints: tuple
+    joints: JointTables
 
     @classmethod
     def from_arrays(cls, rotations: list, translations: list, skeleton: Skeleton, roles: SkeletonRoles,
@@ -107,10 +142,10 @@ class ClipBank:
         joints = joint_config(roles, skeleton, landmarks)
         pos = np.zeros(trans.shape)
         grot = np.zeros(rot.shape)
-        fk_clips(rot, trans, joints[0], starts, lengths, pos, grot)
-        K, N = joints[4].shape[0], rot.shape[0]
+        fk_clips(rot, trans, joints.parents, starts, lengths, pos, grot)
+        K, N = joints.landmarks.shape[0], rot.shape[0]
         feat = (np.empty((K, 2, N)), np.empty((K, N)), np.empty(N), np.empty(N), np.empty(N))
-        _features(pos, starts, lengths, joints[4], joints[5], joints[10], *feat)
+        _features(pos, starts, lengths, joints.landmarks, joints.hips, joints.up, *feat)
         return cls(rot, trans, pos, grot, starts, lengths, feat, joints)
 
     @classmethod
@@ -139,8 +174,7 @@ class ClipBank:
             np.save(tmp / f"{name}.npy", getattr(self, name))
         for k, a in enumerate(self.feat):
             np.save(tmp / f"feat{k}.npy", a)
-        j = self.joints
-        (tmp / "joints.json").write_text(json.dumps([a.tolist() if isinstance(a, np.ndarray) else a for a in j]))
+        (tmp / "joints.json").write_text(json.dumps(self.joints.to_json()))
         os.replace(tmp, folder)
 
     @classmethod
@@ -150,9 +184,7 @@ class ClipBank:
         folder = Path(folder)
         arrays = {name: np.load(folder / f"{name}.npy", mmap_mode="c") for name in cls._ARRAYS}
         feat = tuple(np.load(folder / f"feat{k}.npy", mmap_mode="c") for k in range(5))
-        raw = json.loads((folder / "joints.json").read_text())
-        kinds = (np.int64, np.bool_, np.int64, np.int64, np.int64, np.int64, np.int64, np.int64)
-        joints = tuple(np.array(raw[k], dtype=kinds[k]) for k in range(8)) + tuple(int(x) for x in raw[8:])
+        joints = JointTables.from_json(json.loads((folder / "joints.json").read_text()))
         return cls(arrays["rot"], arrays["trans"], arrays["pos"], arrays["grot"], arrays["starts"], arrays["lengths"],
                    feat, joints)
 
@@ -300,7 +332,7 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
             float(knot_spacing), float(smoothing))
     if B:
         splice_batch((bank.rot, bank.trans, bank.pos, bank.grot), bank.feat, bank.starts, bank.lengths, METHOD_CODES[method],
-                     loco, act, ref, bank.joints, opts, bool(posture), float(twist), out_start, orot, otrans, ocurve, ocorr, opel,
+                     loco, act, ref, tuple(bank.joints), opts, bool(posture), float(twist), out_start, orot, otrans, ocurve, ocorr, opel,
                      cells, status, ocrop, plen, cost, frames, angle)
     bad = np.nonzero(status != 0)[0]
     if len(bad) and on_error == "raise":

@@ -18,9 +18,9 @@ Pairs index the bank. Each pair writes its result into rows ``out_start[b] :`` o
 (room for its locomotion's length) and its scalars into per-pair arrays; nothing a pair
 computes depends on the other pairs of the call, so results do not depend on batching.
 
-``joints`` (see :func:`joint_config` in :mod:`torchsplice.cpu.bank`) is a tuple of int64
-arrays: parents, upper-body mask, FK joints, resampled action joints, landmarks, hips,
-shoulders, pelvis-cloud joints, and scalars pelvis, pelvis parent, up axis.
+``joints`` is :class:`torchsplice.cpu.bank.JointTables` as a plain tuple (its fields, in order:
+parents, upper-body mask, FK joints, resampled action joints, landmarks, hips, shoulders,
+pelvis-cloud joints, and scalars pelvis, pelvis parent, up axis).
 """
 
 from __future__ import annotations

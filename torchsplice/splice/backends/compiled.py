@@ -177,7 +177,7 @@ class CompiledBackend(Backend):
     def assembly_bank(self, prepared):
         b = prepared
         return {"rotations": np.asarray(b.rot), "translations": np.asarray(b.trans), "lengths": np.asarray(b.lengths),
-                "upper": np.flatnonzero(b.joints[1]).tolist(), "pelvis": int(b.joints[8])}
+                "upper": np.flatnonzero(b.joints.upper).tolist(), "pelvis": b.joints.pelvis}
 
     def threads(self):
         from ...cpu import get_threads
