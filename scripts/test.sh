@@ -3,7 +3,8 @@
 #   bash scripts/test.sh          the quick suite: every test but those marked slow (a few minutes)
 #   bash scripts/test.sh --all    every test; CI (CI=true) always runs every test
 #   bash scripts/test.sh -n 2     the quick suite in two processes (pytest-xdist; each builds its own
-#                                 session fixtures): about 30% faster on two idle cores
+#                                 session fixtures): little faster on two cores, which the compiled
+#                                 kernels and torch already use; it helps on more
 # Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it.
 # The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
 # apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
