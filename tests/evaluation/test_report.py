@@ -235,9 +235,22 @@ def test_per_clip_metrics_as_csv_for_any_database(sample_db, tmp_path, capsys):
 
     spliced = tmp_path / "sp.h5"
     splice_all(sample_db, spliced, methods="splice,naive")
-    rc, _, _ = run(capsys, "info", spliced, "method:naive", "--csv", tmp_path / "naive.csv", "--limit", "0")
+    from torchsplice.formats.index import write_rows_csv
+
+    with MotionDatabase.open(spliced) as d:  # what `info DB method:naive --csv FILE` writes
+        chosen = d.summary(clips=["method:naive"])
+        assert chosen["num_clips"] == len(d) and d.summary(select=["method:naive"])["clips"] == chosen["clips"]
+        from torchsplice.core.errors import DatabaseError
+
+        with pytest.raises(DatabaseError, match="no clip named 'nosuch'"):
+            d.summary(clips=["nosuch"])
+        with pytest.raises(TorchspliceError, match="selects no clip"):
+            d.summary(select=["method:cpmc"])
+    write_rows_csv(tmp_path / "naive.csv", chosen["clips"])
     rows = list(csv.DictReader(open(tmp_path / "naive.csv")))
-    assert rc == 0 and len(rows) == 25 and all(r["method"] == "naive" for r in rows)
+    assert len(rows) == 25 and all(r["method"] == "naive" for r in rows)
+    rc, _, _ = run(capsys, "info", spliced, "method:naive", "--csv", tmp_path / "cli.csv", "--limit", "0")
+    assert rc == 0 and (tmp_path / "cli.csv").read_text() == (tmp_path / "naive.csv").read_text()
     with MotionDatabase.open(spliced) as d:
         t = d.clip_table()
         cost = {t.names[r]: float(t.extra["cost"][r]) for r in range(len(t))}

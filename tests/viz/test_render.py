@@ -365,6 +365,12 @@ def test_bad_arguments(tmp_path, clips):
         render([clips["walk"]], tmp_path / "missing" / "x.png")
     with pytest.raises(TorchspliceError, match="elevation from -90 to 90"):  # the command's --elevation 95 too
         render([clips["walk"]], tmp_path / "x.png", elevation=95)
+    from torchsplice.viz.defaults import MAX_FILMSTRIP
+
+    for frames in (0, MAX_FILMSTRIP + 1):  # a filmstrip that would not fit a screen: refused before any drawing
+        with pytest.raises(TorchspliceError, match=f"frames must be from 1 to {MAX_FILMSTRIP}") as err:
+            render([clips["walk"]], tmp_path / "x.png", frames=frames)
+        assert err.value.options == ("frames",) and "\n" not in str(err.value)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -157,15 +157,6 @@ def _labels_text(labels: dict, limit: int = 60) -> str:
     return " ".join(f"{k}={short(k, v)}" for k, v in sorted(labels.items()))
 
 
-def _write_csv(path, clips: list[dict]) -> None:
-    """The clips' rows as CSV, atomically: every key of the first as a column, labels as JSON."""
-    from ..formats.index import rows_csv
-    from ..store.atomic import atomic_path
-
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(rows_csv(clips))
-
-
 class Info(Command):
     name = "info"
     help = "list a database's clips, skeletons and roles"
@@ -193,21 +184,11 @@ class Info(Command):
 
             check_output(args.csv, (".csv",), "a CSV file", inputs=[args.database], overwrite=True)
         with MotionDatabase.open(args.database) as db:
-            s = db.summary()
-            if args.clips or args.select:
-                from ..store.select import names_or_selector, select_clips
-
-                table = db.clip_table()
-                names, chosen = names_or_selector(table, args.clips) if args.clips else (None, None)
-                for name in names or ():
-                    db.index(name)  # an unknown name: the database's one line, with similar names
-                selectors = list(args.select or []) + ([chosen] if chosen else [])
-                keep = set(names) if names is not None else set(table.names)
-                if selectors:
-                    keep &= {table.names[r] for r in select_clips(table, selectors, "selector", str(args.database))}
-                s["clips"] = [c for c in s["clips"] if c["name"] in keep]
+            s = db.summary(clips=args.clips, select=args.select)
         if args.csv is not None:
-            _write_csv(args.csv, s["clips"])
+            from ..formats.index import write_rows_csv
+
+            write_rows_csv(args.csv, s["clips"])
         if args.json:
             print(json.dumps(s, indent=2))
             return 0

@@ -8,9 +8,7 @@ import sys
 from .base import Command, register_command
 from .common import add_output_flags, bounded_int, expand_clips, locked, output, positive_float, positive_int, say
 from ..viz.defaults import (CAMERAS, DEFAULT_AZIMUTH, DEFAULT_CAMERA, DEFAULT_ELEVATION, DEFAULT_FRAMES, DEFAULT_MAX_CLIPS,
-                           DEFAULT_MAX_SECONDS)
-
-MAX_FILMSTRIP = 64  # columns of a PNG filmstrip: more would not fit a screen (and took minutes and GBs)
+                           DEFAULT_MAX_SECONDS, MAX_FILMSTRIP)
 
 
 class Render(Command):

@@ -80,6 +80,16 @@ def rows_csv(rows: Sequence[dict]) -> str:
     return out.getvalue()
 
 
+def write_rows_csv(path, rows: Sequence[dict]) -> Path:
+    """``rows`` (a database's :meth:`~torchsplice.store.database.MotionDatabase.summary` ``clips``,
+    as ``info --csv`` writes them) as CSV at ``path``, atomically: :func:`rows_csv`'s columns."""
+    from ..store.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(rows_csv(rows))
+    return Path(path)
+
+
 def index_files(database, names: Sequence[str] | None, files: Sequence[Path], targets: dict[str, Path],
                 split_ratios=None, split_seed: int | None = None) -> dict[Path, str]:
     """The text of each of ``targets`` (:func:`index_targets`) for clips ``names`` (``None``: every

@@ -466,13 +466,17 @@ class Reading(DatabaseState):
                 yield self.read_batch(group[b : b + batch_size], dtype=dtype, device=device)
 
     @reads
-    def summary(self) -> dict:
+    def summary(self, clips: Sequence[str] | None = None, select: Sequence[str] | None = None) -> dict:
         """A JSON-ready description: file attributes, skeletons, roles, every clip and, for a
         database written by ``splice-all``, its run record ``run`` (tool version, command,
-        settings, inputs, time; ``None`` otherwise)."""
+        settings, inputs, time; ``None`` otherwise). ``clips`` (names, or selectors as a
+        command's clip arguments: :func:`~.select.names_or_selector`) and ``select`` (selectors,
+        all of them) keep the ``clips`` list to the clips they choose; the totals stay the
+        database's. An unknown name or a selector that selects nothing raises one line."""
         ct = self.clip_table()  # labels decoded once
+        keep = self._chosen(ct, clips, select) if clips or select else None
         t = ct.to_dict()
-        clips = [
+        rows = [
             {
                 "name": str(t["name"][i]),
                 "frames": int(t["length"][i]),
@@ -487,7 +491,7 @@ class Reading(DatabaseState):
             for i in range(len(t["name"]))
         ]
         roles: dict[str, int] = {}
-        for c in clips:
+        for c in rows:
             roles[c["role"] or "(none)"] = roles.get(c["role"] or "(none)", 0) + 1
         skeletons = []
         for k, sk in enumerate(self._skeletons):
@@ -498,7 +502,7 @@ class Reading(DatabaseState):
                     "joints": sk.num_joints,
                     "root": sk.names[0],
                     "spec": spec.get("name", "") if isinstance(spec, dict) else "",
-                    "clips": sum(c["skeleton"] == k for c in clips),
+                    "clips": sum(c["skeleton"] == k for c in rows),
                     "joint_names": list(sk.names),
                     "units": str(self.h5[skeleton_path(k)].attrs.get("units", "")),
                     "up_axis": str(self.h5[skeleton_path(k)].attrs.get("up_axis", "")),
@@ -514,11 +518,24 @@ class Reading(DatabaseState):
             "units": attrs.get("units"),
             "up_axis": attrs.get("up_axis"),
             "created_by": attrs.get("created_by"),
-            "num_clips": len(clips),
-            "num_frames": int(sum(c["frames"] for c in clips)),
-            "duration_s": round(sum(c["duration_s"] for c in clips), 3),
+            "num_clips": len(rows),
+            "num_frames": int(sum(c["frames"] for c in rows)),
+            "duration_s": round(sum(c["duration_s"] for c in rows), 3),
             "roles": roles,
             "skeletons": skeletons,
-            "clips": clips,
+            "clips": rows if keep is None else [c for c in rows if c["name"] in keep],
             "run": run_record(attrs.get("run")),
         }
+
+    def _chosen(self, table: ClipTable, clips: Sequence[str] | None, select: Sequence[str] | None) -> set[str]:
+        """The names of :meth:`summary`'s ``clips`` and ``select``."""
+        from .select import names_or_selector, select_clips
+
+        names, chosen = names_or_selector(table, list(clips)) if clips else (None, None)
+        for name in names or ():
+            self.index(name)  # an unknown name: the database's one line, with similar names
+        selectors = list(select or []) + ([chosen] if chosen else [])
+        keep = set(names) if names is not None else set(table.names)
+        if selectors:
+            keep &= {table.names[r] for r in select_clips(table, selectors, "selector", str(self.path))}
+        return keep

@@ -6,7 +6,7 @@ modules' convention)."""
 from __future__ import annotations
 
 __all__ = ["SUPPORTED_SUFFIXES", "CAMERAS", "DEFAULT_CAMERA", "DEFAULT_FRAMES", "DEFAULT_MAX_SECONDS",
-           "DEFAULT_AZIMUTH", "DEFAULT_ELEVATION", "DEFAULT_MAX_CLIPS"]
+           "DEFAULT_AZIMUTH", "DEFAULT_ELEVATION", "DEFAULT_MAX_CLIPS", "MAX_FILMSTRIP"]
 
 SUPPORTED_SUFFIXES = (".gif", ".mp4", ".png")
 """Output types :func:`~.render.render` writes, chosen by the output's suffix."""
@@ -16,6 +16,8 @@ DEFAULT_CAMERA = "heading"
 """The camera turns with each character's heading (one of :data:`CAMERAS`)."""
 DEFAULT_FRAMES = 8
 """Frames per clip in a PNG filmstrip."""
+MAX_FILMSTRIP = 64
+"""Most frames per clip in a PNG filmstrip: more would not fit a screen (and took minutes and GBs)."""
 DEFAULT_MAX_SECONDS: float | None = None
 """Seconds of each clip shown (``None``: all of it)."""
 DEFAULT_AZIMUTH = -55.0

@@ -53,7 +53,7 @@ from ..core.motion import Motion
 from ..store.atomic import atomic_path
 from .camera import Clip, check_up_axis, prepare_clip
 from .defaults import (CAMERAS, DEFAULT_AZIMUTH, DEFAULT_CAMERA, DEFAULT_ELEVATION, DEFAULT_FRAMES, DEFAULT_MAX_SECONDS,
-                       SUPPORTED_SUFFIXES)
+                       SUPPORTED_SUFFIXES, MAX_FILMSTRIP)
 from .camera import canonical_axes, heading_yaw, project, view_rotation, view_rotations  # noqa: F401 (re-exported)
 from .panels import animation_figure, filmstrip_figure, make_scene, release
 from .panels import fit_title  # noqa: F401 (re-exported)
@@ -118,7 +118,7 @@ def render(
             GIF stores exactly, ``100 / gif_delay(fps)``, at most 50 (see :data:`GIF_MAX_FPS`).
             Each output frame shows, per clip, the frame nearest its time, so the output
             plays in real time.
-        frames: number of columns of the PNG filmstrip.
+        frames: number of columns of the PNG filmstrip, at most :data:`~.defaults.MAX_FILMSTRIP`.
         size: width of one panel in inches (its height follows the figures' proportions).
         dpi: pixels per inch; :data:`GIF_DPI` for a GIF, 100 otherwise, by default.
         max_seconds: keep only the first ``max_seconds`` of each clip.
@@ -161,8 +161,9 @@ def render(
     up = check_up_axis(up_axis)
     if fps is not None and not fps > 0:
         raise TorchspliceError(f"fps must be positive, got {fps}")
-    if int(frames) < 1:
-        raise TorchspliceError(f"frames must be at least 1, got {frames}")
+    if not 1 <= int(frames) <= MAX_FILMSTRIP:
+        raise TorchspliceError(f"{{frames}} must be from 1 to {MAX_FILMSTRIP} (a filmstrip's columns), got {frames}",
+                               options=("frames",))
     if dpi is None:
         dpi = GIF_DPI if suffix == ".gif" else 100
     if not size > 0 or not dpi > 0:
