@@ -9,7 +9,7 @@ import math
 import pytest
 import torch
 
-from tests.data.conftest import ALL_FEATURES, spliced_records
+from dataset_clips import ALL_FEATURES, spliced_records
 from torchsplice.core.errors import DatabaseError
 from torchsplice.data import DatasetError, MotionDataset
 from torchsplice.store.database import MotionDatabase

@@ -13,7 +13,7 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from tests.data.conftest import ALL_FEATURES
+from dataset_clips import ALL_FEATURES
 from torchsplice import export_clips, splice_all
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.data import DatasetError, MotionDataset, collate_motion
