@@ -281,8 +281,8 @@ def test_several_clips_as_bvh_into_a_folder(db, bandai_names, tmp_path):
     ([ "-o", "{tmp}/x"], "or pass --all"),
     (["{clip}", "-o", "{tmp}/x.txt", "--format", "npz"], "must end in .npz"),
     (["{clip}", "-o", "{db}", "--format", "npz"], "must end in .npz"),
-    (["nope", "-o", "{tmp}/x.npz"], "no clip named 'nope'"),
-    (["--all", "--skeleton", "9", "-o", "{tmp}/x"], "no skeleton 9"),
+    (["nope", "-o", "{tmp}/x.npz"], "no clip named 'nope'; torchsplice info lists the clips"),
+    (["--all", "--skeleton", "9", "-o", "{tmp}/x"], "numbered from 0; see torchsplice info)"),
     (["--all", "-o", "{tmp}/no/such/x", "--format", "npz"], "does not exist"),
 ])
 def test_export_mistakes_get_one_line(db, bandai_names, tmp_path, capsys, argv, why):

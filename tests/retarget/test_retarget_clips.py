@@ -152,6 +152,10 @@ def test_bad_targets_are_refused_in_one_line_naming_them(tmp_path):
         assert r.returncode == 2 and words in r.stderr and len(r.stderr.strip().splitlines()) == 1, (target, r.stderr)
         assert "Traceback" not in r.stderr and not out.exists()
     assert resolve_target(f"{two}:1").skeleton.matches(big.skeleton)
+    # the command line points at its info command, the library at the method
+    assert "(torchsplice info lists them)" in _cli("retarget", db, "--all", "--to", two, "-o", tmp_path / "o.h5", cwd=tmp_path).stderr
+    with pytest.raises(TorchspliceError, match=r"\(MotionDatabase\.summary\(\) lists them\)$"):
+        resolve_target(str(two))
 
 
 def test_a_skeleton_that_is_not_a_humanoid_is_refused_naming_what_it_lacks(tmp_path):

@@ -28,7 +28,8 @@ _CLI_HINTS = {  # what the library's error hints (torchsplice.core.errors.HINTS)
     "force_locomotion": "--force-locomotion splices it anyway",
     "restart": "pass --restart to discard it",
 }
-_FLAGS = {"overwrite": "--force", "output": "-o", "no_index": "--no-index", "skeletons": "--skeleton"}  # library option -> flag, where it is not --the-same-name
+_FLAGS = {"overwrite": "--force", "output": "-o", "no_index": "--no-index", "skeletons": "--skeleton",
+          "info": "torchsplice info"}  # library option -> flag, where it is not --the-same-name
 
 
 def flag(option: str) -> str:

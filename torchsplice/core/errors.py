@@ -42,9 +42,10 @@ HINTS = {
 """Hint keys, with what a library caller can do (the command line says it with its flags)."""
 
 
-SPELLINGS = {"no_index": "index=False"}
+SPELLINGS = {"no_index": "index=False", "info": "MotionDatabase.summary()"}
 """Options a message names by a setting rather than a name (``{no_index}``: ``index=False``;
-the command line's flag ``--no-index``)."""
+the command line's flag ``--no-index``), and ``{info}``: where a database's clips and skeletons are
+listed (``MotionDatabase.summary()``; the command line's ``torchsplice info``)."""
 
 
 def render_message(message: str, options=(), option_name=lambda o: SPELLINGS.get(o, o)) -> str:

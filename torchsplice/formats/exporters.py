@@ -530,7 +530,7 @@ def select_rows(db: "MotionDatabase", clips: Sequence[str] | None, skeletons: Se
         unknown = [k for k in skeletons if k not in range(len(db.skeletons))]
         if unknown:
             raise TorchspliceError(f"{db.path}: no skeleton {unknown[0]} (it has {len(db.skeletons)}, numbered from 0; "
-                                   "see torchsplice info)")
+                                   "see {info})", options=("info",))
         skeleton = db.clip_table().skeleton
         rows = [r for r in rows if int(skeleton[r]) in set(skeletons)]
     if not rows:

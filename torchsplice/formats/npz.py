@@ -176,8 +176,8 @@ class NpzExport:
                 why = sk[ks[0]].mismatch(sk[k]) if not sk[k].same_topology(sk[ks[0]]) else "units differ"
                 raise TorchspliceError(
                     f"{self.database}: cannot {doing} clips of different skeletons: {self._describe(ks[0])} and "
-                    f"{self._describe(k)} ({why}); export one skeleton at a time ({{skeletons}} with one id, as torchsplice info lists them)",
-                    options=("skeletons",))
+                    f"{self._describe(k)} ({why}); export one skeleton at a time ({{skeletons}} with one id, as {{info}} lists them)",
+                    options=("skeletons", "info"))
 
     @property
     def statistics(self) -> dict:

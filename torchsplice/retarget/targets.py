@@ -95,7 +95,7 @@ def _database_target(text: str, path: Path, k: int | None) -> RetargetTarget:
         n = len(db.skeletons)
         if k is None and n != 1:
             raise TorchspliceError(f"{path}: holds {n} skeletons; name one as {path}:K, K from 0 to {n - 1} "
-                                   "(`torchsplice info` lists them)")
+                                   "({info} lists them)", options=("info",))
         k = 0 if k is None else k
         if not 0 <= k < n:
             raise TorchspliceError(f"{text}: {path} has no skeleton {k} (it has {n}: 0 to {n - 1})")

@@ -133,8 +133,8 @@ class Reading(DatabaseState):
             close = [n for n in index if clip.lower() in n.lower()][:5] or difflib.get_close_matches(
                 clip, list(index), n=5
             )
-            hint = f"; similar: {', '.join(close)}" if close else "; `torchsplice info` lists the clips"
-            raise DatabaseError(f"{self.path}: no clip named {clip!r}{hint}")
+            hint = f"; similar: {', '.join(close)}" if close else "; {info} lists the clips"
+            raise DatabaseError(f"{self.path}: no clip named {clip!r}{hint}", options=("info",) if not close else ())
         return index[clip]
 
     def _index_map(self) -> dict[str, int]:
