@@ -214,6 +214,29 @@ def test_append_packed_equals_appending_clip_by_clip(tmp_path, two_skeleton_clip
             assert np.array_equal(a.read_frame_column(m.name, "score"), b.read_frame_column(m.name, "score"))
 
 
+def test_clip_info_from_the_file_and_from_the_read_table_agree(tmp_path, two_skeleton_clips):
+    """clip_info answers column by column at first, then from the clip table: the same values of
+    the same Python types, the extra columns' unset values included."""
+    cols = {"cost": "float", "note": "str", "n": "int"}
+    path = tmp_path / "x.h5"
+    with MotionDatabase.create(path, columns=cols) as db:
+        for k, m in enumerate(two_skeleton_clips):
+            db.append(m, extra={"cost": k / 3, "note": "ü" * k, "n": k} if k % 2 else {})
+    with MotionDatabase.open(path) as first, MotionDatabase.open(path) as second:
+        second.clip_table()
+        rows = [*range(len(first)), *range(len(first))] * (1 + MotionDatabase.TABLE_AFTER_INFOS // len(first))
+        for row in rows:  # the first ones from the file, the rest from the table it reads after a while
+            a, b = first.clip_info(row), second.clip_info(second.names[row])
+            nan_free = [{k: "NaN" if isinstance(v, float) and np.isnan(v) else v for k, v in d.items()} for d in (a, b)]
+            assert nan_free[0] == nan_free[1] and (a["cost"] == a["cost"]) == bool(row % 2), (a, b)
+            assert list(a) == list(b) and [type(v) for v in a.values()] == [type(v) for v in b.values()]
+            assert a["labels"] is not b["labels"]
+        assert first._info_reads == MotionDatabase.TABLE_AFTER_INFOS and first._clip_table is not None
+        info = second.clip_info(0)
+        info["labels"]["changed"] = "by the caller"
+        assert "changed" not in second.clip_info(0)["labels"]
+
+
 def test_append_packed_refuses_bad_input(tmp_path, two_skeleton_clips):
     m = two_skeleton_clips[0]
     with MotionDatabase.create(tmp_path / "x.h5") as db:

@@ -86,6 +86,7 @@ class MotionDatabase(Reading, Writing, Assembling):
         )
         self._names = None
         self._name_index = None
+        self._info_reads = 0
         self._flushed = h5[f"{CLIPS}/name"].shape[0]
         columns, frame_columns = extra_columns(h5.attrs)
         self._declared = columns

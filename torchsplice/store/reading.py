@@ -143,13 +143,26 @@ class Reading(DatabaseState):
             self._name_index = {n: i for i, n in enumerate(self.names)}
         return self._name_index
 
+    TABLE_AFTER_INFOS = 16
+    """``clip_info`` reads a clip's row column by column until it has been asked this many times
+    on one open database of at most :attr:`TABLE_AFTER_ROWS` clips; then it reads the clip
+    table once (:meth:`clip_table`) and answers from it, as it does whenever the table is read."""
+    TABLE_AFTER_ROWS = 200_000
+
     @reads
     def clip_info(self, clip: str | int) -> dict:
-        """Metadata of one clip: name, source, role, labels, skeleton, start, length, fps."""
+        """Metadata of one clip: name, source, role, labels, skeleton, start, length, fps, and
+        every extra column (Python values)."""
         i = self.index(clip)
         self._require_flushed(i)
         self._table_written()
         c = self.h5[CLIPS]
+        table = getattr(self, "_clip_table", None)
+        if table is None and self._info_reads >= self.TABLE_AFTER_INFOS and len(self) <= self.TABLE_AFTER_ROWS:
+            table = self.clip_table()
+        if table is not None and i < len(table) and table.kinds.keys() == self.columns.keys():
+            return table.info(i)  # rows are only ever added: a row of the table read earlier holds
+        self._info_reads += 1
         info = {k: c[k][i] for k in [*COLUMNS, *self.columns]}
         for k in ("name", "source", "role", "labels", *[n for n, kind in self.columns.items() if kind == "str"]):
             info[k] = info[k].decode() if isinstance(info[k], bytes) else str(info[k])

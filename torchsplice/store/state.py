@@ -42,6 +42,7 @@ class DatabaseState:
     _skeletons: list[Skeleton]
     _names: list[str] | None  # the written clips' names, read once when first asked for
     _name_index: dict[str, int] | None  # name -> row, written and staged clips
+    _info_reads: int  # clip_info calls answered from the file, column by column (see clip_info)
     _flushed: int  # clips written to the file
     _declared: dict[str, str]  # every declared clip column, the store's own parts too
     columns: dict[str, str]  # the declared clip columns but the store's own parts
