@@ -116,9 +116,16 @@ class ClipTable:
     def info(self, i: int) -> dict:
         """Row ``i`` as :meth:`~torchsplice.store.database.MotionDatabase.clip_info` gives it:
         built-in columns then the extra ones, as Python values (labels a fresh dict)."""
-        out = {"name": str(self.name[i]), "source": str(self.source[i]), "role": str(self.role[i]),
-               "labels": dict(self.labels[i]), "skeleton": int(self.skeleton[i]), "start": int(self.start[i]),
-               "length": int(self.length[i]), "fps": float(self.fps[i])}
+        out = {
+            "name": str(self.name[i]),
+            "source": str(self.source[i]),
+            "role": str(self.role[i]),
+            "labels": dict(self.labels[i]),
+            "skeleton": int(self.skeleton[i]),
+            "start": int(self.start[i]),
+            "length": int(self.length[i]),
+            "fps": float(self.fps[i]),
+        }
         for n, kind in self.kinds.items():
             v = self.extra[n][i]
             out[n] = float(v) if kind == "float" else int(v) if kind == "int" else str(v)
