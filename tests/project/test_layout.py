@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 import sys
 from pathlib import Path
 
@@ -69,7 +70,8 @@ def _runtime_nodes(tree: ast.AST, type_checking: bool = False):
             todo.append(child)
 
 
-def _imports(module: str, type_checking: bool = False) -> list[tuple[str, list[str], int]]:
+@functools.cache  # every test reads the same modules: parse each once per session
+def _imports(module: str, type_checking: bool = False) -> tuple[tuple[str, tuple[str, ...], int], ...]:
     """``(imported module, names imported from it, line)`` of every runtime import in ``module``
     (and, with ``type_checking``, of those only a type checker reads)."""
     path = MODULES[module]
@@ -78,7 +80,7 @@ def _imports(module: str, type_checking: bool = False) -> list[tuple[str, list[s
     out = []
     for node in _runtime_nodes(tree, type_checking):
         if isinstance(node, ast.Import):
-            out += [(a.name, [], node.lineno) for a in node.names]
+            out += [(a.name, (), node.lineno) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".")
@@ -86,8 +88,8 @@ def _imports(module: str, type_checking: bool = False) -> list[tuple[str, list[s
                 name = ".".join(base + ([node.module] if node.module else []))
             else:
                 name = node.module or ""
-            out.append((name, [a.name for a in node.names], node.lineno))
-    return out
+            out.append((name, tuple(a.name for a in node.names), node.lineno))
+    return tuple(out)
 
 
 def _edges(type_checking: bool = False) -> dict[str, dict[str, int]]:
