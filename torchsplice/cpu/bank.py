@@ -322,8 +322,8 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
     if buffers is not None:
         rot_out, trans_out, curve_out, correction_out, pelvis_out = Buffers._get(buffers.room, M, J, dtype)
     else:
-        rot_out, trans_out, curve_out, correction_out, pelvis_out = (np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M),
-                                             np.empty(M), np.empty((M, 4)))
+        rot_out, trans_out, curve_out, correction_out, pelvis_out = (
+            np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M), np.empty(M), np.empty((M, 4)))
     cells = np.empty((B, P, 2), np.int64)
     status, crop_out, path_len, frames = (np.empty(B, np.int64) for _ in range(4))
     cost, angle = np.empty(B), np.empty(B)
@@ -332,8 +332,9 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
             float(knot_spacing), float(smoothing))
     if B:
         splice_batch((bank.rot, bank.trans, bank.pos, bank.grot), bank.feat, bank.starts, bank.lengths, METHOD_CODES[method],
-                     loco, act, ref, tuple(bank.joints), opts, bool(posture), float(twist), out_start, rot_out, trans_out, curve_out, correction_out, pelvis_out,
-                     cells, status, crop_out, path_len, cost, frames, angle)
+                     loco, act, ref, tuple(bank.joints), opts, bool(posture), float(twist), out_start,
+                     rot_out, trans_out, curve_out, correction_out, pelvis_out, cells, status, crop_out, path_len, cost, frames,
+                     angle)
     bad = np.nonzero(status != 0)[0]
     if len(bad) and on_error == "raise":
         b = int(bad[0])
@@ -342,14 +343,15 @@ def splice_bank(bank: ClipBank, loco, act, method: str = "splice", ref=None, *, 
         new_start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
         n = int(frames.sum())
         if buffers is not None:
-            rot_packed, trans_packed, curve_packed, correction_packed, pelvis_packed = Buffers._get(buffers.packed, n, J, dtype)
+            packed = Buffers._get(buffers.packed, n, J, dtype)
         else:
-            rot_packed, trans_packed, curve_packed, correction_packed, pelvis_packed = (np.empty((n, J, 4), dtype), np.empty((n, J, 3), dtype), np.empty(n),
-                                                 np.empty(n), np.empty((n, 4)))
-        compact(rot_out, trans_out, curve_out, correction_out, pelvis_out, out_start, frames, new_start, rot_packed, trans_packed, curve_packed, correction_packed, pelvis_packed)
-        rot_out, trans_out, curve_out, correction_out, pelvis_out, out_start = rot_packed[:n], trans_packed[:n], curve_packed[:n], correction_packed[:n], pelvis_packed[:n], new_start
+            packed = (np.empty((n, J, 4), dtype), np.empty((n, J, 3), dtype), np.empty(n), np.empty(n), np.empty((n, 4)))
+        compact(rot_out, trans_out, curve_out, correction_out, pelvis_out, out_start, frames, new_start, *packed)
+        rot_out, trans_out, curve_out, correction_out, pelvis_out = (a[:n] for a in packed)
+        out_start = new_start
     else:
-        rot_out, trans_out, curve_out, correction_out, pelvis_out = rot_out[:0], trans_out[:0], curve_out[:0], correction_out[:0], pelvis_out[:0]
+        rot_out, trans_out, curve_out, correction_out, pelvis_out = (
+            a[:0] for a in (rot_out, trans_out, curve_out, correction_out, pelvis_out))
     curve = curve_out + np.repeat(np.where(status == 0, crop_out, 0), frames)  # at the locomotion's rate, crop included
     return PackedSplices(out_start, frames, rot_out, trans_out, curve, correction_out, crop_out, cost, angle, cells, path_len, status,
                          part_curve=curve_out, pelvis=pelvis_out, window=np.zeros(B, np.int64), loops=np.zeros((B, 2), np.int64))
@@ -379,7 +381,8 @@ def standing_bank(bank: ClipBank, loco, act, acting, tables: StandingTables, met
         rot_out, trans_out, curve_out, correction_out, _ = Buffers._get(buffers.packed, M, J, dtype)
         rot_out, trans_out, curve_out, correction_out = rot_out[:M], trans_out[:M], curve_out[:M], correction_out[:M]
     else:
-        rot_out, trans_out, curve_out, correction_out = np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M), np.empty(M)
+        rot_out, trans_out, curve_out, correction_out = (np.empty((M, J, 4), dtype), np.empty((M, J, 3), dtype), np.empty(M),
+                                                         np.empty(M))
     correction_out[:] = 0.0
     window = np.zeros(B, np.int64)
     loops = bank.loop_points(act, masks, tables) if timing == "loop" and B else np.zeros((B, 2), np.int64)
@@ -389,6 +392,6 @@ def standing_bank(bank: ClipBank, loco, act, acting, tables: StandingTables, met
         standing_batch(bank.rot, bank.trans, bank.starts, bank.lengths, METHOD_CODES[method], TIMING_CODES[timing], loco,
                        act, masks, acting, loops, sj, start, rot_out, trans_out, curve_out, frames, window)
     zeros = np.zeros(B, np.int64)
-    return PackedSplices(start, frames, rot_out, trans_out, curve_out, correction_out, zeros.copy(), np.full(B, np.nan), np.zeros(B),
-                         np.full((B, 1, 2), -1, np.int64), zeros.copy(), zeros.copy(), part_curve=curve_out, pelvis=None,
+    return PackedSplices(start, frames, rot_out, trans_out, curve_out, correction_out, zeros.copy(), np.full(B, np.nan),
+                         np.zeros(B), np.full((B, 1, 2), -1, np.int64), zeros.copy(), zeros.copy(), part_curve=curve_out, pelvis=None,
                          window=window, loops=np.asarray(loops, np.int64).reshape(B, 2))

@@ -27,7 +27,7 @@ from ..specs import DatasetSpec, detect_spec
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, cap, short, skeleton_path
 from .state import DatabaseState
 from .frame_array import FrameArray, reads, virtual_files
-from .table import ClipTable, SkeletonInfo, decode_labels, json_value, run_record
+from .table import ClipTable, SkeletonInfo, json_value, run_record
 
 __all__ = ["Reading", "ClipBatch", "FrameArray", "reads", "virtual_files"]
 
@@ -110,10 +110,6 @@ class Reading(DatabaseState):
         except OSError as exc:
             raise self._frames_error(exc, k, rows) from None
 
-    def _labels(self, text, clip) -> dict:
-        """A clip's labels column (JSON) as a dict; a clear error when it is not one."""
-        return decode_labels(self.path, text, clip)
-
     @property
     @reads
     def names(self) -> list[str]:
@@ -156,23 +152,21 @@ class Reading(DatabaseState):
         i = self.index(clip)
         self._require_flushed(i)
         self._table_written()
-        c = self.h5[CLIPS]
         table = getattr(self, "_clip_table", None)
         if table is None and self._info_reads >= self.TABLE_AFTER_INFOS and len(self) <= self.TABLE_AFTER_ROWS:
             table = self.clip_table()
         if table is not None and i < len(table) and table.kinds.keys() == self.columns.keys():
             return table.info(i)  # rows are only ever added: a row of the table read earlier holds
         self._info_reads += 1
-        info = {k: c[k][i] for k in [*COLUMNS, *self.columns]}
-        for k in ("name", "source", "role", "labels", *[n for n, kind in self.columns.items() if kind == "str"]):
-            info[k] = info[k].decode() if isinstance(info[k], bytes) else str(info[k])
-        for n, kind in self.columns.items():
-            info[n] = float(info[n]) if kind == "float" else int(info[n]) if kind == "int" else info[n]
-        info["labels"] = self._labels(info["labels"], info["name"])
-        for k in ("skeleton", "start", "length"):
-            info[k] = int(info[k])
-        info["fps"] = float(info["fps"])
-        return info
+        return ClipTable.from_columns(self._table_rows(i, i + 1), self.columns, self.path).info(0)
+
+    def _table_rows(self, lo: int, hi: int) -> dict[str, np.ndarray]:
+        """Clip-table rows ``lo:hi`` as stored, every column (text decoded, labels as JSON text)."""
+        c = self.h5[CLIPS]
+        return {
+            k: (c[k].asstr()[lo:hi] if h5py.check_string_dtype(c[k].dtype) else c[k][lo:hi])
+            for k in [*COLUMNS, *self.columns]
+        }
 
     @reads
     def table(self) -> dict[str, np.ndarray]:
@@ -192,11 +186,7 @@ class Reading(DatabaseState):
         cached = getattr(self, "_clip_table", None)
         if cached is not None and len(cached) == c["name"].shape[0]:  # rows are only ever added
             return cached
-        columns = {
-            k: (c[k].asstr()[()] if h5py.check_string_dtype(c[k].dtype) else c[k][()])
-            for k in [*COLUMNS, *self.columns]
-        }
-        self._clip_table = ClipTable.from_columns(columns, self.columns, self.path)
+        self._clip_table = ClipTable.from_columns(self._table_rows(0, c["name"].shape[0]), self.columns, self.path)
         return self._clip_table
 
     @reads
@@ -206,11 +196,7 @@ class Reading(DatabaseState):
         millions of clips that go through them a slice at a time."""
         self.flush()
         self._table_written()
-        c = self.h5[CLIPS]
-        return {
-            k: (c[k].asstr()[lo:hi] if h5py.check_string_dtype(c[k].dtype) else c[k][lo:hi])
-            for k in [*COLUMNS, *self.columns]
-        }
+        return self._table_rows(lo, hi)
 
     def __contains__(self, clip) -> bool:
         """Whether the database holds a clip named ``clip``."""
