@@ -20,13 +20,12 @@ from torchsplice.core.errors import DatabaseError, MotionError
 from torchsplice.core.motion import Motion
 from torchsplice.core.skeleton import Skeleton
 from torchsplice.store.database import SCHEMA_VERSION, ClipBatch, MotionDatabase
+from dataset_clips import CH3, CH6  # BVH channel lists
 from writers import reaped
 
 # --------------------------------------------------------------------------------------------
 # synthetic clips
 # --------------------------------------------------------------------------------------------
-CH6 = ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
-CH3 = ("Zrotation", "Xrotation", "Yrotation")
 
 
 def chain_skeleton(J: int = 3, bone: float = 1.0, prefix: str = "J", animated: bool = False) -> Skeleton:
