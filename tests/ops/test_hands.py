@@ -298,6 +298,15 @@ def test_the_job_keeps_hands_out_where_neither_source_has_one_in(runs_with_raise
                 w0, w1 = _wrists_in_chest(a, arms), _wrists_in_chest(b, arms)
                 ranges.append(((w1.amax(0) - w1.amin(0)).norm(dim=-1) / (w0.amax(0) - w0.amin(0)).norm(dim=-1)))
         assert corrected.sum() > 0
+        # the job measures again only the frames it changed: the columns are the whole results' figures
+        from torchsplice.splice.backends.compiled import CompiledBackend
+
+        clips = [o.read(n) for n in to.name]
+        share, depth = CompiledBackend().inside_body(torch.cat([c.rotations for c in clips]).numpy(),
+                                                     torch.cat([c.local_translations() for c in clips]).numpy(),
+                                                     [c.num_frames for c in clips], sk, body)
+        assert np.array_equal(share, np.asarray(e1["penetration"]))  # Bandai Namco's units are cm, as the columns
+        assert np.allclose(depth, np.asarray(e1["penetration_depth"]), rtol=0, atol=1e-9)
         from torchsplice.store.select import select_clips
 
         picked = select_clips(to, "corrected_frames>0", "clips", str(out))  # the selection language takes the column

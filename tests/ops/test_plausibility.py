@@ -18,7 +18,7 @@ import torch
 
 from realdata import MOCAP, _require_mocap
 from torchsplice.ops.body import CAPSULES, INSIDE_MARGIN, body_of, capsule_ends, inside_depth, segment_distance
-from torchsplice.ops.plausibility import GMD_FPS, jerk, penetration, penetration_packed, skate_ratio
+from torchsplice.ops.plausibility import GMD_FPS, jerk, penetration, penetration_of_frames, penetration_packed, skate_ratio
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.specs.canonical import canonical_joints
@@ -226,10 +226,17 @@ def test_the_compiled_body_test_gives_the_torch_figures(runs_with_raised_hands):
     rot = torch.cat([c.rotations for c in clips]).numpy()
     trans = torch.cat([c.local_translations() for c in clips]).numpy()
     lengths = [c.num_frames for c in clips]
-    want = Backend.inside_body(CompiledBackend(), rot, trans, lengths, sk, body)  # the torch default
-    got = CompiledBackend().inside_body(rot, trans, lengths, sk, body)
+    want = Backend.inside_body(CompiledBackend(), rot, trans, lengths, sk, body, per_frame=True)  # the torch default
+    got = CompiledBackend().inside_body(rot, trans, lengths, sk, body, per_frame=True)
     assert (want[0] > 0).sum() >= 10
     assert np.array_equal(got[0], want[0]) and np.allclose(got[1], want[1], atol=1e-9)
+    # each frame's deepest: the same where it counts (deeper than the margin), at most the margin elsewhere
+    counts = want[2] > body.margin
+    assert np.array_equal(got[2] > body.margin, counts) and counts.sum() >= 10
+    assert np.allclose(got[2][counts], want[2][counts], atol=1e-9) and (got[2][~counts] <= body.margin).all()
+    # ... from which the figures of any frames' clips follow, bit for bit: here every clip's again
+    share, depth = penetration_of_frames(torch.from_numpy(got[2]), lengths, body.margin)
+    assert np.array_equal(share.numpy(), got[0]) and np.array_equal(depth.numpy(), got[1])
 
 
 @pytest.mark.realdata

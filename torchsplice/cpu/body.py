@@ -37,9 +37,10 @@ def _apart(ends, i, k):
 
 @njit(cache=True, parallel=True)
 def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, margin, starts, lengths,
-                 share, depth):
-    """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``share[c]`` and ``depth[c]``
-    (see the module docstring)."""
+                 share, depth, frame_deepest):
+    """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``share[c]`` and ``depth[c]``,
+    and per frame ``t`` its deepest pair into ``frame_deepest[t]`` (exact where deeper than ``margin``,
+    at most ``margin`` elsewhere; see the module docstring)."""
     J = rot.shape[1]
     n_ends = end_a.shape[0]
     for c in prange(starts.shape[0]):
@@ -76,6 +77,7 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
                                                                     row(ends, 2 * obstacle + 1))
                     if pair_depth > frame_depth:
                         frame_depth = pair_depth
+            frame_deepest[t] = frame_depth
             if frame_depth > margin:
                 frames_inside += 1
                 if frame_depth > deepest:

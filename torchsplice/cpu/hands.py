@@ -117,9 +117,16 @@ def _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, ob
     probe_a, probe_b = _vec(probe_ends, 0), _vec(probe_ends, 1)
     arm = _length(_sub((wrists[t, k, 0], wrists[t, k, 1], wrists[t, k, 2]),
                        (elbows[t, k, 0], elbows[t, k, 1], elbows[t, k, 2])))
+    probe_mid, probe_half = _scale(_add(probe_a, probe_b), 0.5), 0.5 * _length(_sub(probe_b, probe_a))
     push = (0.0, 0.0, 0.0)
     for o in obstacles:
         obstacle_a, obstacle_b = _vec(ends[t], 2 * o), _vec(ends[t], 2 * o + 1)
+        # the midpoints' distance less both half-lengths bounds the axes' distance from below: an
+        # obstacle surely out of reach is skipped (the margin keeps rounding from skipping one that is not)
+        apart = _length(_sub(probe_mid, _scale(_add(obstacle_a, obstacle_b), 0.5)))
+        reach = probe_half + 0.5 * _length(_sub(obstacle_b, obstacle_a))
+        if apart - reach > radii[o] - target + 1e-9 * (apart + reach + radii[o]):
+            continue
         s, u = _closest(probe_a, probe_b, obstacle_a, obstacle_b)
         on_probe = _add(probe_a, _scale(_sub(probe_b, probe_a), s))
         on_obstacle = _add(obstacle_a, _scale(_sub(obstacle_b, obstacle_a), u))
@@ -150,6 +157,7 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
         pushes = np.zeros((n, 2, 3))
         widest = np.zeros((n, 2, 3))
         turns = np.zeros((n, 2, 8))  # per arm: the elbow's turn, the shoulder's
+        pushed = np.empty(n, np.int64)
         for t in range(n):
             for j in joints:
                 p = parents[j]
@@ -190,73 +198,86 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
         for d in range(2 * half + 1):
             hann[d] = 1.0 + math.cos(math.pi * (d - half) / (half + 1.0))
         for it in range(iterations):
-            pushed_first, pushed_last = n, -1  # the frames pushed in this pass
+            n_pushed = 0  # the frames pushed in this pass, ascending: pushed[:n_pushed]
             for t in range(n):
-                for k in range(2):
-                    for x in range(3):
-                        pushes[t, k, x] = 0.0
                 if it > 0 and not moved[t]:
                     continue  # a frame no pass has moved was out already, and is still
                 to_chest = qconj(qload(grot, t, chest))
+                hit = False
                 for k in range(2):
                     v = _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probes[k], obstacles, target[c],
-                              slack,
-                              elbow[k], wrist[k])
+                              slack, elbow[k], wrist[k])
                     if v[0] != 0.0 or v[1] != 0.0 or v[2] != 0.0:
-                        pushed_first, pushed_last = min(pushed_first, t), max(pushed_last, t)
+                        hit = True
                         v = qrot(to_chest, v)
                         pushes[t, k, 0], pushes[t, k, 1], pushes[t, k, 2] = v
-            if pushed_last < 0:
+                if hit:
+                    pushed[n_pushed] = t
+                    n_pushed += 1
+            if n_pushed == 0:
                 break
             # a push reaches `spread` frames by the largest-push step and as many more by the window:
-            # only the frames within 2 spread of one change (the rest would add zeros)
-            spread_first, spread_last = max(pushed_first - half, 0), min(pushed_last + half, n - 1)
-            for t in range(spread_first, spread_last + 1):  # the spread in time: the largest push within spread ...
+            # only the frames within 2 spread of a pushed frame change (elsewhere `pushes` and `widest`
+            # are zero, and the window would add zeros)
+            done = -1
+            for i in range(n_pushed):  # the spread in time: the largest push within spread ...
+                for t in range(max(pushed[i] - half, done + 1, 0), min(pushed[i] + half, n - 1) + 1):
+                    for k in range(2):
+                        best, size = t, -1.0
+                        for g in range(max(t - half, 0), min(t + half, n - 1) + 1):
+                            s2 = (pushes[g, k, 0] * pushes[g, k, 0] + pushes[g, k, 1] * pushes[g, k, 1]
+                                  + pushes[g, k, 2] * pushes[g, k, 2])
+                            if s2 > size:
+                                best, size = g, s2
+                        for x in range(3):
+                            widest[t, k, x] = pushes[best, k, x]
+                    done = t
+            done = -1
+            for i in range(n_pushed):  # ... then a Hann window of half-width spread, and the IK where it changed
+                for t in range(max(pushed[i] - 2 * half, done + 1, 0), min(pushed[i] + 2 * half, n - 1) + 1):
+                    done = t
+                    den = 0.0
+                    for f in range(max(t - half, 0), min(t + half, n - 1) + 1):
+                        den += hann[f - t + half]
+                    chest_rot = qload(grot, t, chest)
+                    for k in range(2):
+                        num0 = num1 = num2 = 0.0
+                        for f in range(max(t - half, 0), min(t + half, n - 1) + 1):
+                            weight = hann[f - t + half]
+                            num0 += weight * widest[f, k, 0]
+                            num1 += weight * widest[f, k, 1]
+                            num2 += weight * widest[f, k, 2]
+                        shift[t, k, 0] += num0 / den
+                        shift[t, k, 1] += num1 / den
+                        shift[t, k, 2] += num2 / den
+                        if num0 == 0.0 and num1 == 0.0 and num2 == 0.0:
+                            continue  # unchanged since its last IK (an addition of zero)
+                        if shift[t, k, 0] == 0.0 and shift[t, k, 1] == 0.0 and shift[t, k, 2] == 0.0:
+                            continue  # nothing to move
+                        moved[t] = True
+                        d = qrot(chest_rot, (shift[t, k, 0], shift[t, k, 1], shift[t, k, 2]))
+                        shoulder_pos = _vec(pos[t], shoulder[k])
+                        wrist_pos = _vec(pos[t], wrist[k])
+                        elbow_pos = _vec(pos[t], elbow[k])
+                        hinge_local = _vec(hinges, k)
+                        if hinge_local[0] != 0.0 or hinge_local[1] != 0.0 or hinge_local[2] != 0.0:
+                            hinge = qrot(qload(grot, t, shoulder[k]), hinge_local)
+                        else:
+                            hinge = _chest_hinge(_sub(elbow_pos, shoulder_pos), chest_rot)
+                        elbow_turn, shoulder_turn, new_elbow, new_wrist = _arm_ik(shoulder_pos, elbow_pos, wrist_pos,
+                                                                                  _add(wrist_pos, d), hinge, flex)
+                        for x in range(4):
+                            turns[t, k, x], turns[t, k, 4 + x] = elbow_turn[x], shoulder_turn[x]
+                        for x in range(3):
+                            elbows[t, k, x], wrists[t, k, x] = new_elbow[x], new_wrist[x]
+            for i in range(n_pushed):  # zeros again for the next pass
+                for t in range(max(pushed[i] - half, 0), min(pushed[i] + half, n - 1) + 1):
+                    for k in range(2):
+                        for x in range(3):
+                            widest[t, k, x] = 0.0
                 for k in range(2):
-                    best, size = t, -1.0
-                    for g in range(max(t - half, 0), min(t + half, n - 1) + 1):
-                        s2 = (pushes[g, k, 0] * pushes[g, k, 0] + pushes[g, k, 1] * pushes[g, k, 1]
-                              + pushes[g, k, 2] * pushes[g, k, 2])
-                        if s2 > size:
-                            best, size = g, s2
                     for x in range(3):
-                        widest[t, k, x] = pushes[best, k, x]
-            window_first, window_last = max(pushed_first - 2 * half, 0), min(pushed_last + 2 * half, n - 1)
-            for t in range(window_first, window_last + 1):  # ... then a Hann window of half-width spread
-                den = 0.0
-                for f in range(max(t - half, 0), min(t + half, n - 1) + 1):
-                    den += hann[f - t + half]
-                for k in range(2):
-                    num0 = num1 = num2 = 0.0
-                    for f in range(max(t - half, spread_first), min(t + half, spread_last) + 1):
-                        weight = hann[f - t + half]
-                        num0 += weight * widest[f, k, 0]
-                        num1 += weight * widest[f, k, 1]
-                        num2 += weight * widest[f, k, 2]
-                    shift[t, k, 0] += num0 / den
-                    shift[t, k, 1] += num1 / den
-                    shift[t, k, 2] += num2 / den
-            for t in range(window_first, window_last + 1):  # the IK where the displacement changed
-                chest_rot = qload(grot, t, chest)
-                for k in range(2):
-                    if shift[t, k, 0] == 0.0 and shift[t, k, 1] == 0.0 and shift[t, k, 2] == 0.0:
-                        continue
-                    moved[t] = True
-                    d = qrot(chest_rot, (shift[t, k, 0], shift[t, k, 1], shift[t, k, 2]))
-                    shoulder_pos = _vec(pos[t], shoulder[k])
-                    wrist_pos = _vec(pos[t], wrist[k])
-                    elbow_pos = _vec(pos[t], elbow[k])
-                    hinge_local = _vec(hinges, k)
-                    if hinge_local[0] != 0.0 or hinge_local[1] != 0.0 or hinge_local[2] != 0.0:
-                        hinge = qrot(qload(grot, t, shoulder[k]), hinge_local)
-                    else:
-                        hinge = _chest_hinge(_sub(elbow_pos, shoulder_pos), chest_rot)
-                    elbow_turn, shoulder_turn, new_elbow, new_wrist = _arm_ik(shoulder_pos, elbow_pos, wrist_pos,
-                                                                              _add(wrist_pos, d), hinge, flex)
-                    for x in range(4):
-                        turns[t, k, x], turns[t, k, 4 + x] = elbow_turn[x], shoulder_turn[x]
-                    for x in range(3):
-                        elbows[t, k, x], wrists[t, k, x] = new_elbow[x], new_wrist[x]
+                        pushes[pushed[i], k, x] = 0.0
         count = 0
         for t in range(n):
             if not moved[t]:

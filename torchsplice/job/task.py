@@ -266,7 +266,7 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         rot, corrected, arms = _keep_hands_out(backend, plan, group, skeleton, roles, body, kept_keys, frames, rot,
                                                trans, inside)
     cm = centimetres(DatasetSpec.from_json(group.spec).units)
-    inside = (inside[0], inside[1] * cm)
+    inside = (inside[0], inside[1] * cm)  # (share, depth in cm); the frames' deepest no longer needed
     part = _pack(plan, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture, inside)
     part.extra["corrected_frames"] = corrected
@@ -284,11 +284,12 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
 
 
 def _penetration(backend, body, skeleton, frames, rot: np.ndarray, trans: np.ndarray) -> tuple:
-    """``(share, depth)`` per result of how it puts a hand inside ``body`` (depth in the
-    skeleton's units), from its packed frames (:meth:`~torchsplice.splice.backends.Backend.inside_body`)."""
+    """``(share, depth, deepest)``: per result how it puts a hand inside ``body`` (depth in the
+    skeleton's units), and per packed frame its deepest, from its packed frames
+    (:meth:`~torchsplice.splice.backends.Backend.inside_body`)."""
     if not len(frames):
-        return np.zeros(0), np.zeros(0)
-    return backend.inside_body(rot, trans, frames, skeleton, body)
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return backend.inside_body(rot, trans, frames, skeleton, body, per_frame=True)
 
 
 def _figures(backend, group, skeleton, roles, frames, rot: np.ndarray, trans: np.ndarray) -> dict:
@@ -311,12 +312,16 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     does, or that the ``self_penetration`` flag would report (then out to a quarter of the
     body's margin, whatever the sources do)
     (:meth:`~torchsplice.splice.backends.Backend.keep_hands_out`), in ``rot``, and their ``inside``
-    figures anew. ``(rot, corrected frames per result, (rows, arms))``: ``rows`` the packed
-    frames changed and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' new rotations
-    (:attr:`~torchsplice.ops.hands.Arms.moved`), what an alignment store keeps of them."""
-    from ..ops.hands import arms_of
+    figures anew (in place; only the frames changed are measured again). ``(rot, corrected frames
+    per result, (rows, arms))``: ``rows`` the packed frames changed and ``arms`` ``(M, 4, 4)``
+    their shoulders' and elbows' new rotations (:attr:`~torchsplice.ops.hands.Arms.moved`), what
+    an alignment store keeps of them."""
+    import torch
 
-    share, depth = inside  # depth in the skeleton's units, as the plan's
+    from ..ops.hands import arms_of
+    from ..ops.plausibility import penetration_of_frames
+
+    share, depth, deepest = inside  # depth in the skeleton's units, as the plan's; deepest per packed frame
     corrected = np.zeros(len(frames), np.int64)
     allowed = np.array([max(plan.clips[k[0]].penetration_depth, plan.clips[k[1]].penetration_depth) for k in keys],
                        dtype=np.float64)
@@ -339,8 +344,11 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     rot = np.array(rot, copy=True) if not rot.flags.writeable else rot
     rot[rows[changed][:, None], moved] = arms_now
     corrected[todo] = count
-    s2, d2 = backend.inside_body(new, their_trans, n, skeleton, body)
-    share[todo], depth[todo] = s2, d2
+    if changed.any():  # frames are measured one by one: the changed alone, then each result's figures again
+        deepest[rows[changed]] = backend.inside_body(new[changed], their_trans[changed], [int(changed.sum())], skeleton,
+                                                     body, per_frame=True)[2]
+    s2, d2 = penetration_of_frames(torch.from_numpy(deepest[rows]), n, body.margin)
+    share[todo], depth[todo] = s2.numpy(), d2.numpy()
     return rot, corrected, (rows[changed], arms_now)
 
 

@@ -31,7 +31,7 @@ import torch
 from ..core.rotations import quat_apply, quat_conj
 from .body import Body, inside_depth
 
-__all__ = ["penetration", "penetration_packed", "skate_ratio", "foot_slide", "floor_height", "jerk", "resample_positions",
+__all__ = ["penetration", "penetration_packed", "penetration_of_frames", "skate_ratio", "foot_slide", "floor_height", "jerk", "resample_positions",
            "figure_joints", "clip_figures", "GMD_FPS", "GMD_HEIGHT", "GMD_SPEED", "GMD_WINDOW"]
 
 GMD_FPS, GMD_HEIGHT, GMD_SPEED, GMD_WINDOW = 20.0, 0.05, 0.5, 5
@@ -55,13 +55,19 @@ def penetration_packed(positions: torch.Tensor, lengths, body: Body) -> tuple[to
     """:func:`penetration` of clips packed along frames: ``positions`` ``(N, J, 3)``, the clips'
     frames one after another, ``lengths`` ``(B,)`` summing to ``N``. One segment reduction
     per figure, no loop over clips or frames."""
+    return penetration_of_frames(inside_depth(positions, body).flatten(-2).amax(-1), lengths, body.margin)
+
+
+def penetration_of_frames(deepest: torch.Tensor, lengths, margin: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`penetration_packed` from each packed frame's deepest probe-obstacle depth ``(N,)``
+    (where it is deeper than ``margin``; what a frame's value is below that does not count), so
+    that the frames of a clip that changed can be measured again alone."""
     lengths = torch.as_tensor(lengths, dtype=torch.long)
     B = len(lengths)
     clip = torch.repeat_interleave(torch.arange(B), lengths)
-    deepest = inside_depth(positions, body).flatten(-2).amax(-1)  # (N,)
-    inside = deepest > body.margin
-    zero = torch.zeros(B, dtype=positions.dtype)
-    share = zero.index_add(0, clip, inside.to(positions.dtype)) / lengths.clamp_min(1).to(positions.dtype)
+    inside = deepest > margin
+    zero = torch.zeros(B, dtype=deepest.dtype)
+    share = zero.index_add(0, clip, inside.to(deepest.dtype)) / lengths.clamp_min(1).to(deepest.dtype)
     depth = zero.scatter_reduce(0, clip, torch.where(inside, deepest, 0.0), reduce="amax", include_self=True)
     return share, depth
 

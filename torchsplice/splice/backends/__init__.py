@@ -161,22 +161,27 @@ class Backend:
         default), padded: what the locomotion check reads."""
         raise NotImplementedError
 
-    def inside_body(self, rotations, translations, lengths, skeleton, body) -> tuple:
+    def inside_body(self, rotations, translations, lengths, skeleton, body, per_frame: bool = False) -> tuple:
         """``(share, depth)`` per result of how it puts a hand inside its ``body``
         (:func:`~torchsplice.ops.plausibility.penetration_packed`; depth in the skeleton's units)
         from its packed frames: ``rotations (N, J, 4)``, ``translations (N, J, 3)`` (row 0 the
-        root), ``lengths (B,)``. By torch here; a backend may compute the same figures its way."""
+        root), ``lengths (B,)``. With ``per_frame``, also each frame's deepest ``(N,)``, which
+        :func:`~torchsplice.ops.plausibility.penetration_of_frames` turns into the same two (exact
+        where deeper than the body's margin). By torch here; a backend may compute the same
+        figures its way."""
         import numpy as np
         import torch
 
         from ...core.fk import forward_kinematics
-        from ...ops.plausibility import penetration_packed
+        from ...ops.body import inside_depth
+        from ...ops.plausibility import penetration_of_frames
 
         t = torch.as_tensor(np.asarray(translations, dtype=np.float64))
         positions, _ = forward_kinematics(torch.as_tensor(np.asarray(rotations, dtype=np.float64)), t[:, 0],
                                           skeleton.offsets, skeleton.parents, t)
-        share, depth = penetration_packed(positions, np.asarray(lengths, dtype=np.int64), body)
-        return share.numpy(), depth.numpy()
+        deepest = inside_depth(positions, body).flatten(-2).amax(-1)
+        share, depth = penetration_of_frames(deepest, np.asarray(lengths, dtype=np.int64), body.margin)
+        return (share.numpy(), depth.numpy()) + ((deepest.numpy(),) if per_frame else ())
 
     def figures(self, rotations, translations, lengths, fps, skeleton, joints, up_axis: int, per_metre: float) -> dict:
         """The job's figures of what a person would reject, per result, from its packed frames (as

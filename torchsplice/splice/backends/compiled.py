@@ -109,22 +109,21 @@ class CompiledBackend(Backend):
         return SplicedBatch(out.start, out.frames, out.rotations, out.translations, out.curve, out.correction, out.crop,
                             out.cost, out.posture, [np.zeros((0, 2), np.int64)] * B, {}, parts=_parts(out))
 
-    def inside_body(self, rotations, translations, lengths, skeleton, body):
+    def inside_body(self, rotations, translations, lengths, skeleton, body, per_frame=False):
         from ...cpu.body import inside_clips
         from ...cpu.fk import joint_closure
 
         lengths = np.asarray(lengths, dtype=np.int64)
         starts = (np.cumsum(lengths) - lengths).astype(np.int64)
         ends = body.end_joints.numpy()
-        share, depth = np.zeros(len(lengths)), np.zeros(len(lengths))
-        if not len(lengths):
-            return share, depth
-        inside_clips(np.ascontiguousarray(rotations), np.ascontiguousarray(translations),
-                     np.asarray(skeleton.parents, dtype=np.int64), joint_closure(skeleton.parents, np.unique(ends)),
-                     ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
-                     np.asarray(body.probes, dtype=np.int64), np.asarray(body.obstacles, dtype=np.int64),
-                     float(body.margin), starts, lengths, share, depth)
-        return share, depth
+        share, depth, deepest = np.zeros(len(lengths)), np.zeros(len(lengths)), np.full(int(lengths.sum()), -np.inf)
+        if len(lengths):
+            inside_clips(np.ascontiguousarray(rotations), np.ascontiguousarray(translations),
+                         np.asarray(skeleton.parents, dtype=np.int64), joint_closure(skeleton.parents, np.unique(ends)),
+                         ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
+                         np.asarray(body.probes, dtype=np.int64), np.asarray(body.obstacles, dtype=np.int64),
+                         float(body.margin), starts, lengths, share, depth, deepest)
+        return (share, depth) + ((deepest,) if per_frame else ())
 
     def figures(self, rotations, translations, lengths, fps, skeleton, joints, up_axis, per_metre):
         from ...cpu.figures import GMD, figures_clips
