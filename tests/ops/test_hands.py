@@ -364,6 +364,15 @@ def test_the_compiled_correction_gives_the_torch_one(runs_with_raised_hands):
     assert len(todo) >= 10 and want_n.sum() > 0
     assert np.array_equal(got_n, want_n) and np.allclose(got, want, atol=1e-6)
     assert np.array_equal(got != rot, want != rot)
+    # told each frame's depth from the body test, the kernel tests only the frames deeper than a
+    # target in its first pass: the same output bit for bit, on the targets the job uses and on deeper ones
+    deepest = CompiledBackend().inside_body(rot, trans, lengths, sk, body, per_frame=True)[2]
+    assert (deepest > body.margin).sum() < len(deepest) / 2  # most frames are out: the skip is real
+    for allowed_here in (allowed[todo], allowed[todo] + 0.5 * body.margin):
+        args = (rot, trans, lengths, clips[0].fps, sk, body, arms, allowed_here)
+        plain, plain_n = CompiledBackend().keep_hands_out(*args)
+        told, told_n = CompiledBackend().keep_hands_out(*args, deepest=deepest)
+        assert np.array_equal(told, plain) and np.array_equal(told_n, plain_n)
 
 
 @pytest.mark.realdata

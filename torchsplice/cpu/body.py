@@ -36,11 +36,12 @@ def _apart(ends, i, k):
 
 
 @njit(cache=True, parallel=True)
-def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, margin, starts, lengths,
-                 share, depth, frame_deepest):
+def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, margin, floor, starts,
+                 lengths, share, depth, frame_deepest):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``share[c]`` and ``depth[c]``,
-    and per frame ``t`` its deepest pair into ``frame_deepest[t]`` (exact where deeper than ``margin``,
-    at most ``margin`` elsewhere; see the module docstring)."""
+    and per frame ``t`` its deepest pair into ``frame_deepest[t]`` (exact where deeper than ``floor``,
+    at most ``floor`` elsewhere: a pair that cannot be deeper is not measured; ``floor`` at most
+    ``margin``; see the module docstring)."""
     J = rot.shape[1]
     n_ends = end_a.shape[0]
     for c in prange(starts.shape[0]):
@@ -70,7 +71,7 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
             frame_depth = -math.inf
             for probe in probes:
                 for obstacle in obstacles:
-                    if _apart(ends, probe, obstacle) >= radii[obstacle] - margin:  # cannot count: not measured
+                    if _apart(ends, probe, obstacle) >= radii[obstacle] - floor:  # cannot count: not measured
                         continue
                     pair_depth = radii[obstacle] - segment_distance(row(ends, 2 * probe), row(ends, 2 * probe + 1),
                                                                     row(ends, 2 * obstacle),

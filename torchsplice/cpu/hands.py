@@ -1,18 +1,25 @@
 """Compiled correction that keeps hands out of the body (:mod:`torchsplice.ops.hands`), clips packed along frames.
 
 The same passes as :func:`torchsplice.ops.hands.keep_hands_out`, one clip per thread: per frame,
-FK of the joints needed (``joints``, ascending and closed under parents); then ``iterations``
-passes of the push out of every obstacle (closed-form closest points of the forearm's axis and
-each obstacle's), taken into the chest's frame, spread in time (the largest push within ``spread``
-frames, then a Hann window of half-width ``spread``) and added to the wrists' displacement, and
-two-bone IK of shoulder and elbow onto it, about each elbow's hinge (the clip's mean plane
-normal in the upper arm's frame; none, and the chest's, where its mean is ``hinge_min`` or
-shorter), its reach's change damped by ``flex`` as there. Shapes: rotations ``(N, J, 4)`` (unit WXYZ,
-local; ``out`` the same, written only at the moved joints of changed frames), translations
-``(N, J, 3)`` (row 0 the root's position); capsule ends ``end_a``, ``end_b``, ``end_w``
-``(2C,)`` as :mod:`.body`'s; per arm (left, right) the joints ``shoulder``, ``elbow``,
-``wrist`` and the parents ``shoulder_parent``, ``elbow_parent`` ``(2,)``; per clip ``target`` (how
-deep a forearm may stay, the skeleton's units) and ``spread`` (frames); ``corrected`` ``(B,)`` the frames changed.
+FK of the joints needed (``joints``, ascending and closed under parents: those ``in_arm``, the
+chain from the root to the hands, on every frame; the rest on the frames a pass tests); then
+``iterations`` passes of the push out of every obstacle (closed-form closest points of the
+forearm's axis and each obstacle's), taken into the chest's frame, spread in time (the largest
+push within ``spread`` frames, then a Hann window of half-width ``spread``) and added to the
+wrists' displacement, and two-bone IK of shoulder and elbow onto it, about each elbow's hinge (the
+clip's mean plane normal in the upper arm's frame; none, and the chest's, where its mean is
+``hinge_min`` or shorter), its reach's change damped by ``flex`` as there. The first pass tests
+every frame, or, where ``frame_deepest`` ``(N,)`` is given (not empty: each frame's deepest probe
+in an obstacle from :func:`.body.inside_clips`, exact wherever deeper than ``exact_above``) and a
+clip's target is at least that, only the frames deeper than the target: the others cannot be
+pushed. Later passes test the frames moved. The output is the same either way.
+
+Shapes: rotations ``(N, J, 4)`` (unit WXYZ, local; ``out`` the same, written only at the moved
+joints of changed frames), translations ``(N, J, 3)`` (row 0 the
+root's position); capsule ends ``end_a``, ``end_b``, ``end_w`` ``(2C,)`` as :mod:`.body`'s;
+per arm (left, right) the joints ``shoulder``, ``elbow``, ``wrist`` and the parents
+``shoulder_parent``, ``elbow_parent`` ``(2,)``; per clip ``target`` (how deep a forearm may
+stay, the skeleton's units) and ``spread`` (frames); ``corrected`` ``(B,)`` the frames changed.
 """
 
 from __future__ import annotations
@@ -138,10 +145,42 @@ def _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, ob
     return push
 
 
+@njit(cache=True, nogil=True)
+def _fk_frame(rot, trans, parents, joints, in_arm, arm, row, t, pos, grot):
+    """FK at packed row ``row`` into frame ``t`` of ``pos``, ``grot``: of the ``joints`` whose
+    ``in_arm`` is ``arm`` (their parents already done: the arm chain first, then the rest)."""
+    for j in joints:
+        if in_arm[j] != arm:
+            continue
+        p = parents[j]
+        q = qload(rot, row, j)
+        if p < 0:
+            grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = q
+            pos[t, j, 0], pos[t, j, 1], pos[t, j, 2] = trans[row, j, 0], trans[row, j, 1], trans[row, j, 2]
+        else:
+            parent_rot = qload(grot, t, p)
+            grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = qmul(parent_rot, q)
+            offset = qrot(parent_rot, (trans[row, j, 0], trans[row, j, 1], trans[row, j, 2]))
+            for x in range(3):
+                pos[t, j, x] = pos[t, p, x] + offset[x]
+
+
+@njit(cache=True, nogil=True)
+def _body_frame(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, row, t, pos, grot, ends, whole):
+    """The rest of frame ``t``'s FK and its capsule ends, once (``whole[t]`` says it is done)."""
+    if whole[t]:
+        return
+    _fk_frame(rot, trans, parents, joints, in_arm, False, row, t, pos, grot)
+    for e in range(end_a.shape[0]):
+        for x in range(3):
+            ends[t, e, x] = pos[t, end_a[e], x] * (1.0 - end_w[e]) + pos[t, end_b[e], x] * end_w[e]
+    whole[t] = True
+
+
 @njit(cache=True, parallel=True)
-def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder, elbow,
-                    wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations, hinge_min,
-                    flex, out, corrected):
+def hands_out_clips(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder,
+                    elbow, wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations,
+                    hinge_min, flex, frame_deepest, exact_above, out, corrected):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``out`` and ``corrected[c]``
     (see the module docstring)."""
     J = rot.shape[1]
@@ -151,6 +190,7 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
         pos = np.zeros((n, J, 3))
         grot = np.zeros((n, J, 4))
         ends = np.empty((n, n_ends, 3))
+        whole = np.zeros(n, np.bool_)  # the frame's FK done beyond the arms, and its capsule ends
         elbows = np.empty((n, 2, 3))
         wrists = np.empty((n, 2, 3))
         shift = np.zeros((n, 2, 3))  # the wrists' displacement, chest frame
@@ -158,23 +198,11 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
         widest = np.zeros((n, 2, 3))
         turns = np.zeros((n, 2, 8))  # per arm: the elbow's turn, the shoulder's
         pushed = np.empty(n, np.int64)
+        # the frames the first pass must test: all, or those the body test measured deeper than the
+        # target (exact there when the target is at least exact_above; the margin covers rounding)
+        known = frame_deepest.shape[0] > 0 and target[c] * (1.0 - 1e-6) >= exact_above
         for t in range(n):
-            for j in joints:
-                p = parents[j]
-                q = qload(rot, first + t, j)
-                if p < 0:
-                    grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = q
-                    pos[t, j, 0], pos[t, j, 1], pos[t, j, 2] = (trans[first + t, j, 0], trans[first + t, j, 1],
-                                                                trans[first + t, j, 2])
-                else:
-                    parent_rot = qload(grot, t, p)
-                    grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = qmul(parent_rot, q)
-                    offset = qrot(parent_rot, (trans[first + t, j, 0], trans[first + t, j, 1], trans[first + t, j, 2]))
-                    for x in range(3):
-                        pos[t, j, x] = pos[t, p, x] + offset[x]
-            for e in range(n_ends):
-                for x in range(3):
-                    ends[t, e, x] = pos[t, end_a[e], x] * (1.0 - end_w[e]) + pos[t, end_b[e], x] * end_w[e]
+            _fk_frame(rot, trans, parents, joints, in_arm, True, first + t, t, pos, grot)
             for k in range(2):
                 for x in range(3):
                     elbows[t, k, x] = pos[t, elbow[k], x]
@@ -202,6 +230,9 @@ def hands_out_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, pro
             for t in range(n):
                 if it > 0 and not moved[t]:
                     continue  # a frame no pass has moved was out already, and is still
+                if it == 0 and known and not frame_deepest[first + t] > target[c] * (1.0 - 1e-6):
+                    continue  # no obstacle as deep as the target
+                _body_frame(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, first + t, t, pos, grot, ends, whole)
                 to_chest = qconj(qload(grot, t, chest))
                 hit = False
                 for k in range(2):

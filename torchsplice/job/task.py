@@ -337,7 +337,8 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     rows = np.repeat(starts[todo] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
     arms = arms_of(skeleton, roles, body)
     before, their_trans = np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows])
-    new, count = backend.keep_hands_out(before, their_trans, n, float(group.fps), skeleton, body, arms, allowed[todo])
+    new, count = backend.keep_hands_out(before, their_trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
+                                        deepest=deepest[rows])
     moved = list(arms.moved)
     changed = (new[:, moved] != before[:, moved]).any(axis=(1, 2))
     arms_now = new[changed][:, moved]  # only these rotations differ from the splice's

@@ -32,10 +32,15 @@ from ..core.rotations import quat_apply, quat_conj
 from .body import Body, inside_depth
 
 __all__ = ["penetration", "penetration_packed", "penetration_of_frames", "skate_ratio", "foot_slide", "floor_height", "jerk", "resample_positions",
-           "figure_joints", "clip_figures", "GMD_FPS", "GMD_HEIGHT", "GMD_SPEED", "GMD_WINDOW"]
+           "figure_joints", "clip_figures", "FRAME_FLOOR", "GMD_FPS", "GMD_HEIGHT", "GMD_SPEED", "GMD_WINDOW"]
 
 GMD_FPS, GMD_HEIGHT, GMD_SPEED, GMD_WINDOW = 20.0, 0.05, 0.5, 5
 """GMD's skate convention: frame rate, contact height (m), skating speed (m/s), averaging window (steps)."""
+
+FRAME_FLOOR = 0.5
+"""Each frame's deepest (:func:`penetration_of_frames`, ``Backend.inside_body(per_frame=True)``) is
+exact from this share of the body's margin up: deep enough for the hands' correction
+(:mod:`.hands`), whose least target is ``CLEARANCE`` (a half) of the margin."""
 
 
 def _valid(lengths: torch.Tensor, T: int) -> torch.Tensor:

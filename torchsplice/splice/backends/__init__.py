@@ -167,8 +167,9 @@ class Backend:
         from its packed frames: ``rotations (N, J, 4)``, ``translations (N, J, 3)`` (row 0 the
         root), ``lengths (B,)``. With ``per_frame``, also each frame's deepest ``(N,)``, which
         :func:`~torchsplice.ops.plausibility.penetration_of_frames` turns into the same two (exact
-        where deeper than the body's margin). By torch here; a backend may compute the same
-        figures its way."""
+        where deeper than :data:`~torchsplice.ops.plausibility.FRAME_FLOOR` of the body's margin,
+        no deeper than that elsewhere). By torch here; a backend may compute the same figures its
+        way."""
         import numpy as np
         import torch
 
@@ -206,12 +207,15 @@ class Backend:
                            joints, up_axis, per_metre)
         return {k: v.numpy() for k, v in out.items()}
 
-    def keep_hands_out(self, rotations, translations, lengths, fps: float, skeleton, body, arms, allowed) -> tuple:
+    def keep_hands_out(self, rotations, translations, lengths, fps: float, skeleton, body, arms, allowed,
+                       deepest=None) -> tuple:
         """``(rotations, corrected)``: packed result frames (as :meth:`inside_body` takes them)
         with the arms moved out of ``body`` where a forearm goes deeper than ``allowed`` ``(B,)``
         (the skeleton's units), and the frames changed per result
-        (:func:`~torchsplice.ops.hands.keep_hands_out`). By torch here; a backend may do the same
-        its way."""
+        (:func:`~torchsplice.ops.hands.keep_hands_out`). ``deepest`` ``(N,)``, where given, is each
+        frame's from :meth:`inside_body` (``per_frame``): a backend may skip the frames it shows
+        cannot be pushed, for the same result. By torch here, on every frame; a backend may do
+        the same its way."""
         import numpy as np
         import torch
 

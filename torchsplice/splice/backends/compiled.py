@@ -61,6 +61,15 @@ def warm_up(quiet: bool = False) -> float:
     return time.perf_counter() - t0
 
 
+def _floor(body) -> float:
+    """How deep the body test measures each frame exactly (a little under
+    :data:`~torchsplice.ops.plausibility.FRAME_FLOOR` of the margin, so that a correction whose
+    target is just that may still use the measure)."""
+    from ...ops.plausibility import FRAME_FLOOR
+
+    return FRAME_FLOOR * float(body.margin) * (1.0 - 1e-5)
+
+
 class CompiledBackend(Backend):
     """The compiled CPU splicer (see the module docstring)."""
 
@@ -122,7 +131,7 @@ class CompiledBackend(Backend):
                          np.asarray(skeleton.parents, dtype=np.int64), joint_closure(skeleton.parents, np.unique(ends)),
                          ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
                          np.asarray(body.probes, dtype=np.int64), np.asarray(body.obstacles, dtype=np.int64),
-                         float(body.margin), starts, lengths, share, depth, deepest)
+                         float(body.margin), _floor(body), starts, lengths, share, depth, deepest)
         return (share, depth) + ((deepest,) if per_frame else ())
 
     def figures(self, rotations, translations, lengths, fps, skeleton, joints, up_axis, per_metre):
@@ -147,7 +156,7 @@ class CompiledBackend(Backend):
         out["jerk"] /= per_metre
         return out
 
-    def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed):
+    def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed, deepest=None):
         from ...cpu.fk import joint_closure
         from ...cpu.hands import hands_out_clips
         from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, SLACK
@@ -158,19 +167,24 @@ class CompiledBackend(Backend):
             return np.array(rotations, copy=True), np.zeros(0, np.int64)
         ends = body.end_joints.numpy()
         parents = np.asarray(skeleton.parents, dtype=np.int64)
-        need = np.unique(np.concatenate([ends.reshape(-1), [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]]))
+        chain = [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]
+        need = np.unique(np.concatenate([ends.reshape(-1), chain]))
+        in_arm = np.zeros(len(parents), np.bool_)
+        in_arm[joint_closure(skeleton.parents, np.unique(chain))] = True
         rotations = np.ascontiguousarray(rotations)
         out = rotations.copy()
         corrected = np.zeros(len(lengths), np.int64)
         target = np.maximum(np.asarray(allowed, np.float64), CLEARANCE * body.margin) * np.ones(len(lengths))
         w = np.maximum(np.round(RAMP * np.asarray(fps, np.float64) * np.ones(len(lengths))), 1).astype(np.int64)
+        frame_deepest = np.zeros(0) if deepest is None else np.ascontiguousarray(deepest, dtype=np.float64)
         hands_out_clips(rotations, np.ascontiguousarray(translations), parents, joint_closure(skeleton.parents, need),
-                        ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
+                        in_arm, ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
                         np.asarray(arms.probes, np.int64), np.asarray(body.obstacles, np.int64), int(arms.chest),
                         np.asarray(arms.shoulder, np.int64), np.asarray(arms.elbow, np.int64),
                         np.asarray(arms.wrist, np.int64), parents[list(arms.shoulder)].copy(),
                         parents[list(arms.elbow)].copy(), starts, lengths, target, w, float(SLACK * body.margin),
-                        int(ITERATIONS), float(HINGE_MIN), float(FLEX), out, corrected)
+                        int(ITERATIONS), float(HINGE_MIN), float(FLEX), frame_deepest, _floor(body),
+                        out, corrected)
         return out, corrected
 
     def assembly_bank(self, prepared):
