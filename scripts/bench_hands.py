@@ -44,7 +44,7 @@ from torchsplice.ops.body import body_of  # noqa: E402
 from torchsplice.ops.hands import arms_of  # noqa: E402
 from torchsplice.job.source_figures import scales  # noqa: E402
 from torchsplice.job.task import SELF_PENETRATION  # noqa: E402
-from torchsplice.ops.plausibility import figure_joints  # noqa: E402
+from torchsplice.ops.plausibility import figure_joints, penetration_of_frames  # noqa: E402
 from torchsplice.ops.units import centimetres  # noqa: E402
 from torchsplice.store.database import MotionDatabase  # noqa: E402
 
@@ -192,13 +192,17 @@ def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     joints = figure_joints(sk, r.spec(0).bind(sk))
     up, per_metre, _ = scales(r.spec_json(0))
 
-    def once():
-        backend.inside_body(rot, trans, lengths, sk, body)
+    def once():  # as the job (torchsplice/job/task.py): corrected where they lie, the changed frames measured again
+        _, _, deepest = backend.inside_body(rot, trans, lengths, sk, body, per_frame=True)
         backend.figures(rot, trans, lengths, float(clips[0].fps), sk, joints, up, per_metre)
         if len(todo):
-            new, _ = backend.keep_hands_out(rot[rows], trans[rows], lengths[todo], float(clips[0].fps), sk, body, arms,
-                                            allowed[todo] / per_cm)
-            backend.inside_body(new, trans[rows], lengths[todo], sk, body)
+            out = rot.copy()
+            backend.keep_hands_out(rot, trans, lengths[todo], float(clips[0].fps), sk, body, arms, allowed[todo] / per_cm,
+                                   deepest=deepest, starts=starts[todo], out=out)
+            moved = (rows[:, None], list(arms.moved))
+            again = rows[(out[moved] != rot[moved]).any(axis=(1, 2))]
+            deepest[again] = backend.inside_body(out[again], trans[again], [len(again)], sk, body, per_frame=True)[2]
+            penetration_of_frames(torch.from_numpy(deepest[rows]), lengths[todo], body.margin)
 
     once()
     best = min(_timed(once) for _ in range(3))

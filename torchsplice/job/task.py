@@ -336,18 +336,19 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     n = frames[todo]
     rows = np.repeat(starts[todo] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
     arms = arms_of(skeleton, roles, body)
-    before, their_trans = np.ascontiguousarray(rot[rows]), np.ascontiguousarray(trans[rows])
-    new, count = backend.keep_hands_out(before, their_trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
-                                        deepest=deepest[rows])
     moved = list(arms.moved)
-    changed = (new[:, moved] != before[:, moved]).any(axis=(1, 2))
-    arms_now = new[changed][:, moved]  # only these rotations differ from the splice's
+    was = rot[rows[:, None], moved]  # the moved joints' rotations before: all the correction may change
     rot = np.array(rot, copy=True) if not rot.flags.writeable else rot
-    rot[rows[changed][:, None], moved] = arms_now
+    # corrected where they lie (no copy of their frames): in place, each clip read before it is written
+    _, count = backend.keep_hands_out(rot, trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
+                                      deepest=deepest, starts=starts[todo], out=rot)
+    now = rot[rows[:, None], moved]
+    changed = (now != was).any(axis=(1, 2))
+    arms_now = now[changed]  # only these rotations differ from the splice's
     corrected[todo] = count
     if changed.any():  # frames are measured one by one: the changed alone, then each result's figures again
-        deepest[rows[changed]] = backend.inside_body(new[changed], their_trans[changed], [int(changed.sum())], skeleton,
-                                                     body, per_frame=True)[2]
+        again = rows[changed]
+        deepest[again] = backend.inside_body(rot[again], trans[again], [len(again)], skeleton, body, per_frame=True)[2]
     s2, d2 = penetration_of_frames(torch.from_numpy(deepest[rows]), n, body.margin)
     share[todo], depth[todo] = s2.numpy(), d2.numpy()
     return rot, corrected, (rows[changed], arms_now)

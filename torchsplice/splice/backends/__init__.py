@@ -208,23 +208,31 @@ class Backend:
         return {k: v.numpy() for k, v in out.items()}
 
     def keep_hands_out(self, rotations, translations, lengths, fps: float, skeleton, body, arms, allowed,
-                       deepest=None) -> tuple:
+                       deepest=None, starts=None, out=None) -> tuple:
         """``(rotations, corrected)``: packed result frames (as :meth:`inside_body` takes them)
         with the arms moved out of ``body`` where a forearm goes deeper than ``allowed`` ``(B,)``
         (the skeleton's units), and the frames changed per result
-        (:func:`~torchsplice.ops.hands.keep_hands_out`). ``deepest`` ``(N,)``, where given, is each
-        frame's from :meth:`inside_body` (``per_frame``): a backend may skip the frames it shows
-        cannot be pushed, for the same result. By torch here, on every frame; a backend may do
-        the same its way."""
+        (:func:`~torchsplice.ops.hands.keep_hands_out`). ``starts`` ``(B,)``: where each result's
+        frames begin in the arrays (default one after another), so that a few results of a larger
+        batch are corrected where they lie; ``out``: the array to write (of the rotations' shape;
+        may be ``rotations`` itself; default a copy), returned. ``deepest`` ``(N,)``, where given,
+        is each frame's from :meth:`inside_body` (``per_frame``): a backend may skip the frames it
+        shows cannot be pushed, for the same result. By torch here, on every frame; a backend may
+        do the same its way."""
         import numpy as np
         import torch
 
         from ...ops.hands import keep_hands_out
 
-        out, corrected = keep_hands_out(torch.as_tensor(np.asarray(rotations)), torch.as_tensor(np.asarray(translations)),
-                                        np.asarray(lengths, np.int64), fps, skeleton, body, arms,
-                                        torch.as_tensor(np.asarray(allowed, np.float64)))
-        return out.numpy(), corrected.numpy()
+        lengths = np.asarray(lengths, np.int64)
+        starts = np.cumsum(lengths) - lengths if starts is None else np.asarray(starts, np.int64)
+        rows = np.repeat(starts - (np.cumsum(lengths) - lengths), lengths) + np.arange(int(lengths.sum()))
+        rotations = np.asarray(rotations)
+        new, corrected = keep_hands_out(torch.as_tensor(rotations[rows]), torch.as_tensor(np.asarray(translations)[rows]),
+                                        lengths, fps, skeleton, body, arms, torch.as_tensor(np.asarray(allowed, np.float64)))
+        out = np.array(rotations, copy=True) if out is None else out
+        out[rows] = new.numpy()
+        return out, corrected.numpy()
 
     def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps: float, options) -> tuple[list, list]:
         """The locomotion checks (:func:`~torchsplice.splice.locomotion.check_locomotion`) of

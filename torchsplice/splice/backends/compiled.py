@@ -156,23 +156,27 @@ class CompiledBackend(Backend):
         out["jerk"] /= per_metre
         return out
 
-    def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed, deepest=None):
+    def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed, deepest=None,
+                       starts=None, out=None):
         from ...cpu.fk import joint_closure
         from ...cpu.hands import hands_out_clips
         from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, SLACK
 
         lengths = np.asarray(lengths, dtype=np.int64)
-        starts = (np.cumsum(lengths) - lengths).astype(np.int64)
+        starts = (np.cumsum(lengths) - lengths).astype(np.int64) if starts is None else np.asarray(starts, np.int64)
+        rotations = np.ascontiguousarray(rotations)
+        out = rotations.copy() if out is None else out  # the kernel reads a clip's rows before it writes them
         if not len(lengths):
-            return np.array(rotations, copy=True), np.zeros(0, np.int64)
+            return out, np.zeros(0, np.int64)
+        if not (out.flags.c_contiguous and out.flags.writeable and out.dtype == rotations.dtype
+                and out.shape == rotations.shape):
+            raise ValueError(f"out: a writable C-contiguous {rotations.dtype} array of shape {rotations.shape} is needed")
         ends = body.end_joints.numpy()
         parents = np.asarray(skeleton.parents, dtype=np.int64)
         chain = [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]
         need = np.unique(np.concatenate([ends.reshape(-1), chain]))
         in_arm = np.zeros(len(parents), np.bool_)
         in_arm[joint_closure(skeleton.parents, np.unique(chain))] = True
-        rotations = np.ascontiguousarray(rotations)
-        out = rotations.copy()
         corrected = np.zeros(len(lengths), np.int64)
         target = np.maximum(np.asarray(allowed, np.float64), CLEARANCE * body.margin) * np.ones(len(lengths))
         w = np.maximum(np.round(RAMP * np.asarray(fps, np.float64) * np.ones(len(lengths))), 1).astype(np.int64)
