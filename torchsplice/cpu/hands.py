@@ -15,11 +15,12 @@ clip's target is at least that, only the frames deeper than the target: the othe
 pushed. Later passes test the frames moved. The output is the same either way.
 
 Shapes: rotations ``(N, J, 4)`` (unit WXYZ, local; ``out`` the same, written only at the moved
-joints of changed frames; may be ``rot`` itself: a clip's rows are all read before any is written), translations ``(N, J, 3)`` (row 0 the
-root's position); capsule ends ``end_a``, ``end_b``, ``end_w`` ``(2C,)`` as :mod:`.body`'s;
-per arm (left, right) the joints ``shoulder``, ``elbow``, ``wrist`` and the parents
-``shoulder_parent``, ``elbow_parent`` ``(2,)``; per clip ``target`` (how deep a forearm may
-stay, the skeleton's units) and ``spread`` (frames); ``corrected`` ``(B,)`` the frames changed.
+joints of changed frames, and may be ``rot`` itself: a clip's rows are all read before any is
+written), translations ``(N, J, 3)`` (row 0 the root's position); capsule ends ``end_a``,
+``end_b``, ``end_w`` ``(2C,)`` as :mod:`.body`'s; per arm (left, right) the joints
+``shoulder``, ``elbow``, ``wrist`` and the parents ``shoulder_parent``, ``elbow_parent``
+``(2,)``; per clip ``target`` (how deep a forearm may stay, the skeleton's units) and
+``spread`` (frames); ``corrected`` ``(B,)`` the frames changed.
 """
 
 from __future__ import annotations
