@@ -196,7 +196,7 @@ def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
         _, _, deepest = backend.inside_body(rot, trans, lengths, sk, body, per_frame=True)
         backend.figures(rot, trans, lengths, float(clips[0].fps), sk, joints, up, per_metre)
         if len(todo):
-            out = rot.copy()
+            out = rot.copy()  # the job corrects in place; a copy here keeps the repeats alike (a little slower)
             backend.keep_hands_out(rot, trans, lengths[todo], float(clips[0].fps), sk, body, arms, allowed[todo] / per_cm,
                                    deepest=deepest, starts=starts[todo], out=out)
             moved = (rows[:, None], list(arms.moved))

@@ -361,7 +361,7 @@ def _body_test_share(output: Path, job_seconds: float) -> None:
     up, per_metre, _ = scales(spec)
 
     def figures():
-        backend.inside_body(rot, trans, lengths, sk, body, per_frame=True)  # as the job, which keeps each frame's
+        backend.inside_body(rot, trans, lengths, sk, body, per_frame=True)  # as the job: each frame's depth kept
         backend.figures(rot, trans, lengths, float(clips[0].fps), sk, joints, up, per_metre)
 
     best = best_of(figures, repeats=3)

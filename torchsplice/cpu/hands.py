@@ -2,7 +2,7 @@
 
 The same passes as :func:`torchsplice.ops.hands.keep_hands_out`, one clip per thread: per frame,
 FK of the joints needed (``joints``, ascending and closed under parents: those ``in_arm``, the
-chain from the root to the hands, on every frame; the rest on the frames a pass tests); then
+chain from the root to the wrists, on every frame; the rest on the frames a pass tests); then
 ``iterations`` passes of the push out of every obstacle (closed-form closest points of the
 forearm's axis and each obstacle's), taken into the chest's frame, spread in time (the largest
 push within ``spread`` frames, then a Hann window of half-width ``spread``) and added to the

@@ -344,6 +344,7 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
                                       deepest=deepest, starts=starts[todo], out=rot)
     now = rot[rows[:, None], moved]
     changed = (now != was).any(axis=(1, 2))
+    rot[rows[~changed][:, None], moved] = was[~changed]  # a frame written equal (a zero's sign aside) stays the splice's
     arms_now = now[changed]  # only these rotations differ from the splice's
     corrected[todo] = count
     if changed.any():  # frames are measured one by one: the changed alone, then each result's figures again

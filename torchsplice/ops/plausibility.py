@@ -38,8 +38,8 @@ GMD_FPS, GMD_HEIGHT, GMD_SPEED, GMD_WINDOW = 20.0, 0.05, 0.5, 5
 """GMD's skate convention: frame rate, contact height (m), skating speed (m/s), averaging window (steps)."""
 
 FRAME_FLOOR = 0.5
-"""Each frame's deepest (:func:`penetration_of_frames`, ``Backend.inside_body(per_frame=True)``) is
-exact from this share of the body's margin up: deep enough for the hands' correction
+"""Each frame's deepest (``Backend.inside_body(per_frame=True)``, what :func:`penetration_of_frames`
+reads) is exact from this share of the body's margin up: deep enough for the hands' correction
 (:mod:`.hands`), whose least target is ``CLEARANCE`` (a half) of the margin."""
 
 

@@ -213,12 +213,13 @@ class Backend:
         with the arms moved out of ``body`` where a forearm goes deeper than ``allowed`` ``(B,)``
         (the skeleton's units), and the frames changed per result
         (:func:`~torchsplice.ops.hands.keep_hands_out`). ``starts`` ``(B,)``: where each result's
-        frames begin in the arrays (default one after another), so that a few results of a larger
-        batch are corrected where they lie; ``out``: the array to write (of the rotations' shape;
-        may be ``rotations`` itself; default a copy), returned. ``deepest`` ``(N,)``, where given,
-        is each frame's from :meth:`inside_body` (``per_frame``): a backend may skip the frames it
-        shows cannot be pushed, for the same result. By torch here, on every frame; a backend may
-        do the same its way."""
+        frames begin in the arrays (default one after another; the ranges must not overlap), so
+        that a few results of a larger batch are corrected where they lie; ``out``: the array to
+        write, holding the rotations already (``rotations`` itself, or a copy: a backend may
+        write only the values it changes; default a copy), returned. ``deepest`` ``(N,)``, where
+        given, is each frame's from :meth:`inside_body` (``per_frame``), indexed as the
+        rotations: a backend may skip the frames it shows cannot be pushed, for the same result.
+        By torch here, on every frame; a backend may do the same its way."""
         import numpy as np
         import torch
 

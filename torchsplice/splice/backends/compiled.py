@@ -171,6 +171,8 @@ class CompiledBackend(Backend):
         if not (out.flags.c_contiguous and out.flags.writeable and out.dtype == rotations.dtype
                 and out.shape == rotations.shape):
             raise ValueError(f"out: a writable C-contiguous {rotations.dtype} array of shape {rotations.shape} is needed")
+        if deepest is not None and len(deepest) != len(rotations):
+            raise ValueError(f"deepest: one value per frame of the rotations ({len(rotations)}) is needed, not {len(deepest)}")
         ends = body.end_joints.numpy()
         parents = np.asarray(skeleton.parents, dtype=np.int64)
         chain = [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]
