@@ -1,8 +1,9 @@
 """Compiled correction that keeps hands out of the body (:mod:`torchsplice.ops.hands`), clips packed along frames.
 
 The same passes as :func:`torchsplice.ops.hands.keep_hands_out`, one clip per thread: per frame,
-FK of the joints needed (``joints``, ascending and closed under parents: those ``in_arm``, the
-chain from the root to the wrists, on every frame; the rest on the frames a pass tests); then
+FK (:func:`.fk.fk_clip`) of the joints needed: ``arm``, the chain from the root to the wrists
+(ascending, closed under parents), on every frame, and the ``rest`` (ascending, their parents in
+either) on the frames a pass tests; then
 ``iterations`` passes of the push out of every obstacle (closed-form closest points of the
 forearm's axis and each obstacle's), taken into the chest's frame, spread in time (the largest
 push within ``spread`` frames, then a Hann window of half-width ``spread``) and added to the
@@ -30,6 +31,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .fk import fk_clip
 from .quat import qconj, qload, qmul, qrot
 from .vec import add as _add, cross as _cross, dot as _dot, length as _length, normalized as _normalized
 from .vec import row as _vec, scale as _scale, segment_closest as _closest, sub as _sub
@@ -147,31 +149,12 @@ def _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, ob
 
 
 @njit(cache=True, nogil=True)
-def _fk_frame(rot, trans, parents, joints, in_arm, arm, row, t, pos, grot):
-    """FK at packed row ``row`` into frame ``t`` of ``pos``, ``grot``: of the ``joints`` whose
-    ``in_arm`` is ``arm`` (their parents already done: the arm chain first, then the rest)."""
-    for j in joints:
-        if in_arm[j] != arm:
-            continue
-        p = parents[j]
-        q = qload(rot, row, j)
-        if p < 0:
-            grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = q
-            pos[t, j, 0], pos[t, j, 1], pos[t, j, 2] = trans[row, j, 0], trans[row, j, 1], trans[row, j, 2]
-        else:
-            parent_rot = qload(grot, t, p)
-            grot[t, j, 0], grot[t, j, 1], grot[t, j, 2], grot[t, j, 3] = qmul(parent_rot, q)
-            offset = qrot(parent_rot, (trans[row, j, 0], trans[row, j, 1], trans[row, j, 2]))
-            for x in range(3):
-                pos[t, j, x] = pos[t, p, x] + offset[x]
-
-
-@njit(cache=True, nogil=True)
-def _body_frame(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, row, t, pos, grot, ends, whole):
-    """The rest of frame ``t``'s FK and its capsule ends, once (``whole[t]`` says it is done)."""
+def _body_frame(rot, trans, parents, rest, end_a, end_b, end_w, row, t, pos, grot, ends, whole):
+    """The FK of the ``rest`` of frame ``t``'s joints (packed row ``row``) and its capsule ends,
+    once (``whole[t]`` says it is done)."""
     if whole[t]:
         return
-    _fk_frame(rot, trans, parents, joints, in_arm, False, row, t, pos, grot)
+    fk_clip(rot[row:row + 1], trans[row:row + 1], parents, rest, 1, pos[t:t + 1], grot[t:t + 1])
     for e in range(end_a.shape[0]):
         for x in range(3):
             ends[t, e, x] = pos[t, end_a[e], x] * (1.0 - end_w[e]) + pos[t, end_b[e], x] * end_w[e]
@@ -179,7 +162,7 @@ def _body_frame(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, row, t
 
 
 @njit(cache=True, parallel=True)
-def hands_out_clips(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder,
+def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder,
                     elbow, wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations,
                     hinge_min, flex, frame_deepest, exact_above, out, corrected):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``out`` and ``corrected[c]``
@@ -202,8 +185,8 @@ def hands_out_clips(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, ra
         # the frames the first pass must test: all, or those the body test measured deeper than the
         # target (exact there when the target is at least exact_above; the margin covers rounding)
         known = frame_deepest.shape[0] > 0 and target[c] * (1.0 - 1e-6) >= exact_above
+        fk_clip(rot[first:first + n], trans[first:first + n], parents, arm, n, pos, grot)
         for t in range(n):
-            _fk_frame(rot, trans, parents, joints, in_arm, True, first + t, t, pos, grot)
             for k in range(2):
                 for x in range(3):
                     elbows[t, k, x] = pos[t, elbow[k], x]
@@ -233,7 +216,7 @@ def hands_out_clips(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, ra
                     continue  # a frame no pass has moved was out already, and is still
                 if it == 0 and known and not frame_deepest[first + t] > target[c] * (1.0 - 1e-6):
                     continue  # no obstacle as deep as the target
-                _body_frame(rot, trans, parents, joints, in_arm, end_a, end_b, end_w, first + t, t, pos, grot, ends, whole)
+                _body_frame(rot, trans, parents, rest, end_a, end_b, end_w, first + t, t, pos, grot, ends, whole)
                 to_chest = qconj(qload(grot, t, chest))
                 hit = False
                 for k in range(2):

@@ -176,15 +176,14 @@ class CompiledBackend(Backend):
         ends = body.end_joints.numpy()
         parents = np.asarray(skeleton.parents, dtype=np.int64)
         chain = [arms.chest, *arms.shoulder, *arms.elbow, *arms.wrist]
-        need = np.unique(np.concatenate([ends.reshape(-1), chain]))
-        in_arm = np.zeros(len(parents), np.bool_)
-        in_arm[joint_closure(skeleton.parents, np.unique(chain))] = True
+        arm = joint_closure(skeleton.parents, np.unique(chain))
+        rest = np.setdiff1d(joint_closure(skeleton.parents, np.unique(ends)), arm)  # ascending: parents first
         corrected = np.zeros(len(lengths), np.int64)
         target = np.maximum(np.asarray(allowed, np.float64), CLEARANCE * body.margin) * np.ones(len(lengths))
         w = np.maximum(np.round(RAMP * np.asarray(fps, np.float64) * np.ones(len(lengths))), 1).astype(np.int64)
         frame_deepest = np.zeros(0) if deepest is None else np.ascontiguousarray(deepest, dtype=np.float64)
-        hands_out_clips(rotations, np.ascontiguousarray(translations), parents, joint_closure(skeleton.parents, need),
-                        in_arm, ends[:, 0].copy(), ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
+        hands_out_clips(rotations, np.ascontiguousarray(translations), parents, arm, rest, ends[:, 0].copy(),
+                        ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
                         np.asarray(arms.probes, np.int64), np.asarray(body.obstacles, np.int64), int(arms.chest),
                         np.asarray(arms.shoulder, np.int64), np.asarray(arms.elbow, np.int64),
                         np.asarray(arms.wrist, np.int64), parents[list(arms.shoulder)].copy(),
