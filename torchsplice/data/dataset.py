@@ -87,6 +87,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from ..core.ranges import lengths_to_starts
 from ..core.skeleton import Skeleton
 from ..store import MotionDatabase
 from .collate import collate_motion  # noqa: F401 (its home before data.collate)
@@ -279,7 +280,7 @@ class MotionDataset(Dataset):
             return
         counts = np.where(self._len >= window, (self._len - window) // stride + 1, 0)
         self._win_clip = np.repeat(np.arange(self.num_clips, dtype=np.int64), counts)
-        first = np.cumsum(counts) - counts
+        first = lengths_to_starts(counts)
         self._win_start = (np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(first, counts)) * stride
         short = np.flatnonzero(counts == 0)
         self.num_too_short = int(len(short))
@@ -345,7 +346,7 @@ class MotionDataset(Dataset):
             clips = np.flatnonzero(self._skel == k)
             starts, lengths = self._row0[clips], self._len[clips]
             raw = {n: torch.from_numpy(db.frame_array(k, n).gather(starts, lengths)).to(self.dtype) for n in need}
-            offs = np.cumsum(lengths) - lengths
+            offs = lengths_to_starts(lengths)
             self._pre_offset[clips] = offs
             N = int(lengths.sum())
             fps = torch.from_numpy(np.repeat(self._fps[clips], lengths)).to(self.dtype)

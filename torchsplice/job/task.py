@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
+from ..core.ranges import lengths_to_starts, ranges_to_rows
 from ..ops.units import centimetres
 from ..specs import DatasetSpec
 from ..store.lock import temp_path
@@ -332,9 +333,9 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     if not len(todo):
         return rot, corrected, None
     frames = np.asarray(frames, np.int64)
-    starts = np.cumsum(frames) - frames
+    starts = lengths_to_starts(frames)
     n = frames[todo]
-    rows = np.repeat(starts[todo] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+    rows = ranges_to_rows(starts[todo], n)
     arms = arms_of(skeleton, roles, body)
     moved = list(arms.moved)
     was = rot[rows[:, None], moved]  # the moved joints' rotations before: all the correction may change
@@ -401,7 +402,7 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
     lnames = [plan.clips[k[0]].name for k in keys]
     anames = [plan.clips[k[1]].name for k in keys]
     scale = np.array([plan.clips[k[1]].fps / fps for k in keys])  # to the action's own frames
-    starts = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    starts = lengths_to_starts(frames)
     mean_corr = np.add.reduceat(corr, starts) / frames if len(corr) else np.zeros(len(keys))
     loco_frames = np.array([plan.clips[k[0]].frames for k in keys])
     standing = getattr(task, "mode", "timewarp") == "standing"

@@ -42,6 +42,7 @@ import numpy as np
 import torch
 
 from ..core.fk import forward_kinematics
+from ..core.ranges import ranges_to_rows
 from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat_normalize
 from ..kinematics.contacts import foot_contacts
 from ..specs.canonical import leg_length
@@ -211,7 +212,7 @@ def _pins(pos: np.ndarray, guide: np.ndarray, ankle: int, toe: int | None, s_ank
     run_of = np.full(N, -1)
     lengths = e - s
     idx = np.repeat(np.arange(len(s)), lengths)
-    frames = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths) + np.repeat(s, lengths)
+    frames = ranges_to_rows(s, lengths)
     run_of[frames] = idx
     inside = run_of >= 0
     r = run_of[inside]

@@ -10,6 +10,7 @@ import h5py
 import numpy as np
 
 from ..core.errors import DatabaseError
+from ..core.ranges import lengths_to_starts, ranges_to_rows
 from .assembly import ALIGNMENT, BANKS, Assembly, store_kind
 from .reading import FrameArray
 from .schema import CLIPS, FRAME_ARRAYS, STR, skeleton_path
@@ -119,7 +120,7 @@ class Assembling(DatabaseState):
         starts, rows = self._assembly().clips_of(k)
         lengths = self._assembly().length[rows]
         made = self.assembled(k, starts, lengths)
-        at = np.repeat(starts - np.concatenate(([0], np.cumsum(lengths)[:-1])), lengths) + np.arange(int(lengths.sum()))
+        at = ranges_to_rows(starts, lengths)
         out = {}
         for name, a in made.items():
             whole = np.zeros((N,) + a.shape[1:], a.dtype)
@@ -151,7 +152,7 @@ class Assembling(DatabaseState):
                 compression="lzf",
                 shuffle=True,
             )
-        g["starts"] = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        g["starts"] = lengths_to_starts(lengths)
         g["lengths"] = lengths
         g["names"] = np.array([str(n) for n in names], dtype=object).astype(STR)
         g["keys"] = np.array([str(n) for n in keys], dtype=object).astype(STR)
@@ -228,7 +229,7 @@ class Assembling(DatabaseState):
         g = self.h5[skeleton_path(k)]
         self._reserve(sum(a.nbytes for a in arrays.values()) + 300 * C)
         n0 = g["rotations"].shape[0]
-        rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        rows["skeleton"], rows["start"] = [k] * C, n0 + lengths_to_starts(lengths)
         grown = [n for n in g if isinstance(g[n], h5py.Dataset) and g[n].maxshape and g[n].maxshape[0] is None]
         try:
             for name in grown:

@@ -57,6 +57,7 @@ import numpy as np
 
 from ..core.errors import DatabaseError
 from ..core.method_table import BUILTINS
+from ..core.ranges import lengths_to_starts, ranges_to_rows
 from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
 from .state import DatabaseState
 
@@ -306,7 +307,7 @@ class Assembly:
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
         J, dtype, has_translations = self.skeleton_arrays(db, k)
         N = int(lengths.sum())
-        out_start = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+        out_start = lengths_to_starts(lengths)
         orot = np.empty((N, J, 4), dtype)
         otrans = np.empty((N, J, 3), dtype)
         p = {n: v[clip] for n, v in self.parts.items()}
@@ -314,7 +315,7 @@ class Assembly:
         stored = kind <= 0
         if stored.any():  # frames kept as they are
             s, n, o = starts[stored], lengths[stored], out_start[stored]
-            at_rows = np.repeat(o - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+            at_rows = ranges_to_rows(o, n)
             orot[at_rows] = db.frame_rows(k, "rotations", s, n)
             otrans[at_rows, 0] = db.frame_rows(k, "root_translation", s, n)
             if has_translations:
@@ -325,7 +326,7 @@ class Assembly:
             s, n = starts[timewarp], lengths[timewarp]
             curve = np.zeros(N)
             prot = np.zeros((N, 4), np.float32)
-            at_rows = np.repeat(out_start[timewarp] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+            at_rows = ranges_to_rows(out_start[timewarp], n)
             curve[at_rows] = db.frame_rows(k, "assembly_curve", s, n)
             prot[at_rows] = db.frame_rows(k, "assembly_pelvis", s, n)
         for b in sorted(set(p["assembly_bank"][kind > 0].tolist())):
@@ -399,7 +400,7 @@ class Assembly:
             return None
         n = lengths[which]
         arms = db.frame_rows(k, "assembly_arms", starts[which], n)
-        rows = np.repeat(out_start[which] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+        rows = ranges_to_rows(out_start[which], n)
         keep = (arms != 0).any(axis=(1, 2))
         bank = np.repeat(self.parts["assembly_bank"][clip[which]], n)[keep]
         table = np.array(
@@ -422,7 +423,7 @@ class Assembly:
         p = {n: v[clip] for n, v in self.parts.items()}
         kind = np.repeat(p["assembly_kind"], lengths)
         owner = np.repeat(np.arange(len(starts)), lengths)  # the range of each result frame
-        t = np.repeat(first, lengths) + np.arange(N) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+        t = ranges_to_rows(first, lengths)
         orot = torch.empty((N, J, 4), dtype=torch.float32, device=device)
         otrans = torch.empty((N, J, 3), dtype=torch.float32, device=device)
         stored = kind <= 0
@@ -499,7 +500,7 @@ class Assembly:
                     int(tb["blend"]),
                 )
                 orot[as_tensor(sel, device)], otrans[as_tensor(sel, device)] = r, tr
-        moved = self.moved_arms(db, k, starts, lengths, clip, np.cumsum(lengths) - lengths)
+        moved = self.moved_arms(db, k, starts, lengths, clip, lengths_to_starts(lengths))
         if moved is not None:
             rows, joints, arms = moved
             orot[as_tensor(rows, device)[:, None], as_tensor(joints, device)] = as_tensor(arms, device, torch.float32)

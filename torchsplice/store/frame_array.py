@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 
 from ..core.errors import DatabaseError
+from ..core.ranges import ranges_to_rows
 from .schema import SKELETONS, short
 
 __all__ = ["FrameArray", "reads", "virtual_files"]
@@ -88,7 +89,7 @@ class FrameArray:
         try:
             if hi - lo <= 2 * total:
                 block = ds[lo:hi]
-                rel = np.repeat(starts - lo - np.cumsum(lengths) + lengths, lengths) + np.arange(total)
+                rel = ranges_to_rows(starts - lo, lengths)
                 return block[rel]
             return np.concatenate([ds[int(s) : int(s + n)] for s, n in zip(starts, lengths)])
         except OSError as exc:  # a damaged chunk: one clear line, not HDF5's traceback

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from ..core.errors import DatabaseError
+from ..core.ranges import lengths_to_starts
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import DatasetSpec, detect_spec
@@ -331,7 +332,7 @@ class Reading(DatabaseState):
             mine = list(dict.fromkeys(i for i in idx if int(ct.skeleton[i]) == k))
             starts, lengths = ct.start[mine].astype(np.int64), ct.length[mine].astype(np.int64)
             made = self.assembled(k, starts, lengths)
-            at = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+            at = lengths_to_starts(lengths)
             for i, a, n in zip(mine, at, lengths):
 
                 def get(name):
@@ -408,7 +409,7 @@ class Reading(DatabaseState):
 
         def gather(name):
             if made is not None:  # packed clip after clip: row r of clip b is offset[b] + r
-                offset = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+                offset = lengths_to_starts(lengths)
                 at = offset[:, None] + (rows - starts[:, None])
                 m = made[name]
                 out = (

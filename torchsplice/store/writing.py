@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from ..core.errors import DatabaseError
+from ..core.ranges import lengths_to_starts
 from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
@@ -274,7 +275,7 @@ class Writing(DatabaseState):
         if trans is not None and trans.shape != (N, J, 3):
             raise DatabaseError(f"{self.path}: translations must be {(N, J, 3)}, got {trans.shape}")
         index = self._new_names(names)
-        starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        starts = lengths_to_starts(lengths)
         for name, a in (("rotations", rot), ("root translation", root), ("translations", trans)) if check else ():
             if a is not None and not np.isfinite(a).all():
                 row = int(np.nonzero(~np.isfinite(a.reshape(N, -1)).all(1))[0][0])
@@ -453,7 +454,7 @@ class Writing(DatabaseState):
         C = len(names)
         index = self._new_names(names)
         rows = self._rows(names, lengths, fps, sources, roles, labels, extra)
-        rows["skeleton"], rows["start"] = [k] * C, n0 + np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        rows["skeleton"], rows["start"] = [k] * C, n0 + lengths_to_starts(lengths)
         self._store_rows(rows)
         self._added(index, names)
 

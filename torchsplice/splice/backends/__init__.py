@@ -91,9 +91,10 @@ class SplicedBatch:
     def concat(cls, parts: list["SplicedBatch"]) -> "SplicedBatch":
         """The batches ``parts``, one after another, as one batch (pairs renumbered in order)."""
         import numpy as np
+        from ...core.ranges import lengths_to_starts
 
         frames = np.concatenate([p.frames for p in parts]).astype(np.int64)
-        start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+        start = lengths_to_starts(frames)
         failed, at = {}, 0
         for p in parts:
             failed.update({at + b: why for b, why in p.failed.items()})
@@ -191,6 +192,7 @@ class Backend:
         ``joints`` its :func:`~torchsplice.ops.plausibility.figure_joints`). By torch here, one
         padded batch; a backend may compute the same its way."""
         import numpy as np
+        from ...core.ranges import lengths_to_starts
         import torch
 
         from ...core.fk import forward_kinematics
@@ -198,7 +200,7 @@ class Backend:
 
         lengths = np.asarray(lengths, np.int64)
         B, T = len(lengths), int(lengths.max()) if len(lengths) else 0
-        starts = np.cumsum(lengths) - lengths
+        starts = lengths_to_starts(lengths)
         rows = np.minimum(starts[:, None] + np.arange(T)[None, :], starts[:, None] + np.maximum(lengths - 1, 0)[:, None])
         t = torch.as_tensor(np.asarray(translations, np.float64)[rows])
         pos, grot = forward_kinematics(torch.as_tensor(np.asarray(rotations, np.float64)[rows]), t[..., 0, :],
@@ -221,13 +223,14 @@ class Backend:
         rotations: a backend may skip the frames it shows cannot be pushed, for the same result.
         By torch here, on every frame; a backend may do the same its way."""
         import numpy as np
+        from ...core.ranges import lengths_to_starts, ranges_to_rows
         import torch
 
         from ...ops.hands import keep_hands_out
 
         lengths = np.asarray(lengths, np.int64)
-        starts = np.cumsum(lengths) - lengths if starts is None else np.asarray(starts, np.int64)
-        rows = np.repeat(starts - (np.cumsum(lengths) - lengths), lengths) + np.arange(int(lengths.sum()))
+        starts = lengths_to_starts(lengths) if starts is None else np.asarray(starts, np.int64)
+        rows = ranges_to_rows(starts, lengths)
         rotations = np.asarray(rotations)
         new, corrected = keep_hands_out(torch.as_tensor(rotations[rows]), torch.as_tensor(np.asarray(translations)[rows]),
                                         lengths, fps, skeleton, body, arms, torch.as_tensor(np.asarray(allowed, np.float64)))

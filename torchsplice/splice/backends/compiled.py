@@ -12,16 +12,29 @@ import time
 
 import numpy as np
 
+from ...core.ranges import lengths_to_starts
 from . import Backend, PairFailedError, SplicedBatch
 
-__all__ = ["CompiledBackend", "BACKEND", "warm_up"]
+__all__ = ["CompiledBackend", "BACKEND", "WARM_PARTS", "kernels_cached", "warm_up"]
 
 
-def warm_up(quiet: bool = False) -> float:
-    """Run every kernel of the default paths once on the built-in sample; returns the seconds taken."""
+WARM_PARTS = ("splicer", "others")
+"""The warm-up's two halves, about even in compile time (:func:`warm_up`'s ``parts``): the
+whole-pair splicer alone, and every other kernel of the default paths."""
+
+
+def kernels_cached() -> bool:
+    """Whether this version's kernels are compiled and cached already (:func:`torchsplice.cpu.warm`)."""
     from ...cpu import warm
 
-    if warm():
+    return warm()
+
+
+def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: bool = False) -> float:
+    """Run every kernel of the default paths once on the built-in sample (those of ``parts``, see
+    :data:`WARM_PARTS`), compiling them where the cache lacks them; returns the seconds taken
+    (0 when the cache was already warm, unless ``force``)."""
+    if kernels_cached() and not force:
         return 0.0
     t0 = time.perf_counter()
     if not quiet:
@@ -35,9 +48,13 @@ def warm_up(quiet: bool = False) -> float:
     clips = sample_motions()[:4]
     roles = load_spec("sample").bind(clips[0].skeleton)
     bank = ClipBank.from_motions(clips, clips[0].skeleton, roles)
+    if "splicer" in parts:
+        for method in (m.name for m in BUILTINS):
+            splice_bank(bank, np.array([0, 1]), np.array([2, 3]), method, ref=np.array([0, 1]))
+    if "others" not in parts:
+        return time.perf_counter() - t0
     tables = standing_tables(roles, clips[0].skeleton, clips[0].fps)
     for method in (m.name for m in BUILTINS):
-        splice_bank(bank, np.array([0, 1]), np.array([2, 3]), method, ref=np.array([0, 1]))
         for timing in ("loop", "hold", "fit"):
             standing_bank(bank, np.array([0, 1]), np.array([2, 3]), np.array([[True, False], [True, True]]), tables,
                           method, timing)
@@ -123,7 +140,7 @@ class CompiledBackend(Backend):
         from ...cpu.fk import joint_closure
 
         lengths = np.asarray(lengths, dtype=np.int64)
-        starts = (np.cumsum(lengths) - lengths).astype(np.int64)
+        starts = lengths_to_starts(lengths)
         ends = body.end_joints.numpy()
         share, depth, deepest = np.zeros(len(lengths)), np.zeros(len(lengths)), np.full(int(lengths.sum()), -np.inf)
         if len(lengths):
@@ -140,7 +157,7 @@ class CompiledBackend(Backend):
 
         lengths = np.asarray(lengths, dtype=np.int64)
         B = len(lengths)
-        starts = (np.cumsum(lengths) - lengths).astype(np.int64)
+        starts = lengths_to_starts(lengths)
         feet, upper, chest = joints
         out = {k: np.zeros(B) for k in ("foot_skate", "foot_slide", "floor", "jerk")}
         if not B:
@@ -163,7 +180,7 @@ class CompiledBackend(Backend):
         from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, SLACK
 
         lengths = np.asarray(lengths, dtype=np.int64)
-        starts = (np.cumsum(lengths) - lengths).astype(np.int64) if starts is None else np.asarray(starts, np.int64)
+        starts = lengths_to_starts(lengths) if starts is None else np.asarray(starts, np.int64)
         rotations = np.ascontiguousarray(rotations)
         out = rotations.copy() if out is None else out  # the kernel reads a clip's rows before it writes them
         if not len(lengths):

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...core.errors import TorchspliceError
+from ...core.ranges import lengths_to_starts
 from ..registry import MethodInput, run_checked
 from . import Backend, SplicedBatch
 
@@ -167,7 +168,7 @@ def _pack(rotations, translations, times, lengths, correction, crop, cost, postu
         return x[valid]
 
     frames = lengths.detach().cpu().numpy().astype(np.int64)
-    start = np.concatenate(([0], np.cumsum(frames)[:-1])).astype(np.int64)
+    start = lengths_to_starts(frames)
     curve = packed(times.detach()).to(torch.float64).cpu().numpy()
     corr = packed(correction.detach()).to(torch.float64).cpu().numpy() if correction is not None else np.zeros(len(curve))
     return SplicedBatch(start, frames, packed(rotations), packed(translations), curve, corr, crop, cost, posture,
