@@ -8,11 +8,31 @@ never passes by skipping.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 from realdata import MOCAP, _require_mocap
+
+
+def pytest_configure(config):
+    """Under pytest-xdist with a process per core (``-n 2`` on two cores), each process computes
+    on one thread (torch and the compiled kernels): two processes of two threads each on two
+    cores would wait on each other. A test may still set more threads for itself. The processes
+    that tests start run torch on one thread too (``OMP_NUM_THREADS=1``), the compiled kernels
+    on their own defaults."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if workers >= 2 and workers >= cores:
+        os.environ["OMP_NUM_THREADS"] = "1"
+        import torch
+
+        torch.set_num_threads(1)
+        from torchsplice.cpu import available, set_threads
+
+        if available():
+            set_threads(1)
 
 
 @pytest.fixture(scope="session")
