@@ -2,9 +2,10 @@
 # Set up ./.venv and run the test suite (extra arguments go to pytest).
 #   bash scripts/test.sh          the quick suite: every test but those marked slow (a few minutes)
 #   bash scripts/test.sh --all    every test; CI (CI=true) always runs every test
-#   bash scripts/test.sh -n 2     the quick suite in two processes (pytest-xdist; each builds its own
-#                                 session fixtures): little faster on two cores, which the compiled
-#                                 kernels and torch already use; it helps on more
+#   bash scripts/test.sh -n 1     in one process: by default the tests run in one process per core,
+#                                 four at most (pytest-xdist; each builds its own session fixtures and
+#                                 computes on its share of the cores, tests/conftest.py): on two cores
+#                                 the quick suite takes about 3.5 minutes that way, 6 in one process
 # Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it.
 # The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
 # apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
@@ -27,4 +28,10 @@ if [ "$all" = 0 ]; then
   echo "test: the quick suite (tests marked slow left out; --all runs them too)" >&2
   set -- -m "not slow" "$@"
 fi
+case " $* " in
+  *" -n "*|*" -n"[0-9]*|*" --numprocesses"*|*" -p no:xdist "*) ;;
+  *) _procs="$(nproc 2>/dev/null || echo 1)"
+     if [ "$_procs" -gt 4 ]; then _procs=4; fi
+     if [ "$_procs" -ge 2 ]; then set -- -n "$_procs" "$@"; fi ;;
+esac
 exec python -m pytest "$@"

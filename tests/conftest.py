@@ -17,22 +17,25 @@ from realdata import MOCAP, _require_mocap
 
 
 def pytest_configure(config):
-    """Under pytest-xdist with a process per core (``-n 2`` on two cores), each process computes
-    on one thread (torch and the compiled kernels): two processes of two threads each on two
-    cores would wait on each other. A test may still set more threads for itself. The processes
-    that tests start run torch on one thread too (``OMP_NUM_THREADS=1``), the compiled kernels
-    on their own defaults."""
+    """Under pytest-xdist, the cores are shared out: each test process computes on
+    ``cores // processes`` threads (at least one; torch and the compiled kernels). Two processes
+    of two threads each on two cores would wait on each other: the whole suite took 769 s that
+    way, 526 s with a thread each. A test may still set more threads for itself. The processes
+    that tests start get the same share for torch (``OMP_NUM_THREADS``); the compiled kernels
+    keep their own defaults there."""
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0)
+    if workers < 2:
+        return
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if workers >= 2 and workers >= cores:
-        os.environ["OMP_NUM_THREADS"] = "1"
-        import torch
+    share = max(1, cores // workers)
+    os.environ["OMP_NUM_THREADS"] = str(share)
+    import torch
 
-        torch.set_num_threads(1)
-        from torchsplice.cpu import available, set_threads
+    torch.set_num_threads(share)
+    from torchsplice.cpu import available, set_threads
 
-        if available():
-            set_threads(1)
+    if available():
+        set_threads(share)
 
 
 @pytest.fixture(scope="session")
