@@ -79,31 +79,26 @@ def test_stride_one_window_one_covers_every_frame(two_skeleton_db):
 
 
 def test_window_reads_only_its_frames(plain_db):
-    """Each item reads exactly its rows (and the one before, for velocities) from the file."""
-
-    class Recorder:
-        def __init__(self, ds):
-            self.ds, self.calls = ds, []
-
-        def __getitem__(self, key):
-            self.calls.append((key.start, key.stop))
-            return self.ds[key]
-
-        def gather(self, starts, lengths):  # the rows of several ranges (one read each, or their span)
-            self.calls += [(int(s), int(s + n)) for s, n in zip(starts, lengths)]
-            return self.ds.gather(starts, lengths)
-
-    for features, ctx in ((("rotations", "root_translation"), 0), (("velocities",), 1)):
+    """Each item reads exactly its rows (and the one before, for velocities) from the file, and
+    only the arrays its features need."""
+    for features, ctx, arrays in ((("rotations", "root_translation"), 0, {"rotations", "root_translation"}),
+                                  (("velocities",), 1, {"rotations", "root_translation"})):
         ds = MotionDataset(plain_db, clips=["walk_curve"], window=40, stride=30, features=features)
-        ds[0]  # opens the file and the datasets
-        for key in list(ds._datasets):
-            ds._datasets[key] = Recorder(ds._datasets[key])
-        with MotionDatabase.open(plain_db) as db:
-            row0 = db.clip_info("walk_curve")["start"]
+        ds[0]  # opens the file
+        db, calls = ds._database(), []
+        read = db.frame_rows
+
+        def recorded(k, name, starts, lengths, read=read, calls=calls):
+            calls.extend((name, int(s), int(s + n)) for s, n in zip(starts, lengths))
+            return read(k, name, starts, lengths)
+
+        db.frame_rows = recorded
+        with MotionDatabase.open(plain_db) as other:
+            row0 = other.clip_info("walk_curve")["start"]
         item = ds[2]
         assert item["start"] == 60
-        calls = [c for r in ds._datasets.values() for c in r.calls]
-        assert calls and all(c == (row0 + 60 - ctx, row0 + 100) for c in calls)
+        assert calls and all(c[1:] == (row0 + 60 - ctx, row0 + 100) for c in calls)
+        assert {c[0] for c in calls} <= arrays
         ds.close()
 
 

@@ -83,7 +83,7 @@ def test_pickle_drops_the_file_handle(plain_db):
     first = ds[3]
     assert ds._db is not None
     clone = pickle.loads(pickle.dumps(ds))
-    assert clone._db is None and clone._datasets == {}
+    assert clone._db is None and clone._db_pid is None
     again = clone[3]
     assert again["name"] == first["name"] and torch.equal(again["velocities"], first["velocities"])
     ds.close()

@@ -316,7 +316,7 @@ def test_the_job_keeps_hands_out_where_neither_source_has_one_in(runs_with_raise
 
 
 @pytest.mark.realdata
-def test_an_alignment_store_assembles_the_corrected_arms(runs_with_raised_hands, tmp_path):
+def test_an_alignment_store_assembles_the_corrected_arms(runs_with_raised_hands, tmp_path, monkeypatch):
     from torchsplice.job.run import splice_all
 
     db, _, out = runs_with_raised_hands
@@ -336,6 +336,21 @@ def test_an_alignment_store_assembles_the_corrected_arms(runs_with_raised_hands,
         on = a._assembly().frames_on(a, k, starts, lengths, "cpu")
         mine = torch.cat([o.read(n).rotations for n in names])
         assert torch.allclose(on["rotations"], mine, atol=1e-6)
+    # the moved arms held in memory (the default) or read clip by clip: the same frames
+    shuffled = np.random.default_rng(0).permutation(len(names))[:60]
+    import torchsplice.store.assembly as assembly
+
+    frames = []
+    for budget in (assembly.HELD_PARTS_BYTES, 0):
+        monkeypatch.setattr(assembly, "HELD_PARTS_BYTES", budget)
+        with MotionDatabase.open(al) as a:
+            t = a.clip_table()
+            made = a.assembled(0, t.start[shuffled] + 1, t.length[shuffled] - 2, names=("rotations",))
+            assert list(made) == ["rotations"]
+            held = a._assembly().held
+            assert (held[(0, "assembly_arms")] is None) == (budget == 0) and (0, "assembly_arms") in held
+            frames.append(made["rotations"])
+    assert np.array_equal(frames[0], frames[1])
 
 
 @pytest.mark.realdata

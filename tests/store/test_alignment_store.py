@@ -96,6 +96,32 @@ def test_an_alignment_store_reads_bit_for_bit_as_the_motion_store(sample_jobs):
         assert np.isfinite(sk["rotations"][()][cpmc]).all() and sk["assembly_curve"].dtype == np.float64
 
 
+def test_parts_held_in_memory_or_read_clip_by_clip_give_the_same_frames(sample_jobs, monkeypatch):
+    """An alignment store's per-frame parts are held in memory where small (HELD_PARTS_BYTES),
+    else read clip by clip: the reads are the motion store's either way; and a reader that asks
+    for some arrays gets those, with the bits of a full read."""
+    import torchsplice.store.assembly as assembly
+
+    motion, alignment = sample_jobs
+    monkeypatch.setattr(assembly, "HELD_PARTS_BYTES", 0)
+    assert_reads_alike(alignment, motion)
+    with MotionDatabase.open(alignment) as a:
+        a.read(0)
+        assert a._assembly().held and not any(v is not None for v in a._assembly().held.values())
+    monkeypatch.undo()
+    with MotionDatabase.open(alignment) as a:
+        t = a.clip_table()
+        rows = np.random.default_rng(1).permutation(len(t.start))[:40]
+        starts, lengths = t.start[rows] + 2, np.maximum(t.length[rows] - 5, 0)
+        full = a.assembled(0, starts, lengths)
+        assert a._assembly().held[(0, "assembly_curve")] is not None
+        for names in (("rotations",), ("rotations", "root_translation"), ("root_translation", "action_frame")):
+            some = a.assembled(0, starts, lengths, names=names)
+            assert sorted(some) == sorted(n for n in names if n in full)
+            for n in some:
+                assert _bits(some[n]) == _bits(full[n]), (names, n)
+
+
 def test_the_alignment_store_of_splice_and_naive_is_smaller(sample_db, tmp_path):
     motion = _job(sample_db, tmp_path / "m.h5", "motion", methods="splice,naive")
     alignment = _job(sample_db, tmp_path / "a.h5", "alignment", methods="splice,naive")

@@ -66,9 +66,11 @@ def timewarp_rows(rot, trans, arc, loco_start, action_start, action_frames, uppe
     bank row of the action's frame 0 after its crop, ``action_frames`` its frames from there; ``curve (n,)``: the
     action frame (from ``action_start``) of each result frame; ``pelvis_rot (n, 4)``: the pelvis's rotation.
     ``arc``: :func:`arc_table` of ``rot`` on the ``upper`` joints, or an empty ``(0, J, 2)``
-    array to compute the slerps' angles here (the same bits either way).
+    array to compute the slerps' angles here (the same bits either way). ``out_trans`` may hold
+    fewer joints than ``rot`` (a reader that wants the root's only: ``(n, 1, 3)``); translations
+    are computed for the joints it holds.
     """
-    J = rot.shape[1]
+    J, JT = rot.shape[1], out_trans.shape[1]
     table = arc.shape[0] > 0
     for t in range(n):
         i0, i1, w = split_time(curve[t], action_frames)
@@ -76,8 +78,9 @@ def timewarp_rows(rot, trans, arc, loco_start, action_start, action_frames, uppe
             if j == pelvis:
                 for c in range(4):
                     out_rot[t, j, c] = pelvis_rot[t, c]
-                for c in range(3):
-                    out_trans[t, j, c] = trans[loco_start + t, j, c]
+                if j < JT:
+                    for c in range(3):
+                        out_trans[t, j, c] = trans[loco_start + t, j, c]
             elif upper[j]:
                 p, q = qload(rot, action_start + i0, j), qload(rot, action_start + i1, j)
                 if table:  # w > 0 only where i1 = i0 + 1: the pair the table holds at row as_ + i0
@@ -85,13 +88,15 @@ def timewarp_rows(rot, trans, arc, loco_start, action_start, action_frames, uppe
                     qstore(out_rot, t, j, qslerp_arc(p, q, w, arc[row, j, 0], arc[row, j, 1]))
                 else:
                     qstore(out_rot, t, j, qslerp(p, q, w))
-                for c in range(3):
-                    out_trans[t, j, c] = lerp(trans[action_start + i0, j, c], trans[action_start + i1, j, c], w)
+                if j < JT:
+                    for c in range(3):
+                        out_trans[t, j, c] = lerp(trans[action_start + i0, j, c], trans[action_start + i1, j, c], w)
             else:
                 for c in range(4):
                     out_rot[t, j, c] = rot[loco_start + t, j, c]
-                for c in range(3):
-                    out_trans[t, j, c] = trans[loco_start + t, j, c]
+                if j < JT:
+                    for c in range(3):
+                        out_trans[t, j, c] = trans[loco_start + t, j, c]
 
 
 @njit(cache=True, nogil=True)
@@ -162,8 +167,9 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
     action's first frame played onto a locomotion no longer than it; ``loop_start``/``loop_end`` the
     loop points; ``acting (2,)`` the arms that act (left, right); ``upper``, ``spine``,
     ``arms (2, J)`` and ``blend_s`` the skeleton's tables (:class:`torchsplice.cpu.bank.StandingTables`).
+    ``out_trans`` may hold fewer joints than ``rot``, as :func:`timewarp_rows`'s.
     """
-    J = rot.shape[1]
+    J, JT = rot.shape[1], out_trans.shape[1]
     blend = max(min(blend_s, action_frames // 3), 1)
     # the locomotion's mean posture of each spine joint (splice)
     S = spine.shape[0]
@@ -209,8 +215,9 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
         for j in range(J):
             if not upper[j] or (method == SPLICE_CODE and idle[j]):
                 qstore(out_rot, i, j, qload(rot, loco_start + t, j))
-                for c in range(3):
-                    out_trans[i, j, c] = trans[loco_start + t, j, c]
+                if j < JT:
+                    for c in range(3):
+                        out_trans[i, j, c] = trans[loco_start + t, j, c]
                 continue
             q = qslerp(qload(rot, action_start + i0, j), qload(rot, action_start + i1, j), w)
             tx = trans[action_start + i0, j, 0] + w * (trans[action_start + i1, j, 0] - trans[action_start + i0, j, 0])
@@ -236,7 +243,8 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
             lq = qload(rot, loco_start + t, j)
             if method == NAIVE_CODE:  # naive: the action's upper body, translations too
                 qstore(out_rot, i, j, q)
-                out_trans[i, j, 0], out_trans[i, j, 1], out_trans[i, j, 2] = tx, ty, tz
+                if j < JT:
+                    out_trans[i, j, 0], out_trans[i, j, 1], out_trans[i, j, 2] = tx, ty, tz
                 continue
             if method == CPMC_CODE:  # cpmc: the action's motion since its first frame, on the locomotion
                 q = qnormalize(qmul(lq, qmul(qconj(qload(rot, action_start, j)), q)))
@@ -244,8 +252,9 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
                 k = spine_k[j]
                 q = qnormalize(qmul(q, qmul(qconj((mean[k, 0], mean[k, 1], mean[k, 2], mean[k, 3])), lq)))
             qstore(out_rot, i, j, q)
-            for c in range(3):
-                out_trans[i, j, c] = trans[loco_start + t, j, c]
+            if j < JT:
+                for c in range(3):
+                    out_trans[i, j, c] = trans[loco_start + t, j, c]
 
 
 @njit(cache=True, nogil=True)

@@ -215,7 +215,6 @@ class MotionDataset(Dataset):
 
         self._db: MotionDatabase | None = None
         self._db_pid: int | None = None
-        self._datasets: dict = {}
         with MotionDatabase.open(self.path) as db:
             clip_table = db.clip_table()
             stored = self._read_layout(db)
@@ -308,27 +307,21 @@ class MotionDataset(Dataset):
                 self._db.close()
             except Exception:
                 pass
-            self._db, self._datasets = None, {}
+            self._db = None
         if self._db is None:
             self._db = MotionDatabase.open(self.path)
             self._db_pid = pid
         return self._db
 
-    def _dataset(self, k: int, name: str):
-        key = (k, name)
-        if key not in self._datasets:
-            self._datasets[key] = self._database().frame_array(k, name)
-        return self._datasets[key]
-
     def close(self) -> None:
         """Close this process's HDF5 file, if open (it reopens on the next read)."""
         if self._db is not None and self._db_pid == os.getpid():
             self._db.close()
-        self._db, self._db_pid, self._datasets = None, None, {}
+        self._db, self._db_pid = None, None
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
-        state.update(_db=None, _db_pid=None, _datasets={})  # open files never travel
+        state.update(_db=None, _db_pid=None)  # open files never travel
         return state
 
     def __del__(self):
@@ -407,9 +400,9 @@ class MotionDataset(Dataset):
                 clip_first.append(start == 0)
             # every range of the skeleton in one read per array (an alignment store assembles them at once)
             los_a, sizes_a = np.array(los, np.int64), np.array(sizes, np.int64)
-            if device is None:
-                raw = {name: torch.from_numpy(np.ascontiguousarray(self._dataset(k, name).gather(los_a, sizes_a)))
-                       for name in self._raw[k]}
+            if device is None:  # an alignment store assembles only the arrays asked for
+                raw = {name: torch.from_numpy(np.ascontiguousarray(a))
+                       for name, a in self._database().assembled(k, los_a, sizes_a, self._raw[k]).items()}
             else:
                 raw = self._database().assembled_on(k, los_a, sizes_a, device, self._raw[k])
             sizes_t = torch.tensor(sizes, dtype=torch.int64)

@@ -71,18 +71,22 @@ class Assembling(DatabaseState):
             arrays[(k, name)] = FrameArray(self.h5[skeleton_path(k)][name])
         return arrays[(k, name)].gather(np.asarray(starts, np.int64), np.asarray(lengths, np.int64))
 
-    def assembled(self, k: int, starts, lengths) -> dict[str, np.ndarray]:
+    def assembled(self, k: int, starts, lengths, names=None) -> dict[str, np.ndarray]:
         """Frames of skeleton ``k`` (rows ``starts[i] : starts[i] + lengths[i]``, each within one
         clip) as a motion store holds them: ``rotations``, ``root_translation``, ``translations``
-        (where stored) and the per-frame columns; in an alignment store assembled from the parts."""
+        (where stored) and the per-frame columns; in an alignment store assembled from the parts.
+        ``names``: the frame arrays and per-frame columns wanted (default: all)."""
         starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
+        g = self.h5[skeleton_path(k)]
+        arrays = [n for n in FRAME_ARRAYS if n in g and (names is None or n in names)]
         if self.store == ALIGNMENT:
-            out = self._assembly().frames(self, k, starts, lengths)
+            made = self._assembly().frames(self, k, starts, lengths, "translations" in arrays) if arrays else {}
+            out = {n: made[n] for n in arrays}
         else:
-            g = self.h5[skeleton_path(k)]
-            out = {n: self.frame_rows(k, n, starts, lengths) for n in FRAME_ARRAYS if n in g}
+            out = {n: self.frame_rows(k, n, starts, lengths) for n in arrays}
         for n in self.frame_columns:
-            out[n] = self.frame_rows(k, n, starts, lengths)
+            if names is None or n in names:
+                out[n] = self.frame_rows(k, n, starts, lengths)
         return out
 
     def assembled_on(self, k: int, starts, lengths, device, names=None) -> dict:

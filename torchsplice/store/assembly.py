@@ -51,6 +51,7 @@ no chunk that was never written).
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import h5py
 import numpy as np
@@ -106,6 +107,13 @@ FRAME_PARTS = {
 """The per-frame parts: name -> (shape of a row, dtype)."""
 OPTIONAL_PARTS = ("assembly_arms",)
 """Per-frame parts a store written before them lacks (read as nothing to apply)."""
+HELD_PARTS_BYTES = 256 << 20
+"""An alignment store's ``assembly_curve`` and ``assembly_pelvis`` of a skeleton (8 and 16 bytes
+a frame) are each read whole, once per open database, where they take at most this many bytes
+(about 11 million frames): reads then take their frames' parts from memory instead of reading
+each clip's rows from the file (a shuffled batch of 64 clips was 128 small reads). A larger
+store, or one whose read fails (a damaged chunk), reads each clip's rows as they are asked for."""
+HELD_PARTS = ("assembly_curve", "assembly_pelvis")
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
 METHOD_CODES = {m.name: m.code for m in BUILTINS}
@@ -262,6 +270,7 @@ class Assembly:
         self.start = c["start"][()].astype(np.int64)
         self.length = c["length"][()].astype(np.int64)
         self.by_skeleton: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.held: dict[tuple[int, str], Any] = {}  # see HELD_PARTS_BYTES
 
     def clips_of(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """``(starts, rows)``: the clips of skeleton ``k`` sorted by their first frame."""
@@ -270,6 +279,25 @@ class Assembly:
             rows = rows[np.argsort(self.start[rows], kind="stable")]
             self.by_skeleton[k] = (self.start[rows], rows)
         return self.by_skeleton[k]
+
+    def frame_part(self, db, k: int, name: str, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s per-frame part ``name``,
+        concatenated: from memory where the whole part is held (:data:`HELD_PARTS_BYTES`), else
+        read from the file."""
+        key = (k, name)
+        if key not in self.held:
+            self.held[key] = None
+            if name in HELD_PARTS and db.mode == "r":  # a file being written may still grow its arrays
+                ds = db.h5[skeleton_path(k)][name]
+                if ds.size * ds.dtype.itemsize <= HELD_PARTS_BYTES:
+                    try:
+                        self.held[key] = db.frame_rows(k, name, np.zeros(1, np.int64), np.array([ds.shape[0]]))
+                    except DatabaseError:  # a damaged chunk: each read names its own rows
+                        pass
+        whole = self.held[key]
+        if whole is None:
+            return db.frame_rows(k, name, starts, lengths)
+        return whole[ranges_to_rows(starts, lengths)]
 
     def skeleton_arrays(self, db, k: int) -> tuple[int, np.dtype, bool]:
         """``(J, dtype, has_translations)`` of skeleton ``k``'s frame arrays, looked up once."""
@@ -298,18 +326,22 @@ class Assembly:
             )
         return starts, lengths, clip, first
 
-    def frames(self, db, k: int, starts: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
+    def frames(
+        self, db, k: int, starts: np.ndarray, lengths: np.ndarray, translations: bool = True
+    ) -> dict[str, np.ndarray]:
         """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s frame arrays (each range
         within one clip), concatenated: ``rotations``, ``root_translation`` and ``translations``
-        (where the skeleton stores them), as the store's dtype."""
+        (where the skeleton stores them, unless ``translations`` is false: a reader that wants
+        the root's only saves the other joints' work), as the store's dtype."""
         from ..cpu.assemble import arc_table, assemble_standing, assemble_timewarp
 
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
         J, dtype, has_translations = self.skeleton_arrays(db, k)
+        has_translations = has_translations and translations
         N = int(lengths.sum())
         out_start = lengths_to_starts(lengths)
         orot = np.empty((N, J, 4), dtype)
-        otrans = np.empty((N, J, 3), dtype)
+        otrans = np.empty((N, J if has_translations else 1, 3), dtype)  # the root's only, where that is all stored
         p = {n: v[clip] for n, v in self.parts.items()}
         kind = p["assembly_kind"]
         stored = kind <= 0
@@ -327,8 +359,8 @@ class Assembly:
             curve = np.zeros(N)
             prot = np.zeros((N, 4), np.float32)
             at_rows = ranges_to_rows(out_start[timewarp], n)
-            curve[at_rows] = db.frame_rows(k, "assembly_curve", s, n)
-            prot[at_rows] = db.frame_rows(k, "assembly_pelvis", s, n)
+            curve[at_rows] = self.frame_part(db, k, "assembly_curve", s, n)
+            prot[at_rows] = self.frame_part(db, k, "assembly_pelvis", s, n)
         for b in sorted(set(p["assembly_bank"][kind > 0].tolist())):
             bank = self.banks[b]
             t = bank["tables"]
@@ -388,6 +420,31 @@ class Assembly:
             out["translations"] = otrans
         return out
 
+    def moved_rows(self, db, k: int, clip: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s ``assembly_arms``, each
+        within moved clip ``clip[i]``, concatenated. The rows of every moved clip of the skeleton
+        are read at once and held (:data:`HELD_PARTS_BYTES`), since a store's moved clips are few
+        and readers come back to them; else each range is read from the file."""
+        key = (k, "assembly_arms")
+        if key not in self.held:
+            self.held[key] = None
+            if db.mode == "r":
+                mine = np.flatnonzero(self.moved & (self.parts["assembly_kind"] > 0) & (self.skeleton == k))
+                if int(self.length[mine].sum()) * 64 <= HELD_PARTS_BYTES:
+                    try:
+                        rows = db.frame_rows(k, "assembly_arms", self.start[mine], self.length[mine])
+                    except DatabaseError:  # a damaged chunk: each read names its own rows
+                        rows = None
+                    if rows is not None:
+                        at = np.full(len(self.skeleton), -1, np.int64)
+                        at[mine] = lengths_to_starts(self.length[mine])
+                        self.held[key] = (at, rows)
+        held = self.held[key]
+        if held is None:
+            return db.frame_rows(k, "assembly_arms", starts, lengths)
+        at, rows = held
+        return rows[ranges_to_rows(at[clip] + starts - self.start[clip], lengths)]
+
     def moved_arms(self, db, k: int, starts, lengths, clip, out_start) -> tuple | None:
         """``(rows, joints, rotations)``: the assembled frames (rows of the ranges concatenated,
         ``(M,)``) whose arms were moved out of the body, each one's ``joints`` ``(M, 4)`` and
@@ -399,7 +456,7 @@ class Assembly:
         if not len(which):
             return None
         n = lengths[which]
-        arms = db.frame_rows(k, "assembly_arms", starts[which], n)
+        arms = self.moved_rows(db, k, clip[which], starts[which], n)
         rows = ranges_to_rows(out_start[which], n)
         keep = (arms != 0).any(axis=(1, 2))
         bank = np.repeat(self.parts["assembly_bank"][clip[which]], n)[keep]
@@ -450,8 +507,8 @@ class Assembly:
             sel = np.flatnonzero(mine & (kind == 1))
             if len(sel):
                 tw = np.flatnonzero((p["assembly_kind"] == 1) & (p["assembly_bank"] == b))
-                curve = db.frame_rows(k, "assembly_curve", starts[tw], lengths[tw])
-                prot = db.frame_rows(k, "assembly_pelvis", starts[tw], lengths[tw])
+                curve = self.frame_part(db, k, "assembly_curve", starts[tw], lengths[tw])
+                prot = self.frame_part(db, k, "assembly_pelvis", starts[tw], lengths[tw])
                 o = owner[sel]
                 act, crop = p["assembly_action"][o], p["assembly_crop"][o]
                 n_act = bank["lengths"][act] - crop
