@@ -169,6 +169,7 @@ def _figures(db: Path, raw: Path, out: Path, t_raw: float, t_out: float, cost: b
 def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     """The figures and the correction timed alone on the uncorrected results, as the job runs them
     (the compiled kernels on one thread, as in each of the job's workers)."""
+    from torchsplice.core.ranges import lengths_to_starts, ranges_to_rows
     from torchsplice.cpu import get_threads, set_threads
     from torchsplice.splice.backends import get_backend
 
@@ -185,8 +186,8 @@ def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     often = np.maximum(np.asarray(e0["penetration_locomotion"]), np.asarray(e0["penetration_action"]))
     allowed[share > often + SELF_PENETRATION] = 0.0  # as the job: what the flag would report may keep nothing
     todo = np.flatnonzero((share > 0) & (depth > allowed))
-    starts = np.cumsum(lengths) - lengths
-    rows = np.concatenate([np.arange(starts[b], starts[b] + lengths[b]) for b in todo]) if len(todo) else np.zeros(0, int)
+    starts = lengths_to_starts(lengths)
+    rows = ranges_to_rows(starts[todo], lengths[todo])
     per_cm = centimetres(r.spec(0).units)
 
     joints = figure_joints(sk, r.spec(0).bind(sk))
