@@ -5,11 +5,14 @@ each made once per session (read only), from the records and clips of ``tests/he
 from __future__ import annotations
 
 import pytest
+import torch
 
 from dataset_clips import SPLICED_COLUMNS, animated_skeleton, chain_skeleton, random_clip, spliced_records
 from torchsplice.core.motion import Motion
 from torchsplice.sample import sample_motions
 from torchsplice.store.database import MotionDatabase
+
+F32 = dict(dtype=torch.float32, fps=24.0, role="locomotion")  # the random clips as these tests store them
 
 
 @pytest.fixture(scope="session")
@@ -41,8 +44,8 @@ def two_skeleton_db(tmp_path_factory):
     """Clips on two skeletons; skeleton 0 animates a non-root translation."""
     path = tmp_path_factory.mktemp("two") / "two.h5"
     with MotionDatabase.create(path, chunk_frames=16) as db:
-        db.append(random_clip(animated_skeleton(), 50, "anim_a", 1))
-        db.append(random_clip(chain_skeleton(), 30, "chain_a", 2))
-        db.append(random_clip(animated_skeleton(), 1, "anim_one_frame", 3))
-        db.append(random_clip(animated_skeleton(), 37, "anim_b", 4))
+        db.append(random_clip(animated_skeleton(), 50, "anim_a", 1, **F32))
+        db.append(random_clip(chain_skeleton(), 30, "chain_a", 2, **F32))
+        db.append(random_clip(animated_skeleton(), 1, "anim_one_frame", 3, **F32))
+        db.append(random_clip(animated_skeleton(), 37, "anim_b", 4, **F32))
     return path

@@ -52,7 +52,7 @@ def test_collate_refuses_mixed_skeletons(two_skeleton_db):
         collate_motion([ds[0], ds[1]])
     with pytest.raises(DatasetError, match="skeletons"):
         ds.skeleton  # noqa: B018
-    assert MotionDataset(two_skeleton_db, where={"skeleton": 1}).skeleton.names == ("A", "B", "C")
+    assert MotionDataset(two_skeleton_db, where={"skeleton": 1}).skeleton.names == ("J0", "J1", "J2")
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,6 +1,6 @@
-"""Records and clips the torchsplice.data tests build their databases from
-(``tests/data/conftest.py``): a database shaped like the splice job's output, and small
-skeletons with random clips."""
+"""Records and clips the tests build their databases from: a database shaped like the splice
+job's output (``tests/data/conftest.py``), and small skeletons with random clips (the data and
+store tests)."""
 
 from __future__ import annotations
 
@@ -58,19 +58,49 @@ def animated_skeleton() -> Skeleton:
     )
 
 
-def chain_skeleton() -> Skeleton:
-    return Skeleton(names=["A", "B", "C"], parents=[-1, 0, 1], offsets=[[0, 0, 0], [0, 1, 0], [0, 1, 0.5]],
-                    channels=[CH6, CH3, CH3])
+def chain_skeleton(J: int = 3, bone: float = 1.0, prefix: str = "J", animated: bool = False) -> Skeleton:
+    """A chain J0 <- J1 <- ... with one End Site; ``animated`` gives every joint position channels."""
+    return Skeleton(
+        names=[f"{prefix}{j}" for j in range(J)],
+        parents=[-1] + list(range(J - 1)),
+        offsets=[[0.0, 0.0, 0.0]] + [[0.0, bone, 0.1 * j] for j in range(1, J)],
+        channels=[CH6] + [CH6 if animated else ("Yrotation", "Xrotation", "Zrotation")] * (J - 1),
+        end_site_parents=[J - 1],
+        end_site_offsets=[[0.0, bone / 2, 0.0]],
+    )
 
 
-def random_clip(sk: Skeleton, T: int, name: str, seed: int) -> Motion:
+def branching_skeleton() -> Skeleton:
+    """Five joints, two branches, three end sites, animated non-root translation on one joint."""
+    return Skeleton(
+        names=["Pelvis", "Spine", "Head", "Left Leg", "Right Leg"],
+        parents=[-1, 0, 1, 0, 0],
+        offsets=[[0, 90, 0], [0, 10, 0], [0, 50, 0], [10, -5, 0], [-10, -5, 0]],
+        channels=[CH6, CH6, ("Xrotation", "Yrotation", "Zrotation"), CH3, CH3],
+        end_site_parents=[2, 3, 4],
+        end_site_offsets=[[0, 10, 0], [0, -80, 5], [0, -80, 5]],
+    )
+
+
+def random_clip(sk: Skeleton, T: int, name: str, seed: int = 0, dtype=torch.float64, fps: float = 30.0,
+                role: str = "", labels: dict | None = None, source: str = "") -> Motion:
     g = torch.Generator().manual_seed(seed)
     J = sk.num_joints
-    rot = torch.nn.functional.normalize(torch.randn(T, J, 4, generator=g), dim=-1)
-    root = torch.randn(T, 3, generator=g) * 10
+    rot = torch.nn.functional.normalize(torch.randn(T, J, 4, generator=g, dtype=torch.float64), dim=-1)
+    root = torch.randn(T, 3, generator=g, dtype=torch.float64) * 10
     trans = None
     if sk.has_joint_translations:
-        trans = sk.offsets.float().expand(T, J, 3).clone()
-        trans[:, 1] += torch.randn(T, 3, generator=g)
+        trans = sk.offsets.expand(T, J, 3).clone()
+        animated = torch.tensor(sk.translation_animated)
+        trans[:, animated] += torch.randn(T, int(animated.sum()), 3, generator=g, dtype=torch.float64)
         trans[:, 0] = root
-    return Motion(sk, rot, root, 24.0, trans, name=name, role="locomotion")
+    return Motion(sk, rot.to(dtype), root.to(dtype), fps, None if trans is None else trans.to(dtype),
+                  name=name, source=source or f"/data/{name}.bvh", role=role, labels=dict(labels or {}))
+
+
+def tiny_clips(n: int, sk: Skeleton, T: int = 3) -> list[Motion]:
+    """``n`` small float32 clips, cheap to build in bulk."""
+    g = torch.Generator().manual_seed(1)
+    rot = torch.nn.functional.normalize(torch.randn(n, T, sk.num_joints, 4, generator=g), dim=-1)
+    root = torch.randn(n, T, 3, generator=g)
+    return [Motion(sk, rot[i], root[i], 30.0, name=f"clip{i:05d}") for i in range(n)]

@@ -15,7 +15,7 @@ from torchsplice.core.errors import DatabaseError
 from torchsplice.specs import load_spec
 from torchsplice.store import ClipTable, FrameArray, MotionDatabase, SkeletonInfo
 
-from tests.store.test_database import branching_skeleton, chain_skeleton, random_clip
+from dataset_clips import branching_skeleton, chain_skeleton, random_clip
 
 ROOT = Path(__file__).resolve().parents[2]
 
