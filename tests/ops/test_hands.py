@@ -345,7 +345,8 @@ def test_an_alignment_store_assembles_the_corrected_arms(runs_with_raised_hands,
         monkeypatch.setattr(assembly, "HELD_PARTS_BYTES", budget)
         with MotionDatabase.open(al) as a:
             t = a.clip_table()
-            made = a.assembled(0, t.start[shuffled] + 1, t.length[shuffled] - 2, names=("rotations",))
+            for _ in range(assembly.HOLD_AFTER_READS):
+                made = a.assembled(0, t.start[shuffled] + 1, t.length[shuffled] - 2, names=("rotations",))
             assert list(made) == ["rotations"]
             held = a._assembly().held
             assert (held[(0, "assembly_arms")] is None) == (budget == 0) and (0, "assembly_arms") in held

@@ -110,9 +110,13 @@ OPTIONAL_PARTS = ("assembly_arms",)
 HELD_PARTS_BYTES = 256 << 20
 """An alignment store's ``assembly_curve`` and ``assembly_pelvis`` of a skeleton (8 and 16 bytes
 a frame) are each read whole, once per open database, where they take at most this many bytes
-(about 11 million frames): reads then take their frames' parts from memory instead of reading
-each clip's rows from the file (a shuffled batch of 64 clips was 128 small reads). A larger
-store, or one whose read fails (a damaged chunk), reads each clip's rows as they are asked for."""
+(about 11 million frames), from the :data:`HOLD_AFTER_READS`-th read of the database on: reads
+then take their frames' parts from memory instead of reading each clip's rows from the file (a
+shuffled batch of 64 clips was 128 small reads), and a reader of a few clips never reads them
+all. A larger store, or one whose read fails (a damaged chunk), reads each clip's rows as they
+are asked for. So are the moved arms (``assembly_arms``) of the clips that have them."""
+HOLD_AFTER_READS = 4
+"""Reads of an open alignment store (per skeleton and part) before its parts are held (see :data:`HELD_PARTS_BYTES`)."""
 HELD_PARTS = ("assembly_curve", "assembly_pelvis")
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
@@ -271,6 +275,7 @@ class Assembly:
         self.length = c["length"][()].astype(np.int64)
         self.by_skeleton: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.held: dict[tuple[int, str], Any] = {}  # see HELD_PARTS_BYTES
+        self.reads: dict[tuple[int, str], int] = {}
 
     def clips_of(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """``(starts, rows)``: the clips of skeleton ``k`` sorted by their first frame."""
@@ -280,12 +285,17 @@ class Assembly:
             self.by_skeleton[k] = (self.start[rows], rows)
         return self.by_skeleton[k]
 
+    def _read_again(self, key: tuple[int, str]) -> bool:
+        """Count a read of ``key``; whether it is the :data:`HOLD_AFTER_READS`-th."""
+        self.reads[key] = self.reads.get(key, 0) + 1
+        return self.reads[key] >= HOLD_AFTER_READS
+
     def frame_part(self, db, k: int, name: str, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
         """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s per-frame part ``name``,
         concatenated: from memory where the whole part is held (:data:`HELD_PARTS_BYTES`), else
         read from the file."""
         key = (k, name)
-        if key not in self.held:
+        if key not in self.held and self._read_again(key):
             self.held[key] = None
             if name in HELD_PARTS and db.mode == "r":  # a file being written may still grow its arrays
                 ds = db.h5[skeleton_path(k)][name]
@@ -294,7 +304,7 @@ class Assembly:
                         self.held[key] = db.frame_rows(k, name, np.zeros(1, np.int64), np.array([ds.shape[0]]))
                     except DatabaseError:  # a damaged chunk: each read names its own rows
                         pass
-        whole = self.held[key]
+        whole = self.held.get(key)
         if whole is None:
             return db.frame_rows(k, name, starts, lengths)
         return whole[ranges_to_rows(starts, lengths)]
@@ -426,7 +436,7 @@ class Assembly:
         are read at once and held (:data:`HELD_PARTS_BYTES`), since a store's moved clips are few
         and readers come back to them; else each range is read from the file."""
         key = (k, "assembly_arms")
-        if key not in self.held:
+        if key not in self.held and self._read_again(key):
             self.held[key] = None
             if db.mode == "r":
                 mine = np.flatnonzero(self.moved & (self.parts["assembly_kind"] > 0) & (self.skeleton == k))
@@ -439,7 +449,7 @@ class Assembly:
                         at = np.full(len(self.skeleton), -1, np.int64)
                         at[mine] = lengths_to_starts(self.length[mine])
                         self.held[key] = (at, rows)
-        held = self.held[key]
+        held = self.held.get(key)
         if held is None:
             return db.frame_rows(k, "assembly_arms", starts, lengths)
         at, rows = held
