@@ -285,6 +285,13 @@ class Assembly:
             self.by_skeleton[k] = (self.start[rows], rows)
         return self.by_skeleton[k]
 
+    def has_arms(self, db, k: int) -> bool:
+        """Whether skeleton ``k`` stores ``assembly_arms`` (looked up once where the file is read only)."""
+        have = self.__dict__.setdefault("_has_arms", {})
+        if k not in have or db.mode != "r":
+            have[k] = "assembly_arms" in db.h5[skeleton_path(k)]
+        return have[k]
+
     def _read_again(self, key: tuple[int, str]) -> bool:
         """Count a read of ``key``; whether it is the :data:`HOLD_AFTER_READS`-th."""
         self.reads[key] = self.reads.get(key, 0) + 1
@@ -460,7 +467,7 @@ class Assembly:
         ``(M,)``) whose arms were moved out of the body, each one's ``joints`` ``(M, 4)`` and
         their local rotations ``(M, 4, 4)`` (float32) that replace the assembled ones; ``None``
         where no clip of the ranges has any."""
-        if self.moved is None or "assembly_arms" not in db.h5[skeleton_path(k)]:
+        if self.moved is None or not self.has_arms(db, k):
             return None
         which = np.flatnonzero(self.moved[clip] & (self.parts["assembly_kind"][clip] > 0))
         if not len(which):
