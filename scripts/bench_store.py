@@ -71,16 +71,15 @@ def _dataset_rates(paths: list[Path], passes: int = 5) -> list[float]:
     sets = [MotionDataset(p, features=("rotations", "root_translation")) for p in paths]
     order = np.random.default_rng(0).permutation(len(sets[0])).tolist()
     best = [float("inf")] * len(sets)
-    frames = 0
+    frames = [0] * len(sets)
     for _ in range(passes + 1):
         for i, ds in enumerate(sets):
             t0 = time.perf_counter()
-            frames = 0
+            frames[i] = 0
             for s in range(0, len(order), 64):
-                items = ds.__getitems__(order[s:s + 64])
-                frames += sum(int(i["length"]) for i in items)
+                frames[i] += sum(int(item["length"]) for item in ds.__getitems__(order[s:s + 64]))
             best[i] = min(best[i], time.perf_counter() - t0)
-    return [frames / b for b in best]
+    return [f / b for f, b in zip(frames, best)]
 
 
 def _assembly_rate(path: Path) -> tuple[float, float]:

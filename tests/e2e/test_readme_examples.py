@@ -398,8 +398,8 @@ def test_every_readme_block_runs_in_order_in_one_fresh_clone(mocap_dir, tmp_path
 
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
                TORCHSPLICE_MOCAP=str(mocap_dir))
-    if os.environ.get("PYTEST_XDIST_WORKER_COUNT"):  # the test process's share of the cores (tests/conftest.py)
-        env["NUMBA_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"]
+    if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0) >= 2:  # the process's share of the cores
+        env["NUMBA_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"]  # (tests/conftest.py set it)
     scripts = tmp_path / "blocks"  # outside the clone, so that Python imports the installed package
     scripts.mkdir()
     skipped, ran, done = set(), 0, set()

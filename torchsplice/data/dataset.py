@@ -87,7 +87,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from ..core.ranges import lengths_to_starts
+from ..core.ranges import lengths_to_starts, ranges_to_rows
 from ..core.skeleton import Skeleton
 from ..store import MotionDatabase
 from .collate import collate_motion  # noqa: F401 (its home before data.collate)
@@ -279,8 +279,7 @@ class MotionDataset(Dataset):
             return
         counts = np.where(self._len >= window, (self._len - window) // stride + 1, 0)
         self._win_clip = np.repeat(np.arange(self.num_clips, dtype=np.int64), counts)
-        first = lengths_to_starts(counts)
-        self._win_start = (np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(first, counts)) * stride
+        self._win_start = ranges_to_rows(np.zeros(len(counts), np.int64), counts) * stride
         short = np.flatnonzero(counts == 0)
         self.num_too_short = int(len(short))
         self.too_short = tuple(self.names[i] for i in short)

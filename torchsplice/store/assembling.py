@@ -71,13 +71,12 @@ class Assembling(DatabaseState):
             arrays[(k, name)] = FrameArray(self.h5[skeleton_path(k)][name])
         return arrays[(k, name)].gather(np.asarray(starts, np.int64), np.asarray(lengths, np.int64))
 
-    def _stored_arrays(self, k: int) -> tuple[str, ...]:
-        """The :data:`FRAME_ARRAYS` skeleton ``k`` stores, looked up once per open file read only
-        (h5py's lookups cost more than a batch's other work)."""
-        have = self.__dict__.setdefault("_stored_array_names", {})
+    def skeleton_datasets(self, k: int) -> frozenset[str]:
+        """The names of skeleton ``k``'s datasets (frame arrays, per-frame columns and parts),
+        looked up once per open file read only: h5py's lookups cost more than a batch's other work."""
+        have = self.__dict__.setdefault("_skeleton_datasets", {})
         if k not in have or self.mode != "r":  # a file being written may still add arrays
-            g = self.h5[skeleton_path(k)]
-            have[k] = tuple(n for n in FRAME_ARRAYS if n in g)
+            have[k] = frozenset(self.h5[skeleton_path(k)])
         return have[k]
 
     def assembled(self, k: int, starts, lengths, names=None) -> dict[str, np.ndarray]:
@@ -86,7 +85,7 @@ class Assembling(DatabaseState):
         (where stored) and the per-frame columns; in an alignment store assembled from the parts.
         ``names``: the frame arrays and per-frame columns wanted (default: all)."""
         starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
-        arrays = [n for n in self._stored_arrays(k) if names is None or n in names]
+        arrays = [n for n in FRAME_ARRAYS if n in self.skeleton_datasets(k) and (names is None or n in names)]
         if self.store == ALIGNMENT:
             made = self._assembly().frames(self, k, starts, lengths, "translations" in arrays) if arrays else {}
             out = {n: made[n] for n in arrays}

@@ -114,10 +114,10 @@ a frame) are each read whole, once per open database, where they take at most th
 then take their frames' parts from memory instead of reading each clip's rows from the file (a
 shuffled batch of 64 clips was 128 small reads), and a reader of a few clips never reads them
 all. A larger store, or one whose read fails (a damaged chunk), reads each clip's rows as they
-are asked for. So are the moved arms (``assembly_arms``) of the clips that have them."""
+are asked for. The moved arms (``assembly_arms``) are held likewise, only the rows of the clips
+whose arms were moved."""
 HOLD_AFTER_READS = 4
 """Reads of an open alignment store (per skeleton and part) before its parts are held (see :data:`HELD_PARTS_BYTES`)."""
-HELD_PARTS = ("assembly_curve", "assembly_pelvis")
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
 METHOD_CODES = {m.name: m.code for m in BUILTINS}
@@ -285,43 +285,47 @@ class Assembly:
             self.by_skeleton[k] = (self.start[rows], rows)
         return self.by_skeleton[k]
 
-    def has_arms(self, db, k: int) -> bool:
-        """Whether skeleton ``k`` stores ``assembly_arms`` (looked up once where the file is read only)."""
-        have = self.__dict__.setdefault("_has_arms", {})
-        if k not in have or db.mode != "r":
-            have[k] = "assembly_arms" in db.h5[skeleton_path(k)]
-        return have[k]
-
-    def _read_again(self, key: tuple[int, str]) -> bool:
-        """Count a read of ``key``; whether it is the :data:`HOLD_AFTER_READS`-th."""
-        self.reads[key] = self.reads.get(key, 0) + 1
-        return self.reads[key] >= HOLD_AFTER_READS
-
-    def frame_part(self, db, k: int, name: str, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s per-frame part ``name``,
-        concatenated: from memory where the whole part is held (:data:`HELD_PARTS_BYTES`), else
-        read from the file."""
+    def part_rows(self, db, k: int, name: str, clip: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s per-frame part ``name``
+        (:data:`FRAME_PARTS`), each within clip ``clip[i]`` (a table row), concatenated: from
+        memory where the part is held (:data:`HELD_PARTS_BYTES`), else read from the file."""
         key = (k, name)
-        if key not in self.held and self._read_again(key):
-            self.held[key] = None
-            if name in HELD_PARTS and db.mode == "r":  # a file being written may still grow its arrays
-                ds = db.h5[skeleton_path(k)][name]
-                if ds.size * ds.dtype.itemsize <= HELD_PARTS_BYTES:
-                    try:
-                        self.held[key] = db.frame_rows(k, name, np.zeros(1, np.int64), np.array([ds.shape[0]]))
-                    except DatabaseError:  # a damaged chunk: each read names its own rows
-                        pass
-        whole = self.held.get(key)
-        if whole is None:
+        self.reads[key] = self.reads.get(key, 0) + 1
+        if key not in self.held and self.reads[key] >= HOLD_AFTER_READS:
+            self.held[key] = self._hold(db, k, name)
+        held = self.held.get(key)
+        if held is None:
             return db.frame_rows(k, name, starts, lengths)
-        return whole[ranges_to_rows(starts, lengths)]
+        at, rows = held
+        return rows[ranges_to_rows(at[clip] + starts - self.start[clip], lengths)]
+
+    def _hold(self, db, k: int, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(at, rows)``: the rows of part ``name`` of every clip of skeleton ``k`` that has them
+        (timewarp clips: the curve and the pelvis; clips whose arms were moved: the arms), read
+        at once, and per table row where its clip's rows begin there; ``None`` where they would
+        take more than :data:`HELD_PARTS_BYTES`, the file is being written, or a chunk is damaged
+        (each read then names its own rows)."""
+        kind = self.parts["assembly_kind"]
+        has = (kind == KIND_CODES["timewarp"]) if name != "assembly_arms" else (self.moved & (kind > 0))
+        mine = np.flatnonzero(has & (self.skeleton == k))
+        shape, dtype = FRAME_PARTS[name]
+        row_bytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+        if db.mode != "r" or int(self.length[mine].sum()) * row_bytes > HELD_PARTS_BYTES:
+            return None
+        try:
+            rows = db.frame_rows(k, name, self.start[mine], self.length[mine])
+        except DatabaseError:
+            return None
+        at = np.full(len(self.skeleton), -1, np.int64)
+        at[mine] = lengths_to_starts(self.length[mine])
+        return at, rows
 
     def skeleton_arrays(self, db, k: int) -> tuple[int, np.dtype, bool]:
         """``(J, dtype, has_translations)`` of skeleton ``k``'s frame arrays, looked up once."""
         have = self.__dict__.setdefault("_skeleton_arrays", {})
         if k not in have:
             g = db.h5[skeleton_path(k)]
-            have[k] = (g["rotations"].shape[1], g["rotations"].dtype, "translations" in g)
+            have[k] = (g["rotations"].shape[1], g["rotations"].dtype, "translations" in db.skeleton_datasets(k))
         return have[k]
 
     def locate(self, db, k: int, starts, lengths) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -376,8 +380,8 @@ class Assembly:
             curve = np.zeros(N)
             prot = np.zeros((N, 4), np.float32)
             at_rows = ranges_to_rows(out_start[timewarp], n)
-            curve[at_rows] = self.frame_part(db, k, "assembly_curve", s, n)
-            prot[at_rows] = self.frame_part(db, k, "assembly_pelvis", s, n)
+            curve[at_rows] = self.part_rows(db, k, "assembly_curve", clip[timewarp], s, n)
+            prot[at_rows] = self.part_rows(db, k, "assembly_pelvis", clip[timewarp], s, n)
         for b in sorted(set(p["assembly_bank"][kind > 0].tolist())):
             bank = self.banks[b]
             t = bank["tables"]
@@ -437,43 +441,18 @@ class Assembly:
             out["translations"] = otrans
         return out
 
-    def moved_rows(self, db, k: int, clip: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s ``assembly_arms``, each
-        within moved clip ``clip[i]``, concatenated. The rows of every moved clip of the skeleton
-        are read at once and held (:data:`HELD_PARTS_BYTES`), since a store's moved clips are few
-        and readers come back to them; else each range is read from the file."""
-        key = (k, "assembly_arms")
-        if key not in self.held and self._read_again(key):
-            self.held[key] = None
-            if db.mode == "r":
-                mine = np.flatnonzero(self.moved & (self.parts["assembly_kind"] > 0) & (self.skeleton == k))
-                if int(self.length[mine].sum()) * 64 <= HELD_PARTS_BYTES:
-                    try:
-                        rows = db.frame_rows(k, "assembly_arms", self.start[mine], self.length[mine])
-                    except DatabaseError:  # a damaged chunk: each read names its own rows
-                        rows = None
-                    if rows is not None:
-                        at = np.full(len(self.skeleton), -1, np.int64)
-                        at[mine] = lengths_to_starts(self.length[mine])
-                        self.held[key] = (at, rows)
-        held = self.held.get(key)
-        if held is None:
-            return db.frame_rows(k, "assembly_arms", starts, lengths)
-        at, rows = held
-        return rows[ranges_to_rows(at[clip] + starts - self.start[clip], lengths)]
-
     def moved_arms(self, db, k: int, starts, lengths, clip, out_start) -> tuple | None:
         """``(rows, joints, rotations)``: the assembled frames (rows of the ranges concatenated,
         ``(M,)``) whose arms were moved out of the body, each one's ``joints`` ``(M, 4)`` and
         their local rotations ``(M, 4, 4)`` (float32) that replace the assembled ones; ``None``
         where no clip of the ranges has any."""
-        if self.moved is None or not self.has_arms(db, k):
+        if self.moved is None or "assembly_arms" not in db.skeleton_datasets(k):
             return None
         which = np.flatnonzero(self.moved[clip] & (self.parts["assembly_kind"][clip] > 0))
         if not len(which):
             return None
         n = lengths[which]
-        arms = self.moved_rows(db, k, clip[which], starts[which], n)
+        arms = self.part_rows(db, k, "assembly_arms", clip[which], starts[which], n)
         rows = ranges_to_rows(out_start[which], n)
         keep = (arms != 0).any(axis=(1, 2))
         bank = np.repeat(self.parts["assembly_bank"][clip[which]], n)[keep]
@@ -524,8 +503,8 @@ class Assembly:
             sel = np.flatnonzero(mine & (kind == 1))
             if len(sel):
                 tw = np.flatnonzero((p["assembly_kind"] == 1) & (p["assembly_bank"] == b))
-                curve = self.frame_part(db, k, "assembly_curve", starts[tw], lengths[tw])
-                prot = self.frame_part(db, k, "assembly_pelvis", starts[tw], lengths[tw])
+                curve = self.part_rows(db, k, "assembly_curve", clip[tw], starts[tw], lengths[tw])
+                prot = self.part_rows(db, k, "assembly_pelvis", clip[tw], starts[tw], lengths[tw])
                 o = owner[sel]
                 act, crop = p["assembly_action"][o], p["assembly_crop"][o]
                 n_act = bank["lengths"][act] - crop
