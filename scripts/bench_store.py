@@ -62,23 +62,32 @@ def _same_reads(a: Path, b: Path) -> tuple[int, int]:
         return len(x), bad
 
 
-def _dataset_rates(paths: list[Path], passes: int = 5) -> list[float]:
-    """Frames/s of ``MotionDataset`` over each of ``paths``, reading every clip in a shuffled order,
-    batches of 64, in this process: the best of ``passes``, the datasets' passes taken in turn so
-    that a busy moment of a shared machine falls on each alike (a first pass warms the page cache)."""
+def _dataset_rates(runs: list[tuple[Path, int]], passes: int = 7) -> list[float]:
+    """Frames/s of ``MotionDataset`` over each ``(path, threads)`` of ``runs`` (``threads``: this
+    process's torch threads, which an alignment store's assembly shares its clips over), reading
+    every clip in a shuffled order, batches of 64, in this process: the best of ``passes``, the
+    runs' passes taken in turn so that a busy moment of a shared machine falls on each alike (a
+    first pass warms the page cache)."""
+    import torch
+
     from torchsplice.data import MotionDataset
 
-    sets = [MotionDataset(p, features=("rotations", "root_translation")) for p in paths]
+    sets = [MotionDataset(p, features=("rotations", "root_translation")) for p, _ in runs]
     order = np.random.default_rng(0).permutation(len(sets[0])).tolist()
     best = [float("inf")] * len(sets)
     frames = [0] * len(sets)
-    for _ in range(passes + 1):
-        for i, ds in enumerate(sets):
-            t0 = time.perf_counter()
-            frames[i] = 0
-            for s in range(0, len(order), 64):
-                frames[i] += sum(int(item["length"]) for item in ds.__getitems__(order[s:s + 64]))
-            best[i] = min(best[i], time.perf_counter() - t0)
+    was = torch.get_num_threads()
+    try:
+        for _ in range(passes + 1):
+            for i, (ds, (_, threads)) in enumerate(zip(sets, runs)):
+                torch.set_num_threads(threads)
+                t0 = time.perf_counter()
+                frames[i] = 0
+                for s in range(0, len(order), 64):
+                    frames[i] += sum(int(item["length"]) for item in ds.__getitems__(order[s:s + 64]))
+                best[i] = min(best[i], time.perf_counter() - t0)
+    finally:
+        torch.set_num_threads(was)
     return [f / b for f, b in zip(frames, best)]
 
 
@@ -159,9 +168,14 @@ def bench_store(files: list[Path], big_db: Path | None = None) -> None:
         print(f"store   read back: {n - bad:,} of {n:,} clips bit for bit the motion store's")
         cps, fps_ = _assembly_rate(tmp / "alignment.h5")
         print(f"store   assembly on one core: {cps:,.0f} clips/s, {fps_ / 1e6:,.2f} million frames/s")
-        rm, ra = _dataset_rates([tmp / "motion.h5", tmp / "alignment.h5"])
+        from torchsplice.core.threads import usable_cores
+
+        cores = usable_cores()
+        rm, ra, ra1 = _dataset_rates([(tmp / "motion.h5", cores), (tmp / "alignment.h5", cores),
+                                      (tmp / "alignment.h5", 1)])
         print(f"store   MotionDataset, shuffled whole clips, warm cache: motion {rm / 1e6:,.2f}, alignment {ra / 1e6:,.2f} "
-              f"million frames/s: {ra / rm:.2f}x  [>= 1x]")
+              f"million frames/s: {ra / rm:.2f}x  [>= 1x]  (the assembly on {cores} threads, as a reader in the "
+              f"main process; on 1, as in a DataLoader worker: {ra1 / rm:.2f}x)")
         # killed with SIGKILL at half its tasks, resumed
         out = tmp / "killed.h5"
         first = _job(db, out, "alignment", locos, actions, kill_at=0.5, extra=("--batch-size", "200"))

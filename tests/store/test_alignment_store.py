@@ -65,6 +65,11 @@ def assert_reads_alike(alignment, motion):
             rows = np.concatenate([np.arange(s, s + n) for s, n in zip(t.start[mine], t.length[mine])])
             for name in pm:
                 assert _bits(pa[name][rows]) == _bits(pm[name][rows]), name
+            with pytest.MonkeyPatch.context() as mp:  # the clips shared over threads: the same bits
+                mp.setattr("torchsplice.store.assembly.SPLIT_FRAMES", 1)
+                shared = a.assembled(k, t.start[mine], t.length[mine], threads=3)
+            for name in shared:
+                assert _bits(shared[name]) == _bits(pm[name][rows]), name
             # windows inside clips, as the training dataset reads them
             starts, lengths = t.start[mine][:5] + 1, np.minimum(t.length[mine][:5] - 1, 17)
             for name in ("rotations", "root_translation"):
@@ -124,6 +129,34 @@ def test_parts_held_in_memory_or_read_clip_by_clip_give_the_same_frames(sample_j
             assert sorted(some) == sorted(n for n in names if n in full)
             for n in some:
                 assert _bits(some[n]) == _bits(full[n]), (names, n)
+
+
+def test_a_read_shared_over_threads_gives_the_one_threads_bits(sample_jobs, monkeypatch):
+    """Every thread count assembles the same bits (each thread its own clips and rows), and
+    the motion store's frames; a batch under SPLIT_FRAMES a thread stays in the calling thread."""
+    import torchsplice.core.threads as threads
+    import torchsplice.store.assembly as assembly
+
+    motion, alignment = sample_jobs
+    with MotionDatabase.open(alignment) as a, MotionDatabase.open(motion) as m:
+        t = a.clip_table()
+        rows = np.random.default_rng(2).permutation(len(t.start))
+        starts, lengths = t.start[rows] + 1, np.maximum(t.length[rows] - 3, 0)
+        one = a.assembled(0, starts, lengths, threads=1)
+        want = m.assembled(0, starts, lengths)
+        assert all(_bits(one[n]) == _bits(want[n]) for n in want)
+        made = []
+        monkeypatch.setattr(threads, "_pool_of", lambda n: made.append(n) or threads.ThreadPoolExecutor(n))
+        few = np.cumsum(lengths) < 3 * assembly.SPLIT_FRAMES  # too few frames to share over 3 threads
+        a.assembled(0, starts[few], lengths[few], threads=3)
+        assert made == []
+        a.assembled(0, starts, lengths, threads=1)
+        assert made == []
+        monkeypatch.setattr(assembly, "SPLIT_FRAMES", 1)
+        for n_threads in (2, 3, 7):
+            shared = a.assembled(0, starts, lengths, threads=n_threads)
+            assert all(_bits(shared[n]) == _bits(one[n]) for n in one), n_threads
+        assert sorted(set(made)) == [2, 3, 7] and len(made) == 2 + 3 + 7  # a chunk a thread
 
 
 def test_the_alignment_store_of_splice_and_naive_is_smaller(sample_db, tmp_path):

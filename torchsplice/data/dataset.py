@@ -401,7 +401,8 @@ class MotionDataset(Dataset):
             los_a, sizes_a = np.array(los, np.int64), np.array(sizes, np.int64)
             if device is None:  # an alignment store assembles only the arrays asked for
                 raw = {name: torch.from_numpy(np.ascontiguousarray(a))
-                       for name, a in self._database().assembled(k, los_a, sizes_a, self._raw[k]).items()}
+                       for name, a in self._database().assembled(k, los_a, sizes_a, self._raw[k],
+                                                                  torch.get_num_threads()).items()}
             else:
                 raw = self._database().assembled_on(k, los_a, sizes_a, device, self._raw[k])
             sizes_t = torch.tensor(sizes, dtype=torch.int64)

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import TorchspliceError
+from ..core.threads import usable_cores
 from ..store.database import MotionDatabase
 from .defaults import DEFAULT_INDEX
 
@@ -47,6 +48,7 @@ def materialize(source, output, overwrite: bool = False, progress: bool = False,
             for k, sk in enumerate(db.skeletons):
                 out.add_skeleton(sk, db.stored_spec(k))
             rows = np.arange(len(ct))
+            threads = usable_cores()  # the kernels share each batch's clips (the same bits)
             bar = _bar(len(rows), progress)
             at = 0
             while at < len(rows):
@@ -57,7 +59,7 @@ def materialize(source, output, overwrite: bool = False, progress: bool = False,
                     frames += int(ct.length[stop])
                     stop += 1
                 r = rows[at:stop]
-                f = db.assembled(k, ct.start[r], ct.length[r])
+                f = db.assembled(k, ct.start[r], ct.length[r], threads=threads)
                 out.append_packed(db.skeletons[k], f["rotations"], f["root_translation"], f.get("translations"),
                                   ct.length[r], ct.name[r], ct.fps[r], spec=db.stored_spec(k), sources=ct.source[r],
                                   roles=ct.role[r], labels=ct.labels_json[r],

@@ -57,7 +57,7 @@ class Assembling(DatabaseState):
 
     def _assembly(self) -> Assembly:
         have = getattr(self, "_assembly_cache", None)
-        if have is None or len(have.skeleton) != self.h5[f"{CLIPS}/name"].shape[0]:
+        if have is None or (self.mode != "r" and len(have.skeleton) != self.h5[f"{CLIPS}/name"].shape[0]):
             self.flush()
             self._table_written()
             have = self._assembly_cache = Assembly(self)
@@ -79,15 +79,18 @@ class Assembling(DatabaseState):
             have[k] = frozenset(self.h5[skeleton_path(k)])
         return have[k]
 
-    def assembled(self, k: int, starts, lengths, names=None) -> dict[str, np.ndarray]:
+    def assembled(self, k: int, starts, lengths, names=None, threads: int = 1) -> dict[str, np.ndarray]:
         """Frames of skeleton ``k`` (rows ``starts[i] : starts[i] + lengths[i]``, each within one
         clip) as a motion store holds them: ``rotations``, ``root_translation``, ``translations``
         (where stored) and the per-frame columns; in an alignment store assembled from the parts.
-        ``names``: the frame arrays and per-frame columns wanted (default: all)."""
+        ``names``: the frame arrays and per-frame columns wanted (default: all); ``threads``: the
+        threads of this process an alignment store's assembly may use (the same bits for any count)."""
         starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
         arrays = [n for n in FRAME_ARRAYS if n in self.skeleton_datasets(k) and (names is None or n in names)]
         if self.store == ALIGNMENT:
-            made = self._assembly().frames(self, k, starts, lengths, "translations" in arrays) if arrays else {}
+            made = (
+                self._assembly().frames(self, k, starts, lengths, "translations" in arrays, threads) if arrays else {}
+            )
             out = {n: made[n] for n in arrays}
         else:
             out = {n: self.frame_rows(k, n, starts, lengths) for n in arrays}

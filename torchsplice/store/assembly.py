@@ -59,6 +59,7 @@ import numpy as np
 from ..core.errors import DatabaseError
 from ..core.method_table import BUILTINS
 from ..core.ranges import lengths_to_starts, ranges_to_rows
+from ..core.threads import run_in_threads, split_by_weight
 from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
 from .state import DatabaseState
 
@@ -118,6 +119,8 @@ are asked for. The moved arms (``assembly_arms``) are held likewise, only the ro
 whose arms were moved."""
 HOLD_AFTER_READS = 4
 """Reads of an open alignment store (per skeleton and part) before its parts are held (see :data:`HELD_PARTS_BYTES`)."""
+SPLIT_FRAMES = 2048
+"""Frames a thread assembles at least before a read is shared over threads (see :meth:`Assembly.frames`)."""
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
 METHOD_CODES = {m.name: m.code for m in BUILTINS}
@@ -348,12 +351,14 @@ class Assembly:
         return starts, lengths, clip, first
 
     def frames(
-        self, db, k: int, starts: np.ndarray, lengths: np.ndarray, translations: bool = True
+        self, db, k: int, starts: np.ndarray, lengths: np.ndarray, translations: bool = True, threads: int = 1
     ) -> dict[str, np.ndarray]:
         """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s frame arrays (each range
         within one clip), concatenated: ``rotations``, ``root_translation`` and ``translations``
         (where the skeleton stores them, unless ``translations`` is false: a reader that wants
-        the root's only saves the other joints' work), as the store's dtype."""
+        the root's only saves the other joints' work), as the store's dtype. ``threads``: the
+        threads of this process the kernels share the clips over (:mod:`torchsplice.core.threads`;
+        the same bits for any count), used from :data:`SPLIT_FRAMES` frames a thread."""
         from ..cpu.assemble import arc_table, assemble_standing, assemble_timewarp
 
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
@@ -382,56 +387,67 @@ class Assembly:
             at_rows = ranges_to_rows(out_start[timewarp], n)
             curve[at_rows] = self.part_rows(db, k, "assembly_curve", clip[timewarp], s, n)
             prot[at_rows] = self.part_rows(db, k, "assembly_pelvis", clip[timewarp], s, n)
-        for b in sorted(set(p["assembly_bank"][kind > 0].tolist())):
-            bank = self.banks[b]
-            t = bank["tables"]
-            args = (bank["rot"], bank["trans"], bank["starts"], bank["lengths"])
-            m = timewarp & (p["assembly_bank"] == b)
-            if m.any():
-                if "arc" not in bank:  # the slerps' angles between neighbouring frames, once per bank
-                    bank["arc"] = arc_table(bank["rot"], t["upper"])
-                assemble_timewarp(
-                    args[0],
-                    args[1],
-                    bank["arc"],
-                    *args[2:],
-                    p["assembly_locomotion"][m],
-                    p["assembly_action"][m],
-                    p["assembly_crop"][m],
-                    t["upper"],
-                    t["pelvis"],
-                    curve,
-                    prot,
-                    first[m],
-                    lengths[m],
-                    out_start[m],
-                    orot,
-                    otrans,
-                )
-            m = (kind == 2) & (p["assembly_bank"] == b)
-            if m.any():
-                acting = np.stack([(p["assembly_acting"][m] & 1) > 0, (p["assembly_acting"][m] & 2) > 0], axis=1)
-                loops = np.stack([p["assembly_loop_start"][m], p["assembly_loop_end"][m]], axis=1)
-                assemble_standing(
-                    *args,
-                    p["assembly_locomotion"][m],
-                    p["assembly_action"][m],
-                    p["assembly_method"][m],
-                    p["assembly_timing"][m],
-                    p["assembly_window"][m],
-                    loops,
-                    acting,
-                    t["standing_upper"],
-                    t["spine"],
-                    t["arms"],
-                    t["blend"],
-                    first[m],
-                    lengths[m],
-                    out_start[m],
-                    orot,
-                    otrans,
-                    np.empty(N),
-                )
+        built = np.flatnonzero(kind > 0)
+        for b in sorted(set(p["assembly_bank"][built].tolist())):  # the slerps' angles between neighbouring frames,
+            bank = self.banks[b]  # once per bank (before any thread reads it)
+            if "arc" not in bank and (timewarp & (p["assembly_bank"] == b)).any():
+                bank["arc"] = arc_table(bank["rot"], bank["tables"]["upper"])
+
+        def assemble(chunk: np.ndarray) -> None:  # clips built[chunk] into their own rows of orot/otrans
+            mine = np.zeros(len(kind), bool)
+            mine[built[chunk]] = True
+            for b in sorted(set(p["assembly_bank"][built[chunk]].tolist())):
+                bank = self.banks[b]
+                t = bank["tables"]
+                args = (bank["rot"], bank["trans"], bank["starts"], bank["lengths"])
+                m = mine & timewarp & (p["assembly_bank"] == b)
+                if m.any():
+                    assemble_timewarp(
+                        args[0],
+                        args[1],
+                        bank["arc"],
+                        *args[2:],
+                        p["assembly_locomotion"][m],
+                        p["assembly_action"][m],
+                        p["assembly_crop"][m],
+                        t["upper"],
+                        t["pelvis"],
+                        curve,
+                        prot,
+                        first[m],
+                        lengths[m],
+                        out_start[m],
+                        orot,
+                        otrans,
+                    )
+                m = mine & (kind == 2) & (p["assembly_bank"] == b)
+                if m.any():
+                    acting = np.stack([(p["assembly_acting"][m] & 1) > 0, (p["assembly_acting"][m] & 2) > 0], axis=1)
+                    loops = np.stack([p["assembly_loop_start"][m], p["assembly_loop_end"][m]], axis=1)
+                    assemble_standing(
+                        *args,
+                        p["assembly_locomotion"][m],
+                        p["assembly_action"][m],
+                        p["assembly_method"][m],
+                        p["assembly_timing"][m],
+                        p["assembly_window"][m],
+                        loops,
+                        acting,
+                        t["standing_upper"],
+                        t["spine"],
+                        t["arms"],
+                        t["blend"],
+                        first[m],
+                        lengths[m],
+                        out_start[m],
+                        orot,
+                        otrans,
+                        np.empty(N),
+                    )
+
+        weight = lengths[built]
+        parts = threads if int(weight.sum()) >= threads * SPLIT_FRAMES else 1
+        run_in_threads(assemble, split_by_weight(weight, parts), parts)
         moved = self.moved_arms(db, k, starts, lengths, clip, out_start)
         if moved is not None:
             rows, joints, arms = moved
