@@ -18,8 +18,9 @@ Inputs index a bank of source clips packed along frames (float64 local rotations
 position; clip ``c`` is rows ``starts[c] : starts[c] + lengths[c]``). Outputs are written as
 their arrays' dtype (float32 for the stores). Every function computes result frames
 ``first .. first + count - 1`` of a clip, so a read of a window costs the window only. The batch
-functions run in the calling thread (no parallel region: a read may happen in a forked
-``DataLoader`` worker, or beside other threads); processes give the parallelism.
+functions run in the calling thread and release the GIL (no parallel region: a read may happen
+in a forked ``DataLoader`` worker, or beside other threads); a reader shares its clips over its
+threads (:mod:`torchsplice.core.threads`), each thread writing its own rows.
 """
 
 from __future__ import annotations
