@@ -15,6 +15,8 @@ lower body exactly, keeps the arms' range, and an alignment store assembles the 
 
 from __future__ import annotations
 
+import json
+
 import math
 
 import numpy as np
@@ -336,9 +338,30 @@ def test_an_alignment_store_assembles_the_corrected_arms(runs_with_raised_hands,
         on = a._assembly().frames_on(a, k, starts, lengths, "cpu")
         mine = torch.cat([o.read(n).rotations for n in names])
         assert torch.allclose(on["rotations"], mine, atol=1e-6)
+    # the store keeps the joints moved and zeros for the others: each kept joint's rotation is the
+    # motion store's and not the splice's before the correction; a joint left as zeros is the splice's
+    import torchsplice.store.assembly as assembly
+
+    with MotionDatabase.open(al) as a, MotionDatabase.open(out) as o:
+        assert np.array_equal(a.clip_table().start, o.clip_table().start)
+        arms = a.h5["skeletons/0/assembly_arms"][()]
+        joints = json.loads(a.h5["assembly/banks/0"].attrs["tables"])["moved"]
+        frames_moved = np.flatnonzero((arms != 0).any(axis=(1, 2)))
+        chunk = a.h5["skeletons/0/assembly_arms"].chunks[0]  # only the chunks that hold moved frames are stored
+        assert a.h5["skeletons/0/assembly_arms"].id.get_num_chunks() == len(np.unique(frames_moved // chunk))
+        kept = (arms[frames_moved] != 0).any(axis=2)  # (M, 4)
+        assert kept.any(axis=1).all() and not kept.all()  # some frames move one arm only
+        final = o.packed(0)["rotations"][frames_moved][:, joints]
+        t = a.clip_table()
+        monkeypatch.setattr(assembly.Assembly, "moved_arms", lambda *args: None)
+        a._assembly_cache = None
+        before = a.assembled(0, t.start, t.length, names=("rotations",))["rotations"][frames_moved][:, joints]
+        monkeypatch.undo()
+        assert np.array_equal(arms[frames_moved][kept], final[kept])
+        assert (arms[frames_moved][kept] != before[kept]).any(axis=1).all()
+        assert np.array_equal(final[~kept], before[~kept])
     # the moved arms held in memory (the default) or read clip by clip: the same frames
     shuffled = np.random.default_rng(0).permutation(len(names))[:60]
-    import torchsplice.store.assembly as assembly
 
     frames = []
     for budget in (assembly.HELD_PARTS_BYTES, 0):

@@ -159,6 +159,23 @@ def test_a_read_shared_over_threads_gives_the_one_threads_bits(sample_jobs, monk
         assert sorted(set(made)) == [2, 3, 7] and len(made) == 2 + 3 + 7  # a chunk a thread
 
 
+def test_a_part_that_is_mostly_zeros_stores_only_its_chunks_with_data(tmp_path):
+    from torchsplice.store.assembling import _write_nonzero_chunks
+
+    a = np.zeros((1000, 4, 4), np.float32)
+    a[300:310, 2:] = 1.0  # rows 400..409 of the dataset: chunk 6
+    a[999, 0, 0] = 2.0  # row 1099: chunk 17
+    with h5py.File(tmp_path / "sparse.h5", "w") as f:
+        d = f.create_dataset("x", shape=(1100, 4, 4), chunks=(64, 4, 4), dtype=np.float32, compression="lzf",
+                             shuffle=True)
+        d[:100] = 5.0  # rows another append wrote, sharing chunk 1 with these
+        _write_nonzero_chunks(d, 100, a)
+        assert np.array_equal(d[100:], a) and (d[:100] == 5.0).all()
+        assert d.id.get_num_chunks() == 2 + 2  # chunks 0 and 1 from before, 6 and 17
+        _write_nonzero_chunks(d, 100, np.zeros_like(a))  # nothing to write
+        assert d.id.get_num_chunks() == 4
+
+
 def test_the_alignment_store_of_splice_and_naive_is_smaller(sample_db, tmp_path):
     motion = _job(sample_db, tmp_path / "m.h5", "motion", methods="splice,naive")
     alignment = _job(sample_db, tmp_path / "a.h5", "alignment", methods="splice,naive")

@@ -112,7 +112,8 @@ class Part:
     ``timing``, ``window``, ``loop_start``, ``loop_end``, ``acting``; per frame ``curve``
     (float64) and ``pelvis`` (``(N, 4)`` float32), both ``None`` for standing clips; the arms
     moved out of the body (:func:`_keep_hands_out`), ``arms_rows`` ``(M,)`` the frames changed
-    and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' rotations (:meth:`dense_arms`)."""
+    and ``arms`` ``(M, 4, 4)`` their shoulders' and elbows' rotations, zeros for a joint not changed
+    (:meth:`dense_arms`)."""
 
     task: str
     skeleton: object
@@ -315,8 +316,8 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     (:meth:`~torchsplice.splice.backends.Backend.keep_hands_out`), in ``rot``, and their ``inside``
     figures anew (in place; only the frames changed are measured again). ``(rot, corrected frames
     per result, (rows, arms))``: ``rows`` the packed frames changed and ``arms`` ``(M, 4, 4)``
-    their shoulders' and elbows' new rotations (:attr:`~torchsplice.ops.hands.Arms.moved`), what
-    an alignment store keeps of them."""
+    their shoulders' and elbows' new rotations (:attr:`~torchsplice.ops.hands.Arms.moved`), zeros
+    for a joint not changed, what an alignment store keeps of them."""
     import torch
 
     from ..ops.hands import arms_of
@@ -344,9 +345,12 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     _, count = backend.keep_hands_out(rot, trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
                                       deepest=deepest, starts=starts[todo], out=rot)
     now = rot[rows[:, None], moved]
-    changed = (now != was).any(axis=(1, 2))
-    rot[rows[~changed][:, None], moved] = was[~changed]  # a frame written equal (a zero's sign aside) stays the splice's
-    arms_now = now[changed]  # only these rotations differ from the splice's
+    joint_changed = (now != was).any(axis=2)  # (M, 4): a joint written equal (a zero's sign aside) stays the splice's
+    now = np.where(joint_changed[:, :, None], now, was)
+    rot[rows[:, None], moved] = now
+    changed = joint_changed.any(axis=1)
+    # what an alignment store keeps: the changed joints' rotations, zeros for the others (the arm not moved)
+    arms_now = np.where(joint_changed[changed][:, :, None], now[changed], np.float32(0)).astype(np.float32)
     corrected[todo] = count
     if changed.any():  # frames are measured one by one: the changed alone, then each result's figures again
         again = rows[changed]

@@ -249,7 +249,10 @@ class Assembling(DatabaseState):
             for name in grown:
                 g[name].resize(n0 + N, axis=0)
             for name, a in arrays.items():
-                g[name][n0:] = a
+                if name in SPARSE_PARTS:
+                    _write_nonzero_chunks(g[name], n0, a)
+                else:
+                    g[name][n0:] = a
             self._store_rows(rows)
         except BaseException as exc:
             if io_failure(exc):
@@ -261,3 +264,22 @@ class Assembling(DatabaseState):
                 pass
             raise
         self._added(index, names)
+
+
+SPARSE_PARTS = ("assembly_arms",)
+"""Per-frame parts that are zeros on most frames: only their chunks that hold a non-zero row are written."""
+
+
+def _write_nonzero_chunks(ds: h5py.Dataset, n0: int, a: np.ndarray) -> None:
+    """Rows ``n0 ..`` of ``ds`` from ``a``, written only in the chunks that hold a non-zero row of
+    ``a``: HDF5 stores no chunk that was never written and reads its rows as the fill value,
+    zeros, so a part that is zeros on most frames costs the frames that are not."""
+    chunk = int(ds.chunks[0])
+    nonzero = np.flatnonzero(a.reshape(len(a), -1).any(axis=1))
+    if not len(nonzero):
+        return
+    chunks = np.unique((n0 + nonzero) // chunk)
+    gaps = np.flatnonzero(np.diff(chunks) > 1)
+    for first, last in zip(np.r_[chunks[0], chunks[gaps + 1]], np.r_[chunks[gaps], chunks[-1]]):
+        lo, hi = max(int(first) * chunk - n0, 0), min((int(last) + 1) * chunk - n0, len(a))
+        ds[n0 + lo : n0 + hi] = a[lo:hi]

@@ -31,7 +31,7 @@ Layout, besides :mod:`torchsplice.store.schema`'s (root attribute ``store="align
                                                      local rotations of the bank table "moved"'s
                                                      joints (left shoulder, left elbow, right
                                                      shoulder, right elbow), which replace the
-                                                     assembled ones; zeros where none were moved
+                                                     assembled ones; zeros for a joint not moved
                                                      (optional: stores without it move none)
     /clips/assembly_kind    -1: frames stored in rotations/... as in a motion store (methods whose
                             result is not an alignment: cpmc through the timewarp, plug-ins;
@@ -136,9 +136,10 @@ STORE_README = (
     "(row i of /clips, frames start:start+length of /skeletons/<k>) of assembly_kind 1 plays, at frame t, the root "
     "and lower body of bank clip assembly_locomotion frame t, the pelvis rotation assembly_pelvis[t], and the upper "
     "body of bank clip assembly_action slerped at frame assembly_crop + assembly_curve[t] (translations linearly); "
-    "kind 2 (standing actions) and the exact joint sets are in torchsplice's torchsplice/cpu/assemble.py; where "
-    "a frame's row of /skeletons/<k>/assembly_arms (4,4) is not zeros, it replaces the local rotations of the "
-    "bank's tables' \"moved\" joints (shoulders and elbows moved out of the body); kind -1 "
+    "kind 2 (standing actions) and the exact joint sets are in torchsplice's torchsplice/cpu/assemble.py; "
+    "a frame's row of /skeletons/<k>/assembly_arms (4,4) holds, for each of the bank's tables' \"moved\" joints "
+    "(shoulders and elbows moved out of the body), the local rotation that replaces the assembled one, or zeros "
+    "where that joint was not moved; kind -1 "
     "clips hold their frames in /skeletons/<k>/rotations etc. `torchsplice materialize IN -o OUT` writes every "
     "motion as an ordinary database; torchsplice's MotionDatabase reads either transparently."
 )
@@ -451,17 +452,18 @@ class Assembly:
         moved = self.moved_arms(db, k, starts, lengths, clip, out_start)
         if moved is not None:
             rows, joints, arms = moved
-            orot[rows[:, None], joints] = arms
+            orot[rows, joints] = arms
         out = {"rotations": orot, "root_translation": np.ascontiguousarray(otrans[:, 0])}
         if has_translations:
             out["translations"] = otrans
         return out
 
     def moved_arms(self, db, k: int, starts, lengths, clip, out_start) -> tuple | None:
-        """``(rows, joints, rotations)``: the assembled frames (rows of the ranges concatenated,
-        ``(M,)``) whose arms were moved out of the body, each one's ``joints`` ``(M, 4)`` and
-        their local rotations ``(M, 4, 4)`` (float32) that replace the assembled ones; ``None``
-        where no clip of the ranges has any."""
+        """``(rows, joints, rotations)``: the joints moved out of the body, one entry each, in the
+        assembled frames (rows of the ranges concatenated, ``(P,)``), ``joints`` ``(P,)`` and
+        their local rotations ``(P, 4)`` (float32) that replace the assembled ones (a row of
+        ``assembly_arms`` holds zeros for a joint not moved); ``None`` where no clip of the ranges
+        has any."""
         if self.moved is None or "assembly_arms" not in db.skeleton_datasets(k):
             return None
         which = np.flatnonzero(self.moved[clip] & (self.parts["assembly_kind"][clip] > 0))
@@ -470,14 +472,15 @@ class Assembly:
         n = lengths[which]
         arms = self.part_rows(db, k, "assembly_arms", clip[which], starts[which], n)
         rows = ranges_to_rows(out_start[which], n)
-        keep = (arms != 0).any(axis=(1, 2))
-        bank = np.repeat(self.parts["assembly_bank"][clip[which]], n)[keep]
-        table = np.array(
-            [t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)], np.int64
-        ).reshape(-1, 4)
-        joints = table[bank]
-        known = (joints >= 0).all(axis=1)
-        return rows[keep][known], joints[known], arms[keep][known]
+        table = getattr(self, "_moved_table", None)
+        if table is None:  # each bank's moved joints, -1 where its skeleton has none
+            table = self._moved_table = np.array(
+                [t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)], np.int64
+            ).reshape(-1, 4)
+        joints = table[np.repeat(self.parts["assembly_bank"][clip[which]], n)]  # (M, 4)
+        keep = (arms != 0).any(axis=2) & (joints >= 0)  # (M, 4): the joints moved
+        frame, slot = np.nonzero(keep)
+        return rows[frame], joints[frame, slot], arms[frame, slot]
 
     def frames_on(self, db, k: int, starts: np.ndarray, lengths: np.ndarray, device) -> dict:
         """:meth:`frames` assembled by torch on ``device`` (:mod:`.assembly_torch`): float32
@@ -572,7 +575,7 @@ class Assembly:
         moved = self.moved_arms(db, k, starts, lengths, clip, lengths_to_starts(lengths))
         if moved is not None:
             rows, joints, arms = moved
-            orot[as_tensor(rows, device)[:, None], as_tensor(joints, device)] = as_tensor(arms, device, torch.float32)
+            orot[as_tensor(rows, device), as_tensor(joints, device)] = as_tensor(arms, device, torch.float32)
         out = {"rotations": orot, "root_translation": otrans[:, 0].contiguous()}
         if has_translations:
             out["translations"] = otrans
