@@ -344,20 +344,27 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     # corrected where they lie (no copy of their frames): in place, each clip read before it is written
     _, count = backend.keep_hands_out(rot, trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
                                       deepest=deepest, starts=starts[todo], out=rot)
-    now = rot[rows[:, None], moved]
-    joint_changed = (now != was).any(axis=2)  # (M, 4): a joint written equal (a zero's sign aside) stays the splice's
-    now = np.where(joint_changed[:, :, None], now, was)
-    rot[rows[:, None], moved] = now
+    # the frames of the clips the kernel moved (it writes nothing into the others), as positions in `rows`
+    count = np.asarray(count, np.int64)
+    hit = count > 0
+    at = ranges_to_rows(lengths_to_starts(n)[hit], n[hit])
+    now, before = rot[rows[at][:, None], moved], was[at]
+    bits = f"u{now.itemsize}"
+    written = (now.view(bits) != before.view(bits)).any(axis=2)  # (H, 4): the joints written
+    joint_changed = written & (now != before).any(axis=2)
+    same = np.nonzero(written & ~joint_changed)  # written equal (a zero's sign aside): the splice's stays
+    if len(same[0]):
+        rot[rows[at[same[0]]], np.asarray(moved)[same[1]]] = before[same]
     changed = joint_changed.any(axis=1)
     # what an alignment store keeps: the changed joints' rotations, zeros for the others (the arm not moved)
     arms_now = np.where(joint_changed[changed][:, :, None], now[changed], np.float32(0)).astype(np.float32)
+    again = rows[at[changed]]
     corrected[todo] = count
-    if changed.any():  # frames are measured one by one: the changed alone, then each result's figures again
-        again = rows[changed]
+    if len(again):  # frames are measured one by one: the changed alone, then each result's figures again
         deepest[again] = backend.inside_body(rot[again], trans[again], [len(again)], skeleton, body, per_frame=True)[2]
     s2, d2 = penetration_of_frames(torch.from_numpy(deepest[rows]), n, body.margin)
     share[todo], depth[todo] = s2.numpy(), d2.numpy()
-    return rot, corrected, (rows[changed], arms_now)
+    return rot, corrected, (again, arms_now)
 
 
 PART_KEYS = ("kind", "locomotion", "action")
