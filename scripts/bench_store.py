@@ -168,7 +168,7 @@ def bench_store(files: list[Path], big_db: Path | None = None) -> None:
         print(f"store   read back: {n - bad:,} of {n:,} clips bit for bit the motion store's")
         cps, fps_ = _assembly_rate(tmp / "alignment.h5")
         print(f"store   assembly on one core: {cps:,.0f} clips/s, {fps_ / 1e6:,.2f} million frames/s")
-        from torchsplice.core.threads import usable_cores
+        from torchsplice.job.defaults import usable_cores
 
         cores = usable_cores()
         rm, ra, ra1 = _dataset_rates([(tmp / "motion.h5", cores), (tmp / "alignment.h5", cores),

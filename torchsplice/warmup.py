@@ -10,11 +10,11 @@ the rest) compile at once, the second in a child process (``--part others``).
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import time
 
+from .job.defaults import usable_cores
 from .splice.backends.compiled import WARM_PARTS, kernels_cached, warm_up
 
 __all__ = ["warm_up", "main"]
@@ -32,8 +32,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if kernels_cached():
         return 0
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if cores < 2:
+    if usable_cores() < 2:
         seconds = warm_up()
     else:
         print("setup: compiling the CPU splicer for this machine (once; one to two minutes)", file=sys.stderr,

@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from torchsplice.core.threads import run_in_threads, split_by_weight, usable_cores
+from torchsplice.core.threads import run_in_threads, split_by_weight
 
 
 @pytest.mark.parametrize("parts", [1, 2, 3, 5, 40])
@@ -77,7 +77,3 @@ def test_a_forked_child_makes_its_own_pool():
     os.waitpid(pid, 0)
     assert os.read(r, 16) == b"6"
 
-
-def test_usable_cores_are_the_affinity():
-    n = usable_cores()
-    assert n >= 1 and (not hasattr(os, "sched_getaffinity") or n == len(os.sched_getaffinity(0)))

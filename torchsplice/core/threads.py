@@ -3,13 +3,13 @@
 preallocated outputs, so the result is the one thread's, bit for bit.
 
 - :func:`split_by_weight`: contiguous chunks of items, each about the same total weight (frames);
-- :func:`run_in_threads`: a function applied to each chunk, on a pool of this process;
-- :func:`usable_cores`: the cores this process may run on.
+- :func:`run_in_threads`: a function applied to each chunk, on a pool of this process.
 
 The pool is made on first use and again in a forked child (threads do not survive a fork), so a
 ``DataLoader`` worker that asks for threads gets its own. Callers choose the count: a reader in a
 worker process that shares the cores with its siblings asks for one (``torch.get_num_threads()``
-is 1 there).
+is 1 there); a command that has the machine asks for
+:func:`~torchsplice.job.defaults.usable_cores`.
 """
 
 from __future__ import annotations
@@ -21,19 +21,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["split_by_weight", "run_in_threads", "usable_cores"]
+__all__ = ["split_by_weight", "run_in_threads"]
 
 _pool: ThreadPoolExecutor | None = None
 _pool_key: tuple[int, int] = (0, 0)
 _lock = threading.Lock()
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system says, else all)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
 
 
 def split_by_weight(weights, parts: int) -> list[np.ndarray]:

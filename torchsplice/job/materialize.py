@@ -14,9 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import TorchspliceError
-from ..core.threads import usable_cores
 from ..store.database import MotionDatabase
-from .defaults import DEFAULT_INDEX
+from .defaults import DEFAULT_INDEX, usable_cores
 
 __all__ = ["materialize", "BATCH_FRAMES"]
 

@@ -350,14 +350,14 @@ def _keep_hands_out(backend, plan, group, skeleton, roles, body, keys, frames, r
     at = ranges_to_rows(lengths_to_starts(n)[hit], n[hit])
     now, before = rot[rows[at][:, None], moved], was[at]
     bits = f"u{now.itemsize}"
-    written = (now.view(bits) != before.view(bits)).any(axis=2)  # (H, 4): the joints written
-    joint_changed = written & (now != before).any(axis=2)
-    same = np.nonzero(written & ~joint_changed)  # written equal (a zero's sign aside): the splice's stays
+    joint_changed = (now != before).any(axis=2)  # (H, 4)
+    # a joint written equal (a zero's sign aside) keeps the splice's bits
+    same = np.nonzero((now.view(bits) != before.view(bits)).any(axis=2) & ~joint_changed)
     if len(same[0]):
         rot[rows[at[same[0]]], np.asarray(moved)[same[1]]] = before[same]
     changed = joint_changed.any(axis=1)
     # what an alignment store keeps: the changed joints' rotations, zeros for the others (the arm not moved)
-    arms_now = np.where(joint_changed[changed][:, :, None], now[changed], np.float32(0)).astype(np.float32)
+    arms_now = np.where(joint_changed[changed][:, :, None], now[changed], np.float32(0))
     again = rows[at[changed]]
     corrected[todo] = count
     if len(again):  # frames are measured one by one: the changed alone, then each result's figures again

@@ -280,6 +280,11 @@ class Assembly:
         self.by_skeleton: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.held: dict[tuple[int, str], Any] = {}  # see HELD_PARTS_BYTES
         self.reads: dict[tuple[int, str], int] = {}
+        self.arrays: dict[int, tuple[int, np.dtype, bool]] = {}  # see skeleton_arrays
+        # (banks, 4): each bank's moved joints (its tables' "moved"), -1 where its skeleton has none
+        self.moved_joints = np.array(
+            [t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)], np.int64
+        ).reshape(-1, 4)
 
     def clips_of(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """``(starts, rows)``: the clips of skeleton ``k`` sorted by their first frame."""
@@ -326,11 +331,10 @@ class Assembly:
 
     def skeleton_arrays(self, db, k: int) -> tuple[int, np.dtype, bool]:
         """``(J, dtype, has_translations)`` of skeleton ``k``'s frame arrays, looked up once."""
-        have = self.__dict__.setdefault("_skeleton_arrays", {})
-        if k not in have:
+        if k not in self.arrays:
             g = db.h5[skeleton_path(k)]
-            have[k] = (g["rotations"].shape[1], g["rotations"].dtype, "translations" in db.skeleton_datasets(k))
-        return have[k]
+            self.arrays[k] = (g["rotations"].shape[1], g["rotations"].dtype, "translations" in db.skeleton_datasets(k))
+        return self.arrays[k]
 
     def locate(self, db, k: int, starts, lengths) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(starts, lengths, clip, first)``: frame ranges of skeleton ``k`` as int64 arrays, the
@@ -472,12 +476,7 @@ class Assembly:
         n = lengths[which]
         arms = self.part_rows(db, k, "assembly_arms", clip[which], starts[which], n)
         rows = ranges_to_rows(out_start[which], n)
-        table = getattr(self, "_moved_table", None)
-        if table is None:  # each bank's moved joints, -1 where its skeleton has none
-            table = self._moved_table = np.array(
-                [t if len(t) == 4 else [-1] * 4 for t in (b["tables"]["moved"] for b in self.banks)], np.int64
-            ).reshape(-1, 4)
-        joints = table[np.repeat(self.parts["assembly_bank"][clip[which]], n)]  # (M, 4)
+        joints = self.moved_joints[np.repeat(self.parts["assembly_bank"][clip[which]], n)]  # (M, 4)
         keep = (arms != 0).any(axis=2) & (joints >= 0)  # (M, 4): the joints moved
         frame, slot = np.nonzero(keep)
         return rows[frame], joints[frame, slot], arms[frame, slot]
