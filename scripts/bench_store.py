@@ -224,8 +224,8 @@ def _bench_default_job(db: Path) -> None:
         r = _watched_job(db, out, ("--store", "alignment"))
         said, dt, peak, peak_one, bank = r["said"], r["seconds"], r["peak_mb"], r["peak_one"], r["peak_bank"] / 2**20
         size = sum(f.stat().st_size for f in Path(tmp).iterdir())
-        first = said.strip().splitlines()[0] if said.strip() else ""
-        print(f"store   the default job on {db}: {first}")
+        wrote = re.search(r"^wrote .*$", said, re.M)  # the job's summary, after its progress lines
+        print(f"store   the default job on {db}: {wrote.group(0) if wrote else said.strip()[-300:]}")
         print(f"store   {dt / 60:.1f} min, output {out.stat().st_size / 1e9:.2f} GB ({size / 1e9:.2f} GB with its "
               f"index), peak memory {peak:,.0f} MB (largest process {peak_one:,.0f} MB, against the 1,024 MB budget "
               f"plus the clip bank, {bank:,.0f} MB, which every process maps)  [<= 30 min, <= 12 GB; budget plus bank]")
