@@ -4,8 +4,10 @@
 #   bash scripts/test.sh --all    every test; CI (CI=true) always runs every test
 #   bash scripts/test.sh -n 1     in one process: by default the tests run in one process per core,
 #                                 four at most (pytest-xdist; each builds its own session fixtures and
-#                                 computes on its share of the cores, tests/conftest.py): on two cores
-#                                 the quick suite takes about 3.5 minutes that way, 6 in one process
+#                                 computes on its share of the cores, tests/conftest.py; the longest
+#                                 tests start first, and an idle process takes half of the other's
+#                                 queue: --dist worksteal): on two cores the quick suite takes about
+#                                 2.5 minutes that way, 6 in one process
 # Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it.
 # The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
 # apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
@@ -29,9 +31,11 @@ if [ "$all" = 0 ]; then
   set -- -m "not slow" "$@"
 fi
 case " $* " in
-  *" -n "*|*" -n"[0-9]*|*" --numprocesses"*|*" -p no:xdist "*) ;;
+  *" -p no:xdist "*) ;;
+  *" -n "*|*" -n"[0-9]*|*" --numprocesses"*)
+     case " $* " in *" --dist"*) ;; *) set -- --dist worksteal "$@" ;; esac ;;
   *) _procs="$(nproc 2>/dev/null || echo 1)"
      if [ "$_procs" -gt 4 ]; then _procs=4; fi
-     if [ "$_procs" -ge 2 ]; then set -- -n "$_procs" "$@"; fi ;;
+     if [ "$_procs" -ge 2 ]; then set -- -n "$_procs" --dist worksteal "$@"; fi ;;
 esac
 exec python -m pytest "$@"

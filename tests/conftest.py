@@ -120,8 +120,25 @@ def runs_with_raised_hands(tmp_path_factory):
     return db, folder / "raw.h5", folder / "out.h5"
 
 
+LONGEST_FIRST = ("tests/e2e/test_readme_examples.py::test_every_readme_block_runs_in_order_in_one_fresh_clone",
+                 "tests/job/test_ray.py::")
+"""Under pytest-xdist, these start first (the walkthrough, 200 to 350 s; the Ray cluster, about
+100 s), then every other test marked ``slow``, then the rest: with ``--dist worksteal``
+(scripts/test.sh) the other process takes the quick tests, and whichever runs out first takes
+half of the other's queue, so the run does not end waiting on one long test begun late."""
+
+
+def _run_order(item) -> int:
+    if any(item.nodeid.startswith(first) for first in LONGEST_FIRST):
+        return 0
+    return 1 if item.get_closest_marker("slow") else 2
+
+
 def pytest_collection_modifyitems(config, items):
-    """Tests marked ``gpu`` skip, saying so, where torch sees no CUDA device."""
+    """Tests marked ``gpu`` skip, saying so, where torch sees no CUDA device; under pytest-xdist
+    the longest tests come first (:data:`LONGEST_FIRST`; a stable sort, each group in its order)."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        items.sort(key=_run_order)
     gpu = [item for item in items if item.get_closest_marker("gpu")]
     if not gpu:
         return

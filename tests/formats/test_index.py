@@ -1,7 +1,8 @@
 """Indexes of what was written: every export of several clips and every job output gets an index
 of its clips (split, metrics) and train/val/test lists that split by source clip as the dataset
 does; indexes are named after their whole output and never meet; a full disk while writing the
-job's index says the output itself is complete."""
+job's index says the output itself is complete; an index of more clips than a spreadsheet opens
+is gzip-compressed."""
 
 from __future__ import annotations
 
@@ -129,6 +130,38 @@ def test_every_job_output_gets_an_index_of_its_clips_metrics_and_splits(sample_d
     merged = list(csv.DictReader(open(tmp_path / "sliced.h5.index.csv")))
     with MotionDatabase.open(tmp_path / "sliced.h5") as d:
         assert [r["clip"] for r in merged] == list(d.names)
+
+
+def test_an_index_of_more_clips_than_a_spreadsheet_opens_is_gzip_compressed(sample_db, tmp_path, monkeypatch):
+    """From SPREADSHEET_ROWS clips on, the job's index is NAME.h5.index.csv.gz: the same text as
+    the plain index, the same bytes on a rerun; either kind replaces the other beside a rewritten
+    output, and merge and materialize name it the same way."""
+    import gzip
+
+    from torchsplice.formats import index
+    from torchsplice.job.materialize import materialize
+
+    out = tmp_path / "sp.h5"
+    splice_all(sample_db, out, workers=1, locomotions="jog,walk", store="alignment")
+    plain = (tmp_path / "sp.h5.index.csv").read_bytes()
+    with MotionDatabase.open(out) as d:
+        clips = len(d)
+    assert index.database_index_path(out, clips).name == "sp.h5.index.csv"
+    monkeypatch.setattr(index, "SPREADSHEET_ROWS", clips)  # this output has as many clips as a spreadsheet opens
+    assert index.database_index_path(out, clips - 1).name == "sp.h5.index.csv"
+    assert index.database_index_path(out, clips).name == "sp.h5.index.csv.gz"
+    summary = splice_all(sample_db, out, workers=1, locomotions="jog,walk", store="alignment", overwrite=True)
+    packed = tmp_path / "sp.h5.index.csv.gz"
+    assert summary.index == packed and not (tmp_path / "sp.h5.index.csv").exists()  # the plain one is not left
+    assert "every clip's metrics and split in sp.h5.index.csv.gz" in "\n".join(summary.lines())
+    assert gzip.decompress(packed.read_bytes()) == plain and len(packed.read_bytes()) < len(plain) / 3
+    first = packed.read_bytes()
+    assert index.write_database_index(out) == packed and packed.read_bytes() == first  # no time in its header
+    materialize(out, tmp_path / "motion.h5", progress=False)
+    assert (tmp_path / "motion.h5.index.csv.gz").is_file() and not (tmp_path / "motion.h5.index.csv").exists()
+    monkeypatch.setattr(index, "SPREADSHEET_ROWS", clips + 1)
+    assert index.refresh_database_index(out) == tmp_path / "sp.h5.index.csv"
+    assert (tmp_path / "sp.h5.index.csv").read_bytes() == plain and not packed.exists()
 
 
 def test_a_full_disk_while_writing_the_jobs_index_says_the_output_is_complete(sample_db, tmp_path, monkeypatch):

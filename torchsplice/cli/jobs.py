@@ -78,7 +78,8 @@ class SpliceAll(Command):
                        help="copy the source clips into the output too")
         s.add_argument("--no-index", dest="index", action="store_false", default=DEFAULT_INDEX,
                        help="write no OUT.h5.index.csv beside the output (by default: every clip's cost, flags, coverage, "
-                            "labels and split by source clip, as info --csv and the exports give them)")
+                            "labels and split by source clip, as info --csv and the exports give them; gzip-compressed, "
+                            "OUT.h5.index.csv.gz, for more clips than a spreadsheet opens)")
         s.add_argument("--max-length-ratio", type=positive_float, default=DEFAULT_MAX_LENGTH_RATIO, metavar="R",
                        help="skip pairs whose longer clip lasts more than R times the shorter (e.g. 3); long takes are "
                             "better cut with import --split")

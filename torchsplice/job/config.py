@@ -69,7 +69,8 @@ class JobConfig:
         index: write ``NAME.h5.index.csv`` beside the output when it is complete: every clip's row
             of ``torchsplice info --csv`` (cost, alignment_distance, flags, coverage, role,
             locomotion, action, labels ...) and its split by source clip
-            (:func:`torchsplice.formats.index.write_database_index`). Not part of the plan: a
+            (:func:`torchsplice.formats.index.write_database_index`; ``NAME.h5.index.csv.gz``,
+            gzip-compressed, from a spreadsheet's 1,048,576 rows on). Not part of the plan: a
             resumed run may change it.
         max_run, posture, twist: splicing parameters (see :class:`~torchsplice.splice.SpliceOptions`).
         keep_hands_out: where a result puts a hand or forearm inside its body deeper than its

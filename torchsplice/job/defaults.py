@@ -37,7 +37,8 @@ DEFAULT_TARGET: str | None = None
 """The skeleton every clip is brought onto first (``None``: each pair on its locomotion's)."""
 DEFAULT_COPY_SOURCES = False
 DEFAULT_INDEX = True
-"""Write ``NAME.h5.index.csv`` beside the output (the job, ``merge_job``, ``materialize``)."""
+"""Write ``NAME.h5.index.csv`` beside the output (the job, ``merge_job``, ``materialize``;
+``.csv.gz`` for a million clips or more: :func:`torchsplice.formats.index.database_index_path`)."""
 DEFAULT_KEEP_HANDS_OUT = True
 DEFAULT_COMPRESSION: str | None = "auto"
 """The output's compression (one of :data:`torchsplice.store.defaults.COMPRESSIONS`)."""

@@ -49,7 +49,7 @@ class JobSummary:
     alignment: OutputSize | None = None  # a dry run of a motion store: what --store alignment would take
     written: int | None = None  # bytes the output took
     free: int | None = None  # bytes free beside the output when the job started
-    index: Path | None = None  # NAME.h5.index.csv written beside the output
+    index: Path | None = None  # NAME.h5.index.csv (or .csv.gz) written beside the output
 
     def lines(self, option_name=None) -> list[str]:
         """The closing summary, as printed by the command line; ``option_name(option)`` writes the
