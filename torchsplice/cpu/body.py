@@ -3,9 +3,10 @@
 The same figures as :func:`torchsplice.ops.plausibility.penetration_packed`: per clip the share
 of frames in which a probe capsule's axis is deeper than ``margin`` inside an obstacle capsule
 (``radius - axis distance``), and the deepest it goes. One clip per thread; per frame, FK of
-the joints the capsules need (``joints``, ascending and closed under parents) then each probe
-against each obstacle, the segment distance in closed form (skipped for a pair whose midpoints
-are too far apart for it to count). Shapes: rotations ``(N, J, 4)``
+the joints the capsules need (``joints``, ascending and closed under parents), each capsule's
+midpoint and half-length, then each probe against each obstacle, the segment distance in closed
+form (skipped for a pair whose midpoints are further apart than both half-lengths and the
+obstacle's reach: it cannot count). Shapes: rotations ``(N, J, 4)``
 (unit WXYZ, local), translations ``(N, J, 3)`` (row 0 the root's world position, the others
 offsets or animated translations); capsule ends ``end_a``, ``end_b``, ``end_w`` ``(2C,)``: end
 ``k`` is ``pos[end_a[k]] (1 - end_w[k]) + pos[end_b[k]] end_w[k]``, capsule ``c`` its ends
@@ -25,16 +26,6 @@ from .vec import add, length, row, scale, segment_distance, sub
 __all__ = ["inside_clips"]
 
 
-@njit(cache=True, nogil=True)
-def _apart(ends, i, k):
-    """A lower bound on the distance between segments ``i`` and ``k`` of the capsule ends ``ends``
-    (rows ``2i, 2i+1``): their midpoints' distance less both half-lengths (a pair surely further
-    than a capsule's reach is skipped)."""
-    i_start, i_end, k_start, k_end = row(ends, 2 * i), row(ends, 2 * i + 1), row(ends, 2 * k), row(ends, 2 * k + 1)
-    return (length(scale(sub(add(i_start, i_end), add(k_start, k_end)), 0.5)) - 0.5 * length(sub(i_end, i_start))
-            - 0.5 * length(sub(k_end, k_start)))
-
-
 @njit(cache=True, parallel=True)
 def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes, obstacles, margin, floor, starts,
                  lengths, share, depth, frame_deepest):
@@ -48,6 +39,8 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
         pos = np.zeros((J, 3))
         grot = np.zeros((J, 4))
         ends = np.empty((n_ends, 3))
+        mids = np.empty((n_ends // 2, 3))  # per capsule its axis' midpoint and half its length
+        halves = np.empty(n_ends // 2)
         frames_inside = 0
         deepest = 0.0
         for t in range(starts[c], starts[c] + lengths[c]):
@@ -68,10 +61,17 @@ def inside_clips(rot, trans, parents, joints, end_a, end_b, end_w, radii, probes
                 share_b = end_w[k]
                 for x in range(3):
                     ends[k, x] = pos[end_a[k], x] * (1.0 - share_b) + pos[end_b[k], x] * share_b
+            for capsule in range(n_ends // 2):
+                start, end = row(ends, 2 * capsule), row(ends, 2 * capsule + 1)
+                mid = scale(add(start, end), 0.5)
+                mids[capsule, 0], mids[capsule, 1], mids[capsule, 2] = mid
+                halves[capsule] = 0.5 * length(sub(end, start))
             frame_depth = -math.inf
             for probe in probes:
                 for obstacle in obstacles:
-                    if _apart(ends, probe, obstacle) >= radii[obstacle] - floor:  # cannot count: not measured
+                    # a lower bound on the axes' distance: the midpoints' distance less both half-lengths
+                    apart = length(sub(row(mids, probe), row(mids, obstacle))) - halves[probe] - halves[obstacle]
+                    if apart >= radii[obstacle] - floor:  # cannot count: not measured
                         continue
                     pair_depth = radii[obstacle] - segment_distance(row(ends, 2 * probe), row(ends, 2 * probe + 1),
                                                                     row(ends, 2 * obstacle),
