@@ -98,6 +98,7 @@ class MotionDatabase(Reading, Writing, Assembling):
         self._virtual = {}
         self._resumable = False
         self._row_log = None
+        self._growing = {}
 
     # -- opening and closing ------------------------------------------------------------------
     @classmethod

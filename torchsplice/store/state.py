@@ -53,6 +53,9 @@ class DatabaseState:
     _virtual: dict[int, list[tuple[str, int]]]  # skeleton -> (source file, frames) in order
     _resumable: bool  # written at a staging path across runs (see checkpoint, resume)
     _row_log: RowLog | None  # a resumable database's clip-table rows until it closes
+    _growing: dict[
+        int, tuple[int, dict]
+    ]  # skeleton -> (its group's members, name -> its datasets that grow with frames)
 
     if TYPE_CHECKING:
         # MotionDatabase's own
