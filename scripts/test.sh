@@ -7,7 +7,7 @@
 #                                 computes on its share of the cores, tests/conftest.py; the longest
 #                                 tests start first, and an idle process takes half of the other's
 #                                 queue: --dist worksteal): on two cores the quick suite takes about
-#                                 2.5 minutes that way, 6 in one process
+#                                 3 minutes that way (3:07 with other work on the machine), 6 in one process
 # Real-data tests read ../shared/mocap (or $TORCHSPLICE_MOCAP) and skip, saying why, without it.
 # The viewer's browser tests need Debian's chromium and chromium-driver: installed here with
 # apt-get when missing and running as root (set TORCHSPLICE_NO_APT=1 not to); without them those
