@@ -476,6 +476,7 @@ class Writing(DatabaseState):
                 del g[name]
                 g.create_virtual_dataset(name, layout, fillvalue=np.nan)
         self._virtual = {}
+        self._growing = {}  # the datasets replaced: none of those opened before may be written
 
     @guarded
     def flush(self) -> None:
