@@ -162,6 +162,8 @@ def test_an_index_of_more_clips_than_a_spreadsheet_opens_is_gzip_compressed(samp
     monkeypatch.setattr(index, "SPREADSHEET_ROWS", clips + 1)
     assert index.refresh_database_index(out) == tmp_path / "sp.h5.index.csv"
     assert (tmp_path / "sp.h5.index.csv").read_bytes() == plain and not packed.exists()
+    packed.write_bytes(first)  # a stale index of the other kind beside it: writing the index alone removes it
+    assert index.write_database_index(out) == tmp_path / "sp.h5.index.csv" and not packed.exists()
 
 
 def test_a_full_disk_while_writing_the_jobs_index_says_the_output_is_complete(sample_db, tmp_path, monkeypatch):

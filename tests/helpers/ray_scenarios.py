@@ -66,13 +66,15 @@ def finished(out: Path) -> int:
     return held + len(list(work.glob("part-*")))
 
 
-def ray_workers() -> list[int]:
-    """Every Ray worker process (its title starts ``ray::``: idle, or the task it runs)."""
+def ray_workers(netns: str) -> list[int]:
+    """The Ray worker processes (their title starts ``ray::``: idle, or the task it runs) in the
+    network namespace ``netns`` (``/proc/PID/ns/net``'s link: this scenario's cluster, not one
+    another test run started in its own namespace)."""
     pids = []
     for p in Path("/proc").iterdir():
         if p.name.isdigit():
             try:
-                if (p / "cmdline").read_bytes().startswith(b"ray::"):
+                if (p / "cmdline").read_bytes().startswith(b"ray::") and os.readlink(p / "ns" / "net") == netns:
                     pids.append(int(p.name))
             except OSError:
                 pass
@@ -86,11 +88,15 @@ def kill_a_running_task(driver: subprocess.Popen, timeout: float = 120) -> list[
     of milliseconds, and a scan of /proc on a loaded machine as long, so the scan only finds the
     workers (every 0.2 s) and the watch reads just their titles, about every millisecond."""
     deadline = time.monotonic() + timeout
+    try:
+        netns = os.readlink(f"/proc/{driver.pid}/ns/net")
+    except OSError:  # the job ended already
+        return []
     workers: list[int] = []
     rescan = 0.0
     while time.monotonic() < deadline and driver.poll() is None:
         if time.monotonic() >= rescan:
-            workers, rescan = ray_workers(), time.monotonic() + 0.2
+            workers, rescan = ray_workers(netns), time.monotonic() + 0.2
         for pid in workers:
             try:
                 if b"ray::_ray_run" in Path(f"/proc/{pid}/cmdline").read_bytes():

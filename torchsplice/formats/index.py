@@ -219,7 +219,8 @@ def _slice_columns(columns: list[str], cols: dict, splits, file: str) -> dict[st
 def write_database_index(database, split_ratios=None, split_seed: int | None = None) -> Path:
     """Write the index beside the database ``database`` (every clip's row, in the database's order;
     see the module docstring), atomically: ``NAME.h5.index.csv``, or gzip-compressed
-    ``NAME.h5.index.csv.gz`` for :data:`SPREADSHEET_ROWS` clips or more; returns its path. The rows
+    ``NAME.h5.index.csv.gz`` for :data:`SPREADSHEET_ROWS` clips or more (the other kind, if one
+    lies beside it, is removed); returns its path. The rows
     are made and written :data:`CHUNK_ROWS` at a time, so memory stays bounded for millions of
     clips. An OS error (a full disk) is one line naming the index and saying the database itself
     is complete."""
@@ -249,6 +250,11 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
         except TorchspliceError as exc:
             raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written: "
                                    "torchsplice.formats.index.write_database_index writes it)") from None
+    other = target.with_suffix("") if target.suffix == ".gz" else target.with_name(target.name + ".gz")
+    try:  # the other kind, an earlier index of fewer or more clips, would disagree with this one
+        other.unlink(missing_ok=True)
+    except OSError:
+        pass  # left for the user: not worth failing a written index
     return target
 
 
