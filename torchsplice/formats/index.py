@@ -84,8 +84,14 @@ def database_index_path(database, clips: int) -> Path:
     """The index :func:`write_database_index` writes beside the database ``database`` of ``clips``
     clips: :func:`index_path`'s ``NAME.h5.index.csv``, or ``NAME.h5.index.csv.gz`` from
     :data:`SPREADSHEET_ROWS` clips on."""
-    path = index_path(database)
-    return path.with_name(path.name + ".gz") if clips >= SPREADSHEET_ROWS else path
+    plain, packed = _index_kinds(database)
+    return packed if clips >= SPREADSHEET_ROWS else plain
+
+
+def _index_kinds(database) -> tuple[Path, Path]:
+    """The two names a database's index may have: plain ``NAME.h5.index.csv`` and compressed ``NAME.h5.index.csv.gz``."""
+    plain = index_path(database)
+    return plain, plain.with_name(plain.name + ".gz")
 
 
 def _text_file(path: Path, compressed: bool):
@@ -250,11 +256,7 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
         except TorchspliceError as exc:
             raise TorchspliceError(f"{exc.message}; {database} itself is complete (its index not written: "
                                    "torchsplice.formats.index.write_database_index writes it)") from None
-    other = target.with_suffix("") if target.suffix == ".gz" else target.with_name(target.name + ".gz")
-    try:  # the other kind, an earlier index of fewer or more clips, would disagree with this one
-        other.unlink(missing_ok=True)
-    except OSError:
-        pass  # left for the user: not worth failing a written index
+    _remove([p for p in _index_kinds(database) if p != target])  # an earlier index of the other kind disagrees
     return target
 
 
@@ -262,10 +264,15 @@ def refresh_database_index(database, write: bool = True) -> Path | None:
     """After a database ``database`` was (re)written: remove any earlier ``NAME.h5.index.csv``
     or ``NAME.h5.index.csv.gz`` beside it (an earlier run's, with its splits and costs), then with
     ``write`` write its own (:func:`write_database_index`); returns the index written, or ``None``."""
-    old = index_path(database)
-    for path in (old, old.with_name(old.name + ".gz")):
+    _remove(_index_kinds(database))
+    return write_database_index(database) if write else None
+
+
+def _remove(paths) -> None:
+    """Remove earlier indexes at ``paths``: one that cannot be is written over or left for the
+    user, not worth failing a finished output."""
+    for path in paths:
         try:
             path.unlink(missing_ok=True)
         except OSError:
-            pass  # written over below, or left for the user: not worth failing a finished output
-    return write_database_index(database) if write else None
+            pass

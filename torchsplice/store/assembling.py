@@ -240,16 +240,15 @@ class Assembling(DatabaseState):
         rows = self._rows(names, lengths, fps, sources, roles, labels, {**(extra or {}), **parts})
         k = self.add_skeleton(skeleton, spec)
         self._no_virtual(k)
-        g = self.h5[skeleton_path(k)]
+        grown = self._growing_datasets(k)
         self._reserve(sum(a.nbytes for a in arrays.values()) + 300 * C)
-        n0 = g["rotations"].shape[0]
+        n0 = grown["rotations"].shape[0]
         rows["skeleton"], rows["start"] = [k] * C, n0 + lengths_to_starts(lengths)
-        grown = self._growing_datasets(k, g)
         try:
             for ds in grown.values():
                 ds.resize(n0 + N, axis=0)
             for name, a in arrays.items():
-                ds = grown[name] if name in grown else g[name]
+                ds = grown[name]
                 if name in SPARSE_PARTS:
                     _write_nonzero_chunks(ds, n0, a)
                 else:
@@ -265,24 +264,6 @@ class Assembling(DatabaseState):
                 pass
             raise
         self._added(index, names)
-
-    def _growing_datasets(self, k: int, g: h5py.Group) -> dict:
-        """Name -> dataset of skeleton ``k``'s group ``g`` that grows with its frames, opened once
-        while the group's members stay the same (opening each at every append cost a job of
-        short clips 6% of its writer's time)."""
-        members = len(g)
-        known = self._growing.get(k)
-        if known is None or known[0] != members:
-            found = {n: g[n] for n in g}
-            known = self._growing[k] = (
-                members,
-                {
-                    n: ds
-                    for n, ds in found.items()
-                    if isinstance(ds, h5py.Dataset) and ds.maxshape and ds.maxshape[0] is None
-                },
-            )
-        return known[1]
 
 
 SPARSE_PARTS = ("assembly_arms",)

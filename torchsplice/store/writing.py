@@ -32,6 +32,7 @@ from .guards import (
     dataset_compression,
     frame_values,
     grow_rows,
+    growing_datasets,
     guarded,
     io_failure,
     mb,
@@ -299,9 +300,9 @@ class Writing(DatabaseState):
         rows = self._rows(names, lengths, fps, sources, roles, labels, extra)
         k = self.add_skeleton(skeleton, spec)
         self._no_virtual(k)
-        g = self.h5[skeleton_path(k)]
+        grown = self._growing_datasets(k)
         arrays = {"rotations": rot, "root_translation": root, **frames}
-        if "translations" in g:
+        if "translations" in grown:
             if trans is not None and np.array_equal(trans[:, 0], root):
                 arrays["translations"] = trans  # row 0 already holds the root
             else:
@@ -309,21 +310,21 @@ class Writing(DatabaseState):
                 t[:, 0] = root
                 arrays["translations"] = t
         self._reserve(sum(a.nbytes for a in arrays.values()) + 200 * C)
-        n0 = g["rotations"].shape[0]
+        n0 = grown["rotations"].shape[0]
         rows["skeleton"], rows["start"] = [k] * C, n0 + starts
         try:
             for name, a in arrays.items():
-                ds = g[name]
+                ds = grown[name]
                 ds.resize(n0 + N, axis=0)
                 ds[n0:] = a.astype(ds.dtype, copy=False)
-            grow_rows(g, n0 + N)
+            grow_rows(grown.values(), n0 + N)
             self._store_rows(rows)
         except BaseException as exc:
             if io_failure(exc):
                 raise  # the whole write is discarded (see guarded)
             try:  # leave the file as it was before the call: no half-written rows
                 for name in arrays:
-                    g[name].resize(n0, axis=0)
+                    grown[name].resize(n0, axis=0)
             except Exception:
                 pass
             if isinstance(exc, OSError):
@@ -391,14 +392,14 @@ class Writing(DatabaseState):
         self._writable()
         self.flush()
         k = self.add_skeleton(skeleton, spec)
-        g = self.h5[skeleton_path(k)]
-        arrays = {n: a for n, a in arrays.items() if n in g}
-        n0 = g["rotations"].shape[0]
+        grown = self._growing_datasets(k)
+        arrays = {n: a for n, a in arrays.items() if n in grown}
+        n0 = grown["rotations"].shape[0]
         N = len(next(iter(arrays.values()))) if arrays else 0
         self._reserve(sum(np.asarray(a).nbytes for a in arrays.values()))
-        grow_rows(g, n0 + N)
+        grow_rows(grown.values(), n0 + N)
         for name, a in arrays.items():
-            g[name][n0:] = a
+            grown[name][n0:] = a
 
     def _added(self, index: dict, names: list[str]) -> None:
         """Note ``names``, just written as rows, in the name index and the name list."""
@@ -476,7 +477,7 @@ class Writing(DatabaseState):
                 del g[name]
                 g.create_virtual_dataset(name, layout, fillvalue=np.nan)
         self._virtual = {}
-        self._growing = {}  # the datasets replaced: none of those opened before may be written
+        self._growing = {}  # the datasets replaced: found again if written
 
     @guarded
     def flush(self) -> None:
@@ -489,35 +490,41 @@ class Writing(DatabaseState):
         self._flushed += len(self._staged)
         self._staged, self._staged_frames = [], 0
 
+    def _growing_datasets(self, k: int) -> dict[str, h5py.Dataset]:
+        """:func:`~.guards.growing_datasets` of skeleton ``k`` for one write: names kept, datasets not (held open, they keep chunks in HDF5's cache, past the disk check)."""
+        g = self.h5[skeleton_path(k)]
+        if self._growing.get(k, (None,))[0] != len(g):
+            self._growing[k] = (len(g), tuple(growing_datasets(g)))
+        return {n: g[n] for n in self._growing[k][1]}
+
     def _no_virtual(self, k: int) -> None:
         if k in self._virtual:
             raise DatabaseError(f"{self.path}: skeleton {k} holds virtual frames; real frames cannot be added to it")
 
     def _write_staged(self) -> None:
-        h5 = self.h5
         self._reserve(self._staged_bytes() + 200 * len(self._staged))
         starts = {}
         for k in sorted({k for _, k, *_ in self._staged}):
             self._no_virtual(k)
-            g = h5[skeleton_path(k)]
+            grown = self._growing_datasets(k)
             staged = [(m, fx) for m, kk, _, fx in self._staged if kk == k]
-            n0 = g["rotations"].shape[0]
+            n0 = grown["rotations"].shape[0]
             starts[k] = n0
             arrays = {
                 "rotations": torch.cat([m.rotations.detach().cpu() for m, _ in staged]).numpy(),
                 "root_translation": torch.cat([m.root_translation.detach().cpu() for m, _ in staged]).numpy(),
             }
-            if "translations" in g:
+            if "translations" in grown:
                 arrays["translations"] = torch.cat([m.local_translations().detach().cpu() for m, _ in staged]).numpy()
             for name in self.frame_columns:
                 arrays[name] = np.concatenate(
                     [frame_values(fx.get(name), m.num_frames, name, m.name) for m, fx in staged]
                 )
             for name, a in arrays.items():
-                ds = g[name]
+                ds = grown[name]
                 ds.resize(n0 + a.shape[0], axis=0)
                 ds[n0:] = a.astype(ds.dtype)
-            grow_rows(g, g["rotations"].shape[0])
+            grow_rows(grown.values(), grown["rotations"].shape[0])
         rows: dict[str, list] = {c: [] for c in [*COLUMNS, *self._declared]}
         for m, k, extra, _ in self._staged:
             rows["name"].append(m.name)
