@@ -398,11 +398,21 @@ def test_the_compiled_correction_gives_the_torch_one(runs_with_raised_hands):
     trans = torch.cat([c.local_translations() for c in clips]).numpy()
     lengths = [c.num_frames for c in clips]
     args = (rot, trans, lengths, clips[0].fps, sk, body, arms, allowed[todo])  # Bandai Namco's units are cm, as the columns
-    want, want_n = Backend.keep_hands_out(CompiledBackend(), *args)
-    got, got_n = CompiledBackend().keep_hands_out(*args)
+    want_bits, got_bits = np.zeros(len(rot), np.uint8), np.zeros(len(rot), np.uint8)
+    want, want_n = Backend.keep_hands_out(CompiledBackend(), *args, changed=want_bits)
+    got, got_n = CompiledBackend().keep_hands_out(*args, changed=got_bits)
     assert len(todo) >= 10 and want_n.sum() > 0
     assert np.array_equal(got_n, want_n) and np.allclose(got, want, atol=1e-6)
     assert np.array_equal(got != rot, want != rot)
+    # per frame a bit per moved joint whose value changed; every other joint keeps its bits
+    moved = list(arms.moved)
+    for out, bits in ((got, got_bits), (want, want_bits)):
+        differs = (out[:, moved] != rot[:, moved]).any(-1)
+        assert np.array_equal((bits[:, None] >> np.arange(4)) & 1, differs.astype(np.uint8)) and differs.any()
+        kept = np.ones(rot.shape[:2], bool)
+        kept[:, moved] = ~differs
+        assert np.array_equal(out.view(np.uint32)[kept], rot.view(np.uint32)[kept])
+    assert np.array_equal(got_bits, want_bits)
     # told each frame's depth from the body test, the kernel tests only the frames deeper than a
     # target in its first pass: the same output bit for bit, on the targets the job uses and on deeper ones
     deepest = CompiledBackend().inside_body(rot, trans, lengths, sk, body, per_frame=True)[2]

@@ -21,7 +21,10 @@ written), translations ``(N, J, 3)`` (row 0 the root's position); capsule ends `
 ``end_b``, ``end_w`` ``(2C,)`` as :mod:`.body`'s; per arm (left, right) the joints
 ``shoulder``, ``elbow``, ``wrist`` and the parents ``shoulder_parent``, ``elbow_parent``
 ``(2,)``; per clip ``target`` (how deep a forearm may stay, the skeleton's units) and
-``spread`` (frames); ``corrected`` ``(B,)`` the frames changed.
+``spread`` (frames); ``corrected`` ``(B,)`` the frames changed; ``changed`` ``(N,)`` uint8 (or
+empty: not wanted), per frame a bit per moved joint whose value the correction changed (bit 0
+left shoulder, 1 left elbow, 2 right shoulder, 3 right elbow: :attr:`~torchsplice.ops.hands.Arms.moved`'s
+order), or-ed in; a joint the correction writes with its own value keeps its bits.
 """
 
 from __future__ import annotations
@@ -161,10 +164,27 @@ def _body_frame(rot, trans, parents, rest, end_a, end_b, end_w, row, t, pos, gro
     whole[t] = True
 
 
+@njit(cache=True, inline="always")
+def _write_joint(out, row, joint, q):
+    """``out[row, joint] = q`` where that changes its value (in ``out``'s dtype), ``1``; else
+    ``out`` keeps its bits (a zero's sign included), ``0``."""
+    old = (out[row, joint, 0], out[row, joint, 1], out[row, joint, 2], out[row, joint, 3])
+    differs = False
+    for x in range(4):
+        out[row, joint, x] = q[x]
+        if out[row, joint, x] != old[x]:
+            differs = True
+    if differs:
+        return 1
+    for x in range(4):
+        out[row, joint, x] = old[x]
+    return 0
+
+
 @njit(cache=True, parallel=True)
 def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder,
                     elbow, wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations,
-                    hinge_min, flex, frame_deepest, exact_above, out, corrected):
+                    hinge_min, flex, frame_deepest, exact_above, out, corrected, changed):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``out`` and ``corrected[c]``
     (see the module docstring)."""
     J = rot.shape[1]
@@ -306,7 +326,8 @@ def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, 
                 shoulder_local = qmul(qconj(qload(grot, t, shoulder_parent[k])),
                                       qmul(shoulder_turn, qload(grot, t, shoulder[k])))
                 elbow_local = qmul(qconj(qload(grot, t, elbow_parent[k])), qmul(elbow_turn, qload(grot, t, elbow[k])))
-                for x in range(4):
-                    out[first + t, shoulder[k], x] = shoulder_local[x]
-                    out[first + t, elbow[k], x] = elbow_local[x]
+                bits = _write_joint(out, first + t, shoulder[k], shoulder_local) << (2 * k)
+                bits |= _write_joint(out, first + t, elbow[k], elbow_local) << (2 * k + 1)
+                if changed.shape[0] > 0:
+                    changed[first + t] |= bits
         corrected[c] = count

@@ -342,28 +342,17 @@ def _keep_hands_out(backend, plan, group, skeleton, body, keys, frames, rot: np.
     n = frames[todo]
     rows = ranges_to_rows(starts[todo], n)
     arms = arms_of()  # the group's Arms (ops.hands.arms_of), made once
-    moved = list(arms.moved)
-    was = _joint_rows(rot, rows, moved)  # the moved joints' rotations before: all the correction may change
     rot = np.array(rot, copy=True) if not rot.flags.writeable else rot
-    # corrected where they lie (no copy of their frames): in place, each clip read before it is written
+    # corrected where they lie (no copy of their frames): in place, each clip read before it is written;
+    # per frame a bit per moved joint whose value changed (a joint written equal keeps the splice's bits)
+    changed = np.zeros(len(rot), np.uint8)
     _, count = backend.keep_hands_out(rot, trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
-                                      deepest=deepest, starts=starts[todo], out=rot)
-    # the frames of the clips the kernel moved (it writes nothing into the others), as positions in `rows`
-    count = np.asarray(count, np.int64)
-    hit = count > 0
-    at = ranges_to_rows(lengths_to_starts(n)[hit], n[hit])
-    now, before = _joint_rows(rot, rows[at], moved), was[at]
-    bits = f"u{now.itemsize}"
-    joint_changed = _any4(now != before)  # (H, 4)
-    # a joint written equal (a zero's sign aside) keeps the splice's bits
-    same = np.nonzero(_any4(now.view(bits) != before.view(bits)) & ~joint_changed)
-    if len(same[0]):
-        rot[rows[at[same[0]]], np.asarray(moved)[same[1]]] = before[same]
-    changed = _any4(joint_changed)
+                                      deepest=deepest, starts=starts[todo], out=rot, changed=changed)
+    again = np.flatnonzero(changed)
     # what an alignment store keeps: the changed joints' rotations, zeros for the others (the arm not moved)
-    arms_now = np.where(joint_changed[changed][:, :, None], now[changed], np.float32(0))
-    again = rows[at[changed]]
-    corrected[todo] = count
+    bits = (changed[again, None] >> np.arange(4, dtype=np.uint8)) & 1  # (H, 4)
+    arms_now = np.where(bits[:, :, None] > 0, _joint_rows(rot, again, list(arms.moved)), np.float32(0))
+    corrected[todo] = np.asarray(count, np.int64)
     if len(again):  # frames are measured one by one: the changed alone, then each result's figures again
         deepest[again] = backend.inside_body(rot[again], trans[again], [len(again)], skeleton, body, per_frame=True)[2]
     s2, d2 = penetration_of_frames(torch.from_numpy(deepest[rows]), n, body.margin)
@@ -374,15 +363,9 @@ def _keep_hands_out(backend, plan, group, skeleton, body, keys, frames, rot: np.
 def _joint_rows(rot: np.ndarray, rows: np.ndarray, joints) -> np.ndarray:
     """``rot[rows[:, None], joints]``, ``(R, len(joints), 4)`` of ``rot`` ``(N, J, 4)``: gathered a
     quaternion at a time (one 16-byte item, not four floats: 3x faster on the frames the hands
-    correction reads back)."""
+    correction changed)."""
     quats = np.ascontiguousarray(rot).view(np.dtype((np.void, 4 * rot.itemsize)))[..., 0]
     return quats[np.asarray(rows)[:, None], list(joints)][..., None].view(rot.dtype)
-
-
-def _any4(flags: np.ndarray) -> np.ndarray:
-    """``flags.any(axis=-1)`` of booleans whose last axis has 4 entries, read as one 32-bit word each
-    (numpy's reduction over so short an axis costs 10x more)."""
-    return np.ascontiguousarray(flags).view(np.uint32)[..., 0] != 0
 
 
 PART_KEYS = ("kind", "locomotion", "action")

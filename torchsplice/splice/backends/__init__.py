@@ -210,7 +210,7 @@ class Backend:
         return {k: v.numpy() for k, v in out.items()}
 
     def keep_hands_out(self, rotations, translations, lengths, fps: float, skeleton, body, arms, allowed,
-                       deepest=None, starts=None, out=None) -> tuple:
+                       deepest=None, starts=None, out=None, changed=None) -> tuple:
         """``(rotations, corrected)``: packed result frames (as :meth:`inside_body` takes them)
         with the arms moved out of ``body`` where a forearm goes deeper than ``allowed`` ``(B,)``
         (the skeleton's units), and the frames changed per result
@@ -221,7 +221,10 @@ class Backend:
         write only the values it changes; default a copy), returned. ``deepest`` ``(N,)``, where
         given, is each frame's from :meth:`inside_body` (``per_frame``), indexed as the
         rotations: a backend may skip the frames it shows cannot be pushed, for the same result.
-        By torch here, on every frame; a backend may do the same its way."""
+        ``changed`` ``(N,)`` uint8, where given, gets or-ed in per frame a bit per joint of
+        ``arms.moved`` (bit ``i`` its ``i``-th) whose value changed; a joint given back its own
+        value keeps its bits in ``out`` (a zero's sign included). By torch here, on every frame;
+        a backend may do the same its way."""
         import numpy as np
         from ...core.ranges import lengths_to_starts, ranges_to_rows
         import torch
@@ -235,7 +238,14 @@ class Backend:
         new, corrected = keep_hands_out(torch.as_tensor(rotations[rows]), torch.as_tensor(np.asarray(translations)[rows]),
                                         lengths, fps, skeleton, body, arms, torch.as_tensor(np.asarray(allowed, np.float64)))
         out = np.array(rotations, copy=True) if out is None else out
-        out[rows] = new.numpy()
+        moved = list(arms.moved)
+        was = rotations[rows][:, moved]
+        now = new.numpy().astype(out.dtype, copy=False)[:, moved]
+        differs = (now != was).any(-1)  # (R, 4): the joints whose value changed
+        r, j = np.nonzero(differs)
+        out[rows[r], np.asarray(moved)[j]] = now[r, j]
+        if changed is not None:
+            changed[rows] |= (differs * (1 << np.arange(4))).sum(-1).astype(np.uint8)
         return out, corrected.numpy()
 
     def locomotion_checks(self, prepared, loco_rows, action_rows, roles, fps: float, options) -> tuple[list, list]:

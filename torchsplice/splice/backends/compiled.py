@@ -174,7 +174,7 @@ class CompiledBackend(Backend):
         return out
 
     def keep_hands_out(self, rotations, translations, lengths, fps, skeleton, body, arms, allowed, deepest=None,
-                       starts=None, out=None):
+                       starts=None, out=None, changed=None):
         from ...cpu.fk import joint_closure
         from ...cpu.hands import hands_out_clips
         from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, SLACK
@@ -188,6 +188,9 @@ class CompiledBackend(Backend):
         if not (out.flags.c_contiguous and out.flags.writeable and out.dtype == rotations.dtype
                 and out.shape == rotations.shape):
             raise ValueError(f"out: a writable C-contiguous {rotations.dtype} array of shape {rotations.shape} is needed")
+        if changed is not None and not (changed.dtype == np.uint8 and changed.shape == (len(rotations),)
+                                        and changed.flags.c_contiguous and changed.flags.writeable):
+            raise ValueError(f"changed: a writable contiguous uint8 array of {len(rotations)} frames is needed")
         if deepest is not None and len(deepest) != len(rotations):
             raise ValueError(f"deepest: one value per frame of the rotations ({len(rotations)}) is needed, not {len(deepest)}")
         ends = body.end_joints.numpy()
@@ -206,7 +209,7 @@ class CompiledBackend(Backend):
                         np.asarray(arms.wrist, np.int64), parents[list(arms.shoulder)].copy(),
                         parents[list(arms.elbow)].copy(), starts, lengths, target, w, float(SLACK * body.margin),
                         int(ITERATIONS), float(HINGE_MIN), float(FLEX), frame_deepest, _floor(body),
-                        out, corrected)
+                        out, corrected, np.zeros(0, np.uint8) if changed is None else changed)
         return out, corrected
 
     def assembly_bank(self, prepared):
