@@ -4,15 +4,24 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["preload"]
+__all__ = ["job_kernels", "preload"]
 
 
 def preload(dtype=np.float32) -> None:
-    """Load the kernels a job's task runs from numba's cache, by type signature, running none of
-    them: a process forked after this starts splicing at once, and no parallel region (whose
-    threads would not survive a fork) has run."""
+    """Load the kernels a job's task runs (:func:`job_kernels`) from numba's cache, by type
+    signature, running none of them: a process forked after this starts splicing at once, and
+    no parallel region (whose threads would not survive a fork) has run."""
     from numba import typeof
 
+    for kernel, args in job_kernels(dtype).items():
+        kernel.compile(tuple(typeof(a) for a in args))
+
+
+def job_kernels(dtype=np.float32) -> dict:
+    """The compiled kernels a job's task runs, each with arguments of the types a task passes it
+    (``dtype``: the splicer's output rotations'): kernel -> argument tuple. A kernel whose
+    arguments change changes here too (tests/cpu/test_preload.py runs a job after
+    :func:`preload` and finds no kernel compiled again)."""
     from . import bank as bank_mod
     from . import splice as splice_mod
     from . import standing as standing_mod
@@ -39,7 +48,6 @@ def preload(dtype=np.float32) -> None:
         inside_clips: (out, out, i8, i8, i8, i8, v8, v8, i8, i8, 0.0, 0.0, i8, i8, v8, v8, v8),
         figures_clips: (out, out, i8, i8, i8, i8, 0, 0, 0.0, 0.0, 0.0, 0.0, 0, i8, i8, v8, v8, v8, v8, v8),
         hands_out_clips: (out, out, i8, i8, i8, i8, i8, v8, v8, i8, i8, 0, i8, i8, i8, i8, i8, i8, i8,
-                          v8, i8, 0.0, 0, 0.0, 0.0, v8, 0.0, out, i8),
+                          v8, i8, 0.0, 0, 0.0, 0.0, v8, 0.0, out, i8, np.zeros(0, np.uint8)),
     }
-    for kernel, args in kernels.items():
-        kernel.compile(tuple(typeof(a) for a in args))
+    return kernels
