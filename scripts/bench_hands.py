@@ -169,6 +169,43 @@ def _figures(db: Path, raw: Path, out: Path, t_raw: float, t_out: float, cost: b
 def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     """The figures and the correction timed alone on the uncorrected results, as the job runs them
     (the compiled kernels on one thread, as in each of the job's workers)."""
+    best, _ = _alone(r, e0, names, body, arms, sk)
+    workers = os.cpu_count() or 1  # the job's default: a worker per core, each computing its tasks' figures
+    print(f"hands   cost: the job with the correction {len(names) / t_out:,.0f} pairs/s against {len(names) / t_raw:,.0f} "
+          f"without ({100 * (t_out / t_raw - 1):+.1f}% time, whole process); the figures and the correction alone "
+          f"{best:.3f} s on one core, over the job's {workers} workers {100 * best / workers / t_out:.1f}% of its "
+          f"{t_out:.2f} s ({100 * best / t_out:.1f}% were they on one)  [<= 10%]")
+
+
+WHOLE_SAMPLE = 5000
+"""Results of the whole dataset's job whose figures and correction are timed alone (drawn with seed 0)."""
+
+
+def _whole_cost(raw: Path, t_out: float) -> None:
+    """The figures and the correction timed alone on :data:`WHOLE_SAMPLE` of the whole dataset's
+    job's uncorrected results, scaled to all its frames, against the job's time."""
+    with MotionDatabase.open(raw) as r:
+        table = r.clip_table()
+        pick = np.sort(np.random.default_rng(0).choice(len(r.names), min(WHOLE_SAMPLE, len(r.names)), replace=False))
+        e0 = {c: np.asarray(table.extra[c])[pick] for c in ("penetration", "penetration_depth", "penetration_locomotion",
+                                                           "penetration_action", "penetration_depth_locomotion",
+                                                           "penetration_depth_action")}
+        total = int(np.asarray(table.length).sum())
+        sk = r.skeletons[0]
+        roles = r.spec(0).bind(sk)
+        body = body_of(sk, roles)
+        best, frames = _alone(r, e0, [r.names[i] for i in pick], body, arms_of(sk, roles, body), sk)
+    workers = os.cpu_count() or 1
+    scaled = best * total / frames
+    print(f"hands   cost: the figures and the correction alone on {len(pick):,} of its results drawn at random "
+          f"({frames:,} frames) {best:.2f} s on one core; at that rate its {total:,} frames take {scaled:.0f} s, over "
+          f"its {workers} workers {100 * scaled / workers / t_out:.0f}% of its {t_out:.0f} s  [<= 10%]")
+
+
+def _alone(r, e0, names, body, arms, sk) -> tuple[float, int]:
+    """``(seconds, frames)``: the best of three of the figures and the correction, as the job runs
+    them (torchsplice/job/task.py), on the results ``names`` of ``r`` (uncorrected; ``e0`` their
+    columns), the compiled kernels on one thread."""
     from torchsplice.core.ranges import lengths_to_starts, ranges_to_rows
     from torchsplice.cpu import get_threads, set_threads
     from torchsplice.splice.backends import get_backend
@@ -193,26 +230,23 @@ def _cost(r, e0, names, body, arms, sk, t_raw: float, t_out: float) -> None:
     joints = figure_joints(sk, r.spec(0).bind(sk))
     up, per_metre, _ = scales(r.spec_json(0))
 
-    def once():  # as the job (torchsplice/job/task.py): corrected where they lie, the changed frames measured again
+    def once():  # as the job: corrected where they lie, the joints changed read back, those frames measured again
         _, _, deepest = backend.inside_body(rot, trans, lengths, sk, body, per_frame=True)
         backend.figures(rot, trans, lengths, float(clips[0].fps), sk, joints, up, per_metre)
         if len(todo):
             out = rot.copy()  # the job corrects in place; a copy here keeps the repeats alike (a little slower)
+            changed = np.zeros(len(rot), np.uint8)
             backend.keep_hands_out(rot, trans, lengths[todo], float(clips[0].fps), sk, body, arms, allowed[todo] / per_cm,
-                                   deepest=deepest, starts=starts[todo], out=out)
-            moved = (rows[:, None], list(arms.moved))
-            again = rows[(out[moved] != rot[moved]).any(axis=(1, 2))]
+                                   deepest=deepest, starts=starts[todo], out=out, changed=changed)
+            again = np.flatnonzero(changed)
+            out[again[:, None], list(arms.moved)]  # the arms the store keeps
             deepest[again] = backend.inside_body(out[again], trans[again], [len(again)], sk, body, per_frame=True)[2]
             penetration_of_frames(torch.from_numpy(deepest[rows]), lengths[todo], body.margin)
 
     once()
     best = min(_timed(once) for _ in range(3))
     set_threads(threads)
-    workers = os.cpu_count() or 1  # the job's default: a worker per core, each computing its tasks' figures
-    print(f"hands   cost: the job with the correction {len(names) / t_out:,.0f} pairs/s against {len(names) / t_raw:,.0f} "
-          f"without ({100 * (t_out / t_raw - 1):+.1f}% time, whole process); the figures and the correction alone "
-          f"{best:.3f} s on one core, over the job's {workers} workers {100 * best / workers / t_out:.1f}% of its "
-          f"{t_out:.2f} s ({100 * best / t_out:.1f}% were they on one)  [<= 10%]")
+    return best, int(lengths.sum())
 
 
 def _timed(fn) -> float:
@@ -332,6 +366,7 @@ def bench_hands(mocap: Path, db: Path | None = None, whole: Path | None = None, 
             raw, out, t_raw, t_out = _runs(whole_db, tmp, "whole", WHOLE_JOB, 1)
             print(f"hands   {whole_db.name}: {' '.join(WHOLE_JOB)}:")
             _columns(raw, out, t_raw, t_out)
+            _whole_cost(raw, t_out)
         if whole is None:
             return
         files = held_back(whole, mocap)
