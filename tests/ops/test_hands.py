@@ -413,6 +413,14 @@ def test_the_compiled_correction_gives_the_torch_one(runs_with_raised_hands):
         kept[:, moved] = ~differs
         assert np.array_equal(out.view(np.uint32)[kept], rot.view(np.uint32)[kept])
     assert np.array_equal(got_bits, want_bits)
+    # given an `out` that holds the correction already, each backend writes each joint's own value
+    # back: no bit is set, and `out` keeps its bits
+    for run, done in ((CompiledBackend().keep_hands_out, got),
+                      (lambda *a, **k: Backend.keep_hands_out(CompiledBackend(), *a, **k), want)):
+        again, bits = done.copy(), np.zeros(len(rot), np.uint8)
+        _, counts = run(*args, out=again, changed=bits)
+        assert np.array_equal(counts, got_n) and not bits.any()
+        assert np.array_equal(again.view(np.uint32), done.view(np.uint32))
     # told each frame's depth from the body test, the kernel tests only the frames deeper than a
     # target in its first pass: the same output bit for bit, on the targets the job uses and on deeper ones
     deepest = CompiledBackend().inside_body(rot, trans, lengths, sk, body, per_frame=True)[2]

@@ -24,7 +24,8 @@ written), translations ``(N, J, 3)`` (row 0 the root's position); capsule ends `
 ``spread`` (frames); ``corrected`` ``(B,)`` the frames changed; ``changed`` ``(N,)`` uint8 (or
 empty: not wanted), per frame a bit per moved joint whose value the correction changed (bit 0
 left shoulder, 1 left elbow, 2 right shoulder, 3 right elbow: :attr:`~torchsplice.ops.hands.Arms.moved`'s
-order), or-ed in; a joint the correction writes with its own value keeps its bits.
+order), or-ed in; a joint the correction writes with its own value (NaN counting as equal to
+NaN) keeps its bits.
 """
 
 from __future__ import annotations
@@ -166,13 +167,14 @@ def _body_frame(rot, trans, parents, rest, end_a, end_b, end_w, row, t, pos, gro
 
 @njit(cache=True, inline="always")
 def _write_joint(out, row, joint, q):
-    """``out[row, joint] = q`` where that changes its value (in ``out``'s dtype), ``1``; else
-    ``out`` keeps its bits (a zero's sign included), ``0``."""
+    """``out[row, joint] = q`` where that changes its value (in ``out``'s dtype; NaN counts as
+    equal to NaN), ``1``; else ``out`` keeps its bits (a zero's sign included), ``0``."""
     old = (out[row, joint, 0], out[row, joint, 1], out[row, joint, 2], out[row, joint, 3])
     differs = False
     for x in range(4):
         out[row, joint, x] = q[x]
-        if out[row, joint, x] != old[x]:
+        new = out[row, joint, x]
+        if new != old[x] and not (math.isnan(new) and math.isnan(old[x])):
             differs = True
     if differs:
         return 1

@@ -223,8 +223,9 @@ class Backend:
         rotations: a backend may skip the frames it shows cannot be pushed, for the same result.
         ``changed`` ``(N,)`` uint8, where given, gets or-ed in per frame a bit per joint of
         ``arms.moved`` (bit ``i`` its ``i``-th) whose value changed; a joint given back its own
-        value keeps its bits in ``out`` (a zero's sign included). By torch here, on every frame;
-        a backend may do the same its way."""
+        value (NaN counting as equal to NaN) keeps its bits in ``out`` (a zero's sign included).
+        The job reads the corrected arms from these bits alone: a backend that overrides this
+        method fills them. By torch here, on every frame; a backend may do the same its way."""
         import numpy as np
         from ...core.ranges import lengths_to_starts, ranges_to_rows
         import torch
@@ -239,9 +240,9 @@ class Backend:
                                         lengths, fps, skeleton, body, arms, torch.as_tensor(np.asarray(allowed, np.float64)))
         out = np.array(rotations, copy=True) if out is None else out
         moved = list(arms.moved)
-        was = rotations[rows][:, moved]
+        was = out[rows[:, None], moved]  # (R, 4, 4): what `out` holds of the moved joints
         now = new.numpy().astype(out.dtype, copy=False)[:, moved]
-        differs = (now != was).any(-1)  # (R, 4): the joints whose value changed
+        differs = ((now != was) & ~(np.isnan(now) & np.isnan(was))).any(-1)  # (R, 4): the joints whose value changed
         r, j = np.nonzero(differs)
         out[rows[r], np.asarray(moved)[j]] = now[r, j]
         if changed is not None:
