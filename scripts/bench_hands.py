@@ -43,7 +43,7 @@ from torchsplice.ops.body import body_of  # noqa: E402
 from torchsplice.ops.hands import arms_of  # noqa: E402
 from torchsplice.job.source_figures import scales  # noqa: E402
 from torchsplice.job.defaults import usable_cores  # noqa: E402
-from torchsplice.job.task import SELF_PENETRATION  # noqa: E402
+from torchsplice.job.task import SELF_PENETRATION, changed_arms  # noqa: E402
 from torchsplice.ops.plausibility import figure_joints, penetration_of_frames  # noqa: E402
 from torchsplice.ops.units import centimetres  # noqa: E402
 from torchsplice.store.database import MotionDatabase  # noqa: E402
@@ -232,7 +232,6 @@ def _alone(r, e0, names, body, arms, sk) -> tuple[float, int]:
 
     out = rot.copy()  # corrected in place as the job does; set back to `rot` between repeats, untimed
     changed = np.zeros(len(rot), np.uint8)
-    moved = list(arms.moved)
 
     def once():  # as the job: corrected where they lie, the joints changed read back, those frames measured again
         _, _, deepest = backend.inside_body(out, trans, lengths, sk, body, per_frame=True)
@@ -240,9 +239,7 @@ def _alone(r, e0, names, body, arms, sk) -> tuple[float, int]:
         if len(todo):
             backend.keep_hands_out(out, trans, lengths[todo], float(clips[0].fps), sk, body, arms, allowed[todo] / per_cm,
                                    deepest=deepest, starts=starts[todo], out=out, changed=changed)
-            again = np.flatnonzero(changed)
-            bits = (changed[again, None] >> np.arange(4, dtype=np.uint8)) & 1
-            np.where(bits[:, :, None] > 0, out[again[:, None], moved], np.float32(0))  # the arms the store keeps
+            again, _ = changed_arms(out, changed, arms.moved)  # and the arms the store keeps
             deepest[again] = backend.inside_body(out[again], trans[again], [len(again)], sk, body, per_frame=True)[2]
             penetration_of_frames(torch.from_numpy(deepest[rows]), lengths[todo], body.margin)
             out[again] = rot[again]

@@ -348,16 +348,23 @@ def _keep_hands_out(backend, plan, group, skeleton, body, keys, frames, rot: np.
     changed = np.zeros(len(rot), np.uint8)
     _, count = backend.keep_hands_out(rot, trans, n, float(group.fps), skeleton, body, arms, allowed[todo],
                                       deepest=deepest, starts=starts[todo], out=rot, changed=changed)
-    again = np.flatnonzero(changed)
-    # what an alignment store keeps: the changed joints' rotations, zeros for the others (the arm not moved)
-    bits = (changed[again, None] >> np.arange(4, dtype=np.uint8)) & 1  # (H, 4)
-    arms_now = np.where(bits[:, :, None] > 0, _joint_rows(rot, again, list(arms.moved)), np.float32(0))
+    again, arms_now = changed_arms(rot, changed, arms.moved)
     corrected[todo] = np.asarray(count, np.int64)
     if len(again):  # frames are measured one by one: the changed alone, then each result's figures again
         deepest[again] = backend.inside_body(rot[again], trans[again], [len(again)], skeleton, body, per_frame=True)[2]
     s2, d2 = penetration_of_frames(torch.from_numpy(deepest[rows]), n, body.margin)
     share[todo], depth[todo] = s2.numpy(), d2.numpy()
     return rot, corrected, (again, arms_now)
+
+
+def changed_arms(rot: np.ndarray, changed: np.ndarray, moved) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, arms)``: what an alignment store keeps of a hands correction, from the bits it set
+    in ``changed`` ``(N,)`` (:meth:`~torchsplice.splice.backends.Backend.keep_hands_out`): the
+    frames changed, ascending, and ``(H, 4, 4)`` their ``moved`` joints' rotations in ``rot``
+    ``(N, J, 4)``, zeros for a joint not changed."""
+    rows = np.flatnonzero(changed)
+    bits = (changed[rows, None] >> np.arange(4, dtype=np.uint8)) & 1  # (H, 4)
+    return rows, np.where(bits[:, :, None] > 0, _joint_rows(rot, rows, list(moved)), rot.dtype.type(0))
 
 
 def _joint_rows(rot: np.ndarray, rows: np.ndarray, joints) -> np.ndarray:
