@@ -262,6 +262,123 @@ def test_a_clean_clip_and_a_clip_allowed_as_deep_come_back_as_they_were():
     assert got.shape == (5, 2, 3) and bool((got == 0).all())
 
 
+def _crossing_the_torso(beyond: float):
+    """The sample's first clip (float64), and the same clip with its right arm aimed, over frames
+    30 to 70, at a point that sweeps from 1.5 torso radii in front of the torso's axis to
+    ``beyond`` radii behind it and back (smoothly): its forearm enters the torso from the front,
+    crosses the axis and leaves at the front again. ``(m, rot, body, arms)``."""
+    m = sample_motions()[0].to(torch.float64)
+    roles = load_spec("sample").bind(m.skeleton)
+    body = body_of(m.skeleton, roles)
+    arms = arms_of(m.skeleton, roles, body)
+    trans = m.local_translations()
+    pos, grot = forward_kinematics(m.rotations, trans[:, 0], m.skeleton.offsets, m.skeleton.parents, trans)
+    a, b = capsule_ends(pos, body)
+    torso = body.names.index("torso_r")
+    mid = (a[:, torso] + b[:, torso]) / 2
+    sh, wr = arms.shoulder[1], arms.wrist[1]
+    unit = lambda v: torch.nn.functional.normalize(v, dim=-1)  # noqa: E731
+    front = unit(torch.linalg.cross(unit(b[:, torso] - a[:, torso]), unit(mid - pos[:, sh]), dim=-1))
+    T = m.num_frames
+    sweep = torch.zeros(T, dtype=torch.float64)
+    f = torch.arange(30, 71, dtype=torch.float64)
+    sweep[30:71] = torch.sin(torch.pi * (f - 30) / 40) ** 2
+    radius = float(body.radii[torso])
+    aim = mid + (1.5 * radius - (1.5 + beyond) * radius * sweep)[:, None] * front
+    turn = quat_between(unit(pos[:, wr] - pos[:, sh]), unit(aim - pos[:, sh]))
+    ident = torch.zeros_like(turn)
+    ident[:, 0] = 1.0
+    turn = quat_slerp(ident, turn, (3 * sweep).clamp(max=1.0))
+    rot = m.rotations.clone()
+    rot[:, sh] = quat_mul(quat_conj(grot[:, m.skeleton.parents[sh]]), quat_mul(turn, grot[:, sh]))
+    return m, rot, body, arms
+
+
+def test_the_way_out_turns_back_only_on_a_run_that_leaves_where_it_entered():
+    """Known answers of ``_turned_back``: one arm and obstacle, the normal along +x or -x."""
+    from torchsplice.ops.hands import _turned_back
+
+    def reversed_(signs, follows=None):
+        n = len(signs)
+        away = torch.zeros(n, 2, 1, 3, dtype=torch.float64)
+        away[:, 0, 0, 0] = torch.tensor([float(x or 1) for x in signs], dtype=torch.float64)
+        inside = torch.zeros(n, 2, 1, dtype=torch.bool)
+        inside[:, 0, 0] = torch.tensor([x != 0 for x in signs])
+        follows = torch.ones(n, dtype=torch.bool) if follows is None else torch.tensor(follows)
+        got = _turned_back(away, inside, follows)
+        assert not bool(got[:, 1].any())  # the other arm is inside nothing
+        return got[:, 0, 0].tolist()
+
+    # crosses the axis and comes back: the frames on the far side are pushed out of the entry side
+    assert reversed_([1, 1, -1, -1, 1]) == [False, False, True, True, False]
+    assert reversed_([1, -1, 1, -1, 1]) == [False, True, False, True, False]
+    # goes through (turns once, or three times): the normals are kept
+    assert reversed_([1, 1, -1, -1]) == [False] * 4
+    assert reversed_([1, -1, 1, -1]) == [False] * 4
+    # frames outside the obstacle, or of another clip, end a run: each run counts its own turns
+    assert reversed_([1, -1, 0, -1, 1, -1]) == [False, False, False, False, True, False]
+    assert reversed_([1, -1, 1, -1, 1, -1], follows=[True, True, True, False, True, True]) == \
+        [False, True, False, False, True, False]
+    assert reversed_([1, -1, -1, 1, 0, 1]) == [False, True, True, False, False, False]
+
+
+def test_the_kernels_runs_turn_back_the_frames_the_torch_rule_does():
+    """The compiled pass (:func:`torchsplice.cpu.hands._pushes`) against ``_turned_back`` on
+    random runs: the same normals reversed, each pushed out ``apart`` further; the push of a
+    frame sums its obstacles'."""
+    from torchsplice.cpu.hands import _pushes
+    from torchsplice.ops.hands import _turned_back
+
+    rng = np.random.default_rng(0)
+    n, O = 400, 3
+    inside = rng.random((n, 2, O)) < 0.8
+    away = rng.normal(size=(n, 2, O, 3))
+    away /= np.linalg.norm(away, axis=-1, keepdims=True)
+    away[1:] = np.where(rng.random((n - 1, 2, O, 1)) < 0.7, np.abs(away[:-1]) * np.sign(away[1:]), away[1:])
+    pushed = np.sort(rng.choice(n, size=300, replace=False)).astype(np.int64)
+    inside[np.setdiff1d(np.arange(n), pushed)] = False  # the frames a pass did not test are inside nothing
+    apart, lever = rng.random((n, 2, O)), np.full((n, 2, O), 1.0)
+    radii, obstacles, target, slack = np.array([5.0, 6.0, 7.0]), np.arange(O, dtype=np.int64), 1.0, 0.25
+    grot = np.zeros((n, 1, 4))
+    grot[..., 0] = 1.0  # the chest's frame is the world's
+    pushes = np.zeros((n, 2, 3))
+    kept = _pushes(pushed.copy(), len(pushed), inside, away, apart, lever, radii, obstacles, target, slack, grot, 0,
+                   np.empty((n, 2, O, 2), np.int64), pushes)
+    follows = np.zeros(n, bool)
+    follows[pushed[1:][pushed[1:] == pushed[:-1] + 1]] = True
+    back = _turned_back(torch.from_numpy(away), torch.from_numpy(inside), torch.from_numpy(follows)).numpy()
+    assert back.any() and (inside & ~back).any()
+    sign = np.where(back, -1.0, 1.0)
+    excess = np.where(back, radii + apart - target, radii - apart - target)
+    want = (np.where(inside, sign * (excess + slack) / lever, 0.0)[..., None] * away).sum(2)
+    assert kept == int(inside.any(-1).any(-1).sum())
+    assert np.allclose(pushes, want, atol=1e-12)
+
+
+def test_an_arm_that_crosses_the_torsos_axis_and_back_is_pushed_out_of_one_side_smoothly():
+    m, rot, body, arms = _crossing_the_torso(1.0)
+    trans, T = m.local_translations(), m.num_frames
+    fk = lambda r: forward_kinematics(r, trans[:, 0], m.skeleton.offsets, m.skeleton.parents, trans)  # noqa: E731
+    assert float(penetration_packed(fk(rot)[0], [T], body)[0]) > 0.1
+    out, corrected = keep_hands_out(rot, trans, [T], m.fps, m.skeleton, body, arms, 0.0)
+    pos, grot = fk(out)
+    assert float(penetration_packed(pos, [T], body)[0]) == 0.0 and int(corrected) > 0
+
+    def wrist(p, g):
+        return quat_apply(quat_conj(g[:, arms.chest]), p[:, arms.wrist[1]] - p[:, arms.chest])
+
+    p0, g0 = fk(rot)
+    acc0 = (wrist(p0, g0)[2:] - 2 * wrist(p0, g0)[1:-1] + wrist(p0, g0)[:-2]).norm(dim=-1)
+    acc1 = (wrist(pos, grot)[2:] - 2 * wrist(pos, grot)[1:-1] + wrist(pos, grot)[:-2]).norm(dim=-1)
+    assert float(acc1.max()) <= 1.15 * float(acc0.max())  # 1.27x where the far side's frames were pushed out of it
+    # the compiled kernel gives the same
+    from torchsplice.splice.backends.compiled import CompiledBackend
+
+    got, got_n = CompiledBackend().keep_hands_out(rot.numpy(), trans.numpy(), [T], m.fps, m.skeleton, body, arms,
+                                                  [0.0])
+    assert int(got_n[0]) == int(corrected) and np.allclose(got, out.numpy(), atol=1e-9)
+
+
 def _wrists_in_chest(clip, arms) -> torch.Tensor:
     trans = clip.local_translations()
     pos, grot = forward_kinematics(clip.rotations, trans[:, 0], clip.skeleton.offsets, clip.skeleton.parents, trans)

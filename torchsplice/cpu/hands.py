@@ -5,7 +5,8 @@ FK (:func:`.fk.fk_clip`) of the joints needed: ``arm``, the chain from the root 
 (ascending, closed under parents), on every frame, and the ``rest`` (ascending, their parents in
 either) on the frames a pass tests; then
 ``iterations`` passes of the push out of every obstacle (closed-form closest points of the
-forearm's axis and each obstacle's), taken into the chest's frame, spread in time (the largest
+forearm's axis and each obstacle's; its normal kept on one side over a run of frames that
+leaves the obstacle where it went in), taken into the chest's frame, spread in time (the largest
 push within ``spread`` frames, then a Hann window of half-width ``spread``) and added to the
 wrists' displacement, and two-bone IK of shoulder and elbow onto it, about each elbow's hinge (the
 clip's mean plane normal in the upper arm's frame; none, and the chest's, where its mean is
@@ -116,10 +117,14 @@ def _arm_ik(shoulder, elbow, wrist, target, hinge, flex):
 
 
 @njit(cache=True, nogil=True)
-def _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, obstacles, target, slack, elbow, wrist):
-    """The move of arm ``k``'s wrist (world) out of every obstacle at frame ``t`` (see :mod:`torchsplice.ops.hands`);
-    ``elbows``, ``wrists (n, 2, 3)``: both arms' current positions, used for its ``elbow`` and ``wrist`` joints
-    wherever a capsule end names them."""
+def _contacts(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, obstacles, target, elbow, wrist,
+              inside, away, apart, lever):
+    """Arm ``k``'s forearm against every obstacle at frame ``t`` (see :mod:`torchsplice.ops.hands`'s
+    ``_push``): per obstacle ``o`` (its place in ``obstacles``) into ``inside[t, k, o]`` whether the
+    axis is deeper than ``target``, and there the way out ``away[t, k, o]`` (the normal at the
+    closest point, world), the axes' distance ``apart[t, k, o]`` and the wrist's ``lever``; whether
+    any is inside. ``elbows``, ``wrists (n, 2, 3)``: both arms' current positions, used for its
+    ``elbow`` and ``wrist`` joints wherever a capsule end names them."""
     probe_ends = np.empty((2, 3))
     for e in range(2):
         row = 2 * probe + e
@@ -132,24 +137,89 @@ def _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe, ob
     arm = _length(_sub((wrists[t, k, 0], wrists[t, k, 1], wrists[t, k, 2]),
                        (elbows[t, k, 0], elbows[t, k, 1], elbows[t, k, 2])))
     probe_mid, probe_half = _scale(_add(probe_a, probe_b), 0.5), 0.5 * _length(_sub(probe_b, probe_a))
-    push = (0.0, 0.0, 0.0)
-    for o in obstacles:
+    hit = False
+    for i in range(obstacles.shape[0]):
+        o = obstacles[i]
+        inside[t, k, i] = False
         obstacle_a, obstacle_b = _vec(ends[t], 2 * o), _vec(ends[t], 2 * o + 1)
         # the midpoints' distance less both half-lengths bounds the axes' distance from below: an
         # obstacle surely out of reach is skipped (the margin keeps rounding from skipping one that is not)
-        apart = _length(_sub(probe_mid, _scale(_add(obstacle_a, obstacle_b), 0.5)))
+        mid_apart = _length(_sub(probe_mid, _scale(_add(obstacle_a, obstacle_b), 0.5)))
         reach = probe_half + 0.5 * _length(_sub(obstacle_b, obstacle_a))
-        if apart - reach > radii[o] - target + 1e-9 * (apart + reach + radii[o]):
+        if mid_apart - reach > radii[o] - target + 1e-9 * (mid_apart + reach + radii[o]):
             continue
         s, u = _closest(probe_a, probe_b, obstacle_a, obstacle_b)
         on_probe = _add(probe_a, _scale(_sub(probe_b, probe_a), s))
         on_obstacle = _add(obstacle_a, _scale(_sub(obstacle_b, obstacle_a), u))
-        excess = radii[o] - _length(_sub(on_probe, on_obstacle)) - target
-        if excess > 0.0:
-            away = _normalized(_sub(on_probe, on_obstacle), _sub(on_probe, _scale(_add(obstacle_a, obstacle_b), 0.5)))
-            lever = min(max(_length(_sub(probe_b, probe_a)) / max(arm, 1e-300) * s, 0.5), 2.0)
-            push = _add(push, _scale(away, (excess + slack) / lever))
-    return push
+        distance = _length(_sub(on_probe, on_obstacle))
+        if radii[o] - distance - target > 0.0:
+            inside[t, k, i] = True
+            hit = True
+            way = _normalized(_sub(on_probe, on_obstacle), _sub(on_probe, _scale(_add(obstacle_a, obstacle_b), 0.5)))
+            away[t, k, i, 0], away[t, k, i, 1], away[t, k, i, 2] = way
+            apart[t, k, i] = distance
+            lever[t, k, i] = min(max(_length(_sub(probe_b, probe_a)) / max(arm, 1e-300) * s, 0.5), 2.0)
+    return hit
+
+
+@njit(cache=True, nogil=True)
+def _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, target, slack, grot, chest, runs,
+            pushes):
+    """The wrists' moves out of the obstacles (chest frame) into ``pushes[t]`` for the frames
+    ``pushed[:n_pushed]`` (ascending) of a pass, from :func:`_contacts`: per obstacle its way out
+    times how far beyond ``target`` the forearm goes, plus ``slack``, over the lever, summed. A way
+    out is reversed where the run of consecutive frames inside that obstacle began and ends on
+    one side and the normal has turned over since it began (:func:`torchsplice.ops.hands._turned_back`:
+    the forearm crossed the obstacle's axis); then it goes out through that side, ``apart``
+    further. ``runs (n, 2, O, 2)``: scratch, the reversals so far in a frame's run and in its
+    whole run. Where the pushes of a frame sum to zero it is dropped from ``pushed``; the new
+    count is returned."""
+    n_obstacles = obstacles.shape[0]
+    for i in range(n_pushed):  # the normal's reversals counted along each run ...
+        t = pushed[i]
+        for k in range(2):
+            for o in range(n_obstacles):
+                if not inside[t, k, o]:
+                    continue
+                runs[t, k, o, 0] = 0
+                if i > 0 and pushed[i - 1] == t - 1 and inside[t - 1, k, o]:
+                    turned = (away[t, k, o, 0] * away[t - 1, k, o, 0] + away[t, k, o, 1] * away[t - 1, k, o, 1]
+                              + away[t, k, o, 2] * away[t - 1, k, o, 2]) < 0.0
+                    runs[t, k, o, 0] = runs[t - 1, k, o, 0] + (1 if turned else 0)
+    for i in range(n_pushed - 1, -1, -1):  # ... and each run's total, from its end back
+        t = pushed[i]
+        for k in range(2):
+            for o in range(n_obstacles):
+                if not inside[t, k, o]:
+                    continue
+                if i + 1 < n_pushed and pushed[i + 1] == t + 1 and inside[t + 1, k, o]:
+                    runs[t, k, o, 1] = runs[t + 1, k, o, 1]
+                else:
+                    runs[t, k, o, 1] = runs[t, k, o, 0]
+    kept = 0
+    for i in range(n_pushed):
+        t = pushed[i]
+        to_chest = qconj(qload(grot, t, chest))
+        hit = False
+        for k in range(2):
+            push = (0.0, 0.0, 0.0)
+            for o in range(n_obstacles):
+                if not inside[t, k, o]:
+                    continue
+                way = (away[t, k, o, 0], away[t, k, o, 1], away[t, k, o, 2])
+                excess = radii[obstacles[o]] - apart[t, k, o] - target
+                if runs[t, k, o, 0] % 2 == 1 and runs[t, k, o, 1] % 2 == 0:  # turned back: out through the entry side
+                    way = _scale(way, -1.0)
+                    excess = radii[obstacles[o]] + apart[t, k, o] - target
+                push = _add(push, _scale(way, (excess + slack) / lever[t, k, o]))
+            if push[0] != 0.0 or push[1] != 0.0 or push[2] != 0.0:
+                hit = True
+                push = qrot(to_chest, push)
+            pushes[t, k, 0], pushes[t, k, 1], pushes[t, k, 2] = push
+        if hit:
+            pushed[kept] = t
+            kept += 1
+    return kept
 
 
 @njit(cache=True, nogil=True)
@@ -204,6 +274,12 @@ def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, 
         widest = np.zeros((n, 2, 3))
         turns = np.zeros((n, 2, 8))  # per arm: the elbow's turn, the shoulder's
         pushed = np.empty(n, np.int64)
+        n_obstacles = obstacles.shape[0]
+        inside = np.zeros((n, 2, n_obstacles), np.bool_)  # per frame, arm and obstacle: the forearm in it (_contacts)
+        away = np.empty((n, 2, n_obstacles, 3))
+        apart = np.empty((n, 2, n_obstacles))
+        lever = np.empty((n, 2, n_obstacles))
+        runs = np.empty((n, 2, n_obstacles, 2), np.int64)
         # the frames the first pass must test: all, or those the body test measured deeper than the
         # target (exact there when the target is at least exact_above; the margin covers rounding)
         known = frame_deepest.shape[0] > 0 and target[c] * (1.0 - 1e-6) >= exact_above
@@ -239,18 +315,16 @@ def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, 
                 if it == 0 and known and not frame_deepest[first + t] > target[c] * (1.0 - 1e-6):
                     continue  # no obstacle as deep as the target
                 _body_frame(rot, trans, parents, rest, end_a, end_b, end_w, first + t, t, pos, grot, ends, whole)
-                to_chest = qconj(qload(grot, t, chest))
                 hit = False
                 for k in range(2):
-                    v = _push(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probes[k], obstacles, target[c],
-                              slack, elbow[k], wrist[k])
-                    if v[0] != 0.0 or v[1] != 0.0 or v[2] != 0.0:
+                    if _contacts(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probes[k], obstacles,
+                                 target[c], elbow[k], wrist[k], inside, away, apart, lever):
                         hit = True
-                        v = qrot(to_chest, v)
-                        pushes[t, k, 0], pushes[t, k, 1], pushes[t, k, 2] = v
                 if hit:
                     pushed[n_pushed] = t
                     n_pushed += 1
+            n_pushed = _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, target[c], slack, grot,
+                               chest, runs, pushes)
             if n_pushed == 0:
                 break
             # a push reaches `spread` frames by the largest-push step and as many more by the window:

@@ -8,7 +8,8 @@ moves it out:
 1. The body's capsules (:mod:`.body`) give, per frame and arm, how deep the forearm's axis
    (with the hand) enters each obstacle beyond what the clip may keep (``allowed``, its sources'
    own deepest, and at least half :data:`~.body.INSIDE_MARGIN`), and the way out: the capsule's
-   normal at the closest point.
+   normal at the closest point, kept on one side over frames where the forearm crosses the
+   obstacle's axis and comes back out where it went in (``_turned_back``).
 2. That push, as a move of the wrist, is taken into the chest's frame, spread in time (each
    frame takes the largest push within :data:`RAMP` seconds, then a Hann window of that
    half-width smooths it; no pop where the correction starts or ends) and added to the wrist's
@@ -227,21 +228,55 @@ def _probe_ends(pos: torch.Tensor, E: torch.Tensor, W: torch.Tensor, body: Body,
     return ends[0], ends[1]
 
 
-def _push(pos, E, W, oa, ob, radii, target, slack: float, body: Body, arms: Arms) -> torch.Tensor:
+def _push(pos, E, W, oa, ob, radii, target, slack: float, body: Body, arms: Arms, follows: torch.Tensor) -> torch.Tensor:
     """``(n, 2, 3)`` per frame and arm, the move of the wrist (world) that takes the forearm's
     axis, where it is deeper than ``target`` ``(n,)`` in an obstacle, out to ``slack`` less
     deep than that, with the elbow and wrist at ``E``, ``W`` ``(n, 2, 3)``; zero where it is
-    out already."""
+    out already. ``follows`` ``(n,)``: the row is its clip's frame after the previous row's.
+
+    The way out is the capsule's normal at the closest point, kept on the side the forearm
+    entered from where it also leaves on that side (:func:`_turned_back`): a forearm crossing
+    the obstacle's axis and back would otherwise be pushed out of the far side for a few
+    frames, and the arm would swing through the body and back."""
     pa, pb = _probe_ends(pos, E, W, body, arms)
     s, t = segment_closest(pa, pb, oa, ob)
     cp, co = pa + (pb - pa) * s[..., None], oa + (ob - oa) * t[..., None]
-    excess = radii - _length(cp - co) - target[:, None, None]  # (n, 2, O)
-    excess = torch.where(excess > 0, excess + slack, 0.0)  # beyond the target: out to slack below it
-    if not bool((excess > 0).any()):
+    apart = _length(cp - co)
+    excess = radii - apart - target[:, None, None]  # (n, 2, O)
+    inside = excess > 0
+    if not bool(inside.any()):
         return torch.zeros_like(E)
     away = _normalized(cp - co, cp - (oa + ob) / 2)
+    back = _turned_back(away, inside, follows)
+    away = torch.where(back[..., None], -away, away)
+    excess = torch.where(back, radii + apart - target[:, None, None], excess)  # out through the entry side
+    excess = torch.where(inside, excess + slack, 0.0)  # beyond the target: out to slack below it
     lever = (_length(pb - pa) / _length(W - E).clamp_min(1e-300)[..., None] * s).clamp(0.5, 2.0)
     return (away * (excess / lever)[..., None]).sum(2)
+
+
+def _turned_back(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor) -> torch.Tensor:
+    """``(n, 2, O)``: where the way out ``away`` ``(n, 2, O, 3)`` (the normal at the closest
+    point) is reversed. A run is the consecutive frames (``follows`` ``(n,)``) on which an arm is
+    ``inside`` ``(n, 2, O)`` one obstacle; a step of it turns the normal over where consecutive
+    normals have a negative dot product (the forearm's axis crossed the obstacle's). Where a run
+    turns over an even number of times, it left the obstacle on the side it entered, so its
+    frames after an odd number of turns are reversed: pushed out on that side all along. A run
+    that turns an odd number of times went through the obstacle, and keeps its normals."""
+    n = len(away)
+    link = torch.zeros_like(inside)
+    link[1:] = follows[1:, None, None] & inside[1:] & inside[:-1]
+    reversed_ = torch.zeros_like(inside)
+    reversed_[1:] = link[1:] & ((away[1:] * away[:-1]).sum(-1) < 0)
+    count = torch.cumsum(reversed_.long(), 0)
+    row = torch.arange(n)[:, None, None].expand_as(inside)
+    start = torch.cummax(torch.where(link, -1, row), 0).values  # each run's first row
+    ends = torch.zeros_like(inside)  # each run's last row: the next row does not continue it
+    ends[:-1] = ~link[1:]
+    ends[-1] = True
+    end = torch.flip(torch.cummin(torch.flip(torch.where(ends, row, n), [0]), 0).values, [0])
+    flips = count - count.gather(0, start)
+    return inside & (flips % 2 == 1) & ((count.gather(0, end) - count.gather(0, start)) % 2 == 0)
 
 
 def _near(flag: torch.Tensor, radius: torch.Tensor, first: torch.Tensor, end: torch.Tensor) -> torch.Tensor:
@@ -278,7 +313,7 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
     radii = body.radii.to(torch.float64)[obstacles]
     slack = SLACK * body.margin
     push = _push(pos, pos[:, el], pos[:, wr], a[:, None, obstacles], b[:, None, obstacles], radii, target, slack, body,
-                 arms)
+                 arms, torch.arange(len(pos)) > first)
     inside = (push != 0).any(-1).any(-1)
     if not bool(inside.any()):
         return out, none
@@ -308,7 +343,9 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
         else:  # a frame no pass has moved was out already, and is still
             m = torch.nonzero((D != 0).any(-1).any(-1)).flatten()
             p = torch.zeros_like(D)
-            p[m] = _push(pos[m], E[m], W[m], oa[m], ob[m], radii, target[m], slack, body, arms)
+            follows = ~run[m]  # the row after its clip's previous frame
+            follows[1:] &= m[1:] == m[:-1] + 1
+            p[m] = _push(pos[m], E[m], W[m], oa[m], ob[m], radii, target[m], slack, body, arms, follows)
         if not bool((p != 0).any()):
             break
         D = D + spread_in_time(quat_apply(quat_conj(chest), p), seg_lengths, fps[seg_clip])
