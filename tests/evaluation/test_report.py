@@ -103,7 +103,7 @@ def test_report_on_the_sample_ranks_splice_above_naive(sample_job, tmp_path):
     assert agg["splice"]["phase_in_range"] > agg["naive"]["phase_in_range"]
     assert agg["splice"]["phase"] < agg["naive"]["phase"]
     # the lower body comes from the locomotion either way: foot skate is about the same
-    assert agg["splice"]["foot_skate"] == pytest.approx(agg["naive"]["foot_skate"], rel=0.2)
+    assert agg["splice"]["foot_speed_in_contact"] == pytest.approx(agg["naive"]["foot_speed_in_contact"], rel=0.2)
     text = report.read_text()
     assert "| splice | 25 |" in text and "| naive | 25 |" in text and "walk_curve+carry_box" in text
 
@@ -122,7 +122,128 @@ def test_figures_that_are_not_finite_print_as_a_dash(sample_job, tmp_path, capsy
     rc = main(["evaluate", str(huge), "-o", str(tmp_path / "r.md"), "--no-pictures"])
     cap = capsys.readouterr()
     assert rc == 0 and "Traceback" not in cap.err, cap.err
-    assert "foot skate - " in cap.out and "splice: 25 clips" in cap.out and "naive: 25 clips" in cap.out
+    assert "foot speed in contact - " in cap.out and "splice: 25 clips" in cap.out and "naive: 25 clips" in cap.out
+
+
+FIGURES = ("foot_skate", "foot_slide", "floor", "jerk", "jerk_action")
+"""The job's per-result columns of the feet, the floor and the jerk (docs/job.md)."""
+
+
+def _section(text: str, heading: str) -> str:
+    """The report's section under ``heading``, up to the next section."""
+    start = text.index(heading)
+    end = text.find("\n## ", start + 1)
+    return text[start:] if end < 0 else text[start:end]
+
+
+def _rows(section: str) -> dict[str, list[str]]:
+    """A section's table: its cells after the method's, per method."""
+    return {ln.split("|")[1].strip(): [x.strip() for x in ln.split("|")[2:-1]]
+            for ln in section.splitlines() if ln.startswith("| ") and not ln.startswith("| method")}
+
+
+def test_report_shows_the_feet_floor_and_jerk_per_method_beside_the_actions_jerk(sample_job, tmp_path):
+    """The job's foot_skate, foot_slide, floor and jerk (against jerk_action) as distributions per
+    method, naive included, the numbers those of the output's own columns; the JSON's rows carry
+    the job's columns under their names and the report's own measure as foot_speed_in_contact."""
+    import json
+
+    report, rows_json = tmp_path / "r.md", tmp_path / "r.json"
+    agg = evaluate_database(sample_job, report, pictures=False, json=rows_json)
+    with MotionDatabase.open(sample_job) as d:
+        t = d.clip_table()
+        method = np.asarray([str(m) for m in t.extra["method"]])
+        col = {k: np.asarray(t.extra[k], dtype=np.float64) for k in FIGURES}
+        names = list(t.names)
+    section = _section(report.read_text(), "## Plausibility: feet, floor and jerk")
+    rows = _rows(section)
+    assert set(rows) == {"splice", "naive"}
+
+    def q(v, p):
+        return float(np.quantile(v, p, method="inverted_cdf"))
+
+    for m in ("splice", "naive"):
+        sel = method == m
+        skate, slide, floor, jerk, act = (col[k][sel] for k in FIGURES)
+        want = [str(int(sel.sum())), f"{q(skate, .5):.3f} / {q(skate, .95):.3f}", f"{q(slide, .5):.1f} / {q(slide, .95):.1f}",
+                f"{q(floor, .05):.1f} / {q(floor, .5):.1f} / {q(floor, .95):.1f}", f"{q(jerk, .5):.0f} / {q(jerk, .95):.0f}",
+                f"{q(act, .5):.0f} / {q(act, .95):.0f}", f"{q(jerk / act, .5):.2f} / {q(jerk / act, .95):.2f}"]
+        assert rows[m] == want, (m, rows[m], want)
+        assert agg[m]["jerk_median"] == q(jerk, .5) and agg[m]["foot_skate_p95"] == q(skate, .95)
+        assert agg[m]["floor_p5"] == q(floor, .05)
+    # naive copies the action's upper body frame by frame: its jerk in the chest's frame is the action's
+    assert agg["naive"]["jerk_over_action_median"] == pytest.approx(1.0, abs=0.01)
+    assert "The sources' foot figures are not in the output" in section
+    doc = json.loads(rows_json.read_text())
+    for c in doc["clips"]:
+        i = names.index(c["name"])
+        assert {k: c[k] for k in FIGURES} == pytest.approx({k: float(col[k][i]) for k in FIGURES})
+        assert c["foot_speed_in_contact"] > 0 and "loco_skate" not in c
+    # the two measures differ: GMD's share of steps against the evaluation's speed in cm/s
+    assert doc["aggregates"]["splice"]["foot_speed_in_contact"] == pytest.approx(agg["splice"]["foot_speed_in_contact"])
+    assert "foot_skate" not in doc["aggregates"]["splice"] and doc["aggregates"]["splice"]["foot_skate_median"] < 1
+
+
+def test_feet_and_jerk_distributions_known_answer():
+    """Per-clip rows whose figures are set: the medians and percentiles are the clips' values
+    expected (NaN skipped, an action's jerk of 0 left out of the ratio), a figure no clip of a
+    method has prints '-', and a figure no clip has gets no column."""
+    from torchsplice.evaluation.plausibility import figure_stats, plausibility_section
+
+    rng = np.random.default_rng(0)
+    splice = [{"method": "splice", "name": f"s{k}", "jerk": float(j), "jerk_action": 10.0, "foot_skate": (j - 1) / 100}
+              for k, j in enumerate(rng.permutation(np.arange(1, 21)))]  # jerk 1..20, foot skate 0.00..0.19
+    splice.append({"method": "splice", "name": "nan", "jerk": float("nan"), "jerk_action": 0.0, "foot_skate": float("nan")})
+    naive = [{"method": "naive", "name": f"n{k}", "jerk": j, "jerk_action": a, "foot_skate": 0.5, "floor": f}
+             for k, (j, a, f) in enumerate([(5.0, 5.0, 2.0), (100.0, 10.0, -1.0), (7.0, 7.0, 4.0)])]
+    st = figure_stats(splice)
+    assert st == {"foot_skate_median": 0.09, "foot_skate_p95": 0.18, "jerk_median": 10.0, "jerk_p95": 19.0,
+                  "jerk_action_median": 10.0, "jerk_action_p95": 10.0, "jerk_over_action_median": 1.0,
+                  "jerk_over_action_p95": 1.9}
+    assert figure_stats(naive)["jerk_p95"] == 100.0 and figure_stats(naive)["floor_p5"] == -1.0
+    lines = plausibility_section(splice + naive, ["splice", "naive"], str)  # no penetration: no hands table
+    assert "## Plausibility: a hand inside the body" not in lines and lines[0] == "## Plausibility: feet, floor and jerk"
+    assert lines[2] == ("| method | clips | foot skate, GMD's ratio, median / 95th pct. | floor (cm), 5th pct. / median / "
+                        "95th pct. | jerk (m/s^3), median / 95th pct. | the actions' jerk (m/s^3), median / 95th pct. | "
+                        "jerk / the action's, median / 95th pct. |")
+    assert lines[4] == "| splice | 21 | 0.090 / 0.180 | - / - / - | 10 / 19 | 10 / 10 | 1.00 / 1.90 |"
+    assert lines[5] == "| naive | 3 | 0.500 / 0.500 | -1.0 / 2.0 / 4.0 | 7 / 100 | 7 / 10 | 1.00 / 10.00 |"
+    assert "foot slide" not in lines[2]
+    assert plausibility_section([{"method": "splice", "name": "a", "phase": 0.1}], ["splice"], str) == []
+
+
+@pytest.mark.parametrize("dropped", [FIGURES, ("jerk_action",)], ids=["none", "no_jerk_action"])
+def test_an_output_written_before_the_figures_evaluates_without_them(sample_job, tmp_path, dropped):
+    """An output without the job's feet and jerk columns (as written before them) evaluates: no
+    line of the figures it lacks, no key for them in the JSON, the hands' section as before."""
+    import json
+
+    old = tmp_path / "old.h5"
+    shutil.copy(sample_job, old)
+    import h5py
+
+    with h5py.File(old, "r+") as f:
+        extra = json.loads(f.attrs["extra_columns"])
+        for c in dropped:
+            del f["clips"][c], extra["clip"][c]
+        f.attrs["extra_columns"] = json.dumps(extra)
+    report, rows_json = tmp_path / "r.md", tmp_path / "r.json"
+    agg = evaluate_database(old, report, pictures=False, json=rows_json)
+    text = report.read_text()
+    doc = json.loads(rows_json.read_text())
+    assert "| naive | 25 |" in _section(text, "## Plausibility: a hand inside the body")
+    assert all(not set(dropped) & set(c) for c in doc["clips"])
+    assert all(c["foot_speed_in_contact"] > 0 for c in doc["clips"])
+    if dropped == FIGURES:
+        assert "## Plausibility: feet, floor and jerk" not in text and "GMD's ratio, median" not in text
+        assert "(m/s^3)" not in text and "floor (cm)" not in text
+        assert not any(k.startswith(FIGURES) for k in agg["naive"])
+    else:  # the results' jerk stands alone
+        section = _section(text, "## Plausibility: feet, floor and jerk")
+        head = section.splitlines()[2]
+        assert "| jerk (m/s^3), median / 95th pct. |" in head and "the actions' jerk" not in head and "/ the action's" not in head
+        assert "jerk_over_action_median" not in agg["naive"] and agg["naive"]["jerk_median"] > 0
+        assert len(_rows(section)["naive"]) == 5  # clips, foot skate, foot slide, floor, jerk
 
 
 def test_report_needs_a_spliced_database(sample_db, tmp_path):
@@ -220,7 +341,7 @@ def test_8_evaluate_writes_every_row_for_scripts_and_says_where_its_tables_stop(
         names = set(d.names)
     assert {r["name"] for r in rows} == {c["name"] for c in doc["clips"]} == names and len(rows) == len(names) == 25
     assert set(doc["aggregates"]) == {"splice"} and doc["aggregates"]["splice"]["clips"] == 25
-    assert float(rows[0]["foot_skate"]) == pytest.approx(doc["clips"][0]["foot_skate"])
+    assert float(rows[0]["foot_speed_in_contact"]) == pytest.approx(doc["clips"][0]["foot_speed_in_contact"])
     assert "21 more (the table stops at 4 rows; every row: evaluate's csv or json)" in (tmp_path / "r.md").read_text()
     # the command's words: where it wrote its tables, and a table file of the wrong kind refused up front
     rc, out, _ = run(capsys, "evaluate", spliced, "-o", tmp_path / "t.md", "--no-pictures", "--csv", tmp_path / "t.csv",

@@ -57,7 +57,7 @@ class Evaluate(Command):
             for method, a in agg.items():
                 gt = (f", ground-truth error {fig(a['gt_error'])} {u} over {a['gt_pairs']} pairs"
                       if a.get("gt_error") is not None else "")
-                print(f"{method}: {n(a['clips'], 'clip')}, foot skate {fig(a.get('foot_skate'))} {u}/s, "
+                print(f"{method}: {n(a['clips'], 'clip')}, foot speed in contact {fig(a.get('foot_speed_in_contact'))} {u}/s, "
                       f"posture kept {fig(a.get('posture'))} {u}{gt}")
             print(f"wrote {out}" + "".join(f", {t}" for t in tables if t is not None))
         return 0

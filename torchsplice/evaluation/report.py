@@ -2,7 +2,8 @@
 
 For every spliced clip (and, in aggregate, every method) the report gives:
 
-- **foot skate**: horizontal foot speed while the foot is in ground contact (file units/s);
+- **foot speed in contact** (``foot_speed_in_contact``; not the job's ``foot_skate``, GMD's
+  ratio): horizontal foot speed while the foot is in ground contact (file units/s);
 - **arm-leg phase**: the lag between each arm's swing and the opposite leg's swing, as a
   fraction of the gait cycle, and whether it lies in the range seen in the captured source clips;
 - **posture kept**: distance between the result's and the action's mean shoulder offset from
@@ -14,7 +15,10 @@ For every spliced clip (and, in aggregate, every method) the report gives:
 - for **standing actions** (see :mod:`torchsplice.evaluation.standing`): the action kept (the
   acting wrists' range of motion against the whole action's and against its best window of
   the result's length, with the worst pairs named), the wrist error, the idle arms' phase,
-  the smoothness of the loop seams, and filmstrips of two such pairs.
+  the smoothness of the loop seams, and filmstrips of two such pairs;
+- **plausibility** (see :mod:`torchsplice.evaluation.plausibility`): a hand inside the body, and
+  the distributions of the job's ``foot_skate``, ``foot_slide``, ``floor`` and ``jerk`` columns
+  (against the actions' ``jerk_action``), per method, where the output has them.
 
 The source clips come from the databases recorded in the output's ``run`` attribute, from
 ``sources`` given explicitly, or from the output itself when the job copied them in.
@@ -40,7 +44,7 @@ from ..splice.clips import clips_to_tensors, resample_motion
 from .defaults import DEFAULT_MAX_ROWS, DEFAULT_PICTURES
 from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
-from .plausibility import plausibility_pictures, plausibility_rows, plausibility_section
+from .plausibility import figure_stats, plausibility_pictures, plausibility_rows, plausibility_section
 from .standing import standing_measures
 from ..viz.sources import SourceClips as _Sources, source_databases as _source_dbs
 
@@ -125,7 +129,7 @@ def _metrics(results: list[Motion], locos: list[Motion], acts: list[Motion], rol
     R = clips_to_tensors(results, sk)
     A = clips_to_tensors([resample_motion(a, fps) for a in acts], sk)
     return {
-        "foot_skate": foot_skate(R, roles, fps),
+        "foot_speed_in_contact": foot_skate(R, roles, fps),
         "phase": arm_leg_phase(R, roles, fps),
         "posture": posture_kept(R, A, roles),
     }
@@ -234,7 +238,7 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
             per_clip.append({
                 "name": str(t["name"][i]), "method": method, "locomotion": str(t["locomotion"][i]),
                 "action": str(t["action"][i]), "frames": int(t["length"][i]), "cost": float(t["cost"][i]),
-                "foot_skate": float(m["foot_skate"][n]), "phase": float(m["phase"][n]),
+                "foot_speed_in_contact": float(m["foot_speed_in_contact"][n]), "phase": float(m["phase"][n]),
                 "posture": float(m["posture"][n]), "capture": caps[n], "gt_error": gt[n],
                 "gt_bound": bound[n],
                 "loco_type": locomotion_type(locos[n]),
@@ -316,7 +320,7 @@ def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, 
 def _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved: dict) -> dict[int, dict]:
     """Per position in ``chunk`` of a result whose action was retargeted: where from, the acting
     wrist's range of motion against the action's (as spliced, over the frames the result plays:
-    :func:`~torchsplice.evaluation.retargeting.wrist_spread`) and the locomotion's foot skate."""
+    :func:`~torchsplice.evaluation.retargeting.wrist_spread`) and the locomotion's foot speed in contact."""
     from .retargeting import wrist_spread
 
     out = {}
@@ -330,7 +334,7 @@ def _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved: dict) -> 
         want = wrist_spread(ac, roles, side, used)
         out[n] = {"retargeted_from": ac.labels.get("retargeted_from", "?"),
                   "wrist_ratio": wrist_spread(r, roles, side) / want if want > 0 else float("nan"),
-                  "loco_skate": float(foot_skate(clips_to_tensors([resample_motion(lo, fps)], lo.skeleton), roles, fps)[0])}
+                  "locomotion_foot_speed_in_contact": float(foot_skate(clips_to_tensors([resample_motion(lo, fps)], lo.skeleton), roles, fps)[0])}
     return out
 
 
@@ -342,15 +346,15 @@ def _retarget_section(per_clip, methods, units) -> list[str]:
              f"{len(moved)} of {len(per_clip)} clips spliced an action retargeted onto the locomotion's skeleton "
              f"(from {', '.join(sorted({md(c['retargeted_from']) for c in moved}))}). Wrist range: the acting wrist's "
              "range of motion in the chest frame over arm length, against the action's as spliced over the frames "
-             "the result plays (1 is the action's; the target is 0.8 to 1.2). Foot skate against the locomotion's "
+             "the result plays (1 is the action's; the target is 0.8 to 1.2). Foot speed in contact against the locomotion's "
              f"({units}/s).", "",
-             "| method | clips | wrist range, mean (min to max) | foot skate minus the locomotion's, mean |", "|---|---|---|---|"]
+             "| method | clips | wrist range, mean (min to max) | foot speed in contact minus the locomotion's, mean |", "|---|---|---|---|"]
     for m in methods:
         cs = [c for c in moved if c["method"] == m]
         if not cs:
             continue
         r = [c["wrist_ratio"] for c in cs]
-        d = [c["foot_skate"] - c["loco_skate"] for c in cs]
+        d = [c["foot_speed_in_contact"] - c["locomotion_foot_speed_in_contact"] for c in cs]
         lines.append(f"| {md(m)} | {len(cs)} | {sum(r) / len(r):.2f} ({min(r):.2f} to {max(r):.2f}) | "
                      f"{sum(d) / len(d):+.2f} |")
     return lines + [""]
@@ -389,7 +393,7 @@ def _standing_section(per_clip: list[dict], methods: list[str], units: str, band
              f"({', '.join(sorted({c['timing'] for c in stand}))}).", "",
              "| method | clips | action kept: range / the action's, mean | worst | range / its best window, mean | "
              f"worst | wrist error ({units}), mean | idle arms: lag within captured range | seam jump / capture's "
-             f"99th pct., mean | worst | foot skate ({units}/s), standing | foot skate, time-aligned |",
+             f"99th pct., mean | worst | foot speed in contact ({units}/s), standing | the same, time-aligned |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for m in methods:
         cs = [c for c in stand if c["method"] == m]
@@ -401,8 +405,8 @@ def _standing_section(per_clip: list[dict], methods: list[str], units: str, band
         idle = [c["idle_lag"] for c in cs if math.isfinite(c["idle_lag"])]
         in_range = f"{100 * sum(lo <= x <= hi for x in idle) / len(idle):.0f}% of {len(idle)}" if idle else "-"
         seam, worst = stats([c["seam_ratio"] for c in cs])
-        skate, _ = stats([c["foot_skate"] for c in cs])
-        other, _ = stats([c["foot_skate"] for c in per_clip if c["method"] == m and c.get("timing", "timewarp") == "timewarp"])
+        skate, _ = stats([c["foot_speed_in_contact"] for c in cs])
+        other, _ = stats([c["foot_speed_in_contact"] for c in per_clip if c["method"] == m and c.get("timing", "timewarp") == "timewarp"])
         lines.append(f"| {m} | {len(cs)} | {_fmt(whole)} | {_fmt(whole_min)} | {_fmt(window)} | {_fmt(window_min)} | "
                      f"{_fmt(err)} | {in_range} | {_fmt(seam)} | {_fmt(worst)} | {_fmt(skate)} | {_fmt(other)} |")
     lines += ["", "Action kept: the acting wrists' range of motion in the chest's frame (the extent between their 5th and "
@@ -413,7 +417,7 @@ def _standing_section(per_clip: list[dict], methods: list[str], units: str, band
               "are the action's exactly). Idle arms: the arm-leg lag of the arms the action does not use, against the "
               "range of the captured walks. Seam jump: the largest change of the acting wrists' velocity around each "
               "loop point, over the 99th percentile of the same in the captured action (about 1 or less: as smooth as "
-              "the capture). Foot skate as above: the locomotion's, unchanged.", ""]
+              "the capture). Foot speed in contact as above: the locomotion's, unchanged.", ""]
     worst_pairs = sorted((c for c in stand if math.isfinite(c["window_kept"])), key=lambda c: c["window_kept"])[:5]
     if worst_pairs:
         lines += ["Worst pairs (action kept against the best window):", ""]
@@ -447,12 +451,13 @@ def _aggregate(per_clip: list[dict], methods: list[str]) -> dict:
 
         gt = [c["gt_error"] for c in cs if c["gt_error"] is not None]
         out[method] = {
-            "clips": len(cs), "foot_skate": mean("foot_skate"), "phase": mean("abs_phase"),
+            "clips": len(cs), "foot_speed_in_contact": mean("foot_speed_in_contact"), "phase": mean("abs_phase"),
             "phase_in_range": sum(c["phase_ok"] for c in cs) / len(cs), "posture": mean("posture"),
             "gt_error": sum(gt) / len(gt) if gt else None, "gt_pairs": len(gt), "cost": mean("cost"),
             "gt_by_type": ground_truth_by_type(cs, [method]).get(method, {}),
             "gt_bound": error_stats([c.get("gt_bound") for c in cs])["mean"],
             "gt_bound_by_type": ground_truth_by_type(cs, [method], "gt_bound").get(method, {}),
+            **figure_stats(cs),
         }
     return out
 
@@ -521,15 +526,16 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
              f"{len(per_clip)} spliced clips, methods: {', '.join(map(md, methods))}; spec {md(spec.name)}, lengths in "
              f"{md(units)}.", "",
              "## Per method", "",
-             f"| method | clips | foot skate ({units}/s) | arm-leg lag, mean abs. (cycles) | lag within captured range | "
+             f"| method | clips | foot speed in contact ({units}/s) | arm-leg lag, mean abs. (cycles) | lag within captured range | "
              f"posture kept ({units}) | ground-truth error ({units}) | ground-truth pairs | alignment cost |",
              "|---|---|---|---|---|---|---|---|---|"]
     for m in methods:
         a = agg[m]
-        lines.append(f"| {md(m)} | {a['clips']} | {_fmt(a['foot_skate'])} | {_fmt(a['phase'], 3)} | "
+        lines.append(f"| {md(m)} | {a['clips']} | {_fmt(a['foot_speed_in_contact'])} | {_fmt(a['phase'], 3)} | "
                      f"{100 * a['phase_in_range']:.0f}% | {_fmt(a['posture'])} | {_fmt(a['gt_error'])} | "
                      f"{a['gt_pairs']} | {_fmt(a['cost'])} |")
-    lines += ["", "Foot skate: mean horizontal foot speed while in ground contact. Arm-leg lag: lag between each "
+    lines += ["", "Foot speed in contact: mean horizontal foot speed while in ground contact (the evaluation's "
+              "own measure, not the job's foot_skate column, GMD's ratio). Arm-leg lag: lag between each "
               "arm's swing and the opposite leg's swing, as a fraction of the gait cycle (0: the arm swings forward "
               "with the opposite leg); the captured source clips whose arms swing with their legs "
               f"(of {n_captured}) span {phase_band[0]:.3f} to {phase_band[1]:.3f}. Posture kept: distance between the "
@@ -546,10 +552,10 @@ def _markdown(path, spec, units, methods, agg, per_clip, phase_band, figures, ma
     lines += ["## Per clip", ""]
     for m in methods:
         cs = [c for c in per_clip if c["method"] == m]
-        lines += [f"### {md(m)}", "", "| clip | frames | foot skate | arm-leg lag | posture kept | ground truth | error |",
+        lines += [f"### {md(m)}", "", "| clip | frames | foot speed in contact | arm-leg lag | posture kept | ground truth | error |",
                   "|---|---|---|---|---|---|---|"]
         for c in cs[:max_rows]:
-            lines.append(f"| {md(c['name'])} | {c['frames']} | {_fmt(c['foot_skate'])} | {_lag_text(c['phase'], c['phase_ok'], phase_band)}"
+            lines.append(f"| {md(c['name'])} | {c['frames']} | {_fmt(c['foot_speed_in_contact'])} | {_lag_text(c['phase'], c['phase_ok'], phase_band)}"
                          f" | {_fmt(c['posture'])} | "
                          f"{md(c['capture'] or '-')} | {_fmt(c['gt_error'])} |")
         if len(cs) > max_rows:
