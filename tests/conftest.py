@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from realdata import MOCAP, _require_mocap
+from realdata import BANDAI, BANDAI_FEW, BANDAI_FOLDER, _require_mocap, copy_bandai
 
 
 def pytest_configure(config):
@@ -74,7 +74,7 @@ def mixed(mocap_dir, tmp_path_factory) -> Path:
     from torchsplice import import_bvh
 
     out = tmp_path_factory.mktemp("mixed") / "mixed.h5"
-    bandai = mocap_dir / "bandai_namco_research_motiondataset"
+    bandai = mocap_dir / BANDAI
     files = [bandai / "dataset-1_walk_normal_001.bvh", bandai / "dataset-1_bye_normal_001.bvh",
              mocap_dir / "cmu_graphics_lab" / "cmu_12_01_walk.bvh"]
     report = import_bvh(files, out, units="cm")
@@ -89,31 +89,69 @@ def bandai_namco_db(mocap_dir, tmp_path_factory) -> Path:
     from torchsplice import import_bvh
 
     db = tmp_path_factory.mktemp("bandai_namco") / "bandai.h5"
-    report = import_bvh([mocap_dir / "bandai_namco_research_motiondataset"], db)
+    report = import_bvh([mocap_dir / BANDAI], db)
     assert not report.skipped and report.imported
     return db
+
+
+@pytest.fixture(scope="session")
+def bandai_few_db(mocap_dir, tmp_path_factory) -> Path:
+    """The :data:`realdata.BANDAI_FEW` clips (three locomotions, two of both roles, a wave
+    performed standing in place) imported with the ``bandai_namco`` spec, made once per session:
+    read it, never write into it."""
+    from torchsplice import import_bvh
+
+    db = tmp_path_factory.mktemp("bandai_few") / "bandai.h5"
+    report = import_bvh([mocap_dir / BANDAI / f"{n}.bvh" for n in BANDAI_FEW], db, spec="bandai_namco")
+    assert not report.skipped and len(report.imported) == len(BANDAI_FEW)
+    return db
+
+
+@pytest.fixture(scope="session")
+def bandai_f64(mocap_dir):
+    """``(read, spec)``: ``read(name)`` is the Bandai Namco clip ``name`` (a file stem) in float64,
+    read once per session, and the ``bandai_namco`` spec. The clips are shared by every test:
+    copy a tensor before changing it."""
+    import torch
+
+    from torchsplice.formats.bvh import read_bvh
+    from torchsplice.specs import load_spec
+
+    cache: dict = {}
+
+    def read(name: str):
+        if name not in cache:
+            cache[name] = read_bvh(mocap_dir / BANDAI / f"{name}.bvh", dtype=torch.float64)
+        return cache[name]
+
+    return read, load_spec("bandai_namco")
+
+
+@pytest.fixture
+def bandai_folder(mocap_dir, tmp_path) -> Path:
+    """A folder of copies of the :data:`realdata.BANDAI_FOLDER` clips in the test's own
+    ``tmp_path`` (a test may add files there or break them)."""
+    return copy_bandai(BANDAI_FOLDER, tmp_path / "in")
 
 
 @pytest.fixture
 def bandai_walks(mocap_dir) -> list[Path]:
     """Ten real Bandai Namco walks (paths into the shared folder: read them, never write there)."""
-    files = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("dataset-1_walk*.bvh"))[:10]
+    files = sorted((mocap_dir / BANDAI).glob("dataset-1_walk*.bvh"))[:10]
     assert len(files) == 10
     return files
 
 
 @pytest.fixture(scope="session")
-def runs_with_raised_hands(tmp_path_factory):
+def runs_with_raised_hands(bandai_namco_db, tmp_path_factory):
     """Bandai Namco runs, dashes and turning walks x raised hands, waves and calls, spliced as
     they come (``raw``, ``keep_hands_out=False``) and with the arms kept out of the body
-    (``out``, the default), both motion stores: ``(database, raw, out)``."""
-    from torchsplice.formats.importer import import_bvh
+    (``out``, the default), both motion stores: ``(database, raw, out)``, the database being
+    ``bandai_namco_db`` (the whole folder, the ``bandai_namco`` spec detected)."""
     from torchsplice.job.run import splice_all
 
-    _require_mocap()
     folder = tmp_path_factory.mktemp("hands")
-    db = folder / "bn.h5"
-    import_bvh([MOCAP / "bandai_namco_research_motiondataset"], db, spec="bandai_namco")
+    db = bandai_namco_db
     select = dict(locomotions=["*run*,*dash*,*turn*"], actions=["*wave*,*raise*,*bye*,*call*,*guide*"], workers=1)
     splice_all(db, folder / "raw.h5", keep_hands_out=False, **select)
     splice_all(db, folder / "out.h5", **select)

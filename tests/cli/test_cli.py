@@ -1,33 +1,14 @@
 """The command line on real data and the built-in sample: import, info, export, sample, errors."""
 
 import json
-import shutil
 
 import pytest
 import torch
 
+from cli_helpers import run
+from realdata import BANDAI_FOLDER as SOME  # the clips of the bandai_folder fixture
 from torchsplice.cli import build_parser, main
 from torchsplice.formats.bvh import read_bvh
-
-BANDAI = "bandai_namco_research_motiondataset"
-SOME = ["dataset-2_walk_normal_008", "dataset-2_walk-turn-left_elderly_003", "dataset-2_wave-left-hand_normal_001",
-        "dataset-1_walk-back_musical_001"]
-
-
-@pytest.fixture
-def bandai_folder(mocap_dir, tmp_path):
-    """A folder with a few real Bandai Namco clips (copied to tmp, never into the repo)."""
-    d = tmp_path / "in"
-    d.mkdir()
-    for n in SOME:
-        shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", d)
-    return d
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.mark.parametrize("command", ["sample", "import", "info", "export"])

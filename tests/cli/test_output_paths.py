@@ -15,18 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from cli_helpers import error_line, run as cli_run
+from cli_helpers import error_line, run_any as run  # a usage mistake (said by the argument parser) as its exit code
 from torchsplice.store.lock import MAX_NAME_BYTES, temp_path
 from writers import leftovers
-
-
-def run(capsys, *argv):
-    """:func:`cli_helpers.run`, with a usage mistake (said by the argument parser) as its exit code."""
-    try:
-        return cli_run(capsys, *argv)
-    except SystemExit as exc:
-        out, err = capsys.readouterr()
-        return exc.code, out, err
 
 
 def test_export_into_the_current_folder_by_dot(sample_db, tmp_path, monkeypatch, capsys):

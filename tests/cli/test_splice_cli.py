@@ -2,27 +2,19 @@
 
 from __future__ import annotations
 
-import shutil
-
 import pytest
 import torch
 
-from torchsplice.cli import build_parser, main
+from cli_helpers import run, run_any
+from torchsplice.cli import build_parser
 from torchsplice.core.rotations import quat_angle
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.store.database import MotionDatabase
 from torchsplice.specs import load_spec
 from torchsplice.splice import AlignOptions, SpliceOptions, splice
 
-BANDAI = "bandai_namco_research_motiondataset"
-WAVE = "dataset-2_wave-left-hand_normal_001"
-WALK = "dataset-2_walk_normal_008"
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
+WAVE = "dataset-2_wave-left-hand_normal_001"  # of the bandai_few_db fixture: a wave performed standing in place
+WALK = "dataset-2_walk_normal_008"  # and a walk
 
 
 @pytest.fixture(scope="module")
@@ -107,35 +99,23 @@ def test_options_reach_the_library(sample_db, clips, tmp_path, capsys):
     assert not torch.equal(result.motion.rotations, library(clips, "splice").motion.rotations)
 
 
-@pytest.fixture
-def bandai_db(mocap_dir, tmp_path, capsys):
-    """A database of one real walk and one wave performed standing in place."""
-    src = tmp_path / "in"
-    src.mkdir()
-    for n in (WALK, WAVE):
-        shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", src)
-    db = tmp_path / "bandai.h5"
-    code, _, err = run(capsys, "import", src, "-o", db, "-q")
-    assert code == 0, err
-    return db
-
-
-def test_in_place_action_stands_and_in_place_locomotion_is_refused_without_force_locomotion(bandai_db, tmp_path, capsys):
+def test_in_place_action_stands_and_in_place_locomotion_is_refused_without_force_locomotion(bandai_few_db, tmp_path,
+                                                                                            capsys):
     out = tmp_path / "wave.bvh"
-    code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WAVE, "--action", WALK, "-o", out)
+    code, stdout, err = run(capsys, "splice", bandai_few_db, "--locomotion", WAVE, "--action", WALK, "-o", out)
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("torchsplice: error: ")
     assert WAVE in err and "does not locomote" in err and "--force-locomotion" in err
     assert "Traceback" not in err and stdout == "" and not out.exists()
-    code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WALK, "--action", WAVE, "-o", out)
+    code, stdout, err = run(capsys, "splice", bandai_few_db, "--locomotion", WALK, "--action", WAVE, "-o", out)
     assert code == 0, err
     assert "standing action (loop; acting limbs: left_arm)" in stdout
     from torchsplice.store.database import MotionDatabase
 
-    with MotionDatabase.open(bandai_db) as db:
+    with MotionDatabase.open(bandai_few_db) as db:
         assert read_bvh(out).num_frames == db.read(WALK).num_frames  # as long as the locomotion
     out.unlink()
-    code, stdout, err = run(capsys, "splice", bandai_db, "--locomotion", WALK, "--action", WAVE, "-o", out,
+    code, stdout, err = run(capsys, "splice", bandai_few_db, "--locomotion", WALK, "--action", WAVE, "-o", out,
                             "--force-locomotion")
     assert code == 0, err
     notes = err.splitlines()
@@ -177,20 +157,6 @@ def test_help(capsys):
     with pytest.raises(SystemExit) as e:  # a method that does not exist is a usage error
         build_parser().parse_args(["splice", "db.h5", "--locomotion", "a", "--action", "b", "-o", "x", "--method", "blend"])
     assert e.value.code == 2
-
-
-def run_any(capsys, *argv):
-    """Like :func:`run`, but an argparse usage error (SystemExit) counts as its exit code, and
-    an exception escaping ``main`` fails the test with a clear message."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as e:
-        code = e.code
-    except Exception as exc:  # noqa: BLE001 - the point of the test
-        pytest.fail(f"`torchsplice {' '.join(map(str, argv))}` raised {type(exc).__name__} "
-                    f"instead of a one-line error: {exc}")
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.mark.parametrize("value", ["0", "-2"])

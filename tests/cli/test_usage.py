@@ -8,10 +8,9 @@ from __future__ import annotations
 import pytest
 
 from cli_helpers import error_line, run
+from realdata import BANDAI
 from torchsplice.cli import main
 from torchsplice.store.database import MotionDatabase
-
-BANDAI = "bandai_namco_research_motiondataset"
 
 
 def test_9_a_file_that_is_not_bvh_says_so(tmp_path, capsys):
@@ -125,7 +124,7 @@ def test_12_files_a_generic_spec_reads_can_be_given_their_units(sample_db, tmp_p
 def test_a_wrong_spec_on_a_folder_is_said_once_with_the_count_and_the_spec_auto_picks(mocap_dir, tmp_path, capsys):
     folder = tmp_path / "takes"
     folder.mkdir()
-    takes = sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("*walk*.bvh"))[:6]
+    takes = sorted((mocap_dir / BANDAI).glob("*walk*.bvh"))[:6]
     for f in takes:
         (folder / f.name).symlink_to(f)
     rc, _, err = run(capsys, "import", folder, "--spec", "lafan1", "-o", tmp_path / "x.h5")

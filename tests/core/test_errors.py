@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from torchsplice.cli import cli_message, main
+from torchsplice.formats.sample_database import write_sample
 from torchsplice.core.errors import (HINTS, DatabaseError, MotionError, NotLocomotingError, OutputExistsError,
                                      TorchspliceError, UnfinishedJobError)
 from torchsplice.store.database import MotionDatabase
@@ -43,7 +44,7 @@ def test_no_library_error_message_names_a_flag():
 
 def test_output_exists_is_structured(tmp_path, capsys):
     out = tmp_path / "db.h5"
-    assert main(["sample", "-o", str(out), "-q"]) == 0
+    write_sample(out)
     with pytest.raises(OutputExistsError) as e:
         MotionDatabase.create(out)
     exc = e.value

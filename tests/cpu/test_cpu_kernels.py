@@ -26,14 +26,11 @@ from torchsplice.cpu.fk import fk_clip, fk_clips, joint_closure
 from torchsplice.cpu.grid import clip_features, distance_row_block, phase_crop_pair
 from torchsplice.cpu.horn import horn_batch, horn_cloud, horn_from_h
 from torchsplice.cpu.timewarp import timewarp_batch
-from torchsplice.formats.bvh import read_bvh
-from torchsplice.specs import load_spec
 from torchsplice.core.fk import forward_kinematics
 from torchsplice.splice import SpliceOptions, splice_pairs
 from torchsplice.splice.heck import landmark_indices, phase_crop
 
 F64 = torch.float64
-BANDAI = "bandai_namco_research_motiondataset"
 WALKS = ("dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025", "dataset-2_walk_elderly_006",
          "dataset-1_walk_happy_001", "dataset-1_walk_normal_001")
 
@@ -41,18 +38,14 @@ WALKS = ("dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025", "da
 # ------------------------------------------------------------------------------ fixtures, helpers
 
 
-@pytest.fixture(scope="module")
-def bandai(mocap_dir):
-    """A few real Bandai Namco walks by name (float64), the spec and the bound roles."""
-    clips = {n: read_bvh(mocap_dir / BANDAI / f"{n}.bvh", dtype=F64) for n in WALKS}
-    spec = load_spec("bandai_namco")
-    return clips, spec, spec.bind(clips[WALKS[0]].skeleton)
-
-
 def clips_of(request, source: str):
-    """The clips of ``source``, ``"sample"`` (the ``sample_f64`` fixture) or ``"bandai"`` (only the
-    real one needs the mocap)."""
-    return request.getfixturevalue({"sample": "sample_f64"}.get(source, source))
+    """``(clips by name, spec, roles)`` of ``source``: ``"sample"`` (the ``sample_f64`` fixture) or
+    ``"bandai"`` (:data:`WALKS` of the ``bandai_f64`` fixture; only the real one needs the mocap)."""
+    if source == "sample":
+        return request.getfixturevalue("sample_f64")
+    read, spec = request.getfixturevalue("bandai_f64")
+    clips = {n: read(n) for n in WALKS}
+    return clips, spec, spec.bind(clips[WALKS[0]].skeleton)
 
 
 def dp_kernel(grid: np.ndarray, la, lb, max_run: int):

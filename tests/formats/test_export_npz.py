@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import torch
 
+from realdata import BANDAI
 from torchsplice.cli.common import cli_message
 from torchsplice.core.errors import OutputExistsError, TorchspliceError
 from torchsplice.core.rotations import quat_to_6d, quat_to_rotmat, random_quat, rotation_6d_to_rotmat
@@ -34,7 +35,6 @@ from cli_helpers import run, error_line
 from writers import nan_copy
 
 F64 = torch.float64
-BANDAI = "bandai_namco_research_motiondataset"
 CLIPS = ["dataset-1_walk_proud_001", "dataset-1_bye_normal_001", "dataset-2_walk_normal_008",
          "dataset-2_wave-left-hand_normal_001", "dataset-2_walk-turn-left_normal_025"]
 

@@ -26,6 +26,7 @@ import pytest
 import torch
 
 from cli_helpers import error_line, run
+from realdata import BANDAI
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.formats.captions import gerund, mirror_caption, parse_caption_line
 from torchsplice.formats.exporters import export_clips
@@ -34,8 +35,6 @@ from torchsplice.job import splice_all
 from torchsplice.evaluation.humanml3d import folder_properties
 from torchsplice.formats.humanml3d_features import GROUPS
 from torchsplice.specs.text import POS_TAGS
-
-BANDAI = "bandai_namco_research_motiondataset"
 
 
 @pytest.fixture(scope="module")

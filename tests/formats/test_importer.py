@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from cli_helpers import run
+from realdata import BANDAI
 from torchsplice.cli import main
 from torchsplice.core.errors import OutputExistsError, TorchspliceError
 from torchsplice.store.database import MotionDatabase
 from torchsplice.formats.importer import NothingImportedError, import_bvh
 from writers import _digest, names
 
-BANDAI = "bandai_namco_research_motiondataset"
 WALKS = ["dataset-2_walk_normal_008", "dataset-2_walk-turn-left_normal_025"]
 
 
@@ -124,7 +124,7 @@ def test_a_folder_mixing_datasets_imports_every_file_whatever_the_order(mocap_di
     mixed = tmp_path / "mixed"
     mixed.mkdir()
     picks = [*sorted((mocap_dir / "cmu_graphics_lab").glob("*.bvh"))[:2],
-             sorted((mocap_dir / "bandai_namco_research_motiondataset").glob("dataset-1_walk*.bvh"))[0]]
+             sorted((mocap_dir / BANDAI).glob("dataset-1_walk*.bvh"))[0]]
     for order in (picks, picks[::-1]):
         for f in mixed.iterdir():
             f.unlink()

@@ -7,12 +7,32 @@ Real clips are read from ``../shared/mocap`` beside the checkout, or from the fo
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
+from typing import Iterable
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 MOCAP = Path(os.environ.get("TORCHSPLICE_MOCAP", REPO.parent / "shared" / "mocap"))
+BANDAI = "bandai_namco_research_motiondataset"
+"""The Bandai Namco folder of :data:`MOCAP` (``MOCAP / BANDAI / f"{name}.bvh"``)."""
+
+BANDAI_FEW = [
+    "dataset-2_walk-turn-left_normal_025",  # locomotion
+    "dataset-2_walk-turn-right_normal_031",  # locomotion
+    "dataset-2_walk_normal_008",  # locomotion
+    "dataset-2_walk_active_032",  # both
+    "dataset-2_walk-turn-left_elderly_003",  # both
+    "dataset-2_wave-left-hand_normal_001",  # action, standing in place
+]
+"""The clips of the ``bandai_few_db`` fixture: three locomotions, two clips of both roles and a
+wave performed standing in place."""
+
+BANDAI_FOLDER = ["dataset-2_walk_normal_008", "dataset-2_walk-turn-left_elderly_003",
+                 "dataset-2_wave-left-hand_normal_001", "dataset-1_walk-back_musical_001"]
+"""The clips the ``bandai_folder`` fixture copies: a locomotion, a clip of both roles, an action
+and a walk of the other session."""
 
 
 def _require_mocap() -> Path:
@@ -22,6 +42,16 @@ def _require_mocap() -> Path:
     if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
         pytest.fail(reason + "; CI must run the real-data tests", pytrace=False)
     pytest.skip(reason)
+
+
+def copy_bandai(names: Iterable[str], folder: Path) -> Path:
+    """``folder`` (made if missing) holding copies of the Bandai Namco clips ``names`` (stems):
+    a folder a test may write into, never the shared one."""
+    source = _require_mocap() / BANDAI
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        shutil.copy(source / f"{name}.bvh", folder)
+    return folder
 
 
 def real_bvh_files() -> list[Path]:

@@ -17,7 +17,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from realdata import MOCAP, _require_mocap
+from realdata import BANDAI, MOCAP, _require_mocap
 from torchsplice.core.rotations import axis_angle_to_quat, quat_mul
 from torchsplice.evaluation.metrics import foot_skate_stats
 from torchsplice.evaluation.retargeting import centimetres, wrist_spread
@@ -27,7 +27,6 @@ from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.store.database import MotionDatabase
 
-BANDAI = "bandai_namco_research_motiondataset"
 WAVE = "dataset-2_wave-right-hand_normal_001"
 
 
@@ -94,12 +93,11 @@ def test_an_action_of_one_dataset_on_a_locomotion_of_another(dbs, loco_db, loco,
 
 
 def test_splice_pair_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs, tmp_path):
-    """One database holding both datasets: ``splice_pair`` (what the ``splice`` command runs) and
-    ``plot-alignment`` retarget the action as ``splice-all`` does (the result is on the
-    locomotion's skeleton, and its upper body is the job's result's; ``splice()`` on two clips
-    does not retarget), and ``evaluate_database`` measures a retargeted output against the action
-    as spliced."""
-    from torchsplice.cli import main
+    """One database holding both datasets: ``splice_pair`` (what the ``splice`` command runs)
+    retargets the action as ``splice-all`` does (the result is on the locomotion's skeleton, and
+    its upper body is the job's result's; ``splice()`` on two clips does not retarget; the
+    ``plot-alignment`` command's own retargeting: tests/cli/test_command_words.py), and
+    ``evaluate_database`` measures a retargeted output against the action as spliced."""
     from torchsplice.evaluation.report import evaluate_database
     from torchsplice.job import splice_pair
 
@@ -108,8 +106,6 @@ def test_splice_pair_plot_alignment_and_evaluate_take_pairs_across_skeletons(dbs
                mixed)
     loco = "dataset-2_walk-turn-left_normal_025"
     one = splice_pair(mixed, loco, "test").motion
-    assert main(["plot-alignment", str(mixed), "--locomotion", loco, "--action", "test", "-o",
-                 str(tmp_path / "a.png"), "-q"]) == 0
     out = tmp_path / "job.h5"
     splice_all(mixed, out, locomotions=loco, actions="test", workers=1)
     with MotionDatabase.open(out) as d:

@@ -360,11 +360,10 @@ def test_merge_without_a_job(tmp_path, capsys):
 # --------------------------------------------------------------------------------------------
 # the virtual layout
 # --------------------------------------------------------------------------------------------
-def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path, capsys):
+def test_virtual_layout_reads_like_the_copy(sample_db, reference, tmp_path):
+    """The command's refusal of --copy-sources with --layout virtual: tests/cli/test_command_words.py."""
     out = tmp_path / "out.h5"
-    code, _, err = run(capsys, "splice-all", sample_db, "-o", out, *JOB_FLAGS, "--layout", "virtual")
-    assert code == 2 and "--copy-sources needs --layout copy" in err  # a virtual output holds spliced clips only
-    with pytest.raises(TorchspliceError, match="copy_sources needs layout copy"):
+    with pytest.raises(TorchspliceError, match="copy_sources needs layout copy"):  # a virtual output holds spliced clips only
         splice_all(sample_db, out, **JOB, layout="virtual")
     splice_all(sample_db, out, **dict(JOB, copy_sources=False), layout="virtual")
     shards = tmp_path / "out.h5.shards"

@@ -36,28 +36,15 @@ from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 from torchsplice.core.rotations import quat_angle
 from torchsplice.job import JobConfig, SpliceJob, splice_all
+from cli_helpers import run
+from realdata import BANDAI, BANDAI_FEW
 from writers import _digest, cli, nan_copy, reaped, splice_all_process, summary_of
 
 REPO = Path(__file__).resolve().parents[2]
-BANDAI = "bandai_namco_research_motiondataset"
-BANDAI_CLIPS = [
-    "dataset-2_walk-turn-left_normal_025",  # locomotion
-    "dataset-2_walk-turn-right_normal_031",  # locomotion
-    "dataset-2_walk_normal_008",  # locomotion
-    "dataset-2_walk_active_032",  # both
-    "dataset-2_walk-turn-left_elderly_003",  # both
-    "dataset-2_wave-left-hand_normal_001",  # action, standing in place
-]
 WAVE = "dataset-2_wave-left-hand_normal_001"
 SAMPLE_LOCOS = ["walk_straight", "walk_curve", "turn_sharp", "sidestep", "jog"]
 SAMPLE_ACTIONS = ["carry_box", "carry_cup", "wave", "punch", "arms_out"]
 VOLATILE_RUN_KEYS = ("started", "command", "engine")  # the only parts of the run record that may differ between runs
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def env():
@@ -162,13 +149,6 @@ def batch2_out(sample_db, tmp_path_factory):
     out = tmp_path_factory.mktemp("batch2") / "out.h5"
     splice_all(sample_db, out, batch_pairs=2)
     return out
-
-
-@pytest.fixture(scope="module")
-def bandai_db(mocap_dir, tmp_path_factory):
-    db = tmp_path_factory.mktemp("bandai") / "bandai.h5"
-    import_bvh([mocap_dir / BANDAI / f"{n}.bvh" for n in BANDAI_CLIPS], db, spec="bandai_namco")
-    return db
 
 
 # --------------------------------------------------------------------------------------------
@@ -281,14 +261,14 @@ def test_splice_rows_do_not_depend_on_the_other_methods(default_out, multi_out):
 # --------------------------------------------------------------------------------------------
 # 3. real data
 # --------------------------------------------------------------------------------------------
-def test_real_clips_selected_by_labels(bandai_db, tmp_path):
+def test_real_clips_selected_by_labels(bandai_few_db, tmp_path):
     out = tmp_path / "real.h5"
-    summary = splice_all(bandai_db, out, locomotions=["label:style=normal", "label:content=walk-turn-*"],
+    summary = splice_all(bandai_few_db, out, locomotions=["label:style=normal", "label:content=walk-turn-*"],
                          actions=["label:dataset=2", "label:content=walk*"])
     text = "\n".join(summary.lines())
-    src = table(bandai_db)
+    src = table(bandai_few_db)
     locos = ["dataset-2_walk-turn-left_normal_025", "dataset-2_walk-turn-right_normal_031"]
-    acts = [n for n in BANDAI_CLIPS if n != WAVE]  # every walk* clip, whatever its role
+    acts = [n for n in BANDAI_FEW if n != WAVE]  # every walk* clip, whatever its role
     # n x m minus the two locomotions paired with themselves
     want = {(l, a) for l in locos for a in acts if l != a}
     assert len(want) == 2 * 5 - 2
@@ -311,9 +291,9 @@ def test_real_clips_selected_by_labels(bandai_db, tmp_path):
         assert m.translations is not None  # Bandai Namco animates joint translations; they are kept
 
 
-def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_db, tmp_path):
+def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_few_db, tmp_path):
     out = tmp_path / "wave.h5"
-    summary = splice_all(bandai_db, out, locomotions="role:locomotion")
+    summary = splice_all(bandai_few_db, out, locomotions="role:locomotion")
     text = "\n".join(summary.lines())
     cs = clips(out)
     # 3 locomotions x (2 'both' clips + the standing wave): nothing skipped
@@ -327,15 +307,15 @@ def test_standing_action_is_spliced_by_default_over_the_whole_locomotion(bandai_
         if standing:
             assert c["coverage"] == 1.0 and "does not locomote" not in c["flags"]
     for timing in ("hold", "fit"):
-        summary = splice_all(bandai_db, tmp_path / f"{timing}.h5", locomotions="role:locomotion", actions=WAVE,
+        summary = splice_all(bandai_few_db, tmp_path / f"{timing}.h5", locomotions="role:locomotion", actions=WAVE,
                              timing=timing, acting_limbs="none")
         assert summary.timings == {timing: 3} and f"3 standing actions ({timing})" in "\n".join(summary.lines())
         assert {(c["timing"], c["acting"], c["coverage"]) for c in clips(tmp_path / f"{timing}.h5")} == {(timing, "", 1.0)}
 
 
-def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_db, tmp_path):
+def test_force_locomotion_splices_in_place_action_with_a_flag(bandai_few_db, tmp_path):
     out = tmp_path / "forced.h5"
-    summary = splice_all(bandai_db, out, locomotions="role:locomotion", force_locomotion=True)
+    summary = splice_all(bandai_few_db, out, locomotions="role:locomotion", force_locomotion=True)
     text = "\n".join(summary.lines())
     cs = clips(out)
     assert len(cs) == 9
@@ -703,19 +683,19 @@ def test_selector_matching_nothing(sample_db, tmp_path, capsys):
     assert_left_nothing(tmp_path)
 
 
-def test_actions_db_with_another_skeleton(bandai_db, mocap_dir, tmp_path, capsys):
+def test_actions_db_with_another_skeleton(bandai_few_db, mocap_dir, tmp_path, capsys):
     lafan = tmp_path / "lafan.h5"
     import_bvh([mocap_dir / "lafan1_via_pypi_bvhtools" / "test2.bvh"], lafan)
     out_dir = tmp_path / "o"
     out_dir.mkdir()
     # without retargeting: refused in one line naming both databases
-    code, _, err = run(capsys, "splice-all", bandai_db, "--actions-db", lafan, "--actions", "*", "-o", out_dir / "x.h5",
-                       "--no-retarget")
+    code, _, err = run(capsys, "splice-all", bandai_few_db, "--actions-db", lafan, "--actions", "*",
+                       "-o", out_dir / "x.h5", "--no-retarget")
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
-    assert str(bandai_db) in err and str(lafan) in err and "skeleton" in err and "--retarget is off" in err
+    assert str(bandai_few_db) in err and str(lafan) in err and "skeleton" in err and "--retarget is off" in err
     assert_left_nothing(out_dir)
     # by default the action is retargeted onto the locomotions' skeleton
-    summary = splice_all(bandai_db, out_dir / "x.h5", actions_db=lafan, actions="*")
+    summary = splice_all(bandai_few_db, out_dir / "x.h5", actions_db=lafan, actions="*")
     with MotionDatabase.open(out_dir / "x.h5") as db:
         spliced = [i for i, r in enumerate(db.clip_table().role) if r == "spliced"]
         assert spliced and summary.retargeted == len(spliced)

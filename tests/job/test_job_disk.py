@@ -24,13 +24,7 @@ from torchsplice.job.size import TABLE_BYTES_PER_CLIP, frame_bytes
 from writers import reaped, splice_all_process, summary_of
 
 REPO = Path(__file__).resolve().parents[2]
-BANDAI = "bandai_namco_research_motiondataset"
 JOB = {"locomotions": "label:style=normal", "actions": "role:action,role:both"}
-
-
-@pytest.fixture(scope="module")
-def bandai_db(bandai_namco_db):
-    return bandai_namco_db
 
 
 def listing(folder: Path) -> list[str]:
@@ -57,9 +51,9 @@ def test_dry_run_says_what_the_job_would_do_and_writes_nothing(sample_db, tmp_pa
     assert int(m.group(4).replace(",", "")) == want
 
 
-def test_the_estimate_is_close_to_what_the_job_writes(sample_db, bandai_db, tmp_path, capsys):
+def test_the_estimate_is_close_to_what_the_job_writes(sample_db, bandai_namco_db, tmp_path, capsys):
     for db, extra in ((sample_db, {"methods": "splice,naive"}),
-                      (bandai_db, JOB)):
+                      (bandai_namco_db, JOB)):
         for compression in ("auto", "gzip"):
             out = tmp_path / f"{db.stem}_{compression}.h5"
             s = splice_all(db, out, compression=compression, workers=1, **extra)
@@ -137,9 +131,9 @@ def bank_bytes(folder: Path) -> int:
 
 
 @pytest.mark.slow
-def test_the_peak_disk_of_a_job_is_about_its_output(bandai_db, tmp_path):
+def test_the_peak_disk_of_a_job_is_about_its_output(bandai_namco_db, tmp_path):
     out = tmp_path / "out.h5"
-    with reaped(splice_all_process(bandai_db, out, **JOB, workers=2, batch_pairs=4, cwd=REPO)) as proc:
+    with reaped(splice_all_process(bandai_namco_db, out, **JOB, workers=2, batch_pairs=4, cwd=REPO)) as proc:
         peak, banks, at_peak = 0, 0, {}
         while proc.poll() is None:
             size, files = footprint(tmp_path)
@@ -161,11 +155,11 @@ def held(work: Path) -> int:
 
 
 @pytest.mark.slow
-def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(bandai_db, tmp_path):
+def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(bandai_namco_db, tmp_path):
     from tests.job.test_job import assert_same_file
 
     reference = tmp_path / "reference.h5"
-    splice_all(bandai_db, reference, **JOB, batch_pairs=4, workers=1)
+    splice_all(bandai_namco_db, reference, **JOB, batch_pairs=4, workers=1)
     out = tmp_path / "killed" / "out.h5"
     out.parent.mkdir()
     work = out.with_name(f".{out.name}.parts")
@@ -173,7 +167,7 @@ def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(ba
                env=dict(os.environ, TORCHSPLICE_CHECKPOINT_SECONDS="0"))  # a checkpoint after each task
     merged, kills = [], 0
     for share in (0.2, 0.45, 0.7):
-        with reaped(splice_all_process(bandai_db, out, **job)) as proc:
+        with reaped(splice_all_process(bandai_namco_db, out, **job)) as proc:
             total = None
             deadline = time.monotonic() + 300
             while proc.poll() is None and time.monotonic() < deadline:
@@ -190,7 +184,7 @@ def test_a_job_killed_three_times_ends_bit_identical_and_merges_no_task_twice(ba
             proc.communicate()
         merged.append(held(work))
     assert kills == 3 and merged == sorted(merged) and merged[0] > 0
-    with reaped(splice_all_process(bandai_db, out, **job)) as done:
+    with reaped(splice_all_process(bandai_namco_db, out, **job)) as done:
         stdout, stderr = done.communicate(timeout=600)
     assert done.returncode == 0, stderr
     summary = summary_of(stdout)

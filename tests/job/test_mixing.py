@@ -13,6 +13,7 @@ import re
 
 import pytest
 
+from realdata import BANDAI
 from torchsplice import import_bvh, splice_all
 from torchsplice.cli.common import flag
 from torchsplice.formats.bvh import read_bvh
@@ -20,7 +21,6 @@ from torchsplice.store.database import MotionDatabase
 from torchsplice.sample import sample_motions
 from torchsplice.specs import load_spec
 
-BANDAI = "bandai_namco_research_motiondataset"
 LOCOS = ["dataset-2_walk_normal_008", "dataset-1_walk_proud_001", "cmu_12_01_walk", "walk_curve", "test#001"]
 ACTIONS = ["dataset-2_wave-left-hand_normal_001", "dataset-1_bye_normal_001", "131_02", "carry_box", "test2#002"]
 

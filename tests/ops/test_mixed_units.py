@@ -9,13 +9,13 @@ import json
 
 import pytest
 
+from realdata import BANDAI
 from torchsplice import export_clips, import_bvh, splice_all
 from torchsplice.formats.bvh import read_bvh
 from torchsplice.store.database import MotionDatabase
 from torchsplice.ops.units import convert_units, implausible_size
 from torchsplice.specs import detect_spec
 
-BANDAI = "bandai_namco_research_motiondataset"
 SHIPPED = {  # one real file per shipped dataset spec with data in ../shared/mocap
     "bandai_namco": f"{BANDAI}/dataset-2_walk_normal_008.bvh",
     "cmu": "cmu_graphics_lab/cmu_12_01_walk.bvh",

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from realdata import BANDAI
 from torchsplice.align.curve import interpolate_frames, slerp_frames
 from torchsplice.core.errors import MotionError, TorchspliceError
 from torchsplice.core.motion import Motion
@@ -32,26 +33,12 @@ F64 = torch.float64
 OPT = SpliceOptions(dtype=F64)
 LOCOMOTION = ("walk_straight", "walk_curve", "turn_sharp", "sidestep", "jog")
 ACTIONS = ("carry_box", "carry_cup", "wave", "punch", "arms_out")
-BANDAI = "bandai_namco_research_motiondataset"
 TURN_LEFT = "dataset-2_walk-turn-left_normal_025"
 ELDERLY = "dataset-2_walk_elderly_006"
 WALK2 = "dataset-2_walk_normal_008"
 
 
 # ------------------------------------------------------------------------------ fixtures, helpers
-
-
-@pytest.fixture(scope="module")
-def bandai(mocap_dir):
-    """``read(name)``: a Bandai Namco clip in float64 (cached), and the spec."""
-    cache: dict[str, Motion] = {}
-
-    def read(name: str) -> Motion:
-        if name not in cache:
-            cache[name] = read_bvh(mocap_dir / BANDAI / f"{name}.bvh", dtype=F64)
-        return cache[name]
-
-    return read, load_spec("bandai_namco")
 
 
 def angle(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -139,15 +126,15 @@ def test_splicing_a_sample_clip_onto_itself_returns_it(sample_f64, name):
 
 @pytest.mark.parametrize("name", [WALK2, TURN_LEFT, "dataset-2_walk-turn-right_normal_031", ELDERLY,
                                   "dataset-1_walk_proud_001", "dataset-2_run_normal_028"])
-def test_splicing_a_bandai_namco_walk_onto_itself_returns_it(bandai, name):
-    read, spec = bandai
+def test_splicing_a_bandai_namco_walk_onto_itself_returns_it(bandai_f64, name):
+    read, spec = bandai_f64
     assert_returns_itself(read(name), spec)
 
 
 @pytest.mark.parametrize("backend", ["compiled", "torch"])
 @pytest.mark.parametrize("name", [WALK2, "dataset-1_walk-left_normal_001", "dataset-1_walk-right_normal_001"])
-def test_with_the_locomotions_twist_a_clip_onto_itself_still_returns_it(bandai, name, backend):
-    read, spec = bandai  # the side walks twist their shoulders by about 16 degrees: none is added to their own
+def test_with_the_locomotions_twist_a_clip_onto_itself_still_returns_it(bandai_f64, name, backend):
+    read, spec = bandai_f64  # the side walks twist their shoulders by about 16 degrees: none is added to their own
     assert_returns_itself(read(name), spec, replace(OPT, twist=1.0, force=True, backend=backend))
 
 
@@ -188,8 +175,8 @@ def test_placing_the_action_elsewhere_changes_nothing_sample(sample_f64, method,
 
 
 @pytest.mark.parametrize("method", ["splice", "naive", "cpmc"])
-def test_placing_the_action_elsewhere_changes_nothing_bandai(bandai, method):
-    read, spec = bandai
+def test_placing_the_action_elsewhere_changes_nothing_bandai(bandai_f64, method):
+    read, spec = bandai_f64
     L, A = read(TURN_LEFT), read(ELDERLY)
     ref = read(WALK2) if method == "cpmc" else None
     r1 = splice(L, A, spec, method, ref, OPT)
@@ -303,8 +290,8 @@ def paper_posture_lean(L: Motion, A: Motion, roles, flat) -> tuple[float, torch.
 
 @pytest.mark.parametrize("loco, act", [(TURN_LEFT, ELDERLY), (WALK2, ELDERLY),
                                        ("dataset-1_walk-left_normal_001", "dataset-1_walk_old_001")])
-def test_posture_transfer_on_real_styled_walk_and_the_literal_paper_formula(bandai, loco, act):
-    read, spec = bandai
+def test_posture_transfer_on_real_styled_walk_and_the_literal_paper_formula(bandai_f64, loco, act):
+    read, spec = bandai_f64
     L, A = read(loco), read(act)
     roles = spec.bind(L.skeleton)
     r = splice(L, A, spec, options=OPT)
@@ -360,7 +347,7 @@ def test_spatial_alignment_is_the_best_pelvis_rotation(sample_f64, request, wher
         clips, spec, roles = sample_f64
         L, A = clips["walk_curve"], clips["punch"]
     else:
-        read, spec = request.getfixturevalue("bandai")
+        read, spec = request.getfixturevalue("bandai_f64")
         L, A = read(TURN_LEFT), read(ELDERLY)
         roles = spec.bind(L.skeleton)
     r = splice(L, A, spec, options=replace(OPT, posture=False))
@@ -417,14 +404,14 @@ def gait_phase(x: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Te
 
 
 @pytest.mark.parametrize("name", [WALK2, "dataset-1_walk_proud_001"])
-def test_never_on_the_wrong_foot(bandai, name):
+def test_never_on_the_wrong_foot(bandai_f64, name):
     """The walk spliced onto itself shifted by k frames: the action frame matched to locomotion
     frame t must be in phase with it (t - k plus whole gait cycles), never half a cycle off.
 
     Strides of a real walk vary by a few frames, so the phase is measured on the clip itself
     (knee zero crossings) rather than assumed to repeat with one constant stride; the constant-
     stride error is also checked against a quarter stride (half a stride = the wrong foot)."""
-    read, spec = bandai
+    read, spec = bandai_f64
     m = read(name)
     roles = spec.bind(m.skeleton)
     s = knee_signal(m, roles)
@@ -507,8 +494,8 @@ def test_cmu_walk_at_120_fps_onto_itself_at_30_fps(mocap_dir):
 
 
 @pytest.mark.parametrize("clip", ["dataset-2_wave-left-hand_normal_001", "dataset-1_bow_normal_001"])
-def test_in_place_locomotions_are_refused_unless_forced_and_in_place_actions_stand(bandai, clip):
-    read, spec = bandai
+def test_in_place_locomotions_are_refused_unless_forced_and_in_place_actions_stand(bandai_f64, clip):
+    read, spec = bandai_f64
     walk, still = read(WALK2), read(clip)
     with pytest.raises(NotLocomotingError) as e:
         splice(still, walk, spec, options=OPT)  # as the locomotion: nothing to walk on
@@ -525,8 +512,8 @@ def test_in_place_locomotions_are_refused_unless_forced_and_in_place_actions_sta
     assert r.checks[0].locomoting and not r.checks[1].locomoting and r.checks[1].reason
 
 
-def test_walks_pass_the_locomotion_check(bandai, sample_f64):
-    read, spec = bandai
+def test_walks_pass_the_locomotion_check(bandai_f64, sample_f64):
+    read, spec = bandai_f64
     r = splice(read(TURN_LEFT), read(ELDERLY), spec, options=OPT)
     assert r.checks[0].locomoting and r.checks[1].locomoting and r.notes == ()
     assert min(r.checks[0].swings) >= 1 and r.checks[0].travel >= 1.0
@@ -556,8 +543,8 @@ def test_different_skeletons_are_refused_naming_both_clips(three_skeletons, i, j
         assert a.name in str(e.value) and b.name in str(e.value)
 
 
-def test_pairs_of_different_skeletons_in_one_batch_are_refused(three_skeletons, bandai):
-    read, spec = bandai
+def test_pairs_of_different_skeletons_in_one_batch_are_refused(three_skeletons, bandai_f64):
+    read, spec = bandai_f64
     a = three_skeletons[0]
     laf = three_skeletons[1]
     with pytest.raises(MotionError, match=laf.name):
@@ -618,8 +605,8 @@ def test_twist_target_known_answers(up):
     assert abs(float(shoulder_yaw(square, up))) < 1e-12                 # square shoulders: yaw 0
 
 
-def test_the_twist_share_moves_the_shoulders_towards_the_side_walks(bandai):
-    read, spec = bandai
+def test_the_twist_share_moves_the_shoulders_towards_the_side_walks(bandai_f64):
+    read, spec = bandai_f64
     act, roles = read("dataset-1_walk_happy_001"), spec.bind(read(WALK2).skeleton)
     for name, sign in (("dataset-1_walk-left_normal_001", 1), ("dataset-1_walk-right_normal_001", -1)):
         loco = read(name)
@@ -700,8 +687,8 @@ def test_result_structure_respects_max_run(sample_f64):
         assert_structure(L, A, splice(L, A, spec, options=opt), roles, max_run)
 
 
-def test_result_structure_bandai(bandai):
-    read, spec = bandai
+def test_result_structure_bandai(bandai_f64):
+    read, spec = bandai_f64
     L, A = read(TURN_LEFT), read(ELDERLY)
     r = splice(L, A, spec, options=OPT)
     assert L.translations is not None
@@ -727,8 +714,8 @@ def test_naive_copies_the_upper_body_frame_by_frame(sample_f64, loco, act):
     assert r.posture_deg == 0.0 and bool((r.pelvis_correction == 0).all())
 
 
-def test_naive_bandai_keeps_locomotion_translations(bandai):
-    read, spec = bandai
+def test_naive_bandai_keeps_locomotion_translations(bandai_f64):
+    read, spec = bandai_f64
     L, A = read(TURN_LEFT), read(ELDERLY)
     roles = spec.bind(L.skeleton)
     r = splice(L, A, spec, "naive", options=OPT)
@@ -817,8 +804,8 @@ def test_find_reference_bandai(mocap_dir):
 
 
 @pytest.mark.slow
-def test_splice_beats_naive_on_bandai_namco_ground_truth(mocap_dir, bandai, capsys):
-    read, spec = bandai
+def test_splice_beats_naive_on_bandai_namco_ground_truth(mocap_dir, bandai_f64, capsys):
+    read, spec = bandai_f64
     names = sorted(p.stem for p in (mocap_dir / BANDAI).glob("*.bvh"))
     triples = bandai_namco_triples(names)
     assert len(triples) >= 40

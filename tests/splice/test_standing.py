@@ -14,11 +14,10 @@ import re
 import pytest
 import torch
 
+from realdata import copy_bandai
 from torchsplice import import_bvh, splice_all
 from torchsplice.evaluation.report import evaluate_database
 from torchsplice.core.rotations import quat_angle, quat_apply, quat_conj
-from torchsplice.formats.bvh import read_bvh
-from torchsplice.specs import load_spec
 from torchsplice.core.fk import forward_kinematics
 from torchsplice.splice import SpliceOptions, splice, splice_standing
 from torchsplice.splice.standing import (ACTING_THRESHOLD, LOOP_BLEND_SECONDS, action_times, arm_chains,
@@ -31,14 +30,6 @@ RAISE_LEFT = "dataset-2_raise-up-left-hand_normal_001"
 WALK = "dataset-1_walk_normal_001"
 WALK_OLD = "dataset-1_walk_old_001"
 TURN = "dataset-2_walk-turn-left_normal_025"
-BANDAI = "bandai_namco_research_motiondataset"
-
-
-@pytest.fixture(scope="module")
-def clips(mocap_dir):
-    spec = load_spec("bandai_namco")
-    read = {n: read_bvh(mocap_dir / BANDAI / f"{n}.bvh", dtype=torch.float64) for n in (WAVE_R, WAVE_L, RAISE_BOTH, RAISE_LEFT, WALK, WALK_OLD, TURN)}
-    return read, spec
 
 
 def fk(m):
@@ -76,9 +67,9 @@ def phase(m, roles, hand: int, foot: int) -> float:
 
 
 @pytest.mark.parametrize("loco_name", [WALK, TURN])
-def test_a_standing_wave_on_a_walk_and_a_turn(clips, loco_name):
-    read, spec = clips
-    loco, wave = read[loco_name], read[WAVE_R]
+def test_a_standing_wave_on_a_walk_and_a_turn(bandai_f64, loco_name):
+    read, spec = bandai_f64
+    loco, wave = read(loco_name), read(WAVE_R)
     roles = spec.bind(loco.skeleton)
     r = splice(loco, wave, spec, options=SpliceOptions(dtype=torch.float64))
     m = r.motion
@@ -102,9 +93,9 @@ def test_a_standing_wave_on_a_walk_and_a_turn(clips, loco_name):
 
 
 @pytest.mark.parametrize("action", [WAVE_L, RAISE_LEFT])
-def test_loop_seams_are_continuous(clips, action):
-    read, spec = clips
-    loco, wave = read[WALK_OLD], read[action]
+def test_loop_seams_are_continuous(bandai_f64, action):
+    read, spec = bandai_f64
+    loco, wave = read(WALK_OLD), read(action)
     assert loco.num_frames > wave.num_frames  # one seam at least
     roles = spec.bind(loco.skeleton)
     r = splice(loco, wave, spec, options=SpliceOptions(dtype=torch.float64))
@@ -150,15 +141,15 @@ def test_timings_fill_the_locomotion():
         action_times(loco, act, "bounce", 30.0)
 
 
-def test_acting_limbs_are_found_from_the_data(clips):
-    read, spec = clips
+def test_acting_limbs_are_found_from_the_data(bandai_f64):
+    read, spec = bandai_f64
     found = {}
     for name in (WAVE_R, WAVE_L, RAISE_BOTH):
-        r = splice(read[WALK], read[name], spec)
+        r = splice(read(WALK), read(name), spec)
         found[name] = r.acting
     assert found == {WAVE_R: ("right_arm",), WAVE_L: ("left_arm",), RAISE_BOTH: ("left_arm", "right_arm")}
     assert 0 < ACTING_THRESHOLD < 1
-    forced = splice(read[WALK], read[WAVE_R], spec, options=SpliceOptions(acting_limbs=("left_arm", "right_arm")))
+    forced = splice(read(WALK), read(WAVE_R), spec, options=SpliceOptions(acting_limbs=("left_arm", "right_arm")))
     assert forced.acting == ("left_arm", "right_arm")
     assert parse_limbs("auto") is None and parse_limbs("none") == () and parse_limbs("both") == ("left_arm", "right_arm")
     with pytest.raises(ValueError, match="unknown limb"):
@@ -166,9 +157,9 @@ def test_acting_limbs_are_found_from_the_data(clips):
 
 
 @pytest.mark.parametrize("method", ["naive", "cpmc"])
-def test_the_baselines_handle_standing_actions(clips, method):
-    read, spec = clips
-    loco, wave = read[WALK], read[WAVE_R]
+def test_the_baselines_handle_standing_actions(bandai_f64, method):
+    read, spec = bandai_f64
+    loco, wave = read(WALK), read(WAVE_R)
     roles = spec.bind(loco.skeleton)
     r = splice(loco, wave, spec, method=method, options=SpliceOptions(dtype=torch.float64))
     assert r.timing == "loop" and r.motion.num_frames == loco.num_frames and r.reference is None
@@ -184,14 +175,14 @@ def test_the_baselines_handle_standing_actions(clips, method):
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)])
-def test_standing_actions_on_a_device_equal_the_compiled_splicer(clips, device):
+def test_standing_actions_on_a_device_equal_the_compiled_splicer(bandai_f64, device):
     """Standing actions spliced by the torch splicer on ``device`` (CUDA, or the CPU) against the
     compiled splicer on the CPU, every method and timing: the same lengths, acting arms and
     action frames (within 1e-9 frames), the lower body and root the locomotion's bit for bit,
     rotations within 1e-3 degrees."""
-    read, spec = clips
-    pairs = [(read[WALK], read[WAVE_R]), (read[TURN], read[RAISE_BOTH]), (read[WALK_OLD], read[RAISE_LEFT])]
-    lower = list(spec.bind(read[WALK].skeleton).lower_body)
+    read, spec = bandai_f64
+    pairs = [(read(WALK), read(WAVE_R)), (read(TURN), read(RAISE_BOTH)), (read(WALK_OLD), read(RAISE_LEFT))]
+    lower = list(spec.bind(read(WALK).skeleton).lower_body)
     for method in ("splice", "naive", "cpmc"):
         for timing in ("loop", "hold", "fit"):
             want = splice_standing(pairs, spec, method, SpliceOptions(timing=timing))
@@ -235,12 +226,7 @@ def test_the_default_job_on_bandai_skips_no_standing_action(bandai_namco_db, tmp
 
 @pytest.mark.slow
 def test_evaluate_reports_standing_actions_with_two_filmstrips(mocap_dir, tmp_path):
-    folder = tmp_path / "bvh"
-    folder.mkdir()
-    import shutil
-
-    for n in (WALK, WALK_OLD, TURN, WAVE_L, WAVE_R, RAISE_LEFT):
-        shutil.copy(mocap_dir / BANDAI / f"{n}.bvh", folder)
+    folder = copy_bandai((WALK, WALK_OLD, TURN, WAVE_L, WAVE_R, RAISE_LEFT), tmp_path / "bvh")
     db, out, report = tmp_path / "b.h5", tmp_path / "o.h5", tmp_path / "r.md"
     assert import_bvh([folder], db).ok
     splice_all(db, out, locomotions="role:locomotion,role:both", actions="role:action", methods="splice,naive,cpmc",

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import torch
 
+from realdata import BANDAI
 from torchsplice.cpu import get_threads, set_threads
 from torchsplice.cpu.bank import ClipBank, standing_bank
 from torchsplice.formats.bvh import read_bvh
@@ -26,7 +27,6 @@ from torchsplice.splice.clips import clips_to_tensors
 from torchsplice.splice.standing import (CORE_SHARE, LIMBS, acting_limbs, acting_mask, action_times, best_windows,
                                          hands_in_chest, loop_points, motion_core, standing_tables)
 
-BANDAI = "bandai_namco_research_motiondataset"
 STANDING = ["dataset-2_raise-up-left-hand_normal_001", "dataset-2_raise-up-both-hands_normal_001",
             "dataset-2_wave-right-hand_normal_001", "dataset-2_wave-both-hands_normal_001",
             "dataset-2_wave-left-hand_normal_001", "dataset-1_bow_normal_001", "dataset-1_punch_normal_002"]

@@ -236,23 +236,18 @@ def test_every_read_path_maps_a_damaged_chunk(reader, damaged):
     assert "\n" not in msg
 
 
-def test_missing_shards_of_a_virtual_output_are_named(good, tmp_path, capsys):
-    """HDF5 reads the frames of a missing virtual source as NaN without a word: open says so."""
+def test_missing_shards_of_a_virtual_output_are_named(good, tmp_path):
+    """HDF5 reads the frames of a missing virtual source as NaN without a word: open says so (and
+    ``info`` in one line: tests/cli/test_command_words.py)."""
     out = tmp_path / "virtual.h5"
     splice_all(good["sample"], out, workers=1, layout="virtual", locomotions=LOCO, actions=ACTION, methods="naive")
     with MotionDatabase.open(out) as db:
         assert len(db) >= 1
-    assert main(["info", str(out)]) == 0
     (tmp_path / "virtual.h5.shards").rename(tmp_path / "elsewhere")
     with pytest.raises(DatabaseError, match="missing") as caught:
         MotionDatabase.open(out)
     line = str(caught.value)
     assert "\n" not in line and line.startswith(f"{out}: ") and "virtual.h5.shards/" in line
-    capsys.readouterr()  # the command says the same in one line, its exit code 2
-    assert main(["info", str(out)]) == 2
-    line = capsys.readouterr().err.strip()
-    assert "\n" not in line and line.startswith(f"torchsplice: error: {out}: ") and "virtual.h5.shards/" in line
-    assert "missing" in line
 
 
 def test_open_stays_fast_on_many_clips(tmp_path):

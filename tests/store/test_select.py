@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from realdata import BANDAI
 from torchsplice.core.errors import TorchspliceError
 from torchsplice.job import parse_selector, select_clips
 from torchsplice.store import ClipTable
@@ -15,7 +16,6 @@ from torchsplice import import_bvh, splice_all
 from torchsplice.data import MotionDataset
 from torchsplice.store.database import MotionDatabase
 
-BANDAI = "bandai_namco_research_motiondataset"
 ROWS = [  # name, role, labels
     ("walk_normal", "locomotion", {"content": "walk", "style": "normal", "dataset": "2"}),
     ("walk-turn-left_normal", "locomotion", {"content": "walk-turn-left", "style": "normal", "dataset": "2"}),
@@ -202,8 +202,9 @@ def test_column_and_skeleton_selectors_on_a_spliced_database(spliced_db):
 
 def test_number_columns_are_compared_with_numbers(spliced_db):
     """``COLUMN<VALUE`` and its kin on the number columns (``alignment_distance``, ``cost``,
-    ``penetration``...): the brute-force comparison; NaN selects nothing; a name that is not a
-    number column, or a value that is not a number, is one line naming the selector."""
+    ``jerk``...): the brute-force comparison; NaN selects nothing; a name that is not a number
+    column, or a value that is not a number, is one line naming the selector. (The plausibility
+    columns on values that differ: the tests below.)"""
     from torchsplice.store import MotionDatabase
 
     with MotionDatabase.open(spliced_db) as db:
@@ -215,7 +216,9 @@ def test_number_columns_are_compared_with_numbers(spliced_db):
     assert pick(f"alignment_distance >= {cut!r}") == _brute(t, lambda i: dist[i] >= cut) != []
     assert pick(f"alignment_distance<={cut!r},method:naive") == _brute(t, lambda i: dist[i] <= cut or
                                                                        t.extra["method"][i] == "naive")
-    assert pick("penetration<=0") == _brute(t, lambda i: t.extra["penetration"][i] <= 0) != []
+    jerk = np.asarray(t.extra["jerk"], dtype=np.float64)  # the sample's penetration is 0 throughout: see below
+    above = float(np.median(jerk[np.isfinite(jerk)]))
+    assert pick(f"jerk>{above!r}") == _brute(t, lambda i: jerk[i] > above) != []
     with pytest.raises(TorchspliceError, match=r"selects no clip of db \(its alignment_distance values: .* to .*\)"):
         pick("alignment_distance>1e9")
     with pytest.raises(TorchspliceError, match=r"'alignment_distanse' is not a number column \(number columns: .*cost"):
@@ -273,3 +276,128 @@ def test_6_flags_are_codes_that_selections_filter_with_the_figures_in_their_own_
     assert set(clean.names) == set(rows) - flagged
     assert set(MotionDataset(out, select="flags:*poor_alignment*", features=("rotations",)).names) == \
         {n for n, r in rows.items() if "poor_alignment" in r["flags"]}
+
+
+# --------------------------------------------------------------------------------------------
+# the plausibility columns (penetration, foot_skate, jerk, the self_penetration flag) on values
+# that differ from clip to clip, so that a wrong selection selects other rows
+# --------------------------------------------------------------------------------------------
+NAN = float("nan")
+FIGURES = [  # name, penetration, foot_skate, jerk, flags
+    ("a", 0.0, 0.10, 120.0, ""),
+    ("b", 0.02, 0.25, 900.0, ""),
+    ("c", 0.05, 0.40, 60.0, "self_penetration"),
+    ("d", 0.12, 0.05, 1500.0, "poor_alignment,self_penetration"),
+    ("e", NAN, NAN, NAN, ""),  # a copied source clip: no figures
+    ("f", 0.0, 0.30, 300.0, "poor_alignment"),
+]
+
+
+@pytest.fixture
+def figures():
+    C = len(FIGURES)
+    cols = {"penetration": "float", "foot_skate": "float", "jerk": "float", "flags": "str"}
+    return ClipTable.from_columns({
+        "name": np.array([r[0] for r in FIGURES]), "source": np.array([""] * C), "role": np.array(["spliced"] * C),
+        "labels": np.array([""] * C), "skeleton": np.zeros(C, np.int32), "start": np.arange(C, dtype=np.int64) * 10,
+        "length": np.full(C, 10, np.int64), "fps": np.full(C, 30.0),
+        **{c: np.array([r[k] for r in FIGURES], dtype=np.float64 if kind == "float" else str)
+           for k, (c, kind) in enumerate(cols.items(), start=1)},
+    }, cols, "db.h5")
+
+
+def test_plausibility_columns_select_the_rows_of_their_values(figures):
+    """Each comparison selects the rows the values above say (worked out by hand; a value on the
+    cut tells ``<`` from ``<=``), NaN none of them, and ``flags:`` globs the codes."""
+    assert names(figures, "penetration<=0") == ["a", "f"]
+    assert names(figures, "penetration<0.05") == ["a", "b", "f"]
+    assert names(figures, "penetration>=0.05") == ["c", "d"]
+    assert names(figures, "penetration>0.05") == ["d"]
+    assert names(figures, "foot_skate>0.25") == ["c", "f"]
+    assert names(figures, "foot_skate<=0.25") == ["a", "b", "d"]
+    assert names(figures, "jerk<300") == ["a", "c"]
+    assert names(figures, "jerk>=300") == ["b", "d", "f"]
+    assert names(figures, "flags:*self_penetration*") == ["c", "d"]
+    assert names(figures, "flags:") == ["a", "b", "e"]  # no flag
+    assert names(figures, "flags:*self_penetration*", "penetration>0.05") == ["d"]  # repeated: and
+    assert names(figures, "penetration<=0,flags:*self_penetration*") == ["a", "c", "d", "f"]  # alternatives: or
+    with pytest.raises(TorchspliceError, match=r"'penetration<0' selects no clip of db.h5 \(its penetration values: "):
+        names(figures, "penetration<0")
+
+
+HANDS_LOCOMOTIONS = ["dataset-1_dash_chimpira_001", "dataset-1_dash_tired_001", "dataset-1_run_chimpira_001",
+                     "dataset-1_run_giant_001"]
+HANDS_ACTIONS = ["dataset-2_raise-up-both-hands_normal_001", "dataset-2_raise-up-right-hand_normal_001",
+                 "dataset-1_byebye_normal_001", "dataset-2_wave-left-hand_normal_001", "dataset-1_guide_normal_001"]
+
+
+@pytest.fixture(scope="module")
+def hands_in(mocap_dir, tmp_path_factory):
+    """Real runs and dashes x raised hands, waves, a bye-bye and a guide (20 pairs), spliced with
+    the arms as they come (``keep_hands_out=False``) and the sources copied: some results have a
+    hand inside the body (penetration from 0 to about 0.1, a few flagged ``self_penetration``),
+    foot_skate and jerk differ from pair to pair, and the sources have no figures (NaN)."""
+    folder = tmp_path_factory.mktemp("hands_in")
+    db, out = folder / "bn.h5", folder / "out.h5"
+    assert import_bvh([mocap_dir / BANDAI / f"{n}.bvh" for n in HANDS_LOCOMOTIONS + HANDS_ACTIONS], db).ok
+    summary = splice_all(db, out, locomotions=",".join(HANDS_LOCOMOTIONS), actions=",".join(HANDS_ACTIONS),
+                         keep_hands_out=False, copy_sources=True, workers=1, progress=False)
+    assert summary.spliced == len(HANDS_LOCOMOTIONS) * len(HANDS_ACTIONS)
+    return out
+
+
+def test_plausibility_selectors_on_a_real_output_select_the_rows_their_figures_say(hands_in, tmp_path):
+    """On a real output whose figures differ: every selector on ``penetration``, ``foot_skate``,
+    ``jerk`` and the ``self_penetration`` flag selects the rows a brute-force pass over the
+    figures keeps (neither none nor every result), through the selection language, the
+    database's ``summary(select=)``, the dataset's ``where=`` and ``select=`` and the exports'
+    ``select=``; the flagged rows are those whose penetration exceeds both sources' by more than
+    :data:`~torchsplice.job.task.SELF_PENETRATION`."""
+    from torchsplice.formats.exporters import export_clips
+    from torchsplice.job.task import SELF_PENETRATION
+
+    with MotionDatabase.open(hands_in) as db:
+        t = db.clip_table()
+        summary = lambda *s: [c["name"] for c in db.summary(select=list(s))["clips"]]  # noqa: E731
+        e = t.extra
+        pen, skate, jerk = (np.asarray(e[c], dtype=np.float64) for c in ("penetration", "foot_skate", "jerk"))
+        of_loco, of_action = (np.asarray(e[c], dtype=np.float64)
+                              for c in ("penetration_locomotion", "penetration_action"))
+        codes = [set(str(f).split(",")) - {""} for f in e["flags"]]
+        results = _brute(t, lambda i: t.role[i] == "spliced")
+        pick = lambda *s: [t.names[i] for i in select_clips(t, list(s), "select", "db")]  # noqa: E731
+        inside = _brute(t, lambda i: pen[i] > max(of_loco[i], of_action[i]) + SELF_PENETRATION)
+        assert _brute(t, lambda i: "self_penetration" in codes[i]) == inside
+        cut = {name: float(np.median(v[np.isfinite(v) & (v > 0)])) for name, v in
+               (("penetration", pen), ("foot_skate", skate), ("jerk", jerk))}
+        cases = {
+            "penetration<=0": lambda i: pen[i] <= 0,
+            "penetration>0": lambda i: pen[i] > 0,
+            f"penetration>={cut['penetration']!r}": lambda i: pen[i] >= cut["penetration"],
+            f"foot_skate<{cut['foot_skate']!r}": lambda i: skate[i] < cut["foot_skate"],
+            f"foot_skate>={cut['foot_skate']!r}": lambda i: skate[i] >= cut["foot_skate"],
+            f"jerk>{cut['jerk']!r}": lambda i: jerk[i] > cut["jerk"],
+            f"jerk<={cut['jerk']!r}": lambda i: jerk[i] <= cut["jerk"],
+            "flags:*self_penetration*": lambda i: "self_penetration" in codes[i],
+        }
+        for selector, keep in cases.items():
+            want = _brute(t, keep)
+            assert want and set(want) < set(results), (selector, want)  # some results, not all of them
+            assert pick(selector) == want, selector
+            assert summary(selector) == want, selector
+        calm = f"jerk<={cut['jerk']!r}"
+        both = _brute(t, lambda i: pen[i] > 0 and jerk[i] <= cut["jerk"])
+        assert both and pick("penetration>0", calm) == summary("penetration>0", calm) == both
+    # the dataset: where= (predicates on the columns) and select= keep the same rows
+    dataset = lambda **kw: MotionDataset(hands_in, features=("rotations",), **kw).names  # noqa: E731
+    assert dataset(where={"penetration": lambda v: v > 0}) == _brute(t, lambda i: pen[i] > 0)
+    assert dataset(where={"jerk": lambda v: v <= cut["jerk"]}) == _brute(t, lambda i: jerk[i] <= cut["jerk"])
+    assert dataset(where={"flags": lambda f: "self_penetration" in f.split(",")}) == inside
+    assert dataset(select="flags:*self_penetration*") == inside
+    assert dataset(where={"penetration": lambda v: v > 0}, select=calm) == both
+    # the exports: the files (and the index) of the selected clips, no other
+    result = export_clips(hands_in, out=tmp_path / "bvh", format="bvh", select="flags:*self_penetration*")
+    assert result.names == inside and len(result.files) == len(inside)
+    assert sorted(p.stem for p in (tmp_path / "bvh").glob("*.bvh")) == sorted(inside)
+    result = export_clips(hands_in, out=tmp_path / "both", format="bvh", select=["penetration>0", calm])
+    assert result.names == both

@@ -512,24 +512,6 @@ def test_an_overlay_panel_draws_the_further_clips_in_grey(tmp_path, clips):
     assert n_over > 60 and n_over > 4 * n_alone, (n_alone, n_over)
 
 
-def test_a_filmstrip_draws_as_many_frames_as_its_longest_panel_an_overlay_too(tmp_path, capsys):
-    from cli_helpers import run
-    from torchsplice.sample import sample_motions
-    from torchsplice.specs import load_spec
-    from torchsplice.store.database import MotionDatabase
-
-    db = tmp_path / "short.h5"
-    walk, box = sample_motions()[:2]
-    with MotionDatabase.create(db) as w:
-        w.append(walk.slice(0, 5), spec=load_spec("sample"))
-        w.append(box.slice(0, 12), spec=load_spec("sample"))
-    rc, _, err = run(capsys, "render", db, walk.name, "--overlay", box.name, walk.name, "--frames", "8",
-                     "-o", tmp_path / "a.png")
-    assert rc == 0 and "note" not in err, err  # the overlay's first clip has 12 frames: 8 fit
-    rc, _, err = run(capsys, "render", db, walk.name, "--overlay", box.name, "--frames", "20", "-o", tmp_path / "b.png")
-    assert rc == 0 and "more than the 12 frames of the longest clip; drawing 12" in err, err
-
-
 def test_render_command_takes_an_overlay_a_camera_and_its_angles(tmp_path, capsys, sample_db):
     from cli_helpers import error_line, run
 
