@@ -145,6 +145,12 @@ def _auto_spec_hint(spec, path, why: str) -> str:
     return f"; --spec auto picks {picked.name!r} for them" if picked.name != spec else ""
 
 
+STORE_WORDS = {"motion": "each clip's frames are stored",
+               "alignment": "the source clips once and what splicing computed; every read assembles the motions, "
+                            "`torchsplice materialize` writes them as a motion store"}
+"""What ``info`` says of each kind of store (:mod:`torchsplice.store.assembly`)."""
+
+
 def _labels_text(labels: dict, limit: int = 60) -> str:
     """Labels on one line: a long or multi-line value (captions) by its first line, cut."""
     def short(k: str, v: str) -> str:
@@ -160,8 +166,10 @@ def _labels_text(labels: dict, limit: int = 60) -> str:
 class Info(Command):
     name = "info"
     help = "list a database's clips, skeletons and roles"
-    description = ("Describe a motion database. With --json, print an object whose 'clips' list holds, per clip, "
-                   "name, frames, fps, duration_s, role, labels, skeleton, source.")
+    description = ("Describe a motion database: its kind of store (motion: each clip's frames; alignment: the source "
+                   "clips once and what splicing computed, assembled into motions where read), skeletons, roles and "
+                   "clips. With --json, print an object whose 'store' is 'motion' or 'alignment' and whose 'clips' "
+                   "list holds, per clip, name, frames, fps, duration_s, role, labels, skeleton, source.")
 
     def add_arguments(self, s) -> None:
         s.add_argument("database", help="motion database (.h5)")
@@ -184,7 +192,7 @@ class Info(Command):
 
             check_output(args.csv, (".csv",), "a CSV file", inputs=[args.database], overwrite=True)
         with MotionDatabase.open(args.database) as db:
-            s = db.summary(clips=args.clips, select=args.select)
+            s = {**db.summary(clips=args.clips, select=args.select), "store": db.store}
         if args.csv is not None:
             from ..formats.index import write_rows_csv
 
@@ -196,6 +204,7 @@ class Info(Command):
         print(f"{s['path']}: {n(s['num_clips'], 'clip')}, {s['num_frames']} frames ({minutes:.1f} min); "
               f"schema {s['schema_version']}, units {s['units'] or '?'}, up axis {s['up_axis'] or '?'}, "
               f"quaternions {s['quaternion_order']}")
+        print(f"store: {s['store']} ({STORE_WORDS.get(s['store'], '?')})")
         for k in s["skeletons"]:
             print(f"skeleton {k['id']}: {k['joints']} joints, root {k['root']}, spec {k['spec'] or '-'}"
                   f"{' (roles guessed)' if k['guessed_roles'] else ''}, units {k['units'] or '?'}, "

@@ -32,11 +32,13 @@ source clips (:mod:`.splits`). Mean and Std are the format's: the mean of each c
 every row, and the standard deviation of each kind of feature (one value per kind, the mean of
 its columns'; :data:`~.humanml3d_features.GROUPS`).
 
-``shards=N`` (``--shards N``) writes the motions as tar files in WebDataset's layout instead of
-one file each: ``SPLIT-000000.tar`` ... (about ``N`` in all, each split its own share, at least
-one), each member pair ``ID.npy`` (the features, as ``new_joint_vecs/ID.npy``) and ``ID.txt``
-(the captions, as ``texts/ID.txt``); ``Mean.npy``, ``Std.npy``, the split lists and
-``index.csv`` beside them as ever. A large export is then a handful of files, which
+Motions are computed in batches (:func:`_batches`: a motion's last float64 bits depend on its
+batch). ``shards=N`` (``--shards N``) writes them as tar files in WebDataset's layout instead of
+one file each: ``SPLIT-000000.tar`` ... (about ``N`` in all, each about ``1/N`` of the export:
+each split its share, at least one, cut between batches), each member pair ``ID.npy`` and
+``ID.txt`` byte for byte ``new_joint_vecs/ID.npy`` and ``texts/ID.txt`` of the folder export;
+``Mean.npy``, ``Std.npy``, the split lists and ``index.csv`` beside them as ever. A large export
+is then a handful of files, which
 ``webdataset.WebDataset("OUT/train-{000000..000003}.tar")`` or plain ``tarfile`` reads.
 
 Registered on import; imports no torch until it exports.
@@ -134,15 +136,16 @@ class HumanML3DExporter(Exporter):
             rows = [db.index(n) for n in self.names]
             plan = _plan_items(table, rows, window, bool(o["mirror"]), ratios, parse_seed(o["split_seed"]),
                                str(self.database), _job_sources(db.attrs.get("run")))
-        plan["shards"] = _shard_items(plan["items"], shards) if shards is not None else {}
+        plan["batches"] = _batches(plan["items"])
+        plan["shards"] = _shard_items(plan["batches"], shards) if shards is not None else {}
         return plan
 
     def layout(self) -> list[str]:
         if self._plan["shards"]:
             return (list(self._plan["shards"]) + ["Mean.npy", "Std.npy"] + [f"{s}.txt" for s in (*SPLITS, "train_val", "all")]
                     + ["index.csv"])
-        files = []
-        for item in self._plan["items"]:
+        files = []  # in the order they are computed (_batches)
+        for item in (item for batch in self._plan["batches"] for item in batch):
             files += [f"new_joint_vecs/{item['id']}.npy", f"new_joints/{item['id']}.npy", f"texts/{item['id']}.txt"]
         return files + ["Mean.npy", "Std.npy"] + [f"{s}.txt" for s in (*SPLITS, "train_val", "all")] + ["index.csv"]
 
@@ -260,7 +263,6 @@ class HumanML3DExporter(Exporter):
         from .humanml3d_features import FeatureStats
 
         stats = FeatureStats()
-        rows = []
         if self._plan["shards"]:
             for items in self._plan["shards"].values():
                 written = {"frames": 0}
@@ -268,7 +270,6 @@ class HumanML3DExporter(Exporter):
                 def members(items=items, written=written):  # computed as the tar is written
                     for item, vecs, _, captions in self._clips(items):
                         stats.add(vecs)
-                        rows.append(item)
                         written["frames"] += int(vecs.shape[0])
                         buf = io.BytesIO()
                         np.save(buf, vecs.numpy().astype(np.float32), allow_pickle=False)
@@ -276,15 +277,13 @@ class HumanML3DExporter(Exporter):
                         yield f"{item['id']}.txt", "".join(c.line() + "\n" for c in captions).encode("utf-8")
 
                 yield ("tar", written, members())
-            order = {item["id"]: n for n, item in enumerate(self._plan["items"])}
-            rows.sort(key=lambda r: order[r["id"]])
         else:
-            for item, vecs, joints, captions in self._clips():
+            for item, vecs, joints, captions in self._clips([i for batch in self._plan["batches"] for i in batch]):
                 stats.add(vecs)
                 yield ("npy", item, vecs.numpy().astype(np.float32))
                 yield ("npy", None, joints.numpy().astype(np.float32))
                 yield ("text", None, "".join(c.line() + "\n" for c in captions))
-                rows.append(item)
+        rows = self._plan["items"]  # every one written by now (computed in batches, listed in plan order)
         mean, std = stats.result()
         yield ("npy", None, mean.numpy().astype(np.float32))
         yield ("npy", None, std.numpy().astype(np.float32))
@@ -300,17 +299,19 @@ class HumanML3DExporter(Exporter):
             writer.writerow([spreadsheet_cell(r[c]) for c in INDEX_COLUMNS])
         yield ("text", None, out.getvalue())
 
-    def _clips(self, items=None, db=None):
+    def _clips(self, items=None, db=None, batched: bool = True):
         """``(item, features (N, 263), positions (N, 22, 3), captions)`` per planned item (or per
         one of ``items``, planned items), grouped by clip, computed a batch of clips at a time
-        (from ``db``, the open database, where given)."""
+        (from ``db``, the open database, where given): the export's batches (:func:`_batches`),
+        or without ``batched`` up to :data:`READ_BATCH` clips of ``items`` in their order."""
         if db is None:
             from ..store.database import MotionDatabase
 
             with MotionDatabase.open(self.database) as db:
-                yield from self._clips(items, db)
+                yield from self._clips(items, db, batched)
             return
         from dataclasses import replace
+        from itertools import groupby
 
         import torch
 
@@ -322,10 +323,9 @@ class HumanML3DExporter(Exporter):
         by_clip: dict[str, list[dict]] = {}
         for item in items:
             by_clip.setdefault(item["clip"], []).append(item)
-        names = list(by_clip)
+        runs = [list(g) for _, g in groupby(by_clip, key=lambda n: by_clip[n][0]["batch"] if batched else None)]
         count = self.options["paraphrases"]
-        for b in range(0, len(names), READ_BATCH):
-            chunk = names[b:b + READ_BATCH]
+        for chunk in (run[b:b + READ_BATCH] for run in runs for b in range(0, len(run), READ_BATCH)):
             positions = self._positions(db.read_many(chunk, dtype=torch.float64))
             pieces, meta = [], []
             for name, p in zip(chunk, positions):
@@ -371,8 +371,8 @@ class HumanML3DExporter(Exporter):
 
     def motions(self, items=None, db=None):
         """``(item, features (N, 263), positions (N, 22, 3), captions)`` of ``items`` (planned
-        items; ``None``: all), exactly as the export writes them (see :meth:`_clips`)."""
-        return self._clips(items, db)
+        items; ``None``: all), as the export computes them (to float64's last bits: see :meth:`_clips`)."""
+        return self._clips(items, db, batched=False)
 
     def _positions(self, motions) -> list:
         """Each clip's joint positions ``(T', 22, 3)`` in metres on the SMPL body at 20 fps."""
@@ -457,17 +457,37 @@ class HumanML3DExporter(Exporter):
                 + (f"; {'; '.join(notes)}" if notes else ""))
 
 
-def _shard_items(items: list[dict], shards: int) -> dict[str, list[dict]]:
-    """The tar files of a sharded export (``SPLIT-000000.tar`` ...: each split's motions in plan
-    order, cut into its share of ``shards``, at least one) and the items of each."""
+def _batches(items: list[dict]) -> list[list[dict]]:
+    """The batches the export computes its motions in, in order: each split's (train, val, test,
+    then none) clips in plan order, :data:`READ_BATCH` clips a batch, with their motions; sets
+    ``item["batch"]``. The folder export and every tar of a sharded one compute the same batches."""
+    out: list[list[dict]] = []
+    for s in (*SPLITS, ""):
+        clips: dict[str, list[dict]] = {}
+        for i in (i for i in items if (i["split"] or "") == s):
+            clips.setdefault(i["clip"], []).append(i)
+            i["batch"] = len(out) + (len(clips) - 1) // READ_BATCH
+        names = list(clips)
+        out += [[i for n in names[b:b + READ_BATCH] for i in clips[n]] for b in range(0, len(names), READ_BATCH)]
+    return out
+
+
+def _shard_items(batches: list[list[dict]], shards: int) -> dict[str, list[dict]]:
+    """The tar files of a sharded export (``SPLIT-000000.tar`` ...: each split's batches in
+    order, cut between batches into its share of ``shards``, at least one) and the items of each."""
     out: dict[str, list[dict]] = {}
-    groups = {s: [i for i in items if (i["split"] or "nosplit") == s] for s in (*SPLITS, "nosplit")}
-    for s, group in groups.items():
-        if not group:
-            continue
-        n = min(len(group), max(1, round(shards * len(group) / len(items))))
-        for k in range(n):
-            out[f"{s}-{k:06d}.tar"] = group[k * len(group) // n:(k + 1) * len(group) // n]
+    total = sum(len(b) for b in batches)
+    for s in (*SPLITS, "nosplit"):
+        mine = [b for b in batches if (b[0]["split"] or "nosplit") == s]
+        size = sum(len(b) for b in mine)
+        n = min(len(mine), max(1, round(shards * size / total))) if mine else 0
+        tars: list[list[dict]] = [[] for _ in range(n)]
+        at = 0
+        for b in mine:  # a batch goes to the share its middle falls in
+            tars[min(n - 1, (2 * at + len(b)) * n // (2 * size))] += b
+            at += len(b)
+        for k, tar in enumerate(t for t in tars if t):
+            out[f"{s}-{k:06d}.tar"] = tar
     return out
 
 

@@ -198,6 +198,8 @@ class JobConfig:
             if source is not None and same_file(out, source):  # --force never replaces an input
                 raise TorchspliceError(f"{out}: is also the job's input ({what}); write the output to another file",
                                        options=("actions_db", "target"))
+        if c.store == "alignment":
+            _check_stores_alignments(c)
         return c
 
     @property
@@ -269,6 +271,18 @@ class JobConfig:
             "retarget": self.retarget, "fix_feet": self.fix_feet, "target": self.target,
             **({"plugins": plugin_modules(self.methods)} if plugin_modules(self.methods) else {}),
         }
+
+
+def _check_stores_alignments(c: JobConfig) -> None:
+    """Refuse ``store="alignment"`` with a backend that gives no parts to store (the torch
+    splicer, or a plug-in that does not implement :meth:`~torchsplice.splice.backends.Backend.assembly_bank`),
+    here, before the job plans or creates its work folder (and in a dry run as in a run)."""
+    from ..splice.backends import Backend
+
+    backend = c.splice_backend()
+    if type(backend).assembly_bank is Backend.assembly_bank:
+        raise TorchspliceError(f"{c.output}: the {backend.name} splicer gives no alignments to store; write {{store}} motion",
+                               options=("store",))
 
 
 def _is_int(v) -> bool:

@@ -222,12 +222,8 @@ class SpliceJob:
             engine = make_engine(EngineContext(c, plan, plan_path, sources, self.sink, shard_dir,
                                                keep_shards=self.shard is not None or c.layout == "virtual"))
         except BaseException:
-            if new_plan and not any(shard_dir.glob("part-*")):  # nothing was done: leave no plan that would tie
-                plan_path.unlink(missing_ok=True)                # the next run to these arguments
-                try:
-                    self.work.rmdir()  # only when empty
-                except OSError:
-                    pass
+            if new_plan:
+                _forget_plan(plan_path, shard_dir)
             raise
         out, merged, merge = None, 0, None
         try:
@@ -253,6 +249,8 @@ class SpliceJob:
             if out is not None:
                 out.abort()
             engine.close()
+            if new_plan and out is None and self.shard is None:  # refused before the output was staged (a store it cannot write)
+                _forget_plan(plan_path, shard_dir)
             raise
         log.info("%d pairs in %d tasks (%d already done, %d of them in the output) on %s", sum(t.size for t in tasks),
                  len(tasks), len(have), merged, summary.engine)
@@ -339,6 +337,18 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
 def _shares_banks(config: JobConfig) -> bool:
     """Whether the job's local workers map the driver's banks (see :mod:`.sources`)."""
     return config.engine == "local" and config.uses_worker_processes()
+
+
+def _forget_plan(plan_path: Path, shard_dir: Path) -> None:
+    """A plan this run saved, removed when the run is refused before any task ran, so that it
+    does not tie the next run to these arguments; the work folder goes too when it is empty."""
+    if any(shard_dir.glob("part-*")):
+        return
+    plan_path.unlink(missing_ok=True)
+    try:
+        plan_path.parent.rmdir()  # only when empty
+    except OSError:
+        pass
 
 
 def _free_bytes(folder: Path) -> int | None:

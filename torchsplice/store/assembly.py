@@ -36,7 +36,8 @@ Layout, besides :mod:`torchsplice.store.schema`'s (root attribute ``store="align
     /clips/assembly_kind    -1: frames stored in rotations/... as in a motion store (methods whose
                             result is not an alignment: cpmc through the timewarp, plug-ins;
                             copied source clips);
-                            1: timewarp (splice, naive); 2: standing action
+                            1: timewarp (splice, naive); 2: standing action (the locomotion with the
+                            action's upper body at a timing: loop, hold or fit; see STORE_README)
     /clips/assembly_bank, assembly_locomotion, assembly_action: the bank and its two source clips
     /clips/assembly_crop, assembly_method (0 splice, 1 naive, 2 cpmc), assembly_timing (0 loop,
            1 hold, 2 fit), assembly_window, assembly_loop_start, assembly_loop_end,
@@ -132,16 +133,27 @@ KIND_CODES = {"motion": -1, "timewarp": 1, "standing": 2}
 STORE_README = (
     "torchsplice alignment store: the spliced clips' motions are not stored; each is assembled from two source "
     "clips and what splicing computed. Source clips: /assembly/banks/<b>/rotations (N,J,4 WXYZ local) and "
-    "translations (N,J,3 local, row 0 the root), clip c at rows starts[c]:starts[c]+lengths[c]. A spliced clip "
-    "(row i of /clips, frames start:start+length of /skeletons/<k>) of assembly_kind 1 plays, at frame t, the root "
-    "and lower body of bank clip assembly_locomotion frame t, the pelvis rotation assembly_pelvis[t], and the upper "
-    "body of bank clip assembly_action slerped at frame assembly_crop + assembly_curve[t] (translations linearly); "
-    "kind 2 (standing actions) and the exact joint sets are in torchsplice's torchsplice/cpu/assemble.py; "
-    "a frame's row of /skeletons/<k>/assembly_arms (4,4) holds, for each of the bank's tables' \"moved\" joints "
-    "(shoulders and elbows moved out of the body), the local rotation that replaces the assembled one, or zeros "
-    "where that joint was not moved; kind -1 "
-    "clips hold their frames in /skeletons/<k>/rotations etc. `torchsplice materialize IN -o OUT` writes every "
-    "motion as an ordinary database; torchsplice's MotionDatabase reads either transparently."
+    "translations (N,J,3 local, row 0 the root), clip c at rows starts[c]:starts[c]+lengths[c]; the bank's joint "
+    "sets are its attribute 'tables' (JSON, joint indices: upper, pelvis, standing_upper, spine, arms [left, right], "
+    "blend in frames, moved). A spliced clip (row i of /clips, frames start:start+length of /skeletons/<k>; x(t) "
+    "below is sampled between action frames floor(x) and floor(x)+1, the last held: rotations slerped, translations "
+    "linearly) of assembly_kind 1 (timewarp: splice, naive) plays, at frame t, bank clip assembly_locomotion's frame "
+    "t, its pelvis rotation replaced by assembly_pelvis[t], and on the joints of tables.upper bank clip "
+    "assembly_action at x = assembly_crop + assembly_curve[t]. Kind 2 (a standing action, which does not locomote) "
+    "plays the locomotion's frame t except on tables.standing_upper, where it plays the action (A frames, L the "
+    "locomotion's) at x(t) per assembly_timing: 2 fit t*(A-1)/(L-1); else where L <= A assembly_window + t; 1 hold "
+    "min(t, A-1); 0 loop t until assembly_loop_end, then assembly_loop_start + (t - loop_end) mod (loop_end - "
+    "loop_start), each jump back faded over min(tables.blend, A//3) frames. assembly_acting (bit 0 left, bit 1 "
+    "right) names the arms of tables.arms that act; assembly_method 0 (splice): the arms not acting keep the "
+    "locomotion's, the other joints take the action's rotation, on tables.spine times the inverse of the "
+    "locomotion's mean posture times its rotation at t; 1 (naive): the action's rotations and translations; 2 "
+    "(cpmc): the locomotion's rotation times the action's since its first frame; splice and cpmc keep the "
+    "locomotion's translations; the exact arithmetic, the fade included, is torchsplice/cpu/assemble.py's "
+    "standing_rows. A frame's row of /skeletons/<k>/assembly_arms (4,4) holds, for "
+    "each of tables.moved (shoulders and elbows moved out of the body), the local rotation that replaces the "
+    "assembled one, or zeros where that joint was not moved; kind -1 clips hold their frames in "
+    "/skeletons/<k>/rotations etc. `torchsplice materialize IN -o OUT` writes every motion as an ordinary "
+    "database; torchsplice's MotionDatabase reads either transparently."
 )
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from ..core.errors import DatabaseError
 from ..core.names import CONTROL, control_character, printable
 from ..core.skeleton import Skeleton
-from .assembly import ALIGNMENT, check_assembly, store_kind
+from .assembly import ALIGNMENT, BANKS, MOTION, PART_COLUMNS, STORES, check_assembly, store_kind
 from .schema import (
     CLIPS,
     COMPRESSIONS,
@@ -35,7 +35,15 @@ from .schema import (
     text_attr,
 )
 
-__all__ = ["check_header", "check_structure", "control_name", "whole_number"]
+__all__ = [
+    "check_header",
+    "check_structure",
+    "check_store_kind",
+    "check_banks",
+    "unreadable_bank",
+    "control_name",
+    "whole_number",
+]
 
 
 def whole_number(v) -> int | None:
@@ -61,6 +69,7 @@ def check_structure(h5: h5py.File, mode: str) -> list[Skeleton]:
     (vectorised: a 100,000-clip file opens in milliseconds). Raises :class:`Damage` naming
     the first problem.
     """
+    check_store_kind(h5)
     if mode == "a":
         if (whole_number(h5.attrs.get("chunk_frames")) or 0) < 1:
             raise Damage(f"chunk_frames is not a positive whole number ({cap(h5.attrs.get('chunk_frames'))})")
@@ -209,3 +218,79 @@ def check_header(path: Path, h5: h5py.File, mode: str = "r") -> list[Skeleton]:
         raise DatabaseError(f"{path}: damaged database: {exc}") from None
     except (OSError, KeyError, TypeError, ValueError, IndexError, AttributeError, RuntimeError) as exc:
         raise DatabaseError(f"{path}: damaged database: cannot read its structure ({short(exc)})") from None
+
+
+def check_store_kind(h5: h5py.File) -> None:
+    """The root ``store`` attribute against the layout: an unknown kind, or a file that holds an
+    alignment store's source clips (``assembly/banks``) or all its clip parts (``assembly_*`` columns)
+    while its attribute says (or, deleted, defaults to) ``motion``, whose frame datasets would
+    read as the zeros never written; raises :class:`Damage`."""
+    raw = h5.attrs.get("store")
+    kind = store_kind(h5.attrs)
+    if kind not in STORES:
+        raise Damage(f"its store attribute is {cap(raw)}, neither {' nor '.join(STORES)}")
+    if kind != MOTION:
+        return
+    clips = h5.get(CLIPS)
+    parts = isinstance(clips, h5py.Group) and all(n in clips for n in PART_COLUMNS)
+    if BANKS in h5 or parts:
+        held = BANKS if BANKS in h5 else "clip parts (clips/assembly_*)"
+        said = "is missing" if raw is None else f"says {cap(raw)}"
+        raise Damage(
+            f"it holds an alignment store's {held} but its store attribute {said} (an alignment store's "
+            "says 'alignment'; as a motion store its spliced clips would read as zeros)"
+        )
+
+
+def check_banks(path, h5: h5py.File, banks: list[dict]) -> None:
+    """An alignment store's source banks as read (``banks``: :attr:`~.assembly.Assembly.banks`,
+    float64), checked once per read of them: a value that is not finite (a damaged chunk that
+    still decompresses, a row overwritten) is one :class:`DatabaseError` line naming the file, the
+    bank and the source clip, so that no motion is assembled from it. Vectorised: a sum per array,
+    the rows searched only where it is not finite."""
+    for b, bank in enumerate(banks):
+        for name, key in (("rotations", "rot"), ("translations", "trans")):
+            a = bank[key]
+            with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: NaN, said below in one line
+                if np.isfinite(a.sum()):
+                    continue
+            bad = np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(1))
+            if len(bad):
+                raise DatabaseError(
+                    f"{path}: damaged alignment store: bank {b} ({BANKS}/{b}) holds non-finite {name} "
+                    f"in {_bank_clip(h5[f'{BANKS}/{b}'], int(bad[0]), frame=True)}"
+                )
+
+
+def unreadable_bank(path, h5: h5py.File, exc: BaseException) -> str:
+    """The line that says which source bank of an alignment store cannot be read (a chunk that does
+    not decompress), from where (its first such chunk's rows and source clip); ``exc`` said where
+    no bank is to blame."""
+    for b in range(len(h5[BANKS])):
+        g = h5[f"{BANKS}/{b}"]
+        for name in ("rotations", "translations"):
+            ds = g[name]
+            step = max(ds.chunks[0] if ds.chunks else len(ds), 1)
+            for lo in range(0, len(ds), step):
+                try:
+                    ds[lo : lo + step]
+                except (OSError, ValueError, RuntimeError) as why:
+                    return (
+                        f"{path}: damaged alignment store: bank {b} ({BANKS}/{b}) cannot be read from "
+                        f"{_bank_clip(g, lo)} on (rows {lo}:{min(lo + step, len(ds))} of its {name}: {short(why, 80)})"
+                    )
+    return f"{path}: damaged alignment store: its parts cannot be read ({short(exc, 80)})"
+
+
+def _bank_clip(g: h5py.Group, row: int, frame: bool = False) -> str:
+    """The source clip of bank ``g`` that holds ``row`` (and, with ``frame``, its frame there), in words."""
+    try:
+        starts, lengths = g["starts"][()].astype(np.int64), g["lengths"][()].astype(np.int64)
+        c = int(np.searchsorted(starts, row, side="right")) - 1
+        if 0 <= c < len(starts) and row < starts[c] + lengths[c]:
+            return f"source clip {cap(g['names'].asstr()[c])}" + (
+                f" at its frame {row - int(starts[c])}" if frame else ""
+            )
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return f"row {row}"

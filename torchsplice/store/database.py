@@ -34,10 +34,10 @@ from ..core.version import __version__
 from ..core.errors import DatabaseError, OutputExistsError
 from ..core.skeleton import Skeleton
 from .atomic import os_error_message
-from .checks import check_header
+from .checks import check_banks, check_header, unreadable_bank
 from .lock import check_name_length, output_lock, remove_stale_temporaries, temp_path
 from .assembling import Assembling
-from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES, store_kind
+from .assembly import ALIGNMENT, PART_COLUMNS, STORE_README, STORES, Assembly, store_kind
 from .reading import ClipBatch, Reading, virtual_files
 from .resumable import RowLog, clear_status_flags, commit_path, detach, last_checkpoint, rows_path
 from .schema import (
@@ -330,9 +330,10 @@ class MotionDatabase(Reading, Writing, Assembling):
 
         Appending works on a copy beside the file that replaces it on a clean close (through a
         symbolic link: beside the file it names, which is replaced; the link stays). The file's
-        structure is checked first (attributes, shapes, dtypes, JSON, the clip table's ranges;
-        not the frames, whose damaged chunks are reported by the reads that meet them): a
-        damaged file is one :class:`DatabaseError` naming it and its first problem.
+        structure is checked first (attributes, shapes, dtypes, JSON, the clip table's ranges,
+        the root ``store`` attribute against the layout, :func:`~.checks.check_store_kind`; not
+        the frames, whose damaged chunks are reported by the reads that meet them): a damaged
+        file is one :class:`DatabaseError` naming it and its first problem.
         """
         path = Path(path)
         if mode not in ("r", "a"):
@@ -381,6 +382,24 @@ class MotionDatabase(Reading, Writing, Assembling):
         db = cls(path, h5, mode, tmp, dtype, skeletons)
         db._lock, db._target = lock, real
         return db
+
+    def _assembly(self) -> Assembly:
+        """An alignment store's parts and source banks (:meth:`Assembling._assembly`), the banks
+        checked each time they are read (:func:`~.checks.check_banks`, :func:`~.checks.unreadable_bank`):
+        a damaged source row or chunk is one line naming the file, the bank and the source clip,
+        never a motion assembled from it."""
+        before = getattr(self, "_assembly_cache", None)
+        try:
+            have = super()._assembly()
+        except OSError as exc:  # a chunk that does not decompress
+            raise DatabaseError(unreadable_bank(self.path, self.h5, exc)) from None
+        if have is not before:
+            try:
+                check_banks(self.path, self.h5, have.banks)
+            except DatabaseError:
+                del self._assembly_cache  # every later read is refused too
+                raise
+        return have
 
     def close(self) -> None:
         """Commit (for a write) and close. Safe to call twice."""
