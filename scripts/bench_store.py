@@ -10,7 +10,9 @@ the walks; actions: the walks and the standing actions), as a user runs it:
   of the same job                                                                  [>= 10x smaller]
 - the job's whole-process time, alignment against motion                          [<= 1.0x]
 - every clip read back bit for bit against the motion store (a check, printed)
-- assembly: clips/s and frames/s on one core (``MotionDatabase.assembled``, every clip)
+- assembly: clips/s and frames/s on one core (``MotionDatabase.assembled``, every clip); the
+  torch assembly (``MotionDatabase.assembled_on``, what ``MotionDataset(assemble_on=...)`` runs)
+  on the CPU's threads, and with ``--device cuda`` on the GPU, clips/s (the frames left there)
 - ``MotionDataset`` frames/s over each store, page cache warm, the same shuffled reads [>= 1x]
 - the alignment job killed (SIGKILL) at half its tasks and resumed: its time against the
   uninterrupted run's and its output bit for bit the uninterrupted one's
@@ -110,6 +112,31 @@ def _assembly_rate(path: Path) -> tuple[float, float]:
         return len(t) / best, int(t.length.sum()) / best
 
 
+def _assembly_rate_on(path: Path, device: str) -> float:
+    """Clips/s of the torch assembly of every clip of an alignment store on ``device``, 512
+    clips a call (``MotionDatabase.assembled_on``; the frames stay on the device), best of 3."""
+    import torch
+
+    from torchsplice.store.database import MotionDatabase
+
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+    with MotionDatabase.open(path) as db:
+        t = db.clip_table()
+        db.assembled_on(0, t.start[:1], t.length[:1], device)  # banks loaded and moved, the device warm
+        sync()
+        best = float("inf")
+        for _ in range(3):
+            t0 = time.perf_counter()
+            for k in sorted(set(t.skeleton.tolist())):
+                rows = np.flatnonzero(t.skeleton == k)
+                for s in range(0, len(rows), 512):
+                    r = rows[s:s + 512]
+                    db.assembled_on(k, t.start[r], t.length[r], device)
+            sync()
+            best = min(best, time.perf_counter() - t0)
+        return len(t) / best
+
+
 def _t2m_loader_rate(folder: Path) -> float:
     """Clips/s of a T2M-GPT/MoMask-style loader over an exported HumanML3D folder: every
     ``new_joint_vecs`` file and caption file loaded at start (as their Text2MotionDataset does),
@@ -131,7 +158,7 @@ def _t2m_loader_rate(folder: Path) -> float:
     return len(ids) / (time.perf_counter() - t0)
 
 
-def bench_store(files: list[Path], big_db: Path | None = None) -> None:
+def bench_store(files: list[Path], big_db: Path | None = None, device: str = "cpu") -> None:
     from benchmark import walks_and_turns
     from torchsplice.cli import main as cli
 
@@ -168,6 +195,12 @@ def bench_store(files: list[Path], big_db: Path | None = None) -> None:
         print(f"store   read back: {n - bad:,} of {n:,} clips bit for bit the motion store's")
         cps, fps_ = _assembly_rate(tmp / "alignment.h5")
         print(f"store   assembly on one core: {cps:,.0f} clips/s, {fps_ / 1e6:,.2f} million frames/s")
+        import torch
+
+        for dev in ["cpu"] + ([device] if device != "cpu" else []):
+            on = _assembly_rate_on(tmp / "alignment.h5", dev)
+            threads = f", {torch.get_num_threads()} threads" if dev == "cpu" else ""
+            print(f"store   assembly by torch on {dev}{threads}: {on:,.0f} clips/s  (MotionDataset(assemble_on=...))")
         from torchsplice.job.defaults import usable_cores
 
         cores = usable_cores()

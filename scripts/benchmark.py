@@ -3,7 +3,7 @@
 
     python scripts/benchmark.py                   # every section, real data from ../shared/mocap
     python scripts/benchmark.py --only stages,job # some sections
-    python scripts/benchmark.py --device cuda     # the torch path on a GPU (stages and job)
+    python scripts/benchmark.py --device cuda     # the torch path on a GPU (stages, job, the store's assembly)
 
 Sections:
   parse   BVH parse speed on every real file: MB/s and frames/s                  [>= 30 MB/s]
@@ -753,7 +753,7 @@ def main() -> int:
             "humanml3d": lambda: bench_humanml3d(real_files(args.mocap)),
             "hands": lambda: bench_hands(args.mocap, whole=args.held_back, whole_db=args.mix_db),
             "packed": bench_packed_memory,
-            "store": lambda: bench_store(real_files(args.mocap), args.big_db),
+            "store": lambda: bench_store(real_files(args.mocap), args.big_db, args.device),
             "startup": bench_startup,
         }
         unknown = sections - set(runs)
