@@ -15,9 +15,7 @@ The folder::
                                   locomotion_db and action_db (a spliced clip's sources'
                                   databases, from its run record), retargeted_from, described
                                   (0: its locomotion or its action was not said), and the
-                                  clip's flags, penetration, penetration_depth (cm),
-                                  corrected_frames, foot_skate, jerk and jerk_action (empty
-                                  where the database has no such columns)
+                                  clip's CHECK_COLUMNS (empty where the database has none)
 
 Each clip goes onto the SMPL body's 22 joints (``smpl22``: HumanML3D's joint order, metres, its
 standard bone lengths) by the analytic retargeting of :mod:`torchsplice.ops.retarget` with the
@@ -37,9 +35,8 @@ batch). ``shards=N`` (``--shards N``) writes them as tar files in WebDataset's l
 one file each: ``SPLIT-000000.tar`` ... (about ``N`` in all, each about ``1/N`` of the export:
 each split its share, at least one, cut between batches), each member pair ``ID.npy`` and
 ``ID.txt`` byte for byte ``new_joint_vecs/ID.npy`` and ``texts/ID.txt`` of the folder export;
-``Mean.npy``, ``Std.npy``, the split lists and ``index.csv`` beside them as ever. A large export
-is then a handful of files, which
-``webdataset.WebDataset("OUT/train-{000000..000003}.tar")`` or plain ``tarfile`` reads.
+``Mean.npy``, ``Std.npy``, the split lists and ``index.csv`` beside them as ever. A large export is
+then a handful of files, which ``webdataset.WebDataset("OUT/train-{000000..000003}.tar")`` or plain ``tarfile`` reads.
 
 Registered on import; imports no torch until it exports.
 """
@@ -64,14 +61,16 @@ MIN_FRAMES = 3
 MDM_MIN_ROWS, MDM_MAX_ROWS = 40, 200
 """MDM's and MoMask's loaders keep motions of 40 to 199 feature rows (and crop to 196);
 ``window`` cuts longer clips, and is itself at least 40 frames long."""
-CHECK_COLUMNS = ("flags", "penetration", "penetration_depth", "corrected_frames", "foot_skate", "jerk", "jerk_action")
-"""The source database's columns of what a person would reject (:mod:`torchsplice.job.task`'s
-``flags``; a hand inside the body, its depth in cm and the frames corrected for it; GMD's
-foot skate ratio; the upper body's jerk and the action's, m/s^3), copied into ``index.csv``
-(empty where the database has none)."""
+CHECK_COLUMNS = ("flags", "penetration", "penetration_depth", "corrected_frames", "foot_skate", "jerk", "jerk_action",
+                 "foot_slide", "floor", "penetration_locomotion", "penetration_depth_locomotion", "penetration_action",
+                 "penetration_depth_action")
+"""The source database's columns of what a person would reject (:mod:`torchsplice.job.task`'s ``flags``; a
+hand inside the body, its depth in cm and the frames corrected for it; GMD's foot skate ratio; the upper body's
+jerk and the action's, m/s^3; the feet's speed in contact, cm/s, and lowest point, cm; the sources' hand
+inside and depth), copied into ``index.csv`` (empty where the database has none)."""
 INDEX_COLUMNS = ("id", "clip", "start_s", "end_s", "rows", "mirrored", "split", "role", "locomotion", "action",
                  "method", "database", "locomotion_db", "action_db", "retargeted_from", "described", *CHECK_COLUMNS)
-EARLIER_INDEX_COLUMNS = (INDEX_COLUMNS[:16],)
+EARLIER_INDEX_COLUMNS = (INDEX_COLUMNS[:16], INDEX_COLUMNS[:23])
 """Headers of ``index.csv`` that earlier versions wrote (their exports are still recognised)."""
 
 
