@@ -103,3 +103,20 @@ def test_a_filmstrip_draws_as_many_frames_as_its_longest_panel_an_overlay_too(tm
     assert rc == 0 and "note" not in err, err  # the overlay's first clip has 12 frames: 8 fit
     rc, _, err = run(capsys, "render", db, walk.name, "--overlay", box.name, "--frames", "20", "-o", tmp_path / "b.png")
     assert rc == 0 and "more than the 12 frames of the longest clip; drawing 12" in err, err
+
+
+def test_splice_says_it_moved_an_arm_out_of_the_body_and_keeps_it_when_told(runs_with_raised_hands, tmp_path, capsys):
+    """splice_pair(keep_hands_out=...): tests/ops/test_hands.py."""
+    import numpy as np
+
+    from torchsplice.store.database import MotionDatabase
+
+    db, _, out = runs_with_raised_hands
+    with MotionDatabase.open(out) as o:
+        e = o.clip_table().extra
+        b = int(np.flatnonzero(np.asarray(e["corrected_frames"]) > 0)[0])
+        pair = ["--locomotion", str(e["locomotion"][b]), "--action", str(e["action"][b]), "--force"]
+    code, _, err = run(capsys, "splice", db, *pair, "-o", tmp_path / "a.bvh")
+    assert code == 0 and "the arm was moved out on" in err and "--no-keep-hands-out" in err
+    code, _, err = run(capsys, "splice", db, *pair, "-o", tmp_path / "b.bvh", "--no-keep-hands-out")
+    assert code == 0 and "moved out" not in err

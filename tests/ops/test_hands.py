@@ -593,3 +593,31 @@ def test_hands_are_kept_out_on_a_database_whose_units_are_unknown(runs_with_rais
         assert np.asarray(e["corrected_frames"]).sum() > 0
         assert np.array_equal(np.asarray(e["penetration"]), np.asarray(want["penetration"]))
         assert np.isnan(np.asarray(e["penetration_depth"])).all() and np.isnan(np.asarray(e["jerk"])).all()
+
+
+@pytest.mark.realdata
+def test_one_pair_spliced_alone_has_its_arms_moved_out_as_the_job_moves_them(runs_with_raised_hands):
+    """``splice_pair`` (the ``splice`` command) corrects a result as ``splice_all`` does: the
+    same frames changed, the same rotations (torch against the compiled kernel, float32 stores),
+    and a note saying how many frames; ``keep_hands_out=False`` gives the splice as it came."""
+    from torchsplice.job.pair import splice_pair
+
+    db, raw, out = runs_with_raised_hands
+    with MotionDatabase.open(out) as o, MotionDatabase.open(raw) as r:
+        e = o.clip_table().extra
+        corrected = np.asarray(e["corrected_frames"])
+        b = int(np.flatnonzero(corrected > 0)[0])
+        name, loco, action = o.names[b], str(e["locomotion"][b]), str(e["action"][b])
+        job_out, job_raw = o.read(name), r.read(name)
+    fixed = splice_pair(db, loco, action)
+    as_came = splice_pair(db, loco, action, keep_hands_out=False)
+    assert torch.allclose(as_came.motion.rotations.float(), job_raw.rotations, atol=1e-5)
+    assert torch.allclose(fixed.motion.rotations.float(), job_out.rotations, atol=1e-4)
+    changed = (fixed.motion.rotations != as_came.motion.rotations).any(-1).any(-1)
+    assert int(changed.sum()) == int(corrected[b])
+    assert any(f"moved out on {int(corrected[b])} frames" in n for n in fixed.notes)
+    assert not any("moved out" in n for n in as_came.notes)
+    # a pair the job leaves alone is left alone
+    clean = int(np.flatnonzero(corrected == 0)[0])
+    alone = splice_pair(db, str(e["locomotion"][clean]), str(e["action"][clean]))
+    assert not any("moved out" in n for n in alone.notes)

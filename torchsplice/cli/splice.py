@@ -13,6 +13,7 @@ import sys
 from .base import Command, register_command
 from .common import add_output_flags, device, locked, output, positive_int, say, share
 from ..core.errors import TorchspliceError
+from ..job.defaults import DEFAULT_KEEP_HANDS_OUT
 from ..splice.defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_MAX_RUN,
                                DEFAULT_METHOD, DEFAULT_POSTURE, DEFAULT_TIMING, DEFAULT_TWIST, LIMBS, TIMINGS)
 
@@ -132,6 +133,10 @@ class Splice(Command):
                        help=f"splicing method (default {method}; plug-ins add more, see --plugin)")
         s.add_argument("--reference", metavar="NAME", help="plain-locomotion reference of the action (cpmc)")
         add_splice_options(s)
+        s.add_argument("--no-keep-hands-out", dest="keep_hands_out", action="store_false", default=DEFAULT_KEEP_HANDS_OUT,
+                       help="write the splice as it comes, even where it puts a hand or forearm inside the body deeper "
+                            "than its sources do (by default the arm is moved out, as splice-all does, and a note "
+                            "says on how many frames)")
         add_output_flags(s)
 
     def run(self, args) -> int:
@@ -142,7 +147,7 @@ class Splice(Command):
         method = get_method(args.method)
         out = output(args, "bvh")
         result = splice_pair(args.database, args.locomotion, args.action, method=method, reference=args.reference,
-                             options=splice_options(args))
+                             options=splice_options(args), keep_hands_out=args.keep_hands_out)
         with locked(out, args):
             write_bvh(result.motion, out)
         extra = f", reference {result.reference}" if result.reference else ""
