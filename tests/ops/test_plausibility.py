@@ -344,7 +344,9 @@ def test_gmds_skate_ratio_on_humanml3d_motions_is_its_definition_worked_step_by_
     """On HumanML3D motions (real Bandai Namco runs and walks exported as HumanML3D: SMPL's 22
     joints at 20 fps, the floor at 0, as HumanML3D's own sample is), :func:`skate_ratio` is GMD's
     definition worked by hand, on every motion whose feet are its lowest joints (where the
-    clip's lowest foot point, this measure's floor, is HumanML3D's)."""
+    clip's lowest foot point, this measure's floor, is HumanML3D's). Checked in development on
+    the format's own sample too (``HumanML3D/new_joints/012314.npy`` of EricGuo5513/HumanML3D,
+    not in ../shared): 23 of its 169 steps skate, 0.136, by both."""
     from torchsplice.formats.exporters import export_clips
     from torchsplice.formats.importer import import_bvh
 
