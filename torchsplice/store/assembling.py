@@ -146,7 +146,10 @@ class Assembling(DatabaseState):
         """Store a bank of source clips (packed ``(N, J, 4)`` float64 rotations and ``(N, J, 3)``
         local translations, ``C`` lengths, names, keys and rates) with its joint tables (see
         :func:`_tables`: joint indices); returns its number. Values float32 holds exactly are
-        stored as float32."""
+        stored as float32. Each chunk carries a Fletcher-32 checksum, so a flipped byte that
+        still decompresses to finite values fails the read (h5py's ``OSError``, turned into one
+        line naming the file and the bank by :func:`~.checks.unreadable_bank`); files written
+        without it read as before."""
         self._writable()
         if self.store != ALIGNMENT:
             raise DatabaseError(f"{self.path}: is a motion store; source banks belong in an alignment store")
@@ -165,6 +168,7 @@ class Assembling(DatabaseState):
                 chunks=(min(max(len(a), 1), 1024),) + a.shape[1:],
                 compression="lzf",
                 shuffle=True,
+                fletcher32=True,  # a damaged byte that still decompresses is an error on read, not a motion
             )
         g["starts"] = lengths_to_starts(lengths)
         g["lengths"] = lengths
