@@ -35,7 +35,7 @@ from ..store.select import select_clips
 from .source_figures import source_figures
 from .sources import Sources, clip_key, retargeted_key, retargeted_parts
 
-__all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
+__all__ = ["Pair", "Task", "Group", "Plan", "PlanClip", "ClipColumns", "make_plan", "PLAN_VERSION", "MIN_SECONDS", "SKELETONS_DIFFER"]
 
 PLAN_VERSION = 8
 SKELETONS_DIFFER = "skeletons differ: "
@@ -98,6 +98,45 @@ class PlanClip:
         return out
 
 
+@dataclass(frozen=True)
+class ClipColumns:
+    """The plan's clips as columns, for a task to gather its pairs' figures at once: ``row``
+    maps a clip key to its row; per row its ``name``, ``frames``, ``fps``, ``penetration``,
+    ``penetration_depth`` (the skeleton's units), ``jerk``, its ``acting`` limbs (a tuple, empty
+    where none were found), ``acting_bits`` (bit ``i`` for :data:`~torchsplice.splice.standing.LIMBS`
+    ``[i]``) and whether it is ``flagged`` as not locomoting (:attr:`Plan.flags`)."""
+
+    row: dict
+    name: np.ndarray
+    frames: np.ndarray
+    fps: np.ndarray
+    penetration: np.ndarray
+    penetration_depth: np.ndarray
+    jerk: np.ndarray
+    acting: list
+    acting_bits: np.ndarray
+    flagged: np.ndarray
+
+    @classmethod
+    def of(cls, clips: dict, flags: dict) -> "ClipColumns":
+        from ..splice.standing import LIMBS
+
+        cs = list(clips.values())
+        acting = [tuple(c.acting or ()) for c in cs]
+        return cls(row={k: i for i, k in enumerate(clips)}, name=np.array([c.name for c in cs], dtype=object),
+                   frames=np.array([c.frames for c in cs], np.int64), fps=np.array([c.fps for c in cs], np.float64),
+                   penetration=np.array([c.penetration for c in cs], np.float64),
+                   penetration_depth=np.array([c.penetration_depth for c in cs], np.float64),
+                   jerk=np.array([c.jerk for c in cs], np.float64), acting=acting,
+                   acting_bits=np.array([sum(1 << i for i, limb in enumerate(LIMBS) if limb in a) for a in acting], np.int64),
+                   flagged=np.array([k in flags for k in clips], bool))
+
+    def rows(self, keys) -> np.ndarray:
+        """``(n,)`` int64 the rows of clip ``keys``."""
+        row = self.row
+        return np.array([row[k] for k in keys], np.int64)
+
+
 @dataclass
 class Plan:
     """What a job does (see the module docstring). ``clips`` maps a clip key (:func:`clip_key`)
@@ -112,6 +151,12 @@ class Plan:
     flags: dict[str, str] = field(default_factory=dict)
     sizing: dict = field(default_factory=dict)  # what set the tasks' size: batch_pairs, memory_budget_mb
     version: int = PLAN_VERSION
+
+    def clip_columns(self) -> ClipColumns:
+        """:attr:`clips` and :attr:`flags` as :class:`ClipColumns` (made once, on first use)."""
+        if getattr(self, "_clip_columns", None) is None:
+            self._clip_columns = ClipColumns.of(self.clips, self.flags)
+        return self._clip_columns
 
     def pair_keys(self, p: Pair, same_db: bool) -> tuple[str, str, str | None]:
         ref = p.reference is not None and get_method(p.method).needs_reference

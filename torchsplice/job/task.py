@@ -245,8 +245,10 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
         prepared = backend.prepare([resample_motion(sources.motion(c), fps) for c in wanted], skeleton, roles, options)
         index = {c: i for i, c in enumerate(wanted)}
     lo, ac = [index[k[0]] for k in keys], [index[k[1]] for k in keys]
+    cols = plan.clip_columns()  # the pairs' source figures, gathered by row
+    rows_l, rows_a = cols.rows(k[0] for k in keys), cols.rows(k[1] for k in keys)
     if standing:  # actions that do not locomote: looped, held or fitted (see torchsplice.splice.standing)
-        acting = [tuple((plan.clips[k[1]].acting or ())) for k in keys]
+        acting = [cols.acting[r] for r in rows_a.tolist()]
         batch = backend.standing(prepared, lo, ac, acting, sources.standing_tables(task.group, roles, skeleton, fps),
                                  spec_m, options, fps, buffers=buffers, keep_going=True)
     else:
@@ -261,23 +263,24 @@ def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffer
     skipped: dict[str, int] = {}
     for b, why in failed.items():
         skipped[why] = skipped.get(why, 0) + 1
-        log.warning("%s + %s: %s", plan.clips[keys[b][0]].name, plan.clips[keys[b][1]].name, why)
+        log.warning("%s + %s: %s", cols.name[rows_l[b]], cols.name[rows_a[b]], why)
     body = sources.body_model("body", task.group, skeleton, roles)
     inside = _penetration(backend, body, skeleton, frames, rot, trans)
     kept_keys = [keys[b] for b in kept]
+    rows = (cols, rows_l[ok], rows_a[ok])  # the kept pairs' sources' rows
     corrected, arms = np.zeros(len(kept), np.int64), None
     if config.keep_hands_out:
-        rot, corrected, arms = _keep_hands_out(backend, plan, group, skeleton, body, kept_keys, frames, rot, trans,
-                                               inside, lambda: sources.body_model("arms", task.group, skeleton, roles))
+        rot, corrected, arms = _keep_hands_out(backend, rows, group, skeleton, body, frames, rot, trans, inside,
+                                               lambda: sources.body_model("arms", task.group, skeleton, roles))
     cm = centimetres(DatasetSpec.from_json(group.spec).units)
     inside = (inside[0], inside[1] * cm)  # (share, depth in cm); the frames' deepest no longer needed
-    part = _pack(plan, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
+    part = _pack(plan, rows, group, config, task, [pairs[b] for b in kept], kept_keys, skeleton,
                  frames, rot, trans, curve, corr, crop, cost, posture, inside)
     part.extra["corrected_frames"] = corrected
     part.extra.update(_figures(backend, group, skeleton, sources.body_model("figures", task.group, skeleton, roles),
                                frames, rot, trans))
-    part.extra["jerk_action"] = np.array([plan.clips[k[1]].jerk for k in kept_keys], dtype=np.float64)
-    part.parts = _parts(plan, config, task, kept_keys, batch, ok, standing)
+    part.extra["jerk_action"] = cols.jerk[rows[2]]
+    part.parts = _parts(rows, config, task, kept_keys, batch, ok, standing)
     if part.parts is not None:
         part.parts["arms_rows"], part.parts["arms"] = arms if arms is not None else (
             np.zeros(0, np.int64), np.zeros((0, 4, 4), np.float32))
@@ -311,7 +314,7 @@ def _figures(backend, group, skeleton, joints, frames, rot: np.ndarray, trans: n
     return backend.figures(rot, trans, frames, float(group.fps), skeleton, joints, up, per_metre)
 
 
-def _keep_hands_out(backend, plan, group, skeleton, body, keys, frames, rot: np.ndarray, trans: np.ndarray,
+def _keep_hands_out(backend, rows, group, skeleton, body, frames, rot: np.ndarray, trans: np.ndarray,
                     inside: tuple, arms_of) -> tuple:
     """Move the arms of the results whose hand goes deeper inside the body than either source's
     does, or that the ``self_penetration`` flag would report (then out to a quarter of the
@@ -322,17 +325,18 @@ def _keep_hands_out(backend, plan, group, skeleton, body, keys, frames, rot: np.
     their shoulders' and elbows' new rotations (:attr:`~torchsplice.ops.hands.Arms.moved`), zeros
     for a joint not changed, what an alignment store keeps of them. ``arms_of()`` gives the
     group's :class:`~torchsplice.ops.hands.Arms`
-    (:meth:`~torchsplice.job.sources.Sources.body_model`: made once)."""
+    (:meth:`~torchsplice.job.sources.Sources.body_model`: made once); ``rows`` the plan's
+    :class:`~torchsplice.job.plan.ClipColumns` and the results' locomotions' and actions' rows."""
     import torch
 
     from ..ops.plausibility import penetration_of_frames
 
     share, depth, deepest = inside  # depth in the skeleton's units, as the plan's; deepest per packed frame
     corrected = np.zeros(len(frames), np.int64)
-    allowed = np.array([max(plan.clips[k[0]].penetration_depth, plan.clips[k[1]].penetration_depth) for k in keys],
-                       dtype=np.float64)
+    cols, rows_l, rows_a = rows
+    allowed = np.maximum(cols.penetration_depth[rows_l], cols.penetration_depth[rows_a])
     # a result the flag would report (inside on more of its frames than its sources) may keep nothing
-    often = np.array([max(plan.clips[k[0]].penetration, plan.clips[k[1]].penetration) for k in keys], dtype=np.float64)
+    often = np.maximum(cols.penetration[rows_l], cols.penetration[rows_a])
     allowed[share > often + SELF_PENETRATION] = 0.0
     todo = np.flatnonzero((share > 0) & (depth > allowed))
     if not len(todo):
@@ -379,14 +383,13 @@ PART_KEYS = ("kind", "locomotion", "action")
 """The per-clip parts of :attr:`Part.parts` kept as lists (the rest are arrays)."""
 
 
-def _parts(plan: Plan, config: JobConfig, task: Task, keys, batch, ok: np.ndarray, standing: bool) -> dict | None:
+def _parts(rows, config: JobConfig, task: Task, keys, batch, ok: np.ndarray, standing: bool) -> dict | None:
     """A task's parts for an alignment store (see :class:`Part`), or ``None`` where its clips keep
     their frames: a motion store, a backend that gives no parts, a plug-in method, or a built-in
     whose table row stores frames (cpmc through the timewarp: its result is a per-joint difference
     on the locomotion, not an alignment)."""
     from ..core.method_table import builtin
     from ..store.assembly import TIMING_CODES
-    from ..splice.standing import LIMBS
 
     row = builtin(task.method)
     if config.store != "alignment" or batch.parts is None or row is None or (
@@ -394,15 +397,15 @@ def _parts(plan: Plan, config: JobConfig, task: Task, keys, batch, ok: np.ndarra
         return None
     p = batch.parts
     C = len(keys)
-    acting = [sum(1 << i for i, limb in enumerate(LIMBS) if limb in (plan.clips[k[1]].acting or ())) if standing else 0
-              for k in keys]
+    cols, _, rows_a = rows
+    acting = cols.acting_bits[rows_a] if standing else np.zeros(C, np.int64)
     loops = np.asarray(p["loops"], np.int64)[ok] if standing else np.zeros((C, 2), np.int64)
     return {"kind": ["standing" if standing else "timewarp"] * C, "locomotion": [k[0] for k in keys],
             "action": [k[1] for k in keys], "crop": np.asarray(p["crop"], np.int64)[ok],
             "method": np.full(C, row.code, np.int64),
             "timing": np.full(C, TIMING_CODES[config.timing] if standing else -1, np.int64),
             "window": np.asarray(p["window"], np.int64)[ok], "loop_start": loops[:, 0].copy(),
-            "loop_end": loops[:, 1].copy(), "acting": np.array(acting, np.int64),
+            "loop_end": loops[:, 1].copy(), "acting": np.asarray(acting, np.int64),
             "curve": None if standing else np.array(p["curve"], np.float64),  # a standing clip's follows from its timing
             "pelvis": None if standing else np.asarray(p["pelvis"], np.float32)}
 
@@ -413,27 +416,26 @@ def _float32(x) -> np.ndarray:
         x.detach().float().cpu().numpy() if isinstance(x, torch.Tensor) else x, dtype=np.float32)
 
 
-def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleton, frames, rot, trans, curve, corr,
-          crop, cost, posture, inside) -> Part:
+def _pack(plan: Plan, rows, group, config: JobConfig, task: Task, pairs, keys, skeleton, frames, rot, trans, curve,
+          corr, crop, cost, posture, inside) -> Part:
     """A task's output columns, computed at once (``curve`` and ``crop`` at the locomotion's rate,
     ``corr`` and ``posture`` in degrees, ``inside`` the results' penetration share and depth)."""
     method, fps = task.method, group.fps
-    lnames = [plan.clips[k[0]].name for k in keys]
-    anames = [plan.clips[k[1]].name for k in keys]
-    scale = np.array([plan.clips[k[1]].fps / fps for k in keys])  # to the action's own frames
+    cols, rows_l, rows_a = rows
+    lnames, anames = cols.name[rows_l].tolist(), cols.name[rows_a].tolist()
+    scale = cols.fps[rows_a] / fps  # to the action's own frames
     starts = lengths_to_starts(frames)
     mean_corr = np.add.reduceat(corr, starts) / frames if len(corr) else np.zeros(len(keys))
-    loco_frames = np.array([plan.clips[k[0]].frames for k in keys])
+    loco_frames = cols.frames[rows_l]
     standing = getattr(task, "mode", "timewarp") == "standing"
     cost = np.asarray(cost, dtype=np.float64)
     distance = np.where(np.isfinite(cost), np.sqrt(np.maximum(cost, 0.0)), 0.0) / group.leg if group.leg > 0 \
         else np.zeros(len(keys))  # alignment_distance, for every pair at once
     poor = distance > POOR_ALIGNMENT
-    unmoving = np.array([k[0] in plan.flags or (not standing and k[1] in plan.flags) for k in keys], dtype=bool)
+    unmoving = cols.flagged[rows_l] | (cols.flagged[rows_a] & (not standing))
     share, depth = inside
     cm = centimetres(DatasetSpec.from_json(group.spec).units)  # the plan's depths are in the skeleton's units
-    of_loco = np.array([plan.clips[k[0]].penetration for k in keys], dtype=np.float64)
-    of_action = np.array([plan.clips[k[1]].penetration for k in keys], dtype=np.float64)
+    of_loco, of_action = cols.penetration[rows_l], cols.penetration[rows_a]
     into = share > np.maximum(of_loco, of_action) + SELF_PENETRATION
     flags, details = [""] * len(keys), [""] * len(keys)
     for b in np.flatnonzero(poor | unmoving | into).tolist():  # words only for the pairs flagged
@@ -460,12 +462,12 @@ def _pack(plan: Plan, group, config: JobConfig, task: Task, pairs, keys, skeleto
         "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": posture,
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
         "timing": [config.timing if standing else "timewarp"] * len(keys),
-        "acting": [",".join((plan.clips[k[1]].acting or ())) if standing else "" for k in keys],
+        "acting": [",".join(cols.acting[r]) for r in rows_a.tolist()] if standing else [""] * len(keys),
         "penetration": share, "penetration_depth": depth,
         "penetration_locomotion": of_loco,
-        "penetration_depth_locomotion": cm * np.array([plan.clips[k[0]].penetration_depth for k in keys], dtype=np.float64),
+        "penetration_depth_locomotion": cm * cols.penetration_depth[rows_l],
         "penetration_action": of_action,
-        "penetration_depth_action": cm * np.array([plan.clips[k[1]].penetration_depth for k in keys], dtype=np.float64),
+        "penetration_depth_action": cm * cols.penetration_depth[rows_a],
     }
     return Part(
         task=task.id, skeleton=skeleton, spec=group.spec,
