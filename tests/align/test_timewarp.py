@@ -259,41 +259,6 @@ def test_bad_input_is_refused():
 DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)]
 
 
-def test_the_dp_is_chosen_by_its_declared_devices_and_priority(monkeypatch):
-    """``"auto"`` runs the available implementation of highest priority on the grid's device (the
-    compiled DP on the CPU, torch without numba); a name runs that one; the errors are one line."""
-    from dataclasses import replace
-
-    import torchsplice.cpu
-    from torchsplice.align import timewarp as tw
-
-    ran = []
-
-    def spy(f, name):
-        def run(*args):
-            ran.append(name)
-            return f(*args)
-        return run
-
-    for name, impl in list(tw._IMPLEMENTATIONS.items()):
-        monkeypatch.setitem(tw._IMPLEMENTATIONS, name, replace(impl, timewarp=spy(impl.timewarp, name),
-                                                               cumulative=spy(impl.cumulative, name)))
-    g = torch.rand(2, 6, 7, dtype=torch.float64)
-    for backend, want in (("auto", "compiled"), ("compiled", "compiled"), ("torch", "torch")):
-        ran.clear()
-        timewarp(g, backend=backend)
-        cumulative_cost(g, backend=backend)
-        assert ran == [want, want], backend
-    monkeypatch.setattr(torchsplice.cpu, "_AVAILABLE", False)
-    ran.clear()
-    timewarp(g)
-    assert ran == ["torch"]
-    with pytest.raises(ValueError, match=r"^backend must be 'auto', 'compiled' or 'torch', got 'gpu'$"):
-        timewarp(g, backend="gpu")
-    with pytest.raises(ValueError, match=r"^backend must be 'auto', 'compiled' or 'torch', got 'gpu'$"):
-        cumulative_cost(g, backend="gpu")
-
-
 @pytest.mark.parametrize("device", DEVICES)
 def test_the_dp_on_a_device_gives_the_compiled_bits(device):
     """The DP on ``device`` (``"auto"``: the torch DP on CUDA; the compiled one on the CPU, and

@@ -34,11 +34,18 @@ of reach; those are never chosen. The all-diagonal path from ``(0, 0)`` always r
 or right edge, so with finite costs some end cell is always reachable, whatever the lengths
 and ``L``; a pair only fails (``ValueError`` naming it) when ``+inf`` cells block every path.
 
-Two implementations give the same bits: this module's torch code (any device; it is what runs
-on CUDA) and the compiled one of :mod:`torchsplice.cpu.timewarp` (CPU tensors, by default),
-which runs each pair in one thread and pairs in parallel. Each is declared with the devices it
-runs on and a priority (``_IMPLEMENTATIONS``), as the splicing backends are; ``backend="auto"``
-runs the available one of highest priority on the grid's device.
+Two implementations give the same bits: this module's torch code (:data:`TORCH_DP`, any device;
+it is what runs on CUDA) and the compiled one of :mod:`torchsplice.cpu.timewarp`
+(:data:`COMPILED_DP`, CPU tensors), which runs each pair in one thread and pairs in parallel.
+Which one runs is the splicing backends' choice, not this module's: each backend gives the DP it
+computes with (:attr:`~torchsplice.splice.backends.Backend.dynamic_program`),
+and a ``backend`` name, ``"auto"`` included, means the DP of the registered backend it names
+(``"auto"``: the available one of highest priority that runs on the grid's device, the rule of
+:func:`~torchsplice.splice.backends.resolve_backend`). So registering a backend (a GPU one, say)
+is all it takes for :func:`timewarp` to run that backend's DP on its device. The backends sit in
+a layer above this one: their chooser is named by ``"module:function"`` (:data:`CHOOSER`) and
+imported when first used, as :mod:`torchsplice.core.method_table` names the methods'
+implementations; this module imports nothing above it.
 
 Cost of the torch search: the Python loop runs over the ``Ta`` rows, each step vectorised over the
 batch and the columns (plus ``L`` shifts along the row); memory is the grid, three ``int8``
@@ -48,15 +55,15 @@ Backtracking steps every pair back at once, one path step per loop iteration.
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 import torch
 
-from ..core.priority import highest_priority
-
-__all__ = ["WarpPath", "timewarp", "cumulative_cost", "reachable_mask"]
+__all__ = ["WarpPath", "DynamicProgram", "TORCH_DP", "COMPILED_DP", "CHOOSER", "timewarp", "cumulative_cost",
+           "reachable_mask"]
 
 
 @dataclass
@@ -356,54 +363,36 @@ def _cumulative_compiled(grid, la, lb, L, unbatched) -> torch.Tensor:
     return out[0] if unbatched else out
 
 
-def _compiled_available() -> bool:
-    from ..cpu import available
-
-    return available()
-
-
 @dataclass(frozen=True)
-class _Implementation:
-    """One implementation of the DP, declared as the splicing backends declare themselves
-    (:class:`torchsplice.splice.backends.Backend`): the torch device types it computes on
-    (``None``: any), how strongly ``"auto"`` prefers it, whether it can run in this installation,
-    and its two entry points, each ``(grid (B, Ta, Tb), la (B,), lb (B,), L, unbatched)`` as
-    :func:`_check_inputs` gives them, returning :func:`timewarp`'s and :func:`cumulative_cost`'s
-    results. Another implementation (a GPU kernel, say) is one more entry of :data:`_IMPLEMENTATIONS`."""
+class DynamicProgram:
+    """One implementation of the DP: its two entry points, each taking ``(grid (B, Ta, Tb), la (B,),
+    lb (B,), L, unbatched)`` as :func:`_check_inputs` gives them and returning :func:`timewarp`'s
+    and :func:`cumulative_cost`'s results. A splicing backend gives the one it computes with
+    (:attr:`~torchsplice.splice.backends.Backend.dynamic_program`); another (a GPU kernel, say)
+    is one more instance, given by its backend."""
 
-    devices: tuple[str, ...] | None
-    priority: int
-    available: Callable[[], bool]
     timewarp: Callable[..., WarpPath]
     cumulative: Callable[..., torch.Tensor]
 
-    def runs_on(self, device: torch.device) -> bool:
-        return self.devices is None or device.type in self.devices
+
+TORCH_DP = DynamicProgram(_timewarp_torch, _cumulative_torch)
+"""This module's search: any device (the torch backend's, and every backend's by default)."""
+
+COMPILED_DP = DynamicProgram(_timewarp_compiled, _cumulative_compiled)
+"""The compiled search of :mod:`torchsplice.cpu.timewarp`: CPU tensors (the compiled backend's)."""
+
+CHOOSER = "torchsplice.splice.backends:dynamic_program_for"
+"""``"module:function"``: ``function(backend, device)`` gives the :class:`DynamicProgram` that a
+``backend`` name (``"auto"`` included) means for a grid on ``device``, raising ``ValueError`` for
+a name it does not know or a device the backend does not run on (the splicing backends' registry,
+imported when first used)."""
 
 
-_IMPLEMENTATIONS: dict[str, _Implementation] = {
-    "compiled": _Implementation(("cpu",), 10, _compiled_available, _timewarp_compiled, _cumulative_compiled),
-    "torch": _Implementation(None, 0, lambda: True, _timewarp_torch, _cumulative_torch),
-}
-
-
-def _implementation(backend: str, grid: torch.Tensor) -> _Implementation:
-    """The DP implementation ``backend`` names for ``grid``'s device: ``"auto"`` is, among the
-    available ones that run there, the one of highest priority (the first declared of equals;
-    so the compiled DP for CPU tensors where numba is installed, else torch)."""
-    if backend == "auto":
-        best = highest_priority(_IMPLEMENTATIONS.values(), grid.device)
-        if best is None:
-            raise ValueError(f"no implementation of the DP runs on {grid.device}")
-        return best
-    if backend not in _IMPLEMENTATIONS:
-        names = [repr(n) for n in ("auto", *_IMPLEMENTATIONS)]
-        raise ValueError(f"backend must be {', '.join(names[:-1])} or {names[-1]}, got {backend!r}")
-    impl = _IMPLEMENTATIONS[backend]
-    if not impl.runs_on(grid.device):
-        where = " or ".join(d.upper() for d in impl.devices or ())
-        raise ValueError(f"the {backend} backend runs on {where} tensors, got a grid on {grid.device}")
-    return impl
+def _program(backend: str, grid: torch.Tensor) -> DynamicProgram:
+    """The DP ``backend`` names for ``grid``'s device, as the registered splicing backends choose it
+    (:data:`CHOOSER`)."""
+    module, _, function = CHOOSER.partition(":")
+    return getattr(importlib.import_module(module), function)(backend, grid.device)
 
 
 # ----------------------------------------------------------------------------- public API
@@ -421,9 +410,11 @@ def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: st
         lengths_b: ``(B,)`` integers in ``[1, Tb]``, the valid columns; None means ``Tb``.
         max_run: the slope limit ``L >= 1``: at most ``L`` consecutive horizontal steps and at
             most ``L`` consecutive vertical steps.
-        backend: ``"auto"`` (the compiled DP of :mod:`torchsplice.cpu.timewarp` for CPU
-            tensors, this module's torch code otherwise), ``"compiled"`` or ``"torch"``. Both
-            give the same paths, lengths and totals, bit for bit.
+        backend: a splicing backend's name, whose DP runs (:data:`CHOOSER`): ``"auto"`` (the
+            registered backends' choice for the grid's device: the compiled DP of
+            :mod:`torchsplice.cpu.timewarp` for CPU tensors, this module's torch code otherwise,
+            unless a backend of higher priority is registered there), ``"compiled"`` or
+            ``"torch"``. Both built-ins give the same paths, lengths and totals, bit for bit.
 
     Returns:
         A :class:`WarpPath`; for an unbatched grid its fields drop the batch dimension
@@ -434,7 +425,7 @@ def timewarp(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: st
             valid cell, or a pair whose every path to its top or right edge crosses ``+inf``.
     """
     grid, la, lb, L, unbatched = _check_inputs(grid, lengths_a, lengths_b, max_run)
-    return _implementation(backend, grid).timewarp(grid, la, lb, L, unbatched)
+    return _program(backend, grid).timewarp(grid, la, lb, L, unbatched)
 
 
 def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3, backend: str = "auto") -> torch.Tensor:
@@ -445,7 +436,7 @@ def cumulative_cost(grid, lengths_a=None, lengths_b=None, max_run: int = 3, back
     unreachable under the slope limit, blocked by ``+inf`` costs, or padding.
     """
     grid, la, lb, L, unbatched = _check_inputs(grid, lengths_a, lengths_b, max_run)
-    return _implementation(backend, grid).cumulative(grid, la, lb, L, unbatched)
+    return _program(backend, grid).cumulative(grid, la, lb, L, unbatched)
 
 
 def reachable_mask(Ta: int, Tb: int, max_run: int = 3, device=None) -> torch.Tensor:

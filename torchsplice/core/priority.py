@@ -1,8 +1,8 @@
 """Choosing among declared implementations: the one rule that ``"auto"`` follows everywhere.
 
-Splicing backends (:mod:`torchsplice.splice.backends`) and the DP's implementations
-(:mod:`torchsplice.align.timewarp`) each declare the devices they run on and a priority; both
-pick with :func:`highest_priority`, so the rule is stated once.
+Splicing backends (:mod:`torchsplice.splice.backends`) declare the devices they run on and a
+priority, and ``"auto"`` picks with :func:`highest_priority`, so the rule is stated once; the
+time alignment's DP (:mod:`torchsplice.align.timewarp`) is the chosen backend's.
 """
 
 from __future__ import annotations

@@ -38,6 +38,8 @@ rotation (so the toes point as they did).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 
@@ -47,7 +49,8 @@ from ..core.rotations import quat_apply, quat_between, quat_conj, quat_mul, quat
 from ..kinematics.contacts import foot_contacts
 from ..specs.canonical import leg_length
 
-__all__ = ["two_bone_ik", "fix_feet", "contact_heights", "rig_heights", "BLEND_SECONDS", "PIN_HEIGHT_RATIO", "PIN_SPEED_RATIO"]
+__all__ = ["two_bone_ik", "fix_feet", "FeetMap", "contact_heights", "rig_heights", "BLEND_SECONDS", "PIN_HEIGHT_RATIO",
+           "PIN_SPEED_RATIO"]
 
 BLEND_SECONDS = 4 / 30
 """Seconds over which a pinned foot blends in before its contact run and out after it (4 frames
@@ -263,11 +266,39 @@ def _slices(lengths: list[int]) -> list[slice]:
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class FeetMap:
+    """How the target's legs follow the source's: what :func:`fix_feet` needs of the retargeting
+    (a :class:`~torchsplice.ops.retarget.RetargetMap` holds all of it but the rig's heights), with
+    the defaults :func:`fix_feet` always had.
+
+    Attributes:
+        legs: per leg ``(hip, knee, ankle, toe or None)`` of the target (knee the hip's child,
+            ankle the knee's).
+        source_legs: per leg ``(ankle, toe or None)`` of the source.
+        scale: target units per source unit (the trajectory's scale).
+        source_leg: the source's leg length (source units), for the contact thresholds.
+        target_heights: ``(legs, 2)`` the target rig's contact heights of (ankle, toe), in its
+            units; ``None`` takes the source's, scaled.
+        up_axis: 0, 1 or 2.
+        pelvis: the target joint whose translation or whose ancestors' carry the trajectory
+            (raised or lowered).
+        source_pelvis: the source's (the trajectory was scaled about the floor below its first frame).
+    """
+
+    legs: tuple[tuple[int, int, int, int | None], ...]
+    source_legs: tuple[tuple[int, int | None], ...]
+    scale: float
+    source_leg: float
+    target_heights: torch.Tensor | None = None
+    up_axis: int = 1
+    pelvis: int = 0
+    source_pelvis: int = 0
+
+
 def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations: torch.Tensor | None,
-             lengths: list[int], fps: list[float], legs: list[tuple[int, int, int, int | None]],
-             source_positions: torch.Tensor, source_legs: list[tuple[int, int | None]], scale: float,
-             source_leg: float, target_heights: torch.Tensor | None = None, up_axis: int = 1, pelvis: int = 0,
-             source_pelvis: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+             lengths: list[int], fps: list[float], source_positions: torch.Tensor,
+             feet: FeetMap) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
     """Retargeted clips with their feet fixed (see the module docstring), batched over clips
     whose frames are concatenated (``N = sum(lengths)``).
 
@@ -276,20 +307,13 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
         rotations, root, translations: ``(N, J, 4)``, ``(N, 3)``, ``(N, J, 3)`` or ``None``: the
             retargeted clips' local rotations, root positions and joint translations.
         lengths, fps: each clip's frames and frame rate.
-        legs: per leg ``(hip, knee, ankle, toe or None)`` of the target (knee the hip's child,
-            ankle the knee's).
         source_positions: ``(N, Js, 3)`` the source clips' world positions (source units).
-        source_legs: per leg ``(ankle, toe or None)`` of the source.
-        scale: target units per source unit (the trajectory's scale).
-        source_leg: the source's leg length (source units), for the contact thresholds.
-        target_heights: ``(legs, 2)`` the target rig's contact heights of (ankle, toe), in its
-            units; ``None`` takes the source's, scaled.
-        up_axis: 0, 1 or 2; pelvis: the target joint whose translation or whose ancestors'
-            carry the trajectory (raised or lowered); source_pelvis: the source's (the
-            trajectory was scaled about the floor below its first frame).
+        feet: which joints are the legs, the pelvis and the up axis, on both rigs, the scale and
+            the rig's heights (:class:`FeetMap`).
 
     Returns ``(rotations, root, translations)`` float64, the same shapes.
     """
+    legs, source_legs, up_axis, scale = feet.legs, feet.source_legs, feet.up_axis, feet.scale
     sk = skeleton
     _check_legs(sk, legs)
     rot = rotations.to(torch.float64)
@@ -299,14 +323,14 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
     src = source_positions.to(torch.float64)
     spans = _slices(lengths)
     src_points = [j for a, t in source_legs for j in (a, t) if j is not None]
-    contact_of, rest_src, per_frame = _source_contacts(src, spans, lengths, fps, src_points, source_leg, up_axis)
-    origin = src[[sl.start for sl in spans], source_pelvis].clone()
+    contact_of, rest_src, per_frame = _source_contacts(src, spans, lengths, fps, src_points, feet.source_leg, up_axis)
+    origin = src[[sl.start for sl in spans], feet.source_pelvis].clone()
     origin[:, up_axis] = 0.0
     origin = origin[per_frame]
     guide = origin[:, None] + (src - origin[:, None]) * scale  # the source in the target's units, scaled like the trajectory
     pos, glob = forward_kinematics(rot, root, offsets, parents, trans)
     targets, helds = _ankle_targets(pos, guide, src, spans, fps, legs, source_legs, contact_of, rest_src, src_points,
-                                    per_frame, scale, target_heights, up_axis)
+                                    per_frame, scale, feet.target_heights, up_axis)
     size = leg_length(sk, legs)
     up = torch.zeros(3, dtype=torch.float64)
     up[up_axis] = 1.0
@@ -314,7 +338,7 @@ def fix_feet(skeleton, rotations: torch.Tensor, root: torch.Tensor, translations
     drop = _pelvis_drop(pos, targets, legs, offsets, lift, up, spans, fps, up_axis)
     shift = (lift - drop)[:, None] * up
     if bool((shift != 0).any()):
-        root = _shift_pelvis(sk, pos, glob, root, trans, shift, pelvis)
+        root = _shift_pelvis(sk, pos, glob, root, trans, shift, feet.pelvis)
     out = _solve_legs(rot, pos, glob, parents, legs, targets, size)
     return quat_normalize(out), root, trans
 

@@ -280,9 +280,10 @@ def retarget_motions(motions, rmap: RetargetMap, fix_feet: bool = True,
     if translations is not None:
         translations[:, 0] = root
     if fix_feet and min(lengths) >= 3:
+        feet_map = feet.FeetMap(rmap.legs, rmap.source_legs, rmap.scale, rmap.source_leg, target_heights=target_heights,
+                                up_axis=rmap.up_axis, pelvis=pt, source_pelvis=ps)
         local, root, translations = feet.fix_feet(tgt, local, root, translations, lengths, [float(m.fps) for m in motions],
-                                                  list(rmap.legs), pos, list(rmap.source_legs), rmap.scale,
-                                                  rmap.source_leg, target_heights, rmap.up_axis, pt, ps)
+                                                  pos, feet_map)
     parts = zip(local.split(lengths), root.split(lengths),
                 translations.split(lengths) if translations is not None else [None] * len(lengths))
     return [Motion(skeleton=tgt, rotations=r.to(m.rotations.dtype), root_translation=x.to(m.rotations.dtype),

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import subprocess
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -60,7 +61,7 @@ from .panels import fit_title  # noqa: F401 (re-exported)
 from .stick_figure import Figure3D, figure_points, head_joint  # noqa: F401 (re-exported)
 from .writers import GIF_DPI, GIF_FPS, GIF_MAX_FPS, abandon, ffmpeg_available, ffmpeg_complaint, gif_delay, make_writer
 
-__all__ = ["render", "project", "view_rotation", "SUPPORTED_SUFFIXES", "CAMERAS"]
+__all__ = ["render", "render_clips", "RenderOptions", "project", "view_rotation", "SUPPORTED_SUFFIXES", "CAMERAS"]
 
 _GIF_MAX_PIXELS = 1.2e9
 """A GIF is assembled in memory (one byte a pixel, twice over while Pillow encodes it): more
@@ -80,6 +81,65 @@ def _truncate(m: Motion, max_seconds: float | None) -> Motion:
         return m
     n = max(1, int(math.floor(max_seconds * m.fps + 1e-9)))
     return m.slice(0, n) if n < m.num_frames else m
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """How :func:`render` draws and writes: its arguments but the clips, the output and the titles,
+    as :func:`render` builds them for :func:`render_clips`.
+
+    Attributes:
+        up_axis: the vertical axis of the data (0, 1, 2 or ``"x"``, ``"y"``, ``"z"``); the
+            dataset spec's.
+        fps: the animation's frame rate; for MP4 the clips' (the highest, if they differ) by
+            default; for a GIF :data:`GIF_FPS` by default, and any rate becomes the nearest one
+            GIF stores exactly, ``100 / gif_delay(fps)``, at most 50 (see :data:`GIF_MAX_FPS`).
+            Each output frame shows, per clip, the frame nearest its time, so the output
+            plays in real time.
+        frames: number of columns of the PNG filmstrip, at most :data:`~.defaults.MAX_FILMSTRIP`.
+        size: width of one panel in inches (its height follows the figures' proportions).
+        dpi: pixels per inch; :data:`GIF_DPI` for a GIF, 100 otherwise, by default.
+        max_seconds: keep only the first ``max_seconds`` of each clip.
+        azimuth, elevation: the camera, degrees (see :func:`view_rotation`); with
+            ``camera="heading"`` the azimuth at the first frame.
+        camera: ``"heading"`` (the camera turns with the character's heading, smoothed over a
+            second) or ``"world"`` (its direction never changes); one of :data:`CAMERAS`.
+    """
+
+    up_axis: int | str = 1
+    fps: float | None = None
+    frames: int = DEFAULT_FRAMES
+    size: float = 3.0
+    dpi: int | None = None
+    max_seconds: float | None = DEFAULT_MAX_SECONDS
+    azimuth: float = DEFAULT_AZIMUTH
+    elevation: float = DEFAULT_ELEVATION
+    camera: str = DEFAULT_CAMERA
+
+    def checked(self, suffix: str) -> tuple[int, int]:
+        """``(up axis, dpi)``: the up axis as 0, 1 or 2 and the pixels per inch for an output of
+        ``suffix`` (its default where none is given), once every option is checked.
+
+        Raises:
+            TorchspliceError: a bad camera, up axis or number (one line naming it).
+        """
+        azimuth, elevation = self.azimuth, self.elevation
+        if not (math.isfinite(azimuth) and math.isfinite(elevation) and -90.0 <= elevation <= 90.0):
+            raise TorchspliceError(f"azimuth must be a number and elevation from -90 to 90 degrees, got {azimuth}, {elevation}")
+        if self.camera not in CAMERAS:
+            raise TorchspliceError(f"camera must be one of {', '.join(CAMERAS)}, got {self.camera!r}")
+        up = check_up_axis(self.up_axis)
+        if self.fps is not None and not self.fps > 0:
+            raise TorchspliceError(f"fps must be positive, got {self.fps}")
+        if not 1 <= int(self.frames) <= MAX_FILMSTRIP:
+            raise TorchspliceError(f"{{frames}} must be from 1 to {MAX_FILMSTRIP} (a filmstrip's columns), got {self.frames}",
+                                   options=("frames",))
+        dpi = self.dpi if self.dpi is not None else GIF_DPI if suffix == ".gif" else 100
+        if not self.size > 0 or not dpi > 0:
+            raise TorchspliceError(f"size and dpi must be positive, got size={self.size}, dpi={dpi}")
+        if self.max_seconds is not None and not self.max_seconds > 0:
+            raise TorchspliceError(f"max_seconds must be positive, got {self.max_seconds}")
+        return up, int(dpi)
 
 
 def render(
@@ -111,21 +171,8 @@ def render(
             clip, ``frames`` columns at evenly spaced frames from the clip's first to its last
             (each row its own length), the time and frame number under each figure.
         titles: one title per panel; the (first) clips' names by default.
-        up_axis: the vertical axis of the data (0, 1, 2 or ``"x"``, ``"y"``, ``"z"``); the
-            dataset spec's.
-        fps: the animation's frame rate; for MP4 the clips' (the highest, if they differ) by
-            default; for a GIF :data:`GIF_FPS` by default, and any rate becomes the nearest one
-            GIF stores exactly, ``100 / gif_delay(fps)``, at most 50 (see :data:`GIF_MAX_FPS`).
-            Each output frame shows, per clip, the frame nearest its time, so the output
-            plays in real time.
-        frames: number of columns of the PNG filmstrip, at most :data:`~.defaults.MAX_FILMSTRIP`.
-        size: width of one panel in inches (its height follows the figures' proportions).
-        dpi: pixels per inch; :data:`GIF_DPI` for a GIF, 100 otherwise, by default.
-        max_seconds: keep only the first ``max_seconds`` of each clip.
-        azimuth, elevation: the camera, degrees (see :func:`view_rotation`); with
-            ``camera="heading"`` the azimuth at the first frame.
-        camera: ``"heading"`` (the camera turns with the character's heading, smoothed over a
-            second) or ``"world"`` (its direction never changes); one of :data:`CAMERAS`.
+        up_axis, fps, frames, size, dpi, max_seconds, azimuth, elevation, camera: how it is drawn
+            and written, the attributes of :class:`RenderOptions` (see there for each).
 
     The animation has as many frames as the longest clip needs at ``fps``; shorter clips hold
     their last frame, faded (their label says ``(end)``). A GIF is assembled in memory and refused
@@ -138,7 +185,32 @@ def render(
             ffmpeg, no clips, titles that do not match the clips, bad numbers, or an OS error
             while writing (one line naming the file).
     """
+    options = RenderOptions(up_axis=up_axis, fps=fps, frames=frames, size=size, dpi=dpi, max_seconds=max_seconds,
+                            azimuth=azimuth, elevation=elevation, camera=camera)
+    return render_clips(motions, output, options, titles)
+
+
+def render_clips(motions: Sequence[Motion | Sequence[Motion]], output, options: RenderOptions,
+                 titles: Sequence[str] | None = None) -> Path:
+    """:func:`render` with its options in one :class:`RenderOptions`: the output's type and the
+    panels checked, then the options, then the clips prepared and laid out in panels, then the
+    filmstrip or the animation drawn and written (atomically)."""
     output = Path(output)
+    suffix = _output_suffix(output)
+    groups, titles = _panels(motions, titles)
+    up, dpi = options.checked(suffix)
+    prepared = _prepare_panels(groups, up, options)
+    scene = make_scene(prepared, up, float(options.size))
+    with atomic_path(output) as tmp:
+        if suffix == ".png":
+            _write_filmstrip(tmp, scene, prepared, titles, int(options.frames), dpi)
+        else:
+            _write_animation(tmp, output, suffix, scene, prepared, titles, _output_rate(suffix, options.fps, prepared), dpi)
+    return output
+
+
+def _output_suffix(output: Path) -> str:
+    """The output's type, its suffix in lower case: one that can be written here."""
     suffix = output.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
         raise TorchspliceError(
@@ -147,6 +219,12 @@ def render(
         )
     if suffix == ".mp4" and not ffmpeg_available():
         raise TorchspliceError(".mp4 needs ffmpeg on PATH; write .gif or .png instead")
+    return suffix
+
+
+def _panels(motions, titles) -> tuple[list[list[Motion]], list[str]]:
+    """``(groups, titles)``: the clips of each panel (one, or several drawn over each other) and
+    the panels' titles (the first clips' names by default), one per panel."""
     groups = [[m] if isinstance(m, Motion) else list(m) for m in motions]
     if not groups or not all(groups):
         raise TorchspliceError("render needs at least one clip" if not groups else "a panel of no clips; give each one")
@@ -154,87 +232,96 @@ def render(
     if len(titles) != len(groups):
         raise TorchspliceError(f"{len(titles)} titles for {len(groups)} panel{'s' if len(groups) != 1 else ''}; "
                               "give one title per panel")
-    if not (math.isfinite(azimuth) and math.isfinite(elevation) and -90.0 <= elevation <= 90.0):
-        raise TorchspliceError(f"azimuth must be a number and elevation from -90 to 90 degrees, got {azimuth}, {elevation}")
-    if camera not in CAMERAS:
-        raise TorchspliceError(f"camera must be one of {', '.join(CAMERAS)}, got {camera!r}")
-    up = check_up_axis(up_axis)
-    if fps is not None and not fps > 0:
-        raise TorchspliceError(f"fps must be positive, got {fps}")
-    if not 1 <= int(frames) <= MAX_FILMSTRIP:
-        raise TorchspliceError(f"{{frames}} must be from 1 to {MAX_FILMSTRIP} (a filmstrip's columns), got {frames}",
-                               options=("frames",))
-    if dpi is None:
-        dpi = GIF_DPI if suffix == ".gif" else 100
-    if not size > 0 or not dpi > 0:
-        raise TorchspliceError(f"size and dpi must be positive, got size={size}, dpi={dpi}")
-    if max_seconds is not None and not max_seconds > 0:
-        raise TorchspliceError(f"max_seconds must be positive, got {max_seconds}")
+    return groups, titles
 
+
+def _prepare_panels(groups: list[list[Motion]], up: int, options: RenderOptions) -> list[list[Clip]]:
+    """Each panel's clips cut to ``max_seconds`` and prepared for drawing (:func:`prepare_clip`):
+    the first with its own camera, the others seen from the first's."""
+    o = options
     prepared = []
     for g in groups:
-        lead = prepare_clip(_truncate(g[0], max_seconds), up, azimuth, elevation, camera)
-        prepared.append([lead] + [prepare_clip(_truncate(m, max_seconds), up, azimuth, elevation, camera, leader=lead)
+        lead = prepare_clip(_truncate(g[0], o.max_seconds), up, o.azimuth, o.elevation, o.camera)
+        prepared.append([lead] + [prepare_clip(_truncate(m, o.max_seconds), up, o.azimuth, o.elevation, o.camera, leader=lead)
                                   for m in g[1:]])
-    clips = [g[0] for g in prepared]
-    scene = make_scene(prepared, up, float(size))
-    rate = float(fps) if fps is not None else max(c.fps for c in clips)
+    return prepared
+
+
+def _output_rate(suffix: str, fps: float | None, prepared: list[list[Clip]]) -> float:
+    """An animation's frames per second: ``fps``, else the panels' highest; for a GIF the nearest
+    rate it stores exactly (100 over a whole number of hundredths), :data:`GIF_FPS` by default."""
+    rate = float(fps) if fps is not None else max(g[0].fps for g in prepared)
     if suffix == ".gif":  # a rate GIF stores exactly: 100 / a whole number of hundredths
         rate = 100.0 / gif_delay(min(float(fps) if fps is not None else GIF_FPS, GIF_MAX_FPS))
+    return rate
+
+
+def _frame_of(c: Clip, t: float) -> tuple[int, bool]:
+    """The frame of clip ``c`` shown at time ``t`` (the nearest, its last after it ends) and whether it has ended."""
+    f = int(round(t * c.fps))
+    return min(f, c.num_frames - 1), f > c.num_frames - 1
+
+
+def _write_filmstrip(tmp, scene, prepared: list[list[Clip]], titles: list[str], columns: int, dpi: int) -> None:
+    """The PNG filmstrip, to ``tmp``: a row per panel, ``columns`` frames spread over its own clip."""
+    fig, cells = filmstrip_figure(scene, prepared, titles, columns, dpi)
+    try:
+        for row, g in zip(cells, prepared):
+            for panel, f in zip(row, filmstrip_frames(g[0].num_frames, columns)):
+                panel.show(int(f))
+        fig.savefig(tmp, format="png", dpi=dpi)
+    finally:
+        release(fig)
+
+
+def _write_animation(tmp, output: Path, suffix: str, scene, prepared: list[list[Clip]], titles: list[str], rate: float,
+                     dpi: int) -> None:
+    """The GIF or MP4 animation, to ``tmp``, at ``rate`` frames per second to the end of the
+    longest clip; a GIF too large to assemble is refused before any drawing, and ffmpeg's
+    failures are told in one line naming ``output``."""
+    clips = [g[0] for g in prepared]
     last = max((c.num_frames - 1) / c.fps for c in clips)  # time of the last frame of the longest clip
+    n_out = int(math.floor(last * rate + 1e-6)) + 1
+    fig, panels, clock = animation_figure(scene, prepared, titles, dpi, grid_dots=suffix == ".gif")
+    same_rate = all(c.fps == rate for c in clips)
+    try:
+        canvas = fig.canvas
+        w, h = canvas.get_width_height()
+        if suffix == ".gif" and n_out * w * h > _GIF_MAX_PIXELS:
+            raise TorchspliceError(
+                f"{output}: a GIF of {n_out} frames of {w}x{h} pixels is too large to assemble in memory; "
+                f"shorten it (max_seconds), make it smaller (size, dpi) or write .mp4")
+        canvas.draw()  # the static background, once
+        background = canvas.copy_from_bbox(fig.bbox)
+        writer = make_writer(suffix, rate)
+        writer.setup(fig, str(tmp), dpi)
+        done = False
+        try:
+            for k in range(n_out):
+                _draw_frame(fig, canvas, background, panels, clock, k, rate, same_rate)
+                writer.grab_frame()
+            done = True
+        except BrokenPipeError:  # ffmpeg stopped reading: say why
+            raise TorchspliceError(f"{output}: ffmpeg failed: {ffmpeg_complaint(writer)}") from None
+        finally:
+            if done:
+                writer.finish()
+            else:
+                abandon(writer)
+    except subprocess.CalledProcessError as exc:  # ffmpeg failed at the end
+        err = (exc.stderr if isinstance(exc.stderr, str) else "").strip().splitlines()
+        raise TorchspliceError(f"{output}: ffmpeg failed: {err[-1] if err else exc}") from None
+    finally:
+        release(fig)
 
-    def frame_of(c: Clip, t: float) -> tuple[int, bool]:
-        f = int(round(t * c.fps))
-        return min(f, c.num_frames - 1), f > c.num_frames - 1
 
-    with atomic_path(output) as tmp:
-        if suffix == ".png":
-            n_cols = int(frames)
-            fig, cells = filmstrip_figure(scene, prepared, titles, n_cols, int(dpi))
-            try:
-                for row, c in zip(cells, clips):
-                    for panel, f in zip(row, filmstrip_frames(c.num_frames, n_cols)):
-                        panel.show(int(f))
-                fig.savefig(tmp, format="png", dpi=int(dpi))
-            finally:
-                release(fig)
-        else:
-            n_out = int(math.floor(last * rate + 1e-6)) + 1
-            fig, panels, clock = animation_figure(scene, prepared, titles, int(dpi), grid_dots=suffix == ".gif")
-            same_rate = all(c.fps == rate for c in clips)
-            try:
-                canvas = fig.canvas
-                w, h = canvas.get_width_height()
-                if suffix == ".gif" and n_out * w * h > _GIF_MAX_PIXELS:
-                    raise TorchspliceError(
-                        f"{output}: a GIF of {n_out} frames of {w}x{h} pixels is too large to assemble in memory; "
-                        f"shorten it (max_seconds), make it smaller (size, dpi) or write .mp4")
-                canvas.draw()  # the static background, once
-                background = canvas.copy_from_bbox(fig.bbox)
-                writer = make_writer(suffix, rate)
-                writer.setup(fig, str(tmp), int(dpi))
-                done = False
-                try:
-                    for k in range(n_out):
-                        t = k / rate
-                        canvas.restore_region(background)
-                        for p in panels:
-                            p.show(*frame_of(p.clip, t))
-                            p.blit()
-                        clock.set_text(f"{t:.2f} s   frame {k}" if same_rate else f"{t:.2f} s")
-                        fig.draw_artist(clock)
-                        writer.grab_frame()
-                    done = True
-                except BrokenPipeError:  # ffmpeg stopped reading: say why
-                    raise TorchspliceError(f"{output}: ffmpeg failed: {ffmpeg_complaint(writer)}") from None
-                finally:
-                    if done:
-                        writer.finish()
-                    else:
-                        abandon(writer)
-            except subprocess.CalledProcessError as exc:  # ffmpeg failed at the end
-                err = (exc.stderr if isinstance(exc.stderr, str) else "").strip().splitlines()
-                raise TorchspliceError(f"{output}: ffmpeg failed: {err[-1] if err else exc}") from None
-            finally:
-                release(fig)
-    return output
+def _draw_frame(fig, canvas, background, panels, clock, k: int, rate: float, same_rate: bool) -> None:
+    """Output frame ``k`` over the static ``background``: each panel at its clip's frame of that
+    time (blitted), and the clock (seconds, and the frame number where every clip has ``rate``)."""
+    t = k / rate
+    canvas.restore_region(background)
+    for p in panels:
+        p.show(*_frame_of(p.clip, t))
+        p.blit()
+    clock.set_text(f"{t:.2f} s   frame {k}" if same_rate else f"{t:.2f} s")
+    fig.draw_artist(clock)

@@ -16,7 +16,10 @@ Built in:
 A new backend is one module: a :class:`Backend` subclass and a :func:`register_backend` call
 (from a plug-in module, see :func:`torchsplice.splice.registry.load_plugins`). It declares the
 devices it computes on and a priority (:attr:`Backend.devices`, :attr:`Backend.priority`):
-``"auto"`` runs the available backend of highest priority on the job's device.
+``"auto"`` runs the available backend of highest priority on the job's device. It gives the
+time alignment's DP it computes with too (:attr:`Backend.dynamic_program`): the torch DP unless
+it overrides it; :func:`~torchsplice.align.timewarp.timewarp` asks the registered backends for it
+(:func:`dynamic_program_for`), by the same rule, so one registration serves both.
 
 Conventions of :class:`SplicedBatch` (the one result type of every backend): pair ``b``'s frames
 are rows ``start[b] : start[b] + frames[b]`` of the packed arrays; rotations are local WXYZ
@@ -36,7 +39,7 @@ if TYPE_CHECKING:
     import numpy as np
 
 __all__ = ["Backend", "SplicedBatch", "PairFailedError", "register_backend", "get_backend", "available_backends", "backend_choices",
-           "resolve_backend", "backend_for", "device_type"]
+           "resolve_backend", "backend_for", "device_type", "dynamic_program_for"]
 
 # numpy and torch are imported where used: the command line lists the backends without them.
 
@@ -151,6 +154,17 @@ class Backend:
     def runs_on(self, device: str | None) -> bool:
         """Whether it computes on ``device`` (``None``: the CPU): its type is one of :attr:`devices`."""
         return self.devices is None or device_type(device) in self.devices
+
+    @property
+    def dynamic_program(self):
+        """The time alignment's DP it computes with (a
+        :class:`~torchsplice.align.timewarp.DynamicProgram`): what
+        :func:`~torchsplice.align.timewarp.timewarp` runs on a device this backend is chosen for
+        (:func:`dynamic_program_for`). The torch DP by default, which runs on any device; a backend
+        with a DP of its own (the compiled splicer's, a GPU kernel) gives it here."""
+        from ...align.timewarp import TORCH_DP
+
+        return TORCH_DP
 
     def prepare(self, motions: list, skeleton, roles, options) -> Any:
         """Clips ``motions`` (one skeleton, one frame rate) made ready to splice; pairs then name
@@ -379,6 +393,29 @@ def resolve_backend(backend: str, device: str | None) -> str:
         raise TorchspliceError(f"the {backend} backend runs on {where}; device {device!r} needs backend "
                                f"{' or '.join(repr(n) for n in [*there, 'auto'])}")
     return backend
+
+
+def dynamic_program_for(backend: str, device):
+    """The DP (:attr:`Backend.dynamic_program`) that :func:`~torchsplice.align.timewarp.timewarp`
+    runs for a grid on ``device`` (a ``torch.device``) when ``backend`` is asked for: the named
+    backend's, or with ``"auto"`` that of the backend :func:`resolve_backend` chooses there (so the
+    compiled DP for CPU tensors where numba is installed, else torch, unless a registered backend of
+    higher priority runs there).
+
+    Raises:
+        ValueError: (the DP's contract) an unknown name, or a backend named for a device it does
+            not run on.
+    """
+    if backend == "auto":
+        return get_backend(resolve_backend("auto", device)).dynamic_program
+    if backend not in available_backends():
+        names = [repr(n) for n in backend_choices()]
+        raise ValueError(f"backend must be {', '.join(names[:-1])} or {names[-1]}, got {backend!r}")
+    chosen = get_backend(backend)
+    if not chosen.runs_on(device):
+        where = " or ".join(d.upper() for d in chosen.devices or ())
+        raise ValueError(f"the {backend} backend runs on {where} tensors, got a grid on {device}")
+    return chosen.dynamic_program
 
 
 def backend_for(method, backend: str) -> Backend:

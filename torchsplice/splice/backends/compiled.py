@@ -101,6 +101,13 @@ class CompiledBackend(Backend):
 
         return available()
 
+    @property
+    def dynamic_program(self):
+        """The compiled DP of :mod:`torchsplice.cpu.timewarp` (CPU tensors)."""
+        from ...align.timewarp import COMPILED_DP
+
+        return COMPILED_DP
+
     def prepare(self, motions, skeleton, roles, options):
         from ...cpu.bank import ClipBank
 
