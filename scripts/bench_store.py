@@ -93,36 +93,15 @@ def _dataset_rates(runs: list[tuple[Path, int]], passes: int = 7) -> list[float]
     return [f / b for f, b in zip(frames, best)]
 
 
-def _assembly_rate(path: Path) -> tuple[float, float]:
-    """(clips/s, frames/s) of assembling every clip of an alignment store on one core."""
+def _every_clip_rate(path: Path, assemble, sync=lambda: None) -> tuple[float, float]:
+    """(clips/s, frames/s) of ``assemble(db, k, starts, lengths)`` over every clip of an
+    alignment store, 512 clips a call, best of 3 (after one call that loads the banks and warms
+    up; ``sync`` waits for a device)."""
     from torchsplice.store.database import MotionDatabase
 
     with MotionDatabase.open(path) as db:
         t = db.clip_table()
-        db.assembled(0, t.start[:1], t.length[:1])  # banks loaded, kernels compiled
-        best = float("inf")
-        for _ in range(3):
-            t0 = time.perf_counter()
-            for k in sorted(set(t.skeleton.tolist())):
-                rows = np.flatnonzero(t.skeleton == k)
-                for s in range(0, len(rows), 512):
-                    r = rows[s:s + 512]
-                    db.assembled(k, t.start[r], t.length[r])
-            best = min(best, time.perf_counter() - t0)
-        return len(t) / best, int(t.length.sum()) / best
-
-
-def _assembly_rate_on(path: Path, device: str) -> float:
-    """Clips/s of the torch assembly of every clip of an alignment store on ``device``, 512
-    clips a call (``MotionDatabase.assembled_on``; the frames stay on the device), best of 3."""
-    import torch
-
-    from torchsplice.store.database import MotionDatabase
-
-    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
-    with MotionDatabase.open(path) as db:
-        t = db.clip_table()
-        db.assembled_on(0, t.start[:1], t.length[:1], device)  # banks loaded and moved, the device warm
+        assemble(db, 0, t.start[:1], t.length[:1])
         sync()
         best = float("inf")
         for _ in range(3):
@@ -131,10 +110,25 @@ def _assembly_rate_on(path: Path, device: str) -> float:
                 rows = np.flatnonzero(t.skeleton == k)
                 for s in range(0, len(rows), 512):
                     r = rows[s:s + 512]
-                    db.assembled_on(k, t.start[r], t.length[r], device)
+                    assemble(db, k, t.start[r], t.length[r])
             sync()
             best = min(best, time.perf_counter() - t0)
-        return len(t) / best
+        return len(t) / best, int(t.length.sum()) / best
+
+
+def _assembly_rate(path: Path) -> tuple[float, float]:
+    """(clips/s, frames/s) of assembling every clip of an alignment store on one core
+    (``MotionDatabase.assembled``, the compiled kernels)."""
+    return _every_clip_rate(path, lambda db, k, starts, lengths: db.assembled(k, starts, lengths))
+
+
+def _assembly_rate_on(path: Path, device: str) -> float:
+    """Clips/s of the torch assembly of every clip of an alignment store on ``device``
+    (``MotionDatabase.assembled_on``; the frames stay on the device)."""
+    import torch
+
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+    return _every_clip_rate(path, lambda db, k, starts, lengths: db.assembled_on(k, starts, lengths, device), sync)[0]
 
 
 def _t2m_loader_rate(folder: Path) -> float:

@@ -62,6 +62,21 @@ def reaped(proc: subprocess.Popen):
                 stream.close()
 
 
+def killed_when(proc: subprocess.Popen, ready, seconds: float = 120.0) -> None:
+    """SIGKILL ``proc`` once ``ready()`` is true (polled every 5 ms, for at most ``seconds``),
+    and wait for it; fails if it ended first, with the end of its stderr."""
+    import signal
+    import time
+
+    deadline = time.monotonic() + seconds
+    while proc.poll() is None and time.monotonic() < deadline and not ready():
+        time.sleep(0.005)
+    assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read()[-2000:]
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+
+
 def summary_of(stdout: str) -> dict:
     """The summary a :func:`splice_all_process` printed."""
     return json.loads(stdout.strip().splitlines()[-1])

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import re
-import signal
-import time
 
 import pytest
 
@@ -17,7 +15,7 @@ from tests.job.test_job import REPO, assert_same_file, env, work_folder
 from tests.store.test_alignment_store import READ
 from torchsplice.job import splice_all
 from torchsplice.store.database import MotionDatabase
-from writers import reaped, splice_all_process, summary_of
+from writers import killed_when, reaped, splice_all_process, summary_of
 
 JOB = dict(store="alignment", methods="splice,naive,cpmc", batch_pairs=6, workers=1, index=False)  # 75 pairs, 15 tasks
 
@@ -37,13 +35,7 @@ def test_an_alignment_store_killed_twice_resumes_bit_identical(sample_db, tmp_pa
     merged = []
     for tasks in (1, 6):  # killed after the first task (the banks written), then midway
         with reaped(splice_all_process(sample_db, out, env=every_task, cwd=REPO, **JOB)) as proc:
-            deadline = time.monotonic() + 120
-            while proc.poll() is None and time.monotonic() < deadline and held(work) < tasks:
-                time.sleep(0.005)
-            assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read()[-2000:]
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=30)
-            assert proc.returncode == -signal.SIGKILL
+            killed_when(proc, lambda: held(work) >= tasks)
         assert not out.exists()  # the output appears only once complete
         merged.append(held(work))
     tasks = json.loads((work / "plan.json").read_text())["tasks"]  # 5 tasks a method

@@ -38,7 +38,7 @@ from torchsplice.core.rotations import quat_angle
 from torchsplice.job import JobConfig, SpliceJob, splice_all
 from cli_helpers import run
 from realdata import BANDAI, BANDAI_FEW
-from writers import _digest, cli, nan_copy, reaped, splice_all_process, summary_of
+from writers import _digest, cli, killed_when, nan_copy, reaped, splice_all_process, summary_of
 
 REPO = Path(__file__).resolve().parents[2]
 WAVE = "dataset-2_wave-left-hand_normal_001"
@@ -399,15 +399,7 @@ def test_resume_after_sigkill_is_bit_identical(sample_db, batch2_out, tmp_path):
     every_task = dict(env(), TORCHSPLICE_CHECKPOINT_SECONDS="0")  # a checkpoint after each task, to kill between two
     proc = splice_all_process(sample_db, out, batch_pairs=2, env=every_task, cwd=REPO)
     with reaped(proc):
-        deadline = time.monotonic() + 120
-        while proc.poll() is None and time.monotonic() < deadline:
-            if held() >= 2:
-                break
-            time.sleep(0.005)
-        assert proc.poll() is None, "the job ended before it could be killed: " + proc.stderr.read()[-2000:]
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=30)
-    assert proc.returncode == -signal.SIGKILL
+        killed_when(proc, lambda: held() >= 2)
     assert not out.exists()  # the output appears only once complete
     k = held()
     assert 2 <= k < 13 and (work / "plan.json").is_file()

@@ -175,9 +175,9 @@ def test_a_lone_push_spreads_into_the_worked_hann_window_within_its_clip():
     assert float(got[9, 0, 0]) > 0.0  # further from the larger, the smaller one shares the average
 
 
-def _swung_through_the_chest():
-    """The sample's first clip (float64), and the same clip with its right arm swung smoothly
-    towards the torso's axis over frames 30 to 70 (its upper arm pointing at it at frame 50)."""
+def _sample_and_its_torso():
+    """The sample's first clip (float64), its roles, body and arms, its joints' positions and
+    global rotations, and its right torso capsule: ``(a, b, index, midpoint)``."""
     m = sample_motions()[0].to(torch.float64)
     roles = load_spec("sample").bind(m.skeleton)
     body = body_of(m.skeleton, roles)
@@ -186,7 +186,13 @@ def _swung_through_the_chest():
     pos, grot = forward_kinematics(m.rotations, trans[:, 0], m.skeleton.offsets, m.skeleton.parents, trans)
     a, b = capsule_ends(pos, body)
     torso = body.names.index("torso_r")
-    mid = (a[:, torso] + b[:, torso]) / 2
+    return m, roles, body, arms, pos, grot, (a, b, torso, (a[:, torso] + b[:, torso]) / 2)
+
+
+def _swung_through_the_chest():
+    """The sample's first clip (float64), and the same clip with its right arm swung smoothly
+    towards the torso's axis over frames 30 to 70 (its upper arm pointing at it at frame 50)."""
+    m, roles, body, arms, pos, grot, (a, b, torso, mid) = _sample_and_its_torso()
     sh, el = arms.shoulder[1], arms.elbow[1]
     turn = quat_between(torch.nn.functional.normalize(pos[:, el] - pos[:, sh], dim=-1),
                         torch.nn.functional.normalize(mid - pos[:, sh], dim=-1))
@@ -267,15 +273,7 @@ def _crossing_the_torso(beyond: float):
     30 to 70, at a point that sweeps from 1.5 torso radii in front of the torso's axis to
     ``beyond`` radii behind it and back (smoothly): its forearm enters the torso from the front,
     crosses the axis and leaves at the front again. ``(m, rot, body, arms)``."""
-    m = sample_motions()[0].to(torch.float64)
-    roles = load_spec("sample").bind(m.skeleton)
-    body = body_of(m.skeleton, roles)
-    arms = arms_of(m.skeleton, roles, body)
-    trans = m.local_translations()
-    pos, grot = forward_kinematics(m.rotations, trans[:, 0], m.skeleton.offsets, m.skeleton.parents, trans)
-    a, b = capsule_ends(pos, body)
-    torso = body.names.index("torso_r")
-    mid = (a[:, torso] + b[:, torso]) / 2
+    m, roles, body, arms, pos, grot, (a, b, torso, mid) = _sample_and_its_torso()
     sh, wr = arms.shoulder[1], arms.wrist[1]
     unit = lambda v: torch.nn.functional.normalize(v, dim=-1)  # noqa: E731
     front = unit(torch.linalg.cross(unit(b[:, torso] - a[:, torso]), unit(mid - pos[:, sh]), dim=-1))
