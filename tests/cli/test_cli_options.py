@@ -26,6 +26,7 @@ from torchsplice.job.config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, LAYOUTS
 from torchsplice.job.engines import available_engines
 from torchsplice.job.materialize import materialize
 from torchsplice.job.merge import merge_job
+from torchsplice.job.pair import splice_pair
 from torchsplice.splice import SpliceOptions, TIMINGS, splice
 from torchsplice.splice.registry import available_methods
 from torchsplice.splice.standing import parse_limbs
@@ -70,6 +71,7 @@ def expected() -> dict:
         # every format's options (None: the format's own default, which export_clips fills in)
         **{("export", k): (None, o.choices) for f in available_exporters() for k, o in get_exporter(f).options.items()},
         ("splice", "method"): (param(splice, "method"), available_methods()),
+        ("splice", "keep_hands_out"): (param(splice_pair, "keep_hands_out"), None),
         ("render", "frames"): (param(render, "frames"), None),
         ("render", "max_seconds"): (param(render, "max_seconds"), None),
         ("render", "camera"): (param(render, "camera"), CAMERAS),
