@@ -100,7 +100,7 @@ def test_a_bank_chunk_that_does_not_decompress_is_refused_naming_its_rows(store,
                            f"{clip!r} on (rows {lo}:")
 
 
-def test_a_damaged_per_frame_part_is_refused_by_materialize_naming_the_clip(store, tmp_path, capsys):
+def test_a_damaged_per_frame_part_is_refused_by_every_read_naming_the_clip(store, tmp_path, capsys):
     path = _copy(store, tmp_path, "curve")
     with MotionDatabase.open(store[0]) as db:
         t = db.clip_table()
@@ -114,9 +114,14 @@ def test_a_damaged_per_frame_part_is_refused_by_materialize_naming_the_clip(stor
     out = tmp_path / "motions.h5"
     with pytest.raises(DatabaseError) as caught:
         materialize(path, out)
-    assert str(caught.value) == (f"{path}: damaged alignment store: clip {t.names[row]!r} assembles to non-finite "
-                                 "rotations at its frame 5 (a damaged part); nothing was written")
+    assert str(caught.value) == (f"{path}: damaged alignment store: clip {t.names[row]!r}'s alignment curve is not a "
+                                 "number at its frame 5")  # refused before the kernels index the action with it
     assert not out.exists()
+    with MotionDatabase.open(path) as db:  # every read of the clip, by either assembly
+        for read in (lambda: db.read(t.names[row]), lambda: db.assembled_on(0, t.start[row:row + 1],
+                                                                            t.length[row:row + 1], "cpu")):
+            with pytest.raises(DatabaseError, match="alignment curve is not a number at its frame 5"):
+                read()
     rc, _, err = run(capsys, "materialize", path, "-o", out)
     assert rc == 2 and error_line(err) == f"torchsplice: error: {caught.value}" and not out.exists()
 

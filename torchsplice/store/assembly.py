@@ -61,7 +61,7 @@ from ..core.errors import DatabaseError
 from ..core.method_table import BUILTINS
 from ..core.ranges import lengths_to_starts, ranges_to_rows
 from ..core.threads import run_in_threads, split_by_weight
-from .schema import CLIPS, Damage, cap, checked_dataset, skeleton_path
+from .schema import CLIPS, Damage, cap, checked_dataset, nan_curve, skeleton_path
 from .state import DatabaseState
 
 __all__ = [
@@ -110,18 +110,14 @@ FRAME_PARTS = {
 OPTIONAL_PARTS = ("assembly_arms",)
 """Per-frame parts a store written before them lacks (read as nothing to apply)."""
 HELD_PARTS_BYTES = 256 << 20
-"""An alignment store's ``assembly_curve`` and ``assembly_pelvis`` of a skeleton (8 and 16 bytes
-a frame) are each read whole, once per open database, where they take at most this many bytes
-(about 11 million frames), from the :data:`HOLD_AFTER_READS`-th read of the database on: reads
-then take their frames' parts from memory instead of reading each clip's rows from the file (a
-shuffled batch of 64 clips was 128 small reads), and a reader of a few clips never reads them
-all. A larger store, or one whose read fails (a damaged chunk), reads each clip's rows as they
-are asked for. The moved arms (``assembly_arms``) are held likewise, only the rows of the clips
-whose arms were moved."""
-HOLD_AFTER_READS = 4
-"""Reads of an open alignment store (per skeleton and part) before its parts are held (see :data:`HELD_PARTS_BYTES`)."""
-SPLIT_FRAMES = 2048
-"""Frames a thread assembles at least before a read is shared over threads (see :meth:`Assembly.frames`)."""
+"""An alignment store's ``assembly_curve`` and ``assembly_pelvis`` of a skeleton (8 and 16 bytes a frame) are each
+read whole, once per open database, where they take at most this many bytes (about 11 million frames), from the
+:data:`HOLD_AFTER_READS`-th read of the database on: reads then take their frames' parts from memory instead of
+reading each clip's rows from the file (a shuffled batch of 64 clips was 128 small reads), and a reader of a few
+clips never reads them all. A larger store, or one whose read fails (a damaged chunk), reads each clip's rows as
+they are asked for. The moved arms (``assembly_arms``) are held likewise, only the rows of the clips moved."""
+HOLD_AFTER_READS = 4  # reads of an open alignment store (per skeleton and part) before its parts are held
+SPLIT_FRAMES = 2048  # frames a thread assembles at least before a read is shared over threads (Assembly.frames)
 MOVED_COLUMN = "corrected_frames"
 """The clip column that says a clip's arms were moved (above 0): only their ``assembly_arms`` rows are read."""
 METHOD_CODES = {m.name: m.code for m in BUILTINS}
@@ -320,6 +316,14 @@ class Assembly:
         at, rows = held
         return rows[ranges_to_rows(at[clip] + starts - self.start[clip], lengths)]
 
+    def curve_rows(self, db, k: int, clip, starts, lengths, first) -> np.ndarray:
+        """:meth:`part_rows` of ``assembly_curve``; a NaN (a damaged part, which the kernels would
+        index with) is one :class:`DatabaseError` line naming the file, the clip and its frame."""
+        curve = self.part_rows(db, k, "assembly_curve", clip, starts, lengths)
+        if np.isnan(curve).any():
+            raise DatabaseError(nan_curve(db, curve, clip, lengths, first))
+        return curve
+
     def _hold(self, db, k: int, name: str) -> tuple[np.ndarray, np.ndarray] | None:
         """``(at, rows)``: the rows of part ``name`` of every clip of skeleton ``k`` that has them
         (timewarp clips: the curve and the pelvis; clips whose arms were moved: the arms), read
@@ -402,7 +406,7 @@ class Assembly:
             curve = np.zeros(N)
             prot = np.zeros((N, 4), np.float32)
             at_rows = ranges_to_rows(out_start[timewarp], n)
-            curve[at_rows] = self.part_rows(db, k, "assembly_curve", clip[timewarp], s, n)
+            curve[at_rows] = self.curve_rows(db, k, clip[timewarp], s, n, first[timewarp])
             prot[at_rows] = self.part_rows(db, k, "assembly_pelvis", clip[timewarp], s, n)
         built = np.flatnonzero(kind > 0)
         for b in sorted(set(p["assembly_bank"][built].tolist())):  # the slerps' angles between neighbouring frames,
@@ -533,7 +537,7 @@ class Assembly:
             sel = np.flatnonzero(mine & (kind == 1))
             if len(sel):
                 tw = np.flatnonzero((p["assembly_kind"] == 1) & (p["assembly_bank"] == b))
-                curve = self.part_rows(db, k, "assembly_curve", clip[tw], starts[tw], lengths[tw])
+                curve = self.curve_rows(db, k, clip[tw], starts[tw], lengths[tw], first[tw])
                 prot = self.part_rows(db, k, "assembly_pelvis", clip[tw], starts[tw], lengths[tw])
                 o = owner[sel]
                 act, crop = p["assembly_action"][o], p["assembly_crop"][o]

@@ -52,6 +52,7 @@ from ..core.skeleton import Skeleton
 from .defaults import COMPRESSIONS  # declared there, torch-free (the command line reads it)
 
 __all__ = [
+    "nan_curve",
     "FORMAT",
     "SCHEMA_VERSION",
     "COMPRESSIONS",
@@ -115,6 +116,19 @@ def skeleton_to_group(g: h5py.Group, sk: Skeleton) -> None:
 
 class Damage(Exception):
     """What is wrong with a database file's structure (one line, without the file's name)."""
+
+
+def nan_curve(db, curve, clip, lengths, first) -> str:
+    """The line that refuses a NaN in ``curve`` (an alignment store's ``assembly_curve`` rows of
+    ranges of ``lengths`` frames, the ``first`` of each in table row ``clip``'s frames): the file,
+    the clip and its frame."""
+    bad, ends = int(np.flatnonzero(np.isnan(curve))[0]), np.cumsum(lengths)
+    i = int(np.searchsorted(ends, bad, side="right"))
+    frame = int(first[i] + bad - ends[i] + lengths[i])
+    return (
+        f"{db.path}: damaged alignment store: clip {cap(db.names[int(clip[i])])}'s alignment curve is not a "
+        f"number at its frame {frame}"
+    )
 
 
 def cap(value, n: int = 40) -> str:
