@@ -114,16 +114,40 @@ def test_a_damaged_per_frame_part_is_refused_by_every_read_naming_the_clip(store
     out = tmp_path / "motions.h5"
     with pytest.raises(DatabaseError) as caught:
         materialize(path, out)
-    assert str(caught.value) == (f"{path}: damaged alignment store: clip {t.names[row]!r}'s alignment curve is not a "
-                                 "number at its frame 5")  # refused before the kernels index the action with it
+    assert str(caught.value) == (f"{path}: damaged alignment store: clip {t.names[row]!r} has a NaN in its curve at "
+                                 "its frame 5")  # refused before the kernels index the action with it
     assert not out.exists()
     with MotionDatabase.open(path) as db:  # every read of the clip, by either assembly
         for read in (lambda: db.read(t.names[row]), lambda: db.assembled_on(0, t.start[row:row + 1],
                                                                             t.length[row:row + 1], "cpu")):
-            with pytest.raises(DatabaseError, match="alignment curve is not a number at its frame 5"):
+            with pytest.raises(DatabaseError, match="has a NaN in its curve at its frame 5"):
                 read()
     rc, _, err = run(capsys, "materialize", path, "-o", out)
     assert rc == 2 and error_line(err) == f"torchsplice: error: {caught.value}" and not out.exists()
+
+
+def test_a_part_that_assembles_to_non_finite_frames_is_refused_by_every_read(store, tmp_path):
+    """A damaged pelvis rotation: the clip's frames would be NaN; every compiled read (so
+    ``materialize`` too) refuses them in one line naming the clip and the frame."""
+    path = _copy(store, tmp_path, "pelvis")
+    with MotionDatabase.open(store[0]) as db:
+        t = db.clip_table()
+        kinds = db.h5["clips/assembly_kind"][()]
+    row = int(np.flatnonzero(kinds == 1)[1])
+    with h5py.File(path, "r+") as f:
+        pelvis = f["skeletons/0/assembly_pelvis"]
+        v = pelvis[()]
+        v[int(t.start[row]) + 7] = np.nan
+        pelvis[...] = v
+    want = f"{path}: damaged alignment store: clip {t.names[row]!r} assembles to non-finite rotations at its frame 7"
+    with MotionDatabase.open(path) as db:
+        with pytest.raises(DatabaseError) as caught:
+            db.read(t.names[row])
+        assert str(caught.value) == want
+        db.read(t.names[int(np.flatnonzero(kinds == 1)[0])])  # another clip reads as ever
+    with pytest.raises(DatabaseError, match="assembles to non-finite rotations at its frame 7"):
+        materialize(path, tmp_path / "motions.h5")
+    assert not (tmp_path / "motions.h5").exists()
 
 
 @pytest.mark.parametrize("attribute", [None, "motion", "alignmnet"])

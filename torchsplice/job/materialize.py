@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import DatabaseError, TorchspliceError
+from ..core.errors import TorchspliceError
 from ..store.database import MotionDatabase
 from .defaults import DEFAULT_INDEX, usable_cores
 
@@ -59,7 +59,6 @@ def materialize(source, output, overwrite: bool = False, progress: bool = False,
                     stop += 1
                 r = rows[at:stop]
                 f = db.assembled(k, ct.start[r], ct.length[r], threads=threads)
-                _check_finite(source, f, ct.name[r], ct.length[r])
                 out.append_packed(db.skeletons[k], f["rotations"], f["root_translation"], f.get("translations"),
                                   ct.length[r], ct.name[r], ct.fps[r], spec=db.stored_spec(k), sources=ct.source[r],
                                   roles=ct.role[r], labels=ct.labels_json[r],
@@ -76,28 +75,6 @@ def materialize(source, output, overwrite: bool = False, progress: bool = False,
 
         refresh_database_index(output, write=True)
     return n
-
-
-def _check_finite(source: Path, frames: dict, names, lengths) -> None:
-    """Refuse assembled frames that are not finite (a damaged per-frame part, such as an
-    alignment curve overwritten with NaN; damaged source rows are refused where the banks are
-    read), in one line naming the file and the clip; vectorised: a sum per array, the rows
-    searched only where it is not finite. The output is then never put in place."""
-    for name in ("rotations", "root_translation", "translations"):
-        a = frames.get(name)
-        if a is None:
-            continue
-        with np.errstate(invalid="ignore", over="ignore"):
-            finite = np.isfinite(a.sum(dtype=np.float64))
-        if finite:
-            continue
-        bad = np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(1))
-        if bad.size:
-            starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
-            c = int(np.searchsorted(starts, bad[0], side="right")) - 1
-            raise DatabaseError(f"{source}: damaged alignment store: clip {str(names[c])!r} assembles to non-finite "
-                                   f"{name.replace('_', ' ')} at its frame {int(bad[0] - starts[c])} (a damaged part); "
-                                   "nothing was written")
 
 
 def _bar(total: int, progress: bool):

@@ -30,7 +30,7 @@ from ..splice.registry import Method, get_method
 from ..store.database import MotionDatabase
 from .defaults import DEFAULT_KEEP_HANDS_OUT
 from .plan import leg_length
-from .task import SELF_PENETRATION, poor_alignment
+from .task import allowed_inside, poor_alignment
 
 __all__ = ["splice_pair", "hands_kept_out"]
 
@@ -87,9 +87,8 @@ def splice_pair(database, locomotion: str, action: str, method: str | Method = D
 
 def hands_kept_out(result: SpliceResult, locomotion, action, spec) -> SpliceResult:
     """``result`` with its arms moved out of the body where a hand or forearm goes deeper inside
-    it than ``locomotion``'s and ``action``'s do (the job's rule: as deep as the deeper source
-    may stay, nothing where the result is inside on more of its frames than both by
-    :data:`~torchsplice.job.task.SELF_PENETRATION`; :func:`torchsplice.ops.hands.keep_hands_out`),
+    it than ``locomotion``'s and ``action``'s do (the job's rule,
+    :func:`~torchsplice.job.task.allowed_inside`; :func:`torchsplice.ops.hands.keep_hands_out`),
     with a note saying how many frames changed; ``result`` itself where nothing is to move."""
     import torch
 
@@ -107,7 +106,7 @@ def hands_kept_out(result: SpliceResult, locomotion, action, spec) -> SpliceResu
         return float(share[0]), float(depth[0])
 
     (share, depth), (share_l, depth_l), (share_a, depth_a) = inside(motion), inside(locomotion), inside(action)
-    allowed = 0.0 if share > max(share_l, share_a) + SELF_PENETRATION else max(depth_l, depth_a)
+    allowed = float(allowed_inside(share, share_l, share_a, depth_l, depth_a))
     if not (share > 0 and depth > allowed):
         return result
     rot, corrected = keep_hands_out(motion.rotations, motion.local_translations(), [motion.num_frames], motion.fps,

@@ -103,7 +103,7 @@ class ClipColumns:
     """The plan's clips as columns, for a task to gather its pairs' figures at once: ``row``
     maps a clip key to its row; per row its ``name``, ``frames``, ``fps``, ``penetration``,
     ``penetration_depth`` (the skeleton's units), ``jerk``, its ``acting`` limbs (a tuple, empty
-    where none were found), ``acting_bits`` (bit ``i`` for :data:`~torchsplice.splice.standing.LIMBS`
+    where none were found; ``acting_text`` the same joined by commas), ``acting_bits`` (bit ``i`` for :data:`~torchsplice.splice.standing.LIMBS`
     ``[i]``) and whether it is ``flagged`` as not locomoting (:attr:`Plan.flags`)."""
 
     row: dict
@@ -114,6 +114,7 @@ class ClipColumns:
     penetration_depth: np.ndarray
     jerk: np.ndarray
     acting: list
+    acting_text: np.ndarray
     acting_bits: np.ndarray
     flagged: np.ndarray
 
@@ -128,6 +129,7 @@ class ClipColumns:
                    penetration=np.array([c.penetration for c in cs], np.float64),
                    penetration_depth=np.array([c.penetration_depth for c in cs], np.float64),
                    jerk=np.array([c.jerk for c in cs], np.float64), acting=acting,
+                   acting_text=np.array([",".join(a) for a in acting], dtype=object),
                    acting_bits=np.array([sum(1 << i for i, limb in enumerate(LIMBS) if limb in a) for a in acting], np.int64),
                    flagged=np.array([k in flags for k in clips], bool))
 

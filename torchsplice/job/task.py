@@ -334,10 +334,8 @@ def _keep_hands_out(backend, rows, group, skeleton, body, frames, rot: np.ndarra
     share, depth, deepest = inside  # depth in the skeleton's units, as the plan's; deepest per packed frame
     corrected = np.zeros(len(frames), np.int64)
     cols, rows_l, rows_a = rows
-    allowed = np.maximum(cols.penetration_depth[rows_l], cols.penetration_depth[rows_a])
-    # a result the flag would report (inside on more of its frames than its sources) may keep nothing
-    often = np.maximum(cols.penetration[rows_l], cols.penetration[rows_a])
-    allowed[share > often + SELF_PENETRATION] = 0.0
+    allowed = allowed_inside(share, cols.penetration[rows_l], cols.penetration[rows_a], cols.penetration_depth[rows_l],
+                             cols.penetration_depth[rows_a])
     todo = np.flatnonzero((share > 0) & (depth > allowed))
     if not len(todo):
         return rot, corrected, None
@@ -359,6 +357,15 @@ def _keep_hands_out(backend, rows, group, skeleton, body, frames, rot: np.ndarra
     s2, d2 = penetration_of_frames(torch.from_numpy(deepest[rows]), n, body.margin)
     share[todo], depth[todo] = s2.numpy(), d2.numpy()
     return rot, corrected, (again, arms_now)
+
+
+def allowed_inside(share, share_l, share_a, depth_l, depth_a) -> np.ndarray:
+    """How deep (the skeleton's units) each result's forearm may stay inside its body before the
+    hands correction moves it: as deep as its deeper source goes (``depth_l``, ``depth_a``), and
+    not at all where the result is inside on a larger share of its frames (``share``) than both
+    its sources (``share_l``, ``share_a``) by :data:`SELF_PENETRATION` (the flag would report it)."""
+    often = np.maximum(share_l, share_a)
+    return np.where(np.asarray(share) > often + SELF_PENETRATION, 0.0, np.maximum(depth_l, depth_a))
 
 
 def changed_arms(rot: np.ndarray, changed: np.ndarray, moved) -> tuple[np.ndarray, np.ndarray]:
@@ -462,7 +469,7 @@ def _pack(plan: Plan, rows, group, config: JobConfig, task: Task, pairs, keys, s
         "crop": np.round(crop * scale).astype(np.int64), "cost": cost, "posture_deg": posture,
         "pelvis_correction_deg": mean_corr, "coverage": frames / loco_frames,
         "timing": [config.timing if standing else "timewarp"] * len(keys),
-        "acting": [",".join(cols.acting[r]) for r in rows_a.tolist()] if standing else [""] * len(keys),
+        "acting": cols.acting_text[rows_a].tolist() if standing else [""] * len(keys),
         "penetration": share, "penetration_depth": depth,
         "penetration_locomotion": of_loco,
         "penetration_depth_locomotion": cm * cols.penetration_depth[rows_l],

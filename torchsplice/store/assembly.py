@@ -61,7 +61,7 @@ from ..core.errors import DatabaseError
 from ..core.method_table import BUILTINS
 from ..core.ranges import lengths_to_starts, ranges_to_rows
 from ..core.threads import run_in_threads, split_by_weight
-from .schema import CLIPS, Damage, cap, checked_dataset, nan_curve, skeleton_path
+from .schema import CLIPS, Damage, cap, checked_dataset, damaged_frame, refuse_non_finite, skeleton_path
 from .state import DatabaseState
 
 __all__ = [
@@ -320,8 +320,9 @@ class Assembly:
         """:meth:`part_rows` of ``assembly_curve``; a NaN (a damaged part, which the kernels would
         index with) is one :class:`DatabaseError` line naming the file, the clip and its frame."""
         curve = self.part_rows(db, k, "assembly_curve", clip, starts, lengths)
-        if np.isnan(curve).any():
-            raise DatabaseError(nan_curve(db, curve, clip, lengths, first))
+        bad = np.flatnonzero(np.isnan(curve))
+        if bad.size:
+            raise DatabaseError(damaged_frame(db, int(bad[0]), clip, lengths, first, "has a NaN in its curve"))
         return curve
 
     def _hold(self, db, k: int, name: str) -> tuple[np.ndarray, np.ndarray] | None:
@@ -473,6 +474,7 @@ class Assembly:
         if moved is not None:
             rows, joints, arms = moved
             orot[rows, joints] = arms
+        refuse_non_finite(db, {"rotations": orot, "translations": otrans}, clip, lengths, first)  # a damaged part
         out = {"rotations": orot, "root_translation": np.ascontiguousarray(otrans[:, 0])}
         if has_translations:
             out["translations"] = otrans

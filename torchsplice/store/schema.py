@@ -52,7 +52,8 @@ from ..core.skeleton import Skeleton
 from .defaults import COMPRESSIONS  # declared there, torch-free (the command line reads it)
 
 __all__ = [
-    "nan_curve",
+    "damaged_frame",
+    "refuse_non_finite",
     "FORMAT",
     "SCHEMA_VERSION",
     "COMPRESSIONS",
@@ -118,17 +119,28 @@ class Damage(Exception):
     """What is wrong with a database file's structure (one line, without the file's name)."""
 
 
-def nan_curve(db, curve, clip, lengths, first) -> str:
-    """The line that refuses a NaN in ``curve`` (an alignment store's ``assembly_curve`` rows of
-    ranges of ``lengths`` frames, the ``first`` of each in table row ``clip``'s frames): the file,
-    the clip and its frame."""
-    bad, ends = int(np.flatnonzero(np.isnan(curve))[0]), np.cumsum(lengths)
-    i = int(np.searchsorted(ends, bad, side="right"))
-    frame = int(first[i] + bad - ends[i] + lengths[i])
-    return (
-        f"{db.path}: damaged alignment store: clip {cap(db.names[int(clip[i])])}'s alignment curve is not a "
-        f"number at its frame {frame}"
-    )
+def damaged_frame(db, row: int, clip, lengths, first, what: str) -> str:
+    """The line that refuses packed row ``row`` of an alignment store's read (ranges of
+    ``lengths`` frames, the ``first`` of each in table row ``clip``'s frames): the file, the
+    clip, ``what`` is wrong and the clip's frame."""
+    ends = np.cumsum(lengths)
+    i = int(np.searchsorted(ends, row, side="right"))
+    frame = int(first[i] + row - ends[i] + lengths[i])
+    return f"{db.path}: damaged alignment store: clip {cap(db.names[int(clip[i])])} {what} at its frame {frame}"
+
+
+def refuse_non_finite(db, arrays: dict, clip, lengths, first) -> None:
+    """Refuse an alignment store's assembled ``arrays`` (name -> ``(N, ...)``, packed ranges as
+    :func:`damaged_frame`'s) where a value is not finite (a damaged part): one
+    :class:`~torchsplice.core.errors.DatabaseError` line. A sum per array; rows searched only then."""
+    from ..core.errors import DatabaseError
+
+    for name, a in arrays.items():
+        with np.errstate(invalid="ignore", over="ignore"):
+            if np.isfinite(a.sum(dtype=np.float64)):
+                continue
+        bad = int(np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(1))[0])
+        raise DatabaseError(damaged_frame(db, bad, clip, lengths, first, f"assembles to non-finite {name}"))
 
 
 def cap(value, n: int = 40) -> str:
