@@ -320,12 +320,46 @@ def test_the_way_out_turns_back_only_on_a_run_that_leaves_where_it_entered():
     assert reversed_([1, -1, -1, 1, 0, 1]) == [False, True, True, False, False, False]
 
 
-def test_the_kernels_runs_turn_back_the_frames_the_torch_rule_does():
-    """The compiled pass (:func:`torchsplice.cpu.hands._pushes`) against ``_turned_back`` on
-    random runs: the same normals reversed, each pushed out ``apart`` further; the push of a
-    frame sums its obstacles'."""
+def test_the_way_round_goes_from_the_entry_normal_round_the_side_away_from_the_chest_to_the_exit_normal():
+    """Known answers of ``_way_round``: one arm and an obstacle along z of radius 1, a run whose
+    offsets from the axis (``away * apart``) go from +x to -x, the chest at y = -1 or +1."""
+    from torchsplice.ops.hands import _runs, _turned_back, _way_round
+
+    def way(offsets, chest_y):
+        n = len(offsets)
+        v = torch.zeros(n, 2, 1, 3, dtype=torch.float64)
+        v[:, 0, 0, :2] = torch.tensor(offsets, dtype=torch.float64)
+        v[:, 1, 0, 0] = 1.0
+        apart = v.norm(dim=-1)
+        away = v / apart[..., None]
+        inside = torch.zeros(n, 2, 1, dtype=torch.bool)
+        inside[:, 0] = True
+        runs = _runs(away, inside, torch.ones(n, dtype=torch.bool))
+        assert runs[3][:, 0, 0].tolist() == [1] * n  # one turn: it goes through
+        assert not bool(_turned_back(away, inside, torch.ones(n, dtype=torch.bool), runs).any())
+        oa = torch.zeros(n, 1, 1, 3, dtype=torch.float64)
+        ob = oa.clone()
+        ob[..., 2] = 1.0
+        chest = torch.tensor([0.0, chest_y, 0.5], dtype=torch.float64).expand(n, 1, 1, 3)
+        got = _way_round(away, apart, oa, ob, torch.tensor([1.0], dtype=torch.float64), chest, runs)[:, 0, 0]
+        assert torch.allclose(got.norm(dim=-1), torch.ones(n, dtype=torch.float64))
+        return got, away[:, 0, 0]
+
+    for chest_y in (-1.0, 1.0):
+        for y in (0.1, -0.1):  # the side is the obstacle's outside whichever way the forearm passes
+            got, normal = way([(0.95, y / 2), (0.3, y), (-0.3, y), (-0.95, y / 2)], chest_y)
+            assert bool((got[1:3, 1] * chest_y < -0.8).all())  # across the axis: mostly the side away from the chest
+            assert float((got[0] * normal[0]).sum()) > 0.99 and float((got[-1] * normal[-1]).sum()) > 0.99
+            assert float(got[:, 2].abs().max()) == 0.0
+
+
+def test_the_kernels_runs_turn_back_and_go_round_as_the_torch_rules_do():
+    """The compiled pass (:func:`torchsplice.cpu.hands._pushes`) against ``_runs``,
+    ``_turned_back`` and ``_way_round`` on random runs: the same normals reversed, each pushed
+    out ``apart`` further, the same runs through an obstacle of ``round_`` taken round (through
+    the others, along the normal); the push of a frame sums its obstacles'."""
     from torchsplice.cpu.hands import _pushes
-    from torchsplice.ops.hands import _turned_back
+    from torchsplice.ops.hands import _runs, _turned_back, _way_round
 
     rng = np.random.default_rng(0)
     n, O = 400, 3
@@ -337,18 +371,29 @@ def test_the_kernels_runs_turn_back_the_frames_the_torch_rule_does():
     inside[np.setdiff1d(np.arange(n), pushed)] = False  # the frames a pass did not test are inside nothing
     apart, lever = rng.random((n, 2, O)), np.full((n, 2, O), 1.0)
     radii, obstacles, target, slack = np.array([5.0, 6.0, 7.0]), np.arange(O, dtype=np.int64), 1.0, 0.25
+    ends = rng.normal(size=(n, 2 * O, 3))
+    pos = rng.normal(size=(n, 1, 3))  # the chest's place: the way round leaves it
     grot = np.zeros((n, 1, 4))
     grot[..., 0] = 1.0  # the chest's frame is the world's
     pushes = np.zeros((n, 2, 3))
-    kept = _pushes(pushed.copy(), len(pushed), inside, away, apart, lever, radii, obstacles, target, slack, grot, 0,
-                   np.empty((n, 2, O, 2), np.int64), pushes)
+    round_ = np.array([True, False, True])  # the obstacles a run through is taken round (ops.hands.ROUND)
+    kept = _pushes(pushed.copy(), len(pushed), inside, away, apart, lever, radii, obstacles, round_, target, slack, pos,
+                   grot, 0, ends, np.empty((n, 2, O, 3), np.int64), np.empty((n, 2, O, 2)), pushes)
     follows = np.zeros(n, bool)
     follows[pushed[1:][pushed[1:] == pushed[:-1] + 1]] = True
-    back = _turned_back(torch.from_numpy(away), torch.from_numpy(inside), torch.from_numpy(follows)).numpy()
-    assert back.any() and (inside & ~back).any()
+    t = {name: torch.from_numpy(a) for name, a in dict(away=away, inside=inside, follows=follows, apart=apart).items()}
+    runs = _runs(t["away"], t["inside"], t["follows"])
+    back = _turned_back(t["away"], t["inside"], t["follows"], runs).numpy()
+    through = inside & (runs[3].numpy() % 2 == 1) & round_
+    assert back.any() and through.any() and (inside & ~back & ~through & (runs[3].numpy() % 2 == 1)).any()
+    oa, ob = torch.from_numpy(ends[:, None, 0::2]), torch.from_numpy(ends[:, None, 1::2])
+    way = _way_round(t["away"], t["apart"], oa, ob, torch.from_numpy(radii), torch.from_numpy(pos[:, :, None]), runs)
+    way = way.numpy()
     sign = np.where(back, -1.0, 1.0)
     excess = np.where(back, radii + apart - target, radii - apart - target)
-    want = (np.where(inside, sign * (excess + slack) / lever, 0.0)[..., None] * away).sum(2)
+    along = (sign * (excess + slack) / lever)[..., None] * away
+    round_ = (way * (radii - target + slack)[..., None] - away * apart[..., None]) / lever[..., None]
+    want = np.where(inside[..., None], np.where(through[..., None], round_, along), 0.0).sum(2)
     assert kept == int(inside.any(-1).any(-1).sum())
     assert np.allclose(pushes, want, atol=1e-12)
 
@@ -375,6 +420,72 @@ def test_an_arm_that_crosses_the_torsos_axis_and_back_is_pushed_out_of_one_side_
     got, got_n = CompiledBackend().keep_hands_out(rot.numpy(), trans.numpy(), [T], m.fps, m.skeleton, body, arms,
                                                   [0.0])
     assert int(got_n[0]) == int(corrected) and np.allclose(got, out.numpy(), atol=1e-9)
+
+
+def _through_the_torso(lateral: float):
+    """The sample's first clip (float64), and the same clip with its right arm aimed, over frames
+    30 to 70, at a point that sweeps from 1.5 torso radii in front of the torso's axis to 1.5
+    radii behind it, ``lateral`` radii to the side (the torso's outside for the right arm at
+    negative values), and stays there: its forearm goes through the torso, in at the front and
+    out at the back. ``(m, rot, body, arms)``."""
+    m, roles, body, arms, pos, grot, (a, b, torso, mid) = _sample_and_its_torso()
+    sh, wr = arms.shoulder[1], arms.wrist[1]
+    unit = lambda v: torch.nn.functional.normalize(v, dim=-1)  # noqa: E731
+    axis = unit(b[:, torso] - a[:, torso])
+    front = unit(torch.linalg.cross(axis, unit(mid - pos[:, sh]), dim=-1))
+    side = unit(torch.linalg.cross(front, axis, dim=-1))
+    T = m.num_frames
+    sweep = torch.ones(T, dtype=torch.float64)
+    sweep[:30] = 0.0
+    f = torch.arange(30, 71, dtype=torch.float64)
+    sweep[30:71] = torch.sin(torch.pi / 2 * (f - 30) / 40) ** 2
+    radius = float(body.radii[torso])
+    aim = mid + ((1.5 - 3.0 * sweep) * radius)[:, None] * front + lateral * radius * side
+    turn = quat_between(unit(pos[:, wr] - pos[:, sh]), unit(aim - pos[:, sh]))
+    ident = torch.zeros_like(turn)
+    ident[:, 0] = 1.0
+    weight = (3 * sweep).clamp(max=1.0)
+    turn = quat_slerp(ident, turn, weight)
+    rot = m.rotations.clone()
+    rot[:, sh] = quat_mul(quat_conj(grot[:, m.skeleton.parents[sh]]), quat_mul(turn, grot[:, sh]))
+    return m, rot, body, arms
+
+
+def test_an_arm_that_goes_through_the_torso_is_taken_round_its_outside_smoothly():
+    """In at the front and out at the back: pushed along the normal on each frame, the forearm
+    would be pushed out of the front, then of the back, and swing through the body where it
+    crosses the axis (the wrist's peak acceleration 2.07x the swing's); taken round the torso's
+    outside it comes out with no more acceleration than the swing had (0.85x)."""
+    m, rot, body, arms = _through_the_torso(-0.3)
+    trans, T = m.local_translations(), m.num_frames
+    fk = lambda r: forward_kinematics(r, trans[:, 0], m.skeleton.offsets, m.skeleton.parents, trans)  # noqa: E731
+    assert float(penetration_packed(fk(rot)[0], [T], body)[0]) > 0.05
+    out, corrected = keep_hands_out(rot, trans, [T], m.fps, m.skeleton, body, arms, 0.0)
+    pos, grot = fk(out)
+    assert float(penetration_packed(pos, [T], body)[0]) == 0.0 and int(corrected) > 0
+
+    def wrist(p, g):
+        return quat_apply(quat_conj(g[:, arms.chest]), p[:, arms.wrist[1]] - p[:, arms.chest])
+
+    p0, g0 = fk(rot)
+    acc0 = (wrist(p0, g0)[2:] - 2 * wrist(p0, g0)[1:-1] + wrist(p0, g0)[:-2]).norm(dim=-1)
+    acc1 = (wrist(pos, grot)[2:] - 2 * wrist(pos, grot)[1:-1] + wrist(pos, grot)[:-2]).norm(dim=-1)
+    assert float(acc1.max()) <= 1.0 * float(acc0.max())
+    # round the outside: where the forearm crosses the torso's axis, the corrected wrist is further
+    # from the chest, across the axis, than the swing's
+    _, _, _, _, _, _, (a, b, torso, mid) = _sample_and_its_torso()
+    unit = lambda v: torch.nn.functional.normalize(v, dim=-1)  # noqa: E731
+    outward = unit(mid - p0[:, arms.chest])
+    front = unit(torch.linalg.cross(unit(b[:, torso] - a[:, torso]), unit(mid - p0[:, arms.shoulder[1]]), dim=-1))
+    crossing = int(((p0[:, arms.wrist[1]] - mid) * front).sum(-1)[30:71].abs().argmin()) + 30
+    before = float(((p0[crossing, arms.wrist[1]] - mid[crossing]) * outward[crossing]).sum())
+    after = float(((pos[crossing, arms.wrist[1]] - mid[crossing]) * outward[crossing]).sum())
+    assert after > before + 0.5 * float(body.radii[torso])
+    from torchsplice.splice.backends.compiled import CompiledBackend
+
+    got, got_n = CompiledBackend().keep_hands_out(rot.numpy(), trans.numpy(), [T], m.fps, m.skeleton, body, arms,
+                                                  [0.0])
+    assert int(got_n[0]) == int(corrected) and np.allclose(got, out.numpy(), atol=1e-8)
 
 
 def _wrists_in_chest(clip, arms) -> torch.Tensor:

@@ -6,7 +6,8 @@ FK (:func:`.fk.fk_clip`) of the joints needed: ``arm``, the chain from the root 
 either) on the frames a pass tests; then
 ``iterations`` passes of the push out of every obstacle (closed-form closest points of the
 forearm's axis and each obstacle's; its normal kept on one side over a run of frames that
-leaves the obstacle where it went in), taken into the chest's frame, spread in time (the largest
+leaves the obstacle where it went in, and turned round the obstacle's side over a run that goes
+through), taken into the chest's frame, spread in time (the largest
 push within ``spread`` frames, then a Hann window of half-width ``spread``) and added to the
 wrists' displacement, and two-bone IK of shoulder and elbow onto it, about each elbow's hinge (the
 clip's mean plane normal in the upper arm's frame; none, and the chest's, where its mean is
@@ -163,30 +164,41 @@ def _contacts(pos, t, elbows, wrists, k, ends, end_a, end_b, end_w, radii, probe
 
 
 @njit(cache=True, nogil=True)
-def _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, target, slack, grot, chest, runs,
-            pushes):
+def _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, round_, target, slack, pos, grot, chest,
+            ends, runs, sides, pushes):
     """The wrists' moves out of the obstacles (chest frame) into ``pushes[t]`` for the frames
     ``pushed[:n_pushed]`` (ascending) of a pass, from :func:`_contacts`: per obstacle its way out
-    times how far beyond ``target`` the forearm goes, plus ``slack``, over the lever, summed. A way
-    out is reversed where the run of consecutive frames inside that obstacle began and ends on
-    one side and the normal has turned over since it began (:func:`torchsplice.ops.hands._turned_back`:
-    the forearm crossed the obstacle's axis); then it goes out through that side, ``apart``
-    further. ``runs (n, 2, O, 2)``: scratch, the reversals so far in a frame's run and in its
-    whole run. Where the pushes of a frame sum to zero it is dropped from ``pushed``; the new
-    count is returned."""
+    times how far beyond ``target`` the forearm goes, plus ``slack``, over the lever, summed.
+    Over a run of consecutive frames inside one obstacle (:func:`torchsplice.ops.hands._runs`)
+    the normal's turns are counted. Where the run began and ends on one side and the normal has
+    turned over since it began, the way out is reversed, ``apart`` further (``_turned_back``);
+    where the run went through an obstacle of ``round_`` ``(O,)`` (:data:`torchsplice.ops.hands.ROUND`),
+    the way is round its side away from the chest (``_way_round``), out to the same depth.
+    ``pos (n, J, 3)``: the frames' joint positions (the chest's read); ``ends (n, 2C, 3)``: their
+    capsule ends; scratch ``runs (n, 2, O, 3)`` (the turns so far in a frame's run, in its whole
+    run, and the run's first frame) and ``sides (n, 2, O, 2)`` (the obstacle's middle from the
+    chest along the run's side, summed over the run, and the sizes of those). Where the pushes of
+    a frame sum to zero it is dropped from ``pushed``; the new count is returned."""
     n_obstacles = obstacles.shape[0]
-    for i in range(n_pushed):  # the normal's reversals counted along each run ...
+    for i in range(n_pushed):  # the normal's reversals counted along each run, its offsets summed ...
         t = pushed[i]
         for k in range(2):
             for o in range(n_obstacles):
                 if not inside[t, k, o]:
                     continue
-                runs[t, k, o, 0] = 0
+                runs[t, k, o, 0], runs[t, k, o, 2] = 0, t
+                sides[t, k, o, 0] = sides[t, k, o, 1] = 0.0
                 if i > 0 and pushed[i - 1] == t - 1 and inside[t - 1, k, o]:
                     turned = (away[t, k, o, 0] * away[t - 1, k, o, 0] + away[t, k, o, 1] * away[t - 1, k, o, 1]
                               + away[t, k, o, 2] * away[t - 1, k, o, 2]) < 0.0
                     runs[t, k, o, 0] = runs[t - 1, k, o, 0] + (1 if turned else 0)
-    for i in range(n_pushed - 1, -1, -1):  # ... and each run's total, from its end back
+                    runs[t, k, o, 2] = runs[t - 1, k, o, 2]
+                    sides[t, k, o, 0], sides[t, k, o, 1] = sides[t - 1, k, o, 0], sides[t - 1, k, o, 1]
+                middle = _scale(_add(_vec(ends[t], 2 * obstacles[o]), _vec(ends[t], 2 * obstacles[o] + 1)), 0.5)
+                along = _dot(_sub(middle, _vec(pos[t], chest)), _across(ends, t, obstacles[o], away, runs[t, k, o, 2], k, o))
+                sides[t, k, o, 0] += along
+                sides[t, k, o, 1] += abs(along)
+    for i in range(n_pushed - 1, -1, -1):  # ... and each run's totals, from its end back
         t = pushed[i]
         for k in range(2):
             for o in range(n_obstacles):
@@ -194,6 +206,7 @@ def _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, targ
                     continue
                 if i + 1 < n_pushed and pushed[i + 1] == t + 1 and inside[t + 1, k, o]:
                     runs[t, k, o, 1] = runs[t + 1, k, o, 1]
+                    sides[t, k, o, 0], sides[t, k, o, 1] = sides[t + 1, k, o, 0], sides[t + 1, k, o, 1]
                 else:
                     runs[t, k, o, 1] = runs[t, k, o, 0]
     kept = 0
@@ -207,10 +220,19 @@ def _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, targ
                 if not inside[t, k, o]:
                     continue
                 way = (away[t, k, o, 0], away[t, k, o, 1], away[t, k, o, 2])
-                excess = radii[obstacles[o]] - apart[t, k, o] - target
+                radius = radii[obstacles[o]]
+                if runs[t, k, o, 1] % 2 == 1 and round_[o]:  # went through the torso: round its side
+                    across = _across(ends, t, obstacles[o], away, runs[t, k, o, 2], k, o)
+                    side = _scale(across, -1.0 if sides[t, k, o, 0] < -1e-9 * sides[t, k, o, 1] else 1.0)
+                    offset = _scale(way, apart[t, k, o])
+                    way_round = _normalized(_add(offset, _scale(side, max(radius - apart[t, k, o], 0.0))), way)
+                    move = _sub(_scale(way_round, radius - target + slack), offset)
+                    push = _add(push, _scale(move, 1.0 / lever[t, k, o]))
+                    continue
+                excess = radius - apart[t, k, o] - target
                 if runs[t, k, o, 0] % 2 == 1 and runs[t, k, o, 1] % 2 == 0:  # turned back: out through the entry side
                     way = _scale(way, -1.0)
-                    excess = radii[obstacles[o]] + apart[t, k, o] - target
+                    excess = radius + apart[t, k, o] - target
                 push = _add(push, _scale(way, (excess + slack) / lever[t, k, o]))
             if push[0] != 0.0 or push[1] != 0.0 or push[2] != 0.0:
                 hit = True
@@ -220,6 +242,14 @@ def _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, targ
             pushed[kept] = t
             kept += 1
     return kept
+
+
+@njit(cache=True, inline="always")
+def _across(ends, t, obstacle, away, entry, k, o):
+    """The side of a run through ``obstacle`` at frame ``t``: its axis crossed with the run's
+    entry normal (``away`` at frame ``entry``), unit (zero where they are parallel)."""
+    axis = _sub(_vec(ends[t], 2 * obstacle + 1), _vec(ends[t], 2 * obstacle))
+    return _normalized(_cross(axis, _vec(away[entry, k], o)), (0.0, 0.0, 0.0))
 
 
 @njit(cache=True, nogil=True)
@@ -254,8 +284,8 @@ def _write_joint(out, row, joint, q):
 
 
 @njit(cache=True, parallel=True)
-def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, probes, obstacles, chest, shoulder,
-                    elbow, wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations,
+def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, probes, obstacles, round_, chest,
+                    shoulder, elbow, wrist, shoulder_parent, elbow_parent, starts, lengths, target, spread, slack, iterations,
                     hinge_min, flex, frame_deepest, exact_above, out, corrected, changed):
     """Per clip ``c`` (rows ``starts[c]:starts[c]+lengths[c]``) into ``out`` and ``corrected[c]``
     (see the module docstring)."""
@@ -279,7 +309,8 @@ def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, 
         away = np.empty((n, 2, n_obstacles, 3))
         apart = np.empty((n, 2, n_obstacles))
         lever = np.empty((n, 2, n_obstacles))
-        runs = np.empty((n, 2, n_obstacles, 2), np.int64)
+        runs = np.empty((n, 2, n_obstacles, 3), np.int64)
+        sides = np.empty((n, 2, n_obstacles, 2))
         # the frames the first pass must test: all, or those the body test measured deeper than the
         # target (exact there when the target is at least exact_above; the margin covers rounding)
         known = frame_deepest.shape[0] > 0 and target[c] * (1.0 - 1e-6) >= exact_above
@@ -323,8 +354,8 @@ def hands_out_clips(rot, trans, parents, arm, rest, end_a, end_b, end_w, radii, 
                 if hit:
                     pushed[n_pushed] = t
                     n_pushed += 1
-            n_pushed = _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, target[c], slack, grot,
-                               chest, runs, pushes)
+            n_pushed = _pushes(pushed, n_pushed, inside, away, apart, lever, radii, obstacles, round_, target[c], slack,
+                               pos, grot, chest, ends, runs, sides, pushes)
             if n_pushed == 0:
                 break
             # a push reaches `spread` frames by the largest-push step and as many more by the window:

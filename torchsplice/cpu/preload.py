@@ -47,7 +47,8 @@ def job_kernels(dtype=np.float32) -> dict:
         standing_mod.loop_points_batch: (f8, f8, i8, i8, i8, m8, 0, i8, i8, 0, np.zeros((1, 2), np.int64)),
         inside_clips: (out, out, i8, i8, i8, i8, v8, v8, i8, i8, 0.0, 0.0, i8, i8, v8, v8, v8),
         figures_clips: (out, out, i8, i8, i8, i8, 0, 0, 0.0, 0.0, 0.0, 0.0, 0, i8, i8, v8, v8, v8, v8, v8),
-        hands_out_clips: (out, out, i8, i8, i8, i8, i8, v8, v8, i8, i8, 0, i8, i8, i8, i8, i8, i8, i8,
+        hands_out_clips: (out, out, i8, i8, i8, i8, i8, v8, v8, i8, i8, np.zeros(1, np.bool_), 0, i8, i8, i8, i8, i8,
+                          i8, i8,
                           v8, i8, 0.0, 0, 0.0, 0.0, v8, 0.0, out, i8, np.zeros(0, np.uint8)),
     }
     return kernels

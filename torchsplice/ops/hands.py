@@ -9,7 +9,8 @@ moves it out:
    (with the hand) enters each obstacle beyond what the clip may keep (``allowed``, its sources'
    own deepest, and at least half :data:`~.body.INSIDE_MARGIN`), and the way out: the capsule's
    normal at the closest point, kept on one side over frames where the forearm crosses the
-   obstacle's axis and comes back out where it went in (``_turned_back``).
+   obstacle's axis and comes back out where it went in (``_turned_back``), and turned round the
+   obstacle's side over frames where it goes through (``_way_round``).
 2. That push, as a move of the wrist, is taken into the chest's frame, spread in time (each
    frame takes the largest push within :data:`RAMP` seconds, then a Hann window of that
    half-width smooths it; no pop where the correction starts or ends) and added to the wrist's
@@ -44,7 +45,7 @@ from ..specs.canonical import canonical_joints
 from ..specs.roles import SkeletonRoles
 from .body import Body, capsule_ends, segment_closest
 
-__all__ = ["RAMP", "ITERATIONS", "CLEARANCE", "SLACK", "FLEX", "HINGE_MIN", "Arms", "arms_of", "keep_hands_out",
+__all__ = ["RAMP", "ITERATIONS", "CLEARANCE", "SLACK", "FLEX", "HINGE_MIN", "ROUND", "Arms", "arms_of", "keep_hands_out",
            "spread_in_time", "arm_ik", "elbow_hinges", "hinge_axes", "chest_hinge"]
 
 RAMP = 0.15
@@ -60,6 +61,11 @@ margin, so that a few passes reach it rather than creep towards it."""
 FLEX = 0.5
 """Radians of elbow flexion (0 straight) below which the IK changes an arm's reach less and
 swings it more (see :func:`arm_ik`)."""
+ROUND = ("torso_l", "torso_r")
+"""The obstacles (:data:`~.body.OBSTACLES`) a forearm that goes through is taken round (``_way_round``):
+the torso's two capsules, whose outside is away from the chest. Through the others (the thighs and
+shins, which swing and turn under the arm; the pelvis and head, whose outside no side of the body
+names) it is pushed along the normal, as a run that does not cross the axis is."""
 HINGE_MIN = 1e-3
 """A clip's mean elbow-plane normal (:func:`elbow_hinges`) shorter than this gives no hinge: its
 arm is straight (bent less than about 0.06 degrees) on average."""
@@ -228,16 +234,19 @@ def _probe_ends(pos: torch.Tensor, E: torch.Tensor, W: torch.Tensor, body: Body,
     return ends[0], ends[1]
 
 
-def _push(pos, E, W, oa, ob, radii, target, slack: float, body: Body, arms: Arms, follows: torch.Tensor) -> torch.Tensor:
+def _push(pos, E, W, oa, ob, radii, round_, target, slack: float, body: Body, arms: Arms,
+          follows: torch.Tensor) -> torch.Tensor:
     """``(n, 2, 3)`` per frame and arm, the move of the wrist (world) that takes the forearm's
     axis, where it is deeper than ``target`` ``(n,)`` in an obstacle, out to ``slack`` less
     deep than that, with the elbow and wrist at ``E``, ``W`` ``(n, 2, 3)``; zero where it is
-    out already. ``follows`` ``(n,)``: the row is its clip's frame after the previous row's.
+    out already. ``follows`` ``(n,)``: the row is its clip's frame after the previous row's;
+    ``round_`` ``(O,)``: the obstacles of :data:`ROUND`.
 
-    The way out is the capsule's normal at the closest point, kept on the side the forearm
-    entered from where it also leaves on that side (:func:`_turned_back`): a forearm crossing
-    the obstacle's axis and back would otherwise be pushed out of the far side for a few
-    frames, and the arm would swing through the body and back."""
+    The way out is the capsule's normal at the closest point, except over a run of frames in
+    which the forearm crosses the obstacle's axis (:func:`_runs`): a forearm that crosses and
+    comes back is pushed out of the side it entered all along (:func:`_turned_back`), and one
+    that goes through the torso is taken round it (:func:`_way_round`). Pushed along the bare
+    normal, either would swing through the body where the normal turns over."""
     pa, pb = _probe_ends(pos, E, W, body, arms)
     s, t = segment_closest(pa, pb, oa, ob)
     cp, co = pa + (pb - pa) * s[..., None], oa + (ob - oa) * t[..., None]
@@ -247,22 +256,29 @@ def _push(pos, E, W, oa, ob, radii, target, slack: float, body: Body, arms: Arms
     if not bool(inside.any()):
         return torch.zeros_like(E)
     away = _normalized(cp - co, cp - (oa + ob) / 2)
-    back = _turned_back(away, inside, follows)
+    runs = _runs(away, inside, follows)
+    back = _turned_back(away, inside, follows, runs)
     away = torch.where(back[..., None], -away, away)
     excess = torch.where(back, radii + apart - target[:, None, None], excess)  # out through the entry side
     excess = torch.where(inside, excess + slack, 0.0)  # beyond the target: out to slack below it
     lever = (_length(pb - pa) / _length(W - E).clamp_min(1e-300)[..., None] * s).clamp(0.5, 2.0)
-    return (away * (excess / lever)[..., None]).sum(2)
+    move = away * (excess / lever)[..., None]
+    through = inside & (runs[3] % 2 == 1) & round_
+    if bool(through.any()):  # round the obstacle: out to the same depth along the way round
+        way = _way_round(away, apart, oa, ob, radii, pos[:, arms.chest, None, None], runs)
+        reach = radii - target[:, None, None] + slack
+        move = torch.where(through[..., None], (way * reach[..., None] - away * apart[..., None]) / lever[..., None],
+                           move)
+    return move.sum(2)
 
 
-def _turned_back(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor) -> torch.Tensor:
-    """``(n, 2, O)``: where the way out ``away`` ``(n, 2, O, 3)`` (the normal at the closest
-    point) is reversed. A run is the consecutive frames (``follows`` ``(n,)``) on which an arm is
-    ``inside`` ``(n, 2, O)`` one obstacle; a step of it turns the normal over where consecutive
-    normals have a negative dot product (the forearm's axis crossed the obstacle's). Where a run
-    turns over an even number of times, it left the obstacle on the side it entered, so its
-    frames after an odd number of turns are reversed: pushed out on that side all along. A run
-    that turns an odd number of times went through the obstacle, and keeps its normals."""
+def _runs(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor) -> tuple:
+    """The runs of :func:`_push`'s frames: a run is the consecutive frames (``follows`` ``(n,)``)
+    on which an arm is ``inside`` ``(n, 2, O)`` one obstacle, and a step of it turns the way out
+    ``away`` ``(n, 2, O, 3)`` (the normal at the closest point) over where consecutive normals
+    have a negative dot product: the forearm's axis crossed the obstacle's. Per frame, arm and
+    obstacle ``(n, 2, O)``: ``(start, end, turns so far, turns in the whole run)``, ``start`` and
+    ``end`` the run's first and last row."""
     n = len(away)
     link = torch.zeros_like(inside)
     link[1:] = follows[1:, None, None] & inside[1:] & inside[:-1]
@@ -270,13 +286,45 @@ def _turned_back(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor
     reversed_[1:] = link[1:] & ((away[1:] * away[:-1]).sum(-1) < 0)
     count = torch.cumsum(reversed_.long(), 0)
     row = torch.arange(n)[:, None, None].expand_as(inside)
-    start = torch.cummax(torch.where(link, -1, row), 0).values  # each run's first row
-    ends = torch.zeros_like(inside)  # each run's last row: the next row does not continue it
+    start = torch.cummax(torch.where(link, -1, row), 0).values
+    ends = torch.zeros_like(inside)  # the next row does not continue the run
     ends[:-1] = ~link[1:]
     ends[-1] = True
     end = torch.flip(torch.cummin(torch.flip(torch.where(ends, row, n), [0]), 0).values, [0])
-    flips = count - count.gather(0, start)
-    return inside & (flips % 2 == 1) & ((count.gather(0, end) - count.gather(0, start)) % 2 == 0)
+    first = count.gather(0, start)
+    return start, end, count - first, count.gather(0, end) - first
+
+
+def _turned_back(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor, runs: tuple | None = None) -> torch.Tensor:
+    """``(n, 2, O)``: where the way out ``away`` is reversed (see :func:`_runs` for the shapes).
+    Where a run turns over an even number of times, it left the obstacle on the side it entered,
+    so its frames after an odd number of turns are reversed: pushed out on that side all along.
+    A run that turns an odd number of times went through the obstacle (:func:`_way_round`)."""
+    _, _, so_far, total = _runs(away, inside, follows) if runs is None else runs
+    return inside & (so_far % 2 == 1) & (total % 2 == 0)
+
+
+def _way_round(away: torch.Tensor, apart: torch.Tensor, oa: torch.Tensor, ob: torch.Tensor, radii: torch.Tensor,
+               centre: torch.Tensor, runs: tuple) -> torch.Tensor:
+    """``(n, 2, O, 3)``: the way out of a run that goes through its obstacle (an odd number of
+    turns, :func:`_runs`), round the obstacle's side rather than through its axis. The side is
+    across the axis (``oa`` to ``ob``, ``(n, 1, O, 3)``) from the run's entry normal (``away`` at
+    its first frame), on the obstacle's side away from the body's ``centre`` (the chest,
+    ``(n, 1, 1, 3)``; summed over the run, ``+`` on a tie within rounding): round the torso's
+    outside, a thigh's outside, never into the rest of the body. The way is the offset
+    ``away * apart`` plus the side times what the offset lacks of the radius (``radii - apart``,
+    at least 0), made unit: the entry normal where the forearm enters, the side where it crosses
+    the axis, the exit normal where it leaves. Where the entry normal lies along the axis there
+    is no side: the normal."""
+    start = runs[0]
+    entry = away.gather(0, start[..., None].expand_as(away))
+    across = _normalized(torch.linalg.cross((ob - oa).expand_as(away), entry, dim=-1), torch.zeros_like(away))
+    along = (((oa + ob) / 2 - centre) * across).sum(-1)
+    total = torch.zeros_like(along).scatter_add_(0, start, along).gather(0, start)  # each run's sum
+    size = torch.zeros_like(along).scatter_add_(0, start, along.abs()).gather(0, start)
+    side = torch.where(total < -1e-9 * size, -1.0, 1.0)[..., None] * across
+    offset = away * apart[..., None]
+    return _normalized(offset + side * (radii - apart).clamp_min(0.0)[..., None], away)
 
 
 def _near(flag: torch.Tensor, radius: torch.Tensor, first: torch.Tensor, end: torch.Tensor) -> torch.Tensor:
@@ -311,9 +359,10 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
     a, b = capsule_ends(pos, body)
     obstacles = list(body.obstacles)
     radii = body.radii.to(torch.float64)[obstacles]
+    round_ = torch.tensor([body.names[o] in ROUND for o in obstacles])
     slack = SLACK * body.margin
-    push = _push(pos, pos[:, el], pos[:, wr], a[:, None, obstacles], b[:, None, obstacles], radii, target, slack, body,
-                 arms, torch.arange(len(pos)) > first)
+    push = _push(pos, pos[:, el], pos[:, wr], a[:, None, obstacles], b[:, None, obstacles], radii, round_, target, slack,
+                 body, arms, torch.arange(len(pos)) > first)
     inside = (push != 0).any(-1).any(-1)
     if not bool(inside.any()):
         return out, none
@@ -345,7 +394,7 @@ def keep_hands_out(rotations: torch.Tensor, translations: torch.Tensor, lengths,
             p = torch.zeros_like(D)
             follows = ~run[m]  # the row after its clip's previous frame
             follows[1:] &= m[1:] == m[:-1] + 1
-            p[m] = _push(pos[m], E[m], W[m], oa[m], ob[m], radii, target[m], slack, body, arms, follows)
+            p[m] = _push(pos[m], E[m], W[m], oa[m], ob[m], radii, round_, target[m], slack, body, arms, follows)
         if not bool((p != 0).any()):
             break
         D = D + spread_in_time(quat_apply(quat_conj(chest), p), seg_lengths, fps[seg_clip])

@@ -12,8 +12,13 @@ import time
 
 import numpy as np
 
+from ...core.method_table import BUILTINS
 from ...core.ranges import lengths_to_starts
 from . import Backend, PairFailedError, SplicedBatch
+
+# The kernels (numba), torch and the torch code are imported where used: choosing a backend
+# (resolve_backend, prepares_once) loads neither, so the command line decides early, without torch,
+# whether it starts the job's fork server.
 
 __all__ = ["CompiledBackend", "BACKEND", "WARM_PARTS", "kernels_cached", "warm_up"]
 
@@ -39,7 +44,6 @@ def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: boo
     t0 = time.perf_counter()
     if not quiet:
         print("setup: compiling the CPU splicer for this machine (once; one to three minutes)", file=sys.stderr, flush=True)
-    from ...core.method_table import BUILTINS
     from ...cpu.bank import ClipBank, splice_bank, standing_bank
     from ...sample import sample_motions
     from ...specs import load_spec
@@ -184,7 +188,7 @@ class CompiledBackend(Backend):
                        starts=None, out=None, changed=None):
         from ...cpu.fk import joint_closure
         from ...cpu.hands import hands_out_clips
-        from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, SLACK
+        from ...ops.hands import CLEARANCE, FLEX, HINGE_MIN, ITERATIONS, RAMP, ROUND, SLACK
 
         lengths = np.asarray(lengths, dtype=np.int64)
         starts = lengths_to_starts(lengths) if starts is None else np.asarray(starts, np.int64)
@@ -211,7 +215,8 @@ class CompiledBackend(Backend):
         frame_deepest = np.zeros(0) if deepest is None else np.ascontiguousarray(deepest, dtype=np.float64)
         hands_out_clips(rotations, np.ascontiguousarray(translations), parents, arm, rest, ends[:, 0].copy(),
                         ends[:, 1].copy(), body.end_shares.numpy(), body.radii.numpy(),
-                        np.asarray(arms.probes, np.int64), np.asarray(body.obstacles, np.int64), int(arms.chest),
+                        np.asarray(arms.probes, np.int64), np.asarray(body.obstacles, np.int64),
+                        np.array([body.names[o] in ROUND for o in body.obstacles], np.bool_), int(arms.chest),
                         np.asarray(arms.shoulder, np.int64), np.asarray(arms.elbow, np.int64),
                         np.asarray(arms.wrist, np.int64), parents[list(arms.shoulder)].copy(),
                         parents[list(arms.elbow)].copy(), starts, lengths, target, w, float(SLACK * body.margin),
