@@ -146,14 +146,32 @@ def _exp(x, y, z):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _lin_offset(trans, a, c, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw, f, g):
-    """Component ``c`` of the inertialization offset of joint ``j``'s translation: the pose
-    difference ``x[end] - x[start]`` times ``f`` plus the velocity difference times ``g``."""
-    lb = trans[a + b0, j, c] + bw * (trans[a + b1, j, c] - trans[a + b0, j, c])
-    lbp = trans[a + bp0, j, c] + bpw * (trans[a + bp1, j, c] - trans[a + bp0, j, c])
-    lsn = trans[a + s0, j, c] + sw * (trans[a + s1, j, c] - trans[a + s0, j, c])
-    lnn = trans[a + n0, j, c] + nw * (trans[a + n1, j, c] - trans[a + n0, j, c])
-    return (lb - lsn) * f + ((lb - lbp) - (lnn - lsn)) * g
+def _slerp_at(rot, start, at, j):
+    """Joint ``j``'s rotation in the clip from bank row ``start``, at ``at`` (a
+    :func:`~.curve.split_time`: frames ``i0``, ``i1`` and the weight between them)."""
+    return qslerp(qload(rot, start + at[0], j), qload(rot, start + at[1], j), at[2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lerp_at(trans, start, at, j, c):
+    """Component ``c`` of joint ``j``'s translation in the clip from bank row ``start``, at ``at``
+    (as :func:`_slerp_at`'s)."""
+    return trans[start + at[0], j, c] + at[2] * (trans[start + at[1], j, c] - trans[start + at[0], j, c])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _translation_offset(trans, action_start, c, j, jump, before_jump, loop_in, after_loop_in, pose_weight,
+                        velocity_weight):
+    """Component ``c`` of the inertialization offset of joint ``j``'s translation where a loop
+    jumps back: the pose difference (at the frame it jumps from, ``jump``, less at the frame it
+    jumps to, ``loop_in``) times ``pose_weight``, plus the velocity difference (``jump`` less
+    ``before_jump``, against ``after_loop_in`` less ``loop_in``) times ``velocity_weight``;
+    each time a :func:`~.curve.split_time` of the action (from bank row ``action_start``)."""
+    at_jump = _lerp_at(trans, action_start, jump, j, c)
+    at_before = _lerp_at(trans, action_start, before_jump, j, c)
+    at_loop_in = _lerp_at(trans, action_start, loop_in, j, c)
+    at_after = _lerp_at(trans, action_start, after_loop_in, j, c)
+    return (at_jump - at_loop_in) * pose_weight + ((at_jump - at_before) - (at_after - at_loop_in)) * velocity_weight
 
 
 @njit(cache=True, nogil=True)
@@ -202,17 +220,17 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
         curve[i] = x
         i0, i1, w = split_time(x, action_frames)
         fading = phase < 1.0
-        f = g = bw = bpw = sw = nw = 0.0
-        b0 = b1 = bp0 = bp1 = s0 = s1 = n0 = n1 = 0
+        f = g = 0.0  # the offset's weights: of the pose difference, of the velocity difference
+        jump = before_jump = loop_in = after_loop_in = (0, 0, 0.0)
         if fading:
             sph = phase
             u = sph * blend
             f = 1 - sph * sph * (3 - 2 * sph)
             g = u * (1 - sph) ** 2
-            b0, b1, bw = split_time(source, action_frames)
-            bp0, bp1, bpw = split_time(source - 1, action_frames)
-            s0, s1, sw = split_time(float(loop_start), action_frames)
-            n0, n1, nw = split_time(loop_start + 1.0, action_frames)
+            jump = split_time(source, action_frames)  # the action's frame the loop jumps back from
+            before_jump = split_time(source - 1, action_frames)
+            loop_in = split_time(float(loop_start), action_frames)  # and the frame it jumps to
+            after_loop_in = split_time(loop_start + 1.0, action_frames)
         for j in range(J):
             if not upper[j] or (method == SPLICE_CODE and idle[j]):
                 qstore(out_rot, i, j, qload(rot, loco_start + t, j))
@@ -225,22 +243,19 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
             ty = trans[action_start + i0, j, 1] + w * (trans[action_start + i1, j, 1] - trans[action_start + i0, j, 1])
             tz = trans[action_start + i0, j, 2] + w * (trans[action_start + i1, j, 2] - trans[action_start + i0, j, 2])
             if fading:  # inertialization of the jump back (see torchsplice.splice.standing._sample)
-                qb = qslerp(qload(rot, action_start + b0, j), qload(rot, action_start + b1, j), bw)
-                qbp = qslerp(qload(rot, action_start + bp0, j), qload(rot, action_start + bp1, j), bpw)
-                qs = qslerp(qload(rot, action_start + s0, j), qload(rot, action_start + s1, j), sw)
-                qn = qslerp(qload(rot, action_start + n0, j), qload(rot, action_start + n1, j), nw)
+                qb = _slerp_at(rot, action_start, jump, j)
+                qbp = _slerp_at(rot, action_start, before_jump, j)
+                qs = _slerp_at(rot, action_start, loop_in, j)
+                qn = _slerp_at(rot, action_start, after_loop_in, j)
                 r = _aa(qmul(qb, qconj(qs)))
                 v1 = _aa(qmul(qb, qconj(qbp)))
                 v2 = _aa(qmul(qn, qconj(qs)))
                 q = qnormalize(qmul(_exp(r[0] * f + (v1[0] - v2[0]) * g, r[1] * f + (v1[1] - v2[1]) * g,
                                          r[2] * f + (v1[2] - v2[2]) * g), q))
                 if method == NAIVE_CODE:  # only naive takes the action's translations
-                    tx += _lin_offset(trans, action_start, 0, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw,
-                                      f, g)
-                    ty += _lin_offset(trans, action_start, 1, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw,
-                                      f, g)
-                    tz += _lin_offset(trans, action_start, 2, j, b0, b1, bw, bp0, bp1, bpw, s0, s1, sw, n0, n1, nw,
-                                      f, g)
+                    tx += _translation_offset(trans, action_start, 0, j, jump, before_jump, loop_in, after_loop_in, f, g)
+                    ty += _translation_offset(trans, action_start, 1, j, jump, before_jump, loop_in, after_loop_in, f, g)
+                    tz += _translation_offset(trans, action_start, 2, j, jump, before_jump, loop_in, after_loop_in, f, g)
             lq = qload(rot, loco_start + t, j)
             if method == NAIVE_CODE:  # naive: the action's upper body, translations too
                 qstore(out_rot, i, j, q)
