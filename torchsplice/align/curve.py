@@ -14,6 +14,8 @@ computed in float64.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 
 from ..core.rotations import quat_slerp
@@ -219,8 +221,6 @@ def resample_motion(motion, fps: float):
     """A :class:`~torchsplice.core.motion.Motion` played at ``fps``: rotations by slerp, the root
     and translations by linear interpolation, at :func:`resample_times` (so bone lengths stay
     exact); the clip itself if it is at ``fps`` already."""
-    from dataclasses import replace
-
     if abs(motion.fps - fps) <= 1e-6 * fps:
         return motion
     times = resample_times(motion.num_frames, motion.fps, fps).to(motion.device)[None]

@@ -332,6 +332,7 @@ def _cumulative_torch(grid, la, lb, L, unbatched) -> torch.Tensor:
     return out[0] if unbatched else out
 
 
+# The compiled kernels are imported where used, so that importing this module loads no numba.
 def _timewarp_compiled(grid, la, lb, L, unbatched) -> WarpPath:
     from ..cpu.timewarp import timewarp_batch
 

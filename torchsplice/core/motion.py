@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 import torch
 
 from .errors import MotionError
+from .fk import forward_kinematics
 from .skeleton import Skeleton
 
 __all__ = ["Motion"]
@@ -167,8 +168,6 @@ class Motion:
 
     def global_positions(self) -> torch.Tensor:
         """``(T, J, 3)`` world positions of the joints, by forward kinematics."""
-        from ..core.fk import forward_kinematics
-
         pos, _ = forward_kinematics(
             self.rotations,
             self.root_translation,

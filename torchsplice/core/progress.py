@@ -113,7 +113,7 @@ def progress_bar(
 ):
     """tqdm's bar on stderr when it is a terminal, a :class:`LogProgress` otherwise; nothing
     (a disabled bar) without ``show``."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # on first use: this module is stdlib-only (the command line may import it)
 
     if not show:
         return tqdm(iterable, total=total, desc=desc, unit=unit, initial=initial, disable=True)

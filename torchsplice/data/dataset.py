@@ -94,6 +94,7 @@ from .collate import collate_motion  # noqa: F401 (its home before data.collate)
 from .errors import DatasetError
 from .features import BUILTIN_FEATURES, NEEDS_FK, NOT_PER_FRAME, VELOCITY, derive_features, trajectory_joint
 from .where import selection_mask
+from .sampler import SkeletonBatchSampler
 
 __all__ = ["MotionDataset", "collate_motion", "DatasetError", "FeatureStatistics", "BUILTIN_FEATURES", "ITEM_KEYS"]
 
@@ -467,8 +468,6 @@ class MotionDataset(Dataset):
         topology (so that :func:`collate_motion` can stack their joints), for a dataset whose
         clips are on several: ``DataLoader(ds, batch_sampler=ds.batch_sampler(32, shuffle=True),
         collate_fn=collate_motion)`` (:class:`~torchsplice.data.sampler.SkeletonBatchSampler`)."""
-        from .sampler import SkeletonBatchSampler
-
         groups: dict[int, list[int]] = {}
         for i, g in enumerate(self.item_topologies().tolist()):
             groups.setdefault(g, []).append(i)

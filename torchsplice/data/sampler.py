@@ -4,6 +4,8 @@ are on several (a mixed database): :meth:`MotionDataset.batch_sampler
 
 from __future__ import annotations
 
+import random
+
 __all__ = ["SkeletonBatchSampler"]
 
 
@@ -36,8 +38,6 @@ class SkeletonBatchSampler:
         return out
 
     def __iter__(self):
-        import random
-
         rng = random.Random(f"{self.seed}:{self.epoch}") if self.shuffle else None
         self.epoch += 1
         return iter(self._batches(rng))

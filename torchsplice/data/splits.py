@@ -18,6 +18,7 @@ kind where there are enough.
 
 from __future__ import annotations
 
+import json
 import math
 import random
 from typing import Sequence
@@ -118,9 +119,7 @@ def streamed_splits(slices, ratios: Sequence[float] = DEFAULT_RATIOS, seed: int 
     consecutive rows: ``name``, ``role``, ``labels`` as JSON text, ``locomotion`` and ``action``
     where the table has them), in memory bounded by the source clips, not the rows: ``(C,)`` the
     same splits (``""``: none)."""
-    import json
-
-    import numpy as np
+    import numpy as np  # here: the exports import this module without numpy
 
     ratios, seed = parse_ratios(ratios), parse_seed(seed)
     ids: dict[str, int] = {}

@@ -30,6 +30,7 @@ import numpy as np
 from torch.utils.data import IterableDataset, get_worker_info
 
 from ..core.errors import TorchspliceError
+from .dataset import MotionDataset
 
 __all__ = ["ChunkedStream", "MotionStream", "epoch_order"]
 
@@ -146,8 +147,6 @@ class MotionStream(ChunkedStream):
 
     def __init__(self, path, batch_size: int = 32, *, features: Sequence[str] = ("rotations_6d", "velocities"),
                  chunk: int = 256, shuffle_chunks: int = 8, seed: int = 0, drop_last: bool = False, **dataset):
-        from .dataset import MotionDataset
-
         super().__init__(batch_size, chunk, shuffle_chunks, seed, drop_last)
         self.dataset = MotionDataset(path, features=tuple(features), **dataset)
 

@@ -12,8 +12,11 @@ before a column existed get no line of it (no section without any).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
+
+from ..formats.exporters import clip_filenames
 
 __all__ = ["PLAUSIBILITY_COLUMNS", "FIGURE_COLUMNS", "FIGURES", "plausibility_rows", "figure_stats",
            "plausibility_section", "figures_section", "plausibility_pictures", "WORST", "PICTURED"]
@@ -192,11 +195,9 @@ def plausibility_pictures(db, per_clip: list[dict], methods: list[str], folder, 
     the second around the frame where a hand goes deepest, seen from a camera across the
     contact (looking along neither the hand's way out nor the body, so the gap or the overlap
     shows): ``(caption, path relative to relative_to)`` pairs; none where no clip is beyond."""
-    from pathlib import Path
-
+    # torch and the drawing are imported here: the rest of this module (the tables) needs only numpy
     import torch
 
-    from ..formats.exporters import clip_filenames
     from ..ops.body import body_of, capsule_ends, inside_depth, segment_closest
     from ..viz.camera import canonical_axes
     from ..viz.render import render
@@ -240,6 +241,6 @@ def plausibility_pictures(db, per_clip: list[dict], methods: list[str], folder, 
 
 
 def _cm(units: str) -> float:
-    from ..ops.units import centimetres
+    from ..ops.units import centimetres  # here, as above: loads torch
 
     return centimetres(units)

@@ -26,7 +26,10 @@ The source clips come from the databases recorded in the output's ``run`` attrib
 
 from __future__ import annotations
 
+import csv as csv_module
 import html
+import io
+import json as json_module
 import math
 import re
 from pathlib import Path
@@ -35,18 +38,25 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..core.motion import Motion
-from ..core.names import printable
+from ..core.names import printable, spreadsheet_cell
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
+from ..store.select import select_clips
 from ..formats.exporters import clip_filenames
+from ..retarget import RetargetTarget
+from ..retarget.clips import Retargeter, needs_retargeting, source_label
 from ..specs import DatasetSpec
 from ..splice.clips import clips_to_tensors, resample_motion
+from ..splice.registry import available_methods
 from .defaults import DEFAULT_MAX_ROWS, DEFAULT_PICTURES
 from .ground_truth import best_posture_error, upper_body_error
 from .metrics import arm_leg_phase, arm_leg_phase_stats, foot_skate, posture_kept
 from .plausibility import figure_stats, plausibility_pictures, plausibility_rows, plausibility_section
+from .retargeting import wrist_spread
 from .standing import standing_measures
-from ..viz.sources import SourceClips as _Sources, source_databases as _source_dbs
+from ..viz.alignment import plot_alignment
+from ..viz.render import render
+from ..viz.sources import SourceClips as _Sources, clip_spec, source_databases as _source_dbs
 
 __all__ = ["evaluate_database", "locomotion_type", "error_stats", "ground_truth_by_type"]
 
@@ -176,8 +186,6 @@ def evaluate_database(path, output, sources=None, pictures: bool = DEFAULT_PICTU
         if not rows:
             raise TorchspliceError(f"{path}: holds no spliced clip")
         if select is not None:
-            from ..store.select import select_clips
-
             chosen = set(select_clips(db.clip_table(), select, "{select}", str(path)))
             rows = [i for i in rows if i in chosen]
             if not rows:
@@ -194,8 +202,6 @@ def evaluate_database(path, output, sources=None, pictures: bool = DEFAULT_PICTU
 def _method_order(names) -> list[str]:
     """The methods of a database in the registry's order (built-ins first), then any method
     not registered in this process (its plug-in was not loaded) by name."""
-    from ..splice.registry import available_methods
-
     known = available_methods()
     return sorted(names, key=lambda m: (known.index(m), "") if m in known else (len(known), m))
 
@@ -264,13 +270,6 @@ def _evaluate(db, t, rows, sources: _Sources, path, output, pictures, max_rows, 
 
 def _write_rows(tables, path, units, aggregates, per_clip) -> None:
     """Every clip's row as CSV and/or JSON (``tables``: their paths or ``None``), atomically."""
-    import csv as csv_module
-    import io
-    import json as json_module
-    import math
-
-    from ..core.names import spreadsheet_cell
-
     def clean(v):
         return None if isinstance(v, float) and not math.isfinite(v) else v
 
@@ -300,9 +299,6 @@ def _action_as_spliced(sources: _Sources, name: str, result: Motion, on: tuple, 
     the locomotion database's): the upper body the report measures is the same."""
     if name in moved:
         return moved[name]
-    from ..retarget import RetargetTarget
-    from ..retarget.clips import Retargeter, needs_retargeting, source_label
-    from ..viz.sources import clip_spec
 
     path, k, spec, units = on
     act = sources.get(name)
@@ -321,8 +317,6 @@ def _retarget_rows(db, chunk, results, locos, acts, roles, fps, moved: dict) -> 
     """Per position in ``chunk`` of a result whose action was retargeted: where from, the acting
     wrist's range of motion against the action's (as spliced, over the frames the result plays:
     :func:`~torchsplice.evaluation.retargeting.wrist_spread`) and the locomotion's foot speed in contact."""
-    from .retargeting import wrist_spread
-
     out = {}
     for n, (i, r, lo, ac) in enumerate(zip(chunk, results, locos, acts)):
         if ac.name not in moved or moved[ac.name] is not ac:  # spliced as stored
@@ -464,9 +458,6 @@ def _aggregate(per_clip: list[dict], methods: list[str]) -> dict:
 
 def _pictures(db, sources, spec, per_clip, output: Path, examples: int, moved: dict | None = None) -> list[tuple[str, str]]:
     """A filmstrip (locomotion, action, each method) and an alignment plot for a few pairs."""
-    from ..viz.alignment import plot_alignment
-    from ..viz.render import render
-
     folder = output.with_name(output.stem + "_files")
     folder.mkdir(exist_ok=True)
     first = [c for c in per_clip if c["method"] == per_clip[0]["method"]]

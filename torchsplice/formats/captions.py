@@ -45,6 +45,7 @@ from typing import Sequence
 
 from ..core.errors import TorchspliceError
 from ..specs.text import POS_TAGS, PhraseTable, Token, parse_phrase
+from .plain_files import read_capped_text
 
 __all__ = ["Caption", "Clause", "clip_captions", "compose", "gerund", "mirror_caption", "parse_caption_line",
            "read_captions", "CAPTION_LABEL", "DEFAULT_SUBJECTS", "MOVES"]
@@ -266,8 +267,6 @@ def read_captions(path) -> dict[str, list[Caption]]:
     """A user's captions per source clip: a JSON object ``{"clip name": ["caption", ...]}``, each
     caption a HumanML3D line (``caption#tokens#start#end``) or ``word/POS`` words. One-line
     errors naming the file."""
-    from .plain_files import read_capped_text
-
     path = Path(path)
     if not (path.exists() or path.is_symlink()):
         raise TorchspliceError(f"{path}: no such captions file")

@@ -45,8 +45,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Iterable, Iterator, Sequence
 
 from ..core.errors import TorchspliceError, render_message
-from ..core.names import counted
+from ..core.names import counted, printable
+from ..data.splits import parse_ratios, parse_seed
+from ..store.atomic import check_output, os_error_message
 from .defaults import DEFAULT_EXPORT_INDEX, DEFAULT_FORMAT, ExportOption
+from .index import index_files, index_targets
+from .staging import staged_files
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..store.database import MotionDatabase
@@ -147,7 +151,7 @@ class Exporter:
 
     def select(self) -> list[str]:
         """The clips to export (one-line errors for an unknown clip or skeleton, or none left)."""
-        from ..store.database import MotionDatabase
+        from ..store.database import MotionDatabase  # h5py and torch: imported where used (module docstring)
 
         with MotionDatabase.open(self.database) as db:
             names = db.names
@@ -185,7 +189,7 @@ class Exporter:
     def items(self) -> Iterator[Any]:
         """What :meth:`write` takes, one per file, in export order: by default each clip as a
         :class:`~torchsplice.core.motion.Motion` (float64), read :data:`READ_BATCH` at a time."""
-        import torch
+        import torch  # torch and h5py: imported where used (module docstring)
 
         from ..store.database import MotionDatabase
 
@@ -354,7 +358,6 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             raise TorchspliceError(f"{out}: no export format writes {suffix} files; the formats are {formats} "
                                    "({format} chooses one)", options=("format",))
         files, folder = export_targets(out, names, exporter, single, inputs=[database], overwrite=overwrite)
-    from ..data.splits import parse_ratios, parse_seed
 
     if options.get("split_ratios") is not None:
         parse_ratios(options["split_ratios"])  # bad ones refused before any work, index or not
@@ -368,7 +371,6 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
     exporter.check()
     # an earlier export's files, as its own record lists them, read before this export replaces that record
     earlier = exporter.owned(Path(out)) if layout is not None and overwrite and Path(out).is_dir() else []
-    from .staging import staged_files
 
     result = ExportResult(exporter.name, out, files, names)
     with staged_files(out, folder, overwrite=overwrite, command=command) as stage:
@@ -392,9 +394,6 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
             raise TorchspliceError(f"format {exporter.name!r} ({type(exporter).__module__}) gave {count} files of the "
                                    f"{len(files)} of this export")
         if indexed:
-            from ..store.atomic import os_error_message
-            from .index import index_files
-
             texts = index_files(database, names, files, indexed, options.get("split_ratios"), options.get("split_seed"))
             counts = [texts[indexed[s]].count("\n") for s in ("train", "val", "test") if s in indexed]
             index_note = f"; {indexed['index'].name}" + (f", train/val/test {'/'.join(map(str, counts))}" if counts else "")
@@ -413,8 +412,6 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
                 except FileNotFoundError:
                     pass
                 except OSError as exc:
-                    from ..store.atomic import os_error_message
-
                     raise TorchspliceError(f"{os_error_message(stale, exc)} (an earlier export's file; the new export is "
                                            "in place)") from None
     result.summary_text = exporter.summary(result) + (index_note if indexed else "")
@@ -425,9 +422,6 @@ def export_clips(database, clips: Sequence[str] | None = None, *, out, format: s
 
 def _index_targets(out, files: list[Path], folder_export: bool, database, overwrite: bool) -> dict[str, Path]:
     """The index's files (:func:`.index.index_targets`), checked like the clips' before any work."""
-    from ..store.atomic import check_output
-    from .index import index_targets
-
     targets = index_targets(out, folder_export)
     own = {t.as_posix().casefold() for t in targets.values()}  # case-blind, as the clips' names are checked
     clash = sorted(f for f in files if f.as_posix().casefold() in own)
@@ -444,9 +438,6 @@ def _index_targets(out, files: list[Path], folder_export: bool, database, overwr
 def _write(exporter: Exporter, item, target: Path, path: Path, names: list[str]) -> None:
     """``exporter.write(item, path)``: an OS error (a full disk) as one line naming ``target``;
     a plug-in's failure as one line naming the format (built-ins are trusted)."""
-    from ..core.names import printable
-    from ..store.atomic import os_error_message
-
     try:
         exporter.write(item, path)
     except TorchspliceError:
@@ -466,8 +457,6 @@ def export_targets(out, names: list[str], exporter: Exporter | type[Exporter], s
                    overwrite: bool = False) -> tuple[list[Path], Path | None]:
     """The files an export writes (one per clip, or one), checked before any work, and the folder
     to create (``None`` if none): ``out`` is a file for one clip or a packed file, else a folder."""
-    from ..store.atomic import check_output
-
     out = Path(out)
     suffix, what = exporter.suffix, exporter.what
     if single_file and (not out.is_dir() or exporter.single_file):  # a packed file is never a folder
@@ -494,8 +483,6 @@ def folder_targets(out, layout: list[str], exporter: Exporter, inputs=(),
                    overwrite: bool = False) -> tuple[list[Path], list[Path]]:
     """The files of a folder format's export (``layout``: paths inside ``out``), checked before
     any work, and the folders to create (``out`` and the subfolders, parents first)."""
-    from ..store.atomic import check_output
-
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise TorchspliceError(f"{out}: is a file; the {exporter.title} format writes a folder: give {{output}} a folder",
@@ -584,7 +571,7 @@ def clip_filenames(names, suffix: str) -> list[str]:
 def selected_names(database, select: str | Sequence[str], clips: Sequence[str] | None = None) -> list[str]:
     """The names of the clips of ``database`` that ``select`` selects (in row order), or of
     ``clips`` (in their order) when given; a one-line error when none is."""
-    from ..store.database import MotionDatabase
+    from ..store.database import MotionDatabase  # h5py and torch: imported where used (module docstring)
     from ..store.select import select_clips
 
     with MotionDatabase.open(database) as db:

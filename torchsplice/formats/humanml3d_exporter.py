@@ -45,8 +45,12 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
+import tarfile
+from dataclasses import replace
 from functools import cached_property
+from itertools import groupby
 from pathlib import Path
 
 from ..core.errors import SpecError, TorchspliceError
@@ -309,8 +313,6 @@ class HumanML3DExporter(Exporter):
             with MotionDatabase.open(self.database) as db:
                 yield from self._clips(items, db, batched)
             return
-        from dataclasses import replace
-        from itertools import groupby
 
         import torch
 
@@ -408,8 +410,6 @@ class HumanML3DExporter(Exporter):
 
         kind, _, payload = item
         if kind == "tar":  # members as they are computed; fixed metadata, so equal exports give equal bytes
-            import tarfile
-
             with tarfile.open(path, "w", format=tarfile.USTAR_FORMAT) as tar:
                 for name, data in payload:
                     info = tarfile.TarInfo(name)
@@ -493,8 +493,6 @@ def _shard_items(batches: list[list[dict]], shards: int) -> dict[str, list[dict]
 def _job_sources(run) -> tuple[str, str]:
     """``(locomotions' database, actions' database)`` of a spliced database, as its run record
     names them (``("", "")`` where it names none)."""
-    import json
-
     try:
         record = json.loads(run) if isinstance(run, (str, bytes)) else {}
     except ValueError:

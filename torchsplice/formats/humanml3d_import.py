@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
@@ -201,8 +202,6 @@ def read_humanml3d_motions(items) -> list:
 def _checked(folder: Path, id: str) -> tuple[torch.Tensor, list[str]]:
     """The joint positions ``(N, 22, 3)`` of motion ``id`` and its caption lines, every check
     made (a :class:`~torchsplice.core.errors.TorchspliceError` naming the file)."""
-    import numpy as np
-
     f = folder / "new_joint_vecs" / f"{id}.npy"
     checked_file(f, inside=folder, limit=MAX_ARRAY_BYTES)  # no FIFO, device or symlink out of the folder
     try:

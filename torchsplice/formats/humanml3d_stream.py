@@ -35,7 +35,9 @@ import torch
 from ..core.errors import TorchspliceError
 from ..data.splits import DEFAULT_RATIOS, SPLITS
 from ..data.stream import ChunkedStream
+from ..store.database import MotionDatabase
 from .humanml3d_exporter import HumanML3DExporter
+from .humanml3d_features import FeatureStats
 
 __all__ = ["HumanML3DStream"]
 
@@ -79,8 +81,6 @@ class HumanML3DStream(ChunkedStream):
         return len(self.items)
 
     def _database(self):
-        from ..store.database import MotionDatabase
-
         if self._db is None or self._pid != os.getpid():  # a forked worker opens its own
             self._db, self._pid = MotionDatabase.open(self.path), os.getpid()
         return self._db
@@ -111,8 +111,6 @@ class HumanML3DStream(ChunkedStream):
     def statistics(self) -> tuple[np.ndarray, np.ndarray]:
         """``(mean, std)`` of the stream's motions as the export computes ``Mean.npy`` and
         ``Std.npy`` (one pass over every motion of the split)."""
-        from .humanml3d_features import FeatureStats
-
         stats = FeatureStats()
         for _, feats, _, _ in self.exporter.motions(self.items, self._database()):
             stats.add(feats)

@@ -25,8 +25,13 @@ from typing import Callable, Iterable, Sequence
 
 from ..core.errors import DatabaseError, TorchspliceError
 from ..core.names import control_character, printable
+from ..store.atomic import check_output
 from .defaults import (DEFAULT_FILE_UNITS, DEFAULT_IMPORT_FORMAT, DEFAULT_IMPORT_WINDOW, DEFAULT_IMPORT_WINDOW_OVERLAP,
                        DEFAULT_NAME_PREFIX, DEFAULT_SPEC, DEFAULT_UNITS, IMPORT_FORMATS)
+from .plain_files import not_regular
+
+# torch, the specs, the units and the readers are imported where used: the command line reads
+# DATABASE_SUFFIXES and one_line from this module before (or without) loading torch.
 
 __all__ = ["import_bvh", "ImportOptions", "run_import", "ImportReport", "ImportedClip", "GuessedSkeleton", "NothingImportedError", "collect_bvh",
            "collect_inputs", "FORMATS"]
@@ -107,8 +112,6 @@ class NothingImportedError(TorchspliceError):
 
 def _not_regular(path: Path) -> str:
     """Why a file that exists is not read (a named pipe, a device)."""
-    from .plain_files import not_regular
-
     return f"is {not_regular(path.stat().st_mode)}, not a regular file; not read"
 
 
@@ -322,8 +325,6 @@ def check_options(o: ImportOptions) -> None:
 def checked_output(o: ImportOptions, files: list) -> Path:
     """The database to write: an existing one to append to, or a new one that may be written
     (not one of the inputs; an existing file only with ``overwrite``)."""
-    from ..store.atomic import check_output
-
     out = Path(o.output)
     if o.append:
         if out.suffix.lower() not in DATABASE_SUFFIXES:

@@ -40,7 +40,10 @@ import json
 from pathlib import Path
 from typing import Sequence
 
+from ..core.errors import TorchspliceError
 from ..core.names import spreadsheet_cell
+from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_seed, streamed_splits, table_splits
+from ..store.atomic import atomic_path
 
 __all__ = ["INDEX_NAME", "SPREADSHEET_ROWS", "index_path", "database_index_path", "index_targets", "index_files",
            "rows_csv", "write_database_index", "refresh_database_index"]
@@ -52,8 +55,6 @@ INDEX_NAME = "index.csv"
 def index_targets(out, folder_export: bool) -> dict[str, Path]:
     """The files an export's index writes: ``{"index": ..., "train": ..., ...}`` (split lists
     for a folder export only); ``out`` is the export's folder or packed file."""
-    from ..data.splits import SPLITS
-
     out = Path(out)
     if folder_export:
         return {"index": out / INDEX_NAME, **{s: out / f"{s}.txt" for s in SPLITS}}
@@ -148,8 +149,6 @@ def rows_csv(rows: Sequence[dict]) -> str:
 def write_rows_csv(path, rows: Sequence[dict]) -> Path:
     """``rows`` (a database's :meth:`~torchsplice.store.database.MotionDatabase.summary` ``clips``,
     as ``info --csv`` writes them) as CSV at ``path``, atomically: :func:`rows_csv`'s columns."""
-    from ..store.atomic import atomic_path
-
     with atomic_path(path) as tmp:
         Path(tmp).write_text(rows_csv(rows))
     return Path(path)
@@ -159,7 +158,6 @@ def index_files(database, names: Sequence[str] | None, files: Sequence[Path], ta
                 split_ratios=None, split_seed: int | None = None) -> dict[Path, str]:
     """The text of each of ``targets`` (:func:`index_targets`) for clips ``names`` (``None``: every
     clip, in the database's order) exported to ``files`` (one per clip, or one packed file for all)."""
-    from ..data.splits import DEFAULT_RATIOS, SPLITS, parse_seed, table_splits
     from ..store.database import MotionDatabase
 
     with MotionDatabase.open(database) as db:
@@ -230,9 +228,6 @@ def write_database_index(database, split_ratios=None, split_seed: int | None = N
     are made and written :data:`CHUNK_ROWS` at a time, so memory stays bounded for millions of
     clips. An OS error (a full disk) is one line naming the index and saying the database itself
     is complete."""
-    from ..core.errors import TorchspliceError
-    from ..data.splits import DEFAULT_RATIOS, parse_seed, streamed_splits
-    from ..store.atomic import atomic_path
     from ..store.database import MotionDatabase
 
     database = Path(database)

@@ -86,6 +86,9 @@ from __future__ import annotations
 
 import io
 import json
+import shutil
+import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -94,6 +97,7 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
+from ..data.dataset import MotionDataset
 from ..store.atomic import atomic_path
 from ..store.database import MotionDatabase
 from .exporters import select_rows
@@ -132,8 +136,6 @@ class NpzExport:
     _stats: dict | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
-        from ..data.dataset import MotionDataset
-
         self.database = Path(self.database)
         if self.features is not None and self.features not in FEATURE_SETS:
             raise TorchspliceError(f"unknown feature set {self.features!r} (known: {', '.join(FEATURE_SETS)})")
@@ -300,10 +302,6 @@ class NpzExport:
         file of its own beside ``path``, then the ``.npz`` (a zip of ``.npy`` members, as
         ``numpy.savez`` writes it) is assembled from them member by member. Values that are not
         finite are refused, naming the clip, before the file is complete."""
-        import shutil
-        import tempfile
-        import zipfile
-
         path = Path(path)
         shapes: dict[str, tuple] = {}
         with tempfile.TemporaryDirectory(prefix=f".{path.name}.", dir=path.parent) as tmp:

@@ -11,6 +11,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..sample import sample_motions
+from ..specs import load_spec
+from ..store.database import MotionDatabase
+
 if TYPE_CHECKING:
     from ..core.motion import Motion
 
@@ -22,10 +26,6 @@ def write_sample(out: str | Path, *, overwrite: bool = False) -> list[Motion]:
     written. Refuses an existing ``out`` unless ``overwrite``
     (:class:`~torchsplice.core.errors.OutputExistsError`), and a file another process is
     writing (:class:`~torchsplice.store.lock.LockedError`); the file appears only once complete."""
-    from ..sample import sample_motions
-    from ..specs import load_spec
-    from ..store.database import MotionDatabase
-
     spec = load_spec("sample")
     motions = sample_motions()
     with MotionDatabase.create(out, overwrite=overwrite) as db:

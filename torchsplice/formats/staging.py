@@ -23,14 +23,14 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 from ..core.errors import OutputExistsError, TorchspliceError
+from ..store.atomic import os_error_message
+from ..store.lock import output_lock, remove_stale_temporaries, temp_path
 
 __all__ = ["staged_files", "make_folder"]
 
 
 def make_folder(folder: Path) -> None:
     """Create the output folder of an export; an OS error (permission, full disk) is one line."""
-    from ..store.atomic import os_error_message
-
     try:
         folder.mkdir(exist_ok=True)
     except OSError as exc:
@@ -55,8 +55,6 @@ def staged_files(output, folder: Path | Sequence[Path] | None = None, overwrite:
 
     Yields ``stage(file) -> path``, the temporary path to write ``file`` at.
     """
-    from ..store.lock import output_lock, remove_stale_temporaries, temp_path
-
     staged: dict[Path, Path] = {}
     cleaned: set[Path] = set()
 
@@ -94,9 +92,6 @@ def staged_files(output, folder: Path | Sequence[Path] | None = None, overwrite:
 def _install(staged: dict[Path, Path]) -> None:
     """Rename every staged file to its name; if one rename fails, undo those done (a file they
     replaced was moved aside first, and is put back) and raise a one-line error."""
-    from ..store.atomic import os_error_message
-    from ..store.lock import temp_path
-
     done: list[tuple[Path, Path | None]] = []  # (installed file, the file it replaced, moved aside)
     target = None
     try:

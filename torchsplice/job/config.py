@@ -9,13 +9,15 @@ resume may use another engine or worker count. The splice options are derived he
 
 from __future__ import annotations
 
+import difflib
 import json
 import numbers
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from ..core.errors import TorchspliceError
 from ..store.atomic import same_file
@@ -24,7 +26,9 @@ from ..retarget.defaults import DEFAULT_FIX_FEET
 from ..splice.defaults import (DEFAULT_ACTING_LIMBS, DEFAULT_BACKEND, DEFAULT_DEVICE, DEFAULT_FORCE, DEFAULT_MAX_RUN,
                                DEFAULT_POSTURE, DEFAULT_TIMING, DEFAULT_TWIST)
 from ..splice.options import AlignOptions, SpliceOptions
+from ..splice.backends import Backend, backend_for, get_backend, resolve_backend
 from ..splice.registry import available_methods, get_method, plugin_modules
+from ..splice.standing import LIMBS, TIMINGS, parse_limbs
 from .defaults import (DEFAULT_ACTIONS, DEFAULT_ACTIONS_DB, DEFAULT_BATCH_PAIRS, DEFAULT_COMPRESSION, DEFAULT_COPY_SOURCES,
                        DEFAULT_ENGINE, DEFAULT_INDEX, DEFAULT_KEEP_HANDS_OUT, DEFAULT_LAYOUT, DEFAULT_LOCOMOTIONS,
                        DEFAULT_MAX_LENGTH_RATIO, DEFAULT_MEMORY_BUDGET_MB, DEFAULT_METHODS, DEFAULT_RAY_ADDRESS,
@@ -150,15 +154,12 @@ class JobConfig:
         if c.layout not in LAYOUTS:
             raise TorchspliceError(f"unknown layout {c.layout!r}; choose {' or '.join(LAYOUTS)}")
         if c.store not in STORES:
-            import difflib
-
             near = difflib.get_close_matches(str(c.store), STORES, n=1)
             raise TorchspliceError(f"unknown store {c.store!r}" + (f"; did you mean {near[0]!r}?" if near else "")
                                    + f" (choose {' or '.join(STORES)})")
         if c.layout == "virtual" and c.copy_sources:
             raise TorchspliceError("{copy_sources} needs {layout} copy: a virtual output holds only the spliced clips",
                                    options=("copy_sources", "layout"))
-        from ..splice.standing import LIMBS, TIMINGS
 
         if c.timing not in TIMINGS:
             raise TorchspliceError(f"unknown timing {c.timing!r}; choose {', '.join(TIMINGS)}")
@@ -169,12 +170,11 @@ class JobConfig:
         if c.max_length_ratio is not None and not c.max_length_ratio >= 1:
             raise TorchspliceError(f"{{max_length_ratio}} must be at least 1, got {c.max_length_ratio}",
                                    options=("max_length_ratio",))
-        from ..splice.backends import resolve_backend
 
         resolve_backend(c.backend, c.device)  # a clear error for an unknown one, or one that cannot run there
         target_file = None
         if c.target is not None:
-            from ..retarget.targets import resolve_target
+            from ..retarget.targets import resolve_target  # loaded by jobs that retarget, not by every worker
 
             target_file = resolve_target(str(c.target)).path  # a clear error now for a target that is not one
             c = replace(c, target=str(c.target))
@@ -244,15 +244,11 @@ class JobConfig:
     def resolved_backend(self) -> str:
         """The backend's name :attr:`backend` means on :attr:`device`: ``"compiled"`` (the CPU
         splicer), ``"torch"`` (CUDA, or no numba) or a registered one."""
-        from ..splice.backends import resolve_backend
-
         return resolve_backend(self.backend, self.device)
 
     def splice_backend(self, method: str | None = None):
         """The :class:`~torchsplice.splice.backends.Backend` that splices ``method`` in this job
         (``None``: the job's own, :meth:`resolved_backend`)."""
-        from ..splice.backends import backend_for, get_backend
-
         name = self.resolved_backend()
         return get_backend(name) if method is None else backend_for(get_method(method), name)
 
@@ -277,8 +273,6 @@ def _check_stores_alignments(c: JobConfig) -> None:
     """Refuse ``store="alignment"`` with a backend that gives no parts to store (the torch
     splicer, or a plug-in that does not implement :meth:`~torchsplice.splice.backends.Backend.assembly_bank`),
     here, before the job plans or creates its work folder (and in a dry run as in a run)."""
-    from ..splice.backends import Backend
-
     backend = c.splice_backend()
     if type(backend).assembly_bank is Backend.assembly_bank:
         raise TorchspliceError(f"{c.output}: the {backend.name} splicer gives no alignments to store; write {{store}} motion",
@@ -334,7 +328,6 @@ def check_device(name: str | None) -> str | None:
         return None
     if not isinstance(name, str):
         raise TorchspliceError(f"{{device}} must be a string such as 'cpu' or 'cuda', got {name!r}", options=("device",))
-    import torch
 
     try:
         dev = torch.device(name)
@@ -360,8 +353,6 @@ def job_config(database, output, **options) -> JobConfig:
     ``"left_arm,right_arm"`` as well as a tuple. An unknown option is an error naming the
     options there are.
     """
-    from dataclasses import fields
-
     known = [f.name for f in fields(JobConfig) if f.name not in ("database", "output")]
     bad = sorted(set(options) - set(known))
     if bad:
@@ -382,8 +373,6 @@ def job_config(database, output, **options) -> JobConfig:
     options["device"] = check_device(options.get("device"))
     limbs = options.get("acting_limbs")
     if isinstance(limbs, str):
-        from ..splice.standing import parse_limbs
-
         try:
             options["acting_limbs"] = parse_limbs(limbs)
         except ValueError as exc:

@@ -14,6 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import TorchspliceError
+from ..core.progress import progress_bar
+from ..formats.index import refresh_database_index
+from ..store.atomic import same_file
 from ..store.database import MotionDatabase
 from .defaults import DEFAULT_INDEX, usable_cores
 
@@ -26,8 +29,6 @@ BATCH_FRAMES = 1 << 16
 def materialize(source, output, overwrite: bool = False, progress: bool = False, index: bool = DEFAULT_INDEX) -> int:
     """Write the motion store of the alignment store ``source`` to ``output`` (and, with
     ``index``, ``NAME.h5.index.csv`` beside it, as the job does); returns the number of clips."""
-    from ..store.atomic import same_file
-
     source, output = Path(source), Path(output)
     if output.suffix.lower() not in (".h5", ".hdf5"):
         raise TorchspliceError(f"{output}: the output is a database, so its name must end in .h5 or .hdf5")
@@ -71,13 +72,9 @@ def materialize(source, output, overwrite: bool = False, progress: bool = False,
                 out.update_run_record({"materialized_from": str(source)})
         n = len(ct)
     if index:
-        from ..formats.index import refresh_database_index
-
         refresh_database_index(output, write=True)
     return n
 
 
 def _bar(total: int, progress: bool):
-    from ..core.progress import progress_bar
-
     return progress_bar(total=total, desc="materialize", unit="clip", show=bool(progress))

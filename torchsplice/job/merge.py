@@ -11,20 +11,26 @@ import numpy as np
 import re
 import shutil
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
 from ..core.stop import check_stop
+from ..formats.index import refresh_database_index
+from ..ops.body import body_of
+from ..ops.hands import arms_of
+from ..specs import DatasetSpec
 from ..splice.registry import get_method
+from ..splice.standing import LIMBS
 from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
 from ..store.database import MotionDatabase
 from . import shards
 from .config import JobConfig
 from .defaults import DEFAULT_INDEX
-from .plan import Plan
+from .plan import Plan, plan_key
 from .shards import gaps, output_lock_path, ranges, refuse_live_slices, remove_shard_files, run_shards
 from .sink import make_sink
-from .sources import Sources
+from .sources import Sources, retargeted_parts
 from .summary import JobSummary, progress_bar
 from .task import Part
 
@@ -62,8 +68,6 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         raise UnfinishedJobError(f"{output}: an alignment store holds the job's source clips, and its input databases "
                                  "are gone; merge where they are")
     if (config.copy_sources or config.store == "alignment") and Path(key["database"]["path"]).exists():
-        from .plan import plan_key as plan_key
-
         now = plan_key(config)
         if now["database"] != key["database"] or now["actions_db"] != key["actions_db"]:
             raise UnfinishedJobError(f"{output}: the job's input databases changed since it was planned; cannot copy its "
@@ -126,7 +130,6 @@ def merge_job(output: Path, overwrite: bool = False, progress: bool = True, comm
         finally:
             sources.close()
         shutil.rmtree(work, ignore_errors=True)
-        from ..formats.index import refresh_database_index
 
         summary.index = refresh_database_index(output, write=index)  # never an earlier run's left beside it
     summary.seconds = summary.compute_seconds = time.perf_counter() - t0
@@ -220,8 +223,6 @@ class OutputMerge:
         if not files:
             return
         if self.remover is None:
-            from concurrent.futures import ThreadPoolExecutor
-
             self.remover = ThreadPoolExecutor(max_workers=1, thread_name_prefix="torchsplice-remove")
         self.remover.submit(lambda: [f.unlink(missing_ok=True) for f in files])
 
@@ -336,9 +337,6 @@ def output_banks(plan: Plan, sources: Sources, config: JobConfig) -> list[dict]:
     """The banks of source clips an alignment store holds: each bank the job's groups splice
     from (:meth:`~torchsplice.job.sources.Sources.bank`, built here where not yet), once, with
     its clips' keys, names and rate and the joint tables its clips are assembled with."""
-    from ..splice.standing import LIMBS
-    from .sources import retargeted_parts
-
     out, seen = [], set()
     options = config.splice_options()
     for n, g in enumerate(plan.groups):
@@ -368,24 +366,17 @@ def output_banks(plan: Plan, sources: Sources, config: JobConfig) -> list[dict]:
 
 def _moved_joints(skeleton, roles) -> list[int]:
     """The joints whose rotations keeping hands out of the body replaces (``assembly_arms``)."""
-    from ..ops.body import body_of
-    from ..ops.hands import arms_of
-
     return [int(j) for j in arms_of(skeleton, roles, body_of(skeleton, roles)).moved]
 
 
 def source_skeleton(plan: Plan, g: int, sources: Sources):
     """A locomotion group's skeleton and spec, from its first clip."""
-    from ..specs import DatasetSpec
-
     group = plan.groups[g]
     return sources.motion(group.clips[0]).skeleton, DatasetSpec.from_json(group.spec)
 
 
 def _shard_skeleton(plan: Plan, g: int, sink, shard_dir: Path):
     """A locomotion group's skeleton and spec, from the first of its shards that holds clips."""
-    from ..specs import DatasetSpec
-
     for t in plan.tasks:
         path = shard_dir / sink.shard_name(t.id)
         if t.group == g and path.exists():

@@ -21,7 +21,12 @@ from __future__ import annotations
 
 import dataclasses
 
+import torch
+
 from ..core.errors import TorchspliceError
+from ..ops.body import body_of
+from ..ops.hands import arms_of, keep_hands_out
+from ..ops.plausibility import penetration_packed
 from ..retarget.clips import onto_skeleton
 from ..splice import SpliceOptions, SpliceResult, splice
 from ..splice.defaults import DEFAULT_METHOD
@@ -90,12 +95,6 @@ def hands_kept_out(result: SpliceResult, locomotion, action, spec) -> SpliceResu
     it than ``locomotion``'s and ``action``'s do (the job's rule,
     :func:`~torchsplice.job.task.allowed_inside`; :func:`torchsplice.ops.hands.keep_hands_out`),
     with a note saying how many frames changed; ``result`` itself where nothing is to move."""
-    import torch
-
-    from ..ops.body import body_of
-    from ..ops.hands import arms_of, keep_hands_out
-    from ..ops.plausibility import penetration_packed
-
     motion = result.motion
     skeleton = motion.skeleton
     roles = spec.bind(skeleton)

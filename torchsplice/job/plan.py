@@ -29,6 +29,7 @@ from ..splice.clips import clips_to_tensors
 from ..splice.locomotion import check_locomotion
 from ..splice.references import find_reference
 from ..splice.registry import get_method
+from ..splice.standing import LIMBS, acting_limbs
 from .config import JobConfig
 from .pairs import MIN_SECONDS, MODES, Pair, PairTable, form_pairs  # noqa: F401 (re-exported)
 from ..store.select import select_clips
@@ -120,8 +121,6 @@ class ClipColumns:
 
     @classmethod
     def of(cls, clips: dict, flags: dict) -> "ClipColumns":
-        from ..splice.standing import LIMBS
-
         cs = list(clips.values())
         acting = [tuple(c.acting or ()) for c in cs]
         return cls(row={k: i for i, k in enumerate(clips)}, name=np.array([c.name for c in cs], dtype=object),
@@ -405,8 +404,6 @@ def _padded_chunks(keys: list[str], frames: list[int], budget: int = 65_536, mos
 def _acting(config: JobConfig, sources: Sources, groups: list[Group], clips: dict, sk_l, keys: set[str]) -> None:
     """Record in ``clips[key].acting`` the arms each standing action acts with (found once per
     clip from its own frames, or ``config.acting_limbs``)."""
-    from ..splice.standing import acting_limbs
-
     for g in groups:
         todo = sorted((k for k in g.clips if k in keys and clips[k].acting is None), key=lambda k: clips[k].frames)
         if config.acting_limbs is not None:

@@ -40,9 +40,12 @@ parameters, alignment cost and quality figures) and a per-frame ``action_frame``
 
 from __future__ import annotations
 
+import ctypes
+import gc
 import logging
 import shutil
 import socket
+import tempfile
 import time
 from pathlib import Path
 
@@ -50,8 +53,9 @@ import torch
 
 from ..core.errors import OutputExistsError, TorchspliceError, UnfinishedJobError
 from ..core.stop import check_stop
+from ..formats.index import refresh_database_index
 from ..store.lock import FileLock, check_name_length, remove_stale_temporaries
-from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig
+from .config import DEFAULT_ACTIONS, DEFAULT_LOCOMOTIONS, JobConfig, job_config, parse_shard
 from .engines.base import EngineContext, make_engine
 from .engines.forkserver import prestart
 from .merge import (STAGING, OutputMerge, merge_job, open_output, remove_merged_shards, source_rows, source_skeleton,
@@ -120,7 +124,6 @@ class SpliceJob:
                 sources.close()
             if self.shard is None:
                 shutil.rmtree(self.work, ignore_errors=True)
-                from ..formats.index import refresh_database_index
 
                 summary.index = refresh_database_index(c.output, write=c.index)  # never an earlier run's left beside it
         summary.seconds = time.perf_counter() - t0
@@ -130,8 +133,6 @@ class SpliceJob:
 
     def _dry_run(self, t0: float) -> JobSummary:
         """Plan, and say what the job would do and how much disk it needs; writes nothing."""
-        import tempfile
-
         with tempfile.TemporaryDirectory(dir=self.config.output.parent) as tmp:  # --target's databases, if any
             c = onto_target(self.config, Path(tmp))
             summary = self._dry_run_of(c, t0)
@@ -322,8 +323,6 @@ def splice_all(database, output, *, restart: bool = False, overwrite: bool = Fal
     Returns the :class:`JobSummary` (``spliced``, ``skipped`` by reason, ``flagged``,
     ``seconds``; ``lines()`` is what the command line prints).
     """
-    from .config import job_config, parse_shard
-
     config = job_config(database, output, **options)
     if shard is not None:
         shard = parse_shard(shard)
@@ -361,9 +360,6 @@ def _free_bytes(folder: Path) -> int | None:
 def _return_freed_memory() -> None:
     """Give the memory planning freed back to the system (glibc keeps freed heap memory, and
     planning's batches of clips leave much of it), so that the driver holds what it uses."""
-    import ctypes
-    import gc
-
     gc.collect()
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)

@@ -21,7 +21,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from ..core.errors import DatabaseError
+from ..store.assembly import KIND_CODES
 from ..store.database import MotionDatabase
 from ..specs import DatasetSpec
 from .task import FRAME_COLUMNS, OUTPUT_COLUMNS, Part
@@ -89,10 +92,6 @@ class OutputWriter:
     def _append_parts(self, part: Part, virtual: tuple | None = None) -> None:
         """A part's clips as their parts (an alignment store): source keys become bank rows.
         ``virtual``: ``(source, refer_as)`` of the shard holding their per-frame parts."""
-        from ..store.assembly import KIND_CODES
-
-        import numpy as np
-
         p, fps = part.parts, float(part.fps[0])
         keys = {}  # each source clip looked up once: its (bank, row) where one bank holds it, else None
         for k in set(p["locomotion"]) | set(p["action"]):
@@ -291,7 +290,6 @@ class AlignmentSink(HDF5Sink):
             part.save(path)
             return
         part.save(self._part_file(path))  # first: a shard file whole means its part is there
-        import numpy as np
 
         arrays = {"action_frame": np.asarray(part.action_frame, np.float32)}
         if part.parts is not None:

@@ -10,6 +10,9 @@ import math
 
 import numpy as np
 
+from ..ops.body import body_of
+from ..ops.plausibility import figure_joints
+from ..ops.units import centimetres
 from ..specs import DatasetSpec
 
 __all__ = ["source_figures", "scales"]
@@ -18,8 +21,6 @@ __all__ = ["source_figures", "scales"]
 def scales(spec_json: str) -> tuple[int, float, float]:
     """``(up axis index, units per metre, centimetres per unit)`` of a group's spec (NaN for
     unknown units: figures in metres or centimetres are then NaN)."""
-    from ..ops.units import centimetres
-
     spec = DatasetSpec.from_json(spec_json)
     cm = centimetres(spec.units)
     return "xyz".index(spec.up_axis), 100.0 / cm, cm
@@ -29,9 +30,6 @@ def source_figures(config, sources, groups, clips: dict, sk_l) -> None:
     """Record in ``clips`` (:class:`~torchsplice.job.plan.PlanClip`) each clip's figures on its
     group's skeleton (:meth:`~torchsplice.splice.backends.Backend.inside_body` and
     :meth:`~torchsplice.splice.backends.Backend.figures`), 64 clips at a time."""
-    from ..ops.body import body_of
-    from ..ops.plausibility import figure_joints
-
     backend = config.splice_backend()
     for g in groups:
         skeleton = sk_l[g.skeleton]

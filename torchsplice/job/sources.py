@@ -20,11 +20,17 @@ of workers. Every engine splices from identical arrays.
 
 from __future__ import annotations
 
+import shutil
+from dataclasses import replace
 from pathlib import Path
 
 from ..core.motion import Motion
+from ..ops.body import body_of
+from ..ops.hands import arms_of
+from ..ops.plausibility import figure_joints
 from ..store.database import MotionDatabase
 from ..splice.clips import resample_motion
+from ..splice.standing import standing_tables
 
 __all__ = ["Sources", "clip_key", "split_key", "retargeted_key", "retargeted_parts"]
 
@@ -117,6 +123,7 @@ class Sources:
         (raises the map's one-line error for a skeleton that is not a humanoid)."""
         key = (tag, skeleton, target)
         if key not in self.retargeting:
+            # loaded by jobs that retarget, not by every worker (as in .plan)
             from ..retarget.clips import Retargeter, source_label
             from ..retarget.targets import database_target
 
@@ -182,8 +189,6 @@ class Sources:
         """Write the banks built so far into ``folder`` (:meth:`ClipBank.save`, once each, marked
         as made for ``tag``: the plan's digest), and map them from there from now on, so that
         this process holds them once too."""
-        import shutil
-
         self.bank_dir, self.bank_tag = Path(folder), tag
         for bank_id, (bank, index) in list(self.banks.items()):
             if not isinstance(bank_id, int):
@@ -211,8 +216,6 @@ class Sources:
     def release_clips(self, keep=()) -> None:
         """Forget the clips read so far (but ``keep``, copied: clips read together share one
         buffer, which a kept clip would hold whole): the banks hold what splicing needs."""
-        from dataclasses import replace
-
         copy = lambda t: None if t is None else t.clone()  # noqa: E731
         self.motions = {k: replace(m, rotations=copy(m.rotations), root_translation=copy(m.root_translation),
                                    translations=copy(m.translations))
@@ -227,16 +230,10 @@ class Sources:
         key = (what, group_id)
         if key not in self.models:
             if what == "body":
-                from ..ops.body import body_of
-
                 self.models[key] = body_of(skeleton, roles)
             elif what == "arms":
-                from ..ops.hands import arms_of
-
                 self.models[key] = arms_of(skeleton, roles, self.body_model("body", group_id, skeleton, roles))
             else:
-                from ..ops.plausibility import figure_joints
-
                 self.models[key] = figure_joints(skeleton, roles)
         return self.models[key]
 
@@ -244,7 +241,5 @@ class Sources:
         """The group's tables for standing actions (:func:`~torchsplice.splice.standing.standing_tables`), made once."""
         key = ("standing", group_id)
         if key not in self.banks:
-            from ..splice.standing import standing_tables
-
             self.banks[key] = standing_tables(roles, skeleton, fps)
         return self.banks[key]

@@ -6,9 +6,12 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..core.errors import render_message
 from ..core.names import counted
+from ..core.progress import progress_bar as core_progress_bar
 from .size import OutputSize, format_bytes
 from .plan import SKELETONS_DIFFER
+from .task import FLAG_CODES
 
 __all__ = ["JobSummary", "REASON_OPTIONS", "REASONS_SHOWN", "reason_lines", "progress_bar"]
 
@@ -54,8 +57,6 @@ class JobSummary:
     def lines(self, option_name=None) -> list[str]:
         """The closing summary, as printed by the command line; ``option_name(option)`` writes the
         options a skip reason names (default: the library's names; the command line: its flags)."""
-        from ..core.errors import render_message
-
         name = option_name or (lambda o: o)
         say = lambda why: render_message(why, REASON_OPTIONS, name)  # noqa: E731
         rate = (self.spliced - self.resumed) / self.compute_seconds if self.compute_seconds > 0 else float("nan")
@@ -101,8 +102,6 @@ class JobSummary:
                        "could not be retargeted onto one another:")
             out += [f"  {n} x {say(why)}" for why, n in sorted(apart.items(), key=lambda kv: -kv[1])]
         if self.flagged:
-            from .task import FLAG_CODES
-
             out.append(f"flagged {counted(self.flagged_clips, 'clip')} (their 'flags' column; 'flag_details' says why, clip by clip):")
             out += [f"  {n} x {code}: {FLAG_CODES.get(code, '')}".rstrip(": ")
                     for code, n in sorted(self.flagged.items(), key=lambda kv: -kv[1])]
@@ -111,8 +110,6 @@ class JobSummary:
     def _room(self, option_name=None) -> str:
         """Expected size and free room; for a motion store, what the alignment store would take
         (``option_name`` writes the option, as in :meth:`lines`)."""
-        from ..core.errors import render_message
-
         folder = self.output.parent
         expect = (f"expected output about {format_bytes(self.expected.bytes)} ({self.expected.frames:,} frames)"
                   if self.expected is not None else "")
@@ -154,6 +151,4 @@ def reason_lines(skipped: dict[str, int], say) -> list[str]:
 
 def progress_bar(total: int, initial: int, show: bool):
     """The job's progress: a bar on a terminal, a line every 30 s in a log (:mod:`torchsplice.core.progress`)."""
-    from ..core.progress import progress_bar as bar
-
-    return bar(total=total, desc="splice-all", unit="splice", initial=initial, show=show, smoothing=0.1)
+    return core_progress_bar(total=total, desc="splice-all", unit="splice", initial=initial, show=show, smoothing=0.1)

@@ -18,6 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..core.version import __version__
+from ..store.atomic import atomic_path
 from .config import JobConfig
 
 __all__ = ["onto_target", "target_paths"]
@@ -50,8 +51,7 @@ def onto_target(config: JobConfig, folder: Path | None = None, progress=None) ->
     ``config`` itself when it has no target."""
     if config.target is None:
         return config
-    from ..retarget import resolve_target, retarget_clips
-    from ..store.atomic import atomic_path
+    from ..retarget import resolve_target, retarget_clips  # loaded by jobs with a target only
 
     target = resolve_target(config.target)  # once, for both databases
     out_l, out_a = target_paths(config, folder)

@@ -22,15 +22,21 @@ import numpy as np
 import torch
 
 from ..core.errors import TorchspliceError
+from ..core.method_table import builtin
 from ..core.ranges import lengths_to_starts, ranges_to_rows
+from ..core.version import __version__
+from ..ops.plausibility import penetration_of_frames
 from ..ops.units import centimetres
 from ..specs import DatasetSpec
+from ..store.assembly import TIMING_CODES
 from ..store.lock import temp_path
 from ..splice.api import spliced_labels
+from ..splice.backends import backend_for
 from ..splice.clips import resample_motion
 from ..splice.registry import get_method, load_plugins
 from .config import JobConfig
 from .plan import Plan, Task
+from .source_figures import scales
 from .sources import Sources
 
 __all__ = ["Part", "run_task", "OUTPUT_COLUMNS", "FRAME_COLUMNS", "POOR_ALIGNMENT", "poor_alignment", "FLAG_SEPARATOR",
@@ -218,9 +224,6 @@ class Part:
 
 def run_task(plan: Plan, task: Task, sources: Sources, config: JobConfig, buffers=None) -> Part:
     """Splice the pairs of ``task`` (see the module docstring)."""
-    from ..core.version import __version__
-    from ..splice.backends import backend_for
-
     resolved = config.resolved_backend()
     if plan.key["tool"] != f"torchsplice {__version__}" or plan.key["backend"] != resolved:
         raise TorchspliceError(f"this worker runs torchsplice {__version__} with the {resolved} splicer, but the job "
@@ -305,8 +308,6 @@ def _figures(backend, group, skeleton, joints, frames, rot: np.ndarray, trans: n
     from their packed frames (:meth:`~torchsplice.splice.backends.Backend.figures`; ``joints``:
     :func:`~torchsplice.ops.plausibility.figure_joints`); NaN where the skeleton's units are
     unknown."""
-    from .source_figures import scales
-
     up, per_metre, _ = scales(group.spec)
     names = ("foot_skate", "foot_slide", "floor", "jerk")
     if not len(frames) or not np.isfinite(per_metre):
@@ -327,10 +328,6 @@ def _keep_hands_out(backend, rows, group, skeleton, body, frames, rot: np.ndarra
     group's :class:`~torchsplice.ops.hands.Arms`
     (:meth:`~torchsplice.job.sources.Sources.body_model`: made once); ``rows`` the plan's
     :class:`~torchsplice.job.plan.ClipColumns` and the results' locomotions' and actions' rows."""
-    import torch
-
-    from ..ops.plausibility import penetration_of_frames
-
     share, depth, deepest = inside  # depth in the skeleton's units, as the plan's; deepest per packed frame
     corrected = np.zeros(len(frames), np.int64)
     cols, rows_l, rows_a = rows
@@ -395,9 +392,6 @@ def _parts(rows, config: JobConfig, task: Task, keys, batch, ok: np.ndarray, sta
     their frames: a motion store, a backend that gives no parts, a plug-in method, or a built-in
     whose table row stores frames (cpmc through the timewarp: its result is a per-joint difference
     on the locomotion, not an alignment)."""
-    from ..core.method_table import builtin
-    from ..store.assembly import TIMING_CODES
-
     row = builtin(task.method)
     if config.store != "alignment" or batch.parts is None or row is None or (
             not standing and row.stores == "frames"):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 
+from ..splice.backends import available_backends, get_backend
 from .task import run_task  # noqa: F401 (imports torch and the splicer)
 
 __all__ = ["preload_backends"]
@@ -17,8 +18,6 @@ __all__ = ["preload_backends"]
 def preload_backends(stream=None) -> list[str]:
     """Preload every available backend; one line on ``stream`` (default stderr) per backend whose
     preload failed, naming it and the error; returns those lines."""
-    from ..splice.backends import available_backends, get_backend
-
     failed = []
     for name in available_backends():
         try:

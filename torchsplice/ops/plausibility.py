@@ -29,6 +29,7 @@ from __future__ import annotations
 import torch
 
 from ..core.rotations import quat_apply, quat_conj
+from ..specs.canonical import canonical_joints
 from .body import Body, inside_depth
 
 __all__ = ["penetration", "penetration_packed", "penetration_of_frames", "skate_ratio", "foot_slide", "floor_height", "jerk", "resample_positions",
@@ -169,8 +170,6 @@ def jerk(positions: torch.Tensor, chest_rotations: torch.Tensor, lengths: torch.
 def figure_joints(skeleton, roles) -> tuple[tuple[int, ...], tuple[int, ...], int]:
     """``(feet, upper, chest)`` of a humanoid for :func:`clip_figures`: its toes (its ankles
     where it has none), its elbows, wrists and head, and the joint its arms hang from."""
-    from ..specs.canonical import canonical_joints
-
     j = canonical_joints(roles, skeleton)
     feet = (j["toe_l"], j["toe_r"]) if "toe_l" in j else (j["ankle_l"], j["ankle_r"])
     upper = (j["elbow_l"], j["elbow_r"], j["wrist_l"], j["wrist_r"], j.get("head", j["spine"][-1]))

@@ -21,7 +21,11 @@ import torch
 
 from ..core.errors import SpecError, TorchspliceError
 from ..core.version import __version__
+from ..formats.exporters import selected_names
+from ..formats.importer import DATABASE_SUFFIXES
 from ..ops.retarget import RetargetMap, retarget_map, retarget_motions
+from ..store.atomic import check_output
+from ..store.database import MotionDatabase
 from .defaults import DEFAULT_FIX_FEET
 from .targets import database_target, resolve_target
 
@@ -134,11 +138,6 @@ def retarget_clips(database, clips: Sequence[str] | None = None, *, to, out, sel
         progress: ``progress(iterable, total, description)`` wrapping the chunks (of
             :data:`CHUNK_CLIPS` clips), or ``None``.
     """
-    from ..formats.exporters import selected_names
-    from ..formats.importer import DATABASE_SUFFIXES
-    from ..store.atomic import check_output
-    from ..store.database import MotionDatabase
-
     target = resolve_target(to)
     inputs = [database] + ([target.path] if target.path is not None else [])
     out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=inputs, overwrite=overwrite)

@@ -31,7 +31,11 @@ import torch
 
 from ..core.errors import TorchspliceError
 from ..core.version import __version__
+from ..formats.exporters import selected_names
+from ..formats.importer import DATABASE_SUFFIXES
 from ..ops.mirror import mirror_motion, mirror_rig
+from ..store.atomic import check_output
+from ..store.database import MotionDatabase
 from .defaults import DEFAULT_ORIGINALS
 
 __all__ = ["mirror_clips", "MirrorReport", "MIRROR_SUFFIX"]
@@ -71,11 +75,6 @@ def mirror_clips(database, clips: Sequence[str] | None = None, *, out, select=No
         command: what the run record says made it.
         progress: ``progress(iterable, total, description)`` wrapping the chunks, or ``None``.
     """
-    from ..formats.exporters import selected_names
-    from ..formats.importer import DATABASE_SUFFIXES
-    from ..store.atomic import check_output
-    from ..store.database import MotionDatabase
-
     out = check_output(out, DATABASE_SUFFIXES, "a database", inputs=[database], overwrite=overwrite)
     if select is not None:
         clips = selected_names(database, select, clips)

@@ -13,15 +13,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from ..core.errors import SpecError, TorchspliceError
 from ..core.skeleton import Skeleton
+from ..formats.bvh import read_bvh
 from ..formats.importer import DATABASE_SUFFIXES
 from ..ops.feet import rig_heights
-from ..specs import DatasetSpec, load_spec
+from ..specs import DatasetSpec, detect_spec, load_spec
 from ..specs.canonical import canonical_joints, canonical_legs
 from ..specs.smpl import SMPL22, smpl22_skeleton
+from ..store.database import MotionDatabase
 
 __all__ = ["RetargetTarget", "resolve_target", "database_target", "BUILTIN_TARGETS", "HEIGHT_CLIPS"]
 
@@ -87,8 +90,6 @@ def resolve_target(to, what: str = "the target") -> RetargetTarget:
 
 
 def _database_target(text: str, path: Path, k: int | None) -> RetargetTarget:
-    from ..store.database import MotionDatabase
-
     if not path.is_file():
         raise TorchspliceError(f"{path}: no such database (the retargeting target)")
     with MotionDatabase.open(path) as db:
@@ -105,8 +106,6 @@ def _database_target(text: str, path: Path, k: int | None) -> RetargetTarget:
 def database_target(db, path, k: int) -> RetargetTarget:
     """Skeleton ``k`` of the open database ``db`` (read from ``path``) as a target, its feet's
     resting heights measured on its :data:`HEIGHT_CLIPS` longest clips."""
-    import numpy as np
-
     path = Path(path)
     try:
         spec = db.spec(k)
@@ -121,9 +120,6 @@ def database_target(db, path, k: int) -> RetargetTarget:
 
 
 def _bvh_target(path: Path) -> RetargetTarget:
-    from ..formats.bvh import read_bvh
-    from ..specs import detect_spec
-
     if not path.is_file():
         raise TorchspliceError(f"{path}: no such BVH file (the retargeting target)")
     motion = read_bvh(path, dtype=torch.float64)  # a malformed file: one BVHError line naming it

@@ -16,6 +16,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 from ..core.errors import SpecError
 from .clips import RoleRule
+from .text import parse_phrase_table
 from .vocabulary import AXES, GUESS_KEYS, GUESS_SINGLE, OPTIONAL_PAIRS, PAIRS, ROLES, SECTION_KEYS, UNITS, one_line
 
 __all__ = ["spec_fields", "toml_fields"]
@@ -108,8 +109,6 @@ def spec_fields(data: dict, where: str, path: Path | None = None, from_json: boo
     clips = _section(data, where, "clips", required=False)
     fields_ = {**_parse_dataset(dataset), **_parse_joints(joints), **_parse_clips(clips)}
     if "text" in data:  # the phrase table, for captions: checked here, read by specs.text when captions are made
-        from .text import parse_phrase_table
-
         parse_phrase_table(data["text"], where, fields_["name"])
     notes: tuple[str, ...] = ()
     guessed: tuple[tuple[str, tuple[str, ...]], ...] = ()

@@ -27,6 +27,7 @@ names has no key (so no phrase) for that part. Several phrases for one key are p
 from __future__ import annotations
 
 import functools
+import importlib.resources
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
 from ..core.errors import SpecError
+from .vocabulary import SHIPPED_PACKAGE
 
 __all__ = [
     "Token",
@@ -186,10 +188,6 @@ def phrase_table(path) -> PhraseTable | None:
 def spec_phrase_table(spec) -> PhraseTable | None:
     """The phrase table of a :class:`~torchsplice.specs.DatasetSpec`: its file's (a spec stored in
     a database keeps its file's path), else the shipped spec of its name; ``None`` if none."""
-    import importlib.resources
-
-    from .vocabulary import SHIPPED_PACKAGE
-
     path = getattr(spec, "path", None)
     if path is not None and Path(path).is_file():
         return phrase_table(Path(path))

@@ -34,6 +34,7 @@ This module imports no torch: the command line lists the methods without loading
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 import os
 import re
 import types
@@ -43,6 +44,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from ..core.errors import MotionError, TorchspliceError
 from ..core.method_table import BUILTINS, builtin
+from ..core.names import printable
 
 if TYPE_CHECKING:  # pragma: no cover
     import torch
@@ -185,9 +187,8 @@ def run_checked(method: Method, fn: Callable, inp: MethodInput, *args):
     cut to 300 characters). What passes is detached from autograd, moved to the input's
     device and float type, and its quaternions normalised. Built-ins are trusted.
     """
-    import torch
+    import torch  # here: the registry lists the methods without torch (the command line's choices)
 
-    from ..core.names import printable
     from .clips import ClipTensors
 
     who = f"method {method.name!r}" + (f" ({method.module})" if method.module else "")
@@ -297,10 +298,8 @@ def _ensure_loaded() -> None:
     _ensure_loaded_builtins()
     if _LOADED["entry_points"] is False:
         _LOADED["entry_points"] = None  # loading
-        from importlib.metadata import entry_points
-
         try:
-            for ep in entry_points(group=ENTRY_POINT_GROUP):
+            for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
                 where = f"plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})"
                 try:
                     obj = ep.load()

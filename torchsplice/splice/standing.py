@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from ..core.method_table import builtin, resolve
@@ -59,7 +60,7 @@ from ..core.rotations import axis_angle_to_quat, quat_apply, quat_conj, quat_mul
 from ..core.skeleton import Skeleton
 from ..specs import SkeletonRoles
 from ..align.curve import interpolate_frames, slerp_frames
-from .clips import ClipTensors, without_fk
+from .clips import ClipTensors, with_fk, without_fk
 from .defaults import LIMBS, TIMINGS  # declared there (read by the command line without torch)
 from .methods import upper_mask
 
@@ -188,7 +189,6 @@ def selection_tensors(act: ClipTensors, skeleton: Skeleton) -> ClipTensors:
     points are chosen on (the same frames whatever dtype the splice runs in)."""
     if act.rotations.dtype == torch.float64 and act.positions is not None:
         return act
-    from .clips import with_fk
 
     return with_fk(act.rotations.double(), act.translations.double(), act.lengths, skeleton)
 
@@ -379,9 +379,7 @@ def _mean_rotation(q: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
 def standing_tables(roles: SkeletonRoles, skeleton: Skeleton, fps: float):
     """The compiled splicer's tables for standing actions on ``skeleton`` at ``fps``
     (:class:`~torchsplice.cpu.bank.StandingTables`): the joints this module's functions use."""
-    import numpy as np
-
-    from ..cpu.bank import StandingTables
+    from ..cpu.bank import StandingTables  # here: importing this module loads no numba
 
     J = skeleton.num_joints
     upper = np.zeros(J, dtype=np.bool_)

@@ -8,6 +8,7 @@ import json
 
 import h5py
 import numpy as np
+import torch
 
 from ..core.errors import DatabaseError
 from ..core.ranges import lengths_to_starts, ranges_to_rows
@@ -104,8 +105,6 @@ class Assembling(DatabaseState):
         assembled there by torch (:mod:`torchsplice.store.assembly_torch`; equal to the compiled
         kernels' frames to float32's rounding), a motion store's frames read and moved there.
         ``names``: the frame arrays and per-frame columns wanted (default: all)."""
-        import torch
-
         starts, lengths = np.asarray(starts, np.int64).reshape(-1), np.asarray(lengths, np.int64).reshape(-1)
         g = self.h5[skeleton_path(k)]
         arrays = [n for n in FRAME_ARRAYS if n in g and (names is None or n in names)]

@@ -56,11 +56,13 @@ from typing import Any
 
 import h5py
 import numpy as np
+import torch
 
 from ..core.errors import DatabaseError
 from ..core.method_table import BUILTINS
 from ..core.ranges import lengths_to_starts, ranges_to_rows
 from ..core.threads import run_in_threads, split_by_weight
+from .assembly_torch import as_tensor, standing_frames, timewarp_frames
 from .schema import CLIPS, Damage, cap, checked_dataset, damaged_frame, refuse_non_finite, skeleton_path
 from .state import DatabaseState
 
@@ -381,7 +383,7 @@ class Assembly:
         the root's only saves the other joints' work), as the store's dtype. ``threads``: the
         threads of this process the kernels share the clips over (:mod:`torchsplice.core.threads`;
         the same bits for any count), used from :data:`SPLIT_FRAMES` frames a thread."""
-        from ..cpu.assemble import arc_table, assemble_standing, assemble_timewarp
+        from ..cpu.assemble import arc_table, assemble_standing, assemble_timewarp  # here: loads numba
 
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
         J, dtype, has_translations = self.skeleton_arrays(db, k)
@@ -502,10 +504,6 @@ class Assembly:
     def frames_on(self, db, k: int, starts: np.ndarray, lengths: np.ndarray, device) -> dict:
         """:meth:`frames` assembled by torch on ``device`` (:mod:`.assembly_torch`): float32
         tensors there, equal to the compiled kernels' to float32's rounding."""
-        import torch
-
-        from .assembly_torch import as_tensor, standing_frames, timewarp_frames
-
         starts, lengths, clip, first = self.locate(db, k, starts, lengths)
         J, _, has_translations = self.skeleton_arrays(db, k)
         N = int(lengths.sum())

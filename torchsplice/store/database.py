@@ -24,7 +24,9 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import shlex
 import shutil
+import sys
 from pathlib import Path
 
 import h5py
@@ -61,9 +63,6 @@ __all__ = ["MotionDatabase", "ClipBatch", "ClipTable", "SkeletonInfo", "SCHEMA_V
 
 def _writer_lock(path: Path):
     """Take the lock that lets one writer at a time at ``path`` (refused at once otherwise)."""
-    import shlex
-    import sys
-
     return output_lock(path, shlex.join(sys.argv)[:300]).acquire()
 
 

@@ -26,6 +26,7 @@ from ..core.motion import Motion
 from ..core.skeleton import Skeleton
 from ..specs import DatasetSpec, detect_spec
 from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, cap, short, skeleton_path
+from .select import names_or_selector, select_clips
 from .state import DatabaseState
 from .frame_array import FrameArray, reads, virtual_files
 from .table import ClipTable, SkeletonInfo, json_value, run_record
@@ -529,8 +530,6 @@ class Reading(DatabaseState):
 
     def _chosen(self, table: ClipTable, clips: Sequence[str] | None, select: Sequence[str] | None) -> set[str]:
         """The names of :meth:`summary`'s ``clips`` and ``select``."""
-        from .select import names_or_selector, select_clips
-
         names, chosen = names_or_selector(table, list(clips)) if clips else (None, None)
         for name in names or ():
             self.index(name)  # an unknown name: the database's one line, with similar names

@@ -48,6 +48,7 @@ import h5py
 import numpy as np
 import torch
 
+from ..core.errors import DatabaseError
 from ..core.skeleton import Skeleton
 from .defaults import COMPRESSIONS  # declared there, torch-free (the command line reads it)
 
@@ -133,8 +134,6 @@ def refuse_non_finite(db, arrays: dict, clip, lengths, first) -> None:
     """Refuse an alignment store's assembled ``arrays`` (name -> ``(N, ...)``, packed ranges as
     :func:`damaged_frame`'s) where a value is not finite (a damaged part): one
     :class:`~torchsplice.core.errors.DatabaseError` line. A sum per array; rows searched only then."""
-    from ..core.errors import DatabaseError
-
     for name, a in arrays.items():
         with np.errstate(invalid="ignore", over="ignore"):
             if np.isfinite(a.sum(dtype=np.float64)):

@@ -49,7 +49,7 @@ def alignment_data(locomotion: Motion, action: Motion, spec: DatasetSpec, option
 def plot_alignment(locomotion: Motion, action: Motion, spec: DatasetSpec, output, options: SpliceOptions | None = None,
                    dpi: int = 110) -> Path:
     """Write the alignment picture of one pair to ``output`` (PNG, PDF or SVG), atomically."""
-    import matplotlib
+    import matplotlib  # here, not at import: the Agg backend is chosen before pyplot loads
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -21,6 +21,10 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
 
 from .camera import Clip, canonical_axes
 from .style import CENTER, COLORS, DOT_COLOR, ENDED_ALPHA, GHOST_COLOR, GRID_COLOR, LEFT, RIGHT, TRAIL_COLOR
@@ -145,9 +149,6 @@ class Panel:
 
     def __init__(self, fig, rect, scene: Scene, clip: Clip, k: float, title: str | None, animated: bool,
                  grid_dots: bool = False, others: Sequence[Clip] = ()):
-        from matplotlib.lines import Line2D
-        from matplotlib.patches import Rectangle
-
         self.scene, self.clip, self.k = scene, clip, k
         ax = fig.add_axes(rect)
         ax.set_xlim(k * scene.xlim[0], k * scene.xlim[1])
@@ -233,9 +234,6 @@ class Panel:
 
 def new_figure(width_in: float, height_in: float, dpi: int):
     """An Agg figure sized to whole, even pixel counts (video encoders need even sizes)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     w_px = 2 * max(1, math.ceil(width_in * dpi / 2))
     h_px = 2 * max(1, math.ceil(height_in * dpi / 2))
     fig = Figure(figsize=(w_px / dpi, h_px / dpi), dpi=dpi, facecolor="white")
@@ -254,8 +252,6 @@ def legend(fig, x_in: float, y_in: float, grey: bool = False) -> None:
     """The side colours, left to right from (``x_in``, ``y_in``) inches: a short bone of each
     colour and its name ("left side", "right side": the character's own); with ``grey``, the
     colour of the clips drawn over another ("over it": named in the panel's title)."""
-    from matplotlib.lines import Line2D
-
     W, H = fig.get_size_inches()
     x = x_in
     keys = [(COLORS[LEFT], "left side"), (COLORS[RIGHT], "right side")]

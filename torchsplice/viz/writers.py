@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 from matplotlib.animation import FFMpegWriter, PillowWriter
+from matplotlib.colors import to_rgb
 
 from .style import COLORS, GHOST_COLOR, GRID_COLOR, TEXT_COLORS, TRAIL_COLOR
 
@@ -49,8 +50,7 @@ def _palette():
 
     Returns the palette image to map against and the ``768`` palette values to write.
     """
-    from matplotlib.colors import to_rgb
-    from PIL import Image
+    from PIL import Image  # Pillow: imported where GIFs are made
 
     white, grid = np.ones(3), np.array(to_rgb(GRID_COLOR))
     inks = [np.array(to_rgb(c)) for c in (*COLORS.values(), GRID_COLOR, TRAIL_COLOR, GHOST_COLOR, *TEXT_COLORS)]

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import torch
+
 from ..config import JobConfig
 from ..plan import Plan, Task
 from ..sink import Sink
@@ -79,8 +81,6 @@ def make_engine(ctx: EngineContext) -> Engine:
 def one_thread_worker(config) -> None:
     """What every engine's worker process starts with: one compute thread, for torch and for the
     job's splicing backend (workers run in parallel with each other, not within themselves)."""
-    import torch
-
     torch.set_num_threads(1)
     config.splice_backend().set_threads(1)
 

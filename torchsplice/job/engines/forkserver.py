@@ -7,7 +7,12 @@ loads none.
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import sys
+from multiprocessing import forkserver
+
+from ...splice.backends import get_backend, resolve_backend
+from ..defaults import usable_cores
 
 __all__ = ["prestart"]
 
@@ -21,20 +26,15 @@ def prestart(engine: str, workers: int | None, device: str | None, backend: str 
     This is :meth:`~torchsplice.job.config.JobConfig.uses_worker_processes`'s question, asked
     from the command line's flags before the job's config exists."""
     if workers is None:
-        from ..defaults import usable_cores
-
         workers = usable_cores()
     if engine != "local" or workers <= 1 or sys.platform == "win32":
         return
-    from ...splice.backends import get_backend, resolve_backend
 
     try:
         if not get_backend(resolve_backend(backend, device)).prepares_once:
             return
     except Exception:  # an unknown backend, or one that cannot run there: the job says why
         return
-    import multiprocessing as mp
-    from multiprocessing import forkserver
 
     mp.get_context("forkserver").set_forkserver_preload(["torchsplice.job.worker"])
     try:

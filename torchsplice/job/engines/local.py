@@ -16,16 +16,21 @@ import os
 import re
 import signal
 import sys
+import threading
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from ...core.errors import TorchspliceError
+from ...store.lock import pid_alive
 from ..config import JobConfig
 from ..plan import Plan, Task
+from ..sink import make_sink
 from ..sources import Sources
 from ..task import run_task
 from .base import MAX_ATTEMPTS, Engine, EngineContext, one_thread_worker, shard_compression
+from .inline import InlineEngine
 
 __all__ = ["LocalEngine", "make_local_engine", "IN_FLIGHT_PER_WORKER"]
 
@@ -37,8 +42,6 @@ wait for the driver's merge on disk, so this bounds the disk they take."""
 def make_local_engine(ctx: EngineContext) -> Engine:
     """The ``local`` engine: worker processes, or this process for one worker or a torch device."""
     if not ctx.config.uses_worker_processes():
-        from .inline import InlineEngine
-
         return InlineEngine(ctx)
     return LocalEngine(ctx)
 
@@ -52,7 +55,6 @@ def _worker_init(config: JobConfig, plan_path: str, shard_dir: str, driver: int,
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _exit_with(driver)
     one_thread_worker(config)
-    from ..sink import make_sink
 
     plan = Plan.load(Path(plan_path))
     sources = Sources(config.database, config.actions_db, bank_dir=Path(shard_dir), bank_tag=plan.digest(),
@@ -68,11 +70,6 @@ def _exit_with(driver: int) -> None:
     Workers are children of the fork server, and they hold the pipes that would tell it (and
     them) that the driver died, so neither would notice a killed driver by itself.
     """
-    import threading
-    import time
-
-    from ...store.lock import pid_alive
-
     def watch():
         while pid_alive(driver):
             time.sleep(0.5)

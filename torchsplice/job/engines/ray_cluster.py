@@ -12,6 +12,8 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import socket
+import threading
 import time
 from pathlib import Path
 
@@ -32,7 +34,7 @@ _RAY_CACHE: dict = {}
 def _ray_run(config: JobConfig, digest: str, plan_box: list, index: int, group_box: list):
     """A Ray task. The plan and each group's clips come boxed in a list, so that Ray passes their
     references untouched: a worker process fetches each only once and keeps it."""
-    import ray
+    import ray  # an optional dependency (the ray extra): imported where used
 
     if _RAY_CACHE.get("plan") != digest:
         one_thread_worker(config)
@@ -55,8 +57,6 @@ def _check_reachable(address: str, timeout: float = 10.0, where: str = "{ray_add
     whose answer is not gRPC's (HTTP/2) as a Ray cluster's GCS port speaks it (a dashboard's
     HTTP port, another service): Ray itself would wait long there, saying nothing. ``where``
     names what gave the address."""
-    import socket
-
     host, _, port = address.rpartition(":")
     try:
         port_n = int(port)
@@ -129,8 +129,6 @@ class RayEngine(Engine):
             if address != "local" and "://" not in address:  # a ray:// client address: Ray's client times out itself
                 _check_reachable(address, where=where)
             log.info("connecting to Ray at %s", address if address != "local" else "(a new local instance)")
-            import threading
-
             main = threading.current_thread() is threading.main_thread()
             handlers = {s: h for s in (signal.SIGINT, signal.SIGTERM) if (h := signal.getsignal(s)) is not None} \
                 if main else {}

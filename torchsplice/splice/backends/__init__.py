@@ -29,6 +29,7 @@ and ``crop`` count action frames *at the locomotion's frame rate*; angles are in
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -41,7 +42,8 @@ if TYPE_CHECKING:
 __all__ = ["Backend", "SplicedBatch", "PairFailedError", "register_backend", "get_backend", "available_backends", "backend_choices",
            "resolve_backend", "backend_for", "device_type", "dynamic_program_for"]
 
-# numpy and torch are imported where used: the command line lists the backends without them.
+# numpy, torch and the modules that load them are imported where used: the command line lists the
+# backends without them.
 
 
 @dataclass
@@ -355,8 +357,6 @@ def get_backend(name: str) -> Backend:
         if name in _REGISTRY:
             made = _REGISTRY[name]()
         elif name in _BUILTIN:
-            import importlib
-
             made = importlib.import_module(_BUILTIN[name], __name__).BACKEND
         else:
             raise TorchspliceError(f"unknown backend {name!r}; choose one of {', '.join(backend_choices())}")

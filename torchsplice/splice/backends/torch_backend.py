@@ -20,7 +20,7 @@ import numpy as np
 
 from ...core.errors import TorchspliceError
 from ...core.ranges import lengths_to_starts
-from ..registry import MethodInput, run_checked
+from ..registry import MethodFailedError, MethodInput, run_checked
 from . import Backend, SplicedBatch
 
 if TYPE_CHECKING:
@@ -92,8 +92,6 @@ class TorchBackend(Backend):
             if not keep_going:
                 raise
             if B == 1:  # this pair cannot be spliced: no frames, and why
-                from ..registry import MethodFailedError
-
                 why = str(exc) if isinstance(exc, MethodFailedError) else f"the alignment failed ({exc})"
                 return _failed(prepared, why, options)
         parts = [self.splice(prepared, loco[b:b + 1], action[b:b + 1],
@@ -127,8 +125,6 @@ class TorchBackend(Backend):
             if not keep_going:
                 raise
             if len(loco) == 1:
-                from ..registry import MethodFailedError
-
                 return _failed(prepared, str(exc) if isinstance(exc, MethodFailedError) else f"the alignment failed ({exc})",
                                options)
         return SplicedBatch.concat([self.standing(prepared, loco[b:b + 1], action[b:b + 1], acting[b:b + 1], tables, method,
