@@ -4,12 +4,29 @@ named in one line, and the others are still preloaded."""
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 
-from torchsplice.job.worker import preload_backends
+import pytest
+
 from torchsplice.splice.backends import available_backends, get_backend
 
 
-def test_a_failed_preload_is_named_in_one_line_and_the_others_still_run(monkeypatch):
+@pytest.fixture
+def preload_backends(monkeypatch):
+    """:func:`torchsplice.job.worker.preload_backends`, its module imported (which preloads) with
+    every backend's preload stubbed. The compiled backend's real one readies numba for a fork
+    server (the ``workqueue`` threading layer, which survives a fork but aborts where two threads
+    launch kernels at once, as a thread engine does), so it runs in a process of its own here
+    (:func:`test_a_good_preload_says_nothing`), not in the one that runs the other tests."""
+    for name in available_backends():
+        monkeypatch.setattr(get_backend(name), "preload", lambda: None)
+    from torchsplice.job.worker import preload_backends
+
+    return preload_backends
+
+
+def test_a_failed_preload_is_named_in_one_line_and_the_others_still_run(preload_backends, monkeypatch):
     names = [n for n in available_backends() if get_backend(n).available()]
     assert "compiled" in names and len(names) >= 2
     ran = []
@@ -29,5 +46,8 @@ def test_a_failed_preload_is_named_in_one_line_and_the_others_still_run(monkeypa
 
 
 def test_a_good_preload_says_nothing():
-    out = io.StringIO()
-    assert preload_backends(out) == [] and out.getvalue() == ""
+    """As a fork server starts: the module's import preloads every backend, and so does a call."""
+    code = ("import io\nfrom torchsplice.job.worker import preload_backends\nout = io.StringIO()\n"
+            "print(preload_backends(out) == [] and out.getvalue() == '')")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and done.stdout.strip() == "True" and done.stderr == "", done.stderr
