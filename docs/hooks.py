@@ -8,6 +8,8 @@
   target, from the docstring of ``scripts/benchmark.py`` (read, not run: it takes long).
 - ``<!-- generated: benchmark-runs -->``: the figures ``scripts/benchmark.py --json`` recorded,
   each section with its date, machine and command line (``docs/reference/benchmark-runs.json``).
+- ``<!-- generated: benchmark-runs-whole -->``: the same for the sections run on a whole dataset
+  (``--mix-db``, ``--held-back``, ``--big-db``).
 - ``<!-- generated: spec-format -->``: ``datasets_spec/README.md``, the dataset spec format.
 - The API pages' docstrings are written for Sphinx (``:func:`name```, ``:class:`~a.b```): each
   role becomes code, linked to the object's entry where the site documents it (a cross-reference
@@ -175,21 +177,23 @@ def benchmark_reference() -> str:
 RUNS = REPO / "docs" / "reference" / "benchmark-runs.json"
 
 
-def benchmark_runs() -> str:
+def benchmark_runs(whole: bool = False) -> str:
     """Markdown for the figures the benchmark's runs printed (:data:`RUNS`): per section its
-    date, machine and command line, then each printed line beside its target."""
+    date, machine and command line, then each printed line beside its target; the sections run
+    on ``--mocap``'s files, or (``whole``) those run on a whole dataset."""
     import sys
 
     sys.path.insert(0, str(REPO / "scripts"))
-    from bench_record import load_runs, split_target
+    from bench_record import WHOLE, load_runs, split_target
 
-    sections = load_runs(RUNS)
+    sections = {name: run for name, run in load_runs(RUNS).items() if name.endswith(WHOLE) == whole}
     if not sections:
-        return "No run is recorded yet: `python scripts/benchmark.py --json docs/reference/benchmark-runs.json`.\n"
+        flags = " --mix-db DB --big-db DB" if whole else ""
+        return f"No run is recorded yet: `python scripts/benchmark.py{flags} --json docs/reference/benchmark-runs.json`.\n"
     out: list[str] = []
     for name, run in sections.items():
         data = [ln[len("data: "):] for ln in run["lines"] if ln.startswith("data: ")]
-        out += [f"### `{name}`", "",
+        out += [f"### `{name.removesuffix(WHOLE)}`" + (" on the whole dataset" if whole else ""), "",
                 _text(f"{run['date']}, {run['machine']}; {run['seconds']:,.0f} s{_load_words(run)}; ``{run['command']}``"
                       + (f"; {data[0]}" if data else "") + "."), "",
                 "| what it printed | target |", "|---|---|"]
@@ -218,7 +222,7 @@ def spec_format() -> str:
 
 
 GENERATORS = {"cli": cli_reference, "errors": errors_reference, "benchmark": benchmark_reference,
-              "benchmark-runs": benchmark_runs,
+              "benchmark-runs": benchmark_runs, "benchmark-runs-whole": lambda: benchmark_runs(whole=True),
               "spec-format": spec_format}
 
 

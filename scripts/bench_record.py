@@ -12,6 +12,9 @@ The file, UTF-8 JSON::
                            "seconds": 12.3, "load": [0.4, 1.9],
                            "lines": ["what the section printed", ...]}}}
 
+A section run on a whole dataset (``--mix-db``, ``--held-back``, ``--big-db``: jobs of minutes to
+half an hour) is recorded as ``NAME`` + :data:`WHOLE`, beside its run on ``--mocap``'s files.
+
 ``load`` is the machine's one-minute load average when the section started and when it ended
 (``os.getloadavg``): a figure measured beside other work says so.
 
@@ -30,7 +33,10 @@ import time
 from datetime import date
 from pathlib import Path
 
-__all__ = ["Recorder", "machine", "load_runs", "split_target"]
+__all__ = ["Recorder", "WHOLE", "machine", "load_runs", "split_target"]
+
+WHOLE = ", whole dataset"
+"""What a section's name gains in the record where it ran on a whole dataset."""
 
 
 def machine() -> str:

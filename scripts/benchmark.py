@@ -77,7 +77,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
 
-from bench_record import Recorder  # noqa: E402
+from bench_record import WHOLE, Recorder  # noqa: E402
 from torchsplice.formats.bvh import format_bvh, read_bvh  # noqa: E402
 
 
@@ -760,10 +760,12 @@ def main() -> int:
         if unknown:
             p.error(f"--only: no section named {', '.join(sorted(unknown))} (sections: {', '.join(runs)})")
         recorder = Recorder(args.json)
+        # a section run on the whole dataset is recorded apart from its run on --mocap's files
+        whole = {"mix": args.mix_db, "hands": args.mix_db or args.held_back, "store": args.big_db}
         try:
             for name, run in runs.items():
                 if name in sections:
-                    with recorder.section(name):
+                    with recorder.section(name + WHOLE if whole.get(name) else name):
                         print(f"data: {data}")
                         run()
         finally:

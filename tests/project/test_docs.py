@@ -119,6 +119,17 @@ def test_recorded_benchmark_runs_render_each_line_beside_its_target(tmp_path, mo
     recorder.save()
     page = hooks.benchmark_runs()
     assert "### `store`" in page and "| store reads: 1.5x | &gt;= 1x |" in page and "; 4 clips." in page
+    # a section run on a whole dataset is recorded beside it, and shown apart
+    from bench_record import WHOLE
+
+    assert "No run is recorded yet" in hooks.benchmark_runs(whole=True)
+    with recorder.section("store" + WHOLE):
+        print("store   the default job: 12.5 min  [<= 30 min]")
+    recorder.save()
+    whole = hooks.benchmark_runs(whole=True)
+    assert "### `store` on the whole dataset" in whole and "| store the default job: 12.5 min | &lt;= 30 min |" in whole
+    assert "12.5 min" not in hooks.benchmark_runs() and "| store reads: 1.5x" not in whole
+    page = hooks.benchmark_runs()
     import json
     import os
 
@@ -153,7 +164,10 @@ def test_the_errors_and_speed_pages_hold_what_they_are_generated_from(site):
         for line in run["lines"]:
             if not line.startswith("data: "):
                 assert words(split_target(line)[0]) in words(speed), (name, line)
-    assert "3,107,297 clips" in speed  # the whole dataset's figures, recorded by hand, are kept beside them
+    from bench_record import WHOLE
+
+    assert {"hands" + WHOLE, "store" + WHOLE} <= set(runs)  # the whole dataset's runs are recorded
+    assert "3,107,297" in speed and "store on the whole dataset" in speed  # its default job, as its run printed
 
 
 def test_the_readme_is_a_short_front_page_linking_into_the_site():
