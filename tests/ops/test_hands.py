@@ -335,7 +335,7 @@ def test_the_way_round_goes_from_the_entry_normal_round_the_side_away_from_the_c
         inside = torch.zeros(n, 2, 1, dtype=torch.bool)
         inside[:, 0] = True
         runs = _runs(away, inside, torch.ones(n, dtype=torch.bool))
-        assert runs[3][:, 0, 0].tolist() == [1] * n  # one turn: it goes through
+        assert runs[2][:, 0, 0].tolist() == [1] * n  # one turn: it goes through
         assert not bool(_turned_back(away, inside, torch.ones(n, dtype=torch.bool), runs).any())
         oa = torch.zeros(n, 1, 1, 3, dtype=torch.float64)
         ob = oa.clone()
@@ -384,8 +384,8 @@ def test_the_kernels_runs_turn_back_and_go_round_as_the_torch_rules_do():
     t = {name: torch.from_numpy(a) for name, a in dict(away=away, inside=inside, follows=follows, apart=apart).items()}
     runs = _runs(t["away"], t["inside"], t["follows"])
     back = _turned_back(t["away"], t["inside"], t["follows"], runs).numpy()
-    through = inside & (runs[3].numpy() % 2 == 1) & round_
-    assert back.any() and through.any() and (inside & ~back & ~through & (runs[3].numpy() % 2 == 1)).any()
+    through = inside & (runs[2].numpy() % 2 == 1) & round_
+    assert back.any() and through.any() and (inside & ~back & ~through & (runs[2].numpy() % 2 == 1)).any()
     oa, ob = torch.from_numpy(ends[:, None, 0::2]), torch.from_numpy(ends[:, None, 1::2])
     way = _way_round(t["away"], t["apart"], oa, ob, torch.from_numpy(radii), torch.from_numpy(pos[:, :, None]), runs)
     way = way.numpy()

@@ -263,7 +263,7 @@ def _push(pos, E, W, oa, ob, radii, round_, target, slack: float, body: Body, ar
     excess = torch.where(inside, excess + slack, 0.0)  # beyond the target: out to slack below it
     lever = (_length(pb - pa) / _length(W - E).clamp_min(1e-300)[..., None] * s).clamp(0.5, 2.0)
     move = away * (excess / lever)[..., None]
-    through = inside & (runs[3] % 2 == 1) & round_
+    through = inside & (runs[2] % 2 == 1) & round_
     if bool(through.any()):  # round the obstacle: out to the same depth along the way round
         way = _way_round(away, apart, oa, ob, radii, pos[:, arms.chest, None, None], runs)
         reach = radii - target[:, None, None] + slack
@@ -277,8 +277,8 @@ def _runs(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor) -> tu
     on which an arm is ``inside`` ``(n, 2, O)`` one obstacle, and a step of it turns the way out
     ``away`` ``(n, 2, O, 3)`` (the normal at the closest point) over where consecutive normals
     have a negative dot product: the forearm's axis crossed the obstacle's. Per frame, arm and
-    obstacle ``(n, 2, O)``: ``(start, end, turns so far, turns in the whole run)``, ``start`` and
-    ``end`` the run's first and last row."""
+    obstacle ``(n, 2, O)``: ``(start, turns so far, turns in the whole run)``, ``start`` the
+    run's first row."""
     n = len(away)
     link = torch.zeros_like(inside)
     link[1:] = follows[1:, None, None] & inside[1:] & inside[:-1]
@@ -292,7 +292,7 @@ def _runs(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor) -> tu
     ends[-1] = True
     end = torch.flip(torch.cummin(torch.flip(torch.where(ends, row, n), [0]), 0).values, [0])
     first = count.gather(0, start)
-    return start, end, count - first, count.gather(0, end) - first
+    return start, count - first, count.gather(0, end) - first
 
 
 def _turned_back(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor, runs: tuple | None = None) -> torch.Tensor:
@@ -300,7 +300,7 @@ def _turned_back(away: torch.Tensor, inside: torch.Tensor, follows: torch.Tensor
     Where a run turns over an even number of times, it left the obstacle on the side it entered,
     so its frames after an odd number of turns are reversed: pushed out on that side all along.
     A run that turns an odd number of times went through the obstacle (:func:`_way_round`)."""
-    _, _, so_far, total = _runs(away, inside, follows) if runs is None else runs
+    _, so_far, total = _runs(away, inside, follows) if runs is None else runs
     return inside & (so_far % 2 == 1) & (total % 2 == 0)
 
 
@@ -311,7 +311,7 @@ def _way_round(away: torch.Tensor, apart: torch.Tensor, oa: torch.Tensor, ob: to
     across the axis (``oa`` to ``ob``, ``(n, 1, O, 3)``) from the run's entry normal (``away`` at
     its first frame), on the obstacle's side away from the body's ``centre`` (the chest,
     ``(n, 1, 1, 3)``; summed over the run, ``+`` on a tie within rounding): round the torso's
-    outside, a thigh's outside, never into the rest of the body. The way is the offset
+    outside (:data:`ROUND`), never into the rest of the body. The way is the offset
     ``away * apart`` plus the side times what the offset lacks of the radius (``radii - apart``,
     at least 0), made unit: the entry normal where the forearm enters, the side where it crosses
     the axis, the exit normal where it leaves. Where the entry normal lies along the axis there
