@@ -32,20 +32,29 @@ def test_chunks_of_no_items_zero_weights_and_one_heavy_item():
     assert np.array_equal(np.concatenate(heavy), np.arange(4)) and heavy[0].tolist() == [0, 1]
 
 
-def test_every_chunk_runs_on_the_pool_threads():
+@pytest.mark.parametrize("chunks, threads", [(4, 4), (4, 2), (2, 4), (7, 3)])
+def test_every_chunk_runs_once_on_the_caller_and_the_pool_threads_at_once(chunks, threads):
     seen, names = [], set()
     lock = threading.Lock()
+    inside = [threading.Barrier(min(chunks, threads), timeout=10)]  # every thread asked for runs a chunk at once
 
     def work(chunk):
         with lock:
             seen.extend(chunk.tolist())
+            first = threading.current_thread().name not in names
             names.add(threading.current_thread().name)
+        if first and inside:
+            inside[0].wait()
 
-    run_in_threads(work, split_by_weight(np.ones(10), 4), threads=4)
-    assert sorted(seen) == list(range(10)) and all(n.startswith("torchsplice") for n in names)
+    run_in_threads(work, split_by_weight(np.ones(10), chunks), threads=threads)
+    assert sorted(seen) == list(range(10))
+    caller = threading.current_thread().name
+    assert caller in names and len(names) == min(chunks, threads)
+    assert all(n.startswith("torchsplice") for n in names - {caller})
     names.clear()
-    run_in_threads(work, split_by_weight(np.ones(10), 4), threads=1)  # one thread: the caller's
-    assert names == {threading.current_thread().name}
+    inside.clear()
+    run_in_threads(work, split_by_weight(np.ones(10), chunks), threads=1)  # one thread: the caller's
+    assert names == {caller}
 
 
 def test_a_failure_is_raised_after_every_chunk_has_run():

@@ -17,6 +17,7 @@ from torchsplice.core.errors import DatabaseError
 from torchsplice.job import splice_all
 from torchsplice.job.materialize import materialize
 from torchsplice.store.database import MotionDatabase
+from torchsplice.store import assembly
 
 BANK = "assembly/banks/0"
 
@@ -122,6 +123,11 @@ def test_a_damaged_per_frame_part_is_refused_by_every_read_naming_the_clip(store
                                                                             t.length[row:row + 1], "cpu")):
             with pytest.raises(DatabaseError, match="has a NaN in its curve at its frame 5"):
                 read()
+        other = int(np.flatnonzero(kinds == 1)[0])
+        for _ in range(assembly.HOLD_AFTER_READS + 1):  # and every later one, once the store's parts are held
+            with pytest.raises(DatabaseError, match="has a NaN in its curve at its frame 5"):
+                db.read(t.names[row])
+            db.read(t.names[other])  # another timewarp clip reads as ever
     rc, _, err = run(capsys, "materialize", path, "-o", out)
     assert rc == 2 and error_line(err) == f"torchsplice: error: {caught.value}" and not out.exists()
 

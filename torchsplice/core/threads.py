@@ -3,7 +3,7 @@
 preallocated outputs, so the result is the one thread's, bit for bit.
 
 - :func:`split_by_weight`: contiguous chunks of items, each about the same total weight (frames);
-- :func:`run_in_threads`: a function applied to each chunk, on a pool of this process.
+- :func:`run_in_threads`: a function applied to each chunk, on this thread and a pool of this process.
 
 The pool is made on first use and again in a forked child (threads do not survive a fork), so a
 ``DataLoader`` worker that asks for threads gets its own. Callers choose the count: a reader in a
@@ -58,15 +58,34 @@ def _pool_of(threads: int) -> ThreadPoolExecutor:
 
 
 def run_in_threads(fn: Callable[[np.ndarray], None], chunks: Sequence[np.ndarray], threads: int) -> None:
-    """``fn(chunk)`` for each chunk, on ``threads`` threads of this process (in this thread when
-    ``threads`` is 1 or there is one chunk). The first exception a call raises is raised here,
+    """``fn(chunk)`` for each chunk, on ``threads`` threads of this process: this one and
+    ``threads - 1`` of a pool, each taking the next chunk not yet taken (in this thread alone when
+    ``threads`` is 1 or there is one chunk; the caller works rather than waits, which saves a
+    hand-over per call). The first exception a call raises, in the chunks' order, is raised here
     after every call has ended."""
     if threads <= 1 or len(chunks) <= 1:
         for c in chunks:
             fn(c)
         return
-    futures = [_pool_of(threads).submit(fn, c) for c in chunks]
-    errors = [f.exception() for f in futures]
+    todo = iter(range(len(chunks)))
+    taking = threading.Lock()
+    errors: list[BaseException | None] = [None] * len(chunks)
+
+    def drain() -> None:
+        while True:
+            with taking:
+                i = next(todo, None)
+            if i is None:
+                return
+            try:
+                fn(chunks[i])
+            except BaseException as e:  # raised below, once every chunk has run
+                errors[i] = e
+
+    helpers = [_pool_of(threads - 1).submit(drain) for _ in range(min(threads, len(chunks)) - 1)]
+    drain()
+    for h in helpers:
+        h.result()
     for e in errors:
         if e is not None:
             raise e

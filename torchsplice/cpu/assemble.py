@@ -274,17 +274,18 @@ def standing_rows(rot, trans, loco_start, loco_frames, action_start, action_fram
 
 
 @njit(cache=True, nogil=True)
-def assemble_timewarp(rot, trans, arc, starts, lengths, loco, action, crop, upper, pelvis, curve, pelvis_rot, first,
-                      count, out_start, out_rot, out_trans):
+def assemble_timewarp(rot, trans, arc, starts, lengths, loco, action, crop, upper, pelvis, curve, pelvis_rot, part_at,
+                      first, count, out_start, out_rot, out_trans):
     """Timewarp clips ``b``: result frames ``first[b] .. first[b] + count[b] - 1`` of
     the pair (bank clips ``loco[b]``, ``action[b]``, the action cropped by ``crop[b]``) into rows
-    ``out_start[b] ..`` of ``out_rot``/``out_trans``; ``curve``/``pelvis_rot`` hold those frames' parts in
-    the same rows."""
+    ``out_start[b] ..`` of ``out_rot``/``out_trans``; ``curve``/``pelvis_rot`` hold those frames' parts
+    from row ``part_at[b]`` on (a reader passes the parts it holds in memory as they are, with
+    each clip's place in them, so that no rows are gathered first)."""
     for b in range(loco.shape[0]):
-        o, n = out_start[b], count[b]
+        o, n, at = out_start[b], count[b], part_at[b]
         a = action[b]
         timewarp_rows(rot, trans, arc, starts[loco[b]] + first[b], starts[a] + crop[b], lengths[a] - crop[b], upper, pelvis,
-                      curve[o:o + n], pelvis_rot[o:o + n], n, out_rot[o:o + n], out_trans[o:o + n])
+                      curve[at:at + n], pelvis_rot[at:at + n], n, out_rot[o:o + n], out_trans[o:o + n])
 
 
 @njit(cache=True, nogil=True)

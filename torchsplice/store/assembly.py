@@ -308,31 +308,56 @@ class Assembly:
         """Rows ``starts[i] : starts[i] + lengths[i]`` of skeleton ``k``'s per-frame part ``name``
         (:data:`FRAME_PARTS`), each within clip ``clip[i]`` (a table row), concatenated: from
         memory where the part is held (:data:`HELD_PARTS_BYTES`), else read from the file."""
+        return self._gathered(db, k, name, self._held_part(db, k, name), clip, starts, lengths)
+
+    def _held_part(self, db, k: int, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """The read of part ``name`` of skeleton ``k`` counted; its held ``(at, rows)``
+        (:meth:`_hold`), held from the :data:`HOLD_AFTER_READS`-th read on, or ``None``."""
         key = (k, name)
         self.reads[key] = self.reads.get(key, 0) + 1
         if key not in self.held and self.reads[key] >= HOLD_AFTER_READS:
             self.held[key] = self._hold(db, k, name)
-        held = self.held.get(key)
+        return self.held.get(key)
+
+    def _gathered(self, db, k: int, name: str, held, clip, starts, lengths) -> np.ndarray:
         if held is None:
             return db.frame_rows(k, name, starts, lengths)
         at, rows = held
         return rows[ranges_to_rows(at[clip] + starts - self.start[clip], lengths)]
 
+    def timewarp_parts(self, db, k: int, clip, starts, lengths, first) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(curve, pelvis, at)`` of timewarp ranges (as :meth:`part_rows`'s arguments): the
+        ``assembly_curve`` ``(M,)`` and ``assembly_pelvis`` ``(M, 4)`` rows that hold them, and the
+        row where each range begins there. Where both parts are held, they are the held rows
+        themselves, not copied (both hold the same clips, :meth:`_hold`, and a held curve has no
+        NaN); else the ranges' rows one after another, a NaN in the curve refused as by
+        :meth:`curve_rows`."""
+        curve, pelvis = self._held_part(db, k, "assembly_curve"), self._held_part(db, k, "assembly_pelvis")
+        if curve is not None and pelvis is not None:
+            return curve[1], pelvis[1], curve[0][clip] + starts - self.start[clip]
+        rows = self._gathered(db, k, "assembly_curve", curve, clip, starts, lengths)
+        self._refuse_nan(db, rows, clip, lengths, first)
+        return rows, self._gathered(db, k, "assembly_pelvis", pelvis, clip, starts, lengths), lengths_to_starts(lengths)
+
     def curve_rows(self, db, k: int, clip, starts, lengths, first) -> np.ndarray:
         """:meth:`part_rows` of ``assembly_curve``; a NaN (a damaged part, which the kernels would
         index with) is one :class:`DatabaseError` line naming the file, the clip and its frame."""
         curve = self.part_rows(db, k, "assembly_curve", clip, starts, lengths)
+        self._refuse_nan(db, curve, clip, lengths, first)
+        return curve
+
+    @staticmethod
+    def _refuse_nan(db, curve, clip, lengths, first) -> None:
         bad = np.flatnonzero(np.isnan(curve))
         if bad.size:
             raise DatabaseError(damaged_frame(db, int(bad[0]), clip, lengths, first, "has a NaN in its curve"))
-        return curve
 
     def _hold(self, db, k: int, name: str) -> tuple[np.ndarray, np.ndarray] | None:
         """``(at, rows)``: the rows of part ``name`` of every clip of skeleton ``k`` that has them
         (timewarp clips: the curve and the pelvis; clips whose arms were moved: the arms), read
         at once, and per table row where its clip's rows begin there; ``None`` where they would
-        take more than :data:`HELD_PARTS_BYTES`, the file is being written, or a chunk is damaged
-        (each read then names its own rows)."""
+        take more than :data:`HELD_PARTS_BYTES`, the file is being written, a chunk is damaged or
+        the curve holds a NaN (each read then names its own rows)."""
         kind = self.parts["assembly_kind"]
         has = (kind == KIND_CODES["timewarp"]) if name != "assembly_arms" else (self.moved & (kind > 0))
         mine = np.flatnonzero(has & (self.skeleton == k))
@@ -343,6 +368,8 @@ class Assembly:
         try:
             rows = db.frame_rows(k, name, self.start[mine], self.length[mine])
         except DatabaseError:
+            return None
+        if name == "assembly_curve" and np.isnan(rows).any():  # each read then refuses its own clips' NaN
             return None
         at = np.full(len(self.skeleton), -1, np.int64)
         at[mine] = lengths_to_starts(self.length[mine])
@@ -404,13 +431,11 @@ class Assembly:
                 otrans[at_rows, 1:] = db.frame_rows(k, "translations", s, n)[:, 1:]
         timewarp = kind == 1
         curve = prot = None
+        part_at = np.zeros(len(kind), np.int64)  # where each timewarp clip's rows begin in curve and prot
         if timewarp.any():
-            s, n = starts[timewarp], lengths[timewarp]
-            curve = np.zeros(N)
-            prot = np.zeros((N, 4), np.float32)
-            at_rows = ranges_to_rows(out_start[timewarp], n)
-            curve[at_rows] = self.curve_rows(db, k, clip[timewarp], s, n, first[timewarp])
-            prot[at_rows] = self.part_rows(db, k, "assembly_pelvis", clip[timewarp], s, n)
+            curve, prot, part_at[timewarp] = self.timewarp_parts(
+                db, k, clip[timewarp], starts[timewarp], lengths[timewarp], first[timewarp]
+            )
         built = np.flatnonzero(kind > 0)
         for b in sorted(set(p["assembly_bank"][built].tolist())):  # the slerps' angles between neighbouring frames,
             bank = self.banks[b]  # once per bank (before any thread reads it)
@@ -438,6 +463,7 @@ class Assembly:
                         t["pelvis"],
                         curve,
                         prot,
+                        part_at[m],
                         first[m],
                         lengths[m],
                         out_start[m],
