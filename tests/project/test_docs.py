@@ -166,7 +166,8 @@ def test_the_errors_and_speed_pages_hold_what_they_are_generated_from(site):
                 assert words(split_target(line)[0]) in words(speed), (name, line)
     from bench_record import WHOLE
 
-    assert {"hands" + WHOLE, "store" + WHOLE} <= set(runs)  # the whole dataset's runs are recorded
+    assert {"mix" + WHOLE, "hands" + WHOLE, "store" + WHOLE} <= set(runs)  # the whole dataset's runs are recorded
+    assert "| standing against time-aligned" not in speed  # no figure typed beside them
     assert "store on the whole dataset" in speed  # its default job, as its run printed (every line checked above)
 
 
