@@ -54,7 +54,6 @@ from __future__ import annotations
 import json
 from typing import Any
 
-import h5py
 import numpy as np
 import torch
 
@@ -63,7 +62,7 @@ from ..core.method_table import BUILTINS
 from ..core.ranges import lengths_to_starts, ranges_to_rows
 from ..core.threads import run_in_threads, split_by_weight
 from .assembly_torch import as_tensor, standing_frames, timewarp_frames
-from .schema import CLIPS, Damage, cap, checked_dataset, damaged_frame, refuse_non_finite, skeleton_path
+from .schema import CLIPS, damaged_frame, refuse_non_finite, skeleton_path
 from .state import DatabaseState
 
 __all__ = [
@@ -78,7 +77,7 @@ __all__ = [
     "BANKS",
     "STORE_README",
     "store_kind",
-    "check_assembly",
+    "bank_tables",
     "Assembly",
 ]
 
@@ -162,75 +161,7 @@ def store_kind(attrs) -> str:
     return v or MOTION
 
 
-def check_assembly(h5: h5py.File, skeletons: list, frames: list[int]) -> None:
-    """Check an alignment store's banks, parts and the clips' references into them (vectorised);
-    raises :class:`Damage` naming the first problem."""
-    banks = h5.get(BANKS)
-    if not isinstance(banks, h5py.Group):
-        raise Damage("it is an alignment store without its source clips (assembly/banks is missing)")
-    keys = list(banks)
-    if sorted(keys, key=lambda k: (len(k), k)) != [str(b) for b in range(len(keys))]:
-        raise Damage(f"assembly/banks holds {cap(', '.join(keys))}, expected groups 0..{len(keys) - 1}")
-    sizes, counts, joints = [], [], []
-    for b in range(len(keys)):
-        where = f"{BANKS}/{b}"
-        g = banks[str(b)]
-        if not isinstance(g, h5py.Group):
-            raise Damage(f"{where} is not a group")
-        rot = checked_dataset(g, "rotations", where, (None, None, 4), "f")
-        N, J = rot.shape[0], rot.shape[1]
-        checked_dataset(g, "translations", where, (N, J, 3), "f")
-        C = checked_dataset(g, "starts", where, (None,), "iu").shape[0]
-        for name, kind in (("lengths", "iu"), ("names", "str"), ("keys", "str"), ("fps", "fiu")):
-            checked_dataset(g, name, where, (C,), kind)
-        starts, lengths = g["starts"][()].astype(np.int64), g["lengths"][()].astype(np.int64)
-        if C and ((starts < 0).any() or (lengths < 1).any() or (starts + lengths > N).any()):
-            raise Damage(f"{where} has source clips outside its {N} frames")
-        try:
-            tables = json.loads(g.attrs.get("tables", ""))
-            _tables(tables, J)
-        except (ValueError, TypeError, KeyError, IndexError) as exc:
-            raise Damage(f"{where} has no valid joint tables ({cap(str(exc), 60)})") from None
-        sizes.append(lengths)
-        counts.append(C)
-        joints.append(J)
-    for k, N in enumerate(frames[: len(skeletons)]):
-        g = h5[skeleton_path(k)]
-        for name, (shape, _) in FRAME_PARTS.items():
-            if name in g or name not in OPTIONAL_PARTS:
-                checked_dataset(g, name, skeleton_path(k), (N, *shape), "f")
-    c = h5[CLIPS]
-    if c["name"].shape[0] == 0:
-        return
-    p = {n: c[n][()].astype(np.int64) for n in PART_COLUMNS}
-    sk = c["skeleton"][()].astype(np.int64)
-    kind, bank = p["assembly_kind"], p["assembly_bank"]
-    bad = ~np.isin(kind, list(KIND_CODES.values()))
-    parts = kind > 0
-    bad |= parts & ((bank < 0) | (bank >= len(keys)))
-    if not bad.any() and parts.any():
-        C = np.array(counts, np.int64)[np.where(parts, bank, 0)]
-        J = np.array(joints, np.int64)[np.where(parts, bank, 0)]
-        lo, ac = p["assembly_locomotion"], p["assembly_action"]
-        bad |= parts & ((lo < 0) | (lo >= C) | (ac < 0) | (ac >= C))
-        bad |= parts & (J != np.array([s.num_joints for s in skeletons], np.int64)[sk])
-        if not bad.any():
-            length = c["length"][()].astype(np.int64)
-            la = np.zeros(len(kind), np.int64)
-            aa = np.zeros(len(kind), np.int64)
-            for b in range(len(keys)):
-                m = parts & (bank == b)
-                la[m], aa[m] = sizes[b][lo[m]], sizes[b][ac[m]]
-            bad |= parts & ((length > la) | (p["assembly_crop"] < 0) | (p["assembly_crop"] >= np.maximum(aa, 1)))
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise Damage(
-            f"clip {cap(c['name'].asstr()[i])}'s parts do not fit the alignment store's source clips "
-            f"(kind {int(kind[i])}, bank {int(bank[i])})"
-        )
-
-
-def _tables(raw: dict, J: int) -> dict:
+def bank_tables(raw: dict, J: int) -> dict:
     """A bank's joint tables as the kernels take them (checked against ``J`` joints)."""
 
     def mask(v):
@@ -277,7 +208,7 @@ class Assembly:
                     "trans": trans.astype(np.float64),
                     "starts": g["starts"][()].astype(np.int64),
                     "lengths": g["lengths"][()].astype(np.int64),
-                    "tables": _tables(json.loads(g.attrs["tables"]), rot.shape[1]),
+                    "tables": bank_tables(json.loads(g.attrs["tables"]), rot.shape[1]),
                 }
             )
         c = h5[CLIPS]
