@@ -268,21 +268,19 @@ def test_a_clean_clip_and_a_clip_allowed_as_deep_come_back_as_they_were():
     assert got.shape == (5, 2, 3) and bool((got == 0).all())
 
 
-def _crossing_the_torso(beyond: float):
-    """The sample's first clip (float64), and the same clip with its right arm aimed, over frames
-    30 to 70, at a point that sweeps from 1.5 torso radii in front of the torso's axis to
-    ``beyond`` radii behind it and back (smoothly): its forearm enters the torso from the front,
-    crosses the axis and leaves at the front again. ``(m, rot, body, arms)``."""
+def _right_arm_aimed(sweep: torch.Tensor, ahead: torch.Tensor, lateral: float = 0.0):
+    """The sample's first clip (float64), and the same clip with its right arm aimed at a point
+    ``ahead`` ``(T,)`` torso radii in front of the torso's axis at the chest and ``lateral``
+    radii to its side (the torso's outside for the right arm at negative values), blended in
+    with ``sweep`` ``(T,)`` (fully aimed from a third of it on). ``(m, rot, body, arms)``."""
     m, roles, body, arms, pos, grot, (a, b, torso, mid) = _sample_and_its_torso()
     sh, wr = arms.shoulder[1], arms.wrist[1]
     unit = lambda v: torch.nn.functional.normalize(v, dim=-1)  # noqa: E731
-    front = unit(torch.linalg.cross(unit(b[:, torso] - a[:, torso]), unit(mid - pos[:, sh]), dim=-1))
-    T = m.num_frames
-    sweep = torch.zeros(T, dtype=torch.float64)
-    f = torch.arange(30, 71, dtype=torch.float64)
-    sweep[30:71] = torch.sin(torch.pi * (f - 30) / 40) ** 2
+    axis = unit(b[:, torso] - a[:, torso])
+    front = unit(torch.linalg.cross(axis, unit(mid - pos[:, sh]), dim=-1))
+    side = unit(torch.linalg.cross(front, axis, dim=-1))
     radius = float(body.radii[torso])
-    aim = mid + (1.5 * radius - (1.5 + beyond) * radius * sweep)[:, None] * front
+    aim = mid + (ahead * radius)[:, None] * front + lateral * radius * side
     turn = quat_between(unit(pos[:, wr] - pos[:, sh]), unit(aim - pos[:, sh]))
     ident = torch.zeros_like(turn)
     ident[:, 0] = 1.0
@@ -290,6 +288,17 @@ def _crossing_the_torso(beyond: float):
     rot = m.rotations.clone()
     rot[:, sh] = quat_mul(quat_conj(grot[:, m.skeleton.parents[sh]]), quat_mul(turn, grot[:, sh]))
     return m, rot, body, arms
+
+
+def _crossing_the_torso(beyond: float):
+    """:func:`_right_arm_aimed` over frames 30 to 70 at a point that sweeps from 1.5 torso radii
+    in front of the torso's axis to ``beyond`` radii behind it and back (smoothly): its forearm
+    enters the torso from the front, crosses the axis and leaves at the front again."""
+    T = _sample_and_its_torso()[0].num_frames
+    sweep = torch.zeros(T, dtype=torch.float64)
+    f = torch.arange(30, 71, dtype=torch.float64)
+    sweep[30:71] = torch.sin(torch.pi * (f - 30) / 40) ** 2
+    return _right_arm_aimed(sweep, 1.5 - (1.5 + beyond) * sweep)
 
 
 def test_the_way_out_turns_back_only_on_a_run_that_leaves_where_it_entered():
@@ -431,32 +440,15 @@ def test_an_arm_that_crosses_the_torsos_axis_and_back_is_pushed_out_of_one_side_
 
 
 def _through_the_torso(lateral: float):
-    """The sample's first clip (float64), and the same clip with its right arm aimed, over frames
-    30 to 70, at a point that sweeps from 1.5 torso radii in front of the torso's axis to 1.5
-    radii behind it, ``lateral`` radii to the side (the torso's outside for the right arm at
-    negative values), and stays there: its forearm goes through the torso, in at the front and
-    out at the back. ``(m, rot, body, arms)``."""
-    m, roles, body, arms, pos, grot, (a, b, torso, mid) = _sample_and_its_torso()
-    sh, wr = arms.shoulder[1], arms.wrist[1]
-    unit = lambda v: torch.nn.functional.normalize(v, dim=-1)  # noqa: E731
-    axis = unit(b[:, torso] - a[:, torso])
-    front = unit(torch.linalg.cross(axis, unit(mid - pos[:, sh]), dim=-1))
-    side = unit(torch.linalg.cross(front, axis, dim=-1))
-    T = m.num_frames
+    """:func:`_right_arm_aimed` over frames 30 to 70 at a point that sweeps from 1.5 torso radii
+    in front of the torso's axis to 1.5 radii behind it, ``lateral`` radii to the side, and stays
+    there: its forearm goes through the torso, in at the front and out at the back."""
+    T = _sample_and_its_torso()[0].num_frames
     sweep = torch.ones(T, dtype=torch.float64)
     sweep[:30] = 0.0
     f = torch.arange(30, 71, dtype=torch.float64)
     sweep[30:71] = torch.sin(torch.pi / 2 * (f - 30) / 40) ** 2
-    radius = float(body.radii[torso])
-    aim = mid + ((1.5 - 3.0 * sweep) * radius)[:, None] * front + lateral * radius * side
-    turn = quat_between(unit(pos[:, wr] - pos[:, sh]), unit(aim - pos[:, sh]))
-    ident = torch.zeros_like(turn)
-    ident[:, 0] = 1.0
-    weight = (3 * sweep).clamp(max=1.0)
-    turn = quat_slerp(ident, turn, weight)
-    rot = m.rotations.clone()
-    rot[:, sh] = quat_mul(quat_conj(grot[:, m.skeleton.parents[sh]]), quat_mul(turn, grot[:, sh]))
-    return m, rot, body, arms
+    return _right_arm_aimed(sweep, 1.5 - 3.0 * sweep, lateral)
 
 
 def test_an_arm_that_goes_through_the_torso_is_taken_round_its_outside_smoothly():

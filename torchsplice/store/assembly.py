@@ -251,6 +251,7 @@ class Assembly:
         return self.held.get(key)
 
     def _gathered(self, db, k: int, name: str, held, clip, starts, lengths) -> np.ndarray:
+        """:meth:`part_rows` of part ``name`` given its held ``(at, rows)`` (or ``None``: the file)."""
         if held is None:
             return db.frame_rows(k, name, starts, lengths)
         at, rows = held

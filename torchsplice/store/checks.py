@@ -40,6 +40,7 @@ from .schema import (
     cap,
     checked_dataset,
     extra_columns,
+    first_non_finite_row,
     short,
     skeleton_from_group,
     skeleton_path,
@@ -258,19 +259,14 @@ def check_banks(path, h5: h5py.File, banks: list[dict]) -> None:
     """An alignment store's source banks as read (``banks``: :attr:`~.assembly.Assembly.banks`,
     float64), checked once per read of them: a value that is not finite (a damaged chunk that
     still decompresses, a row overwritten) is one :class:`DatabaseError` line naming the file, the
-    bank and the source clip, so that no motion is assembled from it. Vectorised: a sum per array,
-    the rows searched only where it is not finite."""
+    bank and the source clip, so that no motion is assembled from it (:func:`~.schema.first_non_finite_row`)."""
     for b, bank in enumerate(banks):
         for name, key in (("rotations", "rot"), ("translations", "trans")):
-            a = bank[key]
-            with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: NaN, said below in one line
-                if np.isfinite(a.sum()):
-                    continue
-            bad = np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(1))
-            if len(bad):
+            bad = first_non_finite_row(bank[key])
+            if bad is not None:
                 raise DatabaseError(
                     f"{path}: damaged alignment store: bank {b} ({BANKS}/{b}) holds non-finite {name} "
-                    f"in {_bank_clip(h5[f'{BANKS}/{b}'], int(bad[0]), frame=True)}"
+                    f"in {_bank_clip(h5[f'{BANKS}/{b}'], bad, frame=True)}"
                 )
 
 

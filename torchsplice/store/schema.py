@@ -130,16 +130,23 @@ def damaged_frame(db, row: int, clip, lengths, first, what: str) -> str:
     return f"{db.path}: damaged alignment store: clip {cap(db.names[int(clip[i])])} {what} at its frame {frame}"
 
 
+def first_non_finite_row(a: np.ndarray) -> int | None:
+    """The first row of ``a`` ``(N, ...)`` that holds a value which is not finite, or ``None``:
+    one ``isfinite`` pass, its rows searched only where it finds one."""
+    finite = np.isfinite(a)
+    if finite.all():
+        return None
+    return int(np.flatnonzero(~finite.reshape(len(a), -1).all(1))[0])
+
+
 def refuse_non_finite(db, arrays: dict, clip, lengths, first) -> None:
     """Refuse an alignment store's assembled ``arrays`` (name -> ``(N, ...)``, packed ranges as
     :func:`damaged_frame`'s) where a value is not finite (a damaged part): one
-    :class:`~torchsplice.core.errors.DatabaseError` line. One pass per array (``isfinite``, a
-    quarter of a float64 sum's time, which this check costs on every read); rows searched only then."""
+    :class:`~torchsplice.core.errors.DatabaseError` line (:func:`first_non_finite_row`)."""
     for name, a in arrays.items():
-        if np.isfinite(a).all():
-            continue
-        bad = int(np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(1))[0])
-        raise DatabaseError(damaged_frame(db, bad, clip, lengths, first, f"assembles to non-finite {name}"))
+        bad = first_non_finite_row(a)
+        if bad is not None:
+            raise DatabaseError(damaged_frame(db, bad, clip, lengths, first, f"assembles to non-finite {name}"))
 
 
 def cap(value, n: int = 40) -> str:

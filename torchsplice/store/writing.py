@@ -40,7 +40,8 @@ from .guards import (
     per_clip,
 )
 from .assembly import ALIGNMENT, FRAME_PARTS
-from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, short, skeleton_path, skeleton_to_group
+from .schema import FRAME_ARRAYS, CLIPS, COLUMNS, KINDS, MIXED, SKELETONS, first_non_finite_row, short
+from .schema import skeleton_path, skeleton_to_group
 from .state import DatabaseState
 
 __all__ = ["Writing", "guarded", "io_failure", "SPACE_MARGIN", "FLUSH_FRAMES"]
@@ -278,8 +279,7 @@ class Writing(DatabaseState):
         index = self._new_names(names)
         starts = lengths_to_starts(lengths)
         for name, a in (("rotations", rot), ("root translation", root), ("translations", trans)) if check else ():
-            if a is not None and not np.isfinite(a).all():
-                row = int(np.nonzero(~np.isfinite(a.reshape(N, -1)).all(1))[0][0])
+            if a is not None and (row := first_non_finite_row(a)) is not None:
                 c = int(np.searchsorted(starts, row, side="right") - 1)
                 raise DatabaseError(f"{self.path}: clip {names[c]!r} has non-finite {name} at frame {row - starts[c]}")
         extra, frame_extra = dict(extra or {}), dict(frame_extra or {})
