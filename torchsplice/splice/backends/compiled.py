@@ -20,7 +20,7 @@ from . import Backend, PairFailedError, SplicedBatch
 # (resolve_backend, prepares_once) loads neither, so the command line decides early, without torch,
 # whether it starts the job's fork server.
 
-__all__ = ["CompiledBackend", "BACKEND", "WARM_PARTS", "kernels_cached", "warm_up"]
+__all__ = ["CompiledBackend", "BACKEND", "WARM_PARTS", "kernels_cached", "mark_cached", "warm_up"]
 
 
 WARM_PARTS = ("splicer", "others")
@@ -28,18 +28,32 @@ WARM_PARTS = ("splicer", "others")
 whole-pair splicer alone, and every other kernel of the default paths."""
 
 
-def kernels_cached() -> bool:
-    """Whether this version's kernels are compiled and cached already (:func:`torchsplice.cpu.warm`)."""
-    from ...cpu import warm
+def kernels_cached(dtype=np.float32) -> bool:
+    """Whether this version's kernels are compiled and cached already (:func:`torchsplice.cpu.warm`);
+    for float64 frames, whether :func:`mark_cached` recorded their warm-up."""
+    from ...cpu import cache_dir, warm
 
-    return warm()
+    return (cache_dir() / "float64.warm").is_file() if dtype == np.float64 else warm()
 
 
-def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: bool = False) -> float:
+def mark_cached(dtype=np.float32) -> None:
+    """Record that :func:`warm_up` compiled every part for ``dtype`` (float32 needs no record: any
+    cached kernel says so)."""
+    from ...cpu import cache_dir
+
+    if dtype == np.float64:
+        (cache_dir() / "float64.warm").write_text("the float64 kernels are compiled\n")
+
+
+def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: bool = False,
+            dtype=np.float32) -> float:
     """Run every kernel of the default paths once on the built-in sample (those of ``parts``, see
     :data:`WARM_PARTS`), compiling them where the cache lacks them; returns the seconds taken
-    (0 when the cache was already warm, unless ``force``)."""
-    if kernels_cached() and not force:
+    (0 when the cache was already warm, unless ``force``). ``dtype``: the frames' (the splicer's
+    output, the body test's and the correction's input, the alignment's grids): numba compiles
+    each kernel once per type, so float64 work (``SpliceOptions(dtype=torch.float64)``, float64
+    clips) needs its own warm-up (``python -m torchsplice.warmup --float64``)."""
+    if kernels_cached(dtype) and not force:
         return 0.0
     t0 = time.perf_counter()
     if not quiet:
@@ -49,30 +63,32 @@ def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: boo
     from ...specs import load_spec
     from ..standing import standing_tables
 
-    clips = sample_motions()[:4]
+    import torch
+
+    clips = sample_motions(torch.float64 if dtype == np.float64 else torch.float32)[:4]
     roles = load_spec("sample").bind(clips[0].skeleton)
     bank = ClipBank.from_motions(clips, clips[0].skeleton, roles)
     if "splicer" in parts:
         for method in (m.name for m in BUILTINS):
-            splice_bank(bank, np.array([0, 1]), np.array([2, 3]), method, ref=np.array([0, 1]))
+            splice_bank(bank, np.array([0, 1]), np.array([2, 3]), method, ref=np.array([0, 1]), dtype=dtype)
     if "others" not in parts:
         return time.perf_counter() - t0
     tables = standing_tables(roles, clips[0].skeleton, clips[0].fps)
     for method in (m.name for m in BUILTINS):
         for timing in ("loop", "hold", "fit"):
             standing_bank(bank, np.array([0, 1]), np.array([2, 3]), np.array([[True, False], [True, True]]), tables,
-                          method, timing)
-    import torch
+                          method, timing, dtype=dtype)
+    from ...align.timewarp import cumulative_cost, timewarp
 
-    from ...align.timewarp import timewarp
-
-    timewarp(torch.rand(2, 8, 9), max_run=3)
+    grid = torch.rand(2, 8, 9, dtype=torch.float64 if dtype == np.float64 else torch.float32)
+    timewarp(grid, max_run=3)
+    cumulative_cost(grid, max_run=3)  # plot-alignment's
     from ...ops.body import body_of
     from ...ops.hands import arms_of
 
     m = clips[0]
     body = body_of(m.skeleton, roles)
-    rot, trans = m.rotations.float().numpy(), m.local_translations().float().numpy()
+    rot, trans = m.rotations.numpy(), m.local_translations().numpy()
     CompiledBackend().inside_body(rot, trans, [m.num_frames], m.skeleton, body)
     CompiledBackend().keep_hands_out(rot, trans, [m.num_frames], m.fps, m.skeleton, body, arms_of(m.skeleton, roles, body),
                                      [0.0])
