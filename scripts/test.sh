@@ -26,8 +26,10 @@ if ! { command -v chromium >/dev/null && command -v chromedriver >/dev/null; } \
   apt-get install -y -qq --no-install-recommends chromium chromium-driver >/dev/null
 fi
 TORCHSPLICE_EXTRAS="test,ray,docs" . scripts/setup_env.sh
-# the known-answer tests splice in float64: their kernels compiled once here (a no-op when cached),
-# not on first use in each test process
+# every kernel compiled once here (no-ops once the cache records them: a cache the set-up left
+# half-compiled is finished), float64 too, which the known-answer tests splice in, rather than on
+# first use in each test process
+python -m torchsplice.warmup
 python -m torchsplice.warmup --float64
 # bytecode kept: where the machine sets PYTHONDONTWRITEBYTECODE, pytest would rewrite every test
 # module's asserts again in each process (12 s of each one's start on two cores, 4 s with the cache)

@@ -3,8 +3,9 @@
 numba compiles a kernel the first time it is called and caches the machine code (see
 :func:`torchsplice.cpu.cache_dir`). The kernels take one to two minutes to compile on two cores,
 so ``scripts/setup_env.sh`` runs this once after installing, rather than leaving the wait to a
-user's first splice. A warm cache makes it a no-op. With two cores or more, the two halves of
-the work (:data:`~torchsplice.splice.backends.compiled.WARM_PARTS`: the whole-pair splicer, and
+user's first splice. A warm cache makes it a no-op: a finished warm-up leaves its record in the
+cache (:func:`~torchsplice.splice.backends.compiled.mark_cached`), so that one cut short compiles
+the rest next time. With two cores or more, the two halves of the work (:data:`~torchsplice.splice.backends.compiled.WARM_PARTS`: the whole-pair splicer, and
 the rest) compile at once, the second in a child process (``--part others``).
 
 ``--float64`` compiles the same kernels for float64 frames (numba compiles a kernel once per
@@ -45,12 +46,12 @@ def main(argv: list[str] | None = None) -> int:
     if kernels_cached(dtype):
         return 0
     what = "the CPU splicer's float64 kernels" if f64 else "the CPU splicer"
+    minutes = "two" if usable_cores() >= 2 else "three"
+    print(f"setup: compiling {what} for this machine (once; one to {minutes} minutes)", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
     if usable_cores() < 2:
-        print(f"setup: compiling {what} for this machine (once; one to three minutes)", file=sys.stderr, flush=True)
-        seconds = warm_up(quiet=True, force=True, dtype=dtype)
+        warm_up(quiet=True, force=True, dtype=dtype)  # every part: it records them itself
     else:
-        print(f"setup: compiling {what} for this machine (once; one to two minutes)", file=sys.stderr, flush=True)
-        t0 = time.perf_counter()
         child = subprocess.Popen([sys.executable, "-m", "torchsplice.warmup", *(["--float64"] if f64 else []),
                                   "--part", WARM_PARTS[1]], stderr=subprocess.PIPE, text=True)
         try:
@@ -60,8 +61,8 @@ def main(argv: list[str] | None = None) -> int:
         if child.returncode != 0:
             sys.stderr.write(err)
             return child.returncode or 1
-        seconds = time.perf_counter() - t0
-    mark_cached(dtype)
+        mark_cached(dtype)
+    seconds = time.perf_counter() - t0
     print(f"setup: compiled in {seconds:.0f} s", file=sys.stderr)
     return 0
 

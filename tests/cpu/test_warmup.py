@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from torchsplice.cpu import cache_dir, warm
-from torchsplice.splice.backends.compiled import WARM_PARTS, kernels_cached
+from torchsplice.splice.backends.compiled import WARM_PARTS, kernels_cached, mark_cached
 from torchsplice.warmup import main
 
 
@@ -25,7 +25,7 @@ def _stamps():
 
 
 def test_a_warm_cache_is_left_as_it_is(capsys):
-    assert warm()  # the suite's kernels are compiled by now
+    assert warm() and kernels_cached()  # the suite's kernels are compiled by now (scripts/test.sh)
     before = _stamps()
     assert main([]) == 0
     assert capsys.readouterr().err == ""
@@ -43,3 +43,16 @@ def test_the_float64_warm_up_is_recorded_and_then_left_as_it_is(capsys):
     assert main(["--float64"]) == 0
     assert capsys.readouterr().err == ""
     assert _stamps() == before
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_kernels_cached_only_once_a_whole_warm_up_recorded_them(tmp_path, monkeypatch, dtype):
+    # a cache holding some kernels (a first splice, a warm-up cut short) is not a warm one: the set-up's
+    # next warm-up compiles the rest rather than taking it for done
+    import torchsplice.cpu
+
+    monkeypatch.setattr(torchsplice.cpu, "cache_dir", lambda: tmp_path)
+    (tmp_path / "splice.splice_batch-294.py311.nbi").write_bytes(b"")
+    assert not kernels_cached(dtype)
+    mark_cached(dtype)
+    assert kernels_cached(dtype) and not kernels_cached(np.float64 if dtype == np.float32 else np.float32)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -28,28 +29,32 @@ WARM_PARTS = ("splicer", "others")
 whole-pair splicer alone, and every other kernel of the default paths."""
 
 
-def kernels_cached(dtype=np.float32) -> bool:
-    """Whether this version's kernels are compiled and cached already (:func:`torchsplice.cpu.warm`);
-    for float64 frames, whether :func:`mark_cached` recorded their warm-up."""
-    from ...cpu import cache_dir, warm
+def _warmed(dtype) -> Path:
+    """The record a finished :func:`warm_up` of ``dtype`` leaves in the kernel cache's folder."""
+    from ...cpu import cache_dir
 
-    return (cache_dir() / "float64.warm").is_file() if dtype == np.float64 else warm()
+    return cache_dir() / f"{np.dtype(dtype).name}.warm"
+
+
+def kernels_cached(dtype=np.float32) -> bool:
+    """Whether a warm-up compiled every kernel of the default paths for ``dtype`` frames, for
+    this version of the kernels (:func:`mark_cached`'s record). Kernels cached by a first splice,
+    or by a warm-up cut short, do not count: the next warm-up compiles the rest."""
+    return _warmed(dtype).is_file()
 
 
 def mark_cached(dtype=np.float32) -> None:
-    """Record that :func:`warm_up` compiled every part for ``dtype`` (float32 needs no record: any
-    cached kernel says so)."""
-    from ...cpu import cache_dir
-
-    if dtype == np.float64:
-        (cache_dir() / "float64.warm").write_text("the float64 kernels are compiled\n")
+    """Record that :func:`warm_up` compiled every part for ``dtype`` frames (in the kernels'
+    cache folder, which a change to their sources replaces)."""
+    _warmed(dtype).write_text(f"every kernel of the default paths is compiled for {np.dtype(dtype).name} frames\n")
 
 
 def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: bool = False,
             dtype=np.float32) -> float:
     """Run every kernel of the default paths once on the built-in sample (those of ``parts``, see
     :data:`WARM_PARTS`), compiling them where the cache lacks them; returns the seconds taken
-    (0 when the cache was already warm, unless ``force``). ``dtype``: the frames' (the splicer's
+    (0 when the cache was already warm, unless ``force``); having run every part, it records so
+    (:func:`mark_cached`). ``dtype``: the frames' (the splicer's
     output, the body test's and the correction's input, the alignment's grids): numba compiles
     each kernel once per type, so float64 work (``SpliceOptions(dtype=torch.float64)``, float64
     clips) needs its own warm-up (``python -m torchsplice.warmup --float64``)."""
@@ -65,7 +70,8 @@ def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: boo
 
     import torch
 
-    clips = sample_motions(torch.float64 if dtype == np.float64 else torch.float32)[:4]
+    frames = torch.float64 if dtype == np.float64 else torch.float32
+    clips = sample_motions(frames)[:4]
     roles = load_spec("sample").bind(clips[0].skeleton)
     bank = ClipBank.from_motions(clips, clips[0].skeleton, roles)
     if "splicer" in parts:
@@ -80,7 +86,7 @@ def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: boo
                           method, timing, dtype=dtype)
     from ...align.timewarp import cumulative_cost, timewarp
 
-    grid = torch.rand(2, 8, 9, dtype=torch.float64 if dtype == np.float64 else torch.float32)
+    grid = torch.rand(2, 8, 9, dtype=frames)
     timewarp(grid, max_run=3)
     cumulative_cost(grid, max_run=3)  # plot-alignment's
     from ...ops.body import body_of
@@ -95,6 +101,8 @@ def warm_up(quiet: bool = False, parts: tuple[str, ...] = WARM_PARTS, force: boo
     from ...ops.plausibility import figure_joints
 
     CompiledBackend().figures(rot, trans, [m.num_frames], m.fps, m.skeleton, figure_joints(m.skeleton, roles), 1, 1.0)
+    if set(WARM_PARTS) <= set(parts):
+        mark_cached(dtype)
     return time.perf_counter() - t0
 
 
